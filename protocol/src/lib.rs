@@ -1,0 +1,79 @@
+//! Types that cross the wire between lightcast clients and the server.
+//!
+//! Everything here is plain data (serde), versioned with the crate, and free of GPU or async
+//! dependencies so that thin clients can depend on it cheaply. Vectors are `[f32; 3]` in the
+//! scene's world space (glTF convention: right-handed, +Y up, metres).
+
+use serde::{Deserialize, Serialize};
+
+/// Which kind of punctual light (the three kinds of glTF's `KHR_lights_punctual`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightKind {
+    /// Parallel rays along `direction` (a sun). `intensity` is illuminance in lux.
+    Directional,
+    /// A cone from `position` along `direction`. `intensity` is luminous intensity in candela.
+    Spot,
+    /// Emits from `position` in all directions. `intensity` is luminous intensity in candela.
+    Point,
+}
+
+/// One punctual light.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Light {
+    pub kind: LightKind,
+    /// Position (spot and point lights; ignored for directional).
+    pub position: [f32; 3],
+    /// Direction the light travels (directional and spot; ignored for point). Need not be unit.
+    pub direction: [f32; 3],
+    /// Linear RGB colour.
+    pub color: [f32; 3],
+    /// Lux for directional lights, candela for spot and point lights.
+    pub intensity: f32,
+    /// Spot light: angle in radians from the axis where the falloff starts.
+    pub inner_cone: f32,
+    /// Spot light: angle in radians from the axis where the light reaches zero.
+    pub outer_cone: f32,
+}
+
+/// A pinhole camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    pub position: [f32; 3],
+    pub target: [f32; 3],
+    /// Vertical field of view in degrees.
+    pub fov_y_degrees: f32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn light_round_trips_through_json_with_lowercase_kind() {
+        let light = Light {
+            kind: LightKind::Spot,
+            position: [0.0, 2.0, 0.0],
+            direction: [0.0, -1.0, 0.0],
+            color: [1.0, 0.9, 0.8],
+            intensity: 40.0,
+            inner_cone: 0.5,
+            outer_cone: 0.8,
+        };
+        let json = serde_json::to_string(&light).expect("serialise");
+        assert!(json.contains("\"kind\":\"spot\""), "{json}");
+        let back: Light = serde_json::from_str(&json).expect("parse");
+        assert_eq!(back, light);
+    }
+
+    #[test]
+    fn camera_rejects_unknown_fields() {
+        let err = serde_json::from_str::<Camera>(
+            r#"{"position":[0,0,1],"target":[0,0,0],"fov_y_degrees":45,"zoom":2}"#,
+        )
+        .expect_err("unknown field must be rejected");
+        assert!(err.to_string().contains("zoom"), "{err}");
+    }
+}

@@ -1,0 +1,174 @@
+//! Picks an adapter and opens a device with the features the pipeline can use.
+
+use std::fmt;
+
+/// Which wgpu backend to open. `Auto` lets wgpu choose (Vulkan where present).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendChoice {
+    #[default]
+    Auto,
+    Vulkan,
+    Gl,
+}
+
+impl BackendChoice {
+    /// Backends to try, in order. `Auto` tries Vulkan before GL: probing GL first only adds
+    /// EGL noise on headless machines, and GL on some drivers lacks compute.
+    fn attempts(self) -> &'static [wgpu::Backends] {
+        match self {
+            Self::Auto => &[wgpu::Backends::VULKAN, wgpu::Backends::GL],
+            Self::Vulkan => &[wgpu::Backends::VULKAN],
+            Self::Gl => &[wgpu::Backends::GL],
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter found for backend {backend:?}: {source} (on a machine without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers libvulkan1`)")]
+    NoAdapter {
+        backend: BackendChoice,
+        source: wgpu::RequestAdapterError,
+    },
+    #[error("adapter {adapter} refused to open a device: {source}")]
+    RequestDevice {
+        adapter: String,
+        source: wgpu::RequestDeviceError,
+    },
+    #[error(
+        "adapter {adapter} lacks compute shaders (wgpu downlevel flags); use a Vulkan adapter"
+    )]
+    NoCompute { adapter: String },
+    #[error("waiting for the GPU failed: {0}")]
+    Poll(#[from] wgpu::PollError),
+    #[error("mapping a readback buffer failed: {0}")]
+    Map(String),
+    #[error("{what} of {requested} exceeds this adapter's limit of {limit}")]
+    Limit {
+        what: &'static str,
+        requested: u32,
+        limit: u32,
+    },
+}
+
+/// The adapter, device and queue, plus what the pipeline learned about them.
+pub struct GpuContext {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub info: wgpu::AdapterInfo,
+    /// True when timestamps can be written between passes on an encoder (per-pass GPU times).
+    pub timestamps: bool,
+}
+
+/// Human-readable adapter description (name, type, backend, driver).
+pub struct AdapterSummary<'a>(pub &'a wgpu::AdapterInfo);
+
+impl fmt::Display for AdapterSummary<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let i = self.0;
+        write!(
+            f,
+            "{} ({:?}, {:?}, driver {} {})",
+            i.name, i.device_type, i.backend, i.driver, i.driver_info
+        )
+    }
+}
+
+impl GpuContext {
+    /// Opens the preferred adapter for `backend`. `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` in the
+    /// environment still apply on top (wgpu's own conventions).
+    pub fn new(backend: BackendChoice) -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async(backend))
+    }
+
+    async fn new_async(backend: BackendChoice) -> Result<Self, GpuError> {
+        let options = wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            apply_limit_buckets: false,
+        };
+        // WGPU_BACKEND, when set, overrides `Auto`'s order (wgpu's own convention).
+        let env_backends = wgpu::Backends::from_env().filter(|_| backend == BackendChoice::Auto);
+        let attempts = match &env_backends {
+            Some(b) => std::slice::from_ref(b),
+            None => backend.attempts(),
+        };
+        let mut last_error = None;
+        let mut found = None;
+        for &backends in attempts {
+            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+            desc.backends = backends;
+            match wgpu::Instance::new(desc).request_adapter(&options).await {
+                Ok(adapter) => {
+                    found = Some(adapter);
+                    break;
+                }
+                Err(e) => last_error = Some(e),
+            }
+        }
+        let adapter = match (found, last_error) {
+            (Some(adapter), _) => adapter,
+            (None, Some(source)) => return Err(GpuError::NoAdapter { backend, source }),
+            (None, None) => unreachable!("every backend choice has at least one attempt"),
+        };
+        let info = adapter.get_info();
+        let name = AdapterSummary(&info).to_string();
+        if !adapter
+            .get_downlevel_capabilities()
+            .flags
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+        {
+            return Err(GpuError::NoCompute { adapter: name });
+        }
+        let wanted =
+            wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
+        let timestamps = adapter.features().contains(wanted);
+        let required_features = if timestamps {
+            wanted
+        } else {
+            wgpu::Features::empty()
+        };
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("lightcast"),
+                required_features,
+                required_limits: adapter.limits(),
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|source| GpuError::RequestDevice {
+                adapter: name,
+                source,
+            })?;
+        Ok(Self {
+            adapter,
+            device,
+            queue,
+            info,
+            timestamps,
+        })
+    }
+
+    /// Fails with a precise error when a square 2D texture of `size` is beyond the adapter.
+    pub fn check_texture_size(&self, what: &'static str, size: u32) -> Result<(), GpuError> {
+        let limit = self.device.limits().max_texture_dimension_2d;
+        if size == 0 || size > limit {
+            return Err(GpuError::Limit {
+                what,
+                requested: size,
+                limit,
+            });
+        }
+        Ok(())
+    }
+
+    /// Blocks until all submitted work has finished.
+    pub fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        Ok(())
+    }
+}

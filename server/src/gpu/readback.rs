@@ -1,0 +1,135 @@
+//! Copies a texture into a mappable buffer and hands back tightly packed rows.
+//!
+//! wgpu requires `bytes_per_row` of texture→buffer copies to be a multiple of 256, so rows are
+//! padded on the GPU side and the padding is stripped while reading.
+
+use super::{GpuContext, GpuError};
+
+/// Bytes per row of a copy of `width` pixels of `bytes_per_pixel`, rounded up to wgpu's alignment.
+pub fn padded_bytes_per_row(width: u32, bytes_per_pixel: u32) -> u32 {
+    let unpadded = width * bytes_per_pixel;
+    unpadded.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
+}
+
+/// Removes the per-row padding of a copied image.
+pub fn strip_row_padding(padded: &[u8], width: u32, height: u32, bytes_per_pixel: u32) -> Vec<u8> {
+    let row = (width * bytes_per_pixel) as usize;
+    let stride = padded_bytes_per_row(width, bytes_per_pixel) as usize;
+    let mut out = Vec::with_capacity(row * height as usize);
+    for y in 0..height as usize {
+        out.extend_from_slice(&padded[y * stride..y * stride + row]);
+    }
+    out
+}
+
+/// A staging buffer sized for one texture.
+pub struct TextureReadback {
+    buffer: wgpu::Buffer,
+    width: u32,
+    height: u32,
+    bytes_per_pixel: u32,
+}
+
+impl TextureReadback {
+    pub fn new(
+        device: &wgpu::Device,
+        label: &str,
+        width: u32,
+        height: u32,
+        bytes_per_pixel: u32,
+    ) -> Self {
+        let size = u64::from(padded_bytes_per_row(width, bytes_per_pixel)) * u64::from(height);
+        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        Self {
+            buffer,
+            width,
+            height,
+            bytes_per_pixel,
+        }
+    }
+
+    pub fn encode_copy(&self, encoder: &mut wgpu::CommandEncoder, texture: &wgpu::Texture) {
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &self.buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(padded_bytes_per_row(self.width, self.bytes_per_pixel)),
+                    rows_per_image: Some(self.height),
+                },
+            },
+            wgpu::Extent3d {
+                width: self.width,
+                height: self.height,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+
+    /// Maps the buffer (blocking until the copy has finished) and returns packed rows.
+    pub fn read(&self, ctx: &GpuContext) -> Result<Vec<u8>, GpuError> {
+        let bytes = map_read(ctx, &self.buffer)?;
+        Ok(strip_row_padding(
+            &bytes,
+            self.width,
+            self.height,
+            self.bytes_per_pixel,
+        ))
+    }
+}
+
+/// Blocking map of a whole `MAP_READ` buffer; copies the contents out and unmaps.
+pub fn map_read(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        // The receiver only disappears if this function already returned with an error.
+        let _ = tx.send(r);
+    });
+    ctx.wait_idle()?;
+    rx.recv()
+        .map_err(|e| GpuError::Map(e.to_string()))?
+        .map_err(|e| GpuError::Map(e.to_string()))?;
+    let bytes = buffer
+        .get_mapped_range(..)
+        .map_err(|e| GpuError::Map(e.to_string()))?
+        .to_vec();
+    buffer.unmap();
+    Ok(bytes)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_are_padded_to_256_bytes() {
+        assert_eq!(padded_bytes_per_row(64, 4), 256);
+        assert_eq!(padded_bytes_per_row(65, 4), 512);
+        assert_eq!(padded_bytes_per_row(1, 8), 256);
+        assert_eq!(padded_bytes_per_row(1920, 4), 7680);
+    }
+
+    #[test]
+    fn padding_is_stripped_row_by_row() {
+        let (w, h, bpp) = (3u32, 2u32, 4u32);
+        let stride = padded_bytes_per_row(w, bpp) as usize;
+        let mut padded = vec![0xEEu8; stride * h as usize];
+        for y in 0..h as usize {
+            for i in 0..(w * bpp) as usize {
+                padded[y * stride + i] = (y * 100 + i) as u8;
+            }
+        }
+        let packed = strip_row_padding(&padded, w, h, bpp);
+        assert_eq!(packed.len(), 24);
+        assert_eq!(packed[0], 0);
+        assert_eq!(packed[11], 11);
+        assert_eq!(packed[12], 100);
+        assert!(!packed.contains(&0xEE));
+    }
+}

@@ -1,0 +1,161 @@
+//! WGSL sources. Each pass is one file in `shaders/`, prefixed by the shared snippets it uses
+//! (WGSL has no includes, so a pass module is the concatenation of its files).
+
+/// The files one pass module is made of, in order.
+pub struct ShaderSource {
+    pub name: &'static str,
+    pub files: &'static [(&'static str, &'static str)],
+}
+
+macro_rules! wgsl {
+    ($file:literal) => {
+        ($file, include_str!(concat!("../../../shaders/", $file)))
+    };
+}
+
+pub const GBUFFER: ShaderSource = ShaderSource {
+    name: "gbuffer",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("gbuffer.wgsl"),
+    ],
+};
+
+pub const SHADOW_MAP: ShaderSource = ShaderSource {
+    name: "shadow_map",
+    files: &[wgsl!("shadow_map.wgsl")],
+};
+
+pub const DIRECT_LIGHT: ShaderSource = ShaderSource {
+    name: "direct_light",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("lights.wgsl"),
+        wgsl!("direct_light.wgsl"),
+    ],
+};
+
+pub const EXPOSURE: ShaderSource = ShaderSource {
+    name: "exposure",
+    files: &[wgsl!("exposure_result.wgsl"), wgsl!("exposure.wgsl")],
+};
+
+pub const TONEMAP: ShaderSource = ShaderSource {
+    name: "tonemap",
+    files: &[wgsl!("exposure_result.wgsl"), wgsl!("tonemap.wgsl")],
+};
+
+/// Every pass module; tests validate each with naga.
+pub const ALL: &[&ShaderSource] = &[&GBUFFER, &SHADOW_MAP, &DIRECT_LIGHT, &EXPOSURE, &TONEMAP];
+
+impl ShaderSource {
+    pub fn source(&self) -> String {
+        self.files
+            .iter()
+            .map(|(name, text)| format!("// ---- {name}\n{text}\n"))
+            .collect()
+    }
+
+    pub fn create_module(&self, device: &wgpu::Device) -> wgpu::ShaderModule {
+        device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(self.name),
+            source: wgpu::ShaderSource::Wgsl(self.source().into()),
+        })
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod layout_check {
+    //! Checks that a `#[repr(C)]` Rust struct matches naga's layout of its WGSL mirror.
+
+    use super::ShaderSource;
+
+    pub fn parse(source: &ShaderSource) -> naga::Module {
+        naga::front::wgsl::parse_str(&source.source())
+            .unwrap_or_else(|e| panic!("{}: {}", source.name, e.emit_to_string(&source.source())))
+    }
+
+    /// Asserts the WGSL struct `name` has size `size` and the given member offsets.
+    pub fn assert_struct(
+        source: &ShaderSource,
+        name: &str,
+        size: usize,
+        members: &[(&str, usize)],
+    ) {
+        let module = parse(source);
+        let mut layouter = naga::proc::Layouter::default();
+        layouter
+            .update(module.to_ctx())
+            .expect("layout of a valid module");
+        let (handle, ty) = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("{}: no struct {name}", source.name));
+        let naga::TypeInner::Struct {
+            members: wgsl_members,
+            span,
+        } = &ty.inner
+        else {
+            panic!("{name} is not a struct");
+        };
+        assert_eq!(*span as usize, size, "{name}: WGSL size vs Rust size");
+        assert_eq!(layouter[handle].size as usize, size);
+        assert_eq!(wgsl_members.len(), members.len(), "{name}: member count");
+        for (wgsl, (rust_name, rust_offset)) in wgsl_members.iter().zip(members) {
+            assert_eq!(
+                wgsl.name.as_deref(),
+                Some(*rust_name),
+                "{name}: member order"
+            );
+            assert_eq!(
+                wgsl.offset as usize, *rust_offset,
+                "{name}.{rust_name}: WGSL offset vs Rust offset"
+            );
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeSet;
+
+    #[test]
+    fn every_pass_module_validates_with_naga() {
+        for source in ALL {
+            let module = layout_check::parse(source);
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::empty(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{}: {}", source.name, e.emit_to_string(&source.source())));
+        }
+    }
+
+    #[test]
+    fn every_file_in_shaders_dir_belongs_to_a_pass() {
+        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shaders");
+        let on_disk: BTreeSet<String> = std::fs::read_dir(dir)
+            .expect("shaders/ exists")
+            .map(|e| {
+                e.expect("dir entry")
+                    .file_name()
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .filter(|n| n.ends_with(".wgsl"))
+            .collect();
+        let used: BTreeSet<String> = ALL
+            .iter()
+            .flat_map(|s| s.files.iter().map(|(n, _)| n.to_string()))
+            .collect();
+        assert_eq!(
+            on_disk, used,
+            "every WGSL file must be part of a validated pass"
+        );
+    }
+}

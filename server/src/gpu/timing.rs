@@ -1,0 +1,187 @@
+//! Per-stage timing of a frame.
+//!
+//! With timestamp queries the whole frame is one command buffer and a timestamp is written on
+//! the encoder before and after every stage (timestamps attached to a pass read near zero on
+//! some drivers, lavapipe among them). Without them each stage is submitted on its own and timed
+//! by the CPU until the GPU is idle, which is slower and says so in [`TimingSource`].
+
+use super::{readback::map_read, GpuContext, GpuError};
+use std::time::Instant;
+
+/// Where the stage times came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TimingSource {
+    GpuTimestamps,
+    CpuWallClock,
+}
+
+/// Time one stage took.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct StageTiming {
+    pub stage: &'static str,
+    pub ms: f64,
+}
+
+/// Most stages a frame may time; a frame that names more is a programming error caught in tests.
+const MAX_STAGES: u32 = 32;
+
+/// Query storage reused from frame to frame.
+pub struct FrameTimer {
+    queries: Option<Queries>,
+}
+
+struct Queries {
+    set: wgpu::QuerySet,
+    resolve: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    period_ns: f64,
+}
+
+impl FrameTimer {
+    pub fn new(ctx: &GpuContext) -> Self {
+        let queries = ctx.timestamps.then(|| {
+            let bytes = u64::from(MAX_STAGES) * 2 * 8;
+            Queries {
+                set: ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("stage timestamps"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: MAX_STAGES * 2,
+                }),
+                resolve: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamp resolve"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                }),
+                staging: ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("timestamp readback"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                    mapped_at_creation: false,
+                }),
+                period_ns: f64::from(ctx.queue.get_timestamp_period()),
+            }
+        });
+        Self { queries }
+    }
+
+    pub fn source(&self) -> TimingSource {
+        if self.queries.is_some() {
+            TimingSource::GpuTimestamps
+        } else {
+            TimingSource::CpuWallClock
+        }
+    }
+
+    /// Starts recording a frame's stages.
+    pub fn begin<'a>(&'a mut self, ctx: &'a GpuContext) -> FrameStages<'a> {
+        FrameStages {
+            ctx,
+            timer: self,
+            encoder: None,
+            names: Vec::new(),
+            wall: Vec::new(),
+        }
+    }
+}
+
+/// Records the stages of one frame; see the module docs for the two modes.
+pub struct FrameStages<'a> {
+    ctx: &'a GpuContext,
+    timer: &'a mut FrameTimer,
+    encoder: Option<wgpu::CommandEncoder>,
+    names: Vec<&'static str>,
+    wall: Vec<StageTiming>,
+}
+
+impl FrameStages<'_> {
+    fn encoder(&mut self) -> &mut wgpu::CommandEncoder {
+        let device = &self.ctx.device;
+        self.encoder.get_or_insert_with(|| {
+            device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame"),
+            })
+        })
+    }
+
+    /// Encodes one named stage.
+    pub fn stage(
+        &mut self,
+        name: &'static str,
+        encode: impl FnOnce(&mut wgpu::CommandEncoder),
+    ) -> Result<(), GpuError> {
+        let index = self.names.len() as u32;
+        assert!(
+            index < MAX_STAGES,
+            "more than {MAX_STAGES} stages in a frame"
+        );
+        self.names.push(name);
+        match &self.timer.queries {
+            Some(_) => {
+                self.write_timestamp(index * 2);
+                encode(self.encoder());
+                self.write_timestamp(index * 2 + 1);
+            }
+            None => {
+                let start = Instant::now();
+                encode(self.encoder());
+                self.submit();
+                self.ctx.wait_idle()?;
+                self.wall.push(StageTiming {
+                    stage: name,
+                    ms: start.elapsed().as_secs_f64() * 1e3,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn write_timestamp(&mut self, index: u32) {
+        if let Some(set) = self.timer.queries.as_ref().map(|q| q.set.clone()) {
+            self.encoder().write_timestamp(&set, index);
+        }
+    }
+
+    fn submit(&mut self) {
+        if let Some(encoder) = self.encoder.take() {
+            self.ctx.queue.submit([encoder.finish()]);
+        }
+    }
+
+    /// Submits what is left, waits for the GPU and returns the stage times in order.
+    pub fn finish(mut self) -> Result<Vec<StageTiming>, GpuError> {
+        let count = self.names.len() as u32;
+        let Some((set, resolve, staging, period_ns)) = self.timer.queries.as_ref().map(|q| {
+            (
+                q.set.clone(),
+                q.resolve.clone(),
+                q.staging.clone(),
+                q.period_ns,
+            )
+        }) else {
+            self.submit();
+            self.ctx.wait_idle()?;
+            return Ok(self.wall);
+        };
+        if count == 0 {
+            self.submit();
+            return Ok(Vec::new());
+        }
+        let encoder = self.encoder();
+        encoder.resolve_query_set(&set, 0..count * 2, &resolve, 0);
+        encoder.copy_buffer_to_buffer(&resolve, 0, &staging, 0, u64::from(count) * 16);
+        self.submit();
+        let bytes = map_read(self.ctx, &staging)?;
+        let ticks: &[u64] = bytemuck::cast_slice(&bytes);
+        Ok(self
+            .names
+            .iter()
+            .enumerate()
+            .map(|(i, &stage)| StageTiming {
+                stage,
+                ms: ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns / 1e6,
+            })
+            .collect())
+    }
+}

@@ -1,0 +1,10 @@
+//! lightcast server: scenes, the GPU pipeline and (later) the network service.
+//!
+//! The GPU pipeline ([`renderer`], [`passes`], [`gpu`]) has no async runtime in it, so the
+//! offline `render` command ([`offline`]) and tests can drive it directly.
+
+pub mod gpu;
+pub mod offline;
+pub mod passes;
+pub mod renderer;
+pub mod scene;

@@ -1,0 +1,341 @@
+//! The offline `render` command: one frame of a scene to an image file, no network.
+
+use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
+use crate::passes::exposure::Exposure;
+use crate::renderer::{Frame, RenderSettings, Renderer};
+use crate::scene::{
+    default_light::{default_camera, default_light},
+    Scene,
+};
+use glam::Vec3;
+use lightcast_protocol::{Camera, LightKind};
+use std::path::PathBuf;
+use std::str::FromStr;
+use std::time::Instant;
+
+/// The default scene when none is named: the built-in Cornell box.
+pub const DEFAULT_SCENE: &str = "procedural:cornell";
+
+/// Three comma-separated numbers, e.g. `1.5,2,-3`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vec3Arg(pub [f32; 3]);
+
+impl FromStr for Vec3Arg {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+        let [x, y, z] = parts.as_slice() else {
+            return Err(format!(
+                "expected three comma-separated numbers X,Y,Z, got '{s}'"
+            ));
+        };
+        let parse = |p: &str| {
+            p.parse::<f32>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("'{p}' is not a finite number"))
+        };
+        Ok(Self([parse(x)?, parse(y)?, parse(z)?]))
+    }
+}
+
+/// `auto` or a positive linear scale.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExposureArg(pub Exposure);
+
+impl FromStr for ExposureArg {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(Self(Exposure::Auto));
+        }
+        match s.parse::<f32>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(Self(Exposure::Manual(v))),
+            _ => Err(format!("expected 'auto' or a positive number, got '{s}'")),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LightTypeArg {
+    Directional,
+    Spot,
+    Point,
+}
+
+impl From<LightTypeArg> for LightKind {
+    fn from(a: LightTypeArg) -> Self {
+        match a {
+            LightTypeArg::Directional => LightKind::Directional,
+            LightTypeArg::Spot => LightKind::Spot,
+            LightTypeArg::Point => LightKind::Point,
+        }
+    }
+}
+
+/// Options of `lightcast-server render`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct RenderArgs {
+    /// Scene: a .gltf/.glb file, or `procedural:cornell` / `procedural:street?blocks=N&detail=D&seed=S`.
+    /// Default: the built-in Cornell box.
+    #[arg(long)]
+    pub scene: Option<String>,
+    /// Output width in pixels.
+    #[arg(long, default_value_t = 960)]
+    pub width: u32,
+    /// Output height in pixels.
+    #[arg(long, default_value_t = 540)]
+    pub height: u32,
+    /// Output image (PNG).
+    #[arg(long, default_value = "lightcast.png")]
+    pub out: PathBuf,
+    /// Camera position X,Y,Z. Default: the file's first camera, else framing the scene bounds.
+    #[arg(long, allow_hyphen_values = true)]
+    pub camera_pos: Option<Vec3Arg>,
+    /// Point the camera looks at, X,Y,Z.
+    #[arg(long, allow_hyphen_values = true)]
+    pub camera_target: Option<Vec3Arg>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    pub fov: Option<f32>,
+    /// Light type. Default: the file's KHR_lights_punctual light, else a light standing in for
+    /// the scene's emissive surfaces, else a sun.
+    #[arg(long, value_enum)]
+    pub light_type: Option<LightTypeArg>,
+    /// Light position X,Y,Z (spot and point).
+    #[arg(long, allow_hyphen_values = true)]
+    pub light_pos: Option<Vec3Arg>,
+    /// Direction the light travels X,Y,Z (directional and spot).
+    #[arg(long, allow_hyphen_values = true)]
+    pub light_dir: Option<Vec3Arg>,
+    /// Linear light colour R,G,B.
+    #[arg(long)]
+    pub light_color: Option<Vec3Arg>,
+    /// Lux for directional lights, candela for spot and point lights.
+    #[arg(long)]
+    pub light_intensity: Option<f32>,
+    /// Spot light inner cone angle in degrees (full intensity inside).
+    #[arg(long)]
+    pub light_inner_cone: Option<f32>,
+    /// Spot light outer cone angle in degrees (zero outside).
+    #[arg(long)]
+    pub light_outer_cone: Option<f32>,
+    /// `auto` (log-average luminance to middle grey) or a linear scale applied before tone mapping.
+    #[arg(long, default_value = "auto")]
+    pub exposure: ExposureArg,
+    /// Shadow map side in texels (per cube face for point lights).
+    #[arg(long, default_value_t = 2048)]
+    pub shadow_map_size: u32,
+    /// wgpu backend.
+    #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
+    pub backend: BackendChoice,
+    /// Print the report as JSON on stdout instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What `render` reports after writing the image.
+#[derive(Debug, serde::Serialize)]
+pub struct RenderReport {
+    pub out: PathBuf,
+    pub adapter: String,
+    pub scene: String,
+    pub triangles: usize,
+    pub width: u32,
+    pub height: u32,
+    pub camera: Camera,
+    pub light: lightcast_protocol::Light,
+    pub exposure_scale: f32,
+    pub timing_source: crate::gpu::timing::TimingSource,
+    pub stages: Vec<crate::gpu::timing::StageTiming>,
+    pub gpu_total_ms: f64,
+    pub load_ms: f64,
+    pub setup_ms: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum OfflineError {
+    #[error("scene '{scene}': {source}")]
+    Scene {
+        scene: String,
+        source: crate::scene::OpenError,
+    },
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    #[error(transparent)]
+    Render(#[from] crate::renderer::RenderError),
+    #[error("writing {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: image::ImageError,
+    },
+}
+
+/// Applies the command-line camera and light options on top of the scene's defaults.
+pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
+    let mut camera = default_camera(scene);
+    if let Some(Vec3Arg(p)) = args.camera_pos {
+        camera.position = p;
+        if args.camera_target.is_none() {
+            camera.target = scene.bounds.center().into();
+        }
+    }
+    if let Some(Vec3Arg(t)) = args.camera_target {
+        camera.target = t;
+    }
+    if let Some(fov) = args.fov {
+        camera.fov_y_degrees = fov;
+    }
+
+    let mut light = default_light(scene);
+    if let Some(kind) = args.light_type {
+        let kind = LightKind::from(kind);
+        if kind != light.kind && kind != LightKind::Directional && args.light_pos.is_none() {
+            // A positional light switched on from the command line without a position: hang
+            // it above the scene centre, aimed down, so the result is lit.
+            let center = scene.bounds.center();
+            light.position = (center + Vec3::Y * scene.bounds.radius() * 0.9).into();
+            light.direction = [0.0, -1.0, 0.0];
+        }
+        if kind == LightKind::Spot && light.outer_cone <= 0.0 {
+            light.inner_cone = 30f32.to_radians();
+            light.outer_cone = 45f32.to_radians();
+        }
+        light.kind = kind;
+    }
+    if let Some(Vec3Arg(p)) = args.light_pos {
+        light.position = p;
+    }
+    if let Some(Vec3Arg(d)) = args.light_dir {
+        light.direction = d;
+    }
+    if let Some(Vec3Arg(c)) = args.light_color {
+        light.color = c;
+    }
+    if let Some(i) = args.light_intensity {
+        light.intensity = i;
+    }
+    if let Some(a) = args.light_inner_cone {
+        light.inner_cone = a.to_radians();
+    }
+    if let Some(a) = args.light_outer_cone {
+        light.outer_cone = a.to_radians();
+    }
+    RenderSettings {
+        width: args.width,
+        height: args.height,
+        camera,
+        light,
+        exposure: args.exposure.0,
+        shadow_map_size: args.shadow_map_size,
+        capture_hdr: false,
+    }
+}
+
+/// Loads the scene, renders one frame, writes the PNG and returns the report.
+pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderReport, OfflineError> {
+    let spec = args.scene.as_deref().unwrap_or(DEFAULT_SCENE);
+    let started = Instant::now();
+    let scene = Scene::open(spec).map_err(|source| OfflineError::Scene {
+        scene: spec.to_string(),
+        source,
+    })?;
+    let load_ms = started.elapsed().as_secs_f64() * 1e3;
+    log(&format!(
+        "scene {}: {} triangles, {} materials, {} textures ({load_ms:.1} ms)",
+        scene.name,
+        scene.triangle_count(),
+        scene.materials.len(),
+        scene.textures.len()
+    ));
+
+    let ctx = GpuContext::new(args.backend)?;
+    let adapter = AdapterSummary(&ctx.info).to_string();
+    log(&format!("adapter: {adapter}"));
+    let settings = settings_from_args(args, &scene);
+    settings.validate(&ctx)?;
+    let setup_start = Instant::now();
+    let mut renderer = Renderer::new(ctx, scene);
+    let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
+    let frame = renderer.render(&settings)?;
+    write_png(&frame, &args.out)?;
+    let scene = renderer.scene();
+    Ok(RenderReport {
+        out: args.out.clone(),
+        adapter,
+        scene: scene.name.clone(),
+        triangles: scene.triangle_count(),
+        width: frame.width,
+        height: frame.height,
+        camera: settings.camera,
+        light: settings.light,
+        exposure_scale: frame.exposure_scale,
+        timing_source: frame.timing_source,
+        gpu_total_ms: frame.total_ms(),
+        stages: frame.timings,
+        load_ms,
+        setup_ms,
+    })
+}
+
+pub fn write_png(frame: &Frame, path: &std::path::Path) -> Result<(), OfflineError> {
+    image::save_buffer(
+        path,
+        &frame.rgba8,
+        frame.width,
+        frame.height,
+        image::ExtendedColorType::Rgba8,
+    )
+    .map_err(|source| OfflineError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+impl RenderReport {
+    /// The per-stage table printed after a render.
+    pub fn table(&self) -> String {
+        let source = match self.timing_source {
+            crate::gpu::timing::TimingSource::GpuTimestamps => "GPU timestamps",
+            crate::gpu::timing::TimingSource::CpuWallClock => {
+                "CPU wall clock (adapter has no timestamp queries)"
+            }
+        };
+        let mut s = format!("stage            ms   ({source})\n");
+        for t in &self.stages {
+            s += &format!("{:<14} {:>8.3}\n", t.stage, t.ms);
+        }
+        s += &format!("{:<14} {:>8.3}\n", "total", self.gpu_total_ms);
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn vec3_arg_parses_and_rejects_precisely() {
+        assert_eq!(
+            "1, -2.5,3".parse::<Vec3Arg>(),
+            Ok(Vec3Arg([1.0, -2.5, 3.0]))
+        );
+        assert!("1,2".parse::<Vec3Arg>().unwrap_err().contains("three"));
+        assert!("1,x,3".parse::<Vec3Arg>().unwrap_err().contains("'x'"));
+        assert!("1,inf,3".parse::<Vec3Arg>().is_err());
+    }
+
+    #[test]
+    fn exposure_arg_accepts_auto_or_positive_scale() {
+        assert_eq!(
+            "auto".parse::<ExposureArg>(),
+            Ok(ExposureArg(Exposure::Auto))
+        );
+        assert_eq!(
+            "2.5".parse::<ExposureArg>(),
+            Ok(ExposureArg(Exposure::Manual(2.5)))
+        );
+        assert!("0".parse::<ExposureArg>().is_err());
+        assert!("-1".parse::<ExposureArg>().is_err());
+    }
+}

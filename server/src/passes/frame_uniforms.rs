@@ -1,0 +1,278 @@
+//! Uniforms every pass shares: the camera (`shaders/common.wgsl`) and the light with its
+//! shadow projections (`shaders/lights.wgsl`).
+
+use crate::scene::Aabb;
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat4, Vec3};
+use lightcast_protocol::{Camera, Light, LightKind};
+
+/// Mirrors `CameraUniform` in `shaders/common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct CameraUniform {
+    pub view_proj: [[f32; 4]; 4],
+    pub position: [f32; 3],
+    pub pad0: f32,
+}
+
+/// Mirrors `LightUniform` in `shaders/lights.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct LightUniform {
+    pub face_view_proj: [[[f32; 4]; 4]; 6],
+    pub position: [f32; 3],
+    pub kind: u32,
+    pub direction: [f32; 3],
+    pub cos_inner: f32,
+    pub radiance: [f32; 3],
+    pub cos_outer: f32,
+    pub shadow_texel: f32,
+    pub normal_bias: f32,
+    pub pad0: f32,
+    pub pad1: f32,
+}
+
+/// Widest spot cone a single perspective shadow map covers; light outside it is unshadowed.
+const MAX_SPOT_SHADOW_HALF_ANGLE: f32 = 80.0 * std::f32::consts::PI / 180.0;
+/// Normal offset in shadow-map texels: enough to clear the PCF footprint on sloped surfaces.
+const NORMAL_BIAS_TEXELS: f32 = 1.5;
+
+/// World-to-clip matrix of a camera, with near/far planes fitted to the scene bounds.
+pub fn camera_view_proj(camera: &Camera, aspect: f32, bounds: &Aabb) -> Mat4 {
+    let eye = Vec3::from(camera.position);
+    let target = Vec3::from(camera.target);
+    let forward = (target - eye).normalize_or(Vec3::NEG_Z);
+    let up = stable_up(forward);
+    let view = Mat4::look_to_rh(eye, forward, up);
+    let (near, far) = depth_range(eye, bounds);
+    Mat4::perspective_rh(camera.fov_y_degrees.to_radians(), aspect, near, far) * view
+}
+
+impl CameraUniform {
+    pub fn new(camera: &Camera, aspect: f32, bounds: &Aabb) -> Self {
+        Self {
+            view_proj: camera_view_proj(camera, aspect, bounds).to_cols_array_2d(),
+            position: camera.position,
+            pad0: 0.0,
+        }
+    }
+}
+
+/// An up vector that is never parallel to `forward`.
+fn stable_up(forward: Vec3) -> Vec3 {
+    if forward.y.abs() > 0.999 {
+        Vec3::Z
+    } else {
+        Vec3::Y
+    }
+}
+
+/// Near and far planes that enclose the whole scene as seen from `eye`.
+fn depth_range(eye: Vec3, bounds: &Aabb) -> (f32, f32) {
+    let far = bounds
+        .corners()
+        .iter()
+        .map(|c| c.distance(eye))
+        .fold(0.0f32, f32::max)
+        .max(1e-3)
+        * 1.01;
+    (far * 1e-4, far)
+}
+
+impl LightUniform {
+    /// The light's parameters and the view-projection of each shadow-map face (1 face for
+    /// directional and spot lights, 6 for point lights), fitted to the scene bounds.
+    pub fn new(light: &Light, bounds: &Aabb, shadow_size: u32) -> Self {
+        let direction = Vec3::from(light.direction).normalize_or(Vec3::NEG_Y);
+        let position = Vec3::from(light.position);
+        let radius = bounds.radius().max(1e-3);
+        let center = bounds.center();
+        let mut faces = [Mat4::IDENTITY; 6];
+        // World size of one shadow texel at the scene's scale, for the normal offset.
+        let texel_world;
+        match light.kind {
+            LightKind::Directional => {
+                let eye = center - direction * 2.0 * radius;
+                let view = Mat4::look_to_rh(eye, direction, stable_up(direction));
+                faces[0] =
+                    Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius)
+                        * view;
+                texel_world = 2.0 * radius / shadow_size as f32;
+            }
+            LightKind::Spot => {
+                let half = light.outer_cone.clamp(1e-3, MAX_SPOT_SHADOW_HALF_ANGLE);
+                let (near, far) = depth_range(position, bounds);
+                let view = Mat4::look_to_rh(position, direction, stable_up(direction));
+                faces[0] = Mat4::perspective_rh(2.0 * half, 1.0, near, far) * view;
+                let distance = position.distance(center).max(radius * 0.5);
+                texel_world = 2.0 * distance * half.tan() / shadow_size as f32;
+            }
+            LightKind::Point => {
+                let (near, far) = depth_range(position, bounds);
+                let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near, far);
+                let axes = [
+                    Vec3::X,
+                    Vec3::NEG_X,
+                    Vec3::Y,
+                    Vec3::NEG_Y,
+                    Vec3::Z,
+                    Vec3::NEG_Z,
+                ];
+                for (face, axis) in faces.iter_mut().zip(axes) {
+                    *face = proj * Mat4::look_to_rh(position, axis, stable_up(axis));
+                }
+                let distance = position.distance(center).max(radius * 0.5);
+                texel_world = 2.0 * distance / shadow_size as f32;
+            }
+        }
+        let (cos_inner, cos_outer) = match light.kind {
+            LightKind::Spot => {
+                let outer = light.outer_cone.max(1e-4);
+                let inner = light.inner_cone.clamp(0.0, outer * 0.999);
+                (inner.cos(), outer.cos())
+            }
+            _ => (1.0, -1.0),
+        };
+        let radiance = Vec3::from(light.color) * light.intensity;
+        Self {
+            face_view_proj: faces.map(|m| m.to_cols_array_2d()),
+            position: light.position,
+            kind: light_kind_code(light.kind),
+            direction: direction.into(),
+            cos_inner,
+            radiance: radiance.into(),
+            cos_outer,
+            shadow_texel: 1.0 / shadow_size as f32,
+            normal_bias: NORMAL_BIAS_TEXELS * texel_world,
+            pad0: 0.0,
+            pad1: 0.0,
+        }
+    }
+
+    /// Shadow-map layers this light renders.
+    pub fn face_count(kind: LightKind) -> u32 {
+        match kind {
+            LightKind::Point => 6,
+            LightKind::Directional | LightKind::Spot => 1,
+        }
+    }
+}
+
+/// The `LIGHT_*` constants of `shaders/lights.wgsl`.
+fn light_kind_code(kind: LightKind) -> u32 {
+    match kind {
+        LightKind::Directional => 0,
+        LightKind::Spot => 1,
+        LightKind::Point => 2,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, DIRECT_LIGHT};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn camera_uniform_matches_wgsl() {
+        assert_struct(
+            &DIRECT_LIGHT,
+            "CameraUniform",
+            size_of::<CameraUniform>(),
+            &[
+                ("view_proj", offset_of!(CameraUniform, view_proj)),
+                ("position", offset_of!(CameraUniform, position)),
+                ("pad0", offset_of!(CameraUniform, pad0)),
+            ],
+        );
+    }
+
+    #[test]
+    fn light_uniform_matches_wgsl() {
+        assert_struct(
+            &DIRECT_LIGHT,
+            "LightUniform",
+            size_of::<LightUniform>(),
+            &[
+                ("face_view_proj", offset_of!(LightUniform, face_view_proj)),
+                ("position", offset_of!(LightUniform, position)),
+                ("kind", offset_of!(LightUniform, kind)),
+                ("direction", offset_of!(LightUniform, direction)),
+                ("cos_inner", offset_of!(LightUniform, cos_inner)),
+                ("radiance", offset_of!(LightUniform, radiance)),
+                ("cos_outer", offset_of!(LightUniform, cos_outer)),
+                ("shadow_texel", offset_of!(LightUniform, shadow_texel)),
+                ("normal_bias", offset_of!(LightUniform, normal_bias)),
+                ("pad0", offset_of!(LightUniform, pad0)),
+                ("pad1", offset_of!(LightUniform, pad1)),
+            ],
+        );
+    }
+
+    fn unit_box() -> Aabb {
+        Aabb {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        }
+    }
+
+    fn light(kind: LightKind) -> Light {
+        Light {
+            kind,
+            position: [0.0, 0.5, 0.0],
+            direction: [0.0, -1.0, 0.0],
+            color: [1.0; 3],
+            intensity: 2.0,
+            inner_cone: 0.3,
+            outer_cone: 0.6,
+        }
+    }
+
+    /// Projects `p` with a face matrix into [0,1]² texture space and [0,1] depth.
+    fn project(m: [[f32; 4]; 4], p: Vec3) -> Vec3 {
+        let clip = Mat4::from_cols_array_2d(&m) * p.extend(1.0);
+        clip.truncate() / clip.w
+    }
+
+    #[test]
+    fn directional_shadow_frustum_encloses_the_scene() {
+        let u = LightUniform::new(&light(LightKind::Directional), &unit_box(), 512);
+        for c in unit_box().corners() {
+            let ndc = project(u.face_view_proj[0], c);
+            assert!(ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0, "{c} -> {ndc}");
+            assert!((0.0..=1.0).contains(&ndc.z), "{c} -> {ndc}");
+        }
+        // Closer to the light means smaller depth: the top of the box is in front of the floor.
+        let top = project(u.face_view_proj[0], Vec3::new(0.0, 1.0, 0.0));
+        let bottom = project(u.face_view_proj[0], Vec3::new(0.0, -1.0, 0.0));
+        assert!(top.z < bottom.z);
+    }
+
+    #[test]
+    fn point_light_faces_cover_their_axis() {
+        let u = LightUniform::new(&light(LightKind::Point), &unit_box(), 256);
+        let axes = [
+            Vec3::X,
+            Vec3::NEG_X,
+            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+        ];
+        for (face, axis) in axes.iter().enumerate() {
+            // A point along the face's axis, slightly off-centre, lands inside that face only.
+            let p = Vec3::from(u.position) + *axis * 0.4 + Vec3::splat(0.05);
+            let ndc = project(u.face_view_proj[face], p);
+            assert!(ndc.x.abs() < 1.0 && ndc.y.abs() < 1.0, "face {face}: {ndc}");
+            assert!((0.0..=1.0).contains(&ndc.z), "face {face}: {ndc}");
+        }
+    }
+
+    #[test]
+    fn spot_cone_cosines_are_ordered_and_radiance_scales() {
+        let u = LightUniform::new(&light(LightKind::Spot), &unit_box(), 256);
+        assert!(u.cos_inner > u.cos_outer);
+        assert_eq!(u.radiance, [2.0; 3]);
+        assert_eq!(LightUniform::face_count(LightKind::Point), 6);
+    }
+}

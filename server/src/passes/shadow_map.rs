@@ -1,0 +1,196 @@
+//! Shadow-map pass: depth of the scene from each light face (`shaders/shadow_map.wgsl`).
+
+use super::scene_buffers::SceneBuffers;
+use crate::gpu::shaders;
+
+pub const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Faces are 256 bytes apart in the uniform buffer (the dynamic-offset alignment).
+const FACE_STRIDE: u64 = 256;
+const MAX_FACES: u32 = 6;
+
+/// The depth array for one light and resolution.
+pub struct ShadowMap {
+    texture: wgpu::Texture,
+    /// Every layer, for the lighting pass.
+    pub array_view: wgpu::TextureView,
+    face_views: Vec<wgpu::TextureView>,
+    pub size: u32,
+}
+
+impl ShadowMap {
+    pub fn new(device: &wgpu::Device, size: u32, faces: u32) -> Self {
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("shadow map"),
+            size: wgpu::Extent3d {
+                width: size,
+                height: size,
+                depth_or_array_layers: faces,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        });
+        let array_view = texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("shadow map array"),
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let face_views = (0..faces)
+            .map(|layer| {
+                texture.create_view(&wgpu::TextureViewDescriptor {
+                    label: Some("shadow map face"),
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: layer,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        Self {
+            texture,
+            array_view,
+            face_views,
+            size,
+        }
+    }
+
+    pub fn faces(&self) -> u32 {
+        self.texture.depth_or_array_layers()
+    }
+}
+
+pub struct ShadowMapPass {
+    pipeline: wgpu::RenderPipeline,
+    face_matrices: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+}
+
+impl ShadowMapPass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("shadow map"),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: true,
+                    min_binding_size: wgpu::BufferSize::new(64),
+                },
+                count: None,
+            }],
+        });
+        let face_matrices = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("shadow face matrices"),
+            size: FACE_STRIDE * u64::from(MAX_FACES),
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("shadow map"),
+            layout: &layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &face_matrices,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(64),
+                }),
+            }],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("shadow map"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = shaders::SHADOW_MAP.create_module(device);
+        let attributes = wgpu::vertex_attr_array![0 => Float32x3];
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("shadow map"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(SceneBuffers::vertex_layout(&attributes))],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                stencil: Default::default(),
+                // Slope-scaled bias against acne on surfaces grazing the light; the normal
+                // offset in the lookup handles the rest.
+                bias: wgpu::DepthBiasState {
+                    constant: 2,
+                    slope_scale: 2.0,
+                    clamp: 0.0,
+                },
+            }),
+            multisample: Default::default(),
+            fragment: None,
+            multiview_mask: None,
+            cache: None,
+        });
+        Self {
+            pipeline,
+            face_matrices,
+            bind_group,
+        }
+    }
+
+    /// Uploads the face matrices (`LightUniform::face_view_proj`) for the next encode.
+    pub fn set_faces(&self, queue: &wgpu::Queue, faces: &[[[f32; 4]; 4]]) {
+        for (i, m) in faces.iter().enumerate().take(MAX_FACES as usize) {
+            queue.write_buffer(
+                &self.face_matrices,
+                i as u64 * FACE_STRIDE,
+                bytemuck::bytes_of(m),
+            );
+        }
+    }
+
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        map: &ShadowMap,
+        scene: &SceneBuffers,
+    ) {
+        for (face, view) in map.face_views.iter().enumerate() {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("shadow map face"),
+                color_attachments: &[],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[face as u32 * FACE_STRIDE as u32]);
+            pass.set_vertex_buffer(0, scene.vertices.slice(..));
+            pass.set_index_buffer(scene.indices.slice(..), wgpu::IndexFormat::Uint32);
+            for range in &scene.shadow_casting {
+                pass.draw_indexed(
+                    range.first_index..range.first_index + range.index_count,
+                    0,
+                    0..1,
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,75 @@
+//! Tone mapping (`shaders/tonemap.wgsl`): exposure, ACES-fitted curve, sRGB, 8-bit output.
+
+use super::Target;
+use crate::gpu::shaders;
+
+pub const LDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+pub struct TonemapPass {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
+impl TonemapPass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("tonemap"),
+            entries: &[
+                super::compute_texture_entry(0, false),
+                super::buffer_entry(
+                    1,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Storage { read_only: true },
+                ),
+                super::storage_texture_entry(2, LDR_FORMAT),
+            ],
+        });
+        let module = shaders::TONEMAP.create_module(device);
+        let pipeline = super::compute_pipeline(device, "tonemap", &layout, &module, "main");
+        Self { pipeline, layout }
+    }
+
+    pub fn bind(
+        &self,
+        device: &wgpu::Device,
+        hdr: &Target,
+        exposure: &wgpu::Buffer,
+        ldr: &Target,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tonemap"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&hdr.view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: exposure.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::TextureView(&ldr.view),
+                },
+            ],
+        })
+    }
+
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        width: u32,
+        height: u32,
+    ) {
+        super::dispatch_2d(
+            encoder,
+            "tonemap",
+            &self.pipeline,
+            bind_group,
+            width,
+            height,
+        );
+    }
+}

@@ -1,0 +1,379 @@
+//! The frame: runs the passes in order for one scene and reads the image back.
+//!
+//! No async runtime is involved; the offline `render` command and tests drive it directly.
+
+use crate::gpu::{
+    readback::{map_read, TextureReadback},
+    timing::{FrameTimer, StageTiming, TimingSource},
+    GpuContext, GpuError,
+};
+use crate::passes::{
+    direct_light::{DirectLightPass, HDR_FORMAT},
+    exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
+    frame_uniforms::{CameraUniform, LightUniform},
+    gbuffer::{GBuffer, GBufferBindings, GBufferPass},
+    scene_buffers::SceneBuffers,
+    shadow_map::{ShadowMap, ShadowMapPass},
+    tonemap::{TonemapPass, LDR_FORMAT},
+    Target,
+};
+use crate::scene::Scene;
+use glam::Vec3;
+use lightcast_protocol::{Camera, Light};
+use wgpu::util::DeviceExt;
+
+/// Largest shadow map side accepted (further limited by the adapter).
+pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
+
+/// What one frame should show.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    pub camera: Camera,
+    pub light: Light,
+    pub exposure: Exposure,
+    /// Side of the (square) shadow map per light face.
+    pub shadow_map_size: u32,
+    /// Also read back the linear HDR radiance (before exposure).
+    pub capture_hdr: bool,
+}
+
+/// A rendered frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// sRGB RGBA8, rows top to bottom.
+    pub rgba8: Vec<u8>,
+    /// Linear HDR radiance, RGBA, when [`RenderSettings::capture_hdr`] was set. Alpha 0 marks
+    /// pixels no geometry covers.
+    pub hdr: Option<Vec<[f32; 4]>>,
+    pub timings: Vec<StageTiming>,
+    pub timing_source: TimingSource,
+    /// The exposure scale applied before the tone curve.
+    pub exposure_scale: f32,
+}
+
+impl Frame {
+    pub fn total_ms(&self) -> f64 {
+        self.timings.iter().map(|t| t.ms).sum()
+    }
+}
+
+/// A setting the renderer cannot use, naming the field.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error("invalid {field}: {reason}")]
+    InvalidSetting { field: &'static str, reason: String },
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+fn invalid(field: &'static str, reason: impl Into<String>) -> RenderError {
+    RenderError::InvalidSetting {
+        field,
+        reason: reason.into(),
+    }
+}
+
+fn check_finite(field: &'static str, values: &[f32]) -> Result<(), RenderError> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(invalid(field, "must be finite numbers"))
+    }
+}
+
+impl RenderSettings {
+    /// Rejects settings that would produce garbage or exceed the adapter.
+    pub fn validate(&self, ctx: &GpuContext) -> Result<(), RenderError> {
+        let max = ctx.device.limits().max_texture_dimension_2d;
+        for (field, v) in [("width", self.width), ("height", self.height)] {
+            if v == 0 || v > max {
+                return Err(invalid(field, format!("{v} is outside 1..={max}")));
+            }
+        }
+        let max_shadow = max.min(MAX_SHADOW_MAP_SIZE);
+        if !(16..=max_shadow).contains(&self.shadow_map_size) {
+            return Err(invalid(
+                "shadow_map_size",
+                format!("{} is outside 16..={max_shadow}", self.shadow_map_size),
+            ));
+        }
+        let c = &self.camera;
+        check_finite("camera.position", &c.position)?;
+        check_finite("camera.target", &c.target)?;
+        if Vec3::from(c.position).distance(Vec3::from(c.target)) < 1e-6 {
+            return Err(invalid("camera.target", "must differ from camera.position"));
+        }
+        if !(c.fov_y_degrees > 0.5 && c.fov_y_degrees < 179.5) {
+            return Err(invalid(
+                "camera.fov_y_degrees",
+                format!("{} is outside (0.5, 179.5)", c.fov_y_degrees),
+            ));
+        }
+        let l = &self.light;
+        check_finite("light.position", &l.position)?;
+        check_finite("light.direction", &l.direction)?;
+        check_finite("light.color", &l.color)?;
+        if Vec3::from(l.direction).length() < 1e-6 {
+            return Err(invalid("light.direction", "must not be zero"));
+        }
+        if l.color.iter().any(|&c| c < 0.0) {
+            return Err(invalid("light.color", "must not be negative"));
+        }
+        if !(l.intensity.is_finite() && l.intensity >= 0.0) {
+            return Err(invalid("light.intensity", "must be a finite number ≥ 0"));
+        }
+        if !(l.inner_cone.is_finite() && l.outer_cone.is_finite())
+            || l.inner_cone < 0.0
+            || l.outer_cone > std::f32::consts::FRAC_PI_2
+            || l.inner_cone > l.outer_cone
+        {
+            return Err(invalid("light.cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees"));
+        }
+        if let Exposure::Manual(s) = self.exposure {
+            if !(s.is_finite() && s > 0.0) {
+                return Err(invalid(
+                    "exposure",
+                    format!("{s} must be a positive number"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Targets that depend on the output size.
+struct SizedTargets {
+    width: u32,
+    height: u32,
+    gbuffer: GBuffer,
+    hdr: Target,
+    ldr: Target,
+    ldr_readback: TextureReadback,
+    hdr_readback: TextureReadback,
+    exposure: ExposureBindings,
+    tonemap: wgpu::BindGroup,
+}
+
+/// Renders one scene; keeps GPU resources between frames.
+pub struct Renderer {
+    ctx: GpuContext,
+    timer: FrameTimer,
+    scene: Scene,
+    scene_buffers: SceneBuffers,
+    gbuffer_pass: GBufferPass,
+    shadow_pass: ShadowMapPass,
+    direct_pass: DirectLightPass,
+    exposure_pass: ExposurePass,
+    tonemap_pass: TonemapPass,
+    camera_buffer: wgpu::Buffer,
+    light_buffer: wgpu::Buffer,
+    exposure_readback: wgpu::Buffer,
+    gbuffer_bindings: GBufferBindings,
+    sized: Option<SizedTargets>,
+    shadow_map: Option<ShadowMap>,
+}
+
+impl Renderer {
+    pub fn new(ctx: GpuContext, scene: Scene) -> Self {
+        let device = &ctx.device;
+        let uniform = |label, contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            })
+        };
+        let camera_buffer = uniform(
+            "camera",
+            bytemuck::bytes_of(&bytemuck::Zeroable::zeroed() as &CameraUniform),
+        );
+        let light_buffer = uniform(
+            "light",
+            bytemuck::bytes_of(&bytemuck::Zeroable::zeroed() as &LightUniform),
+        );
+        let exposure_readback = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("exposure readback"),
+            size: std::mem::size_of::<ExposureResult>() as u64,
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let gbuffer_pass = GBufferPass::new(device);
+        let gbuffer_bindings = gbuffer_pass.bind_scene(device, &ctx.queue, &scene, &camera_buffer);
+        Self {
+            timer: FrameTimer::new(&ctx),
+            scene_buffers: SceneBuffers::new(device, &scene),
+            shadow_pass: ShadowMapPass::new(device),
+            direct_pass: DirectLightPass::new(device),
+            exposure_pass: ExposurePass::new(device),
+            tonemap_pass: TonemapPass::new(device),
+            gbuffer_pass,
+            gbuffer_bindings,
+            camera_buffer,
+            light_buffer,
+            exposure_readback,
+            sized: None,
+            shadow_map: None,
+            scene,
+            ctx,
+        }
+    }
+
+    pub fn context(&self) -> &GpuContext {
+        &self.ctx
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn timing_source(&self) -> TimingSource {
+        self.timer.source()
+    }
+
+    fn ensure_targets(&mut self, width: u32, height: u32) {
+        if matches!(&self.sized, Some(s) if s.width == width && s.height == height) {
+            return;
+        }
+        let device = &self.ctx.device;
+        let hdr = Target::new(
+            device,
+            "hdr",
+            width,
+            height,
+            HDR_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+        );
+        let ldr = Target::new(
+            device,
+            "ldr",
+            width,
+            height,
+            LDR_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
+        let exposure = self.exposure_pass.bind(device, &hdr, width, height);
+        let tonemap = self
+            .tonemap_pass
+            .bind(device, &hdr, &self.exposure_pass.result, &ldr);
+        self.sized = Some(SizedTargets {
+            width,
+            height,
+            gbuffer: GBuffer::new(device, width, height),
+            ldr_readback: TextureReadback::new(device, "ldr readback", width, height, 4),
+            hdr_readback: TextureReadback::new(device, "hdr readback", width, height, 8),
+            hdr,
+            ldr,
+            exposure,
+            tonemap,
+        });
+    }
+
+    fn ensure_shadow_map(&mut self, size: u32, faces: u32) {
+        if matches!(&self.shadow_map, Some(m) if m.size == size && m.faces() == faces) {
+            return;
+        }
+        self.shadow_map = Some(ShadowMap::new(&self.ctx.device, size, faces));
+    }
+
+    /// Renders one frame and reads it back (blocking).
+    pub fn render(&mut self, settings: &RenderSettings) -> Result<Frame, RenderError> {
+        settings.validate(&self.ctx)?;
+        let (width, height) = (settings.width, settings.height);
+        self.ensure_targets(width, height);
+        let faces = LightUniform::face_count(settings.light.kind);
+        self.ensure_shadow_map(settings.shadow_map_size, faces);
+        let (Some(sized), Some(shadow_map)) = (&self.sized, &self.shadow_map) else {
+            unreachable!("targets were just ensured");
+        };
+
+        let bounds = &self.scene.bounds;
+        let camera = CameraUniform::new(&settings.camera, width as f32 / height as f32, bounds);
+        let light = LightUniform::new(&settings.light, bounds, settings.shadow_map_size);
+        let queue = &self.ctx.queue;
+        queue.write_buffer(&self.camera_buffer, 0, bytemuck::bytes_of(&camera));
+        queue.write_buffer(&self.light_buffer, 0, bytemuck::bytes_of(&light));
+        self.shadow_pass
+            .set_faces(queue, &light.face_view_proj[..faces as usize]);
+        self.exposure_pass
+            .prepare(queue, &sized.exposure, settings.exposure);
+        let direct_bind_group = self.direct_pass.bind(
+            &self.ctx.device,
+            &self.camera_buffer,
+            &self.light_buffer,
+            &sized.gbuffer,
+            shadow_map,
+            &sized.hdr,
+        );
+
+        let mut stages = self.timer.begin(&self.ctx);
+        stages.stage("shadow_map", |e| {
+            self.shadow_pass.encode(e, shadow_map, &self.scene_buffers)
+        })?;
+        stages.stage("gbuffer", |e| {
+            self.gbuffer_pass.encode(
+                e,
+                &sized.gbuffer,
+                &self.scene_buffers,
+                &self.gbuffer_bindings,
+            )
+        })?;
+        stages.stage("direct_light", |e| {
+            self.direct_pass
+                .encode(e, &direct_bind_group, width, height)
+        })?;
+        if settings.exposure == Exposure::Auto {
+            stages.stage("exposure", |e| {
+                self.exposure_pass
+                    .encode(e, &sized.exposure, settings.exposure)
+            })?;
+        }
+        stages.stage("tonemap", |e| {
+            self.tonemap_pass.encode(e, &sized.tonemap, width, height)
+        })?;
+        stages.stage("readback_copy", |e| {
+            sized.ldr_readback.encode_copy(e, &sized.ldr.texture);
+            if settings.capture_hdr {
+                sized.hdr_readback.encode_copy(e, &sized.hdr.texture);
+            }
+            e.copy_buffer_to_buffer(
+                &self.exposure_pass.result,
+                0,
+                &self.exposure_readback,
+                0,
+                None,
+            );
+        })?;
+        let timings = stages.finish()?;
+
+        let rgba8 = sized.ldr_readback.read(&self.ctx)?;
+        let hdr = if settings.capture_hdr {
+            let bytes = sized.hdr_readback.read(&self.ctx)?;
+            let halves: &[half::f16] = bytemuck::cast_slice(&bytes);
+            Some(
+                halves
+                    .chunks_exact(4)
+                    .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
+                    .collect(),
+            )
+        } else {
+            None
+        };
+        let exposure_bytes = map_read(&self.ctx, &self.exposure_readback)?;
+        let exposure: ExposureResult = bytemuck::pod_read_unaligned(&exposure_bytes);
+        Ok(Frame {
+            width,
+            height,
+            rgba8,
+            hdr,
+            timings,
+            timing_source: self.timer.source(),
+            exposure_scale: exposure.scale,
+        })
+    }
+}

@@ -1,0 +1,221 @@
+//! Direct lighting on the GPU (lavapipe in CI) against CPU ports of the shading equations,
+//! at small sizes. Radiance is compared in the HDR buffer, before exposure and tone mapping.
+
+mod support;
+
+use glam::Vec3;
+use lightcast_protocol::{Camera, Light, LightKind};
+use support::*;
+
+const W: u32 = 64;
+const H: u32 = 48;
+
+/// A 4 m floor at y = 0 seen from above at an angle.
+fn floor_scene(material: lightcast_server::scene::Material) -> lightcast_server::scene::Scene {
+    let (mut v, mut i) = (Vec::new(), Vec::new());
+    quad(&mut v, &mut i, floor_corners(0.0, 0.0, 0.0, 2.0), 0);
+    scene(v, i, vec![material])
+}
+
+fn oblique_camera() -> Camera {
+    Camera {
+        position: [0.3, 1.5, 1.6],
+        target: [0.0, 0.0, 0.0],
+        fov_y_degrees: 50.0,
+    }
+}
+
+/// Mean relative error between GPU HDR radiance and the CPU reference over floor pixels.
+fn compare_with_reference(
+    material: lightcast_server::scene::Material,
+    light: Light,
+) -> (f32, usize) {
+    let scene = floor_scene(material.clone());
+    let camera = oblique_camera();
+    let frame = render(
+        scene.clone(),
+        &settings(W, H, camera.clone(), light.clone()),
+    );
+    let (mut err_sum, mut ref_sum, mut count) = (0.0f32, 0.0f32, 0usize);
+    for y in 0..H {
+        for x in 0..W {
+            let Some(p) = hit_plane(&camera, &scene, W, H, x, y, 0.0) else {
+                continue;
+            };
+            // Skip pixels near the floor's edge, where coverage of the pixel is partial.
+            if p.x.abs() > 1.9 || p.z.abs() > 1.9 {
+                continue;
+            }
+            let expected = direct_radiance(&material, &light, &camera, p, Vec3::Y);
+            let got = hdr_at(&frame, x, y);
+            err_sum += (got - expected).abs().element_sum();
+            ref_sum += expected.element_sum();
+            count += 1;
+        }
+    }
+    assert!(
+        count > (W * H / 3) as usize,
+        "floor covers too few pixels: {count}"
+    );
+    (err_sum / ref_sum.max(1e-12), count)
+}
+
+#[test]
+fn diffuse_floor_under_a_sun_matches_lambert() {
+    let light = directional(Vec3::new(0.3, -1.0, -0.2), 3.0);
+    let (rel, _) = compare_with_reference(plain_material([0.6, 0.4, 0.2], 0.0, 1.0), light);
+    assert!(rel < 0.01, "relative mean error {rel}");
+}
+
+#[test]
+fn glossy_metal_matches_the_phong_lobe_of_eq_4() {
+    // A sun whose mirror reflection points near the camera, so the lobe dominates.
+    let light = directional(Vec3::new(0.1, -1.0, 1.0), 2.0);
+    let metal = plain_material([0.9, 0.7, 0.3], 1.0, 0.45);
+    assert!(split(&metal).exponent > 4.0);
+    let (rel, _) = compare_with_reference(metal, light);
+    assert!(rel < 0.02, "relative mean error {rel}");
+}
+
+#[test]
+fn spot_light_cone_and_inverse_square_match() {
+    let light = Light {
+        kind: LightKind::Spot,
+        position: [0.2, 1.2, 0.1],
+        direction: [0.0, -1.0, 0.0],
+        color: [1.0, 0.8, 0.6],
+        intensity: 5.0,
+        inner_cone: 20f32.to_radians(),
+        outer_cone: 35f32.to_radians(),
+    };
+    let (rel, _) = compare_with_reference(plain_material([0.8, 0.8, 0.8], 0.0, 0.8), light);
+    assert!(rel < 0.02, "relative mean error {rel}");
+}
+
+#[test]
+fn point_light_falls_off_with_distance_squared() {
+    let light = Light {
+        kind: LightKind::Point,
+        position: [-0.4, 0.6, 0.2],
+        direction: [0.0, -1.0, 0.0],
+        color: [1.0; 3],
+        intensity: 2.0,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+    };
+    let (rel, _) = compare_with_reference(plain_material([0.5, 0.5, 0.5], 0.0, 1.0), light);
+    assert!(rel < 0.01, "relative mean error {rel}");
+}
+
+/// Floor with a 0.5 m square occluder hovering above its centre, seen from straight above.
+fn occluder_scene() -> lightcast_server::scene::Scene {
+    let (mut v, mut i) = (Vec::new(), Vec::new());
+    quad(&mut v, &mut i, floor_corners(0.0, 0.0, 0.0, 2.0), 0);
+    quad(&mut v, &mut i, floor_corners(0.0, 0.0, 0.5, 0.25), 0);
+    scene(v, i, vec![plain_material([0.7; 3], 0.0, 1.0)])
+}
+
+fn top_camera() -> Camera {
+    Camera {
+        position: [0.0, 4.0, 0.001],
+        target: [0.0, 0.0, 0.0],
+        fov_y_degrees: 60.0,
+    }
+}
+
+/// Luminance of the floor at world point (x, 0, z), found by searching the pixel whose ray hits it.
+fn floor_luminance_at(
+    frame: &lightcast_server::renderer::Frame,
+    scene: &lightcast_server::scene::Scene,
+    camera: &Camera,
+    target: Vec3,
+) -> f32 {
+    let mut best = (f32::INFINITY, 0.0);
+    for y in 0..frame.height {
+        for x in 0..frame.width {
+            if let Some(p) = hit_plane(camera, scene, frame.width, frame.height, x, y, 0.0) {
+                let d = p.distance(target);
+                if d < best.0 {
+                    best = (d, luminance(hdr_at(frame, x, y)));
+                }
+            }
+        }
+    }
+    best.1
+}
+
+#[test]
+fn occluder_casts_a_shadow_from_a_sun_with_a_soft_pcf_edge() {
+    let scene = occluder_scene();
+    let camera = top_camera();
+    // The sun comes in at an angle so the shadow lands beside the occluder, visible from above.
+    let light = directional(Vec3::new(1.0, -1.0, 0.0), 3.0);
+    let frame = render(scene.clone(), &settings(96, 96, camera.clone(), light));
+    // The occluder at height 0.5 shifts its shadow by 0.5 m along +x.
+    let shadowed = floor_luminance_at(
+        &frame,
+        &scene,
+        &camera,
+        Vec3::new(0.5 + 0.0, 0.0, 0.0) + Vec3::new(0.0, 0.0, 0.1),
+    );
+    let lit = floor_luminance_at(&frame, &scene, &camera, Vec3::new(-1.2, 0.0, 0.0));
+    assert!(lit > 0.1, "lit floor luminance {lit}");
+    assert!(shadowed < 0.05 * lit, "shadow {shadowed} vs lit {lit}");
+    // PCF: somewhere along the edge there are values strictly between lit and shadowed.
+    let edge = (0..40)
+        .map(|k| {
+            floor_luminance_at(
+                &frame,
+                &scene,
+                &camera,
+                Vec3::new(0.55 + 0.25 + (k as f32 - 20.0) * 0.005, 0.0, 0.0),
+            )
+        })
+        .any(|l| l > 0.1 * lit && l < 0.9 * lit);
+    assert!(edge, "no penumbra texels found at the shadow edge");
+}
+
+#[test]
+fn point_light_shadows_work_on_side_faces_of_the_cube() {
+    // A wall at x = 0.6 between a point light at the origin's height 1 and the floor beyond.
+    let (mut v, mut i) = (Vec::new(), Vec::new());
+    quad(&mut v, &mut i, floor_corners(0.0, 0.0, 0.0, 2.0), 0);
+    quad(
+        &mut v,
+        &mut i,
+        [
+            Vec3::new(0.6, 0.0, 1.0),
+            Vec3::new(0.6, 0.0, -1.0),
+            Vec3::new(0.6, 2.0, -1.0),
+            Vec3::new(0.6, 2.0, 1.0),
+        ],
+        0,
+    );
+    let scene = scene(v, i, vec![plain_material([0.7; 3], 0.0, 1.0)]);
+    let camera = top_camera();
+    let light = Light {
+        kind: LightKind::Point,
+        position: [0.0, 1.0, 0.0],
+        direction: [0.0, -1.0, 0.0],
+        color: [1.0; 3],
+        intensity: 3.0,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+    };
+    let frame = render(scene.clone(), &settings(96, 96, camera.clone(), light));
+    let behind_wall = floor_luminance_at(&frame, &scene, &camera, Vec3::new(1.4, 0.0, 0.0));
+    let mirror_side = floor_luminance_at(&frame, &scene, &camera, Vec3::new(-1.4, 0.0, 0.0));
+    let below = floor_luminance_at(&frame, &scene, &camera, Vec3::new(-0.2, 0.0, 0.3));
+    assert!(
+        mirror_side > 0.05,
+        "unoccluded floor luminance {mirror_side}"
+    );
+    assert!(
+        below > mirror_side,
+        "floor under the light should be brightest"
+    );
+    assert!(
+        behind_wall < 0.05 * mirror_side,
+        "behind the wall {behind_wall} vs open {mirror_side}"
+    );
+}

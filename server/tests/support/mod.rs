@@ -1,0 +1,210 @@
+//! Helpers shared by the GPU tests: tiny scenes, a CPU ray caster for planes and CPU ports of
+//! the shading equations in `shaders/` (the references the GPU output is compared against).
+
+#![allow(dead_code)] // each test binary uses a different subset
+
+use glam::{Mat4, Vec3, Vec4Swizzles};
+use lightcast_protocol::{Camera, Light, LightKind};
+use lightcast_server::gpu::{BackendChoice, GpuContext};
+use lightcast_server::passes::exposure::Exposure;
+use lightcast_server::passes::frame_uniforms::camera_view_proj;
+use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
+use lightcast_server::scene::{material, Material, Scene, Vertex};
+use std::f32::consts::PI;
+
+pub fn gpu() -> GpuContext {
+    GpuContext::new(BackendChoice::Auto).expect("a GPU adapter (lavapipe in CI)")
+}
+
+/// Appends a quad with corners `a, b, c, d` (counter-clockwise seen from its normal side).
+pub fn quad(vertices: &mut Vec<Vertex>, indices: &mut Vec<u32>, corners: [Vec3; 4], material: u32) {
+    let n = (corners[1] - corners[0])
+        .cross(corners[2] - corners[0])
+        .normalize();
+    let base = vertices.len() as u32;
+    let uvs = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    for (p, uv) in corners.iter().zip(uvs) {
+        vertices.push(Vertex {
+            position: p.to_array(),
+            normal: n.to_array(),
+            uv,
+            material,
+        });
+    }
+    indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+}
+
+/// A horizontal square at height `y`, facing up, half-size `h`, centred at (cx, cz).
+pub fn floor_corners(cx: f32, cz: f32, y: f32, h: f32) -> [Vec3; 4] {
+    [
+        Vec3::new(cx - h, y, cz + h),
+        Vec3::new(cx + h, y, cz + h),
+        Vec3::new(cx + h, y, cz - h),
+        Vec3::new(cx - h, y, cz - h),
+    ]
+}
+
+pub fn plain_material(base: [f32; 3], metallic: f32, roughness: f32) -> Material {
+    Material {
+        name: "test".into(),
+        base_color: [base[0], base[1], base[2], 1.0],
+        metallic,
+        roughness,
+        ..Material::default()
+    }
+}
+
+pub fn scene(vertices: Vec<Vertex>, indices: Vec<u32>, materials: Vec<Material>) -> Scene {
+    Scene::new("test", vertices, indices, materials, vec![], vec![], vec![]).expect("valid scene")
+}
+
+pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> RenderSettings {
+    RenderSettings {
+        width,
+        height,
+        camera,
+        light,
+        exposure: Exposure::Manual(1.0),
+        shadow_map_size: 256,
+        capture_hdr: true,
+    }
+}
+
+pub fn render(scene: Scene, settings: &RenderSettings) -> Frame {
+    let mut renderer = Renderer::new(gpu(), scene);
+    renderer.render(settings).expect("render")
+}
+
+pub fn directional(direction: Vec3, illuminance: f32) -> Light {
+    Light {
+        kind: LightKind::Directional,
+        position: [0.0; 3],
+        direction: direction.to_array(),
+        color: [1.0; 3],
+        intensity: illuminance,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+    }
+}
+
+/// World-space ray through the centre of pixel (x, y).
+pub fn pixel_ray(
+    camera: &Camera,
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    x: u32,
+    y: u32,
+) -> (Vec3, Vec3) {
+    let view_proj = camera_view_proj(camera, width as f32 / height as f32, &scene.bounds);
+    let inv = view_proj.inverse();
+    let ndc_x = (x as f32 + 0.5) / width as f32 * 2.0 - 1.0;
+    let ndc_y = 1.0 - (y as f32 + 0.5) / height as f32 * 2.0;
+    let unproject = |z: f32| {
+        let p = inv * glam::Vec4::new(ndc_x, ndc_y, z, 1.0);
+        p.xyz() / p.w
+    };
+    let near = unproject(0.0);
+    let far = unproject(1.0);
+    (near, (far - near).normalize())
+}
+
+/// Where a pixel's ray meets the plane y = `plane_y`, if it does.
+pub fn hit_plane(
+    camera: &Camera,
+    scene: &Scene,
+    w: u32,
+    h: u32,
+    x: u32,
+    y: u32,
+    plane_y: f32,
+) -> Option<Vec3> {
+    let (o, d) = pixel_ray(camera, scene, w, h, x, y);
+    if d.y.abs() < 1e-6 {
+        return None;
+    }
+    let t = (plane_y - o.y) / d.y;
+    (t > 0.0).then(|| o + d * t)
+}
+
+/// CPU port of `eval_brdf` in `shaders/brdf.wgsl` (paper eq. 3–4).
+pub fn brdf(m: &Material, n: Vec3, to_light: Vec3, to_viewer: Vec3) -> Vec3 {
+    let s = m.diffuse_glossy();
+    let mirrored = (-to_light) - 2.0 * (-to_light).dot(n) * n;
+    let cos_e = mirrored.dot(to_viewer).max(0.0);
+    s.diffuse / PI + s.glossy * (s.exponent + 2.0) / (2.0 * PI) * cos_e.powf(s.exponent)
+}
+
+fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
+    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// CPU port of `light_incident` in `shaders/lights.wgsl`: (direction to light, irradiance).
+pub fn incident(light: &Light, p: Vec3) -> (Vec3, Vec3) {
+    let radiance = Vec3::from(light.color) * light.intensity;
+    let dir = Vec3::from(light.direction).normalize();
+    match light.kind {
+        LightKind::Directional => (-dir, radiance),
+        LightKind::Spot | LightKind::Point => {
+            let d = Vec3::from(light.position) - p;
+            let l = d.normalize();
+            let mut e = radiance / d.length_squared();
+            if light.kind == LightKind::Spot {
+                let outer = light.outer_cone.max(1e-4);
+                let inner = light.inner_cone.clamp(0.0, outer * 0.999);
+                e *= smoothstep(outer.cos(), inner.cos(), (-l).dot(dir));
+            }
+            (l, e)
+        }
+    }
+}
+
+/// Unshadowed direct radiance leaving `p` towards the camera (CPU reference).
+pub fn direct_radiance(m: &Material, light: &Light, camera: &Camera, p: Vec3, n: Vec3) -> Vec3 {
+    let (l, e) = incident(light, p);
+    let v = (Vec3::from(camera.position) - p).normalize();
+    brdf(m, n, l, v) * e * n.dot(l).max(0.0)
+}
+
+pub fn hdr_at(frame: &Frame, x: u32, y: u32) -> Vec3 {
+    let hdr = frame.hdr.as_ref().expect("HDR captured");
+    let c = hdr[(y * frame.width + x) as usize];
+    Vec3::new(c[0], c[1], c[2])
+}
+
+pub fn rgba_at(frame: &Frame, x: u32, y: u32) -> [u8; 4] {
+    let i = ((y * frame.width + x) * 4) as usize;
+    [
+        frame.rgba8[i],
+        frame.rgba8[i + 1],
+        frame.rgba8[i + 2],
+        frame.rgba8[i + 3],
+    ]
+}
+
+pub fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
+/// Mean of a rectangle of the 8-bit image, per channel, in 0..255.
+pub fn mean_rgb(frame: &Frame, x0: u32, y0: u32, x1: u32, y1: u32) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let [r, g, b, _] = rgba_at(frame, x, y);
+            sum += Vec3::new(r as f32, g as f32, b as f32);
+        }
+    }
+    sum / ((x1 - x0) * (y1 - y0)) as f32
+}
+
+/// Re-exported so tests can state which material split they expect.
+pub fn split(m: &Material) -> material::DiffuseGlossy {
+    m.diffuse_glossy()
+}
+
+/// Identity helper to keep `Mat4` in the import list for tests that build matrices.
+pub fn identity() -> Mat4 {
+    Mat4::IDENTITY
+}

@@ -1,0 +1,10 @@
+// Shared by every pass: constants and the per-frame camera.
+
+const PI: f32 = 3.14159265358979;
+
+// Mirrored by `CameraUniform` in server/src/passes/frame_uniforms.rs.
+struct CameraUniform {
+    view_proj: mat4x4<f32>,
+    position: vec3<f32>,
+    pad0: f32,
+}

@@ -1,0 +1,44 @@
+// Deferred direct lighting: emission plus one punctual light with PCF shadows, into HDR.
+
+@group(0) @binding(0) var<uniform> camera: CameraUniform;
+@group(0) @binding(1) var<uniform> light: LightUniform;
+@group(0) @binding(2) var g_position: texture_2d<f32>;
+@group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
+@group(0) @binding(4) var g_diffuse: texture_2d<f32>;
+@group(0) @binding(5) var g_glossy: texture_2d<f32>;
+@group(0) @binding(6) var g_emissive: texture_2d<f32>;
+@group(0) @binding(7) var shadow_map: texture_depth_2d_array;
+@group(0) @binding(8) var shadow_sampler: sampler_comparison;
+@group(0) @binding(9) var hdr_out: texture_storage_2d<rgba16float, write>;
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = textureDimensions(hdr_out);
+    if id.x >= size.x || id.y >= size.y {
+        return;
+    }
+    let texel = vec2<i32>(id.xy);
+    let position = textureLoad(g_position, texel, 0);
+    if position.w == 0.0 {
+        // Background keeps alpha 0 so exposure and tone mapping can tell it apart.
+        textureStore(hdr_out, texel, vec4<f32>(0.0));
+        return;
+    }
+    let p = position.xyz;
+    let ne = textureLoad(g_normal_exponent, texel, 0);
+    let n = normalize(ne.xyz);
+    let surface = SurfaceBrdf(
+        textureLoad(g_diffuse, texel, 0).rgb,
+        textureLoad(g_glossy, texel, 0).rgb,
+        ne.w,
+    );
+    let v = normalize(camera.position - p);
+    let incident = light_incident(light, p);
+    let cos_x = max(dot(n, incident.to_light), 0.0);
+    var radiance = textureLoad(g_emissive, texel, 0).rgb;
+    if cos_x > 0.0 {
+        let visibility = shadow_visibility(light, shadow_map, shadow_sampler, p, n);
+        radiance += eval_brdf(surface, n, incident.to_light, v) * incident.irradiance * cos_x * visibility;
+    }
+    textureStore(hdr_out, texel, vec4<f32>(radiance, 1.0));
+}

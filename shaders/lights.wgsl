@@ -1,0 +1,89 @@
+// Punctual lights and their shadow maps. The shadow map is a depth array: one layer for
+// directional (orthographic) and spot (perspective) lights, six cube faces for point lights.
+
+const LIGHT_DIRECTIONAL: u32 = 0u;
+const LIGHT_SPOT: u32 = 1u;
+const LIGHT_POINT: u32 = 2u;
+
+// Mirrored by `LightUniform` in server/src/passes/frame_uniforms.rs.
+struct LightUniform {
+    face_view_proj: array<mat4x4<f32>, 6>,
+    position: vec3<f32>,
+    kind: u32,
+    // Direction the light travels (unit).
+    direction: vec3<f32>,
+    cos_inner: f32,
+    // Colour × intensity: illuminance (directional) or intensity (spot, point).
+    radiance: vec3<f32>,
+    cos_outer: f32,
+    // 1 / shadow map resolution.
+    shadow_texel: f32,
+    // World-space offset along the normal before the lookup, against self-shadowing.
+    normal_bias: f32,
+    pad0: f32,
+    pad1: f32,
+}
+
+struct Incident {
+    to_light: vec3<f32>,
+    // Irradiance on a surface facing the light, before the cosine and shadowing.
+    irradiance: vec3<f32>,
+}
+
+fn light_incident(light: LightUniform, p: vec3<f32>) -> Incident {
+    if light.kind == LIGHT_DIRECTIONAL {
+        return Incident(-light.direction, light.radiance);
+    }
+    let d = light.position - p;
+    let dist2 = max(dot(d, d), 1e-8);
+    let l = d * inverseSqrt(dist2);
+    var e = light.radiance / dist2;
+    if light.kind == LIGHT_SPOT {
+        e *= smoothstep(light.cos_outer, light.cos_inner, dot(-l, light.direction));
+    }
+    return Incident(l, e);
+}
+
+// Cube face (+X, -X, +Y, -Y, +Z, -Z) whose frustum contains `p` for a point light.
+fn shadow_face(light: LightUniform, p: vec3<f32>) -> u32 {
+    if light.kind != LIGHT_POINT {
+        return 0u;
+    }
+    let d = p - light.position;
+    let a = abs(d);
+    if a.x >= a.y && a.x >= a.z {
+        return select(1u, 0u, d.x >= 0.0);
+    }
+    if a.y >= a.z {
+        return select(3u, 2u, d.y >= 0.0);
+    }
+    return select(5u, 4u, d.z >= 0.0);
+}
+
+// Fraction of the light reaching `p` (3×3 PCF on hardware-filtered depth comparisons).
+fn shadow_visibility(
+    light: LightUniform,
+    shadow_map: texture_depth_2d_array,
+    shadow_sampler: sampler_comparison,
+    p: vec3<f32>,
+    n: vec3<f32>,
+) -> f32 {
+    let face = shadow_face(light, p);
+    let clip = light.face_view_proj[face] * vec4<f32>(p + n * light.normal_bias, 1.0);
+    if clip.w <= 0.0 {
+        return 0.0;
+    }
+    let ndc = clip.xyz / clip.w;
+    let uv = ndc.xy * vec2<f32>(0.5, -0.5) + vec2<f32>(0.5);
+    if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
+        return 1.0;
+    }
+    var lit = 0.0;
+    for (var y = -1; y <= 1; y++) {
+        for (var x = -1; x <= 1; x++) {
+            let offset = vec2<f32>(f32(x), f32(y)) * light.shadow_texel;
+            lit += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + offset, face, ndc.z);
+        }
+    }
+    return lit / 9.0;
+}

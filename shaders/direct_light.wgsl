@@ -37,7 +37,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let cos_x = max(dot(n, incident.to_light), 0.0);
     var radiance = textureLoad(g_emissive, texel, 0).rgb;
     if cos_x > 0.0 {
-        let visibility = shadow_visibility(light, shadow_map, shadow_sampler, p, n);
+        let visibility = shadow_visibility(light, shadow_map, shadow_sampler, p, n, cos_x);
         radiance += eval_brdf(surface, n, incident.to_light, v) * incident.irradiance * cos_x * visibility;
     }
     textureStore(hdr_out, texel, vec4<f32>(radiance, 1.0));

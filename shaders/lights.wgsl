@@ -18,7 +18,9 @@ struct LightUniform {
     cos_outer: f32,
     // 1 / shadow map resolution.
     shadow_texel: f32,
-    // World-space offset along the normal before the lookup, against self-shadowing.
+    // Offset along the normal before the lookup, against self-shadowing: world units for
+    // directional lights, world units per metre from the light for spot and point lights
+    // (their texels grow with distance).
     normal_bias: f32,
     pad0: f32,
     pad1: f32,
@@ -61,15 +63,24 @@ fn shadow_face(light: LightUniform, p: vec3<f32>) -> u32 {
 }
 
 // Fraction of the light reaching `p` (3×3 PCF on hardware-filtered depth comparisons).
+// `cos_x` is the cosine between the normal `n` and the direction to the light.
 fn shadow_visibility(
     light: LightUniform,
     shadow_map: texture_depth_2d_array,
     shadow_sampler: sampler_comparison,
     p: vec3<f32>,
     n: vec3<f32>,
+    cos_x: f32,
 ) -> f32 {
     let face = shadow_face(light, p);
-    let clip = light.face_view_proj[face] * vec4<f32>(p + n * light.normal_bias, 1.0);
+    var bias = light.normal_bias;
+    if light.kind != LIGHT_DIRECTIONAL {
+        bias *= distance(p, light.position);
+    }
+    // A texel's footprint on a surface grows as 1/cos towards grazing light; so does the
+    // depth error the offset has to clear (capped, or the shadow detaches entirely).
+    bias *= min(1.0 / max(cos_x, 1e-3), 4.0);
+    let clip = light.face_view_proj[face] * vec4<f32>(p + n * bias, 1.0);
     if clip.w <= 0.0 {
         return 0.0;
     }

@@ -34,8 +34,9 @@ pub struct LightUniform {
 
 /// Widest spot cone a single perspective shadow map covers; light outside it is unshadowed.
 const MAX_SPOT_SHADOW_HALF_ANGLE: f32 = 80.0 * std::f32::consts::PI / 180.0;
-/// Normal offset in shadow-map texels: enough to clear the PCF footprint on sloped surfaces.
-const NORMAL_BIAS_TEXELS: f32 = 1.5;
+/// Normal offset in shadow-map texels: the 3×3 PCF kernel reaches one texel out, plus one
+/// for the bilinear comparison.
+const NORMAL_BIAS_TEXELS: f32 = 2.0;
 
 /// World-to-clip matrix of a camera, with near/far planes fitted to the scene bounds.
 pub fn camera_view_proj(camera: &Camera, aspect: f32, bounds: &Aabb) -> Mat4 {
@@ -58,10 +59,11 @@ impl CameraUniform {
     }
 }
 
-/// An up vector that is never parallel to `forward`.
+/// An up vector that is never parallel to `forward`. Looking straight down, -Z is up on screen
+/// so that +X stays to the right, as in a map of the scene seen from above.
 fn stable_up(forward: Vec3) -> Vec3 {
     if forward.y.abs() > 0.999 {
-        Vec3::Z
+        Vec3::new(0.0, 0.0, forward.y.signum())
     } else {
         Vec3::Y
     }
@@ -88,24 +90,22 @@ impl LightUniform {
         let radius = bounds.radius().max(1e-3);
         let center = bounds.center();
         let mut faces = [Mat4::IDENTITY; 6];
-        // World size of one shadow texel at the scene's scale, for the normal offset.
-        let texel_world;
-        match light.kind {
+        // World size of one shadow texel (per metre of distance for spot and point lights).
+        let texel_world = match light.kind {
             LightKind::Directional => {
                 let eye = center - direction * 2.0 * radius;
                 let view = Mat4::look_to_rh(eye, direction, stable_up(direction));
                 faces[0] =
                     Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius)
                         * view;
-                texel_world = 2.0 * radius / shadow_size as f32;
+                2.0 * radius / shadow_size as f32
             }
             LightKind::Spot => {
                 let half = light.outer_cone.clamp(1e-3, MAX_SPOT_SHADOW_HALF_ANGLE);
                 let (near, far) = depth_range(position, bounds);
                 let view = Mat4::look_to_rh(position, direction, stable_up(direction));
                 faces[0] = Mat4::perspective_rh(2.0 * half, 1.0, near, far) * view;
-                let distance = position.distance(center).max(radius * 0.5);
-                texel_world = 2.0 * distance * half.tan() / shadow_size as f32;
+                2.0 * half.tan() / shadow_size as f32
             }
             LightKind::Point => {
                 let (near, far) = depth_range(position, bounds);
@@ -121,10 +121,9 @@ impl LightUniform {
                 for (face, axis) in faces.iter_mut().zip(axes) {
                     *face = proj * Mat4::look_to_rh(position, axis, stable_up(axis));
                 }
-                let distance = position.distance(center).max(radius * 0.5);
-                texel_world = 2.0 * distance / shadow_size as f32;
+                2.0 / shadow_size as f32
             }
-        }
+        };
         let (cos_inner, cos_outer) = match light.kind {
             LightKind::Spot => {
                 let outer = light.outer_cone.max(1e-4);

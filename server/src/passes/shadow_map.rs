@@ -127,11 +127,12 @@ impl ShadowMapPass {
                 depth_write_enabled: Some(true),
                 depth_compare: Some(wgpu::CompareFunction::LessEqual),
                 stencil: Default::default(),
-                // Slope-scaled bias against acne on surfaces grazing the light; the normal
-                // offset in the lookup handles the rest.
+                // Only a tiny constant bias: acne is handled by the normal offset in the lookup.
+                // A slope-scaled bias pushes grazing occluder faces so far back that light
+                // leaks past box edges (measured by the Cornell ray-caster test).
                 bias: wgpu::DepthBiasState {
                     constant: 2,
-                    slope_scale: 2.0,
+                    slope_scale: 0.0,
                     clamp: 0.0,
                 },
             }),

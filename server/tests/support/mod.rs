@@ -208,3 +208,39 @@ pub fn split(m: &Material) -> material::DiffuseGlossy {
 pub fn identity() -> Mat4 {
     Mat4::IDENTITY
 }
+
+/// Distance along the ray to the nearest scene triangle (Möller–Trumbore), if any.
+pub fn trace(scene: &Scene, origin: Vec3, dir: Vec3, max_t: f32) -> Option<(f32, usize)> {
+    let mut best: Option<(f32, usize)> = None;
+    for (tri, idx) in scene.indices.chunks_exact(3).enumerate() {
+        let [a, b, c] =
+            [idx[0], idx[1], idx[2]].map(|i| Vec3::from(scene.vertices[i as usize].position));
+        let (e1, e2) = (b - a, c - a);
+        let p = dir.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        let inv = 1.0 / det;
+        let s = origin - a;
+        let u = s.dot(p) * inv;
+        if !(0.0..=1.0).contains(&u) {
+            continue;
+        }
+        let q = s.cross(e1);
+        let v = dir.dot(q) * inv;
+        if v < 0.0 || u + v > 1.0 {
+            continue;
+        }
+        let t = e2.dot(q) * inv;
+        if t > 1e-4 && t < max_t && best.is_none_or(|(bt, _)| t < bt) {
+            best = Some((t, tri));
+        }
+    }
+    best
+}
+
+/// The material of triangle `tri` (triangles are sorted by material in [`Scene`]).
+pub fn triangle_material(scene: &Scene, tri: usize) -> u32 {
+    scene.vertices[scene.indices[tri * 3] as usize].material
+}

@@ -96,7 +96,7 @@ pub struct RenderArgs {
     #[arg(long, allow_hyphen_values = true)]
     pub camera_target: Option<Vec3Arg>,
     /// Vertical field of view in degrees.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub fov: Option<f32>,
     /// Light type. Default: the file's KHR_lights_punctual light, else a light standing in for
     /// the scene's emissive surfaces, else a sun.
@@ -112,16 +112,16 @@ pub struct RenderArgs {
     #[arg(long)]
     pub light_color: Option<Vec3Arg>,
     /// Lux for directional lights, candela for spot and point lights.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub light_intensity: Option<f32>,
     /// Spot light inner cone angle in degrees (full intensity inside).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub light_inner_cone: Option<f32>,
     /// Spot light outer cone angle in degrees (zero outside).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub light_outer_cone: Option<f32>,
     /// `auto` (log-average luminance to middle grey) or a linear scale applied before tone mapping.
-    #[arg(long, default_value = "auto")]
+    #[arg(long, default_value = "auto", allow_negative_numbers = true)]
     pub exposure: ExposureArg,
     /// Shadow map side in texels (per cube face for point lights).
     #[arg(long, default_value_t = 2048)]

@@ -218,9 +218,9 @@ fn auto_exposure_maps_log_average_luminance_to_middle_grey_and_tonemap_matches_c
         if c[3] == 0.0 {
             continue;
         }
-        for ch in 0..3 {
-            let want = srgb(aces(c[ch] * frame.exposure_scale)) * 255.0;
-            worst = worst.max((want - frame.rgba8[i * 4 + ch] as f32).abs());
+        for (&radiance, &got) in c[..3].iter().zip(&frame.rgba8[i * 4..i * 4 + 3]) {
+            let want = srgb(aces(radiance * frame.exposure_scale)) * 255.0;
+            worst = worst.max((want - got as f32).abs());
         }
     }
     assert!(worst <= 1.5, "largest 8-bit difference {worst}");
@@ -378,15 +378,14 @@ fn every_stage_is_timed_in_order() {
     assert!(frame.total_ms() > 0.0);
 }
 
+type Mutation = Box<dyn Fn(&mut lightcast_server::renderer::RenderSettings)>;
+
 #[test]
 fn invalid_settings_are_rejected_naming_the_field() {
     let scene = procedural::cornell_box();
     let mut renderer = Renderer::new(gpu(), scene.clone());
     let good = default_settings(&scene, 16, 16);
-    let cases: Vec<(
-        &str,
-        Box<dyn Fn(&mut lightcast_server::renderer::RenderSettings)>,
-    )> = vec![
+    let cases: Vec<(&str, Mutation)> = vec![
         ("width", Box::new(|s| s.width = 0)),
         ("height", Box::new(|s| s.height = 1 << 20)),
         ("shadow_map_size", Box::new(|s| s.shadow_map_size = 8)),

@@ -1,0 +1,236 @@
+//! The offline `render` command, run as a user would run the binary.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const CORNELL_GLB: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../shared/scenes/cornell-box/cornell-box.glb"
+);
+
+fn out_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("lightcast-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+fn run(args: &[&str]) -> Output {
+    let output = Command::new(env!("CARGO_BIN_EXE_lightcast-server"))
+        .args(args)
+        .output()
+        .expect("run lightcast-server");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !stderr.contains("panicked"),
+        "the binary panicked: {stderr}"
+    );
+    output
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Runs `render` into `name` under the temp dir with `extra` options; returns the image.
+fn render_ok(name: &str, extra: &[&str]) -> (image::RgbaImage, String, String) {
+    let out = out_dir().join(name);
+    let out_s = out.to_string_lossy().into_owned();
+    let mut args = vec![
+        "render",
+        "--width",
+        "96",
+        "--height",
+        "64",
+        "--shadow-map-size",
+        "256",
+        "--out",
+        &out_s,
+    ];
+    args.extend_from_slice(extra);
+    let o = run(&args);
+    assert!(o.status.success(), "render failed: {}", text(&o.stderr));
+    let img = image::open(&out)
+        .expect("output decodes as an image")
+        .to_rgba8();
+    (img, text(&o.stdout), text(&o.stderr))
+}
+
+fn mean_abs_diff(a: &image::RgbaImage, b: &image::RgbaImage) -> f64 {
+    let sum: u64 = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| u64::from(x.abs_diff(*y)))
+        .sum();
+    sum as f64 / a.as_raw().len() as f64
+}
+
+fn mean_level(a: &image::RgbaImage) -> f64 {
+    let sum: u64 = a
+        .pixels()
+        .map(|p| u64::from(p[0]) + u64::from(p[1]) + u64::from(p[2]))
+        .sum();
+    sum as f64 / (3 * a.width() * a.height()) as f64
+}
+
+#[test]
+fn renders_the_shared_glb_and_prints_adapter_and_stage_times() {
+    let (img, stdout, stderr) = render_ok("glb.png", &["--scene", CORNELL_GLB]);
+    assert_eq!(img.dimensions(), (96, 64));
+    assert!(stderr.contains("adapter:"), "{stderr}");
+    assert!(stderr.contains("cornell-box"), "{stderr}");
+    for stage in ["shadow_map", "gbuffer", "direct_light", "tonemap", "total"] {
+        assert!(stdout.contains(stage), "missing {stage} in {stdout}");
+    }
+    assert!(stdout.contains("wrote"), "{stdout}");
+}
+
+#[test]
+fn without_a_scene_renders_the_builtin_cornell_box() {
+    let (img, _, stderr) = render_ok("default.png", &[]);
+    assert!(stderr.contains("scene cornell"), "{stderr}");
+    assert!(mean_level(&img) > 10.0, "image is black");
+}
+
+#[test]
+fn json_report_is_machine_readable() {
+    let (_, stdout, _) = render_ok(
+        "json.png",
+        &["--json", "--scene", "procedural:street?blocks=2"],
+    );
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("stdout is JSON");
+    assert_eq!(report["width"], 96);
+    assert!(report["adapter"].as_str().is_some_and(|a| !a.is_empty()));
+    let stages = report["stages"].as_array().expect("stages");
+    assert!(stages.len() >= 5);
+    assert!(report["timing_source"].as_str().is_some());
+    assert!(report["triangles"].as_u64().is_some_and(|t| t > 100));
+}
+
+#[test]
+fn camera_and_light_options_change_the_image() {
+    let fixed = [
+        "--exposure",
+        "1",
+        "--light-type",
+        "directional",
+        "--light-dir",
+        "0.2,-1,-0.3",
+    ];
+    let base = [&fixed[..], &["--light-intensity", "2"]].concat();
+    let brighter = [&fixed[..], &["--light-intensity", "4"]].concat();
+    let (a, _, _) = render_ok("light-a.png", &base);
+    let (b, _, _) = render_ok("light-b.png", &brighter);
+    assert!(
+        mean_level(&b) > mean_level(&a) + 2.0,
+        "{} vs {}",
+        mean_level(&b),
+        mean_level(&a)
+    );
+
+    let moved = [
+        &base[..],
+        &[
+            "--camera-pos",
+            "0.5,1.5,3",
+            "--camera-target",
+            "0,0.8,0",
+            "--fov",
+            "60",
+        ],
+    ]
+    .concat();
+    let (c, _, _) = render_ok("camera.png", &moved);
+    assert!(
+        mean_abs_diff(&a, &c) > 5.0,
+        "moving the camera barely changed the image"
+    );
+
+    for kind in ["spot", "point"] {
+        let (img, _, _) = render_ok(
+            &format!("{kind}.png"),
+            &["--light-type", kind, "--light-pos", "0,1.7,0.2"],
+        );
+        assert!(mean_level(&img) > 5.0, "{kind} light left the image black");
+    }
+}
+
+/// Each bad invocation fails with a non-zero exit and a message naming the problem.
+#[test]
+fn bad_input_is_reported_precisely_without_panicking() {
+    let dir = out_dir();
+    let truncated = dir.join("truncated.glb");
+    let bytes = std::fs::read(CORNELL_GLB).expect("read glb");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 3]).expect("write truncated");
+    let garbage = dir.join("garbage.gltf");
+    std::fs::write(&garbage, b"{ this is not json").expect("write garbage");
+    let missing = dir.join("does-not-exist.glb");
+    let out = dir.join("bad.png").to_string_lossy().into_owned();
+    let _ = std::fs::remove_file(&out);
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["--scene".into(), missing.to_string_lossy().into()],
+            "does-not-exist.glb",
+        ),
+        (
+            vec!["--scene".into(), truncated.to_string_lossy().into()],
+            "truncated.glb",
+        ),
+        (
+            vec!["--scene".into(), garbage.to_string_lossy().into()],
+            "garbage.gltf",
+        ),
+        (
+            vec!["--scene".into(), "procedural:castle".into()],
+            "known scenes",
+        ),
+        (
+            vec!["--scene".into(), "procedural:street?blocks=0".into()],
+            "blocks",
+        ),
+        (vec!["--width".into(), "0".into()], "width"),
+        (vec!["--height".into(), "100000".into()], "height"),
+        (
+            vec!["--shadow-map-size".into(), "4".into()],
+            "shadow_map_size",
+        ),
+        (vec!["--camera-pos".into(), "1,2".into()], "three"),
+        (vec!["--fov".into(), "0".into()], "fov"),
+        (vec!["--light-type".into(), "laser".into()], "laser"),
+        (
+            vec!["--light-dir".into(), "0,0,0".into()],
+            "light.direction",
+        ),
+        (
+            vec!["--light-intensity".into(), "-3".into()],
+            "light.intensity",
+        ),
+        (vec!["--exposure".into(), "-1".into()], "exposure"),
+        (vec!["--backend".into(), "directx9".into()], "directx9"),
+        (
+            vec!["--out".into(), "/nonexistent-dir/x.png".into()],
+            "nonexistent-dir",
+        ),
+    ];
+    for (extra, needle) in cases {
+        let mut args: Vec<String> = ["render", "--width", "32", "--height", "32"]
+            .map(String::from)
+            .to_vec();
+        if !extra.iter().any(|a| a == "--out") {
+            args.extend(["--out".to_string(), out.clone()]);
+        }
+        args.extend(extra.iter().cloned());
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = run(&refs);
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "{extra:?} should fail");
+        assert!(
+            stderr.contains(needle),
+            "{extra:?}: error should mention '{needle}': {stderr}"
+        );
+    }
+    assert!(
+        !Path::new(&out).exists(),
+        "a failed render must not leave an output file"
+    );
+}

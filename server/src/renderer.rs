@@ -24,6 +24,11 @@ use wgpu::util::DeviceExt;
 
 /// Largest shadow map side accepted (further limited by the adapter).
 pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
+/// Most shadow-map texels over all faces (a point light's six faces share this budget): 256 MiB
+/// of depth.
+pub const MAX_SHADOW_TEXELS: u64 = 8192 * 8192;
+/// Most output pixels: the frame's targets take about 70 bytes per pixel (4.5 GiB at this size).
+pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
 
 /// What one frame should show.
 #[derive(Clone, Debug)]
@@ -94,7 +99,19 @@ impl RenderSettings {
                 return Err(invalid(field, format!("{v} is outside 1..={max}")));
             }
         }
-        let max_shadow = max.min(MAX_SHADOW_MAP_SIZE);
+        let pixels = u64::from(self.width) * u64::from(self.height);
+        if pixels > MAX_OUTPUT_PIXELS {
+            return Err(invalid(
+                "width",
+                format!(
+                    "{}×{} is {pixels} pixels; at most {MAX_OUTPUT_PIXELS} are allowed",
+                    self.width, self.height
+                ),
+            ));
+        }
+        let faces = u64::from(LightUniform::face_count(self.light.kind));
+        let max_by_budget = ((MAX_SHADOW_TEXELS / faces) as f64).sqrt() as u32;
+        let max_shadow = max.min(MAX_SHADOW_MAP_SIZE).min(max_by_budget);
         if !(16..=max_shadow).contains(&self.shadow_map_size) {
             return Err(invalid(
                 "shadow_map_size",
@@ -234,11 +251,14 @@ impl Renderer {
         self.timer.source()
     }
 
-    fn ensure_targets(&mut self, width: u32, height: u32) {
+    fn ensure_targets(&mut self, width: u32, height: u32) -> Result<(), GpuError> {
         if matches!(&self.sized, Some(s) if s.width == width && s.height == height) {
-            return;
+            return Ok(());
         }
+        // Release the old targets first so a resize does not need both in memory.
+        self.sized = None;
         let device = &self.ctx.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let hdr = Target::new(
             device,
             "hdr",
@@ -261,7 +281,7 @@ impl Renderer {
         let tonemap = self
             .tonemap_pass
             .bind(device, &hdr, &self.exposure_pass.result, &ldr);
-        self.sized = Some(SizedTargets {
+        let sized = SizedTargets {
             width,
             height,
             gbuffer: GBuffer::new(device, width, height),
@@ -271,23 +291,34 @@ impl Renderer {
             ldr,
             exposure,
             tonemap,
-        });
+        };
+        check_allocation(scope, format!("{width}×{height} frame targets"))?;
+        self.sized = Some(sized);
+        Ok(())
     }
 
-    fn ensure_shadow_map(&mut self, size: u32, faces: u32) {
+    fn ensure_shadow_map(&mut self, size: u32, faces: u32) -> Result<(), GpuError> {
         if matches!(&self.shadow_map, Some(m) if m.size == size && m.faces() == faces) {
-            return;
+            return Ok(());
         }
-        self.shadow_map = Some(ShadowMap::new(&self.ctx.device, size, faces));
+        self.shadow_map = None;
+        let scope = self
+            .ctx
+            .device
+            .push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let map = ShadowMap::new(&self.ctx.device, size, faces);
+        check_allocation(scope, format!("{faces}×{size}² shadow map"))?;
+        self.shadow_map = Some(map);
+        Ok(())
     }
 
     /// Renders one frame and reads it back (blocking).
     pub fn render(&mut self, settings: &RenderSettings) -> Result<Frame, RenderError> {
         settings.validate(&self.ctx)?;
         let (width, height) = (settings.width, settings.height);
-        self.ensure_targets(width, height);
+        self.ensure_targets(width, height)?;
         let faces = LightUniform::face_count(settings.light.kind);
-        self.ensure_shadow_map(settings.shadow_map_size, faces);
+        self.ensure_shadow_map(settings.shadow_map_size, faces)?;
         let (Some(sized), Some(shadow_map)) = (&self.sized, &self.shadow_map) else {
             unreachable!("targets were just ensured");
         };
@@ -375,5 +406,16 @@ impl Renderer {
             timing_source: self.timer.source(),
             exposure_scale: exposure.scale,
         })
+    }
+}
+
+/// Turns an out-of-memory error captured while allocating `what` into a [`GpuError`].
+fn check_allocation(scope: wgpu::ErrorScopeGuard, what: String) -> Result<(), GpuError> {
+    match pollster::block_on(scope.pop()) {
+        None => Ok(()),
+        Some(e) => Err(GpuError::OutOfMemory {
+            what,
+            message: e.to_string(),
+        }),
     }
 }

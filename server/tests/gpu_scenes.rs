@@ -387,6 +387,20 @@ fn invalid_settings_are_rejected_naming_the_field() {
     let good = default_settings(&scene, 16, 16);
     let cases: Vec<(&str, Mutation)> = vec![
         ("width", Box::new(|s| s.width = 0)),
+        (
+            "width",
+            Box::new(|s| {
+                s.width = 12_000;
+                s.height = 12_000;
+            }),
+        ),
+        (
+            "shadow_map_size",
+            Box::new(|s| {
+                s.light.kind = LightKind::Point;
+                s.shadow_map_size = 8192;
+            }),
+        ),
         ("height", Box::new(|s| s.height = 1 << 20)),
         ("shadow_map_size", Box::new(|s| s.shadow_map_size = 8)),
         (

@@ -39,16 +39,12 @@ pub enum GpuError {
         "adapter {adapter} lacks compute shaders (wgpu downlevel flags); use a Vulkan adapter"
     )]
     NoCompute { adapter: String },
+    #[error("out of GPU memory allocating {what}: {message}")]
+    OutOfMemory { what: String, message: String },
     #[error("waiting for the GPU failed: {0}")]
     Poll(#[from] wgpu::PollError),
     #[error("mapping a readback buffer failed: {0}")]
     Map(String),
-    #[error("{what} of {requested} exceeds this adapter's limit of {limit}")]
-    Limit {
-        what: &'static str,
-        requested: u32,
-        limit: u32,
-    },
 }
 
 /// The adapter, device and queue, plus what the pipeline learned about them.
@@ -151,19 +147,6 @@ impl GpuContext {
             info,
             timestamps,
         })
-    }
-
-    /// Fails with a precise error when a square 2D texture of `size` is beyond the adapter.
-    pub fn check_texture_size(&self, what: &'static str, size: u32) -> Result<(), GpuError> {
-        let limit = self.device.limits().max_texture_dimension_2d;
-        if size == 0 || size > limit {
-            return Err(GpuError::Limit {
-                what,
-                requested: size,
-                limit,
-            });
-        }
-        Ok(())
     }
 
     /// Blocks until all submitted work has finished.

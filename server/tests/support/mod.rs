@@ -3,7 +3,7 @@
 
 #![allow(dead_code)] // each test binary uses a different subset
 
-use glam::{Mat4, Vec3, Vec4Swizzles};
+use glam::{Vec3, Vec4Swizzles};
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gpu::{BackendChoice, GpuContext};
 use lightcast_server::passes::exposure::Exposure;
@@ -202,11 +202,6 @@ pub fn mean_rgb(frame: &Frame, x0: u32, y0: u32, x1: u32, y1: u32) -> Vec3 {
 /// Re-exported so tests can state which material split they expect.
 pub fn split(m: &Material) -> material::DiffuseGlossy {
     m.diffuse_glossy()
-}
-
-/// Identity helper to keep `Mat4` in the import list for tests that build matrices.
-pub fn identity() -> Mat4 {
-    Mat4::IDENTITY
 }
 
 /// Distance along the ray to the nearest scene triangle (Möller–Trumbore), if any.

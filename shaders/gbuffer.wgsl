@@ -1,30 +1,7 @@
 // G-buffer: rasterises the scene from the camera into world position, normal + glossy
 // exponent, diffuse albedo, glossy colour and emission.
 
-// Mirrored by `MaterialGpu` in server/src/passes/gbuffer.rs.
-struct MaterialGpu {
-    base_color: vec4<f32>,
-    emissive: vec3<f32>,
-    metallic: f32,
-    roughness: f32,
-    // Alpha below this is discarded; 0 for opaque materials.
-    alpha_cutoff: f32,
-    pad0: f32,
-    pad1: f32,
-}
-
 @group(0) @binding(0) var<uniform> camera: CameraUniform;
-@group(0) @binding(1) var<storage, read> materials: array<MaterialGpu>;
-@group(1) @binding(0) var base_color_texture: texture_2d<f32>;
-@group(1) @binding(1) var base_color_sampler: sampler;
-
-// Mirrored by `scene::Vertex`.
-struct VertexInput {
-    @location(0) position: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) uv: vec2<f32>,
-    @location(3) material: u32,
-}
 
 struct VertexOutput {
     @builtin(position) clip: vec4<f32>,
@@ -55,10 +32,8 @@ struct GBufferOut {
 
 @fragment
 fn fs_main(in: VertexOutput, @builtin(front_facing) front: bool) -> GBufferOut {
-    let m = materials[in.material];
-    // Untextured materials are bound to a 1×1 white texture, so sampling stays uniform.
-    let base = m.base_color * textureSample(base_color_texture, base_color_sampler, in.uv);
-    if base.a < m.alpha_cutoff {
+    let m = sample_material(in.material, in.uv);
+    if !m.covered {
         discard;
     }
     // Culling is off (glTF allows double-sided materials); back faces shade with the flipped normal.
@@ -66,13 +41,12 @@ fn fs_main(in: VertexOutput, @builtin(front_facing) front: bool) -> GBufferOut {
     if !front {
         n = -n;
     }
-    let s = split_material(base.rgb, m.metallic, m.roughness);
     var out: GBufferOut;
     // w = 1 marks covered pixels; the clear value 0 marks background.
     out.position = vec4<f32>(in.world, 1.0);
-    out.normal_exponent = vec4<f32>(n, s.exponent);
-    out.diffuse = vec4<f32>(s.diffuse, 1.0);
-    out.glossy = vec4<f32>(s.glossy, 1.0);
+    out.normal_exponent = vec4<f32>(n, m.brdf.exponent);
+    out.diffuse = vec4<f32>(m.brdf.diffuse, 1.0);
+    out.glossy = vec4<f32>(m.brdf.glossy, 1.0);
     out.emissive = vec4<f32>(m.emissive, 1.0);
     return out;
 }

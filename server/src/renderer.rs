@@ -11,8 +11,8 @@ use crate::passes::{
     direct_light::{DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
     frame_uniforms::{CameraUniform, LightUniform},
-    gbuffer::{GBuffer, GBufferBindings, GBufferPass},
-    scene_buffers::SceneBuffers,
+    gbuffer::{GBuffer, GBufferPass},
+    scene_buffers::{material_layout, SceneBuffers},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},
     Target,
@@ -189,7 +189,6 @@ pub struct Renderer {
     camera_buffer: wgpu::Buffer,
     light_buffer: wgpu::Buffer,
     exposure_readback: wgpu::Buffer,
-    gbuffer_bindings: GBufferBindings,
     sized: Option<SizedTargets>,
     shadow_map: Option<ShadowMap>,
 }
@@ -218,17 +217,15 @@ impl Renderer {
             usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
             mapped_at_creation: false,
         });
-        let gbuffer_pass = GBufferPass::new(device);
-        let gbuffer_bindings = gbuffer_pass.bind_scene(device, &ctx.queue, &scene, &camera_buffer);
+        let material_layout = material_layout(device);
         Self {
             timer: FrameTimer::new(&ctx),
-            scene_buffers: SceneBuffers::new(device, &scene),
+            gbuffer_pass: GBufferPass::new(device, &camera_buffer, &material_layout),
+            scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
             shadow_pass: ShadowMapPass::new(device),
             direct_pass: DirectLightPass::new(device),
             exposure_pass: ExposurePass::new(device),
             tonemap_pass: TonemapPass::new(device),
-            gbuffer_pass,
-            gbuffer_bindings,
             camera_buffer,
             light_buffer,
             exposure_readback,
@@ -347,12 +344,8 @@ impl Renderer {
             self.shadow_pass.encode(e, shadow_map, &self.scene_buffers)
         })?;
         stages.stage("gbuffer", |e| {
-            self.gbuffer_pass.encode(
-                e,
-                &sized.gbuffer,
-                &self.scene_buffers,
-                &self.gbuffer_bindings,
-            )
+            self.gbuffer_pass
+                .encode(e, &sized.gbuffer, &self.scene_buffers)
         })?;
         stages.stage("direct_light", |e| {
             self.direct_pass

@@ -18,6 +18,7 @@ pub const GBUFFER: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("materials.wgsl"),
         wgsl!("gbuffer.wgsl"),
     ],
 };

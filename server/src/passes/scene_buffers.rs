@@ -1,19 +1,85 @@
-//! The scene's geometry on the GPU, shared by every rasterising pass.
+//! The scene on the GPU, shared by every rasterising pass: geometry, the material table and one
+//! bind group per material (`shaders/materials.wgsl`, group 1).
 
-use crate::scene::{MaterialRange, Scene, Vertex};
+use crate::scene::{Material, MaterialRange, Scene, Vertex};
+use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
+
+/// Mirrors `MaterialGpu` in `shaders/materials.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct MaterialGpu {
+    pub base_color: [f32; 4],
+    pub emissive: [f32; 3],
+    pub metallic: f32,
+    pub roughness: f32,
+    pub alpha_cutoff: f32,
+    pub pad0: f32,
+    pub pad1: f32,
+}
+
+impl From<&Material> for MaterialGpu {
+    fn from(m: &Material) -> Self {
+        Self {
+            base_color: m.base_color,
+            emissive: m.emissive,
+            metallic: m.metallic,
+            roughness: m.roughness,
+            alpha_cutoff: m.alpha_cutoff.unwrap_or(0.0),
+            pad0: 0.0,
+            pad1: 0.0,
+        }
+    }
+}
 
 pub struct SceneBuffers {
     pub vertices: wgpu::Buffer,
     pub indices: wgpu::Buffer,
     pub ranges: Vec<MaterialRange>,
-    /// Ranges whose material emits light: emitters stand for light sources, so they are not
-    /// drawn into the shadow map (a lamp's bulb must not shadow its own light).
+    /// Ranges whose material does not emit light: emitters stand for light sources, so they are
+    /// not drawn into the shadow map (a lamp's bulb must not shadow its own light).
     pub shadow_casting: Vec<MaterialRange>,
+    /// Group 1 of `shaders/materials.wgsl`, indexed by material.
+    pub materials: Vec<wgpu::BindGroup>,
+}
+
+/// Layout of group 1 in `shaders/materials.wgsl`.
+pub fn material_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("material"),
+        entries: &[
+            wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                count: None,
+            },
+            wgpu::BindGroupLayoutEntry {
+                binding: 1,
+                visibility: wgpu::ShaderStages::FRAGMENT,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
+            super::buffer_entry(
+                2,
+                wgpu::ShaderStages::FRAGMENT,
+                wgpu::BufferBindingType::Storage { read_only: true },
+            ),
+        ],
+    })
 }
 
 impl SceneBuffers {
-    pub fn new(device: &wgpu::Device, scene: &Scene) -> Self {
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        scene: &Scene,
+        material_layout: &wgpu::BindGroupLayout,
+    ) -> Self {
         let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene vertices"),
             contents: bytemuck::cast_slice(&scene.vertices),
@@ -35,6 +101,7 @@ impl SceneBuffers {
             indices,
             ranges: scene.material_ranges.clone(),
             shadow_casting,
+            materials: material_bind_groups(device, queue, scene, material_layout),
         }
     }
 
@@ -46,8 +113,152 @@ impl SceneBuffers {
             attributes,
         }
     }
+
+    /// Draws every material range with its material bound as group 1.
+    pub fn draw_with_materials(&self, pass: &mut wgpu::RenderPass<'_>) {
+        pass.set_vertex_buffer(0, self.vertices.slice(..));
+        pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
+        for range in &self.ranges {
+            pass.set_bind_group(1, &self.materials[range.material as usize], &[]);
+            pass.draw_indexed(
+                range.first_index..range.first_index + range.index_count,
+                0,
+                0..1,
+            );
+        }
+    }
 }
 
 /// All attributes of [`Vertex`] at locations 0–3.
 pub const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 4] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Uint32];
+
+fn material_bind_groups(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    scene: &Scene,
+    layout: &wgpu::BindGroupLayout,
+) -> Vec<wgpu::BindGroup> {
+    let table: Vec<MaterialGpu> = scene.materials.iter().map(MaterialGpu::from).collect();
+    let table = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("materials"),
+        contents: bytemuck::cast_slice(&table),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        label: Some("base colour"),
+        address_mode_u: wgpu::AddressMode::Repeat,
+        address_mode_v: wgpu::AddressMode::Repeat,
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    });
+    let white = upload_texture(device, queue, "white", 1, 1, &[255; 4]);
+    let textures: Vec<wgpu::TextureView> = scene
+        .textures
+        .iter()
+        .map(|t| upload_texture(device, queue, &t.name, t.width, t.height, &t.rgba8))
+        .collect();
+    scene
+        .materials
+        .iter()
+        .map(|m| {
+            let view = m
+                .base_color_texture
+                .and_then(|i| textures.get(i))
+                .unwrap_or(&white);
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(&m.name),
+                layout,
+                entries: &[
+                    wgpu::BindGroupEntry {
+                        binding: 0,
+                        resource: wgpu::BindingResource::TextureView(view),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 1,
+                        resource: wgpu::BindingResource::Sampler(&sampler),
+                    },
+                    wgpu::BindGroupEntry {
+                        binding: 2,
+                        resource: table.as_entire_binding(),
+                    },
+                ],
+            })
+        })
+        .collect()
+}
+
+/// Uploads an sRGB RGBA8 image; the sRGB format makes sampling return linear colour.
+fn upload_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    width: u32,
+    height: u32,
+    rgba8: &[u8],
+) -> wgpu::TextureView {
+    let texture = device.create_texture_with_data(
+        queue,
+        &wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba8UnormSrgb,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        rgba8,
+    );
+    texture.create_view(&wgpu::TextureViewDescriptor::default())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, GBUFFER};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn material_gpu_matches_wgsl() {
+        assert_struct(
+            &GBUFFER,
+            "MaterialGpu",
+            size_of::<MaterialGpu>(),
+            &[
+                ("base_color", offset_of!(MaterialGpu, base_color)),
+                ("emissive", offset_of!(MaterialGpu, emissive)),
+                ("metallic", offset_of!(MaterialGpu, metallic)),
+                ("roughness", offset_of!(MaterialGpu, roughness)),
+                ("alpha_cutoff", offset_of!(MaterialGpu, alpha_cutoff)),
+                ("pad0", offset_of!(MaterialGpu, pad0)),
+                ("pad1", offset_of!(MaterialGpu, pad1)),
+            ],
+        );
+    }
+
+    #[test]
+    fn vertex_attributes_match_the_vertex_struct() {
+        assert_eq!(
+            VERTEX_ATTRIBUTES[0].offset as usize,
+            offset_of!(Vertex, position)
+        );
+        assert_eq!(
+            VERTEX_ATTRIBUTES[1].offset as usize,
+            offset_of!(Vertex, normal)
+        );
+        assert_eq!(VERTEX_ATTRIBUTES[2].offset as usize, offset_of!(Vertex, uv));
+        assert_eq!(
+            VERTEX_ATTRIBUTES[3].offset as usize,
+            offset_of!(Vertex, material)
+        );
+        assert_eq!(size_of::<Vertex>(), 36);
+    }
+}

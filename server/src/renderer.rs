@@ -2,6 +2,7 @@
 //!
 //! No async runtime is involved; the offline `render` command and tests drive it directly.
 
+use crate::gi::sampling::{SamplingReadback, SamplingSettings, ValSampling};
 use crate::gpu::{
     readback::{map_read, TextureReadback},
     timing::{FrameTimer, StageTiming, TimingSource},
@@ -10,7 +11,7 @@ use crate::gpu::{
 use crate::passes::{
     direct_light::{DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
-    frame_uniforms::{CameraUniform, LightUniform},
+    frame_uniforms::{light_faces, CameraUniform, LightUniform},
     gbuffer::{GBuffer, GBufferPass},
     scene_buffers::{material_layout, SceneBuffers},
     shadow_map::{ShadowMap, ShadowMapPass},
@@ -27,6 +28,14 @@ pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
 /// Most shadow-map texels over all faces (a point light's six faces share this budget): 256 MiB
 /// of depth.
 pub const MAX_SHADOW_TEXELS: u64 = 8192 * 8192;
+/// Largest RSM side per light face.
+pub const MAX_RSM_SIZE: u32 = 4096;
+/// Most RSM texels over all faces (each costs ~50 bytes across the sampling stages).
+pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
+/// Most view samples for the importance estimate.
+pub const MAX_VIEW_SAMPLES: u32 = 4096;
+/// Most VALs drawn per frame.
+pub const MAX_VAL_COUNT: u32 = 1 << 20;
 /// Most output pixels: the frame's targets take about 70 bytes per pixel (4.5 GiB at this size).
 pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
 
@@ -42,6 +51,9 @@ pub struct RenderSettings {
     pub shadow_map_size: u32,
     /// Also read back the linear HDR radiance (before exposure).
     pub capture_hdr: bool,
+    /// Runs the BRSM sampling stages (RSM, importance, cumulative sums, VAL selection) when
+    /// set; their results are available from [`Renderer::read_sampling`].
+    pub val_sampling: Option<SamplingSettings>,
 }
 
 /// A rendered frame.
@@ -150,6 +162,31 @@ impl RenderSettings {
         {
             return Err(invalid("light.cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees"));
         }
+        if let Some(g) = &self.val_sampling {
+            let faces = u64::from(LightUniform::face_count(self.light.kind));
+            let max_rsm = MAX_RSM_SIZE.min(((MAX_RSM_TEXELS / faces) as f64).sqrt() as u32);
+            if !(16..=max_rsm).contains(&g.rsm_size) {
+                return Err(invalid(
+                    "rsm_size",
+                    format!("{} is outside 16..={max_rsm}", g.rsm_size),
+                ));
+            }
+            if !(1..=MAX_VIEW_SAMPLES).contains(&g.view_samples) {
+                return Err(invalid(
+                    "view_samples",
+                    format!("{} is outside 1..={MAX_VIEW_SAMPLES}", g.view_samples),
+                ));
+            }
+            if !(1..=MAX_VAL_COUNT).contains(&g.val_count) {
+                return Err(invalid(
+                    "val_count",
+                    format!("{} is outside 1..={MAX_VAL_COUNT}", g.val_count),
+                ));
+            }
+            if !(0.0..1.0).contains(&g.jitter) {
+                return Err(invalid("jitter", format!("{} is outside [0, 1)", g.jitter)));
+            }
+        }
         if let Exposure::Manual(s) = self.exposure {
             if !(s.is_finite() && s > 0.0) {
                 return Err(invalid(
@@ -191,6 +228,9 @@ pub struct Renderer {
     exposure_readback: wgpu::Buffer,
     sized: Option<SizedTargets>,
     shadow_map: Option<ShadowMap>,
+    sampling: ValSampling,
+    /// Whether the last frame ran the sampling stages.
+    sampled: bool,
 }
 
 impl Renderer {
@@ -219,6 +259,8 @@ impl Renderer {
         });
         let material_layout = material_layout(device);
         Self {
+            sampling: ValSampling::new(device, &light_buffer, &material_layout),
+            sampled: false,
             timer: FrameTimer::new(&ctx),
             gbuffer_pass: GBufferPass::new(device, &camera_buffer, &material_layout),
             scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
@@ -246,6 +288,14 @@ impl Renderer {
 
     pub fn timing_source(&self) -> TimingSource {
         self.timer.source()
+    }
+
+    /// The sampling stages' results of the last frame, if it ran them (blocking readback).
+    pub fn read_sampling(&self) -> Result<Option<SamplingReadback>, GpuError> {
+        if !self.sampled {
+            return Ok(None);
+        }
+        self.sampling.read_back(&self.ctx).map(Some)
     }
 
     fn ensure_targets(&mut self, width: u32, height: u32) -> Result<(), GpuError> {
@@ -330,6 +380,16 @@ impl Renderer {
             .set_faces(queue, &light.face_view_proj[..faces as usize]);
         self.exposure_pass
             .prepare(queue, &sized.exposure, settings.exposure);
+        if let Some(g) = &settings.val_sampling {
+            self.sampling.prepare(
+                &self.ctx,
+                &sized.gbuffer,
+                (width, height),
+                &light_faces(&settings.light, bounds),
+                g,
+            );
+        }
+        self.sampled = settings.val_sampling.is_some();
         let direct_bind_group = self.direct_pass.bind(
             &self.ctx.device,
             &self.camera_buffer,
@@ -347,6 +407,13 @@ impl Renderer {
             self.gbuffer_pass
                 .encode(e, &sized.gbuffer, &self.scene_buffers)
         })?;
+        if let Some(g) = &settings.val_sampling {
+            let sampling = &self.sampling;
+            stages.stage("rsm", |e| sampling.encode_rsm(e, &self.scene_buffers))?;
+            stages.stage("importance", |e| sampling.encode_importance(e, g))?;
+            stages.stage("cumulative_sums", |e| sampling.encode_cumulative_sums(e))?;
+            stages.stage("val_select", |e| sampling.encode_selection(e, g))?;
+        }
         stages.stage("direct_light", |e| {
             self.direct_pass
                 .encode(e, &direct_bind_group, width, height)

@@ -48,8 +48,44 @@ pub const TONEMAP: ShaderSource = ShaderSource {
     files: &[wgsl!("exposure_result.wgsl"), wgsl!("tonemap.wgsl")],
 };
 
+pub const RSM: ShaderSource = ShaderSource {
+    name: "rsm",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("lights.wgsl"),
+        wgsl!("materials.wgsl"),
+        wgsl!("rsm.wgsl"),
+    ],
+};
+
+pub const IMPORTANCE: ShaderSource = ShaderSource {
+    name: "importance",
+    files: &[wgsl!("view_samples.wgsl"), wgsl!("importance.wgsl")],
+};
+
+pub const CUMULATIVE_SUMS: ShaderSource = ShaderSource {
+    name: "cumulative_sums",
+    files: &[wgsl!("cumulative_sums.wgsl")],
+};
+
+pub const VAL_SELECT: ShaderSource = ShaderSource {
+    name: "val_select",
+    files: &[wgsl!("vals.wgsl"), wgsl!("val_select.wgsl")],
+};
+
 /// Every pass module; tests validate each with naga.
-pub const ALL: &[&ShaderSource] = &[&GBUFFER, &SHADOW_MAP, &DIRECT_LIGHT, &EXPOSURE, &TONEMAP];
+pub const ALL: &[&ShaderSource] = &[
+    &GBUFFER,
+    &SHADOW_MAP,
+    &DIRECT_LIGHT,
+    &EXPOSURE,
+    &TONEMAP,
+    &RSM,
+    &IMPORTANCE,
+    &CUMULATIVE_SUMS,
+    &VAL_SELECT,
+];
 
 impl ShaderSource {
     pub fn source(&self) -> String {

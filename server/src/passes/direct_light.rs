@@ -75,10 +75,6 @@ impl DirectLightPass {
         shadow: &ShadowMap,
         hdr: &Target,
     ) -> wgpu::BindGroup {
-        let view = |binding, view| wgpu::BindGroupEntry {
-            binding,
-            resource: wgpu::BindingResource::TextureView(view),
-        };
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("direct light"),
             layout: &self.layout,
@@ -91,17 +87,17 @@ impl DirectLightPass {
                     binding: 1,
                     resource: light.as_entire_binding(),
                 },
-                view(2, &gbuffer.position.view),
-                view(3, &gbuffer.normal_exponent.view),
-                view(4, &gbuffer.diffuse.view),
-                view(5, &gbuffer.glossy.view),
-                view(6, &gbuffer.emissive.view),
-                view(7, &shadow.array_view),
+                super::view_binding(2, &gbuffer.position.view),
+                super::view_binding(3, &gbuffer.normal_exponent.view),
+                super::view_binding(4, &gbuffer.diffuse.view),
+                super::view_binding(5, &gbuffer.glossy.view),
+                super::view_binding(6, &gbuffer.emissive.view),
+                super::view_binding(7, &shadow.array_view),
                 wgpu::BindGroupEntry {
                     binding: 8,
                     resource: wgpu::BindingResource::Sampler(&self.shadow_sampler),
                 },
-                view(9, &hdr.view),
+                super::view_binding(9, &hdr.view),
             ],
         })
     }

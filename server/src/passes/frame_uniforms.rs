@@ -81,49 +81,82 @@ fn depth_range(eye: Vec3, bounds: &Aabb) -> (f32, f32) {
     (far * 1e-4, far)
 }
 
+/// One face of a light's projection (shadow map and RSM share them).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightFace {
+    pub view_proj: Mat4,
+    /// Viewing axis of the face (unit).
+    pub axis: Vec3,
+    /// Side of the face's frustum at unit depth (perspective), or of the orthographic box.
+    pub extent: f32,
+    pub perspective: bool,
+}
+
+/// The faces a light renders from, fitted to the scene bounds: one orthographic face for a
+/// directional light, one perspective face for a spot light, six cube faces for a point light.
+pub fn light_faces(light: &Light, bounds: &Aabb) -> Vec<LightFace> {
+    let direction = Vec3::from(light.direction).normalize_or(Vec3::NEG_Y);
+    let position = Vec3::from(light.position);
+    let radius = bounds.radius().max(1e-3);
+    let center = bounds.center();
+    match light.kind {
+        LightKind::Directional => {
+            let eye = center - direction * 2.0 * radius;
+            let view = Mat4::look_to_rh(eye, direction, stable_up(direction));
+            let proj =
+                Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius);
+            vec![LightFace {
+                view_proj: proj * view,
+                axis: direction,
+                extent: 2.0 * radius,
+                perspective: false,
+            }]
+        }
+        LightKind::Spot => {
+            let half = light.outer_cone.clamp(1e-3, MAX_SPOT_SHADOW_HALF_ANGLE);
+            let (near, far) = depth_range(position, bounds);
+            let view = Mat4::look_to_rh(position, direction, stable_up(direction));
+            vec![LightFace {
+                view_proj: Mat4::perspective_rh(2.0 * half, 1.0, near, far) * view,
+                axis: direction,
+                extent: 2.0 * half.tan(),
+                perspective: true,
+            }]
+        }
+        LightKind::Point => {
+            let (near, far) = depth_range(position, bounds);
+            let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near, far);
+            [
+                Vec3::X,
+                Vec3::NEG_X,
+                Vec3::Y,
+                Vec3::NEG_Y,
+                Vec3::Z,
+                Vec3::NEG_Z,
+            ]
+            .map(|axis| LightFace {
+                view_proj: proj * Mat4::look_to_rh(position, axis, stable_up(axis)),
+                axis,
+                extent: 2.0,
+                perspective: true,
+            })
+            .to_vec()
+        }
+    }
+}
+
 impl LightUniform {
-    /// The light's parameters and the view-projection of each shadow-map face (1 face for
-    /// directional and spot lights, 6 for point lights), fitted to the scene bounds.
+    /// The light's parameters and the view-projection of each shadow-map face, fitted to the
+    /// scene bounds.
     pub fn new(light: &Light, bounds: &Aabb, shadow_size: u32) -> Self {
         let direction = Vec3::from(light.direction).normalize_or(Vec3::NEG_Y);
-        let position = Vec3::from(light.position);
-        let radius = bounds.radius().max(1e-3);
-        let center = bounds.center();
-        let mut faces = [Mat4::IDENTITY; 6];
-        // World size of one shadow texel (per metre of distance for spot and point lights).
-        let texel_world = match light.kind {
-            LightKind::Directional => {
-                let eye = center - direction * 2.0 * radius;
-                let view = Mat4::look_to_rh(eye, direction, stable_up(direction));
-                faces[0] =
-                    Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius)
-                        * view;
-                2.0 * radius / shadow_size as f32
-            }
-            LightKind::Spot => {
-                let half = light.outer_cone.clamp(1e-3, MAX_SPOT_SHADOW_HALF_ANGLE);
-                let (near, far) = depth_range(position, bounds);
-                let view = Mat4::look_to_rh(position, direction, stable_up(direction));
-                faces[0] = Mat4::perspective_rh(2.0 * half, 1.0, near, far) * view;
-                2.0 * half.tan() / shadow_size as f32
-            }
-            LightKind::Point => {
-                let (near, far) = depth_range(position, bounds);
-                let proj = Mat4::perspective_rh(std::f32::consts::FRAC_PI_2, 1.0, near, far);
-                let axes = [
-                    Vec3::X,
-                    Vec3::NEG_X,
-                    Vec3::Y,
-                    Vec3::NEG_Y,
-                    Vec3::Z,
-                    Vec3::NEG_Z,
-                ];
-                for (face, axis) in faces.iter_mut().zip(axes) {
-                    *face = proj * Mat4::look_to_rh(position, axis, stable_up(axis));
-                }
-                2.0 / shadow_size as f32
-            }
-        };
+        let faces = light_faces(light, bounds);
+        let mut face_view_proj = [Mat4::IDENTITY.to_cols_array_2d(); 6];
+        for (slot, face) in face_view_proj.iter_mut().zip(&faces) {
+            *slot = face.view_proj.to_cols_array_2d();
+        }
+        // World size of one shadow texel (per metre of distance for perspective faces).
+        let texel_world = faces[0].extent / shadow_size as f32;
         let (cos_inner, cos_outer) = match light.kind {
             LightKind::Spot => {
                 let outer = light.outer_cone.max(1e-4);
@@ -134,7 +167,7 @@ impl LightUniform {
         };
         let radiance = Vec3::from(light.color) * light.intensity;
         Self {
-            face_view_proj: faces.map(|m| m.to_cols_array_2d()),
+            face_view_proj,
             position: light.position,
             kind: light_kind_code(light.kind),
             direction: direction.into(),

@@ -8,13 +8,17 @@
 //!
 //! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry.
 
+pub mod cumulative_sums;
 pub mod direct_light;
 pub mod exposure;
 pub mod frame_uniforms;
 pub mod gbuffer;
+pub mod importance;
+pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;
 pub mod tonemap;
+pub mod val_select;
 
 /// Workgroup edge of the 2D compute passes (8×8 threads).
 pub const TILE: u32 = 8;
@@ -141,4 +145,20 @@ pub fn dispatch_2d(
     pass.set_pipeline(pipeline);
     pass.set_bind_group(0, bind_group, &[]);
     pass.dispatch_workgroups(width.div_ceil(TILE), height.div_ceil(TILE), 1);
+}
+
+/// A bind group entry for a whole buffer.
+pub fn buffer_binding(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// A bind group entry for a texture view.
+pub fn view_binding(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: wgpu::BindingResource::TextureView(view),
+    }
 }

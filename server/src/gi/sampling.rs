@@ -1,0 +1,311 @@
+//! Per-frame VAL sampling of the BRSM method: RSM → importance (eq. 10–11) → cumulative
+//! sums → selection of N_sVAL VALs with their weights (eq. 13–15). Owns the passes and the
+//! buffers between them.
+
+use crate::gpu::{readback::map_read, GpuContext, GpuError};
+use crate::passes::{
+    cumulative_sums::CumulativeSumsPass,
+    frame_uniforms::LightFace,
+    gbuffer::GBuffer,
+    importance::{ImportanceParams, ImportancePass, ViewSample},
+    rsm::{Rsm, RsmFace, RsmPass},
+    scene_buffers::SceneBuffers,
+    val_select::{SelectionBuffers, Val, ValSelectPass},
+};
+
+/// What the sampling stages should do this frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SamplingSettings {
+    /// RSM side per light face, in texels.
+    pub rsm_size: u32,
+    /// N_VS: view samples for the importance estimate.
+    pub view_samples: u32,
+    /// N_sVAL: VALs drawn from the importance distribution.
+    pub val_count: u32,
+    /// Offset of the stratified draws within their strata, in [0, 1).
+    pub jitter: f32,
+    /// Give every VAL importance 1 (turns the estimator into plain stratified sampling).
+    pub uniform_importance: bool,
+}
+
+/// Buffers and bind groups for one RSM size, light face count, output size and VAL count.
+struct Resources {
+    key: (u32, u32, u32, u32, u32),
+    rsm: Rsm,
+    samples: wgpu::Buffer,
+    importance: wgpu::Buffer,
+    column_sums: wgpu::Buffer,
+    row_sums: wgpu::Buffer,
+    vals: wgpu::Buffer,
+    importance_group: wgpu::BindGroup,
+    sums_group: wgpu::BindGroup,
+    select_group: wgpu::BindGroup,
+}
+
+pub struct ValSampling {
+    rsm_pass: RsmPass,
+    importance_pass: ImportancePass,
+    sums_pass: CumulativeSumsPass,
+    select_pass: ValSelectPass,
+    resources: Option<Resources>,
+}
+
+/// Everything the sampling stages produced, read back for tests and debug views.
+#[derive(Clone, Debug)]
+pub struct SamplingReadback {
+    pub rsm_width: u32,
+    pub rsm_height: u32,
+    /// RGBA per texel: world position, w = 1 where a VAL exists.
+    pub rsm_position: Vec<[f32; 4]>,
+    /// RGBA per texel: VAL normal (xyz).
+    pub rsm_normal: Vec<[f32; 4]>,
+    /// RGBA per texel: reflected flux (rgb) and disk area (a).
+    pub rsm_flux_area: Vec<[f32; 4]>,
+    pub view_samples: Vec<ViewSample>,
+    pub importance: Vec<f32>,
+    pub column_sums: Vec<f32>,
+    pub row_sums: Vec<f32>,
+    pub vals: Vec<Val>,
+}
+
+fn storage(device: &wgpu::Device, label: &str, bytes: u64) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: bytes.max(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
+}
+
+impl ValSampling {
+    pub fn new(
+        device: &wgpu::Device,
+        light: &wgpu::Buffer,
+        material_layout: &wgpu::BindGroupLayout,
+    ) -> Self {
+        Self {
+            rsm_pass: RsmPass::new(device, light, material_layout),
+            importance_pass: ImportancePass::new(device),
+            sums_pass: CumulativeSumsPass::new(device),
+            select_pass: ValSelectPass::new(device),
+            resources: None,
+        }
+    }
+
+    /// Creates the buffers for this frame's sizes (kept while the sizes stay the same) and
+    /// writes the uniforms.
+    pub fn prepare(
+        &mut self,
+        ctx: &GpuContext,
+        gbuffer: &GBuffer,
+        gbuffer_size: (u32, u32),
+        faces: &[LightFace],
+        settings: &SamplingSettings,
+    ) {
+        let face_count = faces.len() as u32;
+        let key = (
+            settings.rsm_size,
+            face_count,
+            settings.view_samples,
+            settings.val_count,
+            gbuffer_size.0 ^ (gbuffer_size.1 << 16),
+        );
+        if self.resources.as_ref().map(|r| r.key) != Some(key) {
+            self.resources = None;
+            self.resources = Some(self.create_resources(ctx, gbuffer, key, settings));
+        }
+        let Some(res) = &self.resources else {
+            unreachable!("resources were just created");
+        };
+        let queue = &ctx.queue;
+        let rsm_faces: Vec<RsmFace> = faces
+            .iter()
+            .map(|f| RsmFace::new(f, settings.rsm_size))
+            .collect();
+        self.rsm_pass.set_faces(queue, &rsm_faces);
+        self.importance_pass
+            .prepare(queue, &importance_params(&res.rsm, settings));
+        self.sums_pass
+            .prepare(queue, res.rsm.width(), res.rsm.height());
+        self.select_pass
+            .prepare(queue, &res.rsm, settings.val_count, settings.jitter);
+    }
+
+    fn create_resources(
+        &self,
+        ctx: &GpuContext,
+        gbuffer: &GBuffer,
+        key: (u32, u32, u32, u32, u32),
+        settings: &SamplingSettings,
+    ) -> Resources {
+        let device = &ctx.device;
+        let rsm = Rsm::new(device, settings.rsm_size, key.1);
+        let texels = u64::from(rsm.texels());
+        let samples = storage(
+            device,
+            "view samples",
+            u64::from(settings.view_samples) * std::mem::size_of::<ViewSample>() as u64,
+        );
+        let importance = storage(device, "importance", texels * 4);
+        let column_sums = storage(device, "column sums", texels * 4);
+        let row_sums = storage(device, "row sums", u64::from(rsm.width()) * 4);
+        let vals = storage(
+            device,
+            "selected vals",
+            u64::from(settings.val_count) * std::mem::size_of::<Val>() as u64,
+        );
+        let importance_group =
+            self.importance_pass
+                .bind(device, gbuffer, &rsm, &samples, &importance);
+        let sums_group = self
+            .sums_pass
+            .bind(device, &importance, &column_sums, &row_sums);
+        let select_group = self.select_pass.bind(
+            device,
+            &rsm,
+            &SelectionBuffers {
+                importance: &importance,
+                column_sums: &column_sums,
+                row_sums: &row_sums,
+                vals: &vals,
+            },
+        );
+        Resources {
+            key,
+            rsm,
+            samples,
+            importance,
+            column_sums,
+            row_sums,
+            vals,
+            importance_group,
+            sums_group,
+            select_group,
+        }
+    }
+
+    fn res(&self) -> &Resources {
+        self.resources
+            .as_ref()
+            .expect("ValSampling::prepare must run before encoding")
+    }
+
+    pub fn rsm(&self) -> &Rsm {
+        &self.res().rsm
+    }
+
+    /// The selected VALs of the last prepared frame.
+    pub fn vals(&self) -> &wgpu::Buffer {
+        &self.res().vals
+    }
+
+    pub fn encode_rsm(&self, encoder: &mut wgpu::CommandEncoder, scene: &SceneBuffers) {
+        self.rsm_pass.encode(encoder, &self.res().rsm, scene);
+    }
+
+    pub fn encode_importance(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        settings: &SamplingSettings,
+    ) {
+        let res = self.res();
+        self.importance_pass.encode(
+            encoder,
+            &res.importance_group,
+            &importance_params(&res.rsm, settings),
+        );
+    }
+
+    pub fn encode_cumulative_sums(&self, encoder: &mut wgpu::CommandEncoder) {
+        let res = self.res();
+        self.sums_pass
+            .encode(encoder, &res.sums_group, res.rsm.width());
+    }
+
+    pub fn encode_selection(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        settings: &SamplingSettings,
+    ) {
+        self.select_pass
+            .encode(encoder, &self.res().select_group, settings.val_count);
+    }
+
+    /// Reads back every intermediate result (blocking; for tests and debug views).
+    pub fn read_back(&self, ctx: &GpuContext) -> Result<SamplingReadback, GpuError> {
+        let res = self.res();
+        let rsm = &res.rsm;
+        let read_buffer = |buffer: &wgpu::Buffer| -> Result<Vec<u8>, GpuError> {
+            let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("sampling readback"),
+                size: buffer.size(),
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            });
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+            encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, None);
+            ctx.queue.submit([encoder.finish()]);
+            map_read(ctx, &staging)
+        };
+        // RGBA textures of 32-bit (16 bytes per texel) or 16-bit (8 bytes) floats.
+        let read_texture = |texture: &wgpu::Texture, bytes_per_texel: u32| {
+            let readback = crate::gpu::readback::TextureReadback::new(
+                &ctx.device,
+                "rsm readback",
+                rsm.width(),
+                rsm.height(),
+                bytes_per_texel,
+            );
+            let mut encoder = ctx
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+            readback.encode_copy(&mut encoder, texture);
+            ctx.queue.submit([encoder.finish()]);
+            let bytes = readback.read(ctx)?;
+            let texels: Vec<[f32; 4]> = if bytes_per_texel == 8 {
+                bytemuck::pod_collect_to_vec::<u8, half::f16>(&bytes)
+                    .chunks_exact(4)
+                    .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
+                    .collect()
+            } else {
+                bytemuck::pod_collect_to_vec(&bytes)
+            };
+            Ok::<_, GpuError>(texels)
+        };
+        let floats = |bytes: Vec<u8>, n: usize| -> Vec<f32> {
+            let mut v: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
+            v.truncate(n);
+            v
+        };
+        let texels = rsm.texels() as usize;
+        let (_, _, view_samples, val_count, _) = res.key;
+        let mut samples: Vec<ViewSample> =
+            bytemuck::pod_collect_to_vec(&read_buffer(&res.samples)?);
+        samples.truncate(view_samples as usize);
+        let mut vals: Vec<Val> = bytemuck::pod_collect_to_vec(&read_buffer(&res.vals)?);
+        vals.truncate(val_count as usize);
+        Ok(SamplingReadback {
+            rsm_width: rsm.width(),
+            rsm_height: rsm.height(),
+            rsm_position: read_texture(&rsm.position.texture, 16)?,
+            rsm_normal: read_texture(&rsm.normal.texture, 8)?,
+            rsm_flux_area: read_texture(&rsm.flux_area.texture, 16)?,
+            view_samples: samples,
+            importance: floats(read_buffer(&res.importance)?, texels),
+            column_sums: floats(read_buffer(&res.column_sums)?, texels),
+            row_sums: floats(read_buffer(&res.row_sums)?, rsm.width() as usize),
+            vals,
+        })
+    }
+}
+
+fn importance_params(rsm: &Rsm, settings: &SamplingSettings) -> ImportanceParams {
+    ImportanceParams {
+        rsm_width: rsm.width(),
+        rsm_height: rsm.height(),
+        sample_count: settings.view_samples,
+        uniform_importance: u32::from(settings.uniform_importance),
+    }
+}

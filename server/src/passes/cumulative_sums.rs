@@ -1,0 +1,138 @@
+//! Cumulative sums of the importance map (`shaders/cumulative_sums.wgsl`): down each column,
+//! then across the column totals.
+
+use crate::gpu::shaders;
+use bytemuck::{Pod, Zeroable};
+
+/// Mirrors `ScanParams` in `shaders/cumulative_sums.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct ScanParams {
+    pub width: u32,
+    pub height: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+}
+
+pub struct CumulativeSumsPass {
+    columns: wgpu::ComputePipeline,
+    rows: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+}
+
+impl CumulativeSumsPass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("cumulative sums"),
+            entries: &[
+                super::buffer_entry(
+                    0,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Uniform,
+                ),
+                super::buffer_entry(
+                    1,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Storage { read_only: true },
+                ),
+                super::buffer_entry(
+                    2,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Storage { read_only: false },
+                ),
+                super::buffer_entry(
+                    3,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Storage { read_only: false },
+                ),
+            ],
+        });
+        let module = shaders::CUMULATIVE_SUMS.create_module(device);
+        Self {
+            columns: super::compute_pipeline(
+                device,
+                "scan columns",
+                &layout,
+                &module,
+                "scan_columns",
+            ),
+            rows: super::compute_pipeline(device, "scan rows", &layout, &module, "scan_rows"),
+            layout,
+            params: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("scan params"),
+                size: std::mem::size_of::<ScanParams>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        }
+    }
+
+    pub fn bind(
+        &self,
+        device: &wgpu::Device,
+        importance: &wgpu::Buffer,
+        column_sums: &wgpu::Buffer,
+        row_sums: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("cumulative sums"),
+            layout: &self.layout,
+            entries: &[
+                super::buffer_binding(0, &self.params),
+                super::buffer_binding(1, importance),
+                super::buffer_binding(2, column_sums),
+                super::buffer_binding(3, row_sums),
+            ],
+        })
+    }
+
+    pub fn prepare(&self, queue: &wgpu::Queue, width: u32, height: u32) {
+        let params = ScanParams {
+            width,
+            height,
+            pad0: 0,
+            pad1: 0,
+        };
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+    }
+
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        width: u32,
+    ) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("cumulative sums"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_pipeline(&self.columns);
+        pass.dispatch_workgroups(width, 1, 1);
+        pass.set_pipeline(&self.rows);
+        pass.dispatch_workgroups(1, 1, 1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, CUMULATIVE_SUMS};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn scan_params_match_wgsl() {
+        assert_struct(
+            &CUMULATIVE_SUMS,
+            "ScanParams",
+            size_of::<ScanParams>(),
+            &[
+                ("width", offset_of!(ScanParams, width)),
+                ("height", offset_of!(ScanParams, height)),
+                ("pad0", offset_of!(ScanParams, pad0)),
+                ("pad1", offset_of!(ScanParams, pad1)),
+            ],
+        );
+    }
+}

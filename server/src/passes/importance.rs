@@ -1,0 +1,174 @@
+//! VAL importance (`shaders/importance.wgsl`, eq. 10–11): view samples gathered from the
+//! G-buffer at Halton positions, then one importance value per RSM texel.
+
+use super::{gbuffer::GBuffer, rsm::Rsm};
+use crate::gpu::shaders;
+use bytemuck::{Pod, Zeroable};
+
+/// Mirrors `ViewSample` in `shaders/view_samples.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct ViewSample {
+    pub position: [f32; 3],
+    pub valid: f32,
+    pub normal: [f32; 3],
+    pub pad0: f32,
+}
+
+/// Mirrors `ImportanceParams` in `shaders/importance.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct ImportanceParams {
+    pub rsm_width: u32,
+    pub rsm_height: u32,
+    pub sample_count: u32,
+    pub uniform_importance: u32,
+}
+
+pub struct ImportancePass {
+    gather: wgpu::ComputePipeline,
+    estimate: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+}
+
+impl ImportancePass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let storage = wgpu::BufferBindingType::Storage { read_only: false };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("importance"),
+            entries: &[
+                super::buffer_entry(
+                    0,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Uniform,
+                ),
+                super::compute_texture_entry(1, false),
+                super::compute_texture_entry(2, false),
+                super::buffer_entry(3, wgpu::ShaderStages::COMPUTE, storage),
+                super::compute_texture_entry(4, false),
+                super::compute_texture_entry(5, false),
+                super::compute_texture_entry(6, false),
+                super::buffer_entry(7, wgpu::ShaderStages::COMPUTE, storage),
+            ],
+        });
+        let module = shaders::IMPORTANCE.create_module(device);
+        Self {
+            gather: super::compute_pipeline(
+                device,
+                "view samples",
+                &layout,
+                &module,
+                "gather_view_samples",
+            ),
+            estimate: super::compute_pipeline(
+                device,
+                "importance",
+                &layout,
+                &module,
+                "estimate_importance",
+            ),
+            layout,
+            params: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("importance params"),
+                size: std::mem::size_of::<ImportanceParams>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        }
+    }
+
+    pub fn bind(
+        &self,
+        device: &wgpu::Device,
+        gbuffer: &GBuffer,
+        rsm: &Rsm,
+        samples: &wgpu::Buffer,
+        importance: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("importance"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.params.as_entire_binding(),
+                },
+                super::view_binding(1, &gbuffer.position.view),
+                super::view_binding(2, &gbuffer.normal_exponent.view),
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: samples.as_entire_binding(),
+                },
+                super::view_binding(4, &rsm.position.view),
+                super::view_binding(5, &rsm.normal.view),
+                super::view_binding(6, &rsm.flux_area.view),
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: importance.as_entire_binding(),
+                },
+            ],
+        })
+    }
+
+    pub fn prepare(&self, queue: &wgpu::Queue, params: &ImportanceParams) {
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+    }
+
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        params: &ImportanceParams,
+    ) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("importance"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_pipeline(&self.gather);
+        pass.dispatch_workgroups(params.sample_count.div_ceil(64), 1, 1);
+        pass.set_pipeline(&self.estimate);
+        pass.dispatch_workgroups(
+            params.rsm_width.div_ceil(super::TILE),
+            params.rsm_height.div_ceil(super::TILE),
+            1,
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, IMPORTANCE};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn importance_structs_match_wgsl() {
+        assert_struct(
+            &IMPORTANCE,
+            "ViewSample",
+            size_of::<ViewSample>(),
+            &[
+                ("position", offset_of!(ViewSample, position)),
+                ("valid", offset_of!(ViewSample, valid)),
+                ("normal", offset_of!(ViewSample, normal)),
+                ("pad0", offset_of!(ViewSample, pad0)),
+            ],
+        );
+        assert_struct(
+            &IMPORTANCE,
+            "ImportanceParams",
+            size_of::<ImportanceParams>(),
+            &[
+                ("rsm_width", offset_of!(ImportanceParams, rsm_width)),
+                ("rsm_height", offset_of!(ImportanceParams, rsm_height)),
+                ("sample_count", offset_of!(ImportanceParams, sample_count)),
+                (
+                    "uniform_importance",
+                    offset_of!(ImportanceParams, uniform_importance),
+                ),
+            ],
+        );
+    }
+}

@@ -1,0 +1,279 @@
+//! Reflective shadow map (`shaders/rsm.wgsl`): VAL position, normal, flux and disk area per
+//! texel, the faces of a light side by side in one atlas.
+
+use super::frame_uniforms::LightFace;
+use super::scene_buffers::{SceneBuffers, VERTEX_ATTRIBUTES};
+use super::Target;
+use crate::gpu::shaders;
+use bytemuck::{Pod, Zeroable};
+
+pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+/// Flux of a small texel far from a dim light can be far below f16's normal range.
+pub const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// Faces are 256 bytes apart in the uniform buffer (the dynamic-offset alignment).
+const FACE_STRIDE: u64 = 256;
+const MAX_FACES: usize = 6;
+
+/// Mirrors `RsmFace` in `shaders/rsm.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct RsmFace {
+    pub view_proj: [[f32; 4]; 4],
+    pub axis: [f32; 3],
+    pub texel_area: f32,
+    pub perspective: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+}
+
+impl RsmFace {
+    /// Eq. 1 for an RSM of `size`² texels per face: the disk area is `texel_area · z²` for
+    /// perspective faces (w_near·h_near / z_near² is the squared frustum side at unit depth)
+    /// and `texel_area` itself for an orthographic face.
+    pub fn new(face: &LightFace, size: u32) -> Self {
+        let texel_side = face.extent / size as f32;
+        Self {
+            view_proj: face.view_proj.to_cols_array_2d(),
+            axis: face.axis.into(),
+            texel_area: texel_side * texel_side,
+            perspective: u32::from(face.perspective),
+            pad0: 0,
+            pad1: 0,
+            pad2: 0,
+        }
+    }
+}
+
+/// The RSM atlas: `faces` squares of `size`² side by side.
+pub struct Rsm {
+    pub size: u32,
+    pub faces: u32,
+    pub position: Target,
+    pub normal: Target,
+    pub flux_area: Target,
+    depth: Target,
+}
+
+impl Rsm {
+    pub fn new(device: &wgpu::Device, size: u32, faces: u32) -> Self {
+        let (w, h) = (size * faces, size);
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
+            | wgpu::TextureUsages::TEXTURE_BINDING
+            | wgpu::TextureUsages::COPY_SRC;
+        Self {
+            size,
+            faces,
+            position: Target::new(device, "rsm position", w, h, POSITION_FORMAT, usage),
+            normal: Target::new(device, "rsm normal", w, h, NORMAL_FORMAT, usage),
+            flux_area: Target::new(device, "rsm flux", w, h, FLUX_FORMAT, usage),
+            depth: Target::new(
+                device,
+                "rsm depth",
+                w,
+                h,
+                DEPTH_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+            ),
+        }
+    }
+
+    pub fn width(&self) -> u32 {
+        self.size * self.faces
+    }
+
+    pub fn height(&self) -> u32 {
+        self.size
+    }
+
+    pub fn texels(&self) -> u32 {
+        self.width() * self.height()
+    }
+}
+
+pub struct RsmPass {
+    pipeline: wgpu::RenderPipeline,
+    faces: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+}
+
+impl RsmPass {
+    pub fn new(
+        device: &wgpu::Device,
+        light: &wgpu::Buffer,
+        material_layout: &wgpu::BindGroupLayout,
+    ) -> Self {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("rsm"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: true,
+                        min_binding_size: wgpu::BufferSize::new(
+                            std::mem::size_of::<RsmFace>() as u64
+                        ),
+                    },
+                    count: None,
+                },
+                super::buffer_entry(
+                    1,
+                    wgpu::ShaderStages::FRAGMENT,
+                    wgpu::BufferBindingType::Uniform,
+                ),
+            ],
+        });
+        let faces = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("rsm faces"),
+            size: FACE_STRIDE * MAX_FACES as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("rsm"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                        buffer: &faces,
+                        offset: 0,
+                        size: wgpu::BufferSize::new(std::mem::size_of::<RsmFace>() as u64),
+                    }),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: light.as_entire_binding(),
+                },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("rsm"),
+            bind_group_layouts: &[Some(&layout), Some(material_layout)],
+            immediate_size: 0,
+        });
+        let module = shaders::RSM.create_module(device);
+        let targets = [POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT].map(|format| {
+            Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })
+        });
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("rsm"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(SceneBuffers::vertex_layout(&VERTEX_ATTRIBUTES))],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: Default::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        Self {
+            pipeline,
+            faces,
+            bind_group,
+        }
+    }
+
+    pub fn set_faces(&self, queue: &wgpu::Queue, faces: &[RsmFace]) {
+        for (i, face) in faces.iter().enumerate().take(MAX_FACES) {
+            queue.write_buffer(
+                &self.faces,
+                i as u64 * FACE_STRIDE,
+                bytemuck::bytes_of(face),
+            );
+        }
+    }
+
+    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm, scene: &SceneBuffers) {
+        let attachment = |view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("rsm"),
+            color_attachments: &[
+                attachment(&rsm.position.view),
+                attachment(&rsm.normal.view),
+                attachment(&rsm.flux_area.view),
+            ],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &rsm.depth.view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipeline);
+        for face in 0..rsm.faces {
+            let size = rsm.size as f32;
+            pass.set_viewport(face as f32 * size, 0.0, size, size, 0.0, 1.0);
+            pass.set_bind_group(0, &self.bind_group, &[face * FACE_STRIDE as u32]);
+            scene.draw_with_materials(&mut pass);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, RSM};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn rsm_face_matches_wgsl() {
+        assert_struct(
+            &RSM,
+            "RsmFace",
+            size_of::<RsmFace>(),
+            &[
+                ("view_proj", offset_of!(RsmFace, view_proj)),
+                ("axis", offset_of!(RsmFace, axis)),
+                ("texel_area", offset_of!(RsmFace, texel_area)),
+                ("perspective", offset_of!(RsmFace, perspective)),
+                ("pad0", offset_of!(RsmFace, pad0)),
+                ("pad1", offset_of!(RsmFace, pad1)),
+                ("pad2", offset_of!(RsmFace, pad2)),
+            ],
+        );
+    }
+}

@@ -1,0 +1,200 @@
+//! VAL selection (`shaders/val_select.wgsl`): N_sVAL stratified draws from the importance
+//! distribution by binary search on the cumulative sums, each with its Monte Carlo weight.
+
+use super::rsm::Rsm;
+use crate::gpu::shaders;
+use bytemuck::{Pod, Zeroable};
+
+/// Mirrors `SelectParams` in `shaders/val_select.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct SelectParams {
+    pub width: u32,
+    pub height: u32,
+    pub count: u32,
+    pub row_pitch: u32,
+    pub jitter: f32,
+    pub pad0: f32,
+    pub pad1: f32,
+    pub pad2: f32,
+}
+
+/// Mirrors `Val` in `shaders/vals.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct Val {
+    pub position: [f32; 3],
+    pub area: f32,
+    pub normal: [f32; 3],
+    pub weight: f32,
+    pub flux: [f32; 3],
+    pub texel: u32,
+}
+
+const WORKGROUP: u32 = 64;
+/// Workgroups per dispatch row (wgpu's per-dimension limit).
+const MAX_GROUPS_X: u32 = 65_535;
+
+pub struct ValSelectPass {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+}
+
+/// The buffers VAL selection reads and writes.
+pub struct SelectionBuffers<'a> {
+    pub importance: &'a wgpu::Buffer,
+    pub column_sums: &'a wgpu::Buffer,
+    pub row_sums: &'a wgpu::Buffer,
+    pub vals: &'a wgpu::Buffer,
+}
+
+impl ValSelectPass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("val select"),
+            entries: &[
+                super::buffer_entry(
+                    0,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Uniform,
+                ),
+                super::buffer_entry(1, wgpu::ShaderStages::COMPUTE, read),
+                super::buffer_entry(2, wgpu::ShaderStages::COMPUTE, read),
+                super::buffer_entry(3, wgpu::ShaderStages::COMPUTE, read),
+                super::compute_texture_entry(4, false),
+                super::compute_texture_entry(5, false),
+                super::compute_texture_entry(6, false),
+                super::buffer_entry(
+                    7,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Storage { read_only: false },
+                ),
+            ],
+        });
+        let module = shaders::VAL_SELECT.create_module(device);
+        Self {
+            pipeline: super::compute_pipeline(
+                device,
+                "val select",
+                &layout,
+                &module,
+                "select_vals",
+            ),
+            layout,
+            params: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("val select params"),
+                size: std::mem::size_of::<SelectParams>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+        }
+    }
+
+    pub fn bind(
+        &self,
+        device: &wgpu::Device,
+        rsm: &Rsm,
+        buffers: &SelectionBuffers,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("val select"),
+            layout: &self.layout,
+            entries: &[
+                super::buffer_binding(0, &self.params),
+                super::buffer_binding(1, buffers.importance),
+                super::buffer_binding(2, buffers.column_sums),
+                super::buffer_binding(3, buffers.row_sums),
+                super::view_binding(4, &rsm.position.view),
+                super::view_binding(5, &rsm.normal.view),
+                super::view_binding(6, &rsm.flux_area.view),
+                super::buffer_binding(7, buffers.vals),
+            ],
+        })
+    }
+
+    /// Dispatch grid for `count` VALs: (groups per row, rows).
+    fn grid(count: u32) -> (u32, u32) {
+        let groups = count.div_ceil(WORKGROUP).max(1);
+        let x = groups.min(MAX_GROUPS_X);
+        (x, groups.div_ceil(x))
+    }
+
+    pub fn prepare(&self, queue: &wgpu::Queue, rsm: &Rsm, count: u32, jitter: f32) {
+        let params = SelectParams {
+            width: rsm.width(),
+            height: rsm.height(),
+            count,
+            row_pitch: Self::grid(count).0 * WORKGROUP,
+            jitter,
+            pad0: 0.0,
+            pad1: 0.0,
+            pad2: 0.0,
+        };
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+    }
+
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        count: u32,
+    ) {
+        let (x, y) = Self::grid(count);
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("val select"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_pipeline(&self.pipeline);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, VAL_SELECT};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn select_structs_match_wgsl() {
+        assert_struct(
+            &VAL_SELECT,
+            "SelectParams",
+            size_of::<SelectParams>(),
+            &[
+                ("width", offset_of!(SelectParams, width)),
+                ("height", offset_of!(SelectParams, height)),
+                ("count", offset_of!(SelectParams, count)),
+                ("row_pitch", offset_of!(SelectParams, row_pitch)),
+                ("jitter", offset_of!(SelectParams, jitter)),
+                ("pad0", offset_of!(SelectParams, pad0)),
+                ("pad1", offset_of!(SelectParams, pad1)),
+                ("pad2", offset_of!(SelectParams, pad2)),
+            ],
+        );
+        assert_struct(
+            &VAL_SELECT,
+            "Val",
+            size_of::<Val>(),
+            &[
+                ("position", offset_of!(Val, position)),
+                ("area", offset_of!(Val, area)),
+                ("normal", offset_of!(Val, normal)),
+                ("weight", offset_of!(Val, weight)),
+                ("flux", offset_of!(Val, flux)),
+                ("texel", offset_of!(Val, texel)),
+            ],
+        );
+    }
+
+    #[test]
+    fn large_counts_use_a_two_dimensional_grid() {
+        assert_eq!(ValSelectPass::grid(1), (1, 1));
+        assert_eq!(ValSelectPass::grid(8192), (128, 1));
+        let (x, y) = ValSelectPass::grid(16_777_216);
+        assert!(x <= MAX_GROUPS_X && u64::from(x) * u64::from(y) * 64 >= 16_777_216);
+    }
+}

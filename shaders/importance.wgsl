@@ -1,0 +1,87 @@
+// Bidirectional importance of every VAL (eq. 10–11): how strongly it lights what the camera
+// sees, estimated from N_VS view samples. Two entry points: gather the view samples from the
+// G-buffer, then one thread per RSM texel sums over all samples.
+
+// Mirrored by `ImportanceParams` in server/src/passes/importance.rs.
+struct ImportanceParams {
+    rsm_width: u32,
+    rsm_height: u32,
+    sample_count: u32,
+    // 1: every texel gets importance 1, covered or not (turns the BRSM estimator into plain
+    // stratified sampling: with one draw per texel it is exactly the full LightSkin sum).
+    uniform_importance: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: ImportanceParams;
+@group(0) @binding(1) var g_position: texture_2d<f32>;
+@group(0) @binding(2) var g_normal_exponent: texture_2d<f32>;
+@group(0) @binding(3) var<storage, read_write> samples: array<ViewSample>;
+@group(0) @binding(4) var rsm_position: texture_2d<f32>;
+@group(0) @binding(5) var rsm_normal: texture_2d<f32>;
+@group(0) @binding(6) var rsm_flux_area: texture_2d<f32>;
+@group(0) @binding(7) var<storage, read_write> importance: array<f32>;
+
+@compute @workgroup_size(64)
+fn gather_view_samples(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.sample_count {
+        return;
+    }
+    let size = textureDimensions(g_position);
+    // Index 0 of the Halton sequence is the origin; start at 1.
+    let h = vec2<f32>(halton(i + 1u, 2u), halton(i + 1u, 3u));
+    let pixel = min(vec2<u32>(h * vec2<f32>(size)), size - vec2<u32>(1u));
+    let p = textureLoad(g_position, pixel, 0);
+    let n = textureLoad(g_normal_exponent, pixel, 0).xyz;
+    samples[i] = ViewSample(p.xyz, p.w, n, 0.0);
+}
+
+const TILE_SAMPLES: u32 = 64u;
+var<workgroup> tile: array<ViewSample, 64>;
+
+@compute @workgroup_size(8, 8)
+fn estimate_importance(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let inside = id.x < params.rsm_width && id.y < params.rsm_height;
+    var val_position = vec3<f32>(0.0);
+    var val_normal = vec3<f32>(0.0);
+    var flux = 0.0;
+    if inside {
+        let p = textureLoad(rsm_position, id.xy, 0);
+        val_position = p.xyz;
+        val_normal = textureLoad(rsm_normal, id.xy, 0).xyz;
+        flux = p.w * dot(textureLoad(rsm_flux_area, id.xy, 0).rgb, vec3<f32>(0.2126, 0.7152, 0.0722));
+    }
+    var sum = 0.0;
+    // Samples are staged through workgroup memory, 64 at a time, shared by the 64 texels.
+    for (var base = 0u; base < params.sample_count; base += TILE_SAMPLES) {
+        workgroupBarrier();
+        let s = base + local;
+        if s < params.sample_count {
+            tile[local] = samples[s];
+        } else {
+            tile[local] = ViewSample(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+        }
+        workgroupBarrier();
+        if flux > 0.0 {
+            for (var k = 0u; k < TILE_SAMPLES; k++) {
+                let vs = tile[k];
+                let l = vs.position - val_position;
+                let dist2 = dot(l, l);
+                let d = l * inverseSqrt(max(dist2, 1e-12));
+                // Eq. 11: the squared distance is clamped to at least 1.
+                let g = max(dot(val_normal, d), 0.0) * max(dot(vs.normal, -d), 0.0) / max(dist2, 1.0);
+                sum += vs.valid * g;
+            }
+        }
+    }
+    if inside {
+        var value = flux * sum / f32(max(params.sample_count, 1u));
+        if params.uniform_importance != 0u {
+            value = 1.0;
+        }
+        importance[id.y * params.rsm_width + id.x] = value;
+    }
+}

@@ -1,0 +1,73 @@
+// Reflective shadow map: every texel seen from the light becomes a virtual area light (VAL)
+// with a position, a normal, the flux it reflects and its disk area (eq. 1). Faces of a point
+// light lie side by side in one atlas, so later stages treat every light as one 2D map.
+
+// Mirrored by `RsmFace` in server/src/passes/rsm.rs.
+struct RsmFace {
+    view_proj: mat4x4<f32>,
+    // The face's viewing axis (unit), for the view-space depth z of eq. 1.
+    axis: vec3<f32>,
+    // Eq. 1 without z²: w_near·h_near / (z_near²·w_RSM·h_RSM) for perspective faces; the
+    // constant texel area (w·h of the orthographic box / texel count) for directional lights.
+    texel_area: f32,
+    perspective: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+@group(0) @binding(0) var<uniform> face: RsmFace;
+@group(0) @binding(1) var<uniform> light: LightUniform;
+
+struct VertexOutput {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) @interpolate(flat) material: u32,
+}
+
+@vertex
+fn vs_main(v: VertexInput) -> VertexOutput {
+    var out: VertexOutput;
+    out.clip = face.view_proj * vec4<f32>(v.position, 1.0);
+    out.world = v.position;
+    out.normal = v.normal;
+    out.uv = v.uv;
+    out.material = v.material;
+    return out;
+}
+
+struct RsmOut {
+    // w = 1 marks texels that hold a VAL.
+    @location(0) position: vec4<f32>,
+    @location(1) normal: vec4<f32>,
+    // rgb: reflected flux Φ_l; a: disk area A_l (eq. 1).
+    @location(2) flux_area: vec4<f32>,
+}
+
+@fragment
+fn fs_main(in: VertexOutput, @builtin(front_facing) front: bool) -> RsmOut {
+    let m = sample_material(in.material, in.uv);
+    if !m.covered {
+        discard;
+    }
+    var n = normalize(in.normal);
+    if !front {
+        n = -n;
+    }
+    var area = face.texel_area;
+    if face.perspective != 0u {
+        let z = dot(in.world - light.position, face.axis);
+        area *= z * z;
+    }
+    // The texel's footprint perpendicular to the light is A_disk, so it receives E⊥·A_disk and
+    // reflects the diffuse part of that (the VAL emits diffusely, eq. 3).
+    let incident = light_incident(light, in.world);
+    let facing = select(0.0, 1.0, dot(n, incident.to_light) > 0.0);
+    var out: RsmOut;
+    out.position = vec4<f32>(in.world, 1.0);
+    out.normal = vec4<f32>(n, 0.0);
+    out.flux_area = vec4<f32>(m.brdf.diffuse * incident.irradiance * area * facing, area);
+    return out;
+}

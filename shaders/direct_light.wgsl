@@ -1,4 +1,5 @@
-// Deferred direct lighting: emission plus one punctual light with PCF shadows, into HDR.
+// Deferred lighting: emission, one punctual light with PCF shadows, and the indirect light
+// computed before, into HDR.
 
 @group(0) @binding(0) var<uniform> camera: CameraUniform;
 @group(0) @binding(1) var<uniform> light: LightUniform;
@@ -10,6 +11,7 @@
 @group(0) @binding(7) var shadow_map: texture_depth_2d_array;
 @group(0) @binding(8) var shadow_sampler: sampler_comparison;
 @group(0) @binding(9) var hdr_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(10) var indirect: texture_2d<f32>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -35,7 +37,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let v = normalize(camera.position - p);
     let incident = light_incident(light, p);
     let cos_x = max(dot(n, incident.to_light), 0.0);
-    var radiance = textureLoad(g_emissive, texel, 0).rgb;
+    var radiance = textureLoad(g_emissive, texel, 0).rgb + textureLoad(indirect, texel, 0).rgb;
     if cos_x > 0.0 {
         let visibility = shadow_visibility(light, shadow_map, shadow_sampler, p, n, cos_x);
         radiance += eval_brdf(surface, n, incident.to_light, v) * incident.irradiance * cos_x * visibility;

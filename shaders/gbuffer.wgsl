@@ -9,16 +9,19 @@ struct VertexOutput {
     @location(1) normal: vec3<f32>,
     @location(2) uv: vec2<f32>,
     @location(3) @interpolate(flat) material: u32,
+    // The provoking vertex: its 16 nearest light caches serve the whole triangle.
+    @location(4) @interpolate(flat) vertex: u32,
 }
 
 @vertex
-fn vs_main(v: VertexInput) -> VertexOutput {
+fn vs_main(v: VertexInput, @builtin(vertex_index) vertex: u32) -> VertexOutput {
     var out: VertexOutput;
     out.clip = camera.view_proj * vec4<f32>(v.position, 1.0);
     out.world = v.position;
     out.normal = v.normal;
     out.uv = v.uv;
     out.material = v.material;
+    out.vertex = vertex;
     return out;
 }
 
@@ -28,6 +31,7 @@ struct GBufferOut {
     @location(2) diffuse: vec4<f32>,
     @location(3) glossy: vec4<f32>,
     @location(4) emissive: vec4<f32>,
+    @location(5) vertex: u32,
 }
 
 @fragment
@@ -48,5 +52,6 @@ fn fs_main(in: VertexOutput, @builtin(front_facing) front: bool) -> GBufferOut {
     out.diffuse = vec4<f32>(m.brdf.diffuse, 1.0);
     out.glossy = vec4<f32>(m.brdf.glossy, 1.0);
     out.emissive = vec4<f32>(m.emissive, 1.0);
+    out.vertex = in.vertex;
     return out;
 }

@@ -3,6 +3,8 @@
 //! The GPU pipeline ([`renderer`], [`passes`], [`gpu`]) has no async runtime in it, so the
 //! offline `render` command ([`offline`]) and tests can drive it directly.
 
+pub mod bench;
+pub mod debug_views;
 pub mod gi;
 pub mod gpu;
 pub mod offline;

@@ -1,7 +1,9 @@
-//! `lightcast-server`: the binary. Subcommands: `render` (offline, one frame to a file).
+//! `lightcast-server`: the binary. Subcommands: `render` (offline, one frame to a file) and
+//! `bench` (the paper's evaluation of the GI methods).
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use lightcast_server::bench::{self, BenchArgs};
 use lightcast_server::offline::{self, RenderArgs};
 
 #[derive(Parser)]
@@ -19,6 +21,9 @@ struct Cli {
 enum Command {
     /// Render one frame of a scene to a PNG file (no network) and print per-pass GPU times.
     Render(RenderArgs),
+    /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
+    /// BRSM's error against LightSkin (the paper's Figures 3 and 5).
+    Bench(BenchArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -44,6 +49,31 @@ fn main() -> anyhow::Result<()> {
                     report.height,
                     report.exposure_scale
                 );
+            }
+        }
+        Command::Bench(args) => {
+            let bar = indicatif::ProgressBar::new(0);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
+                    .context("progress bar template")?,
+            );
+            let mut log = |line: &str| bar.println(line);
+            let mut progress = |done: u64, total: u64, label: &str| {
+                bar.set_length(total);
+                bar.set_position(done);
+                bar.set_message(label.to_string());
+            };
+            let report = bench::run(&args, &mut log, &mut progress).context("bench failed")?;
+            bar.finish_and_clear();
+            let markdown = report.markdown();
+            print!("{markdown}");
+            if let Some(path) = &args.json {
+                std::fs::write(path, serde_json::to_string_pretty(&report)?)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+            if let Some(path) = &args.markdown {
+                std::fs::write(path, &markdown)
+                    .with_context(|| format!("writing {}", path.display()))?;
             }
         }
     }

@@ -1,8 +1,14 @@
 //! The offline `render` command: one frame of a scene to an image file, no network.
 
+use crate::debug_views::{self, DebugView};
+use crate::gi::{
+    cache_store::CacheStore,
+    caches::{CacheParams, Progress},
+    GiMethod, GiSettings,
+};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
-use crate::renderer::{Frame, RenderSettings, Renderer};
+use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
     Scene,
@@ -126,6 +132,34 @@ pub struct RenderArgs {
     /// Shadow map side in texels (per cube face for point lights).
     #[arg(long, default_value_t = 2048)]
     pub shadow_map_size: u32,
+    /// Indirect light: `none`, `lightskin` (every RSM texel is a VAL) or `brsm`
+    /// (importance-sampled VALs).
+    #[arg(long, value_enum, default_value = "brsm")]
+    pub gi: GiMethod,
+    /// RSM side per light face in texels (16 … 4096; a point light's six faces share 4096²).
+    #[arg(long, default_value_t = GiSettings::default().rsm_size)]
+    pub rsm_size: u32,
+    /// N_VS: view samples for the BRSM importance estimate (1 … 4096).
+    #[arg(long, default_value_t = GiSettings::default().view_samples)]
+    pub view_samples: u32,
+    /// N_sVAL: VALs selected per frame by BRSM (1 … 1048576).
+    #[arg(long, default_value_t = GiSettings::default().val_count)]
+    pub vals: u32,
+    /// Light caches: largest distance d_eps between a surface point and its cache, in scene
+    /// units. Default: derived from the scene's surface area (about 6,000 caches).
+    #[arg(long)]
+    pub cache_distance: Option<f32>,
+    /// Light caches: largest angle theta_eps between surface and cache normals, in degrees.
+    #[arg(long)]
+    pub cache_angle: Option<f32>,
+    /// Where precomputed light caches are kept (env LIGHTCAST_CACHE_DIR; default: the user's
+    /// cache directory).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+    /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
+    /// importance map, selected VALs, light caches).
+    #[arg(long, value_enum, default_value = "final")]
+    pub view: DebugView,
     /// wgpu backend.
     #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
     pub backend: BackendChoice,
@@ -138,6 +172,8 @@ pub struct RenderArgs {
 #[derive(Debug, serde::Serialize)]
 pub struct RenderReport {
     pub out: PathBuf,
+    pub view: DebugView,
+    pub gi: GiSettings,
     pub adapter: String,
     pub scene: String,
     pub triangles: usize,
@@ -160,10 +196,14 @@ pub enum OfflineError {
         scene: String,
         source: crate::scene::OpenError,
     },
+    #[error("light caches: {0}")]
+    Caches(#[from] crate::gi::caches::CacheError),
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
     Render(#[from] crate::renderer::RenderError),
+    #[error("--view {view:?} needs global illumination; use --gi lightskin or --gi brsm")]
+    ViewNeedsGi { view: DebugView },
     #[error("writing {path}: {source}")]
     Write {
         path: PathBuf,
@@ -229,7 +269,13 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
-        val_sampling: None,
+        gi: GiSettings {
+            method: args.gi,
+            rsm_size: args.rsm_size,
+            view_samples: args.view_samples,
+            val_count: args.vals,
+            ..GiSettings::default()
+        },
     }
 }
 
@@ -256,18 +302,97 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let settings = settings_from_args(args, &scene);
     settings.validate(&ctx)?;
     let setup_start = Instant::now();
+    let caches = if args.gi == GiMethod::None {
+        None
+    } else {
+        let mut params = CacheParams::for_scene(&scene);
+        if let Some(d) = args.cache_distance {
+            params.d_eps = d;
+        }
+        if let Some(a) = args.cache_angle {
+            params.theta_eps_degrees = a;
+        }
+        let store = CacheStore::new(
+            args.cache_dir
+                .clone()
+                .unwrap_or_else(CacheStore::default_dir),
+        );
+        let started = Instant::now();
+        let mut last_step = "";
+        let mut progress = |p: Progress| {
+            if p.step != last_step || p.done == p.total {
+                log(&format!("light caches: {} {}/{}", p.step, p.done, p.total));
+                last_step = p.step;
+            }
+        };
+        let (set, from_disk) = store.load_or_compute(&scene, &params, &mut progress)?;
+        log(&format!(
+            "light caches: {} caches (d_eps {}, theta_eps {}°), {} in {:.1} ms",
+            set.caches.len(),
+            params.d_eps,
+            params.theta_eps_degrees,
+            if from_disk { "loaded" } else { "computed" },
+            started.elapsed().as_secs_f64() * 1e3
+        ));
+        Some(set)
+    };
     let mut renderer = Renderer::new(ctx, scene);
+    if let Some(set) = &caches {
+        renderer.set_caches(set)?;
+    }
     let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
+    if args.view != DebugView::Final && args.gi == GiMethod::None {
+        return Err(OfflineError::ViewNeedsGi { view: args.view });
+    }
+    let mut settings = settings;
+    settings.capture_hdr = args.view == DebugView::Indirect;
     let frame = renderer.render(&settings)?;
-    write_png(&frame, &args.out)?;
+    let image = match args.view {
+        DebugView::Final => debug_views::Image {
+            width: frame.width,
+            height: frame.height,
+            rgba8: frame.rgba8.clone(),
+        },
+        DebugView::Indirect => {
+            debug_views::indirect(&frame).ok_or(OfflineError::ViewNeedsGi { view: args.view })?
+        }
+        DebugView::RsmFlux | DebugView::Importance | DebugView::SelectedVals => {
+            let sampling = renderer
+                .read_sampling()?
+                .ok_or(OfflineError::ViewNeedsGi { view: args.view })?;
+            match args.view {
+                DebugView::RsmFlux => debug_views::rsm_flux(&sampling),
+                DebugView::Importance => debug_views::importance(&sampling),
+                _ => debug_views::selected_vals(&sampling),
+            }
+        }
+        DebugView::Caches => {
+            let lighting = renderer
+                .read_cache_lighting()?
+                .ok_or(OfflineError::ViewNeedsGi { view: args.view })?;
+            let set = caches
+                .as_ref()
+                .ok_or(OfflineError::ViewNeedsGi { view: args.view })?;
+            debug_views::caches(
+                &frame,
+                &settings.camera,
+                &renderer.scene().bounds,
+                &set.caches,
+                &lighting,
+            )
+        }
+    };
+    write_png(&image, &args.out)?;
     let scene = renderer.scene();
     Ok(RenderReport {
         out: args.out.clone(),
+        view: args.view,
+        gi: settings.gi,
         adapter,
         scene: scene.name.clone(),
         triangles: scene.triangle_count(),
-        width: frame.width,
-        height: frame.height,
+        width: image.width,
+        height: image.height,
         camera: settings.camera,
         light: settings.light,
         exposure_scale: frame.exposure_scale,
@@ -279,12 +404,12 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     })
 }
 
-pub fn write_png(frame: &Frame, path: &std::path::Path) -> Result<(), OfflineError> {
+pub fn write_png(image: &debug_views::Image, path: &std::path::Path) -> Result<(), OfflineError> {
     image::save_buffer(
         path,
-        &frame.rgba8,
-        frame.width,
-        frame.height,
+        &image.rgba8,
+        image.width,
+        image.height,
         image::ExtendedColorType::Rgba8,
     )
     .map_err(|source| OfflineError::Write {

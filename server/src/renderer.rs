@@ -2,17 +2,24 @@
 //!
 //! No async runtime is involved; the offline `render` command and tests drive it directly.
 
-use crate::gi::sampling::{SamplingReadback, SamplingSettings, ValSampling};
+use crate::gi::{
+    cache_buffers::CacheBuffers,
+    caches::CacheSet,
+    sampling::{SamplingReadback, ValSampling},
+    GiMethod, GiSettings,
+};
 use crate::gpu::{
     readback::{map_read, TextureReadback},
     timing::{FrameTimer, StageTiming, TimingSource},
     GpuContext, GpuError,
 };
 use crate::passes::{
-    direct_light::{DirectLightPass, HDR_FORMAT},
+    cache_lighting::{CacheLighting, CacheLightingPass, ValSource},
+    direct_light::{DirectLightInputs, DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
     frame_uniforms::{light_faces, CameraUniform, LightUniform},
     gbuffer::{GBuffer, GBufferPass},
+    indirect_light::{CacheInputs, IndirectLightPass, INDIRECT_FORMAT},
     scene_buffers::{material_layout, SceneBuffers},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},
@@ -51,9 +58,8 @@ pub struct RenderSettings {
     pub shadow_map_size: u32,
     /// Also read back the linear HDR radiance (before exposure).
     pub capture_hdr: bool,
-    /// Runs the BRSM sampling stages (RSM, importance, cumulative sums, VAL selection) when
-    /// set; their results are available from [`Renderer::read_sampling`].
-    pub val_sampling: Option<SamplingSettings>,
+    /// Indirect light: method and parameters.
+    pub gi: GiSettings,
 }
 
 /// A rendered frame.
@@ -66,6 +72,8 @@ pub struct Frame {
     /// Linear HDR radiance, RGBA, when [`RenderSettings::capture_hdr`] was set. Alpha 0 marks
     /// pixels no geometry covers.
     pub hdr: Option<Vec<[f32; 4]>>,
+    /// Linear indirect radiance alone (RGBA), when [`RenderSettings::capture_hdr`] was set.
+    pub indirect: Option<Vec<[f32; 4]>>,
     pub timings: Vec<StageTiming>,
     pub timing_source: TimingSource,
     /// The exposure scale applied before the tone curve.
@@ -83,6 +91,10 @@ impl Frame {
 pub enum RenderError {
     #[error("invalid {field}: {reason}")]
     InvalidSetting { field: &'static str, reason: String },
+    #[error("global illumination needs the scene's light caches; call Renderer::set_caches first")]
+    CachesMissing,
+    #[error("light caches were computed for {caches} vertices, but the scene has {scene}")]
+    CachesMismatch { caches: usize, scene: usize },
     #[error(transparent)]
     Gpu(#[from] GpuError),
 }
@@ -162,7 +174,8 @@ impl RenderSettings {
         {
             return Err(invalid("light.cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees"));
         }
-        if let Some(g) = &self.val_sampling {
+        let g = &self.gi;
+        if g.method != GiMethod::None {
             let faces = u64::from(LightUniform::face_count(self.light.kind));
             let max_rsm = MAX_RSM_SIZE.min(((MAX_RSM_TEXELS / faces) as f64).sqrt() as u32);
             if !(16..=max_rsm).contains(&g.rsm_size) {
@@ -208,6 +221,8 @@ struct SizedTargets {
     ldr: Target,
     ldr_readback: TextureReadback,
     hdr_readback: TextureReadback,
+    indirect: Target,
+    indirect_readback: TextureReadback,
     exposure: ExposureBindings,
     tonemap: wgpu::BindGroup,
 }
@@ -231,6 +246,11 @@ pub struct Renderer {
     sampling: ValSampling,
     /// Whether the last frame ran the sampling stages.
     sampled: bool,
+    cache_pass: CacheLightingPass,
+    indirect_pass: IndirectLightPass,
+    caches: Option<CacheBuffers>,
+    /// The indirect target holds light from an earlier frame that must be cleared.
+    indirect_stale: bool,
 }
 
 impl Renderer {
@@ -261,6 +281,10 @@ impl Renderer {
         Self {
             sampling: ValSampling::new(device, &light_buffer, &material_layout),
             sampled: false,
+            cache_pass: CacheLightingPass::new(device),
+            indirect_pass: IndirectLightPass::new(device),
+            caches: None,
+            indirect_stale: false,
             timer: FrameTimer::new(&ctx),
             gbuffer_pass: GBufferPass::new(device, &camera_buffer, &material_layout),
             scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
@@ -288,6 +312,41 @@ impl Renderer {
 
     pub fn timing_source(&self) -> TimingSource {
         self.timer.source()
+    }
+
+    /// Uploads the scene's light caches (needed by every GI method).
+    pub fn set_caches(&mut self, set: &CacheSet) -> Result<(), RenderError> {
+        if set.vertex_caches.len() != self.scene.vertices.len() {
+            return Err(RenderError::CachesMismatch {
+                caches: set.vertex_caches.len(),
+                scene: self.scene.vertices.len(),
+            });
+        }
+        self.caches = Some(CacheBuffers::new(&self.ctx.device, set));
+        Ok(())
+    }
+
+    /// Proxy lights of every cache from the last GI frame (blocking; for tests and debugging).
+    pub fn read_cache_lighting(&self) -> Result<Option<Vec<CacheLighting>>, GpuError> {
+        let Some(caches) = self.caches.as_ref().filter(|_| self.sampled) else {
+            return Ok(None);
+        };
+        let staging = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("cache lighting readback"),
+            size: caches.lighting.size(),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        });
+        let mut encoder = self
+            .ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        encoder.copy_buffer_to_buffer(&caches.lighting, 0, &staging, 0, None);
+        self.ctx.queue.submit([encoder.finish()]);
+        let mut lighting: Vec<CacheLighting> =
+            bytemuck::pod_collect_to_vec(&map_read(&self.ctx, &staging)?);
+        lighting.truncate(caches.count as usize);
+        Ok(Some(lighting))
     }
 
     /// The sampling stages' results of the last frame, if it ran them (blocking readback).
@@ -324,6 +383,17 @@ impl Renderer {
             LDR_FORMAT,
             wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
         );
+        let indirect = Target::new(
+            device,
+            "indirect",
+            width,
+            height,
+            INDIRECT_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::COPY_SRC,
+        );
         let exposure = self.exposure_pass.bind(device, &hdr, width, height);
         let tonemap = self
             .tonemap_pass
@@ -334,6 +404,8 @@ impl Renderer {
             gbuffer: GBuffer::new(device, width, height),
             ldr_readback: TextureReadback::new(device, "ldr readback", width, height, 4),
             hdr_readback: TextureReadback::new(device, "hdr readback", width, height, 8),
+            indirect_readback: TextureReadback::new(device, "indirect readback", width, height, 8),
+            indirect,
             hdr,
             ldr,
             exposure,
@@ -380,23 +452,65 @@ impl Renderer {
             .set_faces(queue, &light.face_view_proj[..faces as usize]);
         self.exposure_pass
             .prepare(queue, &sized.exposure, settings.exposure);
-        if let Some(g) = &settings.val_sampling {
+        let gi = settings.gi;
+        let gi_on = gi.method != GiMethod::None;
+        if gi_on {
+            let caches = self.caches.as_ref().ok_or(RenderError::CachesMissing)?;
             self.sampling.prepare(
                 &self.ctx,
                 &sized.gbuffer,
                 (width, height),
                 &light_faces(&settings.light, bounds),
-                g,
+                &gi,
             );
+            let source = match gi.method {
+                GiMethod::Brsm => ValSource::Selected {
+                    count: gi.val_count,
+                },
+                GiMethod::Lightskin | GiMethod::None => ValSource::EveryTexel,
+            };
+            self.cache_pass.prepare(
+                queue,
+                settings.camera.position,
+                caches.count,
+                self.sampling.rsm(),
+                source,
+            );
+            self.indirect_pass.prepare(queue, true);
         }
-        self.sampled = settings.val_sampling.is_some();
+        self.sampled = gi_on;
+        let gi_bind_groups = self.caches.as_ref().filter(|_| gi_on).map(|caches| {
+            let device = &self.ctx.device;
+            let lighting = self.cache_pass.bind(
+                device,
+                &caches.caches,
+                self.sampling.vals(),
+                self.sampling.rsm(),
+                &caches.lighting,
+            );
+            let indirect = self.indirect_pass.bind(
+                device,
+                &self.camera_buffer,
+                &sized.gbuffer,
+                &CacheInputs {
+                    caches: &caches.caches,
+                    lighting: &caches.lighting,
+                    vertex_caches: &caches.vertex_caches,
+                },
+                &sized.indirect,
+            );
+            (caches.count, lighting, indirect)
+        });
         let direct_bind_group = self.direct_pass.bind(
             &self.ctx.device,
-            &self.camera_buffer,
-            &self.light_buffer,
-            &sized.gbuffer,
-            shadow_map,
-            &sized.hdr,
+            &DirectLightInputs {
+                camera: &self.camera_buffer,
+                light: &self.light_buffer,
+                gbuffer: &sized.gbuffer,
+                shadow: shadow_map,
+                indirect: &sized.indirect,
+                hdr: &sized.hdr,
+            },
         );
 
         let mut stages = self.timer.begin(&self.ctx);
@@ -407,13 +521,24 @@ impl Renderer {
             self.gbuffer_pass
                 .encode(e, &sized.gbuffer, &self.scene_buffers)
         })?;
-        if let Some(g) = &settings.val_sampling {
+        if let Some((cache_count, lighting_group, indirect_group)) = &gi_bind_groups {
             let sampling = &self.sampling;
             stages.stage("rsm", |e| sampling.encode_rsm(e, &self.scene_buffers))?;
-            stages.stage("importance", |e| sampling.encode_importance(e, g))?;
-            stages.stage("cumulative_sums", |e| sampling.encode_cumulative_sums(e))?;
-            stages.stage("val_select", |e| sampling.encode_selection(e, g))?;
+            if gi.method == GiMethod::Brsm {
+                stages.stage("importance", |e| sampling.encode_importance(e, &gi))?;
+                stages.stage("cumulative_sums", |e| sampling.encode_cumulative_sums(e))?;
+                stages.stage("val_select", |e| sampling.encode_selection(e, &gi))?;
+            }
+            stages.stage("cache_lighting", |e| {
+                self.cache_pass.encode(e, lighting_group, *cache_count)
+            })?;
+            stages.stage("indirect_light", |e| {
+                self.indirect_pass.encode(e, indirect_group, width, height)
+            })?;
+        } else if self.indirect_stale {
+            stages.stage("indirect_clear", |e| clear_target(e, &sized.indirect))?;
         }
+        self.indirect_stale = gi_on;
         stages.stage("direct_light", |e| {
             self.direct_pass
                 .encode(e, &direct_bind_group, width, height)
@@ -431,6 +556,9 @@ impl Renderer {
             sized.ldr_readback.encode_copy(e, &sized.ldr.texture);
             if settings.capture_hdr {
                 sized.hdr_readback.encode_copy(e, &sized.hdr.texture);
+                sized
+                    .indirect_readback
+                    .encode_copy(e, &sized.indirect.texture);
             }
             e.copy_buffer_to_buffer(
                 &self.exposure_pass.result,
@@ -443,17 +571,13 @@ impl Renderer {
         let timings = stages.finish()?;
 
         let rgba8 = sized.ldr_readback.read(&self.ctx)?;
-        let hdr = if settings.capture_hdr {
-            let bytes = sized.hdr_readback.read(&self.ctx)?;
-            let halves: &[half::f16] = bytemuck::cast_slice(&bytes);
-            Some(
-                halves
-                    .chunks_exact(4)
-                    .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
-                    .collect(),
+        let (hdr, indirect) = if settings.capture_hdr {
+            (
+                Some(read_rgba16f(&self.ctx, &sized.hdr_readback)?),
+                Some(read_rgba16f(&self.ctx, &sized.indirect_readback)?),
             )
         } else {
-            None
+            (None, None)
         };
         let exposure_bytes = map_read(&self.ctx, &self.exposure_readback)?;
         let exposure: ExposureResult = bytemuck::pod_read_unaligned(&exposure_bytes);
@@ -462,6 +586,7 @@ impl Renderer {
             height,
             rgba8,
             hdr,
+            indirect,
             timings,
             timing_source: self.timer.source(),
             exposure_scale: exposure.scale,
@@ -478,4 +603,34 @@ fn check_allocation(scope: wgpu::ErrorScopeGuard, what: String) -> Result<(), Gp
             message: e.to_string(),
         }),
     }
+}
+
+/// Reads an RGBA16F readback as f32 texels.
+fn read_rgba16f(ctx: &GpuContext, readback: &TextureReadback) -> Result<Vec<[f32; 4]>, GpuError> {
+    let bytes = readback.read(ctx)?;
+    let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(&bytes);
+    Ok(halves
+        .chunks_exact(4)
+        .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
+        .collect())
+}
+
+/// Clears a colour target to zero.
+fn clear_target(encoder: &mut wgpu::CommandEncoder, target: &Target) {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some("clear"),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view: &target.view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: None,
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
 }

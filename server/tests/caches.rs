@@ -7,7 +7,7 @@ use lightcast_server::gi::cache_store::CacheStore;
 use lightcast_server::gi::caches::{
     precompute, CacheError, CacheParams, CacheSet, Progress, NEIGHBOURS,
 };
-use lightcast_server::scene::{procedural, Material, Scene, Vertex};
+use lightcast_server::scene::{procedural, Material, Scene, Texture, Vertex};
 use std::path::PathBuf;
 
 /// Deterministic pseudo-random numbers in [0, 1).
@@ -200,7 +200,10 @@ fn assert_area_matches(scene: &Scene, set: &CacheSet) {
         "{}: cache areas sum to {sum}, surface area is {expected}",
         scene.name
     );
-    assert!(set.caches.iter().all(|c| c.area > 0.0 && c.disk_area == c.area));
+    assert!(set
+        .caches
+        .iter()
+        .all(|c| c.area > 0.0 && c.disk_area == c.area));
     assert!((set.stats.surface_area - expected).abs() <= 1e-3 * expected);
 }
 
@@ -224,7 +227,11 @@ fn assert_neighbours_valid(scene: &Scene, set: &CacheSet) {
             .iter()
             .map(|&c| distance(c as u32))
             .fold(f32::INFINITY, f32::min);
-        assert_eq!(distance(valid[0]), nearest, "first entry is not the nearest");
+        assert_eq!(
+            distance(valid[0]),
+            nearest,
+            "first entry is not the nearest"
+        );
         // The 16th facing neighbour is no further than any facing cache left out.
         if let Some(&last) = valid[..facing_count].last() {
             for &c in &facing {
@@ -249,8 +256,57 @@ fn cornell_box_is_covered_with_exact_areas() {
     assert_covered(&scene, &set, 4);
     assert_area_matches(&scene, &set);
     // The red and green walls tint their caches; white surfaces stay grey.
-    assert!(set.caches.iter().any(|c| c.diffuse[0] > 0.6 && c.diffuse[1] < 0.1));
-    assert!(set.caches.iter().any(|c| c.diffuse[1] > 0.4 && c.diffuse[0] < 0.2));
+    assert!(set
+        .caches
+        .iter()
+        .any(|c| c.diffuse[0] > 0.6 && c.diffuse[1] < 0.1));
+    assert!(set
+        .caches
+        .iter()
+        .any(|c| c.diffuse[1] > 0.4 && c.diffuse[0] < 0.2));
+}
+
+#[test]
+fn small_street_is_covered_with_exact_areas() {
+    let scene = procedural::build("street?blocks=3&detail=1").expect("street scene");
+    let set = compute(&scene, &CacheParams::for_scene(&scene));
+    assert_covered(&scene, &set, 4);
+    assert_area_matches(&scene, &set);
+}
+
+#[test]
+fn textured_materials_use_the_mean_linear_texture_colour() {
+    let mut g = Default::default();
+    grid(Vec3::ZERO, Vec3::X, -Vec3::Z, 2, &mut g);
+    let plain = scene("textured", g.0, g.1, g.2);
+    // Half white, half black texels: mean linear colour 0.5.
+    let texture = Texture {
+        name: "checker".into(),
+        width: 2,
+        height: 1,
+        rgba8: vec![255, 255, 255, 255, 0, 0, 0, 255],
+    };
+    let material = Material {
+        base_color: [0.8, 0.4, 0.2, 1.0],
+        base_color_texture: Some(0),
+        ..Material::default()
+    };
+    let textured = Scene::new(
+        "textured",
+        plain.vertices.clone(),
+        plain.indices.clone(),
+        vec![material],
+        vec![texture],
+        vec![],
+        vec![],
+    )
+    .expect("valid textured scene");
+    let set = compute(&textured, &params(0.5));
+    for c in &set.caches {
+        for (got, want) in c.diffuse.iter().zip([0.4, 0.2, 0.1]) {
+            assert!((got - want).abs() < 1e-5, "diffuse {:?}", c.diffuse);
+        }
+    }
 }
 
 #[test]
@@ -346,7 +402,14 @@ fn output_is_deterministic_across_thread_counts() {
 fn progress_reports_every_step_to_completion() {
     let mut reports: Vec<Progress> = Vec::new();
     precompute(&cube(), &params(0.2), &mut |p| reports.push(p)).expect("caches");
-    for step in ["sampling", "voxelising", "clustering", "merging", "assigning", "neighbours"] {
+    for step in [
+        "sampling",
+        "voxelising",
+        "clustering",
+        "merging",
+        "assigning",
+        "neighbours",
+    ] {
         let last = reports
             .iter()
             .rev()
@@ -443,7 +506,10 @@ fn store_loads_what_it_computed() {
         .expect("computed");
     assert!(!from_disk);
     assert_eq!(third.params, other);
-    assert_eq!(std::fs::read_dir(dir.join("nested")).expect("dir").count(), 2);
+    assert_eq!(
+        std::fs::read_dir(dir.join("nested")).expect("dir").count(),
+        2
+    );
 
     // A different material changes the key too.
     let mut tinted = scene.clone();

@@ -6,7 +6,9 @@ mod support;
 
 use glam::Vec3;
 use lightcast_protocol::{Light, LightKind};
-use lightcast_server::gi::sampling::{SamplingReadback, SamplingSettings};
+use lightcast_server::gi::caches::{precompute, CacheParams};
+use lightcast_server::gi::sampling::SamplingReadback;
+use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::passes::frame_uniforms::light_faces;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -16,8 +18,9 @@ use support::*;
 const W: u32 = 64;
 const H: u32 = 48;
 
-fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> SamplingSettings {
-    SamplingSettings {
+fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiSettings {
+    GiSettings {
+        method: GiMethod::Brsm,
         rsm_size,
         view_samples,
         val_count,
@@ -26,14 +29,17 @@ fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> SamplingSetting
     }
 }
 
-fn run(
-    scene: &Scene,
-    light: Light,
-    sampling: SamplingSettings,
-) -> (RenderSettings, SamplingReadback) {
-    let mut s = settings(W, H, default_camera(scene), light);
-    s.val_sampling = Some(sampling);
+fn renderer_with_caches(scene: &Scene) -> Renderer {
+    let caches = precompute(scene, &CacheParams::for_scene(scene), &mut |_| {}).expect("caches");
     let mut renderer = Renderer::new(gpu(), scene.clone());
+    renderer.set_caches(&caches).expect("caches fit the scene");
+    renderer
+}
+
+fn run(scene: &Scene, light: Light, sampling: GiSettings) -> (RenderSettings, SamplingReadback) {
+    let mut s = settings(W, H, default_camera(scene), light);
+    s.gi = sampling;
+    let mut renderer = renderer_with_caches(scene);
     renderer.render(&s).expect("render");
     let readback = renderer
         .read_sampling()
@@ -304,7 +310,7 @@ fn uniform_importance_with_one_draw_per_texel_selects_every_val_exactly_once() {
 #[test]
 fn sampling_settings_are_validated() {
     let scene = procedural::cornell_box();
-    let mut renderer = Renderer::new(gpu(), scene.clone());
+    let mut renderer = renderer_with_caches(&scene);
     for (field, s) in [
         ("rsm_size", sampling(8, 64, 64)),
         ("rsm_size", sampling(8192, 64, 64)),
@@ -313,7 +319,7 @@ fn sampling_settings_are_validated() {
         ("val_count", sampling(32, 64, u32::MAX)),
     ] {
         let mut settings = settings(16, 16, default_camera(&scene), default_light(&scene));
-        settings.val_sampling = Some(s);
+        settings.gi = s;
         match renderer.render(&settings) {
             Err(lightcast_server::renderer::RenderError::InvalidSetting { field: f, .. }) => {
                 assert_eq!(f, field)

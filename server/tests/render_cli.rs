@@ -17,6 +17,7 @@ fn out_dir() -> PathBuf {
 fn run(args: &[&str]) -> Output {
     let output = Command::new(env!("CARGO_BIN_EXE_lightcast-server"))
         .args(args)
+        .env("LIGHTCAST_CACHE_DIR", out_dir().join("light-caches"))
         .output()
         .expect("run lightcast-server");
     let stderr = String::from_utf8_lossy(&output.stderr);

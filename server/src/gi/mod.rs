@@ -1,5 +1,65 @@
 //! Global illumination: LightSkin light caches fed by Bidirectional Reflective Shadow Maps
-//! (seed paper 004). [`sampling`] runs the per-frame BRSM stages (RSM, importance, cumulative
-//! sums, VAL selection); the GPU passes themselves live in `crate::passes`.
+//! (seed paper 004). Per model, [`caches`] are precomputed once and kept by [`cache_store`];
+//! per frame, [`sampling`] runs the BRSM stages (RSM, importance, cumulative sums, VAL
+//! selection) and [`cache_buffers`] holds the caches and their proxy lights on the GPU. The
+//! GPU passes themselves live in `crate::passes`.
 
+pub mod cache_buffers;
+pub mod cache_store;
+pub mod caches;
+pub mod reference;
 pub mod sampling;
+
+/// How indirect light is computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GiMethod {
+    /// Direct light only.
+    None,
+    /// LightSkin: every RSM texel is a VAL (eq. 3–7).
+    Lightskin,
+    /// BRSM: an importance-sampled subset of VALs (eq. 10–15).
+    #[default]
+    Brsm,
+}
+
+/// Parameters of the GI methods.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct GiSettings {
+    pub method: GiMethod,
+    /// RSM side per light face, in texels.
+    pub rsm_size: u32,
+    /// N_VS: view samples for the importance estimate (BRSM).
+    pub view_samples: u32,
+    /// N_sVAL: VALs drawn from the importance distribution (BRSM).
+    pub val_count: u32,
+    /// Offset of the stratified VAL draws within their strata, in [0, 1).
+    pub jitter: f32,
+    /// Give every RSM texel importance 1 (turns BRSM into plain stratified sampling; with one
+    /// draw per texel it equals LightSkin).
+    pub uniform_importance: bool,
+}
+
+impl Default for GiSettings {
+    /// The paper's evaluation settings: 512 view samples and 8,192 VALs; a 1024² RSM.
+    fn default() -> Self {
+        Self {
+            method: GiMethod::Brsm,
+            rsm_size: 1024,
+            view_samples: 512,
+            val_count: 8192,
+            jitter: 0.5,
+            uniform_importance: false,
+        }
+    }
+}
+
+impl GiSettings {
+    /// No indirect light.
+    pub fn off() -> Self {
+        Self {
+            method: GiMethod::None,
+            ..Self::default()
+        }
+    }
+}

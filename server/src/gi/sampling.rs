@@ -2,6 +2,7 @@
 //! sums → selection of N_sVAL VALs with their weights (eq. 13–15). Owns the passes and the
 //! buffers between them.
 
+use super::GiSettings;
 use crate::gpu::{readback::map_read, GpuContext, GpuError};
 use crate::passes::{
     cumulative_sums::CumulativeSumsPass,
@@ -12,21 +13,6 @@ use crate::passes::{
     scene_buffers::SceneBuffers,
     val_select::{SelectionBuffers, Val, ValSelectPass},
 };
-
-/// What the sampling stages should do this frame.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SamplingSettings {
-    /// RSM side per light face, in texels.
-    pub rsm_size: u32,
-    /// N_VS: view samples for the importance estimate.
-    pub view_samples: u32,
-    /// N_sVAL: VALs drawn from the importance distribution.
-    pub val_count: u32,
-    /// Offset of the stratified draws within their strata, in [0, 1).
-    pub jitter: f32,
-    /// Give every VAL importance 1 (turns the estimator into plain stratified sampling).
-    pub uniform_importance: bool,
-}
 
 /// Buffers and bind groups for one RSM size, light face count, output size and VAL count.
 struct Resources {
@@ -100,7 +86,7 @@ impl ValSampling {
         gbuffer: &GBuffer,
         gbuffer_size: (u32, u32),
         faces: &[LightFace],
-        settings: &SamplingSettings,
+        settings: &GiSettings,
     ) {
         let face_count = faces.len() as u32;
         let key = (
@@ -136,7 +122,7 @@ impl ValSampling {
         ctx: &GpuContext,
         gbuffer: &GBuffer,
         key: (u32, u32, u32, u32, u32),
-        settings: &SamplingSettings,
+        settings: &GiSettings,
     ) -> Resources {
         let device = &ctx.device;
         let rsm = Rsm::new(device, settings.rsm_size, key.1);
@@ -203,11 +189,7 @@ impl ValSampling {
         self.rsm_pass.encode(encoder, &self.res().rsm, scene);
     }
 
-    pub fn encode_importance(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        settings: &SamplingSettings,
-    ) {
+    pub fn encode_importance(&self, encoder: &mut wgpu::CommandEncoder, settings: &GiSettings) {
         let res = self.res();
         self.importance_pass.encode(
             encoder,
@@ -222,11 +204,7 @@ impl ValSampling {
             .encode(encoder, &res.sums_group, res.rsm.width());
     }
 
-    pub fn encode_selection(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        settings: &SamplingSettings,
-    ) {
+    pub fn encode_selection(&self, encoder: &mut wgpu::CommandEncoder, settings: &GiSettings) {
         self.select_pass
             .encode(encoder, &self.res().select_group, settings.val_count);
     }
@@ -301,7 +279,7 @@ impl ValSampling {
     }
 }
 
-fn importance_params(rsm: &Rsm, settings: &SamplingSettings) -> ImportanceParams {
+fn importance_params(rsm: &Rsm, settings: &GiSettings) -> ImportanceParams {
     ImportanceParams {
         rsm_width: rsm.width(),
         rsm_height: rsm.height(),

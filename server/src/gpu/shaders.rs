@@ -74,6 +74,25 @@ pub const VAL_SELECT: ShaderSource = ShaderSource {
     files: &[wgsl!("vals.wgsl"), wgsl!("val_select.wgsl")],
 };
 
+pub const CACHE_LIGHTING: ShaderSource = ShaderSource {
+    name: "cache_lighting",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("vals.wgsl"),
+        wgsl!("light_caches.wgsl"),
+        wgsl!("cache_lighting.wgsl"),
+    ],
+};
+
+pub const INDIRECT_LIGHT: ShaderSource = ShaderSource {
+    name: "indirect_light",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("light_caches.wgsl"),
+        wgsl!("indirect_light.wgsl"),
+    ],
+};
+
 /// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
@@ -85,6 +104,8 @@ pub const ALL: &[&ShaderSource] = &[
     &IMPORTANCE,
     &CUMULATIVE_SUMS,
     &VAL_SELECT,
+    &CACHE_LIGHTING,
+    &INDIRECT_LIGHT,
 ];
 
 impl ShaderSource {

@@ -1,10 +1,20 @@
-//! Deferred direct lighting (`shaders/direct_light.wgsl`): emission plus one punctual light
-//! with the paper's BRDF (eq. 3–4) and PCF shadows, into the HDR target.
+//! Deferred lighting (`shaders/direct_light.wgsl`): emission, one punctual light with the
+//! paper's BRDF (eq. 3–4) and PCF shadows, plus the indirect target, into HDR.
 
 use super::{gbuffer::GBuffer, shadow_map::ShadowMap, Target};
 use crate::gpu::shaders;
 
 pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// What the lighting pass reads and writes.
+pub struct DirectLightInputs<'a> {
+    pub camera: &'a wgpu::Buffer,
+    pub light: &'a wgpu::Buffer,
+    pub gbuffer: &'a GBuffer,
+    pub shadow: &'a ShadowMap,
+    pub indirect: &'a Target,
+    pub hdr: &'a Target,
+}
 
 pub struct DirectLightPass {
     pipeline: wgpu::ComputePipeline,
@@ -48,6 +58,7 @@ impl DirectLightPass {
                     count: None,
                 },
                 super::storage_texture_entry(9, HDR_FORMAT),
+                super::compute_texture_entry(10, false),
             ],
         });
         let module = shaders::DIRECT_LIGHT.create_module(device);
@@ -66,38 +77,31 @@ impl DirectLightPass {
         }
     }
 
-    pub fn bind(
-        &self,
-        device: &wgpu::Device,
-        camera: &wgpu::Buffer,
-        light: &wgpu::Buffer,
-        gbuffer: &GBuffer,
-        shadow: &ShadowMap,
-        hdr: &Target,
-    ) -> wgpu::BindGroup {
+    pub fn bind(&self, device: &wgpu::Device, inputs: &DirectLightInputs) -> wgpu::BindGroup {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("direct light"),
             layout: &self.layout,
             entries: &[
                 wgpu::BindGroupEntry {
                     binding: 0,
-                    resource: camera.as_entire_binding(),
+                    resource: inputs.camera.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 1,
-                    resource: light.as_entire_binding(),
+                    resource: inputs.light.as_entire_binding(),
                 },
-                super::view_binding(2, &gbuffer.position.view),
-                super::view_binding(3, &gbuffer.normal_exponent.view),
-                super::view_binding(4, &gbuffer.diffuse.view),
-                super::view_binding(5, &gbuffer.glossy.view),
-                super::view_binding(6, &gbuffer.emissive.view),
-                super::view_binding(7, &shadow.array_view),
+                super::view_binding(2, &inputs.gbuffer.position.view),
+                super::view_binding(3, &inputs.gbuffer.normal_exponent.view),
+                super::view_binding(4, &inputs.gbuffer.diffuse.view),
+                super::view_binding(5, &inputs.gbuffer.glossy.view),
+                super::view_binding(6, &inputs.gbuffer.emissive.view),
+                super::view_binding(7, &inputs.shadow.array_view),
                 wgpu::BindGroupEntry {
                     binding: 8,
                     resource: wgpu::BindingResource::Sampler(&self.shadow_sampler),
                 },
-                super::view_binding(9, &hdr.view),
+                super::view_binding(9, &inputs.hdr.view),
+                super::view_binding(10, &inputs.indirect.view),
             ],
         })
     }

@@ -4,12 +4,13 @@ use super::{scene_buffers::SceneBuffers, Target};
 use crate::gpu::shaders;
 
 /// Formats of the colour targets, in `GBufferOut` location order.
-pub const FORMATS: [wgpu::TextureFormat; 5] = [
+pub const FORMATS: [wgpu::TextureFormat; 6] = [
     wgpu::TextureFormat::Rgba32Float, // world position, w = coverage
     wgpu::TextureFormat::Rgba16Float, // normal, w = glossy exponent
     wgpu::TextureFormat::Rgba8Unorm,  // diffuse albedo
     wgpu::TextureFormat::Rgba8Unorm,  // glossy colour
     wgpu::TextureFormat::Rgba16Float, // emitted radiance
+    wgpu::TextureFormat::R32Uint,     // provoking vertex (its light-cache list)
 ];
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
@@ -20,6 +21,7 @@ pub struct GBuffer {
     pub diffuse: Target,
     pub glossy: Target,
     pub emissive: Target,
+    pub vertex: Target,
     pub depth: Target,
 }
 
@@ -33,6 +35,7 @@ impl GBuffer {
             diffuse: t("gbuffer diffuse", FORMATS[2]),
             glossy: t("gbuffer glossy", FORMATS[3]),
             emissive: t("gbuffer emissive", FORMATS[4]),
+            vertex: t("gbuffer vertex", FORMATS[5]),
             depth: Target::new(
                 device,
                 "gbuffer depth",
@@ -44,13 +47,14 @@ impl GBuffer {
         }
     }
 
-    fn colour_views(&self) -> [&wgpu::TextureView; 5] {
+    fn colour_views(&self) -> [&wgpu::TextureView; 6] {
         [
             &self.position.view,
             &self.normal_exponent.view,
             &self.diffuse.view,
             &self.glossy.view,
             &self.emissive.view,
+            &self.vertex.view,
         ]
     }
 }
@@ -168,6 +172,6 @@ impl GBufferPass {
         });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.camera_bind_group, &[]);
-        scene.draw_with_materials(&mut pass);
+        scene.draw_with_materials(&mut pass, &scene.ranges);
     }
 }

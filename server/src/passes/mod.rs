@@ -1,19 +1,28 @@
 //! The render pipeline, one module per GPU pass, in frame order:
 //!
 //! 1. [`shadow_map`]: depth from the light (1 or 6 faces).
-//! 2. [`gbuffer`]: position, normal, materials from the camera.
-//! 3. [`direct_light`]: deferred direct light with PCF shadows into HDR.
-//! 4. [`exposure`]: automatic exposure from the HDR image.
-//! 5. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
+//! 2. [`gbuffer`]: position, normal, materials and light-cache vertex from the camera.
+//! 3. [`rsm`]: the reflective shadow map, every texel a virtual area light (VAL).
+//! 4. [`importance`]: importance of every VAL from view samples (BRSM only).
+//! 5. [`cumulative_sums`]: cumulative importance (BRSM only).
+//! 6. [`val_select`]: N_sVAL VALs drawn from it with their weights (BRSM only).
+//! 7. [`cache_lighting`]: diffuse and glossy proxy lights per light cache.
+//! 8. [`indirect_light`]: proxy lights interpolated per pixel.
+//! 9. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
+//! 10. [`exposure`]: automatic exposure from the HDR image.
+//! 11. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
 //!
-//! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry.
+//! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry
+//! and materials.
 
+pub mod cache_lighting;
 pub mod cumulative_sums;
 pub mod direct_light;
 pub mod exposure;
 pub mod frame_uniforms;
 pub mod gbuffer;
 pub mod importance;
+pub mod indirect_light;
 pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;

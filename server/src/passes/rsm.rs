@@ -248,7 +248,7 @@ impl RsmPass {
             let size = rsm.size as f32;
             pass.set_viewport(face as f32 * size, 0.0, size, size, 0.0, 1.0);
             pass.set_bind_group(0, &self.bind_group, &[face * FACE_STRIDE as u32]);
-            scene.draw_with_materials(&mut pass);
+            scene.draw_with_materials(&mut pass, &scene.shadow_casting);
         }
     }
 }

@@ -37,7 +37,8 @@ pub struct SceneBuffers {
     pub indices: wgpu::Buffer,
     pub ranges: Vec<MaterialRange>,
     /// Ranges whose material does not emit light: emitters stand for light sources, so they are
-    /// not drawn into the shadow map (a lamp's bulb must not shadow its own light).
+    /// not drawn into the shadow map or the RSM (a lamp's bulb must neither shadow nor reflect
+    /// its own light).
     pub shadow_casting: Vec<MaterialRange>,
     /// Group 1 of `shaders/materials.wgsl`, indexed by material.
     pub materials: Vec<wgpu::BindGroup>,
@@ -114,11 +115,12 @@ impl SceneBuffers {
         }
     }
 
-    /// Draws every material range with its material bound as group 1.
-    pub fn draw_with_materials(&self, pass: &mut wgpu::RenderPass<'_>) {
+    /// Draws `ranges` (all of [`Self::ranges`], or the light-facing [`Self::shadow_casting`])
+    /// with each range's material bound as group 1.
+    pub fn draw_with_materials(&self, pass: &mut wgpu::RenderPass<'_>, ranges: &[MaterialRange]) {
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
-        for range in &self.ranges {
+        for range in ranges {
             pass.set_bind_group(1, &self.materials[range.material as usize], &[]);
             pass.draw_indexed(
                 range.first_index..range.first_index + range.index_count,

@@ -73,3 +73,17 @@ impl TonemapPass {
         );
     }
 }
+
+/// CPU port of `shaders/tonemap.wgsl` for one linear colour: exposure, ACES fit, sRGB, 8 bits.
+/// Used by debug views that tone-map buffers read back from the GPU, and by tests.
+pub fn tonemap_cpu(linear: [f32; 3], exposure: f32) -> [u8; 3] {
+    let aces = |x: f32| ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0);
+    let srgb = |c: f32| {
+        if c <= 0.003_130_8 {
+            c * 12.92
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        }
+    };
+    linear.map(|c| (srgb(aces(c * exposure)) * 255.0).round() as u8)
+}

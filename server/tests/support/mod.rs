@@ -67,7 +67,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         exposure: Exposure::Manual(1.0),
         shadow_map_size: 256,
         capture_hdr: true,
-        val_sampling: None,
+        gi: lightcast_server::gi::GiSettings::off(),
     }
 }
 
@@ -205,35 +205,47 @@ pub fn split(m: &Material) -> material::DiffuseGlossy {
     m.diffuse_glossy()
 }
 
-/// Distance along the ray to the nearest scene triangle (Möller–Trumbore), if any.
-pub fn trace(scene: &Scene, origin: Vec3, dir: Vec3, max_t: f32) -> Option<(f32, usize)> {
-    let mut best: Option<(f32, usize)> = None;
-    for (tri, idx) in scene.indices.chunks_exact(3).enumerate() {
-        let [a, b, c] =
-            [idx[0], idx[1], idx[2]].map(|i| Vec3::from(scene.vertices[i as usize].position));
-        let (e1, e2) = (b - a, c - a);
-        let p = dir.cross(e2);
-        let det = e1.dot(p);
-        if det.abs() < 1e-12 {
-            continue;
-        }
-        let inv = 1.0 / det;
-        let s = origin - a;
-        let u = s.dot(p) * inv;
-        if !(0.0..=1.0).contains(&u) {
-            continue;
-        }
-        let q = s.cross(e1);
-        let v = dir.dot(q) * inv;
-        if v < 0.0 || u + v > 1.0 {
-            continue;
-        }
-        let t = e2.dot(q) * inv;
-        if t > 1e-4 && t < max_t && best.is_none_or(|(bt, _)| t < bt) {
-            best = Some((t, tri));
-        }
+/// Distance along the ray to triangle `tri` (Möller–Trumbore), if it is hit.
+fn intersect(scene: &Scene, tri: usize, origin: Vec3, dir: Vec3) -> Option<f32> {
+    let idx = &scene.indices[tri * 3..tri * 3 + 3];
+    let [a, b, c] =
+        [idx[0], idx[1], idx[2]].map(|i| Vec3::from(scene.vertices[i as usize].position));
+    let (e1, e2) = (b - a, c - a);
+    let p = dir.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-12 {
+        return None;
     }
-    best
+    let inv = 1.0 / det;
+    let s = origin - a;
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = dir.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    Some(e2.dot(q) * inv)
+}
+
+/// Distance along the ray to the nearest scene triangle and its index, if any.
+pub fn trace(scene: &Scene, origin: Vec3, dir: Vec3, max_t: f32) -> Option<(f32, usize)> {
+    (0..scene.indices.len() / 3)
+        .filter_map(|tri| intersect(scene, tri, origin, dir).map(|t| (t, tri)))
+        .filter(|&(t, _)| t > 1e-4 && t < max_t)
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// Whether more than one triangle is hit within `eps` of distance `t` (coplanar overlaps,
+/// where the rasteriser's choice is arbitrary).
+pub fn ambiguous_hit(scene: &Scene, origin: Vec3, dir: Vec3, t: f32, eps: f32) -> bool {
+    (0..scene.indices.len() / 3)
+        .filter_map(|tri| intersect(scene, tri, origin, dir))
+        .filter(|&h| (h - t).abs() < eps)
+        .count()
+        > 1
 }
 
 /// The material of triangle `tri` (triangles are sorted by material in [`Scene`]).

@@ -1,0 +1,467 @@
+//! `lightcast-server bench`: the paper's evaluation (its Figures 3 and 5) on our scenes.
+//!
+//! For every RSM size the LightSkin baseline is rendered first; every BRSM configuration (VAL
+//! count × view samples) is then timed at the same RSM size and its indirect buffer compared
+//! with the baseline's (mean absolute difference, absolute and relative to the baseline's
+//! mean). All configurations run in one process on one GPU, so ratios between them are fair.
+
+use crate::gi::{cache_store::CacheStore, caches::CacheParams, GiMethod, GiSettings};
+use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
+use crate::offline::{ExposureArg, DEFAULT_SCENE};
+use crate::renderer::{RenderSettings, Renderer};
+use crate::scene::{
+    default_light::{default_camera, default_light},
+    Scene,
+};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// Stages that belong to global illumination (summed into `gi_ms`).
+const GI_STAGES: [&str; 6] = [
+    "rsm",
+    "importance",
+    "cumulative_sums",
+    "val_select",
+    "cache_lighting",
+    "indirect_light",
+];
+
+/// Options of `lightcast-server bench`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Scene: a .gltf/.glb file or a procedural scene (see `render --help`).
+    #[arg(long)]
+    pub scene: Option<String>,
+    #[arg(long, default_value_t = 1920)]
+    pub width: u32,
+    #[arg(long, default_value_t = 1080)]
+    pub height: u32,
+    /// RSM sides to test (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = [128, 256, 512, 1024, 2048])]
+    pub rsm_sizes: Vec<u32>,
+    /// VAL counts N_sVAL for BRSM (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = [2048, 4096, 8192])]
+    pub vals: Vec<u32>,
+    /// View-sample counts N_VS for BRSM (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = [256, 512])]
+    pub view_samples: Vec<u32>,
+    /// Timed frames per configuration.
+    #[arg(long, default_value_t = 30)]
+    pub frames: u32,
+    /// Untimed frames before timing each configuration.
+    #[arg(long, default_value_t = 5)]
+    pub warmup: u32,
+    /// Light caches: d_eps in scene units (default: derived from the scene).
+    #[arg(long)]
+    pub cache_distance: Option<f32>,
+    /// Where precomputed light caches are kept (env LIGHTCAST_CACHE_DIR).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+    /// Write the results as JSON here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write the results as a markdown table here.
+    #[arg(long)]
+    pub markdown: Option<PathBuf>,
+    /// Exposure for the frames (only the indirect buffer is compared, so this does not matter
+    /// for the error; `auto` costs one extra stage).
+    #[arg(long, default_value = "1", allow_negative_numbers = true)]
+    pub exposure: ExposureArg,
+    #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
+    pub backend: BackendChoice,
+}
+
+/// Median and 95th percentile of a stage's time.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StageStats {
+    pub median_ms: f64,
+    pub p95_ms: f64,
+}
+
+/// One configuration's results.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BenchRow {
+    pub method: GiMethod,
+    pub rsm_size: u32,
+    pub val_count: Option<u32>,
+    pub view_samples: Option<u32>,
+    pub stages: BTreeMap<String, StageStats>,
+    pub gi: StageStats,
+    pub frame: StageStats,
+    pub fps: f64,
+    /// Mean absolute difference of the indirect buffer against LightSkin at this RSM size.
+    pub mad: f64,
+    /// `mad` divided by the mean of LightSkin's indirect buffer.
+    pub mad_relative: f64,
+    /// LightSkin's frame time divided by this configuration's.
+    pub speedup_vs_lightskin: f64,
+}
+
+/// The whole run.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BenchReport {
+    pub adapter: String,
+    pub timing_source: crate::gpu::timing::TimingSource,
+    pub scene: String,
+    pub triangles: usize,
+    pub caches: usize,
+    pub width: u32,
+    pub height: u32,
+    pub frames: u32,
+    pub warmup: u32,
+    pub rows: Vec<BenchRow>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error("scene '{scene}': {source}")]
+    Scene {
+        scene: String,
+        source: crate::scene::OpenError,
+    },
+    #[error("light caches: {0}")]
+    Caches(#[from] crate::gi::caches::CacheError),
+    #[error(transparent)]
+    Gpu(#[from] crate::gpu::GpuError),
+    #[error(transparent)]
+    Render(#[from] crate::renderer::RenderError),
+    #[error("{what} list is empty")]
+    EmptyList { what: &'static str },
+    #[error("--frames must be at least 1")]
+    NoFrames,
+    #[error("writing {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    let i = ((sorted.len() as f64 - 1.0) * q).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn stats(mut v: Vec<f64>) -> StageStats {
+    v.sort_by(f64::total_cmp);
+    StageStats {
+        median_ms: percentile(&v, 0.5),
+        p95_ms: percentile(&v, 0.95),
+    }
+}
+
+/// Mean absolute difference (per channel) and the reference's mean.
+fn mad(reference: &[[f32; 4]], other: &[[f32; 4]]) -> (f64, f64) {
+    let mut diff = 0.0f64;
+    let mut sum = 0.0f64;
+    for (a, b) in reference.iter().zip(other) {
+        for k in 0..3 {
+            diff += f64::from((a[k] - b[k]).abs());
+            sum += f64::from(a[k]);
+        }
+    }
+    let n = (reference.len() * 3).max(1) as f64;
+    (diff / n, sum / n)
+}
+
+struct Timed {
+    stages: BTreeMap<String, StageStats>,
+    gi: StageStats,
+    frame: StageStats,
+    indirect: Vec<[f32; 4]>,
+}
+
+/// Renders `warmup + frames` frames; the last one also captures the indirect buffer.
+fn time_config(
+    renderer: &mut Renderer,
+    settings: &RenderSettings,
+    warmup: u32,
+    frames: u32,
+    tick: &mut dyn FnMut(),
+) -> Result<Timed, BenchError> {
+    let mut per_stage: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    let (mut gi, mut total) = (Vec::new(), Vec::new());
+    let mut indirect = Vec::new();
+    for i in 0..warmup + frames {
+        let mut s = settings.clone();
+        s.capture_hdr = i + 1 == warmup + frames;
+        let frame = renderer.render(&s)?;
+        tick();
+        if i < warmup {
+            continue;
+        }
+        let mut gi_ms = 0.0;
+        for t in &frame.timings {
+            if t.stage == "readback_copy" {
+                continue;
+            }
+            per_stage.entry(t.stage.to_string()).or_default().push(t.ms);
+            if GI_STAGES.contains(&t.stage) {
+                gi_ms += t.ms;
+            }
+        }
+        gi.push(gi_ms);
+        total.push(
+            frame
+                .timings
+                .iter()
+                .filter(|t| t.stage != "readback_copy")
+                .map(|t| t.ms)
+                .sum(),
+        );
+        if let Some(buffer) = frame.indirect {
+            indirect = buffer;
+        }
+    }
+    Ok(Timed {
+        stages: per_stage.into_iter().map(|(k, v)| (k, stats(v))).collect(),
+        gi: stats(gi),
+        frame: stats(total),
+        indirect,
+    })
+}
+
+/// Runs the benchmark, reporting progress through `progress(done, total, label)`.
+pub fn run(
+    args: &BenchArgs,
+    log: &mut dyn FnMut(&str),
+    progress: &mut dyn FnMut(u64, u64, &str),
+) -> Result<BenchReport, BenchError> {
+    if args.frames == 0 {
+        return Err(BenchError::NoFrames);
+    }
+    for (what, list) in [
+        ("--rsm-sizes", &args.rsm_sizes),
+        ("--vals", &args.vals),
+        ("--view-samples", &args.view_samples),
+    ] {
+        if list.is_empty() {
+            return Err(BenchError::EmptyList { what });
+        }
+    }
+    let spec = args.scene.as_deref().unwrap_or(DEFAULT_SCENE);
+    let scene = Scene::open(spec).map_err(|source| BenchError::Scene {
+        scene: spec.to_string(),
+        source,
+    })?;
+    let mut params = CacheParams::for_scene(&scene);
+    if let Some(d) = args.cache_distance {
+        params.d_eps = d;
+    }
+    let store = CacheStore::new(
+        args.cache_dir
+            .clone()
+            .unwrap_or_else(CacheStore::default_dir),
+    );
+    let (caches, _) = store.load_or_compute(&scene, &params, &mut |_| {})?;
+    log(&format!(
+        "scene {}: {} triangles, {} light caches",
+        scene.name,
+        scene.triangle_count(),
+        caches.caches.len()
+    ));
+    let ctx = GpuContext::new(args.backend)?;
+    let adapter = AdapterSummary(&ctx.info).to_string();
+    log(&format!("adapter: {adapter}"));
+    let base = RenderSettings {
+        width: args.width,
+        height: args.height,
+        camera: default_camera(&scene),
+        light: default_light(&scene),
+        exposure: args.exposure.0,
+        shadow_map_size: 2048,
+        capture_hdr: false,
+        gi: GiSettings::default(),
+    };
+    let (name, triangles, cache_count) = (
+        scene.name.clone(),
+        scene.triangle_count(),
+        caches.caches.len(),
+    );
+    let mut renderer = Renderer::new(ctx, scene);
+    renderer.set_caches(&caches)?;
+    let timing_source = renderer.timing_source();
+
+    let brsm_configs: Vec<(u32, u32)> = args
+        .vals
+        .iter()
+        .flat_map(|&v| args.view_samples.iter().map(move |&s| (v, s)))
+        .collect();
+    let per_config = u64::from(args.warmup + args.frames);
+    let total = args.rsm_sizes.len() as u64 * (1 + brsm_configs.len() as u64) * per_config;
+    let mut done = 0u64;
+    let mut rows = Vec::new();
+    for &rsm_size in &args.rsm_sizes {
+        let mut settings = base.clone();
+        settings.gi = GiSettings {
+            method: GiMethod::Lightskin,
+            rsm_size,
+            ..GiSettings::default()
+        };
+        let label = format!("lightskin rsm {rsm_size}²");
+        let baseline = time_config(
+            &mut renderer,
+            &settings,
+            args.warmup,
+            args.frames,
+            &mut || {
+                done += 1;
+                progress(done, total, &label);
+            },
+        )?;
+        let (_, baseline_mean) = mad(&baseline.indirect, &baseline.indirect);
+        let baseline_ms = baseline.frame.median_ms;
+        rows.push(BenchRow {
+            method: GiMethod::Lightskin,
+            rsm_size,
+            val_count: None,
+            view_samples: None,
+            fps: 1e3 / baseline_ms,
+            mad: 0.0,
+            mad_relative: 0.0,
+            speedup_vs_lightskin: 1.0,
+            stages: baseline.stages.clone(),
+            gi: baseline.gi.clone(),
+            frame: baseline.frame.clone(),
+        });
+        for &(val_count, view_samples) in &brsm_configs {
+            settings.gi = GiSettings {
+                method: GiMethod::Brsm,
+                rsm_size,
+                val_count,
+                view_samples,
+                ..GiSettings::default()
+            };
+            let label = format!("brsm rsm {rsm_size}² vals {val_count} vs {view_samples}");
+            let timed = time_config(
+                &mut renderer,
+                &settings,
+                args.warmup,
+                args.frames,
+                &mut || {
+                    done += 1;
+                    progress(done, total, &label);
+                },
+            )?;
+            let (difference, _) = mad(&baseline.indirect, &timed.indirect);
+            rows.push(BenchRow {
+                method: GiMethod::Brsm,
+                rsm_size,
+                val_count: Some(val_count),
+                view_samples: Some(view_samples),
+                fps: 1e3 / timed.frame.median_ms,
+                mad: difference,
+                mad_relative: if baseline_mean > 0.0 {
+                    difference / baseline_mean
+                } else {
+                    0.0
+                },
+                speedup_vs_lightskin: baseline_ms / timed.frame.median_ms,
+                stages: timed.stages,
+                gi: timed.gi,
+                frame: timed.frame,
+            });
+        }
+    }
+    Ok(BenchReport {
+        adapter,
+        timing_source,
+        scene: name,
+        triangles,
+        caches: cache_count,
+        width: args.width,
+        height: args.height,
+        frames: args.frames,
+        warmup: args.warmup,
+        rows,
+    })
+}
+
+impl BenchReport {
+    /// A markdown table: one row per configuration.
+    pub fn markdown(&self) -> String {
+        let mut s = format!(
+            "Scene `{}` ({} triangles, {} light caches), {}×{}, adapter {}, {:?}, {} frames after {} warm-up.\n\n",
+            self.scene,
+            self.triangles,
+            self.caches,
+            self.width,
+            self.height,
+            self.adapter,
+            self.timing_source,
+            self.frames,
+            self.warmup
+        );
+        s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD | MAD / mean |\n";
+        s += "|---|---|---|---|---|---|---|---|---|---|\n";
+        for r in &self.rows {
+            let opt = |v: Option<u32>| v.map_or("all".to_string(), |v| v.to_string());
+            s += &format!(
+                "| {:?} | {}² | {} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.1} | {:.2}× | {:.3e} | {:.2} % |\n",
+                r.method,
+                r.rsm_size,
+                opt(r.val_count),
+                r.view_samples.map_or("-".to_string(), |v| v.to_string()),
+                r.gi.median_ms,
+                r.gi.p95_ms,
+                r.frame.median_ms,
+                r.frame.p95_ms,
+                r.fps,
+                r.speedup_vs_lightskin,
+                r.mad,
+                r.mad_relative * 100.0
+            );
+        }
+        s += "\nPer-stage medians (ms):\n\n| method | RSM | VALs | view samples |";
+        let stage_names: Vec<&String> = self
+            .rows
+            .iter()
+            .flat_map(|r| r.stages.keys())
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        for name in &stage_names {
+            s += &format!(" {name} |");
+        }
+        s += "\n|---|---|---|---|";
+        s += &"---|".repeat(stage_names.len());
+        s += "\n";
+        for r in &self.rows {
+            s += &format!(
+                "| {:?} | {}² | {} | {} |",
+                r.method,
+                r.rsm_size,
+                r.val_count.map_or("all".to_string(), |v| v.to_string()),
+                r.view_samples.map_or("-".to_string(), |v| v.to_string())
+            );
+            for name in &stage_names {
+                s += &r
+                    .stages
+                    .get(*name)
+                    .map_or(" - |".to_string(), |st| format!(" {:.3} |", st.median_ms));
+            }
+            s += "\n";
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_of_sorted_samples() {
+        let s = stats(vec![5.0, 1.0, 3.0, 2.0, 4.0]);
+        assert_eq!(s.median_ms, 3.0);
+        assert_eq!(s.p95_ms, 5.0);
+    }
+
+    #[test]
+    fn mean_absolute_difference_is_per_channel() {
+        let a = [[1.0, 2.0, 3.0, 1.0]];
+        let b = [[1.5, 2.0, 2.0, 0.0]];
+        let (d, mean) = mad(&a, &b);
+        assert!((d - 0.5).abs() < 1e-12);
+        assert!((mean - 2.0).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,206 @@
+//! Debug images a researcher expects next to the final frame (the paper's Figures 2 and 6
+//! views): indirect light alone, RSM flux, importance map, selected VALs and the light caches.
+//! They are built on the CPU from buffers read back after a frame.
+
+use crate::gi::{caches::LightCache, sampling::SamplingReadback};
+use crate::passes::{
+    cache_lighting::CacheLighting, exposure::KEY, frame_uniforms::camera_view_proj,
+    tonemap::tonemap_cpu,
+};
+use crate::renderer::Frame;
+use crate::scene::Aabb;
+use glam::{Vec3, Vec4Swizzles};
+use lightcast_protocol::Camera;
+
+/// Which image `render --view` writes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DebugView {
+    /// The tone-mapped frame.
+    #[default]
+    Final,
+    /// Indirect light only, at the frame's exposure.
+    Indirect,
+    /// The reflective shadow map's flux (all light faces side by side).
+    RsmFlux,
+    /// The VAL importance map of eq. 10 (log scale).
+    Importance,
+    /// The RSM flux darkened, with the selected VALs marked.
+    SelectedVals,
+    /// The frame darkened, with every light cache drawn in the colour of its diffuse proxy light.
+    Caches,
+}
+
+impl DebugView {
+    /// Whether the view needs the sampling stages' buffers read back.
+    pub fn needs_sampling(self) -> bool {
+        matches!(self, Self::RsmFlux | Self::Importance | Self::SelectedVals)
+    }
+}
+
+/// An RGBA8 image.
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub rgba8: Vec<u8>,
+}
+
+impl Image {
+    fn from_rgb(width: u32, height: u32, pixels: impl Iterator<Item = [u8; 3]>) -> Self {
+        let rgba8 = pixels.flat_map(|[r, g, b]| [r, g, b, 255]).collect();
+        Self {
+            width,
+            height,
+            rgba8,
+        }
+    }
+
+    fn put(&mut self, x: i64, y: i64, rgb: [u8; 3]) {
+        if x < 0 || y < 0 || x >= i64::from(self.width) || y >= i64::from(self.height) {
+            return;
+        }
+        let i = ((y as usize) * self.width as usize + x as usize) * 4;
+        self.rgba8[i..i + 3].copy_from_slice(&rgb);
+    }
+}
+
+fn luminance(c: [f32; 3]) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}
+
+/// Exposure that maps the log-average luminance of the positive entries to middle grey.
+fn auto_exposure(values: impl Iterator<Item = f32>) -> f32 {
+    let (sum, n) = values
+        .filter(|&l| l > 0.0)
+        .fold((0.0f64, 0u64), |(s, n), l| (s + f64::from(l.log2()), n + 1));
+    if n == 0 {
+        return 1.0;
+    }
+    KEY / (sum / n as f64).exp2() as f32
+}
+
+/// Indirect light alone, tone-mapped with the frame's exposure.
+pub fn indirect(frame: &Frame) -> Option<Image> {
+    let indirect = frame.indirect.as_ref()?;
+    Some(Image::from_rgb(
+        frame.width,
+        frame.height,
+        indirect
+            .iter()
+            .map(|c| tonemap_cpu([c[0], c[1], c[2]], frame.exposure_scale)),
+    ))
+}
+
+/// The RSM's reflected flux, auto-exposed.
+pub fn rsm_flux(s: &SamplingReadback) -> Image {
+    let rgb = |t: &[f32; 4]| [t[0], t[1], t[2]];
+    let exposure = auto_exposure(s.rsm_flux_area.iter().map(|t| luminance(rgb(t))));
+    Image::from_rgb(
+        s.rsm_width,
+        s.rsm_height,
+        s.rsm_flux_area
+            .iter()
+            .map(|t| tonemap_cpu(rgb(t), exposure)),
+    )
+}
+
+/// The importance map on a log scale: black is zero, white the largest value, six decades
+/// below it are dark grey.
+pub fn importance(s: &SamplingReadback) -> Image {
+    let max = s.importance.iter().copied().fold(0.0f32, f32::max);
+    Image::from_rgb(
+        s.rsm_width,
+        s.rsm_height,
+        s.importance.iter().map(|&v| {
+            if v <= 0.0 || max <= 0.0 {
+                return [0; 3];
+            }
+            let t = (1.0 + (v / max).log10() / 6.0).clamp(0.0, 1.0);
+            let g = (40.0 + 215.0 * t) as u8;
+            [g; 3]
+        }),
+    )
+}
+
+/// The RSM flux at a quarter of its brightness with every selected VAL's texel in magenta.
+pub fn selected_vals(s: &SamplingReadback) -> Image {
+    let mut image = rsm_flux(s);
+    for px in image.rgba8.chunks_exact_mut(4) {
+        for c in &mut px[..3] {
+            *c /= 4;
+        }
+    }
+    for v in s.vals.iter().filter(|v| v.weight > 0.0) {
+        let (x, y) = (v.texel % s.rsm_width, v.texel / s.rsm_width);
+        image.put(i64::from(x), i64::from(y), [255, 0, 255]);
+    }
+    image
+}
+
+/// The frame at a third of its brightness with every light cache facing the camera drawn as a
+/// dot in the colour of its diffuse proxy light (caches behind geometry are drawn too). Dots
+/// are 3×3 pixels unless that would cover more than a quarter of the image.
+pub fn caches(
+    frame: &Frame,
+    camera: &Camera,
+    bounds: &Aabb,
+    caches: &[LightCache],
+    lighting: &[CacheLighting],
+) -> Image {
+    let mut image = Image {
+        width: frame.width,
+        height: frame.height,
+        rgba8: frame.rgba8.iter().map(|&c| c / 3).collect(),
+    };
+    let view_proj = camera_view_proj(camera, frame.width as f32 / frame.height as f32, bounds);
+    let exposure = auto_exposure(lighting.iter().map(|l| luminance(l.diffuse_flux)));
+    let eye = Vec3::from(camera.position);
+    let pixels = u64::from(frame.width) * u64::from(frame.height);
+    let radius: i64 = if caches.len() as u64 * 9 * 4 <= pixels {
+        1
+    } else {
+        0
+    };
+    for (c, l) in caches.iter().zip(lighting) {
+        let p = Vec3::from(c.position);
+        if Vec3::from(c.normal).dot(eye - p) <= 0.0 {
+            continue;
+        }
+        let clip = view_proj * p.extend(1.0);
+        if clip.w <= 0.0 {
+            continue;
+        }
+        let ndc = clip.xyz() / clip.w;
+        let x = ((ndc.x * 0.5 + 0.5) * frame.width as f32) as i64;
+        let y = ((0.5 - ndc.y * 0.5) * frame.height as f32) as i64;
+        let colour = tonemap_cpu(l.diffuse_flux, exposure);
+        for dy in -radius..=radius {
+            for dx in -radius..=radius {
+                image.put(x + dx, y + dy, colour);
+            }
+        }
+    }
+    image
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_exposure_maps_the_log_average_to_middle_grey() {
+        let e = auto_exposure([0.5f32, 2.0, 0.0].into_iter());
+        // Geometric mean of 0.5 and 2 is 1; zeros are ignored.
+        assert!((e - KEY).abs() < 1e-6);
+        assert_eq!(auto_exposure(std::iter::empty()), 1.0);
+    }
+
+    #[test]
+    fn put_ignores_pixels_outside_the_image() {
+        let mut image = Image::from_rgb(2, 2, [[0u8; 3]; 4].into_iter());
+        image.put(-1, 0, [9; 3]);
+        image.put(2, 1, [9; 3]);
+        image.put(1, 1, [9; 3]);
+        assert_eq!(image.rgba8.iter().filter(|&&c| c == 9).count(), 3);
+    }
+}

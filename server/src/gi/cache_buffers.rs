@@ -1,0 +1,52 @@
+//! Light caches on the GPU: the caches, each vertex's 16 nearest caches, and the proxy
+//! lights written every frame by cache lighting.
+
+use super::caches::{CacheSet, LightCache, NEIGHBOURS};
+use crate::passes::cache_lighting::CacheLighting;
+use wgpu::util::DeviceExt;
+
+pub struct CacheBuffers {
+    pub caches: wgpu::Buffer,
+    pub vertex_caches: wgpu::Buffer,
+    pub lighting: wgpu::Buffer,
+    pub count: u32,
+}
+
+impl CacheBuffers {
+    pub fn new(device: &wgpu::Device, set: &CacheSet) -> Self {
+        // Storage bindings may not be empty; a scene without caches binds one dummy cache that
+        // no vertex refers to.
+        let dummy = [<LightCache as bytemuck::Zeroable>::zeroed()];
+        let caches: &[LightCache] = if set.caches.is_empty() {
+            &dummy
+        } else {
+            &set.caches
+        };
+        let no_vertices = [[u32::MAX; NEIGHBOURS]];
+        let vertex_caches: &[[u32; NEIGHBOURS]] = if set.vertex_caches.is_empty() {
+            &no_vertices
+        } else {
+            &set.vertex_caches
+        };
+        let storage = wgpu::BufferUsages::STORAGE;
+        Self {
+            caches: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("light caches"),
+                contents: bytemuck::cast_slice(caches),
+                usage: storage,
+            }),
+            vertex_caches: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("vertex caches"),
+                contents: bytemuck::cast_slice(vertex_caches),
+                usage: storage,
+            }),
+            lighting: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("cache lighting"),
+                size: (caches.len() * std::mem::size_of::<CacheLighting>()) as u64,
+                usage: storage | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+            count: set.caches.len() as u32,
+        }
+    }
+}

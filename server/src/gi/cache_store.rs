@@ -1,0 +1,497 @@
+//! On-disk store of precomputed light caches, keyed by a hash of everything the computation
+//! reads, so each model is distributed once (the paper's per-model precomputation step).
+//!
+//! File layout (`<key>.lcc`): magic, an endianness tag, the format version, the key, the
+//! parameters, the [`CacheStats`], the two counts, the raw [`LightCache`] array and the
+//! per-vertex index array, then a SHA-256 of everything before it. Any file that does not check
+//! out is ignored with a warning and recomputed; files are written to a temporary name and
+//! renamed, so readers never see half a file.
+
+use super::caches::{
+    material_splits, precompute, CacheError, CacheParams, CacheSet, CacheStats, LightCache,
+    Progress, StepTimings, MAX_CACHES, NEIGHBOURS,
+};
+use crate::scene::Scene;
+use sha2::{Digest, Sha256};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// Bump whenever the file layout or the cache algorithm's output changes.
+const FORMAT_VERSION: u32 = 1;
+const MAGIC: [u8; 8] = *b"LCLCACHE";
+/// Written in native byte order: a store shared with a machine of the other endianness reads
+/// as foreign instead of as garbage (the arrays are stored in native order).
+const ENDIAN_TAG: u32 = 0x0102_0304;
+const KEY_LEN: usize = 64;
+const STATS_LEN: usize = 17 * 8;
+const HEADER_LEN: usize = 8 + 4 + 4 + KEY_LEN + 4 + 4 + STATS_LEN + 8 + 8;
+const CHECKSUM_LEN: usize = 32;
+const CACHE_SIZE: usize = std::mem::size_of::<LightCache>();
+const VERTEX_ENTRY_SIZE: usize = 4 * NEIGHBOURS;
+
+/// A directory of stored cache sets.
+#[derive(Clone, Debug)]
+pub struct CacheStore {
+    dir: PathBuf,
+}
+
+/// Why a stored file was not used (only ever logged).
+#[derive(Debug, thiserror::Error)]
+enum DecodeError {
+    #[error("file is {0} bytes, too short for a cache file")]
+    TooShort(usize),
+    #[error("checksum mismatch (corrupt or truncated file)")]
+    Checksum,
+    #[error("not a light cache file (bad magic)")]
+    Magic,
+    #[error("written on a machine with a different byte order")]
+    Endian,
+    #[error("format version {found}, expected {FORMAT_VERSION}")]
+    Version { found: u32 },
+    #[error("file is for key {found}, not this scene")]
+    Key { found: String },
+    #[error("stored parameters {found:?} differ from the requested ones")]
+    Params { found: CacheParams },
+    #[error("{found} vertex entries stored, scene has {expected} vertices")]
+    VertexCount { found: u64, expected: usize },
+    #[error("{0} caches stored, more than the maximum of {MAX_CACHES}")]
+    CacheCount(u64),
+    #[error("length {found} does not match the {expected} bytes the counts imply")]
+    Length { found: usize, expected: usize },
+    #[error("vertex {vertex} refers to cache {index}, but there are {caches}")]
+    Index {
+        vertex: usize,
+        index: u32,
+        caches: usize,
+    },
+}
+
+impl CacheStore {
+    /// A store in `dir`, which is created on the first write.
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self { dir: dir.into() }
+    }
+
+    /// `$LIGHTCAST_CACHE_DIR`, else `$XDG_CACHE_HOME/lightcast`, else `~/.cache/lightcast`,
+    /// else `./.lightcast-cache`.
+    pub fn default_dir() -> PathBuf {
+        let var = |name: &str| {
+            std::env::var_os(name)
+                .filter(|v| !v.is_empty())
+                .map(PathBuf::from)
+        };
+        if let Some(dir) = var("LIGHTCAST_CACHE_DIR") {
+            return dir;
+        }
+        // The XDG spec says relative paths in XDG_CACHE_HOME are invalid and to be ignored.
+        if let Some(dir) = var("XDG_CACHE_HOME").filter(|d| d.is_absolute()) {
+            return dir.join("lightcast");
+        }
+        if let Some(home) = var("HOME") {
+            return home.join(".cache").join("lightcast");
+        }
+        PathBuf::from(".lightcast-cache")
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// SHA-256 (hex) over the format version, the vertex and index bytes, the material split
+    /// values (with texture means folded in) and the parameters: everything `precompute` reads.
+    pub fn key(scene: &Scene, params: &CacheParams) -> String {
+        let mut h = Sha256::new();
+        h.update(MAGIC);
+        h.update(FORMAT_VERSION.to_le_bytes());
+        h.update((scene.vertices.len() as u64).to_le_bytes());
+        h.update(bytemuck::cast_slice(&scene.vertices));
+        h.update((scene.indices.len() as u64).to_le_bytes());
+        h.update(bytemuck::cast_slice(&scene.indices));
+        let splits = material_splits(scene);
+        h.update((splits.len() as u64).to_le_bytes());
+        for m in &splits {
+            for v in m.diffuse.to_array().into_iter().chain(m.glossy.to_array()) {
+                h.update(v.to_le_bytes());
+            }
+            h.update(m.exponent.to_le_bytes());
+        }
+        h.update(params.d_eps.to_le_bytes());
+        h.update(params.theta_eps_degrees.to_le_bytes());
+        hex(&h.finalize())
+    }
+
+    /// Path of the file for `key`.
+    pub fn path(&self, key: &str) -> PathBuf {
+        self.dir.join(format!("{key}.lcc"))
+    }
+
+    /// Loads the cache set for (scene, params) if stored and valid, else computes and stores
+    /// it. Returns whether it came from disk. Unreadable or invalid files and failed writes are
+    /// logged as warnings; only invalid parameters are errors.
+    pub fn load_or_compute(
+        &self,
+        scene: &Scene,
+        params: &CacheParams,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<(CacheSet, bool), CacheError> {
+        params.validate()?;
+        let key = Self::key(scene, params);
+        let path = self.path(&key);
+        match read_bounded(&path, max_file_len(scene.vertices.len())) {
+            Ok(bytes) => match decode(&bytes, &key, params, scene.vertices.len()) {
+                Ok(set) => {
+                    tracing::info!(path = %path.display(), caches = set.caches.len(), "light caches loaded");
+                    return Ok((set, true));
+                }
+                Err(e) => {
+                    tracing::warn!(path = %path.display(), "ignoring stored light caches: {e}")
+                }
+            },
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                tracing::warn!(path = %path.display(), "cannot read stored light caches: {e}")
+            }
+        }
+        let set = precompute(scene, params, progress)?;
+        if let Err(e) = self.write(&key, &set) {
+            tracing::warn!(path = %path.display(), "cannot store light caches: {e}");
+        }
+        Ok((set, false))
+    }
+
+    /// Writes atomically: a temporary file in the same directory, then a rename.
+    fn write(&self, key: &str, set: &CacheSet) -> std::io::Result<()> {
+        std::fs::create_dir_all(&self.dir)?;
+        let bytes = encode(key, set);
+        let tmp = self.dir.join(format!(
+            "{key}.lcc.tmp-{}-{:?}",
+            std::process::id(),
+            std::thread::current().id()
+        ));
+        let written = std::fs::File::create(&tmp).and_then(|mut f| {
+            f.write_all(&bytes)?;
+            f.sync_all()
+        });
+        let renamed = written.and_then(|()| std::fs::rename(&tmp, self.path(key)));
+        if renamed.is_err() {
+            // Best effort: a leftover temporary file is harmless, the error below is what counts.
+            let _ = std::fs::remove_file(&tmp);
+        }
+        renamed
+    }
+}
+
+/// Largest valid file for a scene with `vertex_count` vertices.
+fn max_file_len(vertex_count: usize) -> u64 {
+    (HEADER_LEN + CHECKSUM_LEN) as u64
+        + MAX_CACHES * CACHE_SIZE as u64
+        + vertex_count as u64 * VERTEX_ENTRY_SIZE as u64
+}
+
+/// Reads a file unless it is longer than `max` bytes (a foreign file is not worth the memory).
+fn read_bounded(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+    let mut file = std::fs::File::open(path)?;
+    let len = file.metadata()?.len();
+    if len > max {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "file is {len} bytes, more than the {max} a cache file for this scene can have"
+            ),
+        ));
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    std::io::Read::read_to_end(&mut file, &mut bytes)?;
+    Ok(bytes)
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn stats_fields(s: &CacheStats) -> [u64; 17] {
+    let t = &s.timings;
+    let nanos = |d: Duration| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX);
+    [
+        s.triangles,
+        s.degenerate_triangles,
+        s.samples,
+        s.voxels,
+        s.caches_before_merge,
+        s.snapped,
+        s.merged_away,
+        s.dropped_empty,
+        s.caches,
+        s.surface_area.to_bits(),
+        nanos(t.sampling),
+        nanos(t.voxelising),
+        nanos(t.clustering),
+        nanos(t.merging),
+        nanos(t.assigning),
+        nanos(t.neighbours),
+        nanos(t.total),
+    ]
+}
+
+fn stats_from_fields(f: [u64; 17]) -> CacheStats {
+    let d = Duration::from_nanos;
+    CacheStats {
+        triangles: f[0],
+        degenerate_triangles: f[1],
+        samples: f[2],
+        voxels: f[3],
+        caches_before_merge: f[4],
+        snapped: f[5],
+        merged_away: f[6],
+        dropped_empty: f[7],
+        caches: f[8],
+        surface_area: f64::from_bits(f[9]),
+        timings: StepTimings {
+            sampling: d(f[10]),
+            voxelising: d(f[11]),
+            clustering: d(f[12]),
+            merging: d(f[13]),
+            assigning: d(f[14]),
+            neighbours: d(f[15]),
+            total: d(f[16]),
+        },
+    }
+}
+
+fn encode(key: &str, set: &CacheSet) -> Vec<u8> {
+    let body = set.caches.len() * CACHE_SIZE + set.vertex_caches.len() * VERTEX_ENTRY_SIZE;
+    let mut out = Vec::with_capacity(HEADER_LEN + body + CHECKSUM_LEN);
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&ENDIAN_TAG.to_ne_bytes());
+    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    let mut key_bytes = [0u8; KEY_LEN];
+    let n = key.len().min(KEY_LEN);
+    key_bytes[..n].copy_from_slice(&key.as_bytes()[..n]);
+    out.extend_from_slice(&key_bytes);
+    out.extend_from_slice(&set.params.d_eps.to_le_bytes());
+    out.extend_from_slice(&set.params.theta_eps_degrees.to_le_bytes());
+    for field in stats_fields(&set.stats) {
+        out.extend_from_slice(&field.to_le_bytes());
+    }
+    out.extend_from_slice(&(set.caches.len() as u64).to_le_bytes());
+    out.extend_from_slice(&(set.vertex_caches.len() as u64).to_le_bytes());
+    out.extend_from_slice(bytemuck::cast_slice(&set.caches));
+    out.extend_from_slice(bytemuck::cast_slice(&set.vertex_caches));
+    let checksum = Sha256::digest(&out);
+    out.extend_from_slice(&checksum);
+    out
+}
+
+/// Reads fixed-size fields front to back; callers check the total length first.
+struct Reader<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> Reader<'a> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        let (head, rest) = self.bytes.split_at(N);
+        self.bytes = rest;
+        let mut out = [0; N];
+        out.copy_from_slice(head);
+        out
+    }
+
+    fn u32(&mut self) -> u32 {
+        u32::from_le_bytes(self.take())
+    }
+
+    fn u64(&mut self) -> u64 {
+        u64::from_le_bytes(self.take())
+    }
+
+    fn f32(&mut self) -> f32 {
+        f32::from_le_bytes(self.take())
+    }
+}
+
+fn decode(
+    bytes: &[u8],
+    key: &str,
+    params: &CacheParams,
+    vertex_count: usize,
+) -> Result<CacheSet, DecodeError> {
+    if bytes.len() < HEADER_LEN + CHECKSUM_LEN {
+        return Err(DecodeError::TooShort(bytes.len()));
+    }
+    let (content, checksum) = bytes.split_at(bytes.len() - CHECKSUM_LEN);
+    if Sha256::digest(content).as_slice() != checksum {
+        return Err(DecodeError::Checksum);
+    }
+    let mut r = Reader { bytes: content };
+    if r.take::<8>() != MAGIC {
+        return Err(DecodeError::Magic);
+    }
+    if r.take::<4>() != ENDIAN_TAG.to_ne_bytes() {
+        return Err(DecodeError::Endian);
+    }
+    let version = r.u32();
+    if version != FORMAT_VERSION {
+        return Err(DecodeError::Version { found: version });
+    }
+    let stored_key = r.take::<KEY_LEN>();
+    if stored_key.as_slice() != key.as_bytes() {
+        return Err(DecodeError::Key {
+            found: String::from_utf8_lossy(&stored_key).into_owned(),
+        });
+    }
+    let stored = CacheParams {
+        d_eps: r.f32(),
+        theta_eps_degrees: r.f32(),
+    };
+    // Bitwise: the key hashed these exact bits.
+    if stored.d_eps.to_bits() != params.d_eps.to_bits()
+        || stored.theta_eps_degrees.to_bits() != params.theta_eps_degrees.to_bits()
+    {
+        return Err(DecodeError::Params { found: stored });
+    }
+    let stats = stats_from_fields(std::array::from_fn(|_| r.u64()));
+    let cache_count = r.u64();
+    let vertex_entries = r.u64();
+    if vertex_entries != vertex_count as u64 {
+        return Err(DecodeError::VertexCount {
+            found: vertex_entries,
+            expected: vertex_count,
+        });
+    }
+    if cache_count > MAX_CACHES {
+        return Err(DecodeError::CacheCount(cache_count));
+    }
+    let caches_len = cache_count as usize * CACHE_SIZE;
+    let expected = caches_len.saturating_add(vertex_count.saturating_mul(VERTEX_ENTRY_SIZE));
+    if r.bytes.len() != expected {
+        return Err(DecodeError::Length {
+            found: r.bytes.len(),
+            expected,
+        });
+    }
+    // Copy into typed vectors: the byte buffer has no alignment guarantee.
+    let (cache_bytes, vertex_bytes) = r.bytes.split_at(caches_len);
+    let mut caches = vec![<LightCache as bytemuck::Zeroable>::zeroed(); cache_count as usize];
+    bytemuck::cast_slice_mut(&mut caches).copy_from_slice(cache_bytes);
+    let mut vertex_caches = vec![[u32::MAX; NEIGHBOURS]; vertex_count];
+    bytemuck::cast_slice_mut(&mut vertex_caches).copy_from_slice(vertex_bytes);
+    for (vertex, entry) in vertex_caches.iter().enumerate() {
+        if let Some(&index) = entry
+            .iter()
+            .find(|&&i| i != u32::MAX && i as usize >= caches.len())
+        {
+            return Err(DecodeError::Index {
+                vertex,
+                index,
+                caches: caches.len(),
+            });
+        }
+    }
+    Ok(CacheSet {
+        params: *params,
+        caches,
+        vertex_caches,
+        stats,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample_set(vertices: usize) -> CacheSet {
+        let cache = LightCache {
+            position: [1.0, 2.0, 3.0],
+            area: 0.5,
+            normal: [0.0, 1.0, 0.0],
+            disk_area: 0.5,
+            diffuse: [0.7, 0.6, 0.5],
+            exponent: 1.0,
+            glossy: [0.04; 3],
+            pad0: 0.0,
+        };
+        let mut entry = [u32::MAX; NEIGHBOURS];
+        entry[0] = 1;
+        entry[1] = 0;
+        CacheSet {
+            params: CacheParams {
+                d_eps: 0.25,
+                theta_eps_degrees: 30.0,
+            },
+            caches: vec![cache; 2],
+            vertex_caches: vec![entry; vertices],
+            stats: CacheStats {
+                caches: 2,
+                surface_area: 1.0,
+                timings: StepTimings {
+                    total: Duration::from_millis(12),
+                    ..StepTimings::default()
+                },
+                ..CacheStats::default()
+            },
+        }
+    }
+
+    #[test]
+    fn round_trips_and_rejects_every_single_byte_change() {
+        let set = sample_set(3);
+        let key = "a".repeat(64);
+        let bytes = encode(&key, &set);
+        assert_eq!(
+            decode(&bytes, &key, &set.params, 3).expect("valid file"),
+            set
+        );
+        for i in (0..bytes.len()).step_by(7) {
+            let mut bad = bytes.clone();
+            bad[i] ^= 0x40;
+            assert!(decode(&bad, &key, &set.params, 3).is_err(), "flip at {i}");
+        }
+        for len in [0, 10, HEADER_LEN, bytes.len() - 1] {
+            assert!(
+                decode(&bytes[..len], &key, &set.params, 3).is_err(),
+                "length {len}"
+            );
+        }
+    }
+
+    #[test]
+    fn rejects_files_for_other_scenes_or_params() {
+        let set = sample_set(3);
+        let key = "b".repeat(64);
+        let bytes = encode(&key, &set);
+        let other_key = "c".repeat(64);
+        assert!(matches!(
+            decode(&bytes, &other_key, &set.params, 3),
+            Err(DecodeError::Key { .. })
+        ));
+        assert!(matches!(
+            decode(&bytes, &key, &set.params, 4),
+            Err(DecodeError::VertexCount { .. })
+        ));
+        let params = CacheParams {
+            d_eps: 0.5,
+            ..set.params
+        };
+        assert!(matches!(
+            decode(&bytes, &key, &params, 3),
+            Err(DecodeError::Params { .. })
+        ));
+    }
+
+    #[test]
+    fn rejects_out_of_range_indices_even_with_a_valid_checksum() {
+        let mut set = sample_set(2);
+        set.vertex_caches[1][2] = 2;
+        let key = "d".repeat(64);
+        let bytes = encode(&key, &set);
+        assert!(matches!(
+            decode(&bytes, &key, &set.params, 2),
+            Err(DecodeError::Index {
+                vertex: 1,
+                index: 2,
+                caches: 2
+            })
+        ));
+    }
+}

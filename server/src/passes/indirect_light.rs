@@ -1,0 +1,151 @@
+//! Indirect light per pixel (`shaders/indirect_light.wgsl`): interpolation of the proxy
+//! lights of the pixel's 16 light caches (eq. 8–9), into the indirect target.
+
+use super::{gbuffer::GBuffer, Target};
+use crate::gpu::shaders;
+use bytemuck::{Pod, Zeroable};
+
+pub const INDIRECT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+/// Mirrors `IndirectParams` in `shaders/indirect_light.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct IndirectParams {
+    pub enabled: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+}
+
+/// The light-cache buffers the pass reads.
+pub struct CacheInputs<'a> {
+    pub caches: &'a wgpu::Buffer,
+    pub lighting: &'a wgpu::Buffer,
+    pub vertex_caches: &'a wgpu::Buffer,
+}
+
+pub struct IndirectLightPass {
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    params: wgpu::Buffer,
+}
+
+impl IndirectLightPass {
+    pub fn new(device: &wgpu::Device) -> Self {
+        let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let uniform = wgpu::BufferBindingType::Uniform;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("indirect light"),
+            entries: &[
+                super::buffer_entry(0, wgpu::ShaderStages::COMPUTE, uniform),
+                super::buffer_entry(1, wgpu::ShaderStages::COMPUTE, uniform),
+                super::compute_texture_entry(2, false),
+                super::compute_texture_entry(3, false),
+                super::compute_texture_entry(4, false),
+                super::compute_texture_entry(5, false),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 6,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                super::buffer_entry(7, wgpu::ShaderStages::COMPUTE, read),
+                super::buffer_entry(8, wgpu::ShaderStages::COMPUTE, read),
+                super::buffer_entry(9, wgpu::ShaderStages::COMPUTE, read),
+                super::storage_texture_entry(10, INDIRECT_FORMAT),
+            ],
+        });
+        let module = shaders::INDIRECT_LIGHT.create_module(device);
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("indirect params"),
+            size: std::mem::size_of::<IndirectParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Self {
+            pipeline: super::compute_pipeline(device, "indirect light", &layout, &module, "main"),
+            layout,
+            params,
+        }
+    }
+
+    pub fn bind(
+        &self,
+        device: &wgpu::Device,
+        camera: &wgpu::Buffer,
+        gbuffer: &GBuffer,
+        caches: &CacheInputs,
+        indirect: &Target,
+    ) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("indirect light"),
+            layout: &self.layout,
+            entries: &[
+                super::buffer_binding(0, camera),
+                super::buffer_binding(1, &self.params),
+                super::view_binding(2, &gbuffer.position.view),
+                super::view_binding(3, &gbuffer.normal_exponent.view),
+                super::view_binding(4, &gbuffer.diffuse.view),
+                super::view_binding(5, &gbuffer.glossy.view),
+                super::view_binding(6, &gbuffer.vertex.view),
+                super::buffer_binding(7, caches.caches),
+                super::buffer_binding(8, caches.lighting),
+                super::buffer_binding(9, caches.vertex_caches),
+                super::view_binding(10, &indirect.view),
+            ],
+        })
+    }
+
+    pub fn prepare(&self, queue: &wgpu::Queue, enabled: bool) {
+        let params = IndirectParams {
+            enabled: u32::from(enabled),
+            pad0: 0,
+            pad1: 0,
+            pad2: 0,
+        };
+        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+    }
+
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        width: u32,
+        height: u32,
+    ) {
+        super::dispatch_2d(
+            encoder,
+            "indirect light",
+            &self.pipeline,
+            bind_group,
+            width,
+            height,
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, INDIRECT_LIGHT};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn indirect_params_match_wgsl() {
+        assert_struct(
+            &INDIRECT_LIGHT,
+            "IndirectParams",
+            size_of::<IndirectParams>(),
+            &[
+                ("enabled", offset_of!(IndirectParams, enabled)),
+                ("pad0", offset_of!(IndirectParams, pad0)),
+                ("pad1", offset_of!(IndirectParams, pad1)),
+                ("pad2", offset_of!(IndirectParams, pad2)),
+            ],
+        );
+    }
+}

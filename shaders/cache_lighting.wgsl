@@ -1,0 +1,149 @@
+// Cache lighting: per light cache, the diffuse and glossy proxy lights built from the VALs
+// (eq. 3–7 for LightSkin over every RSM texel; eq. 13–15 for the BRSM subset, where each VAL
+// carries its weight 1 / (N_sVAL · P_VAL)). One thread per cache; VALs are staged through
+// workgroup memory 64 at a time.
+
+// Mirrored by `CacheLightingParams` in server/src/passes/cache_lighting.rs.
+struct CacheLightingParams {
+    camera: vec3<f32>,
+    cache_count: u32,
+    // Selected VALs (BRSM) or RSM texels (LightSkin).
+    val_count: u32,
+    // 0: VALs from the selection buffer; 1: every RSM texel is a VAL with weight 1.
+    every_texel: u32,
+    rsm_width: u32,
+    pad0: u32,
+}
+
+@group(0) @binding(0) var<uniform> params: CacheLightingParams;
+@group(0) @binding(1) var<storage, read> caches: array<LightCache>;
+@group(0) @binding(2) var<storage, read> vals: array<Val>;
+@group(0) @binding(3) var rsm_position: texture_2d<f32>;
+@group(0) @binding(4) var rsm_normal: texture_2d<f32>;
+@group(0) @binding(5) var rsm_flux_area: texture_2d<f32>;
+@group(0) @binding(6) var<storage, read_write> lighting: array<CacheLighting>;
+
+// ε_p of eq. 6.
+const EPS_P: f32 = 1e-6;
+// Floors of eq. 7's denominator: a proxy at grazing incidence (or outside the glossy lobe)
+// would otherwise get an unbounded flux.
+const MIN_COS_DIFFUSE: f32 = 1e-3;
+const MIN_COS_GLOSSY: f32 = 1e-2;
+const MIN_DIST2: f32 = 1e-4;
+const TILE_VALS: u32 = 64u;
+
+var<workgroup> tile: array<Val, 64>;
+
+fn load_val(index: u32) -> Val {
+    if index >= params.val_count {
+        return Val(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u);
+    }
+    if params.every_texel == 0u {
+        return vals[index];
+    }
+    let texel = vec2<u32>(index % params.rsm_width, index / params.rsm_width);
+    let p = textureLoad(rsm_position, texel, 0);
+    let fa = textureLoad(rsm_flux_area, texel, 0);
+    // Uncovered texels get weight 0.
+    return Val(p.xyz, fa.a, textureLoad(rsm_normal, texel, 0).xyz, p.w, fa.rgb, index);
+}
+
+struct Accum {
+    // Σ w·Φ_l·G (diffuse) and Σ w·Φ_l·G·cos^k θ_e (glossy): eq. 14/15 without ρ.
+    e_d: vec3<f32>,
+    e_g: vec3<f32>,
+    // Σ a, Σ a·x_l, Σ a·x_l² with a the eq. 6 weights times the VAL's weight (eq. 13).
+    s_d: f32,
+    s_g: f32,
+    p_d: vec3<f32>,
+    p_g: vec3<f32>,
+    q_d: vec3<f32>,
+    q_g: vec3<f32>,
+}
+
+fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) {
+    let delta = val.position - c.position;
+    let len2 = dot(delta, delta);
+    if val.weight <= 0.0 || len2 <= 0.0 {
+        return;
+    }
+    let d2 = max(len2, MIN_DIST2);
+    let w_dir = delta * inverseSqrt(len2);
+    let cos_l = max(dot(val.normal, -w_dir), 0.0);
+    let cos_x = max(dot(c.normal, w_dir), 0.0);
+    // Geometric factor of eq. 3/4 with the VAL's disk area; A·G is the disk-to-point form
+    // factor of eq. 6.
+    let g = cos_l * cos_x / (val.area + PI * d2);
+    let form_factor = val.area * g;
+    let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), c.exponent);
+    (*acc).e_d += val.weight * val.flux * g;
+    (*acc).e_g += val.weight * val.flux * g * lobe;
+    let a_d = val.weight * (EPS_P + form_factor);
+    let a_g = val.weight * (EPS_P + lobe * form_factor);
+    (*acc).s_d += a_d;
+    (*acc).s_g += a_g;
+    (*acc).p_d += a_d * val.position;
+    (*acc).p_g += a_g * val.position;
+    (*acc).q_d += a_d * val.position * val.position;
+    (*acc).q_g += a_g * val.position * val.position;
+}
+
+struct Proxy {
+    position: vec3<f32>,
+    radius: f32,
+}
+
+// Eq. 5/13 position and the extent 2σ of the weighted VAL positions (largest axis).
+fn proxy(c: LightCache, s: f32, p: vec3<f32>, q: vec3<f32>) -> Proxy {
+    if s <= 0.0 {
+        return Proxy(c.position, 0.0);
+    }
+    let mean = p / s;
+    let sigma = sqrt(max(q / s - mean * mean, vec3<f32>(0.0)));
+    return Proxy(mean, 2.0 * max(sigma.x, max(sigma.y, sigma.z)));
+}
+
+@compute @workgroup_size(64)
+fn light_caches(
+    @builtin(global_invocation_id) id: vec3<u32>,
+    @builtin(local_invocation_index) local: u32,
+) {
+    let i = id.x;
+    let in_range = i < params.cache_count;
+    var c = LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
+    if in_range {
+        c = caches[i];
+    }
+    let v = normalize(params.camera - c.position);
+    var acc = Accum(vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
+    for (var base = 0u; base < params.val_count; base += TILE_VALS) {
+        workgroupBarrier();
+        tile[local] = load_val(base + local);
+        workgroupBarrier();
+        if in_range {
+            for (var k = 0u; k < TILE_VALS; k++) {
+                accumulate(&acc, c, v, tile[k]);
+            }
+        }
+    }
+    if !in_range {
+        return;
+    }
+    // Eq. 7 with eq. 3/4 (or 14/15) plugged in as L_o: the cache's ρ_d/π (ρ_g·(k+2)/2π) appears
+    // in L_o and in f_r and cancels, so the proxies carry incident light only and any
+    // surface near the cache can apply its own BRDF to them.
+    let pd = proxy(c, acc.s_d, acc.p_d, acc.q_d);
+    let to_d = pd.position - c.position;
+    let dist2_d = max(dot(to_d, to_d), MIN_DIST2);
+    let cos_d = dot(c.normal, normalize(to_d));
+    let flux_d = 4.0 * PI * dist2_d * acc.e_d / max(cos_d, MIN_COS_DIFFUSE);
+
+    let pg = proxy(c, acc.s_g, acc.p_g, acc.q_g);
+    let to_g = pg.position - c.position;
+    let dist2_g = max(dot(to_g, to_g), MIN_DIST2);
+    let w_g = normalize(to_g);
+    let lobe_g = pow(max(dot(mirror(c.normal, w_g), v), 0.0), c.exponent);
+    let flux_g = 4.0 * PI * dist2_g * acc.e_g / max(dot(c.normal, w_g) * lobe_g, MIN_COS_GLOSSY);
+
+    lighting[i] = CacheLighting(pd.position, pd.radius, flux_d, 0.0, pg.position, pg.radius, flux_g, 0.0);
+}

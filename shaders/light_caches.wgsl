@@ -30,3 +30,66 @@ struct CacheLighting {
 fn mirror(n: vec3<f32>, w: vec3<f32>) -> vec3<f32> {
     return 2.0 * dot(n, w) * n - w;
 }
+
+// Proxy-light occlusion by double projection (paper, "Occlusion"): the proxy's bounding sphere
+// and the occluding caches' disks are projected onto the unit hemisphere around the target
+// cache and from there onto its unit base disk (Nusselt's analogue: the projected area is π
+// times the form factor), turned into axis-aligned squares of the same area, and the covered
+// fraction of the proxy's square is its occlusion.
+
+// Smallest side of a proxy's square on the unit base disk.
+const MIN_PROXY_SIDE: f32 = 1e-3;
+
+struct Square {
+    center: vec2<f32>,
+    side: f32,
+}
+
+// Tangent axes of the target cache's base disk.
+fn tangent_frame(n: vec3<f32>) -> mat2x3<f32> {
+    var up = vec3<f32>(0.0, 1.0, 0.0);
+    if abs(n.y) > 0.99 {
+        up = vec3<f32>(1.0, 0.0, 0.0);
+    }
+    let t = normalize(cross(n, up));
+    return mat2x3<f32>(t, cross(n, t));
+}
+
+// Square of area π·F on the base disk, centred where direction `w` lands.
+fn projected_square(frame: mat2x3<f32>, w: vec3<f32>, form_factor: f32) -> Square {
+    return Square(vec2<f32>(dot(w, frame[0]), dot(w, frame[1])), sqrt(PI * max(form_factor, 0.0)));
+}
+
+fn overlap(a: Square, b: Square) -> f32 {
+    let lo = max(a.center - 0.5 * a.side, b.center - 0.5 * b.side);
+    let hi = min(a.center + 0.5 * a.side, b.center + 0.5 * b.side);
+    let size = max(hi - lo, vec2<f32>(0.0));
+    return size.x * size.y;
+}
+
+// Square of a proxy sphere (centre, radius) seen from the cache; side 0 if below its horizon.
+// The sphere's form factor is (r/d)²·cos θ.
+fn proxy_square(frame: mat2x3<f32>, c: LightCache, center: vec3<f32>, radius: f32) -> Square {
+    let to = center - c.position;
+    let d2 = max(dot(to, to), 1e-8);
+    let w = to * inverseSqrt(d2);
+    let cos_c = max(dot(c.normal, w), 0.0);
+    let square = projected_square(frame, w, min(radius * radius / d2, 1.0) * cos_c);
+    // A point-like proxy still needs a footprint for the overlap test to see it covered.
+    return Square(square.center, max(square.side, MIN_PROXY_SIDE));
+}
+
+// Square of occluder cache `o` seen from cache `c`, if `o` lies in front of `c` and closer
+// than `max_dist2`; its disk's form factor is A·cos θ_c·cos θ_o / (π d² + A).
+fn occluder_square(frame: mat2x3<f32>, c: LightCache, o: LightCache, max_dist2: f32) -> Square {
+    let to = o.position - c.position;
+    let d2 = dot(to, to);
+    if d2 <= 1e-10 || d2 >= max_dist2 {
+        return Square(vec2<f32>(0.0), 0.0);
+    }
+    let w = to * inverseSqrt(d2);
+    let cos_c = max(dot(c.normal, w), 0.0);
+    let cos_o = abs(dot(o.normal, w));
+    let form_factor = o.disk_area * cos_c * cos_o / (PI * d2 + o.disk_area);
+    return projected_square(frame, w, form_factor);
+}

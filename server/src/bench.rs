@@ -17,12 +17,13 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 /// Stages that belong to global illumination (summed into `gi_ms`).
-const GI_STAGES: [&str; 6] = [
+const GI_STAGES: [&str; 7] = [
     "rsm",
     "importance",
     "cumulative_sums",
     "val_select",
     "cache_lighting",
+    "proxy_occlusion",
     "indirect_light",
 ];
 

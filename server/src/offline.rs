@@ -145,6 +145,9 @@ pub struct RenderArgs {
     /// N_sVAL: VALs selected per frame by BRSM (1 … 1048576).
     #[arg(long, default_value_t = GiSettings::default().val_count)]
     pub vals: u32,
+    /// Turn off the occlusion of proxy lights by other caches (double projection).
+    #[arg(long)]
+    pub no_occlusion: bool,
     /// Light caches: largest distance d_eps between a surface point and its cache, in scene
     /// units. Default: derived from the scene's surface area (about 6,000 caches).
     #[arg(long)]
@@ -274,6 +277,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
             rsm_size: args.rsm_size,
             view_samples: args.view_samples,
             val_count: args.vals,
+            occlusion: !args.no_occlusion,
             ..GiSettings::default()
         },
     }

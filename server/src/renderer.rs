@@ -20,6 +20,7 @@ use crate::passes::{
     frame_uniforms::{light_faces, CameraUniform, LightUniform},
     gbuffer::{GBuffer, GBufferPass},
     indirect_light::{CacheInputs, IndirectLightPass, INDIRECT_FORMAT},
+    proxy_occlusion::ProxyOcclusionPass,
     scene_buffers::{material_layout, SceneBuffers},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},
@@ -247,6 +248,7 @@ pub struct Renderer {
     /// Whether the last frame ran the sampling stages.
     sampled: bool,
     cache_pass: CacheLightingPass,
+    occlusion_pass: ProxyOcclusionPass,
     indirect_pass: IndirectLightPass,
     caches: Option<CacheBuffers>,
     /// The indirect target holds light from an earlier frame that must be cleared.
@@ -282,6 +284,7 @@ impl Renderer {
             sampling: ValSampling::new(device, &light_buffer, &material_layout),
             sampled: false,
             cache_pass: CacheLightingPass::new(device),
+            occlusion_pass: ProxyOcclusionPass::new(device),
             indirect_pass: IndirectLightPass::new(device),
             caches: None,
             indirect_stale: false,
@@ -476,6 +479,7 @@ impl Renderer {
                 self.sampling.rsm(),
                 source,
             );
+            self.occlusion_pass.prepare(queue, caches.count);
             self.indirect_pass.prepare(queue, true);
         }
         self.sampled = gi_on;
@@ -499,7 +503,10 @@ impl Renderer {
                 },
                 &sized.indirect,
             );
-            (caches.count, lighting, indirect)
+            let occlusion = self
+                .occlusion_pass
+                .bind(device, &caches.caches, &caches.lighting);
+            (caches.count, lighting, occlusion, indirect)
         });
         let direct_bind_group = self.direct_pass.bind(
             &self.ctx.device,
@@ -521,7 +528,9 @@ impl Renderer {
             self.gbuffer_pass
                 .encode(e, &sized.gbuffer, &self.scene_buffers)
         })?;
-        if let Some((cache_count, lighting_group, indirect_group)) = &gi_bind_groups {
+        if let Some((cache_count, lighting_group, occlusion_group, indirect_group)) =
+            &gi_bind_groups
+        {
             let sampling = &self.sampling;
             stages.stage("rsm", |e| sampling.encode_rsm(e, &self.scene_buffers))?;
             if gi.method == GiMethod::Brsm {
@@ -532,6 +541,11 @@ impl Renderer {
             stages.stage("cache_lighting", |e| {
                 self.cache_pass.encode(e, lighting_group, *cache_count)
             })?;
+            if gi.occlusion {
+                stages.stage("proxy_occlusion", |e| {
+                    self.occlusion_pass.encode(e, occlusion_group, *cache_count)
+                })?;
+            }
             stages.stage("indirect_light", |e| {
                 self.indirect_pass.encode(e, indirect_group, width, height)
             })?;

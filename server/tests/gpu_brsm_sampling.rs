@@ -26,6 +26,7 @@ fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiSettings {
         val_count,
         jitter: 0.5,
         uniform_importance: false,
+        occlusion: false,
     }
 }
 

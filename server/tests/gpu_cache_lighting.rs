@@ -6,7 +6,8 @@ mod support;
 use glam::Vec3;
 use lightcast_server::gi::caches::{precompute, CacheParams, CacheSet};
 use lightcast_server::gi::reference::{
-    light_cache, shade, ProxyLight, ProxyLights, RefCache, RefSurface, RefVal,
+    light_cache, proxy_visibility, shade, OccluderDisk, ProxyLight, ProxyLights, RefCache,
+    RefSurface, RefVal,
 };
 use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::passes::cache_lighting::CacheLighting;
@@ -26,6 +27,7 @@ fn gi(method: GiMethod, rsm_size: u32, val_count: u32) -> GiSettings {
         val_count,
         jitter: 0.5,
         uniform_importance: false,
+        occlusion: false,
     }
 }
 
@@ -144,6 +146,73 @@ fn brsm_cache_lighting_matches_the_cpu_reference() {
         })
         .collect();
     assert_small(proxy_errors(&run, &vals), 1e-4, 1e-2);
+}
+
+#[test]
+fn proxy_occlusion_matches_the_cpu_double_projection() {
+    let mut settings = gi(GiMethod::Brsm, 32, 1024);
+    settings.occlusion = false;
+    let open = run(settings);
+    settings.occlusion = true;
+    let occluded = run(settings);
+    let before = open
+        .renderer
+        .read_cache_lighting()
+        .expect("readback")
+        .expect("GI ran");
+    let after = occluded
+        .renderer
+        .read_cache_lighting()
+        .expect("readback")
+        .expect("GI ran");
+    let disks: Vec<OccluderDisk> = open
+        .caches
+        .caches
+        .iter()
+        .map(|c| OccluderDisk {
+            position: Vec3::from(c.position),
+            normal: Vec3::from(c.normal),
+            disk_area: c.disk_area,
+        })
+        .collect();
+    let (mut dimmed, mut worst) = (0, 0.0f32);
+    for (i, (b, a)) in before.iter().zip(&after).enumerate() {
+        let others: Vec<OccluderDisk> = disks
+            .iter()
+            .enumerate()
+            .filter(|&(j, _)| j != i)
+            .map(|(_, d)| *d)
+            .collect();
+        for (flux_b, flux_a, pos, radius) in [
+            (
+                b.diffuse_flux,
+                a.diffuse_flux,
+                b.diffuse_position,
+                b.diffuse_radius,
+            ),
+            (
+                b.glossy_flux,
+                a.glossy_flux,
+                b.glossy_position,
+                b.glossy_radius,
+            ),
+        ] {
+            let v = proxy_visibility(&disks[i], Vec3::from(pos), radius, &others);
+            let want = Vec3::from(flux_b) * v;
+            let got = Vec3::from(flux_a);
+            let scale = Vec3::from(flux_b).max_element().max(1e-12);
+            worst = worst.max((got - want).abs().max_element() / scale);
+            if v < 0.99 {
+                dimmed += 1;
+            }
+        }
+    }
+    assert!(worst < 2e-3, "largest relative flux difference {worst}");
+    // In a box with two blocks some proxies are hidden, and not all of them.
+    assert!(
+        dimmed > 10 && dimmed < 2 * before.len(),
+        "{dimmed} dimmed proxies"
+    );
 }
 
 #[test]

@@ -38,6 +38,8 @@ pub struct GiSettings {
     /// Give every RSM texel importance 1 (turns BRSM into plain stratified sampling; with one
     /// draw per texel it equals LightSkin).
     pub uniform_importance: bool,
+    /// Dim proxy lights hidden behind other caches (the paper's double projection).
+    pub occlusion: bool,
 }
 
 impl Default for GiSettings {
@@ -50,6 +52,7 @@ impl Default for GiSettings {
             val_count: 8192,
             jitter: 0.5,
             uniform_importance: false,
+            occlusion: true,
         }
     }
 }

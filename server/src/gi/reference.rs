@@ -637,3 +637,130 @@ mod tests {
         assert_close(shade_with(&brighter), base * s, 1e-5);
     }
 }
+
+/// A cache as an occluder or occlusion target: position, unit normal and disk area.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OccluderDisk {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub disk_area: f32,
+}
+
+/// Smallest side of a proxy's square on the unit base disk (a point proxy still has a
+/// footprint that occluders can cover).
+pub const MIN_PROXY_SIDE: f32 = 1e-3;
+
+/// An axis-aligned square on the target cache's unit base disk: centre and side.
+type Square = (glam::Vec2, f32);
+
+fn tangent_frame(n: Vec3) -> (Vec3, Vec3) {
+    let up = if n.y.abs() > 0.99 { Vec3::X } else { Vec3::Y };
+    let t = n.cross(up).normalize();
+    (t, n.cross(t))
+}
+
+fn overlap(a: Square, b: Square) -> f32 {
+    let lo = (a.0 - glam::Vec2::splat(0.5 * a.1)).max(b.0 - glam::Vec2::splat(0.5 * b.1));
+    let hi = (a.0 + glam::Vec2::splat(0.5 * a.1)).min(b.0 + glam::Vec2::splat(0.5 * b.1));
+    let size = (hi - lo).max(glam::Vec2::ZERO);
+    size.x * size.y
+}
+
+/// Visible fraction of a proxy sphere (`center`, `radius`) seen from `target`, by the paper's
+/// double projection ("Occlusion"): the sphere and every occluder disk in front of the target
+/// and nearer than the proxy are projected onto the unit hemisphere and then onto the base
+/// disk, where each covers π times its form factor — (r/d)²·cos θ for the sphere,
+/// A·cos θ_c·cos θ_o / (π d² + A) for a disk — as a square of that area; the squares' overlap
+/// with the proxy's square is the occluded fraction (clamped to 1).
+pub fn proxy_visibility(
+    target: &OccluderDisk,
+    center: Vec3,
+    radius: f32,
+    occluders: &[OccluderDisk],
+) -> f32 {
+    let (t, b) = tangent_frame(target.normal);
+    let square = |w: Vec3, form_factor: f32| -> Square {
+        (
+            glam::Vec2::new(w.dot(t), w.dot(b)),
+            (PI * form_factor.max(0.0)).sqrt(),
+        )
+    };
+    let to = center - target.position;
+    let d2 = to.length_squared().max(1e-8);
+    let w = to / d2.sqrt();
+    let cos_c = target.normal.dot(w).max(0.0);
+    let mut proxy = square(w, (radius * radius / d2).min(1.0) * cos_c);
+    proxy.1 = proxy.1.max(MIN_PROXY_SIDE);
+    let covered: f32 = occluders
+        .iter()
+        .filter_map(|o| {
+            let to_o = o.position - target.position;
+            let od2 = to_o.length_squared();
+            if od2 <= 1e-10 || od2 >= to.length_squared() {
+                return None;
+            }
+            let wo = to_o / od2.sqrt();
+            let cos_t = target.normal.dot(wo).max(0.0);
+            let cos_o = o.normal.dot(wo).abs();
+            let form_factor = o.disk_area * cos_t * cos_o / (PI * od2 + o.disk_area);
+            Some(overlap(proxy, square(wo, form_factor)))
+        })
+        .sum();
+    1.0 - (covered / (proxy.1 * proxy.1)).min(1.0)
+}
+
+#[cfg(test)]
+mod occlusion_tests {
+    use super::*;
+
+    fn disk(position: Vec3, normal: Vec3, disk_area: f32) -> OccluderDisk {
+        OccluderDisk {
+            position,
+            normal,
+            disk_area,
+        }
+    }
+
+    #[test]
+    fn a_wall_of_caches_between_cache_and_proxy_hides_it() {
+        let target = disk(Vec3::ZERO, Vec3::Y, 0.01);
+        // A 5×5 grid of 0.2 m caches at height 1 fully covers a proxy at height 2.
+        let wall: Vec<OccluderDisk> = (-2..=2)
+            .flat_map(|i| {
+                (-2..=2).map(move |j| {
+                    disk(
+                        Vec3::new(i as f32 * 0.2, 1.0, j as f32 * 0.2),
+                        Vec3::NEG_Y,
+                        0.04,
+                    )
+                })
+            })
+            .collect();
+        assert!(proxy_visibility(&target, Vec3::new(0.0, 2.0, 0.0), 0.05, &wall) < 0.01);
+        // Without the wall, or with the wall behind the proxy, it is fully visible.
+        assert_eq!(
+            proxy_visibility(&target, Vec3::new(0.0, 2.0, 0.0), 0.05, &[]),
+            1.0
+        );
+        assert_eq!(
+            proxy_visibility(&target, Vec3::new(0.0, 0.5, 0.0), 0.05, &wall),
+            1.0
+        );
+    }
+
+    #[test]
+    fn coplanar_caches_do_not_occlude_and_partial_cover_is_partial() {
+        let target = disk(Vec3::ZERO, Vec3::Y, 0.01);
+        let floor: Vec<OccluderDisk> = (1..5)
+            .map(|i| disk(Vec3::new(i as f32 * 0.3, 0.0, 0.0), Vec3::Y, 0.09))
+            .collect();
+        assert_eq!(
+            proxy_visibility(&target, Vec3::new(0.3, 1.0, 0.0), 0.3, &floor),
+            1.0
+        );
+        // One small disk in front of a large proxy covers part of it.
+        let one = [disk(Vec3::new(0.0, 0.5, 0.0), Vec3::NEG_Y, 0.01)];
+        let v = proxy_visibility(&target, Vec3::new(0.0, 2.0, 0.0), 1.0, &one);
+        assert!(v > 0.5 && v < 1.0, "visibility {v}");
+    }
+}

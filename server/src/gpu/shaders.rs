@@ -93,6 +93,15 @@ pub const INDIRECT_LIGHT: ShaderSource = ShaderSource {
     ],
 };
 
+pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
+    name: "proxy_occlusion",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("light_caches.wgsl"),
+        wgsl!("proxy_occlusion.wgsl"),
+    ],
+};
+
 /// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
@@ -106,6 +115,7 @@ pub const ALL: &[&ShaderSource] = &[
     &VAL_SELECT,
     &CACHE_LIGHTING,
     &INDIRECT_LIGHT,
+    &PROXY_OCCLUSION,
 ];
 
 impl ShaderSource {

@@ -7,10 +7,11 @@
 //! 5. [`cumulative_sums`]: cumulative importance (BRSM only).
 //! 6. [`val_select`]: N_sVAL VALs drawn from it with their weights (BRSM only).
 //! 7. [`cache_lighting`]: diffuse and glossy proxy lights per light cache.
-//! 8. [`indirect_light`]: proxy lights interpolated per pixel.
-//! 9. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
-//! 10. [`exposure`]: automatic exposure from the HDR image.
-//! 11. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
+//! 8. [`proxy_occlusion`]: the proxies dimmed by the caches in between (double projection).
+//! 9. [`indirect_light`]: proxy lights interpolated per pixel.
+//! 10. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
+//! 11. [`exposure`]: automatic exposure from the HDR image.
+//! 12. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
 //!
 //! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry
 //! and materials.
@@ -23,6 +24,7 @@ pub mod frame_uniforms;
 pub mod gbuffer;
 pub mod importance;
 pub mod indirect_light;
+pub mod proxy_occlusion;
 pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;

@@ -1,7 +1,8 @@
 // Cache lighting: per light cache, the diffuse and glossy proxy lights built from the VALs
 // (eq. 3–7 for LightSkin over every RSM texel; eq. 13–15 for the BRSM subset, where each VAL
 // carries its weight 1 / (N_sVAL · P_VAL)). One thread per cache; VALs are staged through
-// workgroup memory 64 at a time.
+// workgroup memory 64 at a time. The VALs are split into chunks, one dispatch each, whose sums
+// add up in `accum`; a last dispatch turns the sums into proxy lights.
 
 // Mirrored by `CacheLightingParams` in server/src/passes/cache_lighting.rs.
 struct CacheLightingParams {
@@ -12,7 +13,12 @@ struct CacheLightingParams {
     // 0: VALs from the selection buffer; 1: every RSM texel is a VAL with weight 1.
     every_texel: u32,
     rsm_width: u32,
+    // This dispatch's VALs: [first_val, end_val).
+    first_val: u32,
+    end_val: u32,
     pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: CacheLightingParams;
@@ -22,8 +28,11 @@ struct CacheLightingParams {
 @group(0) @binding(4) var rsm_normal: texture_2d<f32>;
 @group(0) @binding(5) var rsm_flux_area: texture_2d<f32>;
 @group(0) @binding(6) var<storage, read_write> lighting: array<CacheLighting>;
+@group(0) @binding(7) var<storage, read_write> accum: array<Accum>;
 
-// ε_p of eq. 6.
+// ε_p of eq. 6, per unit of VAL disk area: a constant ε_p summed over a million tiny VALs of a
+// high-resolution RSM would outweigh their form factors (area × G) and drag every proxy to the
+// mean of the whole RSM; scaled by the area it stays negligible at any resolution.
 const EPS_P: f32 = 1e-6;
 // Floors of eq. 7's denominator: a proxy at grazing incidence (or outside the glossy lobe)
 // would otherwise get an unbounded flux.
@@ -48,17 +57,23 @@ fn load_val(index: u32) -> Val {
     return Val(p.xyz, fa.a, textureLoad(rsm_normal, texel, 0).xyz, p.w, fa.rgb, index);
 }
 
+// Mirrored by `CacheAccum` in server/src/passes/cache_lighting.rs.
 struct Accum {
     // Σ w·Φ_l·G (diffuse) and Σ w·Φ_l·G·cos^k θ_e (glossy): eq. 14/15 without ρ.
     e_d: vec3<f32>,
-    e_g: vec3<f32>,
-    // Σ a, Σ a·x_l, Σ a·x_l² with a the eq. 6 weights times the VAL's weight (eq. 13).
+    // Σ a with a the eq. 6 weight times the VAL's weight (eq. 13), diffuse and glossy.
     s_d: f32,
+    e_g: vec3<f32>,
     s_g: f32,
+    // Σ a·x_l and Σ a·x_l², for the proxy positions and extents.
     p_d: vec3<f32>,
+    pad0: f32,
     p_g: vec3<f32>,
+    pad1: f32,
     q_d: vec3<f32>,
+    pad2: f32,
     q_g: vec3<f32>,
+    pad3: f32,
 }
 
 fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) {
@@ -78,8 +93,8 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
     let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), c.exponent);
     (*acc).e_d += val.weight * val.flux * g;
     (*acc).e_g += val.weight * val.flux * g * lobe;
-    let a_d = val.weight * (EPS_P + form_factor);
-    let a_g = val.weight * (EPS_P + lobe * form_factor);
+    let a_d = val.weight * (EPS_P * val.area + form_factor);
+    let a_g = val.weight * (EPS_P * val.area + lobe * form_factor);
     (*acc).s_d += a_d;
     (*acc).s_g += a_g;
     (*acc).p_d += a_d * val.position;
@@ -103,31 +118,57 @@ fn proxy(c: LightCache, s: f32, p: vec3<f32>, q: vec3<f32>) -> Proxy {
     return Proxy(mean, 2.0 * max(sigma.x, max(sigma.y, sigma.z)));
 }
 
+fn zero_accum() -> Accum {
+    return Accum(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+}
+
+fn load_cache(i: u32) -> LightCache {
+    if i < params.cache_count {
+        return caches[i];
+    }
+    return LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
+}
+
 @compute @workgroup_size(64)
-fn light_caches(
+fn accumulate_vals(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
 ) {
     let i = id.x;
     let in_range = i < params.cache_count;
-    var c = LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
-    if in_range {
-        c = caches[i];
-    }
+    let c = load_cache(i);
     let v = normalize(params.camera - c.position);
-    var acc = Accum(vec3<f32>(0.0), vec3<f32>(0.0), 0.0, 0.0, vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0), vec3<f32>(0.0));
-    for (var base = 0u; base < params.val_count; base += TILE_VALS) {
+    var acc = zero_accum();
+    if in_range && params.first_val > 0u {
+        acc = accum[i];
+    }
+    for (var base = params.first_val; base < params.end_val; base += TILE_VALS) {
         workgroupBarrier();
         tile[local] = load_val(base + local);
         workgroupBarrier();
         if in_range {
-            for (var k = 0u; k < TILE_VALS; k++) {
+            let count = min(TILE_VALS, params.end_val - base);
+            for (var k = 0u; k < count; k++) {
                 accumulate(&acc, c, v, tile[k]);
             }
         }
     }
-    if !in_range {
+    if in_range {
+        accum[i] = acc;
+    }
+}
+
+@compute @workgroup_size(64)
+fn finish_proxies(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.cache_count {
         return;
+    }
+    let c = caches[i];
+    let v = normalize(params.camera - c.position);
+    var acc = zero_accum();
+    if params.val_count > 0u {
+        acc = accum[i];
     }
     // Eq. 7 with eq. 3/4 (or 14/15) plugged in as L_o: the cache's ρ_d/π (ρ_g·(k+2)/2π) appears
     // in L_o and in f_r and cancels, so the proxies carry incident light only and any

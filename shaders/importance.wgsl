@@ -10,6 +10,12 @@ struct ImportanceParams {
     // 1: every texel gets importance 1, covered or not (turns the BRSM estimator into plain
     // stratified sampling: with one draw per texel it is exactly the full LightSkin sum).
     uniform_importance: u32,
+    // This dispatch's first RSM row: rows are split into bands, one dispatch each, so no
+    // dispatch runs long enough to trip a driver's watchdog.
+    first_row: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: ImportanceParams;
@@ -44,15 +50,16 @@ fn estimate_importance(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
 ) {
-    let inside = id.x < params.rsm_width && id.y < params.rsm_height;
+    let texel = vec2<u32>(id.x, id.y + params.first_row);
+    let inside = texel.x < params.rsm_width && texel.y < params.rsm_height;
     var val_position = vec3<f32>(0.0);
     var val_normal = vec3<f32>(0.0);
     var flux = 0.0;
     if inside {
-        let p = textureLoad(rsm_position, id.xy, 0);
+        let p = textureLoad(rsm_position, texel, 0);
         val_position = p.xyz;
-        val_normal = textureLoad(rsm_normal, id.xy, 0).xyz;
-        flux = p.w * dot(textureLoad(rsm_flux_area, id.xy, 0).rgb, vec3<f32>(0.2126, 0.7152, 0.0722));
+        val_normal = textureLoad(rsm_normal, texel, 0).xyz;
+        flux = p.w * dot(textureLoad(rsm_flux_area, texel, 0).rgb, vec3<f32>(0.2126, 0.7152, 0.0722));
     }
     var sum = 0.0;
     // Samples are staged through workgroup memory, 64 at a time, shared by the 64 texels.
@@ -82,6 +89,6 @@ fn estimate_importance(
         if params.uniform_importance != 0u {
             value = 1.0;
         }
-        importance[id.y * params.rsm_width + id.x] = value;
+        importance[texel.y * params.rsm_width + texel.x] = value;
     }
 }

@@ -79,12 +79,16 @@ fn proxy_square(frame: mat2x3<f32>, c: LightCache, center: vec3<f32>, radius: f3
     return Square(square.center, max(square.side, MIN_PROXY_SIDE));
 }
 
-// Square of occluder cache `o` seen from cache `c`, if `o` lies in front of `c` and closer
-// than `max_dist2`; its disk's form factor is A·cos θ_c·cos θ_o / (π d² + A).
-fn occluder_square(frame: mat2x3<f32>, c: LightCache, o: LightCache, max_dist2: f32) -> Square {
+// Square of occluder cache `o` seen from cache `c`, if `o` lies in front of `c`, nearer than
+// the proxy sphere (`center`, `radius`) and outside it: caches inside the sphere carry the VALs
+// the proxy stands for, so they are the light, not something in front of it. The disk's form
+// factor is A·cos θ_c·cos θ_o / (π d² + A).
+fn occluder_square(frame: mat2x3<f32>, c: LightCache, o: LightCache, center: vec3<f32>, radius: f32) -> Square {
     let to = o.position - c.position;
     let d2 = dot(to, to);
-    if d2 <= 1e-10 || d2 >= max_dist2 {
+    let to_proxy = center - c.position;
+    let from_proxy = o.position - center;
+    if d2 <= 1e-10 || d2 >= dot(to_proxy, to_proxy) || dot(from_proxy, from_proxy) < radius * radius {
         return Square(vec2<f32>(0.0), 0.0);
     }
     let w = to * inverseSqrt(d2);

@@ -32,8 +32,6 @@ fn occlude_proxies(
     let frame = tangent_frame(c.normal);
     let square_d = proxy_square(frame, c, l.diffuse_position, l.diffuse_radius);
     let square_g = proxy_square(frame, c, l.glossy_position, l.glossy_radius);
-    let to_d = l.diffuse_position - c.position;
-    let to_g = l.glossy_position - c.position;
     var covered_d = 0.0;
     var covered_g = 0.0;
     for (var base = 0u; base < params.cache_count; base += TILE_CACHES) {
@@ -52,8 +50,8 @@ fn occlude_proxies(
                     continue;
                 }
                 let o = tile[k];
-                covered_d += overlap(square_d, occluder_square(frame, c, o, dot(to_d, to_d)));
-                covered_g += overlap(square_g, occluder_square(frame, c, o, dot(to_g, to_g)));
+                covered_d += overlap(square_d, occluder_square(frame, c, o, l.diffuse_position, l.diffuse_radius));
+                covered_g += overlap(square_g, occluder_square(frame, c, o, l.glossy_position, l.glossy_radius));
             }
         }
     }

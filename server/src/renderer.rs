@@ -457,6 +457,7 @@ impl Renderer {
             .prepare(queue, &sized.exposure, settings.exposure);
         let gi = settings.gi;
         let gi_on = gi.method != GiMethod::None;
+        let mut lighting_chunks = 0;
         if gi_on {
             let caches = self.caches.as_ref().ok_or(RenderError::CachesMissing)?;
             self.sampling.prepare(
@@ -472,7 +473,7 @@ impl Renderer {
                 },
                 GiMethod::Lightskin | GiMethod::None => ValSource::EveryTexel,
             };
-            self.cache_pass.prepare(
+            lighting_chunks = self.cache_pass.prepare(
                 queue,
                 settings.camera.position,
                 caches.count,
@@ -491,6 +492,7 @@ impl Renderer {
                 self.sampling.vals(),
                 self.sampling.rsm(),
                 &caches.lighting,
+                &caches.accum,
             );
             let indirect = self.indirect_pass.bind(
                 device,
@@ -539,7 +541,8 @@ impl Renderer {
                 stages.stage("val_select", |e| sampling.encode_selection(e, &gi))?;
             }
             stages.stage("cache_lighting", |e| {
-                self.cache_pass.encode(e, lighting_group, *cache_count)
+                self.cache_pass
+                    .encode(e, lighting_group, *cache_count, lighting_chunks)
             })?;
             if gi.occlusion {
                 stages.stage("proxy_occlusion", |e| {

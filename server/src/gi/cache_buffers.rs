@@ -2,13 +2,15 @@
 //! lights written every frame by cache lighting.
 
 use super::caches::{CacheSet, LightCache, NEIGHBOURS};
-use crate::passes::cache_lighting::CacheLighting;
+use crate::passes::cache_lighting::{CacheAccum, CacheLighting};
 use wgpu::util::DeviceExt;
 
 pub struct CacheBuffers {
     pub caches: wgpu::Buffer,
     pub vertex_caches: wgpu::Buffer,
     pub lighting: wgpu::Buffer,
+    /// Sums carried between the chunked cache-lighting dispatches.
+    pub accum: wgpu::Buffer,
     pub count: u32,
 }
 
@@ -44,6 +46,12 @@ impl CacheBuffers {
                 label: Some("cache lighting"),
                 size: (caches.len() * std::mem::size_of::<CacheLighting>()) as u64,
                 usage: storage | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            }),
+            accum: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("cache lighting sums"),
+                size: (caches.len() * std::mem::size_of::<CacheAccum>()) as u64,
+                usage: storage,
                 mapped_at_creation: false,
             }),
             count: set.caches.len() as u32,

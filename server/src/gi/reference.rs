@@ -20,7 +20,10 @@
 use glam::Vec3;
 use std::f32::consts::PI;
 
-/// ε_p of eq. 6: keeps the position weights of eq. 5 non-zero.
+/// ε_p of eq. 6, per unit of VAL disk area: keeps the position weights of eq. 5 non-zero.
+/// Scaling it by the VAL's area keeps it negligible next to the form factor (itself area × G)
+/// at any RSM resolution; a constant ε_p summed over a million tiny VALs would outweigh them
+/// and drag every proxy to the mean of the whole RSM.
 pub const EPS_P: f32 = 1e-6;
 /// Floor of (n_c·ω_p)⁺ in the diffuse flux of eq. 7.
 pub const MIN_COS_DIFFUSE: f32 = 1e-3;
@@ -182,8 +185,8 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
         e_d += w * g * val.flux;
         e_g += w * g * lobe * val.flux;
         // Eq. 6 weights times the BRSM weight 1/(N_sVAL·P_VAL) of eq. 13.
-        m_d.add(w * (EPS_P + form_factor), val.position);
-        m_g.add(w * (EPS_P + lobe * form_factor), val.position);
+        m_d.add(w * (EPS_P * val.area + form_factor), val.position);
+        m_g.add(w * (EPS_P * val.area + lobe * form_factor), val.position);
     }
 
     // Eq. 7 with L_o,d = ρ_d/π·E_d and f_r = ρ_d/π: ρ_d cancels.
@@ -667,8 +670,8 @@ fn overlap(a: Square, b: Square) -> f32 {
 }
 
 /// Visible fraction of a proxy sphere (`center`, `radius`) seen from `target`, by the paper's
-/// double projection ("Occlusion"): the sphere and every occluder disk in front of the target
-/// and nearer than the proxy are projected onto the unit hemisphere and then onto the base
+/// double projection ("Occlusion"): the sphere and every occluder disk in front of the target,
+/// nearer than the proxy and outside its sphere are projected onto the unit hemisphere and then onto the base
 /// disk, where each covers π times its form factor — (r/d)²·cos θ for the sphere,
 /// A·cos θ_c·cos θ_o / (π d² + A) for a disk — as a square of that area; the squares' overlap
 /// with the proxy's square is the occluded fraction (clamped to 1).
@@ -696,7 +699,9 @@ pub fn proxy_visibility(
         .filter_map(|o| {
             let to_o = o.position - target.position;
             let od2 = to_o.length_squared();
-            if od2 <= 1e-10 || od2 >= to.length_squared() {
+            // Caches inside the proxy's sphere carry its VALs: they are the light itself.
+            let inside = (o.position - center).length_squared() < radius * radius;
+            if od2 <= 1e-10 || od2 >= to.length_squared() || inside {
                 return None;
             }
             let wo = to_o / od2.sqrt();

@@ -34,6 +34,8 @@ pub struct ValSampling {
     sums_pass: CumulativeSumsPass,
     select_pass: ValSelectPass,
     resources: Option<Resources>,
+    /// RSM rows per importance dispatch, chosen by the last `prepare`.
+    importance_band_rows: u32,
 }
 
 /// Everything the sampling stages produced, read back for tests and debug views.
@@ -75,6 +77,7 @@ impl ValSampling {
             sums_pass: CumulativeSumsPass::new(device),
             select_pass: ValSelectPass::new(device),
             resources: None,
+            importance_band_rows: 1,
         }
     }
 
@@ -109,12 +112,14 @@ impl ValSampling {
             .map(|f| RsmFace::new(f, settings.rsm_size))
             .collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
-        self.importance_pass
+        let band_rows = self
+            .importance_pass
             .prepare(queue, &importance_params(&res.rsm, settings));
         self.sums_pass
             .prepare(queue, res.rsm.width(), res.rsm.height());
         self.select_pass
             .prepare(queue, &res.rsm, settings.val_count, settings.jitter);
+        self.importance_band_rows = band_rows;
     }
 
     fn create_resources(
@@ -195,6 +200,7 @@ impl ValSampling {
             encoder,
             &res.importance_group,
             &importance_params(&res.rsm, settings),
+            self.importance_band_rows,
         );
     }
 
@@ -285,5 +291,9 @@ fn importance_params(rsm: &Rsm, settings: &GiSettings) -> ImportanceParams {
         rsm_height: rsm.height(),
         sample_count: settings.view_samples,
         uniform_importance: u32::from(settings.uniform_importance),
+        first_row: 0,
+        pad0: 0,
+        pad1: 0,
+        pad2: 0,
     }
 }

@@ -28,8 +28,37 @@ pub struct CacheLightingParams {
     pub val_count: u32,
     pub every_texel: u32,
     pub rsm_width: u32,
+    pub first_val: u32,
+    pub end_val: u32,
     pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
+
+/// Mirrors `Accum` in `shaders/cache_lighting.wgsl`: per-cache sums carried between the
+/// chunked dispatches (only its size matters on the CPU).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct CacheAccum {
+    pub e_d: [f32; 3],
+    pub s_d: f32,
+    pub e_g: [f32; 3],
+    pub s_g: f32,
+    pub p_d: [f32; 3],
+    pub pad0: f32,
+    pub p_g: [f32; 3],
+    pub pad1: f32,
+    pub q_d: [f32; 3],
+    pub pad2: f32,
+    pub q_g: [f32; 3],
+    pub pad3: f32,
+}
+
+/// Cache–VAL evaluations per dispatch: about half a second on lavapipe, far below any
+/// watchdog on a real GPU. Longer dispatches were seen to stop early on lavapipe.
+const DISPATCH_BUDGET: u64 = 1 << 26;
+/// Most dispatches per frame (a huge job then exceeds the budget per dispatch instead).
+const MAX_CHUNKS: u32 = 1024;
 
 /// Where the VALs come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,22 +72,25 @@ pub enum ValSource {
 const WORKGROUP: u32 = 64;
 
 pub struct CacheLightingPass {
-    pipeline: wgpu::ComputePipeline,
+    accumulate: wgpu::ComputePipeline,
+    finish: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: wgpu::Buffer,
+    params: super::UniformSlots,
 }
 
 impl CacheLightingPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let read = wgpu::BufferBindingType::Storage { read_only: true };
+        let params = super::UniformSlots::new(
+            device,
+            "cache lighting params",
+            std::mem::size_of::<CacheLightingParams>() as u64,
+            MAX_CHUNKS + 1,
+        );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cache lighting"),
             entries: &[
-                super::buffer_entry(
-                    0,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Uniform,
-                ),
+                params.layout_entry(0),
                 super::buffer_entry(1, wgpu::ShaderStages::COMPUTE, read),
                 super::buffer_entry(2, wgpu::ShaderStages::COMPUTE, read),
                 super::compute_texture_entry(3, false),
@@ -69,24 +101,31 @@ impl CacheLightingPass {
                     wgpu::ShaderStages::COMPUTE,
                     wgpu::BufferBindingType::Storage { read_only: false },
                 ),
+                super::buffer_entry(
+                    7,
+                    wgpu::ShaderStages::COMPUTE,
+                    wgpu::BufferBindingType::Storage { read_only: false },
+                ),
             ],
         });
         let module = shaders::CACHE_LIGHTING.create_module(device);
         Self {
-            pipeline: super::compute_pipeline(
+            accumulate: super::compute_pipeline(
                 device,
                 "cache lighting",
                 &layout,
                 &module,
-                "light_caches",
+                "accumulate_vals",
+            ),
+            finish: super::compute_pipeline(
+                device,
+                "proxy lights",
+                &layout,
+                &module,
+                "finish_proxies",
             ),
             layout,
-            params: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("cache lighting params"),
-                size: std::mem::size_of::<CacheLightingParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
+            params,
         }
     }
 
@@ -97,22 +136,25 @@ impl CacheLightingPass {
         vals: &wgpu::Buffer,
         rsm: &Rsm,
         lighting: &wgpu::Buffer,
+        accum: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("cache lighting"),
             layout: &self.layout,
             entries: &[
-                super::buffer_binding(0, &self.params),
+                self.params.binding(0),
                 super::buffer_binding(1, caches),
                 super::buffer_binding(2, vals),
                 super::view_binding(3, &rsm.position.view),
                 super::view_binding(4, &rsm.normal.view),
                 super::view_binding(5, &rsm.flux_area.view),
                 super::buffer_binding(6, lighting),
+                super::buffer_binding(7, accum),
             ],
         })
     }
 
+    /// Writes one parameter slot per chunk of VALs; returns the number of chunks to encode.
     pub fn prepare(
         &self,
         queue: &wgpu::Queue,
@@ -120,35 +162,58 @@ impl CacheLightingPass {
         cache_count: u32,
         rsm: &Rsm,
         source: ValSource,
-    ) {
+    ) -> u32 {
         let (val_count, every_texel) = match source {
             ValSource::Selected { count } => (count, 0),
             ValSource::EveryTexel => (rsm.texels(), 1),
         };
-        let params = CacheLightingParams {
-            camera,
-            cache_count,
+        let chunk = super::chunk_size(
             val_count,
-            every_texel,
-            rsm_width: rsm.width(),
-            pad0: 0,
-        };
-        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+            u64::from(cache_count.max(1)),
+            DISPATCH_BUDGET,
+            WORKGROUP,
+            MAX_CHUNKS,
+        );
+        let chunks = val_count.div_ceil(chunk);
+        let params: Vec<CacheLightingParams> = (0..chunks.max(1))
+            .map(|k| CacheLightingParams {
+                camera,
+                cache_count,
+                val_count,
+                every_texel,
+                rsm_width: rsm.width(),
+                first_val: k * chunk,
+                end_val: ((k + 1) * chunk).min(val_count),
+                pad0: 0,
+                pad1: 0,
+                pad2: 0,
+            })
+            .collect();
+        self.params.write(queue, &params);
+        chunks
     }
 
+    /// One dispatch per chunk of VALs, then one that builds the proxy lights.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         bind_group: &wgpu::BindGroup,
         cache_count: u32,
+        chunks: u32,
     ) {
+        let groups = cache_count.div_ceil(WORKGROUP).max(1);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("cache lighting"),
             timestamp_writes: None,
         });
-        pass.set_bind_group(0, bind_group, &[]);
-        pass.set_pipeline(&self.pipeline);
-        pass.dispatch_workgroups(cache_count.div_ceil(WORKGROUP).max(1), 1, 1);
+        pass.set_pipeline(&self.accumulate);
+        for k in 0..chunks {
+            pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(k)]);
+            pass.dispatch_workgroups(groups, 1, 1);
+        }
+        pass.set_pipeline(&self.finish);
+        pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(0)]);
+        pass.dispatch_workgroups(groups, 1, 1);
     }
 }
 
@@ -192,7 +257,30 @@ mod tests {
                 ("val_count", offset_of!(CacheLightingParams, val_count)),
                 ("every_texel", offset_of!(CacheLightingParams, every_texel)),
                 ("rsm_width", offset_of!(CacheLightingParams, rsm_width)),
+                ("first_val", offset_of!(CacheLightingParams, first_val)),
+                ("end_val", offset_of!(CacheLightingParams, end_val)),
                 ("pad0", offset_of!(CacheLightingParams, pad0)),
+                ("pad1", offset_of!(CacheLightingParams, pad1)),
+                ("pad2", offset_of!(CacheLightingParams, pad2)),
+            ],
+        );
+        assert_struct(
+            &CACHE_LIGHTING,
+            "Accum",
+            size_of::<CacheAccum>(),
+            &[
+                ("e_d", offset_of!(CacheAccum, e_d)),
+                ("s_d", offset_of!(CacheAccum, s_d)),
+                ("e_g", offset_of!(CacheAccum, e_g)),
+                ("s_g", offset_of!(CacheAccum, s_g)),
+                ("p_d", offset_of!(CacheAccum, p_d)),
+                ("pad0", offset_of!(CacheAccum, pad0)),
+                ("p_g", offset_of!(CacheAccum, p_g)),
+                ("pad1", offset_of!(CacheAccum, pad1)),
+                ("q_d", offset_of!(CacheAccum, q_d)),
+                ("pad2", offset_of!(CacheAccum, pad2)),
+                ("q_g", offset_of!(CacheAccum, q_g)),
+                ("pad3", offset_of!(CacheAccum, pad3)),
             ],
         );
         assert_struct(

@@ -23,26 +23,37 @@ pub struct ImportanceParams {
     pub rsm_height: u32,
     pub sample_count: u32,
     pub uniform_importance: u32,
+    pub first_row: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
+
+/// Texel–sample evaluations per dispatch (see `cache_lighting::DISPATCH_BUDGET`).
+const DISPATCH_BUDGET: u64 = 1 << 26;
+/// Most row bands per frame.
+const MAX_BANDS: u32 = 1024;
 
 pub struct ImportancePass {
     gather: wgpu::ComputePipeline,
     estimate: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: wgpu::Buffer,
+    params: super::UniformSlots,
 }
 
 impl ImportancePass {
     pub fn new(device: &wgpu::Device) -> Self {
         let storage = wgpu::BufferBindingType::Storage { read_only: false };
+        let params = super::UniformSlots::new(
+            device,
+            "importance params",
+            std::mem::size_of::<ImportanceParams>() as u64,
+            MAX_BANDS,
+        );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("importance"),
             entries: &[
-                super::buffer_entry(
-                    0,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Uniform,
-                ),
+                params.layout_entry(0),
                 super::compute_texture_entry(1, false),
                 super::compute_texture_entry(2, false),
                 super::buffer_entry(3, wgpu::ShaderStages::COMPUTE, storage),
@@ -69,12 +80,7 @@ impl ImportancePass {
                 "estimate_importance",
             ),
             layout,
-            params: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("importance params"),
-                size: std::mem::size_of::<ImportanceParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
+            params,
         }
     }
 
@@ -90,10 +96,7 @@ impl ImportancePass {
             label: Some("importance"),
             layout: &self.layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.params.as_entire_binding(),
-                },
+                self.params.binding(0),
                 super::view_binding(1, &gbuffer.position.view),
                 super::view_binding(2, &gbuffer.normal_exponent.view),
                 wgpu::BindGroupEntry {
@@ -111,29 +114,51 @@ impl ImportancePass {
         })
     }
 
-    pub fn prepare(&self, queue: &wgpu::Queue, params: &ImportanceParams) {
-        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(params));
+    /// Writes one parameter slot per band of RSM rows; returns the band height in rows.
+    pub fn prepare(&self, queue: &wgpu::Queue, params: &ImportanceParams) -> u32 {
+        let rows = super::chunk_size(
+            params.rsm_height,
+            u64::from(params.rsm_width) * u64::from(params.sample_count.max(1)),
+            DISPATCH_BUDGET,
+            super::TILE,
+            MAX_BANDS,
+        );
+        let bands: Vec<ImportanceParams> = (0..params.rsm_height.div_ceil(rows).max(1))
+            .map(|b| ImportanceParams {
+                first_row: b * rows,
+                ..*params
+            })
+            .collect();
+        self.params.write(queue, &bands);
+        rows
     }
 
+    /// Gathers the view samples, then estimates importance band by band.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         bind_group: &wgpu::BindGroup,
         params: &ImportanceParams,
+        band_rows: u32,
     ) {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("importance"),
             timestamp_writes: None,
         });
-        pass.set_bind_group(0, bind_group, &[]);
+        pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(0)]);
         pass.set_pipeline(&self.gather);
         pass.dispatch_workgroups(params.sample_count.div_ceil(64), 1, 1);
         pass.set_pipeline(&self.estimate);
-        pass.dispatch_workgroups(
-            params.rsm_width.div_ceil(super::TILE),
-            params.rsm_height.div_ceil(super::TILE),
-            1,
-        );
+        let band_rows = band_rows.max(1);
+        for b in 0..params.rsm_height.div_ceil(band_rows) {
+            let rows = band_rows.min(params.rsm_height - b * band_rows);
+            pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(b)]);
+            pass.dispatch_workgroups(
+                params.rsm_width.div_ceil(super::TILE),
+                rows.div_ceil(super::TILE),
+                1,
+            );
+        }
     }
 }
 
@@ -168,6 +193,10 @@ mod tests {
                     "uniform_importance",
                     offset_of!(ImportanceParams, uniform_importance),
                 ),
+                ("first_row", offset_of!(ImportanceParams, first_row)),
+                ("pad0", offset_of!(ImportanceParams, pad0)),
+                ("pad1", offset_of!(ImportanceParams, pad1)),
+                ("pad2", offset_of!(ImportanceParams, pad2)),
             ],
         );
     }

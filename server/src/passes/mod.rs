@@ -173,3 +173,108 @@ pub fn view_binding(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEn
         resource: wgpu::BindingResource::TextureView(view),
     }
 }
+
+/// Distance between uniform slots addressed by dynamic offsets (wgpu's largest alignment).
+pub const UNIFORM_SLOT: u64 = 256;
+
+/// A uniform buffer of equally sized slots, each bound through a dynamic offset: lets one
+/// command buffer run a pass several times with different parameters (for example one
+/// dispatch per chunk of work, so no single dispatch runs long enough to trip a driver's
+/// watchdog).
+pub struct UniformSlots {
+    pub buffer: wgpu::Buffer,
+    slots: u32,
+    slot_size: u64,
+}
+
+impl UniformSlots {
+    pub fn new(device: &wgpu::Device, label: &str, slot_size: u64, slots: u32) -> Self {
+        Self {
+            buffer: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: UNIFORM_SLOT * u64::from(slots.max(1)),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
+            slots: slots.max(1),
+            slot_size,
+        }
+    }
+
+    pub fn slots(&self) -> u32 {
+        self.slots
+    }
+
+    /// Layout entry for binding `binding` with a dynamic offset.
+    pub fn layout_entry(&self, binding: u32) -> wgpu::BindGroupLayoutEntry {
+        wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Uniform,
+                has_dynamic_offset: true,
+                min_binding_size: wgpu::BufferSize::new(self.slot_size),
+            },
+            count: None,
+        }
+    }
+
+    /// Bind group entry covering one slot (the dynamic offset picks which).
+    pub fn binding(&self, binding: u32) -> wgpu::BindGroupEntry<'_> {
+        wgpu::BindGroupEntry {
+            binding,
+            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: &self.buffer,
+                offset: 0,
+                size: wgpu::BufferSize::new(self.slot_size),
+            }),
+        }
+    }
+
+    /// Writes `values` into consecutive slots from slot 0 (at most [`Self::slots`]).
+    pub fn write<T: bytemuck::Pod>(&self, queue: &wgpu::Queue, values: &[T]) {
+        for (i, v) in values.iter().enumerate().take(self.slots as usize) {
+            queue.write_buffer(&self.buffer, i as u64 * UNIFORM_SLOT, bytemuck::bytes_of(v));
+        }
+    }
+
+    /// Dynamic offset of slot `i`.
+    pub fn offset(i: u32) -> u32 {
+        i * UNIFORM_SLOT as u32
+    }
+}
+
+/// Splits `total` work items into chunks of whole `granule`s such that `cost_per_item` × chunk
+/// stays within `budget` where possible, using at most `max_chunks` chunks. Returns the chunk
+/// size (a multiple of `granule`, at least one granule).
+pub fn chunk_size(
+    total: u32,
+    cost_per_item: u64,
+    budget: u64,
+    granule: u32,
+    max_chunks: u32,
+) -> u32 {
+    let granule = granule.max(1);
+    let by_budget = (budget / cost_per_item.max(1)).clamp(1, u64::from(u32::MAX)) as u32;
+    let within_budget = (by_budget / granule).max(1) * granule;
+    let by_count = total.div_ceil(max_chunks.max(1)).div_ceil(granule) * granule;
+    within_budget.max(by_count)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::chunk_size;
+
+    #[test]
+    fn chunks_respect_budget_granule_and_count() {
+        // 6,600 caches × 65,536 VALs with a 2^26 budget: chunks of ≤ 10,168 VALs, rounded to 64.
+        let c = chunk_size(65_536, 6_600, 1 << 26, 64, 4096);
+        assert_eq!(c % 64, 0);
+        assert!(c <= 10_168 && c > 10_000, "{c}");
+        // A tiny job is one chunk.
+        assert_eq!(10u32.div_ceil(chunk_size(10, 1, 1 << 26, 64, 4096)), 1);
+        // The chunk count cap wins over the budget.
+        let c = chunk_size(1 << 24, 1 << 20, 1 << 26, 64, 16);
+        assert!((1u32 << 24).div_ceil(c) <= 16);
+    }
+}

@@ -4,6 +4,7 @@
 # - libvulkan1: the Vulkan loader wgpu opens.
 # - mesa-vulkan-drivers (lavapipe, a CPU Vulkan driver) only when no Vulkan driver is installed,
 #   so machines without a GPU can still render (slowly) and run the tests.
+# - fonts-dejavu-core: the font of the benchmark's PNG plots.
 # - Rust itself is not installed here: cargo ≥ 1.87 must be on PATH (https://rustup.rs).
 set -euo pipefail
 
@@ -18,6 +19,8 @@ icds=$(ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json 2>/dev/null | 
 if [ "$icds" -eq 0 ] && ! dpkg -s mesa-vulkan-drivers >/dev/null 2>&1; then
   packages+=(mesa-vulkan-drivers)
 fi
+
+[ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || packages+=(fonts-dejavu-core)
 
 if [ ${#packages[@]} -gt 0 ]; then
   echo "setup: installing ${packages[*]}" >&2

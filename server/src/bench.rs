@@ -64,6 +64,10 @@ pub struct BenchArgs {
     /// Write the results as a markdown table here.
     #[arg(long)]
     pub markdown: Option<PathBuf>,
+    /// Write PNG plots to PREFIX-error.png (error vs RSM size) and PREFIX-fps.png (fps vs RSM
+    /// size, per configuration).
+    #[arg(long)]
+    pub plots: Option<PathBuf>,
     /// Exposure for the frames (only the indirect buffer is compared, so this does not matter
     /// for the error; `auto` costs one extra stage).
     #[arg(long, default_value = "1", allow_negative_numbers = true)]

@@ -4,6 +4,7 @@
 //! offline `render` command ([`offline`]) and tests can drive it directly.
 
 pub mod bench;
+pub mod bench_plots;
 pub mod debug_views;
 pub mod gi;
 pub mod gpu;

@@ -75,6 +75,11 @@ fn main() -> anyhow::Result<()> {
                 std::fs::write(path, &markdown)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
+            if let Some(prefix) = &args.plots {
+                for path in lightcast_server::bench_plots::write_plots(&report, prefix)? {
+                    eprintln!("wrote {}", path.display());
+                }
+            }
         }
     }
     Ok(())

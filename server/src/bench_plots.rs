@@ -1,0 +1,223 @@
+//! PNG plots of a [`BenchReport`]: relative error against LightSkin and frames per second, both
+//! over the RSM size, one line per configuration (the paper's Figures 3 and 5).
+
+use crate::bench::{BenchReport, BenchRow};
+use crate::gi::GiMethod;
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// Fonts tried in order for the plots' text (Debian's fonts-dejavu-core provides the first).
+const FONT_CANDIDATES: [&str; 2] = [
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+];
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("no font for the plot text found (install fonts-dejavu-core); looked for {0:?}")]
+    NoFont(Vec<&'static str>),
+    #[error("drawing {path}: {message}")]
+    Draw { path: PathBuf, message: String },
+}
+
+/// Registers the plot font once per process.
+fn ensure_font() -> Result<(), PlotError> {
+    static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        FONT_CANDIDATES.iter().any(|path| {
+            std::fs::read(path).ok().is_some_and(|bytes| {
+                // The font must live for the rest of the process; it is loaded once.
+                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+                plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok()
+            })
+        })
+    });
+    if ok {
+        Ok(())
+    } else {
+        Err(PlotError::NoFont(FONT_CANDIDATES.to_vec()))
+    }
+}
+
+fn label(row: &BenchRow) -> String {
+    match row.method {
+        GiMethod::Brsm => format!(
+            "BRSM {} VALs, {} view samples",
+            row.val_count.unwrap_or(0),
+            row.view_samples.unwrap_or(0)
+        ),
+        _ => "LightSkin".to_string(),
+    }
+}
+
+/// One line per configuration: (label, [(log2 of the RSM side, value)]).
+fn series(
+    report: &BenchReport,
+    value: impl Fn(&BenchRow) -> f64,
+) -> Vec<(String, Vec<(f64, f64)>)> {
+    let mut out: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for row in &report.rows {
+        let name = label(row);
+        let point = (f64::from(row.rsm_size).log2(), value(row));
+        match out.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, points)) => points.push(point),
+            None => out.push((name, vec![point])),
+        }
+    }
+    out
+}
+
+fn draw(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    lines: &[(String, Vec<(f64, f64)>)],
+) -> Result<(), PlotError> {
+    let err = |e: &dyn std::fmt::Display| PlotError::Draw {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let points = lines.iter().flat_map(|(_, p)| p.iter());
+    let x_max = points.clone().map(|p| p.0).fold(0.0, f64::max);
+    let x_min = points.clone().map(|p| p.0).fold(x_max, f64::min);
+    let y_max = points.map(|p| p.1).fold(0.0, f64::max).max(1e-9) * 1.1;
+    let root = BitMapBackend::new(path, (960, 600)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 24))
+        .margin(16)
+        .x_label_area_size(48)
+        .y_label_area_size(72)
+        .build_cartesian_2d(x_min - 0.25..x_max + 0.25, 0.0..y_max)
+        .map_err(|e| err(&e))?;
+    chart
+        .configure_mesh()
+        .x_desc("RSM side (texels)")
+        .x_labels(((x_max - x_min) as usize + 1).max(2))
+        .x_label_formatter(&|v| format!("{}", v.exp2().round()))
+        .y_desc(y_label)
+        .label_style(("sans-serif", 16))
+        .draw()
+        .map_err(|e| err(&e))?;
+    for (i, (name, points)) in lines.iter().enumerate() {
+        let colour = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(
+                points.iter().copied(),
+                colour.stroke_width(2),
+            ))
+            .map_err(|e| err(&e))?
+            .label(name.as_str())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+            });
+        chart
+            .draw_series(points.iter().map(|&p| Circle::new(p, 4, colour.filled())))
+            .map_err(|e| err(&e))?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()
+        .map_err(|e| err(&e))?;
+    root.present().map_err(|e| err(&e))?;
+    Ok(())
+}
+
+/// Writes `<prefix>-error.png` and `<prefix>-fps.png`; returns their paths.
+pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, PlotError> {
+    ensure_font()?;
+    let with_suffix = |suffix: &str| {
+        let mut name = prefix.as_os_str().to_owned();
+        name.push(suffix);
+        PathBuf::from(name)
+    };
+    let error_path = with_suffix("-error.png");
+    let brsm_only: Vec<_> = series(report, |r| r.mad_relative * 100.0)
+        .into_iter()
+        .filter(|(name, _)| name != "LightSkin")
+        .collect();
+    draw(
+        &error_path,
+        "Indirect light: mean absolute difference to LightSkin",
+        "MAD / LightSkin mean (%)",
+        &brsm_only,
+    )?;
+    let fps_path = with_suffix("-fps.png");
+    draw(
+        &fps_path,
+        &format!("Frames per second ({})", report.adapter),
+        "fps (median frame time)",
+        &series(report, |r| r.fps),
+    )?;
+    Ok(vec![error_path, fps_path])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::StageStats;
+    use crate::gpu::timing::TimingSource;
+
+    fn row(method: GiMethod, rsm_size: u32, vals: Option<u32>, fps: f64, mad: f64) -> BenchRow {
+        let stats = StageStats {
+            median_ms: 1000.0 / fps,
+            p95_ms: 1000.0 / fps,
+        };
+        BenchRow {
+            method,
+            rsm_size,
+            val_count: vals,
+            view_samples: vals.map(|_| 512),
+            stages: Default::default(),
+            gi: stats.clone(),
+            frame: stats,
+            fps,
+            mad,
+            mad_relative: mad,
+            speedup_vs_lightskin: 1.0,
+        }
+    }
+
+    #[test]
+    fn plots_are_written_as_png_images() {
+        let rows = [128, 256, 512]
+            .iter()
+            .flat_map(|&s| {
+                [
+                    row(GiMethod::Lightskin, s, None, 1e5 / f64::from(s), 0.0),
+                    row(GiMethod::Brsm, s, Some(2048), 500.0, 0.1),
+                    row(GiMethod::Brsm, s, Some(8192), 300.0, 0.05),
+                ]
+            })
+            .collect();
+        let report = BenchReport {
+            adapter: "test".into(),
+            timing_source: TimingSource::GpuTimestamps,
+            scene: "t".into(),
+            triangles: 1,
+            caches: 1,
+            width: 1,
+            height: 1,
+            frames: 1,
+            warmup: 0,
+            rows,
+        };
+        // Two configurations of BRSM plus LightSkin: three lines in the fps plot.
+        assert_eq!(series(&report, |r| r.fps).len(), 3);
+        let dir = std::env::temp_dir().join(format!("lightcast-plots-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let paths = write_plots(&report, &dir.join("bench")).expect("plots");
+        assert_eq!(paths.len(), 2);
+        for path in paths {
+            let image = image::open(&path).expect("a PNG");
+            assert_eq!((image.width(), image.height()), (960, 600));
+            // Not a blank canvas: some pixels are not white.
+            let rgb = image.to_rgb8();
+            assert!(rgb.pixels().filter(|p| p.0 != [255, 255, 255]).count() > 1000);
+        }
+        std::fs::remove_dir_all(&dir).expect("remove temp dir");
+    }
+}

@@ -31,6 +31,16 @@ pub enum DebugView {
     Caches,
 }
 
+impl std::fmt::Display for DebugView {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        use clap::ValueEnum;
+        match self.to_possible_value() {
+            Some(v) => f.write_str(v.get_name()),
+            None => write!(f, "{self:?}"),
+        }
+    }
+}
+
 impl DebugView {
     /// Whether the view needs the sampling stages' buffers read back.
     pub fn needs_sampling(self) -> bool {

@@ -205,7 +205,7 @@ pub enum OfflineError {
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
     Render(#[from] crate::renderer::RenderError),
-    #[error("--view {view:?} needs global illumination; use --gi lightskin or --gi brsm")]
+    #[error("--view {view} needs global illumination; use --gi lightskin or --gi brsm")]
     ViewNeedsGi { view: DebugView },
     #[error("writing {path}: {source}")]
     Write {

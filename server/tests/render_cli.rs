@@ -212,6 +212,25 @@ fn bad_input_is_reported_precisely_without_panicking() {
             vec!["--out".into(), "/nonexistent-dir/x.png".into()],
             "nonexistent-dir",
         ),
+        (vec!["--vals".into(), "0".into()], "val_count"),
+        (vec!["--rsm-size".into(), "5".into()], "rsm_size"),
+        (
+            vec!["--view-samples".into(), "100000".into()],
+            "view_samples",
+        ),
+        (vec!["--cache-distance".into(), "nan".into()], "d_eps"),
+        (vec!["--cache-distance".into(), "0.00001".into()], "d_eps"),
+        (vec!["--cache-angle".into(), "120".into()], "theta_eps"),
+        (
+            vec![
+                "--gi".into(),
+                "none".into(),
+                "--view".into(),
+                "indirect".into(),
+            ],
+            "--view indirect",
+        ),
+        (vec!["--gi".into(), "fancy".into()], "fancy"),
     ];
     for (extra, needle) in cases {
         let mut args: Vec<String> = ["render", "--width", "32", "--height", "32"]
@@ -234,4 +253,59 @@ fn bad_input_is_reported_precisely_without_panicking() {
         !Path::new(&out).exists(),
         "a failed render must not leave an output file"
     );
+}
+
+#[test]
+fn gi_methods_and_debug_views_write_images() {
+    let small = [
+        "--rsm-size",
+        "32",
+        "--vals",
+        "256",
+        "--view-samples",
+        "32",
+        "--exposure",
+        "1",
+    ];
+    let (none, _, _) = render_ok("gi-none.png", &[&small[..], &["--gi", "none"]].concat());
+    let (brsm, stdout, stderr) =
+        render_ok("gi-brsm.png", &[&small[..], &["--gi", "brsm"]].concat());
+    let (lightskin, _, _) = render_ok(
+        "gi-lightskin.png",
+        &[&small[..], &["--gi", "lightskin"]].concat(),
+    );
+    assert!(stderr.contains("light caches:"), "{stderr}");
+    for stage in [
+        "rsm",
+        "importance",
+        "cumulative_sums",
+        "val_select",
+        "cache_lighting",
+        "proxy_occlusion",
+        "indirect_light",
+    ] {
+        assert!(stdout.contains(stage), "missing {stage}: {stdout}");
+    }
+    // Indirect light only adds: both GI images are brighter than direct light alone.
+    assert!(
+        mean_level(&brsm) > mean_level(&none) + 1.0,
+        "{} vs {}",
+        mean_level(&brsm),
+        mean_level(&none)
+    );
+    assert!(mean_level(&lightskin) > mean_level(&none) + 1.0);
+    for (view, size) in [
+        ("indirect", (96, 64)),
+        ("rsm-flux", (32, 32)),
+        ("importance", (32, 32)),
+        ("selected-vals", (32, 32)),
+        ("caches", (96, 64)),
+    ] {
+        let (img, _, _) = render_ok(
+            &format!("view-{view}.png"),
+            &[&small[..], &["--view", view]].concat(),
+        );
+        assert_eq!(img.dimensions(), size, "{view}");
+        assert!(mean_level(&img) > 1.0, "{view} is black");
+    }
 }

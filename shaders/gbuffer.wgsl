@@ -3,26 +3,9 @@
 
 @group(0) @binding(0) var<uniform> camera: CameraUniform;
 
-struct VertexOutput {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) world: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) uv: vec2<f32>,
-    @location(3) @interpolate(flat) material: u32,
-    // The provoking vertex: its 16 nearest light caches serve the whole triangle.
-    @location(4) @interpolate(flat) vertex: u32,
-}
-
 @vertex
-fn vs_main(v: VertexInput, @builtin(vertex_index) vertex: u32) -> VertexOutput {
-    var out: VertexOutput;
-    out.clip = camera.view_proj * vec4<f32>(v.position, 1.0);
-    out.world = v.position;
-    out.normal = v.normal;
-    out.uv = v.uv;
-    out.material = v.material;
-    out.vertex = vertex;
-    return out;
+fn vs_main(v: VertexInput, @builtin(vertex_index) vertex: u32) -> SurfaceVaryings {
+    return surface_varyings(v, vertex, camera.view_proj);
 }
 
 struct GBufferOut {
@@ -35,16 +18,12 @@ struct GBufferOut {
 }
 
 @fragment
-fn fs_main(in: VertexOutput, @builtin(front_facing) front: bool) -> GBufferOut {
+fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> GBufferOut {
     let m = sample_material(in.material, in.uv);
     if !m.covered {
         discard;
     }
-    // Culling is off (glTF allows double-sided materials); back faces shade with the flipped normal.
-    var n = normalize(in.normal);
-    if !front {
-        n = -n;
-    }
+    let n = facing_normal(in.normal, front);
     var out: GBufferOut;
     // w = 1 marks covered pixels; the clear value 0 marks background.
     out.position = vec4<f32>(in.world, 1.0);

@@ -42,3 +42,24 @@ struct VertexInput {
     @location(2) uv: vec2<f32>,
     @location(3) material: u32,
 }
+
+// What the rasterising passes interpolate from a scene vertex.
+struct SurfaceVaryings {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) @interpolate(flat) material: u32,
+    // The provoking vertex: its 16 nearest light caches serve the whole triangle.
+    @location(4) @interpolate(flat) vertex: u32,
+}
+
+fn surface_varyings(v: VertexInput, vertex: u32, view_proj: mat4x4<f32>) -> SurfaceVaryings {
+    return SurfaceVaryings(view_proj * vec4<f32>(v.position, 1.0), v.position, v.normal, v.uv, v.material, vertex);
+}
+
+// The shading normal: back faces (glTF allows double-sided materials) use the flipped one.
+fn facing_normal(normal: vec3<f32>, front: bool) -> vec3<f32> {
+    let n = normalize(normal);
+    return select(-n, n, front);
+}

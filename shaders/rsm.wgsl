@@ -19,23 +19,9 @@ struct RsmFace {
 @group(0) @binding(0) var<uniform> face: RsmFace;
 @group(0) @binding(1) var<uniform> light: LightUniform;
 
-struct VertexOutput {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) world: vec3<f32>,
-    @location(1) normal: vec3<f32>,
-    @location(2) uv: vec2<f32>,
-    @location(3) @interpolate(flat) material: u32,
-}
-
 @vertex
-fn vs_main(v: VertexInput) -> VertexOutput {
-    var out: VertexOutput;
-    out.clip = face.view_proj * vec4<f32>(v.position, 1.0);
-    out.world = v.position;
-    out.normal = v.normal;
-    out.uv = v.uv;
-    out.material = v.material;
-    return out;
+fn vs_main(v: VertexInput, @builtin(vertex_index) vertex: u32) -> SurfaceVaryings {
+    return surface_varyings(v, vertex, face.view_proj);
 }
 
 struct RsmOut {
@@ -47,15 +33,12 @@ struct RsmOut {
 }
 
 @fragment
-fn fs_main(in: VertexOutput, @builtin(front_facing) front: bool) -> RsmOut {
+fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> RsmOut {
     let m = sample_material(in.material, in.uv);
     if !m.covered {
         discard;
     }
-    var n = normalize(in.normal);
-    if !front {
-        n = -n;
-    }
+    let n = facing_normal(in.normal, front);
     var area = face.texel_area;
     if face.perspective != 0u {
         let z = dot(in.world - light.position, face.axis);

@@ -5,9 +5,9 @@
 //! with the baseline's (mean absolute difference, absolute and relative to the baseline's
 //! mean). All configurations run in one process on one GPU, so ratios between them are fair.
 
-use crate::gi::{cache_store::CacheStore, caches::CacheParams, GiMethod, GiSettings};
+use crate::gi::{GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
-use crate::offline::{ExposureArg, DEFAULT_SCENE};
+use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
@@ -52,12 +52,8 @@ pub struct BenchArgs {
     /// Untimed frames before timing each configuration.
     #[arg(long, default_value_t = 5)]
     pub warmup: u32,
-    /// Light caches: d_eps in scene units (default: derived from the scene).
-    #[arg(long)]
-    pub cache_distance: Option<f32>,
-    /// Where precomputed light caches are kept (env LIGHTCAST_CACHE_DIR).
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
+    #[command(flatten)]
+    pub caches: CacheArgs,
     /// Write the results as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -248,16 +244,7 @@ pub fn run(
         scene: spec.to_string(),
         source,
     })?;
-    let mut params = CacheParams::for_scene(&scene);
-    if let Some(d) = args.cache_distance {
-        params.d_eps = d;
-    }
-    let store = CacheStore::new(
-        args.cache_dir
-            .clone()
-            .unwrap_or_else(CacheStore::default_dir),
-    );
-    let (caches, _) = store.load_or_compute(&scene, &params, &mut |_| {})?;
+    let caches = args.caches.load(&scene, log)?;
     log(&format!(
         "scene {}: {} triangles, {} light caches",
         scene.name,

@@ -3,7 +3,7 @@
 use crate::debug_views::{self, DebugView};
 use crate::gi::{
     cache_store::CacheStore,
-    caches::{CacheParams, Progress},
+    caches::{CacheParams, CacheSet, Progress},
     GiMethod, GiSettings,
 };
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
@@ -79,6 +79,63 @@ impl From<LightTypeArg> for LightKind {
     }
 }
 
+/// Light-cache options shared by `render` and `bench`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct CacheArgs {
+    /// Light caches: largest distance d_eps between a surface point and its cache, in scene
+    /// units. Default: derived from the scene's surface area (about 6,000 caches).
+    #[arg(long)]
+    pub cache_distance: Option<f32>,
+    /// Light caches: largest angle theta_eps between surface and cache normals, in degrees.
+    #[arg(long)]
+    pub cache_angle: Option<f32>,
+    /// Where precomputed light caches are kept (env LIGHTCAST_CACHE_DIR; default: the user's
+    /// cache directory).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+}
+
+impl CacheArgs {
+    /// Loads the scene's light caches from the store, or computes and stores them, logging
+    /// progress and how long it took.
+    pub fn load(
+        &self,
+        scene: &Scene,
+        log: &mut dyn FnMut(&str),
+    ) -> Result<CacheSet, crate::gi::caches::CacheError> {
+        let mut params = CacheParams::for_scene(scene);
+        if let Some(d) = self.cache_distance {
+            params.d_eps = d;
+        }
+        if let Some(a) = self.cache_angle {
+            params.theta_eps_degrees = a;
+        }
+        let store = CacheStore::new(
+            self.cache_dir
+                .clone()
+                .unwrap_or_else(CacheStore::default_dir),
+        );
+        let started = Instant::now();
+        let mut last_step = "";
+        let mut progress = |p: Progress| {
+            if p.step != last_step || p.done == p.total {
+                log(&format!("light caches: {} {}/{}", p.step, p.done, p.total));
+                last_step = p.step;
+            }
+        };
+        let (set, from_disk) = store.load_or_compute(scene, &params, &mut progress)?;
+        log(&format!(
+            "light caches: {} caches (d_eps {}, theta_eps {}°), {} in {:.1} ms",
+            set.caches.len(),
+            params.d_eps,
+            params.theta_eps_degrees,
+            if from_disk { "loaded" } else { "computed" },
+            started.elapsed().as_secs_f64() * 1e3
+        ));
+        Ok(set)
+    }
+}
+
 /// Options of `lightcast-server render`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct RenderArgs {
@@ -148,17 +205,8 @@ pub struct RenderArgs {
     /// Turn off the occlusion of proxy lights by other caches (double projection).
     #[arg(long)]
     pub no_occlusion: bool,
-    /// Light caches: largest distance d_eps between a surface point and its cache, in scene
-    /// units. Default: derived from the scene's surface area (about 6,000 caches).
-    #[arg(long)]
-    pub cache_distance: Option<f32>,
-    /// Light caches: largest angle theta_eps between surface and cache normals, in degrees.
-    #[arg(long)]
-    pub cache_angle: Option<f32>,
-    /// Where precomputed light caches are kept (env LIGHTCAST_CACHE_DIR; default: the user's
-    /// cache directory).
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
+    #[command(flatten)]
+    pub caches: CacheArgs,
     /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
     /// importance map, selected VALs, light caches).
     #[arg(long, value_enum, default_value = "final")]
@@ -309,36 +357,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let caches = if args.gi == GiMethod::None {
         None
     } else {
-        let mut params = CacheParams::for_scene(&scene);
-        if let Some(d) = args.cache_distance {
-            params.d_eps = d;
-        }
-        if let Some(a) = args.cache_angle {
-            params.theta_eps_degrees = a;
-        }
-        let store = CacheStore::new(
-            args.cache_dir
-                .clone()
-                .unwrap_or_else(CacheStore::default_dir),
-        );
-        let started = Instant::now();
-        let mut last_step = "";
-        let mut progress = |p: Progress| {
-            if p.step != last_step || p.done == p.total {
-                log(&format!("light caches: {} {}/{}", p.step, p.done, p.total));
-                last_step = p.step;
-            }
-        };
-        let (set, from_disk) = store.load_or_compute(&scene, &params, &mut progress)?;
-        log(&format!(
-            "light caches: {} caches (d_eps {}, theta_eps {}°), {} in {:.1} ms",
-            set.caches.len(),
-            params.d_eps,
-            params.theta_eps_degrees,
-            if from_disk { "loaded" } else { "computed" },
-            started.elapsed().as_secs_f64() * 1e3
-        ));
-        Some(set)
+        Some(args.caches.load(&scene, log)?)
     };
     let mut renderer = Renderer::new(ctx, scene);
     if let Some(set) = &caches {

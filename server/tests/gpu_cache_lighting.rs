@@ -134,17 +134,7 @@ fn brsm_cache_lighting_matches_the_cpu_reference() {
         .read_sampling()
         .expect("readback")
         .expect("sampled");
-    let vals: Vec<RefVal> = sampling
-        .vals
-        .iter()
-        .map(|v| RefVal {
-            position: Vec3::from(v.position),
-            normal: Vec3::from(v.normal),
-            flux: Vec3::from(v.flux),
-            area: v.area,
-            weight: v.weight,
-        })
-        .collect();
+    let vals = ref_vals(&sampling.vals);
     assert_small(proxy_errors(&run, &vals), 1e-4, 1e-2);
 }
 
@@ -438,31 +428,8 @@ fn chunked_dispatches_give_the_unchunked_results() {
         .expect("GI ran");
 
     // Importance of every 97th texel against eq. 10–11.
-    let n = sampling.view_samples.len() as f32;
     for i in (0..sampling.importance.len()).step_by(97) {
-        let p = sampling.rsm_position[i];
-        let want = if p[3] == 0.0 {
-            0.0
-        } else {
-            let (x, nl) = (
-                Vec3::from_slice(&p[..3]),
-                Vec3::from_slice(&sampling.rsm_normal[i][..3]),
-            );
-            let flux = luminance(Vec3::from_slice(&sampling.rsm_flux_area[i][..3]));
-            let sum: f32 = sampling
-                .view_samples
-                .iter()
-                .map(|vs| {
-                    let l = Vec3::from(vs.position) - x;
-                    let d2 = l.length_squared();
-                    let d = l / d2.max(1e-24).sqrt();
-                    vs.valid * nl.dot(d).max(0.0) * Vec3::from(vs.normal).dot(-d).max(0.0)
-                        / d2.max(1.0)
-                })
-                .sum();
-            flux * sum / n
-        };
-        let got = sampling.importance[i];
+        let (got, want) = (sampling.importance[i], cpu_importance(&sampling, i));
         assert!(
             (got - want).abs() <= 1e-3 * want.abs() + 1e-9,
             "texel {i}: {got} vs {want}"
@@ -470,17 +437,7 @@ fn chunked_dispatches_give_the_unchunked_results() {
     }
 
     // Proxy lights of every 50th cache against eq. 3–7 / 13–15.
-    let vals: Vec<RefVal> = sampling
-        .vals
-        .iter()
-        .map(|v| RefVal {
-            position: Vec3::from(v.position),
-            normal: Vec3::from(v.normal),
-            flux: Vec3::from(v.flux),
-            area: v.area,
-            weight: v.weight,
-        })
-        .collect();
+    let vals = ref_vals(&sampling.vals);
     let camera = Vec3::from(settings.camera.position);
     let scale = scene.bounds.radius();
     let mut errors = Vec::new();

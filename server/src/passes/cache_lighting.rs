@@ -80,7 +80,6 @@ pub struct CacheLightingPass {
 
 impl CacheLightingPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let read = wgpu::BufferBindingType::Storage { read_only: true };
         let params = super::UniformSlots::new(
             device,
             "cache lighting params",
@@ -91,21 +90,13 @@ impl CacheLightingPass {
             label: Some("cache lighting"),
             entries: &[
                 params.layout_entry(0),
-                super::buffer_entry(1, wgpu::ShaderStages::COMPUTE, read),
-                super::buffer_entry(2, wgpu::ShaderStages::COMPUTE, read),
+                super::storage_entry(1, true),
+                super::storage_entry(2, true),
                 super::compute_texture_entry(3, false),
                 super::compute_texture_entry(4, false),
                 super::compute_texture_entry(5, false),
-                super::buffer_entry(
-                    6,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: false },
-                ),
-                super::buffer_entry(
-                    7,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: false },
-                ),
+                super::storage_entry(6, false),
+                super::storage_entry(7, false),
             ],
         });
         let module = shaders::CACHE_LIGHTING.create_module(device);
@@ -202,10 +193,7 @@ impl CacheLightingPass {
         chunks: u32,
     ) {
         let groups = cache_count.div_ceil(WORKGROUP).max(1);
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("cache lighting"),
-            timestamp_writes: None,
-        });
+        let mut pass = super::begin_compute(encoder, "cache lighting");
         pass.set_pipeline(&self.accumulate);
         for k in 0..chunks {
             pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(k)]);

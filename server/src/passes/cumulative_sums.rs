@@ -26,26 +26,10 @@ impl CumulativeSumsPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cumulative sums"),
             entries: &[
-                super::buffer_entry(
-                    0,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Uniform,
-                ),
-                super::buffer_entry(
-                    1,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: true },
-                ),
-                super::buffer_entry(
-                    2,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: false },
-                ),
-                super::buffer_entry(
-                    3,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: false },
-                ),
+                super::uniform_entry(0),
+                super::storage_entry(1, true),
+                super::storage_entry(2, false),
+                super::storage_entry(3, false),
             ],
         });
         let module = shaders::CUMULATIVE_SUMS.create_module(device);
@@ -59,12 +43,7 @@ impl CumulativeSumsPass {
             ),
             rows: super::compute_pipeline(device, "scan rows", &layout, &module, "scan_rows"),
             layout,
-            params: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("scan params"),
-                size: std::mem::size_of::<ScanParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
+            params: super::uniform_buffer(device, "scan params", std::mem::size_of::<ScanParams>()),
         }
     }
 
@@ -103,10 +82,7 @@ impl CumulativeSumsPass {
         bind_group: &wgpu::BindGroup,
         width: u32,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("cumulative sums"),
-            timestamp_writes: None,
-        });
+        let mut pass = super::begin_compute(encoder, "cumulative sums");
         pass.set_bind_group(0, bind_group, &[]);
         pass.set_pipeline(&self.columns);
         pass.dispatch_workgroups(width, 1, 1);

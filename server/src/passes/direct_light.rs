@@ -24,18 +24,11 @@ pub struct DirectLightPass {
 
 impl DirectLightPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let uniform = |binding| {
-            super::buffer_entry(
-                binding,
-                wgpu::ShaderStages::COMPUTE,
-                wgpu::BufferBindingType::Uniform,
-            )
-        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("direct light"),
             entries: &[
-                uniform(0),
-                uniform(1),
+                super::uniform_entry(0),
+                super::uniform_entry(1),
                 super::compute_texture_entry(2, false),
                 super::compute_texture_entry(3, false),
                 super::compute_texture_entry(4, false),

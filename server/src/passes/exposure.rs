@@ -59,30 +59,24 @@ pub struct ExposureBindings {
 
 impl ExposurePass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let storage = wgpu::BufferBindingType::Storage { read_only: false };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("exposure"),
             entries: &[
-                super::buffer_entry(
-                    0,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Uniform,
-                ),
+                super::uniform_entry(0),
                 super::compute_texture_entry(1, false),
-                super::buffer_entry(2, wgpu::ShaderStages::COMPUTE, storage),
-                super::buffer_entry(3, wgpu::ShaderStages::COMPUTE, storage),
+                super::storage_entry(2, false),
+                super::storage_entry(3, false),
             ],
         });
         let module = shaders::EXPOSURE.create_module(device);
         let reduce =
             super::compute_pipeline(device, "exposure tiles", &layout, &module, "reduce_tiles");
         let finish = super::compute_pipeline(device, "exposure finish", &layout, &module, "finish");
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("exposure params"),
-            size: std::mem::size_of::<ExposureParams>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let params = super::uniform_buffer(
+            device,
+            "exposure params",
+            std::mem::size_of::<ExposureParams>(),
+        );
         let result = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("exposure result"),
             size: std::mem::size_of::<ExposureResult>() as u64,
@@ -173,10 +167,7 @@ impl ExposurePass {
         if exposure != Exposure::Auto {
             return;
         }
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("exposure"),
-            timestamp_writes: None,
-        });
+        let mut pass = super::begin_compute(encoder, "exposure");
         pass.set_bind_group(0, &bindings.bind_group, &[]);
         pass.set_pipeline(&self.reduce);
         pass.dispatch_workgroups(bindings.tiles.0, bindings.tiles.1, 1);

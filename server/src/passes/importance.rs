@@ -43,7 +43,6 @@ pub struct ImportancePass {
 
 impl ImportancePass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let storage = wgpu::BufferBindingType::Storage { read_only: false };
         let params = super::UniformSlots::new(
             device,
             "importance params",
@@ -56,11 +55,11 @@ impl ImportancePass {
                 params.layout_entry(0),
                 super::compute_texture_entry(1, false),
                 super::compute_texture_entry(2, false),
-                super::buffer_entry(3, wgpu::ShaderStages::COMPUTE, storage),
+                super::storage_entry(3, false),
                 super::compute_texture_entry(4, false),
                 super::compute_texture_entry(5, false),
                 super::compute_texture_entry(6, false),
-                super::buffer_entry(7, wgpu::ShaderStages::COMPUTE, storage),
+                super::storage_entry(7, false),
             ],
         });
         let module = shaders::IMPORTANCE.create_module(device);
@@ -141,10 +140,7 @@ impl ImportancePass {
         params: &ImportanceParams,
         band_rows: u32,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("importance"),
-            timestamp_writes: None,
-        });
+        let mut pass = super::begin_compute(encoder, "importance");
         pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(0)]);
         pass.set_pipeline(&self.gather);
         pass.dispatch_workgroups(params.sample_count.div_ceil(64), 1, 1);

@@ -32,13 +32,11 @@ pub struct IndirectLightPass {
 
 impl IndirectLightPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let read = wgpu::BufferBindingType::Storage { read_only: true };
-        let uniform = wgpu::BufferBindingType::Uniform;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("indirect light"),
             entries: &[
-                super::buffer_entry(0, wgpu::ShaderStages::COMPUTE, uniform),
-                super::buffer_entry(1, wgpu::ShaderStages::COMPUTE, uniform),
+                super::uniform_entry(0),
+                super::uniform_entry(1),
                 super::compute_texture_entry(2, false),
                 super::compute_texture_entry(3, false),
                 super::compute_texture_entry(4, false),
@@ -53,19 +51,18 @@ impl IndirectLightPass {
                     },
                     count: None,
                 },
-                super::buffer_entry(7, wgpu::ShaderStages::COMPUTE, read),
-                super::buffer_entry(8, wgpu::ShaderStages::COMPUTE, read),
-                super::buffer_entry(9, wgpu::ShaderStages::COMPUTE, read),
+                super::storage_entry(7, true),
+                super::storage_entry(8, true),
+                super::storage_entry(9, true),
                 super::storage_texture_entry(10, INDIRECT_FORMAT),
             ],
         });
         let module = shaders::INDIRECT_LIGHT.create_module(device);
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("indirect params"),
-            size: std::mem::size_of::<IndirectParams>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let params = super::uniform_buffer(
+            device,
+            "indirect params",
+            std::mem::size_of::<IndirectParams>(),
+        );
         Self {
             pipeline: super::compute_pipeline(device, "indirect light", &layout, &module, "main"),
             layout,

@@ -149,10 +149,7 @@ pub fn dispatch_2d(
     width: u32,
     height: u32,
 ) {
-    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-        label: Some(label),
-        timestamp_writes: None,
-    });
+    let mut pass = begin_compute(encoder, label);
     pass.set_pipeline(pipeline);
     pass.set_bind_group(0, bind_group, &[]);
     pass.dispatch_workgroups(width.div_ceil(TILE), height.div_ceil(TILE), 1);
@@ -259,6 +256,45 @@ pub fn chunk_size(
     let within_budget = (by_budget / granule).max(1) * granule;
     let by_count = total.div_ceil(max_chunks.max(1)).div_ceil(granule) * granule;
     within_budget.max(by_count)
+}
+
+/// Layout entry for a uniform buffer read by a compute shader.
+pub fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    buffer_entry(
+        binding,
+        wgpu::ShaderStages::COMPUTE,
+        wgpu::BufferBindingType::Uniform,
+    )
+}
+
+/// Layout entry for a storage buffer used by a compute shader.
+pub fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    buffer_entry(
+        binding,
+        wgpu::ShaderStages::COMPUTE,
+        wgpu::BufferBindingType::Storage { read_only },
+    )
+}
+
+/// A uniform buffer of `size` bytes written with `queue.write_buffer`.
+pub fn uniform_buffer(device: &wgpu::Device, label: &str, size: usize) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// A compute pass without timestamp writes (stages are timed on the encoder).
+pub fn begin_compute<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+) -> wgpu::ComputePass<'e> {
+    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+        label: Some(label),
+        timestamp_writes: None,
+    })
 }
 
 #[cfg(test)]

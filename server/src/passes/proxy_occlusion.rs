@@ -28,21 +28,9 @@ impl ProxyOcclusionPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("proxy occlusion"),
             entries: &[
-                super::buffer_entry(
-                    0,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Uniform,
-                ),
-                super::buffer_entry(
-                    1,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: true },
-                ),
-                super::buffer_entry(
-                    2,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: false },
-                ),
+                super::uniform_entry(0),
+                super::storage_entry(1, true),
+                super::storage_entry(2, false),
             ],
         });
         let module = shaders::PROXY_OCCLUSION.create_module(device);
@@ -55,12 +43,11 @@ impl ProxyOcclusionPass {
                 "occlude_proxies",
             ),
             layout,
-            params: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("occlusion params"),
-                size: std::mem::size_of::<OcclusionParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
+            params: super::uniform_buffer(
+                device,
+                "occlusion params",
+                std::mem::size_of::<OcclusionParams>(),
+            ),
         }
     }
 
@@ -97,10 +84,7 @@ impl ProxyOcclusionPass {
         bind_group: &wgpu::BindGroup,
         cache_count: u32,
     ) {
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("proxy occlusion"),
-            timestamp_writes: None,
-        });
+        let mut pass = super::begin_compute(encoder, "proxy occlusion");
         pass.set_bind_group(0, bind_group, &[]);
         pass.set_pipeline(&self.pipeline);
         pass.dispatch_workgroups(cache_count.div_ceil(WORKGROUP).max(1), 1, 1);

@@ -2,7 +2,7 @@
 //! texel, the faces of a light side by side in one atlas.
 
 use super::frame_uniforms::LightFace;
-use super::scene_buffers::{SceneBuffers, VERTEX_ATTRIBUTES};
+use super::scene_buffers::SceneBuffers;
 use super::Target;
 use crate::gpu::shaders;
 use bytemuck::{Pod, Zeroable};
@@ -157,44 +157,14 @@ impl RsmPass {
             immediate_size: 0,
         });
         let module = shaders::RSM.create_module(device);
-        let targets = [POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT].map(|format| {
-            Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("rsm"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(SceneBuffers::vertex_layout(&VERTEX_ATTRIBUTES))],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &targets,
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = super::scene_buffers::material_pipeline(
+            device,
+            "rsm",
+            &pipeline_layout,
+            &module,
+            &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT],
+            DEPTH_FORMAT,
+        );
         Self {
             pipeline,
             faces,

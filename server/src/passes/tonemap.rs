@@ -16,11 +16,7 @@ impl TonemapPass {
             label: Some("tonemap"),
             entries: &[
                 super::compute_texture_entry(0, false),
-                super::buffer_entry(
-                    1,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: true },
-                ),
+                super::storage_entry(1, true),
                 super::storage_texture_entry(2, LDR_FORMAT),
             ],
         });

@@ -51,26 +51,17 @@ pub struct SelectionBuffers<'a> {
 
 impl ValSelectPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let read = wgpu::BufferBindingType::Storage { read_only: true };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("val select"),
             entries: &[
-                super::buffer_entry(
-                    0,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Uniform,
-                ),
-                super::buffer_entry(1, wgpu::ShaderStages::COMPUTE, read),
-                super::buffer_entry(2, wgpu::ShaderStages::COMPUTE, read),
-                super::buffer_entry(3, wgpu::ShaderStages::COMPUTE, read),
+                super::uniform_entry(0),
+                super::storage_entry(1, true),
+                super::storage_entry(2, true),
+                super::storage_entry(3, true),
                 super::compute_texture_entry(4, false),
                 super::compute_texture_entry(5, false),
                 super::compute_texture_entry(6, false),
-                super::buffer_entry(
-                    7,
-                    wgpu::ShaderStages::COMPUTE,
-                    wgpu::BufferBindingType::Storage { read_only: false },
-                ),
+                super::storage_entry(7, false),
             ],
         });
         let module = shaders::VAL_SELECT.create_module(device);
@@ -83,12 +74,11 @@ impl ValSelectPass {
                 "select_vals",
             ),
             layout,
-            params: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("val select params"),
-                size: std::mem::size_of::<SelectParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }),
+            params: super::uniform_buffer(
+                device,
+                "val select params",
+                std::mem::size_of::<SelectParams>(),
+            ),
         }
     }
 
@@ -142,10 +132,7 @@ impl ValSelectPass {
         count: u32,
     ) {
         let (x, y) = Self::grid(count);
-        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-            label: Some("val select"),
-            timestamp_writes: None,
-        });
+        let mut pass = super::begin_compute(encoder, "val select");
         pass.set_bind_group(0, bind_group, &[]);
         pass.set_pipeline(&self.pipeline);
         pass.dispatch_workgroups(x, y, 1);

@@ -252,3 +252,44 @@ pub fn ambiguous_hit(scene: &Scene, origin: Vec3, dir: Vec3, t: f32, eps: f32) -
 pub fn triangle_material(scene: &Scene, tri: usize) -> u32 {
     scene.vertices[scene.indices[tri * 3] as usize].material
 }
+
+/// CPU port of `estimate_importance` in `shaders/importance.wgsl` (eq. 10–11) for RSM texel
+/// `i` of a read-back sampling run.
+pub fn cpu_importance(rb: &lightcast_server::gi::sampling::SamplingReadback, i: usize) -> f32 {
+    let p = rb.rsm_position[i];
+    if p[3] == 0.0 {
+        return 0.0;
+    }
+    let (x, nl) = (
+        Vec3::from_slice(&p[..3]),
+        Vec3::from_slice(&rb.rsm_normal[i][..3]),
+    );
+    let flux = luminance(Vec3::from_slice(&rb.rsm_flux_area[i][..3]));
+    let sum: f32 = rb
+        .view_samples
+        .iter()
+        .map(|vs| {
+            let l = Vec3::from(vs.position) - x;
+            let d2 = l.length_squared();
+            let d = l / d2.max(1e-24).sqrt();
+            // Eq. 11: the squared distance is clamped to at least 1.
+            vs.valid * nl.dot(d).max(0.0) * Vec3::from(vs.normal).dot(-d).max(0.0) / d2.max(1.0)
+        })
+        .sum();
+    flux * sum / rb.view_samples.len() as f32
+}
+
+/// The selected VALs as inputs of the CPU reference.
+pub fn ref_vals(
+    vals: &[lightcast_server::passes::val_select::Val],
+) -> Vec<lightcast_server::gi::reference::RefVal> {
+    vals.iter()
+        .map(|v| lightcast_server::gi::reference::RefVal {
+            position: Vec3::from(v.position),
+            normal: Vec3::from(v.normal),
+            flux: Vec3::from(v.flux),
+            area: v.area,
+            weight: v.weight,
+        })
+        .collect()
+}

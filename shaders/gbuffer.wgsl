@@ -1,11 +1,17 @@
 // G-buffer: rasterises the scene from the camera into world position, normal + glossy
-// exponent, diffuse albedo, glossy colour and emission.
+// exponent, diffuse albedo, glossy colour, emission and the id that finds the pixel's light
+// caches. The fragment entry point comes from gbuffer_triangle_ids.wgsl (scene-wide triangle
+// ids, needs the primitive_index extension) or gbuffer_vertex_ids.wgsl (provoking vertex).
 
 @group(0) @binding(0) var<uniform> camera: CameraUniform;
 
 @vertex
-fn vs_main(v: VertexInput, @builtin(vertex_index) vertex: u32) -> SurfaceVaryings {
-    return surface_varyings(v, vertex, camera.view_proj);
+fn vs_main(
+    v: VertexInput,
+    @builtin(vertex_index) vertex: u32,
+    @builtin(instance_index) first_triangle: u32,
+) -> SurfaceVaryings {
+    return surface_varyings(v, vertex, first_triangle, camera.view_proj);
 }
 
 struct GBufferOut {
@@ -14,11 +20,10 @@ struct GBufferOut {
     @location(2) diffuse: vec4<f32>,
     @location(3) glossy: vec4<f32>,
     @location(4) emissive: vec4<f32>,
-    @location(5) vertex: u32,
+    @location(5) id: u32,
 }
 
-@fragment
-fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> GBufferOut {
+fn write_gbuffer(in: SurfaceVaryings, front: bool, id: u32) -> GBufferOut {
     let m = sample_material(in.material, in.uv);
     if !m.covered {
         discard;
@@ -31,6 +36,6 @@ fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> GBufferOu
     out.diffuse = vec4<f32>(m.brdf.diffuse, 1.0);
     out.glossy = vec4<f32>(m.brdf.glossy, 1.0);
     out.emissive = vec4<f32>(m.emissive, 1.0);
-    out.vertex = in.vertex;
+    out.id = id;
     return out;
 }

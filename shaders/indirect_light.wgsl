@@ -1,13 +1,17 @@
-// Indirect light per pixel: the proxy lights of the 16 caches stored with the pixel's vertex
-// are interpolated with the weights of eq. 8 (eq. 9) and applied with the surface's BRDF.
+// Indirect light per pixel: the proxy lights of the 16 caches stored with a vertex are
+// interpolated with the weights of eq. 8 (eq. 9) and applied with the surface's BRDF. With
+// triangle ids in the G-buffer the results for the triangle's three vertices are blended by
+// the pixel's barycentric coordinates (smooth across triangles); without, the provoking
+// vertex serves the whole triangle.
 
 // Mirrored by `IndirectParams` in server/src/passes/indirect_light.rs.
 struct IndirectParams {
     // 0 writes black (GI off).
     enabled: u32,
+    // 1: `g_id` holds triangle ids; 0: provoking-vertex ids.
+    triangle_ids: u32,
     pad0: u32,
     pad1: u32,
-    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> camera: CameraUniform;
@@ -16,41 +20,38 @@ struct IndirectParams {
 @group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
 @group(0) @binding(4) var g_diffuse: texture_2d<f32>;
 @group(0) @binding(5) var g_glossy: texture_2d<f32>;
-@group(0) @binding(6) var g_vertex: texture_2d<u32>;
+@group(0) @binding(6) var g_id: texture_2d<u32>;
 @group(0) @binding(7) var<storage, read> caches: array<LightCache>;
 @group(0) @binding(8) var<storage, read> lighting: array<CacheLighting>;
 // 16 cache indices per scene vertex; u32::MAX pads lists of fewer caches.
 @group(0) @binding(9) var<storage, read> vertex_caches: array<u32>;
 @group(0) @binding(10) var indirect_out: texture_storage_2d<rgba16float, write>;
+// The scene's triangle list and vertex positions (9 floats per vertex, position first).
+@group(0) @binding(11) var<storage, read> indices: array<u32>;
+@group(0) @binding(12) var<storage, read> vertices: array<f32>;
 
 const NEIGHBOURS: u32 = 16u;
 const NO_CACHE: u32 = 0xffffffffu;
 const MIN_DIST2: f32 = 1e-4;
+const VERTEX_FLOATS: u32 = 9u;
 
-@compute @workgroup_size(8, 8)
-fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let size = textureDimensions(indirect_out);
-    if id.x >= size.x || id.y >= size.y {
-        return;
-    }
-    let texel = vec2<i32>(id.xy);
-    let position = textureLoad(g_position, texel, 0);
-    if params.enabled == 0u || position.w == 0.0 {
-        textureStore(indirect_out, texel, vec4<f32>(0.0));
-        return;
-    }
-    let x = position.xyz;
-    let ne = textureLoad(g_normal_exponent, texel, 0);
-    let n = normalize(ne.xyz);
-    let k = ne.w;
-    let v = normalize(camera.position - x);
-    let first = textureLoad(g_vertex, texel, 0).x * NEIGHBOURS;
+struct Surface {
+    x: vec3<f32>,
+    n: vec3<f32>,
+    v: vec3<f32>,
+    diffuse: vec3<f32>,
+    glossy: vec3<f32>,
+    k: f32,
+}
 
+// Indirect radiance at the surface from the 16 caches of `vertex` (eq. 8–9).
+fn shade_from_vertex(s: Surface, vertex: u32) -> vec3<f32> {
+    let first = vertex * NEIGHBOURS;
     var d_max = 0.0;
     for (var j = 0u; j < NEIGHBOURS; j++) {
         let ci = vertex_caches[first + j];
         if ci != NO_CACHE {
-            d_max = max(d_max, distance(x, caches[ci].position));
+            d_max = max(d_max, distance(s.x, caches[ci].position));
         }
     }
     var sum_d = 0.0;
@@ -68,11 +69,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         let l = lighting[ci];
         var a = 1.0;
         if d_max > 0.0 {
-            a = 1.0 - distance(x, c.position) / d_max;
+            a = 1.0 - distance(s.x, c.position) / d_max;
         }
         // Eq. 8: normals for the diffuse term, mirrored incident directions for the glossy one.
-        let w_d = a * sqrt(max(dot(n, c.normal), 0.0));
-        let r_x = mirror(n, normalize(l.glossy_position - x));
+        let w_d = a * sqrt(max(dot(s.n, c.normal), 0.0));
+        let r_x = mirror(s.n, normalize(l.glossy_position - s.x));
         let r_c = mirror(c.normal, normalize(l.glossy_position - c.position));
         let w_g = a * sqrt(max(dot(r_x, r_c), 0.0));
         sum_d += w_d;
@@ -85,19 +86,69 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var radiance = vec3<f32>(0.0);
     if sum_d > 0.0 {
         // Eq. 9, then the interpolated proxy as a point light of intensity Φ/4π.
-        let to_light = pos_d / sum_d - x;
+        let to_light = pos_d / sum_d - s.x;
         let d2 = max(dot(to_light, to_light), MIN_DIST2);
         let w = normalize(to_light);
-        let diffuse = textureLoad(g_diffuse, texel, 0).rgb;
-        radiance += diffuse / PI * (flux_d / sum_d) / (4.0 * PI * d2) * max(dot(n, w), 0.0);
+        radiance += s.diffuse / PI * (flux_d / sum_d) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
     }
     if sum_g > 0.0 {
-        let to_light = pos_g / sum_g - x;
+        let to_light = pos_g / sum_g - s.x;
         let d2 = max(dot(to_light, to_light), MIN_DIST2);
         let w = normalize(to_light);
-        let glossy = textureLoad(g_glossy, texel, 0).rgb;
-        let lobe = (k + 2.0) / (2.0 * PI) * pow(max(dot(mirror(n, w), v), 0.0), k);
-        radiance += glossy * lobe * (flux_g / sum_g) / (4.0 * PI * d2) * max(dot(n, w), 0.0);
+        let lobe = (s.k + 2.0) / (2.0 * PI) * pow(max(dot(mirror(s.n, w), s.v), 0.0), s.k);
+        radiance += s.glossy * lobe * (flux_g / sum_g) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
+    }
+    return radiance;
+}
+
+fn vertex_position(i: u32) -> vec3<f32> {
+    let b = i * VERTEX_FLOATS;
+    return vec3<f32>(vertices[b], vertices[b + 1u], vertices[b + 2u]);
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    let size = textureDimensions(indirect_out);
+    if id.x >= size.x || id.y >= size.y {
+        return;
+    }
+    let texel = vec2<i32>(id.xy);
+    let position = textureLoad(g_position, texel, 0);
+    if params.enabled == 0u || position.w == 0.0 {
+        textureStore(indirect_out, texel, vec4<f32>(0.0));
+        return;
+    }
+    let ne = textureLoad(g_normal_exponent, texel, 0);
+    let s = Surface(
+        position.xyz,
+        normalize(ne.xyz),
+        normalize(camera.position - position.xyz),
+        textureLoad(g_diffuse, texel, 0).rgb,
+        textureLoad(g_glossy, texel, 0).rgb,
+        ne.w,
+    );
+    let g = textureLoad(g_id, texel, 0).x;
+    var radiance = vec3<f32>(0.0);
+    if params.triangle_ids == 0u {
+        radiance = shade_from_vertex(s, g);
+    } else {
+        let tri = vec3<u32>(indices[3u * g], indices[3u * g + 1u], indices[3u * g + 2u]);
+        let a = vertex_position(tri.x);
+        let e1 = vertex_position(tri.y) - a;
+        let e2 = vertex_position(tri.z) - a;
+        // Barycentric coordinates of the pixel's position in its triangle.
+        let d = s.x - a;
+        let d11 = dot(e1, e1);
+        let d12 = dot(e1, e2);
+        let d22 = dot(e2, e2);
+        let denom = d11 * d22 - d12 * d12;
+        var b = vec3<f32>(1.0, 0.0, 0.0);
+        if denom > 0.0 {
+            let u = clamp((d22 * dot(d, e1) - d12 * dot(d, e2)) / denom, 0.0, 1.0);
+            let w = clamp((d11 * dot(d, e2) - d12 * dot(d, e1)) / denom, 0.0, 1.0 - u);
+            b = vec3<f32>(1.0 - u - w, u, w);
+        }
+        radiance = b.x * shade_from_vertex(s, tri.x) + b.y * shade_from_vertex(s, tri.y) + b.z * shade_from_vertex(s, tri.z);
     }
     textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));
 }

@@ -50,12 +50,16 @@ struct SurfaceVaryings {
     @location(1) normal: vec3<f32>,
     @location(2) uv: vec2<f32>,
     @location(3) @interpolate(flat) material: u32,
-    // The provoking vertex: its 16 nearest light caches serve the whole triangle.
+    // The provoking vertex (its light caches serve the triangle when triangle ids are not
+    // available).
     @location(4) @interpolate(flat) vertex: u32,
+    // Index of the draw's first triangle in the scene (passed as the instance index), so that
+    // it plus the primitive index is the scene-wide triangle id.
+    @location(5) @interpolate(flat) first_triangle: u32,
 }
 
-fn surface_varyings(v: VertexInput, vertex: u32, view_proj: mat4x4<f32>) -> SurfaceVaryings {
-    return SurfaceVaryings(view_proj * vec4<f32>(v.position, 1.0), v.position, v.normal, v.uv, v.material, vertex);
+fn surface_varyings(v: VertexInput, vertex: u32, first_triangle: u32, view_proj: mat4x4<f32>) -> SurfaceVaryings {
+    return SurfaceVaryings(view_proj * vec4<f32>(v.position, 1.0), v.position, v.normal, v.uv, v.material, vertex, first_triangle);
 }
 
 // The shading normal: back faces (glTF allows double-sided materials) use the flipped one.

@@ -20,8 +20,12 @@ struct RsmFace {
 @group(0) @binding(1) var<uniform> light: LightUniform;
 
 @vertex
-fn vs_main(v: VertexInput, @builtin(vertex_index) vertex: u32) -> SurfaceVaryings {
-    return surface_varyings(v, vertex, face.view_proj);
+fn vs_main(
+    v: VertexInput,
+    @builtin(vertex_index) vertex: u32,
+    @builtin(instance_index) first_triangle: u32,
+) -> SurfaceVaryings {
+    return surface_varyings(v, vertex, first_triangle, face.view_proj);
 }
 
 struct RsmOut {

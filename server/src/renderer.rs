@@ -289,7 +289,12 @@ impl Renderer {
             caches: None,
             indirect_stale: false,
             timer: FrameTimer::new(&ctx),
-            gbuffer_pass: GBufferPass::new(device, &camera_buffer, &material_layout),
+            gbuffer_pass: GBufferPass::new(
+                device,
+                &camera_buffer,
+                &material_layout,
+                ctx.primitive_index,
+            ),
             scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
             shadow_pass: ShadowMapPass::new(device),
             direct_pass: DirectLightPass::new(device),
@@ -311,6 +316,12 @@ impl Renderer {
 
     pub fn scene(&self) -> &Scene {
         &self.scene
+    }
+
+    /// Whether indirect light blends the light caches of each triangle's three vertices
+    /// (primitive indices available) rather than using the provoking vertex's.
+    pub fn triangle_ids(&self) -> bool {
+        self.ctx.primitive_index
     }
 
     pub fn timing_source(&self) -> TimingSource {
@@ -481,7 +492,8 @@ impl Renderer {
                 source,
             );
             self.occlusion_pass.prepare(queue, caches.count);
-            self.indirect_pass.prepare(queue, true);
+            self.indirect_pass
+                .prepare(queue, true, self.ctx.primitive_index);
         }
         self.sampled = gi_on;
         let gi_bind_groups = self.caches.as_ref().filter(|_| gi_on).map(|caches| {
@@ -502,6 +514,7 @@ impl Renderer {
                     caches: &caches.caches,
                     lighting: &caches.lighting,
                     vertex_caches: &caches.vertex_caches,
+                    scene: &self.scene_buffers,
                 },
                 &sized.indirect,
             );

@@ -55,6 +55,10 @@ pub struct GpuContext {
     pub info: wgpu::AdapterInfo,
     /// True when timestamps can be written between passes on an encoder (per-pass GPU times).
     pub timestamps: bool,
+    /// True when fragment shaders can read primitive indices, so the G-buffer can store
+    /// triangle ids and indirect light blends the light caches of a triangle's three vertices.
+    /// Set it to false before creating a renderer to use provoking vertices instead.
+    pub primitive_index: bool,
 }
 
 /// Human-readable adapter description (name, type, backend, driver).
@@ -118,14 +122,17 @@ impl GpuContext {
         {
             return Err(GpuError::NoCompute { adapter: name });
         }
-        let wanted =
+        let timestamp_features =
             wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS;
-        let timestamps = adapter.features().contains(wanted);
-        let required_features = if timestamps {
-            wanted
-        } else {
-            wgpu::Features::empty()
-        };
+        let timestamps = adapter.features().contains(timestamp_features);
+        let primitive_index = adapter.features().contains(wgpu::Features::PRIMITIVE_INDEX);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= timestamp_features;
+        }
+        if primitive_index {
+            required_features |= wgpu::Features::PRIMITIVE_INDEX;
+        }
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("lightcast"),
@@ -146,6 +153,7 @@ impl GpuContext {
             queue,
             info,
             timestamps,
+            primitive_index,
         })
     }
 

@@ -13,6 +13,7 @@ macro_rules! wgsl {
     };
 }
 
+/// The G-buffer writing provoking-vertex ids (adapters without primitive indices).
 pub const GBUFFER: ShaderSource = ShaderSource {
     name: "gbuffer",
     files: &[
@@ -20,6 +21,20 @@ pub const GBUFFER: ShaderSource = ShaderSource {
         wgsl!("brdf.wgsl"),
         wgsl!("materials.wgsl"),
         wgsl!("gbuffer.wgsl"),
+        wgsl!("gbuffer_vertex_ids.wgsl"),
+    ],
+};
+
+/// The G-buffer writing scene-wide triangle ids (needs `Features::PRIMITIVE_INDEX`).
+pub const GBUFFER_TRIANGLE_IDS: ShaderSource = ShaderSource {
+    name: "gbuffer_triangle_ids",
+    files: &[
+        wgsl!("enable_primitive_index.wgsl"),
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("materials.wgsl"),
+        wgsl!("gbuffer.wgsl"),
+        wgsl!("gbuffer_triangle_ids.wgsl"),
     ],
 };
 
@@ -105,6 +120,7 @@ pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
 /// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
+    &GBUFFER_TRIANGLE_IDS,
     &SHADOW_MAP,
     &DIRECT_LIGHT,
     &EXPOSURE,
@@ -197,7 +213,7 @@ mod tests {
             let module = layout_check::parse(source);
             naga::valid::Validator::new(
                 naga::valid::ValidationFlags::all(),
-                naga::valid::Capabilities::empty(),
+                naga::valid::Capabilities::PRIMITIVE_INDEX,
             )
             .validate(&module)
             .unwrap_or_else(|e| panic!("{}: {}", source.name, e.emit_to_string(&source.source())));

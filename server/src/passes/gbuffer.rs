@@ -10,7 +10,7 @@ pub const FORMATS: [wgpu::TextureFormat; 6] = [
     wgpu::TextureFormat::Rgba8Unorm,  // diffuse albedo
     wgpu::TextureFormat::Rgba8Unorm,  // glossy colour
     wgpu::TextureFormat::Rgba16Float, // emitted radiance
-    wgpu::TextureFormat::R32Uint,     // provoking vertex (its light-cache list)
+    wgpu::TextureFormat::R32Uint,     // triangle or provoking-vertex id (finds the light caches)
 ];
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
@@ -21,7 +21,8 @@ pub struct GBuffer {
     pub diffuse: Target,
     pub glossy: Target,
     pub emissive: Target,
-    pub vertex: Target,
+    /// Scene-wide triangle id, or the provoking vertex without primitive indices.
+    pub id: Target,
     pub depth: Target,
 }
 
@@ -35,7 +36,7 @@ impl GBuffer {
             diffuse: t("gbuffer diffuse", FORMATS[2]),
             glossy: t("gbuffer glossy", FORMATS[3]),
             emissive: t("gbuffer emissive", FORMATS[4]),
-            vertex: t("gbuffer vertex", FORMATS[5]),
+            id: t("gbuffer id", FORMATS[5]),
             depth: Target::new(
                 device,
                 "gbuffer depth",
@@ -54,7 +55,7 @@ impl GBuffer {
             &self.diffuse.view,
             &self.glossy.view,
             &self.emissive.view,
-            &self.vertex.view,
+            &self.id.view,
         ]
     }
 }
@@ -65,10 +66,12 @@ pub struct GBufferPass {
 }
 
 impl GBufferPass {
+    /// `triangle_ids` needs `Features::PRIMITIVE_INDEX` on the device.
     pub fn new(
         device: &wgpu::Device,
         camera: &wgpu::Buffer,
         material_layout: &wgpu::BindGroupLayout,
+        triangle_ids: bool,
     ) -> Self {
         let camera_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gbuffer camera"),
@@ -91,7 +94,12 @@ impl GBufferPass {
             bind_group_layouts: &[Some(&camera_layout), Some(material_layout)],
             immediate_size: 0,
         });
-        let module = shaders::GBUFFER.create_module(device);
+        let source = if triangle_ids {
+            &shaders::GBUFFER_TRIANGLE_IDS
+        } else {
+            &shaders::GBUFFER
+        };
+        let module = source.create_module(device);
         let pipeline = super::scene_buffers::material_pipeline(
             device,
             "gbuffer",

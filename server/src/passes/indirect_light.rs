@@ -12,16 +12,17 @@ pub const INDIRECT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Floa
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct IndirectParams {
     pub enabled: u32,
+    pub triangle_ids: u32,
     pub pad0: u32,
     pub pad1: u32,
-    pub pad2: u32,
 }
 
-/// The light-cache buffers the pass reads.
+/// The light-cache and scene buffers the pass reads.
 pub struct CacheInputs<'a> {
     pub caches: &'a wgpu::Buffer,
     pub lighting: &'a wgpu::Buffer,
     pub vertex_caches: &'a wgpu::Buffer,
+    pub scene: &'a super::scene_buffers::SceneBuffers,
 }
 
 pub struct IndirectLightPass {
@@ -55,6 +56,8 @@ impl IndirectLightPass {
                 super::storage_entry(8, true),
                 super::storage_entry(9, true),
                 super::storage_texture_entry(10, INDIRECT_FORMAT),
+                super::storage_entry(11, true),
+                super::storage_entry(12, true),
             ],
         });
         let module = shaders::INDIRECT_LIGHT.create_module(device);
@@ -88,21 +91,24 @@ impl IndirectLightPass {
                 super::view_binding(3, &gbuffer.normal_exponent.view),
                 super::view_binding(4, &gbuffer.diffuse.view),
                 super::view_binding(5, &gbuffer.glossy.view),
-                super::view_binding(6, &gbuffer.vertex.view),
+                super::view_binding(6, &gbuffer.id.view),
                 super::buffer_binding(7, caches.caches),
                 super::buffer_binding(8, caches.lighting),
                 super::buffer_binding(9, caches.vertex_caches),
                 super::view_binding(10, &indirect.view),
+                super::buffer_binding(11, &caches.scene.indices),
+                super::buffer_binding(12, &caches.scene.vertices),
             ],
         })
     }
 
-    pub fn prepare(&self, queue: &wgpu::Queue, enabled: bool) {
+    /// `triangle_ids` says what the G-buffer's id target holds.
+    pub fn prepare(&self, queue: &wgpu::Queue, enabled: bool, triangle_ids: bool) {
         let params = IndirectParams {
             enabled: u32::from(enabled),
+            triangle_ids: u32::from(triangle_ids),
             pad0: 0,
             pad1: 0,
-            pad2: 0,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
@@ -139,9 +145,9 @@ mod tests {
             size_of::<IndirectParams>(),
             &[
                 ("enabled", offset_of!(IndirectParams, enabled)),
+                ("triangle_ids", offset_of!(IndirectParams, triangle_ids)),
                 ("pad0", offset_of!(IndirectParams, pad0)),
                 ("pad1", offset_of!(IndirectParams, pad1)),
-                ("pad2", offset_of!(IndirectParams, pad2)),
             ],
         );
     }

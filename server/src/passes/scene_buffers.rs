@@ -84,12 +84,13 @@ impl SceneBuffers {
         let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene vertices"),
             contents: bytemuck::cast_slice(&scene.vertices),
-            usage: wgpu::BufferUsages::VERTEX,
+            // Storage too: indirect light reads triangle corners to find barycentrics.
+            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
         });
         let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene indices"),
             contents: bytemuck::cast_slice(&scene.indices),
-            usage: wgpu::BufferUsages::INDEX,
+            usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,
         });
         let shadow_casting = scene
             .material_ranges
@@ -116,16 +117,18 @@ impl SceneBuffers {
     }
 
     /// Draws `ranges` (all of [`Self::ranges`], or the light-facing [`Self::shadow_casting`])
-    /// with each range's material bound as group 1.
+    /// with each range's material bound as group 1. The instance index is the range's first
+    /// triangle, so shaders can turn primitive indices into scene-wide triangle ids.
     pub fn draw_with_materials(&self, pass: &mut wgpu::RenderPass<'_>, ranges: &[MaterialRange]) {
         pass.set_vertex_buffer(0, self.vertices.slice(..));
         pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
         for range in ranges {
             pass.set_bind_group(1, &self.materials[range.material as usize], &[]);
+            let first_triangle = range.first_index / 3;
             pass.draw_indexed(
                 range.first_index..range.first_index + range.index_count,
                 0,
-                0..1,
+                first_triangle..first_triangle + 1,
             );
         }
     }

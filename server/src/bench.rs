@@ -46,6 +46,9 @@ pub struct BenchArgs {
     /// View-sample counts N_VS for BRSM (comma-separated).
     #[arg(long, value_delimiter = ',', default_values_t = [256, 512])]
     pub view_samples: Vec<u32>,
+    /// Weight α of the uniform part of BRSM's selection pdf (0 = the paper's plain BRSM).
+    #[arg(long, default_value_t = crate::gi::DEFAULT_DEFENSIVE)]
+    pub defensive: f32,
     /// Timed frames per configuration.
     #[arg(long, default_value_t = 30)]
     pub frames: u32,
@@ -110,6 +113,8 @@ pub struct BenchReport {
     pub height: u32,
     pub frames: u32,
     pub warmup: u32,
+    /// α of BRSM's defensive selection mixture.
+    pub defensive: f32,
     pub rows: Vec<BenchRow>,
 }
 
@@ -321,6 +326,7 @@ pub fn run(
                 rsm_size,
                 val_count,
                 view_samples,
+                defensive: args.defensive,
                 ..GiSettings::default()
             };
             let label = format!("brsm rsm {rsm_size}² vals {val_count} vs {view_samples}");
@@ -364,6 +370,7 @@ pub fn run(
         height: args.height,
         frames: args.frames,
         warmup: args.warmup,
+        defensive: args.defensive,
         rows,
     })
 }
@@ -372,7 +379,7 @@ impl BenchReport {
     /// A markdown table: one row per configuration.
     pub fn markdown(&self) -> String {
         let mut s = format!(
-            "Scene `{}` ({} triangles, {} light caches), {}×{}, adapter {}, {:?}, {} frames after {} warm-up.\n\n",
+            "Scene `{}` ({} triangles, {} light caches), {}×{}, adapter {}, {:?}, {} frames after {} warm-up, BRSM defensive α = {}.\n\n",
             self.scene,
             self.triangles,
             self.caches,
@@ -381,7 +388,8 @@ impl BenchReport {
             self.adapter,
             self.timing_source,
             self.frames,
-            self.warmup
+            self.warmup,
+            self.defensive
         );
         s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD | MAD / mean |\n";
         s += "|---|---|---|---|---|---|---|---|---|---|\n";

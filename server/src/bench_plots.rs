@@ -203,6 +203,7 @@ mod tests {
             height: 1,
             frames: 1,
             warmup: 0,
+            defensive: 0.1,
             rows,
         };
         // Two configurations of BRSM plus LightSkin: three lines in the fps plot.

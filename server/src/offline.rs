@@ -202,6 +202,10 @@ pub struct RenderArgs {
     /// N_sVAL: VALs selected per frame by BRSM (1 … 1048576).
     #[arg(long, default_value_t = GiSettings::default().val_count)]
     pub vals: u32,
+    /// Weight α of the uniform part mixed into BRSM's VAL selection (0 = the paper's plain
+    /// importance sampling; bounds the weight of rarely drawn VALs).
+    #[arg(long, default_value_t = crate::gi::DEFAULT_DEFENSIVE)]
+    pub defensive: f32,
     /// Turn off the occlusion of proxy lights by other caches (double projection).
     #[arg(long)]
     pub no_occlusion: bool,
@@ -326,6 +330,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
             view_samples: args.view_samples,
             val_count: args.vals,
             occlusion: !args.no_occlusion,
+            defensive: args.defensive,
             ..GiSettings::default()
         },
     }

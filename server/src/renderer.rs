@@ -200,6 +200,12 @@ impl RenderSettings {
             if !(0.0..1.0).contains(&g.jitter) {
                 return Err(invalid("jitter", format!("{} is outside [0, 1)", g.jitter)));
             }
+            if !(0.0..=1.0).contains(&g.defensive) {
+                return Err(invalid(
+                    "defensive",
+                    format!("{} is outside [0, 1]", g.defensive),
+                ));
+            }
         }
         if let Exposure::Manual(s) = self.exposure {
             if !(s.is_finite() && s > 0.0) {

@@ -25,6 +25,7 @@ fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiSettings {
         view_samples,
         val_count,
         jitter: 0.5,
+        defensive: 0.0,
         uniform_importance: false,
         occlusion: false,
     }
@@ -122,7 +123,8 @@ fn check_rsm_flux(scene: &Scene, light: &Light, rb: &SamplingReadback, size: u32
     assert!(worst < 2e-3, "worst relative flux error {worst}");
 }
 
-fn check_importance_sums_and_selection(rb: &SamplingReadback, val_count: u32) {
+/// `alpha`: the defensive mixture weight the selection ran with.
+fn check_importance_sums_and_selection(rb: &SamplingReadback, val_count: u32, alpha: f64) {
     // Importance against eq. 10–11.
     let want: Vec<f32> = (0..rb.importance.len())
         .map(|i| cpu_importance(rb, i))
@@ -155,13 +157,15 @@ fn check_importance_sums_and_selection(rb: &SamplingReadback, val_count: u32) {
             "row sum {x}: {got} vs {row_total}"
         );
     }
-    // Selection: stratified draws hit every texel N·P times, rounded up or down.
+    // Selection: stratified draws hit every texel N·P times, rounded up or down, with
+    // P = (1 − α)·I/ΣI + α/M.
     let total: f64 = rb.importance.iter().map(|&v| f64::from(v)).sum();
+    let texels = rb.importance.len() as f64;
+    let pdf = |i: usize| (1.0 - alpha) * f64::from(rb.importance[i]) / total + alpha / texels;
     let mut counts = vec![0u32; rb.importance.len()];
     for v in &rb.vals {
         counts[v.texel as usize] += 1;
-        let p = f64::from(rb.importance[v.texel as usize]) / total;
-        let expected_weight = 1.0 / (f64::from(val_count) * p);
+        let expected_weight = 1.0 / (f64::from(val_count) * pdf(v.texel as usize));
         assert!(
             (f64::from(v.weight) - expected_weight).abs() <= 1e-3 * expected_weight,
             "weight {} vs {expected_weight}",
@@ -180,7 +184,7 @@ fn check_importance_sums_and_selection(rb: &SamplingReadback, val_count: u32) {
     }
     let mut worst = 0.0f64;
     for (i, &c) in counts.iter().enumerate() {
-        let expected = f64::from(val_count) * f64::from(rb.importance[i]) / total;
+        let expected = f64::from(val_count) * pdf(i);
         worst = worst.max((f64::from(c) - expected).abs());
     }
     assert!(
@@ -196,7 +200,7 @@ fn spot_light_rsm_importance_sums_and_selection_match_the_cpu() {
     assert_eq!(light.kind, LightKind::Spot);
     let (settings, rb) = run(&scene, light.clone(), sampling(32, 128, 4096));
     check_rsm_flux(&scene, &light, &rb, 32);
-    check_importance_sums_and_selection(&rb, 4096);
+    check_importance_sums_and_selection(&rb, 4096, 0.0);
 
     // View samples sit at Halton pixel positions of the G-buffer (checked by ray casting).
     assert_eq!(rb.view_samples.len(), 128);
@@ -248,7 +252,7 @@ fn point_light_atlas_has_six_faces_with_correct_areas_and_flux() {
         assert!(covered > 0, "face {face} is empty");
     }
     check_rsm_flux(&scene, &light, &rb, 16);
-    check_importance_sums_and_selection(&rb, 2048);
+    check_importance_sums_and_selection(&rb, 2048, 0.0);
 }
 
 #[test]
@@ -258,7 +262,23 @@ fn directional_light_uses_constant_disk_areas() {
     assert_eq!(light.kind, LightKind::Directional);
     let (_, rb) = run(&scene, light.clone(), sampling(32, 64, 1024));
     check_rsm_flux(&scene, &light, &rb, 32);
-    check_importance_sums_and_selection(&rb, 1024);
+    check_importance_sums_and_selection(&rb, 1024, 0.0);
+}
+
+#[test]
+fn defensive_mixture_draws_by_the_mixed_pdf_and_reaches_unimportant_vals() {
+    let scene = procedural::cornell_box();
+    let light = default_light(&scene);
+    let mut s = sampling(32, 64, 4096);
+    s.defensive = 0.25;
+    let (_, rb) = run(&scene, light, s);
+    check_importance_sums_and_selection(&rb, 4096, 0.25);
+    // Every texel has P ≥ α/M = 0.25/1024, so 4,096 stratified draws reach each one.
+    let mut drawn = vec![false; rb.importance.len()];
+    for v in &rb.vals {
+        drawn[v.texel as usize] = true;
+    }
+    assert!(drawn.iter().all(|&d| d), "some texel was never drawn");
 }
 
 #[test]

@@ -26,6 +26,7 @@ fn gi(method: GiMethod, rsm_size: u32, val_count: u32) -> GiSettings {
         view_samples: 64,
         val_count,
         jitter: 0.5,
+        defensive: lightcast_server::gi::DEFAULT_DEFENSIVE,
         uniform_importance: false,
         occlusion: false,
     }

@@ -117,8 +117,13 @@ impl ValSampling {
             .prepare(queue, &importance_params(&res.rsm, settings));
         self.sums_pass
             .prepare(queue, res.rsm.width(), res.rsm.height());
-        self.select_pass
-            .prepare(queue, &res.rsm, settings.val_count, settings.jitter);
+        self.select_pass.prepare(
+            queue,
+            &res.rsm,
+            settings.val_count,
+            settings.jitter,
+            settings.defensive,
+        );
         self.importance_band_rows = band_rows;
     }
 

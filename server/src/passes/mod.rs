@@ -1,7 +1,7 @@
 //! The render pipeline, one module per GPU pass, in frame order:
 //!
 //! 1. [`shadow_map`]: depth from the light (1 or 6 faces).
-//! 2. [`gbuffer`]: position, normal, materials and light-cache vertex from the camera.
+//! 2. [`gbuffer`]: position, normal, materials and triangle id from the camera.
 //! 3. [`rsm`]: the reflective shadow map, every texel a virtual area light (VAL).
 //! 4. [`importance`]: importance of every VAL from view samples (BRSM only).
 //! 5. [`cumulative_sums`]: cumulative importance (BRSM only).

@@ -14,9 +14,9 @@ pub struct SelectParams {
     pub count: u32,
     pub row_pitch: u32,
     pub jitter: f32,
+    pub defensive: f32,
     pub pad0: f32,
     pub pad1: f32,
-    pub pad2: f32,
 }
 
 /// Mirrors `Val` in `shaders/vals.wgsl`.
@@ -111,16 +111,17 @@ impl ValSelectPass {
         (x, groups.div_ceil(x))
     }
 
-    pub fn prepare(&self, queue: &wgpu::Queue, rsm: &Rsm, count: u32, jitter: f32) {
+    /// `defensive` is the weight α of the uniform part of the selection pdf.
+    pub fn prepare(&self, queue: &wgpu::Queue, rsm: &Rsm, count: u32, jitter: f32, defensive: f32) {
         let params = SelectParams {
             width: rsm.width(),
             height: rsm.height(),
             count,
             row_pitch: Self::grid(count).0 * WORKGROUP,
             jitter,
+            defensive,
             pad0: 0.0,
             pad1: 0.0,
-            pad2: 0.0,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
     }
@@ -157,9 +158,9 @@ mod tests {
                 ("count", offset_of!(SelectParams, count)),
                 ("row_pitch", offset_of!(SelectParams, row_pitch)),
                 ("jitter", offset_of!(SelectParams, jitter)),
+                ("defensive", offset_of!(SelectParams, defensive)),
                 ("pad0", offset_of!(SelectParams, pad0)),
                 ("pad1", offset_of!(SelectParams, pad1)),
-                ("pad2", offset_of!(SelectParams, pad2)),
             ],
         );
         assert_struct(

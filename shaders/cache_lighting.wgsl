@@ -89,6 +89,12 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
     // Geometric factor of eq. 3/4 with the VAL's disk area; A·G is the disk-to-point form
     // factor of eq. 6.
     let g = cos_l * cos_x / (val.area + PI * d2);
+    // A VAL that cannot light the cache takes no part, not even through ε_p: summed over the
+    // many VALs behind a cache, ε_p alone would drag the proxy far off, and eq. 9 then
+    // interpolates that far proxy's large flux onto nearby points.
+    if g <= 0.0 {
+        return;
+    }
     let form_factor = val.area * g;
     let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), c.exponent);
     (*acc).e_d += val.weight * val.flux * g;

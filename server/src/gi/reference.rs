@@ -177,6 +177,12 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
         let cos_x = n_c.dot(omega).max(0.0);
         // Geometric factor of eq. 3 / 4 for the VAL's disk.
         let g = cos_l * cos_x / (val.area + PI * d2);
+        // A VAL that cannot light the cache takes no part, not even through ε_p: summed over
+        // the many VALs behind a cache, ε_p alone would drag the proxy far off, and eq. 9 then
+        // interpolates that far proxy's large flux onto nearby points.
+        if g <= 0.0 {
+            continue;
+        }
         // Form factor disk → point at c (eq. 6).
         let form_factor = val.area * g;
         // cos^k θ_e of eq. 4 with the cache's k.
@@ -530,8 +536,8 @@ mod tests {
             let proxies = light_cache(&CACHE, vals, camera);
             for proxy in [proxies.diffuse, proxies.glossy] {
                 assert_eq!(proxy.flux, Vec3::ZERO);
-                // Only ε_p weighs the position.
-                assert_close(proxy.position, vals[0].position, 1e-6);
+                // No VAL takes part: the proxy sits at the cache.
+                assert_close(proxy.position, CACHE.position, 1e-6);
             }
         }
     }

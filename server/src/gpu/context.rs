@@ -76,8 +76,8 @@ impl fmt::Display for AdapterSummary<'_> {
 }
 
 impl GpuContext {
-    /// Opens the preferred adapter for `backend`. `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` in the
-    /// environment still apply on top (wgpu's own conventions).
+    /// Opens the preferred (high-performance) adapter for `backend`; with `Auto`, a
+    /// `WGPU_BACKEND` in the environment names the backends to try (wgpu's convention).
     pub fn new(backend: BackendChoice) -> Result<Self, GpuError> {
         pollster::block_on(Self::new_async(backend))
     }

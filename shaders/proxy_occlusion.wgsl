@@ -1,65 +1,88 @@
 // Occlusion of each cache's two proxy lights by the disks of the other caches (double
-// projection, see light_caches.wgsl); scales the proxies' flux by the visible fraction.
+// projection, see light_caches.wgsl); scales the proxies' flux by the visible fraction. The
+// occluders are split into chunks, one dispatch each, whose covered areas add up in
+// `coverage`; a last dispatch applies them.
 
 // Mirrored by `OcclusionParams` in server/src/passes/proxy_occlusion.rs.
 struct OcclusionParams {
     cache_count: u32,
+    // This dispatch's occluders: [first_occluder, end_occluder).
+    first_occluder: u32,
+    end_occluder: u32,
     pad0: u32,
-    pad1: u32,
-    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: OcclusionParams;
 @group(0) @binding(1) var<storage, read> caches: array<LightCache>;
 @group(0) @binding(2) var<storage, read_write> lighting: array<CacheLighting>;
+// Covered area of the diffuse (x) and glossy (y) proxy squares so far.
+@group(0) @binding(3) var<storage, read_write> coverage: array<vec2<f32>>;
 
 const TILE_CACHES: u32 = 64u;
 var<workgroup> tile: array<LightCache, 64>;
 
+fn empty_cache() -> LightCache {
+    return LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
+}
+
 @compute @workgroup_size(64)
-fn occlude_proxies(
+fn accumulate_coverage(
     @builtin(global_invocation_id) id: vec3<u32>,
     @builtin(local_invocation_index) local: u32,
 ) {
     let i = id.x;
     let in_range = i < params.cache_count;
-    var c = LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
+    var c = empty_cache();
     var l = CacheLighting(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
+    var covered = vec2<f32>(0.0);
     if in_range {
         c = caches[i];
         l = lighting[i];
+        if params.first_occluder > 0u {
+            covered = coverage[i];
+        }
     }
     let frame = tangent_frame(c.normal);
     let square_d = proxy_square(frame, c, l.diffuse_position, l.diffuse_radius);
     let square_g = proxy_square(frame, c, l.glossy_position, l.glossy_radius);
-    var covered_d = 0.0;
-    var covered_g = 0.0;
-    for (var base = 0u; base < params.cache_count; base += TILE_CACHES) {
+    for (var base = params.first_occluder; base < params.end_occluder; base += TILE_CACHES) {
         workgroupBarrier();
         let j = base + local;
-        if j < params.cache_count {
+        if j < params.end_occluder {
             tile[local] = caches[j];
         } else {
-            tile[local] = LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
+            tile[local] = empty_cache();
         }
         workgroupBarrier();
         if in_range {
-            let count = min(TILE_CACHES, params.cache_count - base);
+            let count = min(TILE_CACHES, params.end_occluder - base);
             for (var k = 0u; k < count; k++) {
                 if base + k == i {
                     continue;
                 }
                 let o = tile[k];
-                covered_d += overlap(square_d, occluder_square(frame, c, o, l.diffuse_position, l.diffuse_radius));
-                covered_g += overlap(square_g, occluder_square(frame, c, o, l.glossy_position, l.glossy_radius));
+                covered.x += overlap(square_d, occluder_square(frame, c, o, l.diffuse_position, l.diffuse_radius));
+                covered.y += overlap(square_g, occluder_square(frame, c, o, l.glossy_position, l.glossy_radius));
             }
         }
     }
-    if !in_range {
+    if in_range {
+        coverage[i] = covered;
+    }
+}
+
+@compute @workgroup_size(64)
+fn apply_occlusion(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= params.cache_count {
         return;
     }
-    l.diffuse_flux *= visibility(square_d, covered_d);
-    l.glossy_flux *= visibility(square_g, covered_g);
+    let c = caches[i];
+    var l = lighting[i];
+    let covered = coverage[i];
+    let frame = tangent_frame(c.normal);
+    l.diffuse_flux *= visibility(proxy_square(frame, c, l.diffuse_position, l.diffuse_radius), covered.x);
+    l.glossy_flux *= visibility(proxy_square(frame, c, l.glossy_position, l.glossy_radius), covered.y);
     lighting[i] = l;
 }
 

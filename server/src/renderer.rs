@@ -475,6 +475,7 @@ impl Renderer {
         let gi = settings.gi;
         let gi_on = gi.method != GiMethod::None;
         let mut lighting_chunks = 0;
+        let mut occlusion_chunks = 0;
         if gi_on {
             let caches = self.caches.as_ref().ok_or(RenderError::CachesMissing)?;
             self.sampling.prepare(
@@ -497,7 +498,7 @@ impl Renderer {
                 self.sampling.rsm(),
                 source,
             );
-            self.occlusion_pass.prepare(queue, caches.count);
+            occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
             self.indirect_pass
                 .prepare(queue, true, self.ctx.primitive_index);
         }
@@ -524,9 +525,12 @@ impl Renderer {
                 },
                 &sized.indirect,
             );
-            let occlusion = self
-                .occlusion_pass
-                .bind(device, &caches.caches, &caches.lighting);
+            let occlusion = self.occlusion_pass.bind(
+                device,
+                &caches.caches,
+                &caches.lighting,
+                &caches.coverage,
+            );
             (caches.count, lighting, occlusion, indirect)
         });
         let direct_bind_group = self.direct_pass.bind(
@@ -565,7 +569,8 @@ impl Renderer {
             })?;
             if gi.occlusion {
                 stages.stage("proxy_occlusion", |e| {
-                    self.occlusion_pass.encode(e, occlusion_group, *cache_count)
+                    self.occlusion_pass
+                        .encode(e, occlusion_group, *cache_count, occlusion_chunks)
                 })?;
             }
             stages.stage("indirect_light", |e| {

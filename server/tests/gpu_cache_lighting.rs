@@ -476,3 +476,56 @@ fn chunked_dispatches_give_the_unchunked_results() {
     }
     assert_small(errors, 1e-4, 1e-2);
 }
+
+/// Occlusion with more cache pairs than one dispatch's budget runs in chunks of occluders; a
+/// subset of caches is checked against the CPU double projection.
+#[test]
+fn chunked_occlusion_matches_the_cpu_double_projection() {
+    let mut settings = gi(GiMethod::Brsm, 32, 1024);
+    settings.occlusion = false;
+    let open = run_scene(procedural::cornell_box(), 0.09, settings);
+    settings.occlusion = true;
+    let occluded = run_scene(procedural::cornell_box(), 0.09, settings);
+    let count = open.caches.caches.len() as u64;
+    assert!(count * count > 1 << 26, "{count} caches fit one dispatch");
+    let before = open
+        .renderer
+        .read_cache_lighting()
+        .expect("readback")
+        .expect("GI ran");
+    let after = occluded
+        .renderer
+        .read_cache_lighting()
+        .expect("readback")
+        .expect("GI ran");
+    let disks: Vec<OccluderDisk> = open
+        .caches
+        .caches
+        .iter()
+        .map(|c| OccluderDisk {
+            position: Vec3::from(c.position),
+            normal: Vec3::from(c.normal),
+            disk_area: c.disk_area,
+        })
+        .collect();
+    let mut worst = 0.0f32;
+    for i in (0..disks.len()).step_by(37) {
+        let others: Vec<OccluderDisk> = disks
+            .iter()
+            .enumerate()
+            .filter(|&(j, _)| j != i)
+            .map(|(_, d)| *d)
+            .collect();
+        let (b, a) = (&before[i], &after[i]);
+        let v = proxy_visibility(
+            &disks[i],
+            Vec3::from(b.diffuse_position),
+            b.diffuse_radius,
+            &others,
+        );
+        let want = Vec3::from(b.diffuse_flux) * v;
+        let scale = Vec3::from(b.diffuse_flux).max_element().max(1e-12);
+        worst = worst.max((Vec3::from(a.diffuse_flux) - want).abs().max_element() / scale);
+    }
+    assert!(worst < 2e-3, "largest relative flux difference {worst}");
+}

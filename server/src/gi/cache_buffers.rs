@@ -11,6 +11,8 @@ pub struct CacheBuffers {
     pub lighting: wgpu::Buffer,
     /// Sums carried between the chunked cache-lighting dispatches.
     pub accum: wgpu::Buffer,
+    /// Covered proxy areas carried between the chunked occlusion dispatches.
+    pub coverage: wgpu::Buffer,
     pub count: u32,
 }
 
@@ -51,6 +53,12 @@ impl CacheBuffers {
             accum: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("cache lighting sums"),
                 size: (caches.len() * std::mem::size_of::<CacheAccum>()) as u64,
+                usage: storage,
+                mapped_at_creation: false,
+            }),
+            coverage: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("occlusion coverage"),
+                size: (caches.len() * 8) as u64,
                 usage: storage,
                 mapped_at_creation: false,
             }),

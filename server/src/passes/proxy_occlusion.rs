@@ -10,44 +10,59 @@ use bytemuck::{Pod, Zeroable};
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct OcclusionParams {
     pub cache_count: u32,
+    pub first_occluder: u32,
+    pub end_occluder: u32,
     pub pad0: u32,
-    pub pad1: u32,
-    pub pad2: u32,
 }
 
 const WORKGROUP: u32 = 64;
+/// Cache–occluder pairs per dispatch (see `cache_lighting::DISPATCH_BUDGET`).
+const DISPATCH_BUDGET: u64 = 1 << 26;
+/// Most dispatches per frame.
+const MAX_CHUNKS: u32 = 1024;
 
 pub struct ProxyOcclusionPass {
-    pipeline: wgpu::ComputePipeline,
+    accumulate: wgpu::ComputePipeline,
+    apply: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: wgpu::Buffer,
+    params: super::UniformSlots,
 }
 
 impl ProxyOcclusionPass {
     pub fn new(device: &wgpu::Device) -> Self {
+        let params = super::UniformSlots::new(
+            device,
+            "occlusion params",
+            std::mem::size_of::<OcclusionParams>() as u64,
+            MAX_CHUNKS,
+        );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("proxy occlusion"),
             entries: &[
-                super::uniform_entry(0),
+                params.layout_entry(0),
                 super::storage_entry(1, true),
                 super::storage_entry(2, false),
+                super::storage_entry(3, false),
             ],
         });
         let module = shaders::PROXY_OCCLUSION.create_module(device);
         Self {
-            pipeline: super::compute_pipeline(
+            accumulate: super::compute_pipeline(
+                device,
+                "occlusion coverage",
+                &layout,
+                &module,
+                "accumulate_coverage",
+            ),
+            apply: super::compute_pipeline(
                 device,
                 "proxy occlusion",
                 &layout,
                 &module,
-                "occlude_proxies",
+                "apply_occlusion",
             ),
             layout,
-            params: super::uniform_buffer(
-                device,
-                "occlusion params",
-                std::mem::size_of::<OcclusionParams>(),
-            ),
+            params,
         }
     }
 
@@ -56,38 +71,60 @@ impl ProxyOcclusionPass {
         device: &wgpu::Device,
         caches: &wgpu::Buffer,
         lighting: &wgpu::Buffer,
+        coverage: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("proxy occlusion"),
             layout: &self.layout,
             entries: &[
-                super::buffer_binding(0, &self.params),
+                self.params.binding(0),
                 super::buffer_binding(1, caches),
                 super::buffer_binding(2, lighting),
+                super::buffer_binding(3, coverage),
             ],
         })
     }
 
-    pub fn prepare(&self, queue: &wgpu::Queue, cache_count: u32) {
-        let params = OcclusionParams {
+    /// Writes one parameter slot per chunk of occluders; returns the number of chunks.
+    pub fn prepare(&self, queue: &wgpu::Queue, cache_count: u32) -> u32 {
+        let chunk = super::chunk_size(
             cache_count,
-            pad0: 0,
-            pad1: 0,
-            pad2: 0,
-        };
-        queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+            u64::from(cache_count.max(1)),
+            DISPATCH_BUDGET,
+            WORKGROUP,
+            MAX_CHUNKS,
+        );
+        let chunks = cache_count.div_ceil(chunk).max(1);
+        let params: Vec<OcclusionParams> = (0..chunks)
+            .map(|k| OcclusionParams {
+                cache_count,
+                first_occluder: k * chunk,
+                end_occluder: ((k + 1) * chunk).min(cache_count),
+                pad0: 0,
+            })
+            .collect();
+        self.params.write(queue, &params);
+        chunks
     }
 
+    /// One dispatch per chunk of occluders, then one that dims the proxies.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         bind_group: &wgpu::BindGroup,
         cache_count: u32,
+        chunks: u32,
     ) {
+        let groups = cache_count.div_ceil(WORKGROUP).max(1);
         let mut pass = super::begin_compute(encoder, "proxy occlusion");
-        pass.set_bind_group(0, bind_group, &[]);
-        pass.set_pipeline(&self.pipeline);
-        pass.dispatch_workgroups(cache_count.div_ceil(WORKGROUP).max(1), 1, 1);
+        pass.set_pipeline(&self.accumulate);
+        for k in 0..chunks {
+            pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(k)]);
+            pass.dispatch_workgroups(groups, 1, 1);
+        }
+        pass.set_pipeline(&self.apply);
+        pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(0)]);
+        pass.dispatch_workgroups(groups, 1, 1);
     }
 }
 
@@ -105,9 +142,12 @@ mod tests {
             size_of::<OcclusionParams>(),
             &[
                 ("cache_count", offset_of!(OcclusionParams, cache_count)),
+                (
+                    "first_occluder",
+                    offset_of!(OcclusionParams, first_occluder),
+                ),
+                ("end_occluder", offset_of!(OcclusionParams, end_occluder)),
                 ("pad0", offset_of!(OcclusionParams, pad0)),
-                ("pad1", offset_of!(OcclusionParams, pad1)),
-                ("pad2", offset_of!(OcclusionParams, pad2)),
             ],
         );
     }

@@ -42,9 +42,9 @@ impl std::fmt::Display for DebugView {
 }
 
 impl DebugView {
-    /// Whether the view needs the sampling stages' buffers read back.
-    pub fn needs_sampling(self) -> bool {
-        matches!(self, Self::RsmFlux | Self::Importance | Self::SelectedVals)
+    /// Whether the view shows a stage only BRSM runs (importance, selection).
+    pub fn needs_brsm(self) -> bool {
+        matches!(self, Self::Importance | Self::SelectedVals)
     }
 }
 

@@ -259,6 +259,8 @@ pub enum OfflineError {
     Render(#[from] crate::renderer::RenderError),
     #[error("--view {view} needs global illumination; use --gi lightskin or --gi brsm")]
     ViewNeedsGi { view: DebugView },
+    #[error("--view {view} shows a BRSM stage; use --gi brsm")]
+    ViewNeedsBrsm { view: DebugView },
     #[error("writing {path}: {source}")]
     Write {
         path: PathBuf,
@@ -371,6 +373,9 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
     if args.view != DebugView::Final && args.gi == GiMethod::None {
         return Err(OfflineError::ViewNeedsGi { view: args.view });
+    }
+    if args.view.needs_brsm() && args.gi != GiMethod::Brsm {
+        return Err(OfflineError::ViewNeedsBrsm { view: args.view });
     }
     let mut settings = settings;
     settings.capture_hdr = args.view == DebugView::Indirect;

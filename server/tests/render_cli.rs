@@ -231,6 +231,15 @@ fn bad_input_is_reported_precisely_without_panicking() {
             "--view indirect",
         ),
         (vec!["--gi".into(), "fancy".into()], "fancy"),
+        (
+            vec![
+                "--gi".into(),
+                "lightskin".into(),
+                "--view".into(),
+                "importance".into(),
+            ],
+            "--gi brsm",
+        ),
     ];
     for (extra, needle) in cases {
         let mut args: Vec<String> = ["render", "--width", "32", "--height", "32"]

@@ -297,6 +297,29 @@ pub fn begin_compute<'e>(
     })
 }
 
+/// The chunked-reduction pattern: `accumulate` once per chunk (slot k of the bind group's
+/// [`UniformSlots`] describes chunk k), then `finish` once (slot 0), each over `groups`
+/// workgroups.
+pub fn dispatch_chunked(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    pipelines: (&wgpu::ComputePipeline, &wgpu::ComputePipeline),
+    bind_group: &wgpu::BindGroup,
+    groups: u32,
+    chunks: u32,
+) {
+    let (accumulate, finish) = pipelines;
+    let mut pass = begin_compute(encoder, label);
+    pass.set_pipeline(accumulate);
+    for k in 0..chunks {
+        pass.set_bind_group(0, bind_group, &[UniformSlots::offset(k)]);
+        pass.dispatch_workgroups(groups, 1, 1);
+    }
+    pass.set_pipeline(finish);
+    pass.set_bind_group(0, bind_group, &[UniformSlots::offset(0)]);
+    pass.dispatch_workgroups(groups, 1, 1);
+}
+
 #[cfg(test)]
 mod tests {
     use super::chunk_size;

@@ -115,16 +115,14 @@ impl ProxyOcclusionPass {
         cache_count: u32,
         chunks: u32,
     ) {
-        let groups = cache_count.div_ceil(WORKGROUP).max(1);
-        let mut pass = super::begin_compute(encoder, "proxy occlusion");
-        pass.set_pipeline(&self.accumulate);
-        for k in 0..chunks {
-            pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(k)]);
-            pass.dispatch_workgroups(groups, 1, 1);
-        }
-        pass.set_pipeline(&self.apply);
-        pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(0)]);
-        pass.dispatch_workgroups(groups, 1, 1);
+        super::dispatch_chunked(
+            encoder,
+            "proxy occlusion",
+            (&self.accumulate, &self.apply),
+            bind_group,
+            cache_count.div_ceil(WORKGROUP).max(1),
+            chunks,
+        );
     }
 }
 

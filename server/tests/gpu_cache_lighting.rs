@@ -147,24 +147,21 @@ fn brsm_cache_lighting_matches_the_cpu_reference() {
     assert_small(proxy_errors(&run, &vals), 1e-4, 1e-2);
 }
 
-#[test]
-fn proxy_occlusion_matches_the_cpu_double_projection() {
+/// The same frame without and with occlusion: proxy lights before, after, and every cache
+/// as an occluder disk.
+fn occlusion_runs(d_eps: f32) -> (Vec<CacheLighting>, Vec<CacheLighting>, Vec<OccluderDisk>) {
     let mut settings = gi(GiMethod::Brsm, 32, 1024);
     settings.occlusion = false;
-    let open = run(settings);
+    let open = run_scene(procedural::cornell_box(), d_eps, settings);
     settings.occlusion = true;
-    let occluded = run(settings);
-    let before = open
-        .renderer
-        .read_cache_lighting()
-        .expect("readback")
-        .expect("GI ran");
-    let after = occluded
-        .renderer
-        .read_cache_lighting()
-        .expect("readback")
-        .expect("GI ran");
-    let disks: Vec<OccluderDisk> = open
+    let occluded = run_scene(procedural::cornell_box(), d_eps, settings);
+    let read = |run: &Run| {
+        run.renderer
+            .read_cache_lighting()
+            .expect("readback")
+            .expect("GI ran")
+    };
+    let disks = open
         .caches
         .caches
         .iter()
@@ -174,6 +171,12 @@ fn proxy_occlusion_matches_the_cpu_double_projection() {
             disk_area: c.disk_area,
         })
         .collect();
+    (read(&open), read(&occluded), disks)
+}
+
+#[test]
+fn proxy_occlusion_matches_the_cpu_double_projection() {
+    let (before, after, disks) = occlusion_runs(0.3);
     let (mut dimmed, mut worst) = (0, 0.0f32);
     for (i, (b, a)) in before.iter().zip(&after).enumerate() {
         let others: Vec<OccluderDisk> = disks
@@ -481,33 +484,9 @@ fn chunked_dispatches_give_the_unchunked_results() {
 /// subset of caches is checked against the CPU double projection.
 #[test]
 fn chunked_occlusion_matches_the_cpu_double_projection() {
-    let mut settings = gi(GiMethod::Brsm, 32, 1024);
-    settings.occlusion = false;
-    let open = run_scene(procedural::cornell_box(), 0.09, settings);
-    settings.occlusion = true;
-    let occluded = run_scene(procedural::cornell_box(), 0.09, settings);
-    let count = open.caches.caches.len() as u64;
+    let (before, after, disks) = occlusion_runs(0.09);
+    let count = disks.len() as u64;
     assert!(count * count > 1 << 26, "{count} caches fit one dispatch");
-    let before = open
-        .renderer
-        .read_cache_lighting()
-        .expect("readback")
-        .expect("GI ran");
-    let after = occluded
-        .renderer
-        .read_cache_lighting()
-        .expect("readback")
-        .expect("GI ran");
-    let disks: Vec<OccluderDisk> = open
-        .caches
-        .caches
-        .iter()
-        .map(|c| OccluderDisk {
-            position: Vec3::from(c.position),
-            normal: Vec3::from(c.normal),
-            disk_area: c.disk_area,
-        })
-        .collect();
     let mut worst = 0.0f32;
     for i in (0..disks.len()).step_by(37) {
         let others: Vec<OccluderDisk> = disks

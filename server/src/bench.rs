@@ -288,48 +288,32 @@ pub fn run(
     let mut done = 0u64;
     let mut rows = Vec::new();
     for &rsm_size in &args.rsm_sizes {
-        let mut settings = base.clone();
-        settings.gi = GiSettings {
+        // LightSkin first: every BRSM configuration is compared with it.
+        let lightskin = GiSettings {
             method: GiMethod::Lightskin,
             rsm_size,
             ..GiSettings::default()
         };
-        let label = format!("lightskin rsm {rsm_size}²");
-        let baseline = time_config(
-            &mut renderer,
-            &settings,
-            args.warmup,
-            args.frames,
-            &mut || {
-                done += 1;
-                progress(done, total, &label);
-            },
-        )?;
-        let (_, baseline_mean) = mad(&baseline.indirect, &baseline.indirect);
-        let baseline_ms = baseline.frame.median_ms;
-        rows.push(BenchRow {
-            method: GiMethod::Lightskin,
-            rsm_size,
-            val_count: None,
-            view_samples: None,
-            fps: 1e3 / baseline_ms,
-            mad: 0.0,
-            mad_relative: 0.0,
-            speedup_vs_lightskin: 1.0,
-            stages: baseline.stages.clone(),
-            gi: baseline.gi.clone(),
-            frame: baseline.frame.clone(),
-        });
-        for &(val_count, view_samples) in &brsm_configs {
-            settings.gi = GiSettings {
+        let configs = std::iter::once(lightskin).chain(brsm_configs.iter().map(
+            |&(val_count, view_samples)| GiSettings {
                 method: GiMethod::Brsm,
                 rsm_size,
                 val_count,
                 view_samples,
                 defensive: args.defensive,
                 ..GiSettings::default()
+            },
+        ));
+        let mut baseline: Option<(Vec<[f32; 4]>, f64, f64)> = None;
+        for gi in configs {
+            let label = match gi.method {
+                GiMethod::Brsm => format!(
+                    "brsm rsm {rsm_size}² vals {} vs {}",
+                    gi.val_count, gi.view_samples
+                ),
+                _ => format!("lightskin rsm {rsm_size}²"),
             };
-            let label = format!("brsm rsm {rsm_size}² vals {val_count} vs {view_samples}");
+            let settings = RenderSettings { gi, ..base.clone() };
             let timed = time_config(
                 &mut renderer,
                 &settings,
@@ -340,20 +324,25 @@ pub fn run(
                     progress(done, total, &label);
                 },
             )?;
-            let (difference, _) = mad(&baseline.indirect, &timed.indirect);
+            let (reference, reference_mean, reference_ms) = baseline.get_or_insert_with(|| {
+                let (_, mean) = mad(&timed.indirect, &timed.indirect);
+                (timed.indirect.clone(), mean, timed.frame.median_ms)
+            });
+            let (difference, _) = mad(reference, &timed.indirect);
+            let brsm = gi.method == GiMethod::Brsm;
             rows.push(BenchRow {
-                method: GiMethod::Brsm,
+                method: gi.method,
                 rsm_size,
-                val_count: Some(val_count),
-                view_samples: Some(view_samples),
+                val_count: brsm.then_some(gi.val_count),
+                view_samples: brsm.then_some(gi.view_samples),
                 fps: 1e3 / timed.frame.median_ms,
                 mad: difference,
-                mad_relative: if baseline_mean > 0.0 {
-                    difference / baseline_mean
+                mad_relative: if *reference_mean > 0.0 {
+                    difference / *reference_mean
                 } else {
                     0.0
                 },
-                speedup_vs_lightskin: baseline_ms / timed.frame.median_ms,
+                speedup_vs_lightskin: *reference_ms / timed.frame.median_ms,
                 stages: timed.stages,
                 gi: timed.gi,
                 frame: timed.frame,

@@ -660,15 +660,7 @@ fn read_rgba16f(ctx: &GpuContext, readback: &TextureReadback) -> Result<Vec<[f32
 fn clear_target(encoder: &mut wgpu::CommandEncoder, target: &Target) {
     encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
         label: Some("clear"),
-        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-            view: &target.view,
-            depth_slice: None,
-            resolve_target: None,
-            ops: wgpu::Operations {
-                load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                store: wgpu::StoreOp::Store,
-            },
-        })],
+        color_attachments: &[Some(crate::passes::cleared_attachment(&target.view))],
         depth_stencil_attachment: None,
         timestamp_writes: None,
         occlusion_query_set: None,

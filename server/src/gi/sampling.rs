@@ -34,8 +34,8 @@ pub struct ValSampling {
     sums_pass: CumulativeSumsPass,
     select_pass: ValSelectPass,
     resources: Option<Resources>,
-    /// RSM rows per importance dispatch, chosen by the last `prepare`.
-    importance_band_rows: u32,
+    /// RSM rows of each importance dispatch, chosen by the last `prepare`.
+    importance_bands: Vec<std::ops::Range<u32>>,
 }
 
 /// Everything the sampling stages produced, read back for tests and debug views.
@@ -77,7 +77,7 @@ impl ValSampling {
             sums_pass: CumulativeSumsPass::new(device),
             select_pass: ValSelectPass::new(device),
             resources: None,
-            importance_band_rows: 1,
+            importance_bands: Vec::new(),
         }
     }
 
@@ -112,7 +112,7 @@ impl ValSampling {
             .map(|f| RsmFace::new(f, settings.rsm_size))
             .collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
-        let band_rows = self
+        let bands = self
             .importance_pass
             .prepare(queue, &importance_params(&res.rsm, settings));
         self.sums_pass
@@ -124,7 +124,7 @@ impl ValSampling {
             settings.jitter,
             settings.defensive,
         );
-        self.importance_band_rows = band_rows;
+        self.importance_bands = bands;
     }
 
     fn create_resources(
@@ -205,7 +205,7 @@ impl ValSampling {
             encoder,
             &res.importance_group,
             &importance_params(&res.rsm, settings),
-            self.importance_band_rows,
+            &self.importance_bands,
         );
     }
 

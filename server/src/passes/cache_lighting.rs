@@ -54,12 +54,6 @@ pub struct CacheAccum {
     pub pad3: f32,
 }
 
-/// Cache–VAL evaluations per dispatch: about half a second on lavapipe, far below any
-/// watchdog on a real GPU. Longer dispatches were seen to stop early on lavapipe.
-const DISPATCH_BUDGET: u64 = 1 << 26;
-/// Most dispatches per frame (a huge job then exceeds the budget per dispatch instead).
-const MAX_CHUNKS: u32 = 1024;
-
 /// Where the VALs come from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ValSource {
@@ -84,7 +78,7 @@ impl CacheLightingPass {
             device,
             "cache lighting params",
             std::mem::size_of::<CacheLightingParams>() as u64,
-            MAX_CHUNKS + 1,
+            super::MAX_CHUNKS,
         );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cache lighting"),
@@ -158,30 +152,24 @@ impl CacheLightingPass {
             ValSource::Selected { count } => (count, 0),
             ValSource::EveryTexel => (rsm.texels(), 1),
         };
-        let chunk = super::chunk_size(
-            val_count,
-            u64::from(cache_count.max(1)),
-            DISPATCH_BUDGET,
-            WORKGROUP,
-            MAX_CHUNKS,
-        );
-        let chunks = val_count.div_ceil(chunk);
-        let params: Vec<CacheLightingParams> = (0..chunks.max(1))
-            .map(|k| CacheLightingParams {
+        let chunks = super::chunk_ranges(val_count, u64::from(cache_count.max(1)), WORKGROUP);
+        let params: Vec<CacheLightingParams> = chunks
+            .iter()
+            .map(|range| CacheLightingParams {
                 camera,
                 cache_count,
                 val_count,
                 every_texel,
                 rsm_width: rsm.width(),
-                first_val: k * chunk,
-                end_val: ((k + 1) * chunk).min(val_count),
+                first_val: range.start,
+                end_val: range.end,
                 pad0: 0,
                 pad1: 0,
                 pad2: 0,
             })
             .collect();
         self.params.write(queue, &params);
-        chunks
+        chunks.len() as u32
     }
 
     /// One dispatch per chunk of VALs, then one that builds the proxy lights.

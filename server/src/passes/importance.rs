@@ -29,11 +29,6 @@ pub struct ImportanceParams {
     pub pad2: u32,
 }
 
-/// Texel–sample evaluations per dispatch (see `cache_lighting::DISPATCH_BUDGET`).
-const DISPATCH_BUDGET: u64 = 1 << 26;
-/// Most row bands per frame.
-const MAX_BANDS: u32 = 1024;
-
 pub struct ImportancePass {
     gather: wgpu::ComputePipeline,
     estimate: wgpu::ComputePipeline,
@@ -47,7 +42,7 @@ impl ImportancePass {
             device,
             "importance params",
             std::mem::size_of::<ImportanceParams>() as u64,
-            MAX_BANDS,
+            super::MAX_CHUNKS,
         );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("importance"),
@@ -113,23 +108,26 @@ impl ImportancePass {
         })
     }
 
-    /// Writes one parameter slot per band of RSM rows; returns the band height in rows.
-    pub fn prepare(&self, queue: &wgpu::Queue, params: &ImportanceParams) -> u32 {
-        let rows = super::chunk_size(
+    /// Writes one parameter slot per band of RSM rows; returns the bands.
+    pub fn prepare(
+        &self,
+        queue: &wgpu::Queue,
+        params: &ImportanceParams,
+    ) -> Vec<std::ops::Range<u32>> {
+        let bands = super::chunk_ranges(
             params.rsm_height,
             u64::from(params.rsm_width) * u64::from(params.sample_count.max(1)),
-            DISPATCH_BUDGET,
             super::TILE,
-            MAX_BANDS,
         );
-        let bands: Vec<ImportanceParams> = (0..params.rsm_height.div_ceil(rows).max(1))
-            .map(|b| ImportanceParams {
-                first_row: b * rows,
+        let slots: Vec<ImportanceParams> = bands
+            .iter()
+            .map(|rows| ImportanceParams {
+                first_row: rows.start,
                 ..*params
             })
             .collect();
-        self.params.write(queue, &bands);
-        rows
+        self.params.write(queue, &slots);
+        bands
     }
 
     /// Gathers the view samples, then estimates importance band by band.
@@ -138,20 +136,18 @@ impl ImportancePass {
         encoder: &mut wgpu::CommandEncoder,
         bind_group: &wgpu::BindGroup,
         params: &ImportanceParams,
-        band_rows: u32,
+        bands: &[std::ops::Range<u32>],
     ) {
         let mut pass = super::begin_compute(encoder, "importance");
         pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(0)]);
         pass.set_pipeline(&self.gather);
         pass.dispatch_workgroups(params.sample_count.div_ceil(64), 1, 1);
         pass.set_pipeline(&self.estimate);
-        let band_rows = band_rows.max(1);
-        for b in 0..params.rsm_height.div_ceil(band_rows) {
-            let rows = band_rows.min(params.rsm_height - b * band_rows);
-            pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(b)]);
+        for (b, rows) in bands.iter().enumerate() {
+            pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(b as u32)]);
             pass.dispatch_workgroups(
                 params.rsm_width.div_ceil(super::TILE),
-                rows.div_ceil(super::TILE),
+                rows.len().div_ceil(super::TILE as usize) as u32,
                 1,
             );
         }

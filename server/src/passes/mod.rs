@@ -68,6 +68,19 @@ impl Target {
     }
 }
 
+/// A colour attachment cleared to zero and stored.
+pub fn cleared_attachment(view: &wgpu::TextureView) -> wgpu::RenderPassColorAttachment<'_> {
+    wgpu::RenderPassColorAttachment {
+        view,
+        depth_slice: None,
+        resolve_target: None,
+        ops: wgpu::Operations {
+            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+            store: wgpu::StoreOp::Store,
+        },
+    }
+}
+
 /// Layout entry for a texture read with `textureLoad` in a compute shader.
 pub fn compute_texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
@@ -241,21 +254,26 @@ impl UniformSlots {
     }
 }
 
-/// Splits `total` work items into chunks of whole `granule`s such that `cost_per_item` × chunk
-/// stays within `budget` where possible, using at most `max_chunks` chunks. Returns the chunk
-/// size (a multiple of `granule`, at least one granule).
-pub fn chunk_size(
-    total: u32,
-    cost_per_item: u64,
-    budget: u64,
-    granule: u32,
-    max_chunks: u32,
-) -> u32 {
+/// Evaluations (item × inner-loop step) per dispatch for passes that split their work:
+/// about half a second on lavapipe, which was seen to stop dispatches of a few seconds early
+/// and return partial results; far below any watchdog on a real GPU.
+pub const DISPATCH_BUDGET: u64 = 1 << 26;
+/// Most dispatches one pass splits into (a huge job then exceeds the budget per dispatch).
+pub const MAX_CHUNKS: u32 = 1024;
+
+/// Splits `total` work items into consecutive ranges of whole `granule`s such that
+/// `cost_per_item` × range length stays within [`DISPATCH_BUDGET`] where possible, using at
+/// most [`MAX_CHUNKS`] ranges. Always returns at least one range (empty when `total` is 0).
+pub fn chunk_ranges(total: u32, cost_per_item: u64, granule: u32) -> Vec<std::ops::Range<u32>> {
     let granule = granule.max(1);
-    let by_budget = (budget / cost_per_item.max(1)).clamp(1, u64::from(u32::MAX)) as u32;
+    let by_budget = (DISPATCH_BUDGET / cost_per_item.max(1)).clamp(1, u64::from(u32::MAX)) as u32;
     let within_budget = (by_budget / granule).max(1) * granule;
-    let by_count = total.div_ceil(max_chunks.max(1)).div_ceil(granule) * granule;
-    within_budget.max(by_count)
+    let by_count = total.div_ceil(MAX_CHUNKS).div_ceil(granule) * granule;
+    let size = within_budget.max(by_count);
+    let count = total.div_ceil(size).max(1);
+    (0..count)
+        .map(|k| k * size..((k + 1) * size).min(total))
+        .collect()
 }
 
 /// Layout entry for a uniform buffer read by a compute shader.
@@ -322,18 +340,23 @@ pub fn dispatch_chunked(
 
 #[cfg(test)]
 mod tests {
-    use super::chunk_size;
+    use super::{chunk_ranges, MAX_CHUNKS};
 
     #[test]
     fn chunks_respect_budget_granule_and_count() {
-        // 6,600 caches × 65,536 VALs with a 2^26 budget: chunks of ≤ 10,168 VALs, rounded to 64.
-        let c = chunk_size(65_536, 6_600, 1 << 26, 64, 4096);
-        assert_eq!(c % 64, 0);
-        assert!(c <= 10_168 && c > 10_000, "{c}");
-        // A tiny job is one chunk.
-        assert_eq!(10u32.div_ceil(chunk_size(10, 1, 1 << 26, 64, 4096)), 1);
-        // The chunk count cap wins over the budget.
-        let c = chunk_size(1 << 24, 1 << 20, 1 << 26, 64, 16);
-        assert!((1u32 << 24).div_ceil(c) <= 16);
+        // 6,600 caches × 65,536 VALs with a 2^26 budget: 7 ranges of ≤ 10,168 VALs.
+        let r = chunk_ranges(65_536, 6_600, 64);
+        assert!(
+            r.iter().all(|c| c.start % 64 == 0 && c.len() <= 10_168),
+            "{r:?}"
+        );
+        assert_eq!(r.first().map(|c| c.start), Some(0));
+        assert_eq!(r.last().map(|c| c.end), Some(65_536));
+        assert!(r.windows(2).all(|w| w[0].end == w[1].start));
+        // A tiny job is one range; an empty one is one empty range.
+        assert_eq!(chunk_ranges(10, 1, 64), vec![0..10]);
+        assert_eq!(chunk_ranges(0, 1, 64), vec![0..0]);
+        // The count cap wins over the budget.
+        assert!(chunk_ranges(1 << 24, 1 << 20, 64).len() <= MAX_CHUNKS as usize);
     }
 }

@@ -16,10 +16,6 @@ pub struct OcclusionParams {
 }
 
 const WORKGROUP: u32 = 64;
-/// Cache–occluder pairs per dispatch (see `cache_lighting::DISPATCH_BUDGET`).
-const DISPATCH_BUDGET: u64 = 1 << 26;
-/// Most dispatches per frame.
-const MAX_CHUNKS: u32 = 1024;
 
 pub struct ProxyOcclusionPass {
     accumulate: wgpu::ComputePipeline,
@@ -34,7 +30,7 @@ impl ProxyOcclusionPass {
             device,
             "occlusion params",
             std::mem::size_of::<OcclusionParams>() as u64,
-            MAX_CHUNKS,
+            super::MAX_CHUNKS,
         );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("proxy occlusion"),
@@ -87,24 +83,18 @@ impl ProxyOcclusionPass {
 
     /// Writes one parameter slot per chunk of occluders; returns the number of chunks.
     pub fn prepare(&self, queue: &wgpu::Queue, cache_count: u32) -> u32 {
-        let chunk = super::chunk_size(
-            cache_count,
-            u64::from(cache_count.max(1)),
-            DISPATCH_BUDGET,
-            WORKGROUP,
-            MAX_CHUNKS,
-        );
-        let chunks = cache_count.div_ceil(chunk).max(1);
-        let params: Vec<OcclusionParams> = (0..chunks)
-            .map(|k| OcclusionParams {
+        let chunks = super::chunk_ranges(cache_count, u64::from(cache_count.max(1)), WORKGROUP);
+        let params: Vec<OcclusionParams> = chunks
+            .iter()
+            .map(|range| OcclusionParams {
                 cache_count,
-                first_occluder: k * chunk,
-                end_occluder: ((k + 1) * chunk).min(cache_count),
+                first_occluder: range.start,
+                end_occluder: range.end,
                 pad0: 0,
             })
             .collect();
         self.params.write(queue, &params);
-        chunks
+        chunks.len() as u32
     }
 
     /// One dispatch per chunk of occluders, then one that dims the proxies.

@@ -183,36 +183,12 @@ impl RsmPass {
     }
 
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm, scene: &SceneBuffers) {
-        let attachment = |view| {
-            Some(wgpu::RenderPassColorAttachment {
-                view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })
-        };
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("rsm"),
-            color_attachments: &[
-                attachment(&rsm.position.view),
-                attachment(&rsm.normal.view),
-                attachment(&rsm.flux_area.view),
-            ],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &rsm.depth.view,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
+        let mut pass = super::scene_buffers::begin_material_pass(
+            encoder,
+            "rsm",
+            &[&rsm.position.view, &rsm.normal.view, &rsm.flux_area.view],
+            &rsm.depth.view,
+        );
         pass.set_pipeline(&self.pipeline);
         for face in 0..rsm.faces {
             let size = rsm.size as f32;

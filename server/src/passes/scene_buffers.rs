@@ -188,6 +188,35 @@ pub fn material_pipeline(
     })
 }
 
+/// Begins a render pass for a [`material_pipeline`]: colour targets cleared to zero (w = 0
+/// marks "nothing here"), depth cleared to the far plane and discarded afterwards.
+pub fn begin_material_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    colour_views: &[&wgpu::TextureView],
+    depth_view: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    let attachments: Vec<Option<wgpu::RenderPassColorAttachment>> = colour_views
+        .iter()
+        .map(|view| Some(super::cleared_attachment(view)))
+        .collect();
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &attachments,
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth_view,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Discard,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
 /// All attributes of [`Vertex`] at locations 0–3.
 pub const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 4] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Uint32];

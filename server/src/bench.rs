@@ -120,13 +120,15 @@ pub struct BenchReport {
 
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
-    #[error("scene '{scene}': {source}")]
+    // Messages are complete on their own (the inner error is not a `source`, so a printed
+    // chain does not repeat it).
+    #[error("scene '{scene}': {error}")]
     Scene {
         scene: String,
-        source: crate::scene::OpenError,
+        error: crate::scene::OpenError,
     },
     #[error("light caches: {0}")]
-    Caches(#[from] crate::gi::caches::CacheError),
+    Caches(crate::gi::caches::CacheError),
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
@@ -135,11 +137,6 @@ pub enum BenchError {
     EmptyList { what: &'static str },
     #[error("--frames must be at least 1")]
     NoFrames,
-    #[error("writing {path}: {source}")]
-    Write {
-        path: PathBuf,
-        source: std::io::Error,
-    },
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -245,9 +242,9 @@ pub fn run(
         }
     }
     let spec = args.scene.as_deref().unwrap_or(DEFAULT_SCENE);
-    let scene = Scene::open(spec).map_err(|source| BenchError::Scene {
+    let scene = Scene::open(spec).map_err(|error| BenchError::Scene {
         scene: spec.to_string(),
-        source,
+        error,
     })?;
     let caches = args.caches.load(&scene, log)?;
     log(&format!(
@@ -431,6 +428,12 @@ impl BenchReport {
             s += "\n";
         }
         s
+    }
+}
+
+impl From<crate::gi::caches::CacheError> for BenchError {
+    fn from(error: crate::gi::caches::CacheError) -> Self {
+        Self::Caches(error)
     }
 }
 

@@ -246,13 +246,15 @@ pub struct RenderReport {
 
 #[derive(Debug, thiserror::Error)]
 pub enum OfflineError {
-    #[error("scene '{scene}': {source}")]
+    // Messages are complete on their own (the inner error is not a `source`, so a printed
+    // chain does not repeat it).
+    #[error("scene '{scene}': {error}")]
     Scene {
         scene: String,
-        source: crate::scene::OpenError,
+        error: crate::scene::OpenError,
     },
     #[error("light caches: {0}")]
-    Caches(#[from] crate::gi::caches::CacheError),
+    Caches(crate::gi::caches::CacheError),
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
@@ -261,10 +263,10 @@ pub enum OfflineError {
     ViewNeedsGi { view: DebugView },
     #[error("--view {view} shows a BRSM stage; use --gi brsm")]
     ViewNeedsBrsm { view: DebugView },
-    #[error("writing {path}: {source}")]
+    #[error("writing {path}: {error}")]
     Write {
         path: PathBuf,
-        source: image::ImageError,
+        error: image::ImageError,
     },
 }
 
@@ -342,9 +344,9 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
 pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderReport, OfflineError> {
     let spec = args.scene.as_deref().unwrap_or(DEFAULT_SCENE);
     let started = Instant::now();
-    let scene = Scene::open(spec).map_err(|source| OfflineError::Scene {
+    let scene = Scene::open(spec).map_err(|error| OfflineError::Scene {
         scene: spec.to_string(),
-        source,
+        error,
     })?;
     let load_ms = started.elapsed().as_secs_f64() * 1e3;
     log(&format!(
@@ -445,9 +447,9 @@ pub fn write_png(image: &debug_views::Image, path: &std::path::Path) -> Result<(
         image.height,
         image::ExtendedColorType::Rgba8,
     )
-    .map_err(|source| OfflineError::Write {
+    .map_err(|error| OfflineError::Write {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 
@@ -466,6 +468,12 @@ impl RenderReport {
         }
         s += &format!("{:<14} {:>8.3}\n", "total", self.gpu_total_ms);
         s
+    }
+}
+
+impl From<crate::gi::caches::CacheError> for OfflineError {
+    fn from(error: crate::gi::caches::CacheError) -> Self {
+        Self::Caches(error)
     }
 }
 

@@ -25,15 +25,15 @@ impl BackendChoice {
 
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
-    #[error("no GPU adapter found for backend {backend:?}: {source} (on a machine without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers libvulkan1`)")]
+    #[error("no GPU adapter found for backend {backend:?}: {error} (on a machine without a GPU install a software Vulkan driver, e.g. `apt-get install mesa-vulkan-drivers libvulkan1`)")]
     NoAdapter {
         backend: BackendChoice,
-        source: wgpu::RequestAdapterError,
+        error: wgpu::RequestAdapterError,
     },
-    #[error("adapter {adapter} refused to open a device: {source}")]
+    #[error("adapter {adapter} refused to open a device: {error}")]
     RequestDevice {
         adapter: String,
-        source: wgpu::RequestDeviceError,
+        error: wgpu::RequestDeviceError,
     },
     #[error(
         "adapter {adapter} lacks compute shaders (wgpu downlevel flags); use a Vulkan adapter"
@@ -42,9 +42,15 @@ pub enum GpuError {
     #[error("out of GPU memory allocating {what}: {message}")]
     OutOfMemory { what: String, message: String },
     #[error("waiting for the GPU failed: {0}")]
-    Poll(#[from] wgpu::PollError),
+    Poll(wgpu::PollError),
     #[error("mapping a readback buffer failed: {0}")]
     Map(String),
+}
+
+impl From<wgpu::PollError> for GpuError {
+    fn from(error: wgpu::PollError) -> Self {
+        Self::Poll(error)
+    }
 }
 
 /// The adapter, device and queue, plus what the pipeline learned about them.
@@ -110,7 +116,7 @@ impl GpuContext {
         }
         let adapter = match (found, last_error) {
             (Some(adapter), _) => adapter,
-            (None, Some(source)) => return Err(GpuError::NoAdapter { backend, source }),
+            (None, Some(error)) => return Err(GpuError::NoAdapter { backend, error }),
             (None, None) => unreachable!("every backend choice has at least one attempt"),
         };
         let info = adapter.get_info();
@@ -143,9 +149,9 @@ impl GpuContext {
                 trace: wgpu::Trace::Off,
             })
             .await
-            .map_err(|source| GpuError::RequestDevice {
+            .map_err(|error| GpuError::RequestDevice {
                 adapter: name,
-                source,
+                error,
             })?;
         Ok(Self {
             adapter,

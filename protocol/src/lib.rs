@@ -5,9 +5,22 @@
 //! scene's world space (glTF convention: right-handed, +Y up, metres).
 
 use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+pub mod api;
+pub mod frame;
+pub mod stream;
+
+pub use api::*;
+pub use frame::{FrameHeader, FrameHeaderError, STAGE_NAMES};
+pub use stream::{ClientMessage, ServerEvent};
+
+/// Version of the HTTP/WebSocket API; the paths carry it as `/v{API_VERSION}/…`.
+pub const API_VERSION: u32 = 1;
 
 /// Which kind of punctual light (the three kinds of glTF's `KHR_lights_punctual`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum LightKind {
     /// Parallel rays along `direction` (a sun). `intensity` is illuminance in lux.
@@ -19,7 +32,7 @@ pub enum LightKind {
 }
 
 /// One punctual light.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Light {
     pub kind: LightKind,
@@ -38,7 +51,7 @@ pub struct Light {
 }
 
 /// A pinhole camera.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
     pub position: [f32; 3],

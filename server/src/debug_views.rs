@@ -2,50 +2,75 @@
 //! views): indirect light alone, RSM flux, importance map, selected VALs and the light caches.
 //! They are built on the CPU from buffers read back after a frame.
 
+use crate::gi::GiMethod;
 use crate::gi::{caches::LightCache, sampling::SamplingReadback};
+use crate::gpu::GpuError;
 use crate::passes::{
     cache_lighting::CacheLighting, exposure::KEY, frame_uniforms::camera_view_proj,
     tonemap::tonemap_cpu,
 };
-use crate::renderer::Frame;
+use crate::renderer::{Frame, Renderer};
 use crate::scene::Aabb;
 use glam::{Vec3, Vec4Swizzles};
 use lightcast_protocol::Camera;
 
-/// Which image `render --view` writes.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum DebugView {
-    /// The tone-mapped frame.
-    #[default]
-    Final,
-    /// Indirect light only, at the frame's exposure.
-    Indirect,
-    /// The reflective shadow map's flux (all light faces side by side).
-    RsmFlux,
-    /// The VAL importance map of eq. 10 (log scale).
-    Importance,
-    /// The RSM flux darkened, with the selected VALs marked.
-    SelectedVals,
-    /// The frame darkened, with every light cache drawn in the colour of its diffuse proxy light.
-    Caches,
+pub use lightcast_protocol::View;
+
+/// Why a debug view cannot be shown.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewError {
+    #[error("view {view} needs global illumination; use GI method lightskin or brsm")]
+    NeedsGi { view: View },
+    #[error("view {view} shows a BRSM stage; use GI method brsm")]
+    NeedsBrsm { view: View },
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
 }
 
-impl std::fmt::Display for DebugView {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        use clap::ValueEnum;
-        match self.to_possible_value() {
-            Some(v) => f.write_str(v.get_name()),
-            None => write!(f, "{self:?}"),
+/// Refuses a view the GI method does not produce, before anything is rendered.
+pub fn check(view: View, method: GiMethod) -> Result<(), ViewError> {
+    if view.needs_gi() && method == GiMethod::None {
+        return Err(ViewError::NeedsGi { view });
+    }
+    if view.needs_brsm() && method != GiMethod::Brsm {
+        return Err(ViewError::NeedsBrsm { view });
+    }
+    Ok(())
+}
+
+/// The image of `view` for a frame `renderer` just rendered (`frame` must have been rendered
+/// with `capture_hdr` for the indirect view; `caches` are the scene's light caches).
+pub fn compose(
+    view: View,
+    renderer: &Renderer,
+    frame: Frame,
+    camera: &Camera,
+    caches: Option<&[LightCache]>,
+) -> Result<Image, ViewError> {
+    let needs_gi = ViewError::NeedsGi { view };
+    Ok(match view {
+        View::Final => Image {
+            width: frame.width,
+            height: frame.height,
+            rgba8: frame.rgba8,
+        },
+        View::Indirect => indirect(&frame).ok_or(needs_gi)?,
+        View::RsmFlux | View::Importance | View::SelectedVals => {
+            let sampling = renderer.read_sampling()?.ok_or(needs_gi)?;
+            match view {
+                View::RsmFlux => rsm_flux(&sampling),
+                View::Importance => importance(&sampling),
+                _ => selected_vals(&sampling),
+            }
         }
-    }
-}
-
-impl DebugView {
-    /// Whether the view shows a stage only BRSM runs (importance, selection).
-    pub fn needs_brsm(self) -> bool {
-        matches!(self, Self::Importance | Self::SelectedVals)
-    }
+        View::Caches => {
+            let lighting = renderer.read_cache_lighting()?;
+            let (Some(lighting), Some(caches)) = (lighting, caches) else {
+                return Err(needs_gi);
+            };
+            self::caches(&frame, camera, &renderer.scene().bounds, caches, &lighting)
+        }
+    })
 }
 
 /// An RGBA8 image.

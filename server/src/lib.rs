@@ -1,7 +1,8 @@
-//! lightcast server: scenes, the GPU pipeline and (later) the network service.
+//! lightcast server: scenes, the GPU pipeline and the network service.
 //!
 //! The GPU pipeline ([`renderer`], [`passes`], [`gpu`]) has no async runtime in it, so the
-//! offline `render` command ([`offline`]) and tests can drive it directly.
+//! offline `render` command ([`offline`]) and tests can drive it directly; [`service`] puts
+//! it behind HTTP and WebSocket.
 
 pub mod bench;
 pub mod bench_plots;
@@ -12,3 +13,4 @@ pub mod offline;
 pub mod passes;
 pub mod renderer;
 pub mod scene;
+pub mod service;

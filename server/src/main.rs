@@ -1,24 +1,35 @@
-//! `lightcast-server`: the binary. Subcommands: `render` (offline, one frame to a file) and
-//! `bench` (the paper's evaluation of the GI methods).
+//! `lightcast-server`: the binary. Subcommands: `serve` (the default: the HTTP/WebSocket
+//! service), `render` (offline, one frame to a file) and `bench` (the paper's evaluation of the
+//! GI methods).
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use lightcast_server::bench::{self, BenchArgs};
 use lightcast_server::offline::{self, RenderArgs};
+use lightcast_server::service::{self, ServeArgs};
 
 #[derive(Parser)]
 #[command(
     name = "lightcast-server",
     version,
-    about = "Remote rendering with real-time global illumination"
+    about = "Remote rendering with real-time global illumination",
+    args_conflicts_with_subcommands = true
 )]
 struct Cli {
     #[command(subcommand)]
-    command: Command,
+    command: Option<Command>,
+    /// Without a subcommand the server runs `serve` with these options.
+    #[command(flatten)]
+    serve: ServeArgs,
 }
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the HTTP/WebSocket service (the default): scenes, streaming sessions, one-shot
+    /// renders, /metrics, /openapi.json.
+    Serve(ServeArgs),
+    /// Print the OpenAPI document of the HTTP API (the same as GET /openapi.json).
+    Openapi,
     /// Render one frame of a scene to a PNG file (no network) and print per-pass GPU times.
     Render(RenderArgs),
     /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
@@ -26,15 +37,44 @@ enum Command {
     Bench(BenchArgs),
 }
 
+fn serve(args: &ServeArgs) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(async {
+        let log = |line: &str| tracing::info!("{line}");
+        let service = service::Service::start(args, &log)
+            .await
+            .context("the service could not start")?;
+        service::termination_signal().await;
+        tracing::info!("shutting down");
+        service.shutdown().await.context("shutting down")?;
+        tracing::info!("stopped");
+        Ok(())
+    })
+}
+
 fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    // The service logs what it does; the offline commands only warnings.
+    let default_filter = match cli.command {
+        None | Some(Command::Serve(_)) => "info",
+        Some(_) => "warn",
+    };
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter)),
         )
         .with_writer(std::io::stderr)
         .init();
-    match Cli::parse().command {
+    let Some(command) = cli.command else {
+        return serve(&cli.serve);
+    };
+    match command {
+        Command::Serve(args) => serve(&args)?,
+        Command::Openapi => println!("{}", service::http::openapi_document()?),
         Command::Render(args) => {
             let mut log = |line: &str| eprintln!("{line}");
             let report = offline::render(&args, &mut log).context("render failed")?;

@@ -1,6 +1,6 @@
 //! The offline `render` command: one frame of a scene to an image file, no network.
 
-use crate::debug_views::{self, DebugView};
+use crate::debug_views::{self, View};
 use crate::gi::{
     cache_store::CacheStore,
     caches::{CacheParams, CacheSet, Progress},
@@ -214,7 +214,7 @@ pub struct RenderArgs {
     /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
     /// importance map, selected VALs, light caches).
     #[arg(long, value_enum, default_value = "final")]
-    pub view: DebugView,
+    pub view: View,
     /// wgpu backend.
     #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
     pub backend: BackendChoice,
@@ -227,7 +227,7 @@ pub struct RenderArgs {
 #[derive(Debug, serde::Serialize)]
 pub struct RenderReport {
     pub out: PathBuf,
-    pub view: DebugView,
+    pub view: View,
     pub gi: GiSettings,
     pub adapter: String,
     pub scene: String,
@@ -260,14 +260,25 @@ pub enum OfflineError {
     #[error(transparent)]
     Render(#[from] crate::renderer::RenderError),
     #[error("--view {view} needs global illumination; use --gi lightskin or --gi brsm")]
-    ViewNeedsGi { view: DebugView },
+    ViewNeedsGi { view: View },
     #[error("--view {view} shows a BRSM stage; use --gi brsm")]
-    ViewNeedsBrsm { view: DebugView },
+    ViewNeedsBrsm { view: View },
     #[error("writing {path}: {error}")]
     Write {
         path: PathBuf,
         error: image::ImageError,
     },
+}
+
+impl From<debug_views::ViewError> for OfflineError {
+    /// The same refusals as the service's, in terms of the command-line flags.
+    fn from(e: debug_views::ViewError) -> Self {
+        match e {
+            debug_views::ViewError::NeedsGi { view } => Self::ViewNeedsGi { view },
+            debug_views::ViewError::NeedsBrsm { view } => Self::ViewNeedsBrsm { view },
+            debug_views::ViewError::Gpu(g) => Self::Gpu(g),
+        }
+    }
 }
 
 /// Applies the command-line camera and light options on top of the scene's defaults.
@@ -373,50 +384,20 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         renderer.set_caches(set)?;
     }
     let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
-    if args.view != DebugView::Final && args.gi == GiMethod::None {
-        return Err(OfflineError::ViewNeedsGi { view: args.view });
-    }
-    if args.view.needs_brsm() && args.gi != GiMethod::Brsm {
-        return Err(OfflineError::ViewNeedsBrsm { view: args.view });
-    }
+    debug_views::check(args.view, args.gi)?;
     let mut settings = settings;
-    settings.capture_hdr = args.view == DebugView::Indirect;
+    settings.capture_hdr = args.view == View::Indirect;
     let frame = renderer.render(&settings)?;
-    let image = match args.view {
-        DebugView::Final => debug_views::Image {
-            width: frame.width,
-            height: frame.height,
-            rgba8: frame.rgba8.clone(),
-        },
-        DebugView::Indirect => {
-            debug_views::indirect(&frame).ok_or(OfflineError::ViewNeedsGi { view: args.view })?
-        }
-        DebugView::RsmFlux | DebugView::Importance | DebugView::SelectedVals => {
-            let sampling = renderer
-                .read_sampling()?
-                .ok_or(OfflineError::ViewNeedsGi { view: args.view })?;
-            match args.view {
-                DebugView::RsmFlux => debug_views::rsm_flux(&sampling),
-                DebugView::Importance => debug_views::importance(&sampling),
-                _ => debug_views::selected_vals(&sampling),
-            }
-        }
-        DebugView::Caches => {
-            let lighting = renderer
-                .read_cache_lighting()?
-                .ok_or(OfflineError::ViewNeedsGi { view: args.view })?;
-            let set = caches
-                .as_ref()
-                .ok_or(OfflineError::ViewNeedsGi { view: args.view })?;
-            debug_views::caches(
-                &frame,
-                &settings.camera,
-                &renderer.scene().bounds,
-                &set.caches,
-                &lighting,
-            )
-        }
-    };
+    let exposure_scale = frame.exposure_scale;
+    let timing_source = frame.timing_source;
+    let stages = frame.timings.clone();
+    let image = debug_views::compose(
+        args.view,
+        &renderer,
+        frame,
+        &settings.camera,
+        caches.as_ref().map(|set| set.caches.as_slice()),
+    )?;
     write_png(&image, &args.out)?;
     let scene = renderer.scene();
     Ok(RenderReport {
@@ -430,10 +411,10 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         height: image.height,
         camera: settings.camera,
         light: settings.light,
-        exposure_scale: frame.exposure_scale,
-        timing_source: frame.timing_source,
-        gpu_total_ms: frame.total_ms(),
-        stages: frame.timings,
+        exposure_scale,
+        timing_source,
+        gpu_total_ms: stages.iter().map(|t| t.ms).sum(),
+        stages,
         load_ms,
         setup_ms,
     })

@@ -29,6 +29,7 @@ use crate::passes::{
 use crate::scene::Scene;
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light};
+use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
 /// Largest shadow map side accepted (further limited by the adapter).
@@ -46,6 +47,9 @@ pub const MAX_VIEW_SAMPLES: u32 = 4096;
 pub const MAX_VAL_COUNT: u32 = 1 << 20;
 /// Most output pixels: the frame's targets take about 70 bytes per pixel (4.5 GiB at this size).
 pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
+
+/// Output sizes whose targets a renderer keeps at once.
+const MAX_SIZES: usize = 4;
 
 /// What one frame should show.
 #[derive(Clone, Debug)]
@@ -79,6 +83,8 @@ pub struct Frame {
     pub timing_source: TimingSource,
     /// The exposure scale applied before the tone curve.
     pub exposure_scale: f32,
+    /// CPU time spent waiting for the read-back buffers to be mapped.
+    pub readback_ms: f64,
 }
 
 impl Frame {
@@ -118,7 +124,11 @@ fn check_finite(field: &'static str, values: &[f32]) -> Result<(), RenderError> 
 impl RenderSettings {
     /// Rejects settings that would produce garbage or exceed the adapter.
     pub fn validate(&self, ctx: &GpuContext) -> Result<(), RenderError> {
-        let max = ctx.device.limits().max_texture_dimension_2d;
+        self.validate_for(ctx.device.limits().max_texture_dimension_2d)
+    }
+
+    /// [`Self::validate`] for an adapter whose textures may be `max` texels wide.
+    pub fn validate_for(&self, max: u32) -> Result<(), RenderError> {
         for (field, v) in [("width", self.width), ("height", self.height)] {
             if v == 0 || v > max {
                 return Err(invalid(field, format!("{v} is outside 1..={max}")));
@@ -238,7 +248,7 @@ struct SizedTargets {
 pub struct Renderer {
     ctx: GpuContext,
     timer: FrameTimer,
-    scene: Scene,
+    scene: Arc<Scene>,
     scene_buffers: SceneBuffers,
     gbuffer_pass: GBufferPass,
     shadow_pass: ShadowMapPass,
@@ -248,7 +258,9 @@ pub struct Renderer {
     camera_buffer: wgpu::Buffer,
     light_buffer: wgpu::Buffer,
     exposure_readback: wgpu::Buffer,
-    sized: Option<SizedTargets>,
+    /// Targets of the most recently used output sizes, most recent first (sessions of
+    /// different sizes share one renderer).
+    sized: Vec<SizedTargets>,
     shadow_map: Option<ShadowMap>,
     sampling: ValSampling,
     /// Whether the last frame ran the sampling stages.
@@ -262,7 +274,8 @@ pub struct Renderer {
 }
 
 impl Renderer {
-    pub fn new(ctx: GpuContext, scene: Scene) -> Self {
+    pub fn new(ctx: GpuContext, scene: impl Into<Arc<Scene>>) -> Self {
+        let scene = scene.into();
         let device = &ctx.device;
         let uniform = |label, contents: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -309,7 +322,7 @@ impl Renderer {
             camera_buffer,
             light_buffer,
             exposure_readback,
-            sized: None,
+            sized: Vec::new(),
             shadow_map: None,
             scene,
             ctx,
@@ -377,12 +390,20 @@ impl Renderer {
         self.sampling.read_back(&self.ctx).map(Some)
     }
 
+    /// Makes the targets of `width`×`height` the first of [`Self::sized`].
     fn ensure_targets(&mut self, width: u32, height: u32) -> Result<(), GpuError> {
-        if matches!(&self.sized, Some(s) if s.width == width && s.height == height) {
+        if let Some(i) = self
+            .sized
+            .iter()
+            .position(|s| s.width == width && s.height == height)
+        {
+            let hit = self.sized.remove(i);
+            self.sized.insert(0, hit);
             return Ok(());
         }
-        // Release the old targets first so a resize does not need both in memory.
-        self.sized = None;
+        // Release the least recently used targets first so a new size does not need them all
+        // in memory at once.
+        self.sized.truncate(MAX_SIZES - 1);
         let device = &self.ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let hdr = Target::new(
@@ -432,7 +453,7 @@ impl Renderer {
             tonemap,
         };
         check_allocation(scope, format!("{width}×{height} frame targets"))?;
-        self.sized = Some(sized);
+        self.sized.insert(0, sized);
         Ok(())
     }
 
@@ -458,7 +479,7 @@ impl Renderer {
         self.ensure_targets(width, height)?;
         let faces = LightUniform::face_count(settings.light.kind);
         self.ensure_shadow_map(settings.shadow_map_size, faces)?;
-        let (Some(sized), Some(shadow_map)) = (&self.sized, &self.shadow_map) else {
+        let (Some(sized), Some(shadow_map)) = (self.sized.first(), &self.shadow_map) else {
             unreachable!("targets were just ensured");
         };
 
@@ -611,6 +632,7 @@ impl Renderer {
         })?;
         let timings = stages.finish()?;
 
+        let readback_start = std::time::Instant::now();
         let rgba8 = sized.ldr_readback.read(&self.ctx)?;
         let (hdr, indirect) = if settings.capture_hdr {
             (
@@ -631,6 +653,7 @@ impl Renderer {
             timings,
             timing_source: self.timer.source(),
             exposure_scale: exposure.scale,
+            readback_ms: readback_start.elapsed().as_secs_f64() * 1e3,
         })
     }
 }

@@ -10,18 +10,7 @@ pub mod caches;
 pub mod reference;
 pub mod sampling;
 
-/// How indirect light is computed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum GiMethod {
-    /// Direct light only.
-    None,
-    /// LightSkin: every RSM texel is a VAL (eq. 3–7).
-    Lightskin,
-    /// BRSM: an importance-sampled subset of VALs (eq. 10–15).
-    #[default]
-    Brsm,
-}
+pub use lightcast_protocol::GiMethod;
 
 /// Default α of [`GiSettings::defensive`]: the largest weight 1/(N·P) stays below 3.4·M/N
 /// for M RSM texels and N VALs. Chosen by measurement (`bench --defensive`, lavapipe, RSM

@@ -53,7 +53,9 @@ impl From<wgpu::PollError> for GpuError {
     }
 }
 
-/// The adapter, device and queue, plus what the pipeline learned about them.
+/// The adapter, device and queue, plus what the pipeline learned about them. Clones share the
+/// same device.
+#[derive(Clone)]
 pub struct GpuContext {
     pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,

@@ -63,22 +63,52 @@ pub enum ProceduralError {
     Scene(#[from] SceneError),
 }
 
+/// A parsed procedural scene name.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Spec {
+    Cornell,
+    Street(StreetParams),
+}
+
+impl Spec {
+    /// Parses `name` or `name?key=value&...`.
+    pub fn parse(spec: &str) -> Result<Self, ProceduralError> {
+        let (name, query) = spec.split_once('?').unwrap_or((spec, ""));
+        let parameters = parse_query(query)?;
+        match name {
+            "cornell" | "cornell-box" => match parameters.first() {
+                Some((key, _)) => Err(ProceduralError::UnknownParameter {
+                    scene: "cornell",
+                    parameter: (*key).to_owned(),
+                    known: "none",
+                }),
+                None => Ok(Self::Cornell),
+            },
+            "street" => Ok(Self::Street(StreetParams::from_parameters(&parameters)?)),
+            _ => Err(ProceduralError::UnknownScene(name.to_owned())),
+        }
+    }
+
+    /// Triangles the scene will have, without building it (so callers can refuse large ones
+    /// first).
+    pub fn triangle_count(&self) -> u64 {
+        match self {
+            Self::Cornell => cornell_box().triangle_count() as u64,
+            Self::Street(params) => params.counts().1,
+        }
+    }
+
+    pub fn build(&self) -> Result<Scene, ProceduralError> {
+        match self {
+            Self::Cornell => Ok(cornell_box()),
+            Self::Street(params) => street(params),
+        }
+    }
+}
+
 /// Builds the scene named by `spec` (`name` or `name?key=value&...`).
 pub fn build(spec: &str) -> Result<Scene, ProceduralError> {
-    let (name, query) = spec.split_once('?').unwrap_or((spec, ""));
-    let parameters = parse_query(query)?;
-    match name {
-        "cornell" | "cornell-box" => match parameters.first() {
-            Some((key, _)) => Err(ProceduralError::UnknownParameter {
-                scene: "cornell",
-                parameter: (*key).to_owned(),
-                known: "none",
-            }),
-            None => Ok(cornell_box()),
-        },
-        "street" => street(&StreetParams::from_parameters(&parameters)?),
-        _ => Err(ProceduralError::UnknownScene(name.to_owned())),
-    }
+    Spec::parse(spec)?.build()
 }
 
 /// Splits `a=1&b=2` into pairs. Empty items are skipped so that `street?` and a trailing `&`

@@ -1,0 +1,452 @@
+//! Bodies of the HTTP API (`/v1/scenes`, `/v1/sessions`, `/v1/render`) and its error format.
+//!
+//! Request bodies reject unknown fields, so a misspelt parameter is an error that names it
+//! rather than a silently ignored value. Every field has a default, so `{}` is a valid request.
+
+use crate::{Camera, Light};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// The id of the scene the server loads at start (the built-in Cornell box).
+pub const DEFAULT_SCENE_ID: &str = "default";
+
+/// Every error the API returns, with a 4xx or 5xx status.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ErrorBody {
+    /// Stable machine-readable kind, e.g. `invalid_field`, `not_found`, `unauthorized`.
+    pub error: String,
+    /// The request field at fault, as a path (`render.gi.rsm_size`), when one is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// What went wrong, for people.
+    pub message: String,
+}
+
+/// How indirect light is computed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum GiMethod {
+    /// Direct light only.
+    None,
+    /// LightSkin: every RSM texel is a VAL (eq. 3–7 of the seed paper).
+    Lightskin,
+    /// BRSM: an importance-sampled subset of VALs (eq. 10–15).
+    #[default]
+    Brsm,
+}
+
+/// Which image a frame shows: the final frame or one of the GI debug views.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
+pub enum View {
+    /// The tone-mapped frame.
+    #[default]
+    Final,
+    /// Indirect light only, at the frame's exposure.
+    Indirect,
+    /// The reflective shadow map's flux (all light faces side by side).
+    RsmFlux,
+    /// The VAL importance map of eq. 10 (log scale); needs `brsm`.
+    Importance,
+    /// The RSM flux darkened, with the selected VALs marked; needs `brsm`.
+    SelectedVals,
+    /// The frame darkened, with every light cache drawn in the colour of its diffuse proxy light.
+    Caches,
+}
+
+impl std::fmt::Display for View {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Final => "final",
+            Self::Indirect => "indirect",
+            Self::RsmFlux => "rsm-flux",
+            Self::Importance => "importance",
+            Self::SelectedVals => "selected-vals",
+            Self::Caches => "caches",
+        })
+    }
+}
+
+impl View {
+    /// Whether the view shows a stage only BRSM runs (importance, selection).
+    pub fn needs_brsm(self) -> bool {
+        matches!(self, Self::Importance | Self::SelectedVals)
+    }
+
+    /// Whether the view shows GI data (any method but `none`).
+    pub fn needs_gi(self) -> bool {
+        self != Self::Final
+    }
+}
+
+/// Parameters of the GI methods. Defaults are the paper's evaluation settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct GiParams {
+    pub method: GiMethod,
+    /// RSM side per light face in texels (16 … the server's limit).
+    pub rsm_size: u32,
+    /// N_VS: view samples for the importance estimate (BRSM).
+    pub view_samples: u32,
+    /// N_sVAL: VALs drawn per frame (BRSM).
+    pub val_count: u32,
+    /// Weight α in [0, 1] of a uniform part mixed into the BRSM selection pdf; 0 is the
+    /// paper's plain importance sampling.
+    pub defensive: f32,
+    /// Dim proxy lights hidden behind other caches (the paper's double projection).
+    pub occlusion: bool,
+    /// Light caches: largest distance d_eps between a surface point and its cache, in scene
+    /// units; `null` derives it from the scene's surface area. A value other than the scene's
+    /// default starts a precomputation of its own.
+    pub cache_distance: Option<f32>,
+    /// Light caches: largest angle theta_eps between surface and cache normals, in degrees;
+    /// `null` for the default (30°).
+    pub cache_angle: Option<f32>,
+}
+
+impl Default for GiParams {
+    fn default() -> Self {
+        Self {
+            method: GiMethod::Brsm,
+            rsm_size: 1024,
+            view_samples: 512,
+            val_count: 8192,
+            defensive: 0.3,
+            occlusion: true,
+            cache_distance: None,
+            cache_angle: None,
+        }
+    }
+}
+
+/// What to render: scene, size, camera, light and GI. Shared by sessions and one-shot renders.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderParams {
+    /// Scene id (see `/v1/scenes`).
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    /// `null`: the scene's camera, else one framing its bounds.
+    pub camera: Option<Camera>,
+    /// `null`: the scene's light (see the scene's `default_light`).
+    pub light: Option<Light>,
+    /// Linear scale before tone mapping; `null` for automatic exposure.
+    pub exposure: Option<f32>,
+    /// Shadow map side in texels (per cube face for point lights).
+    pub shadow_map_size: u32,
+    pub gi: GiParams,
+    pub view: View,
+}
+
+impl Default for RenderParams {
+    fn default() -> Self {
+        Self {
+            scene: DEFAULT_SCENE_ID.to_string(),
+            width: 960,
+            height: 540,
+            camera: None,
+            light: None,
+            exposure: None,
+            shadow_map_size: 2048,
+            gi: GiParams::default(),
+            view: View::Final,
+        }
+    }
+}
+
+/// Image codecs of frames and stills.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Codec {
+    #[default]
+    Jpeg,
+    Png,
+}
+
+/// How a session encodes its frames. While input keeps arriving frames use
+/// `moving_quality`; once input has rested for `still_after_ms` one still follows in
+/// `still_codec` at `quality` (as remote-visualisation tools do).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct Encoding {
+    pub codec: Codec,
+    /// JPEG quality 1–100 at rest.
+    pub quality: u8,
+    /// JPEG quality 1–100 while the camera, light or parameters change.
+    pub moving_quality: u8,
+    /// Rest time before the high-quality still; 0 turns stills off.
+    pub still_after_ms: u32,
+    pub still_codec: Codec,
+}
+
+impl Default for Encoding {
+    fn default() -> Self {
+        Self {
+            codec: Codec::Jpeg,
+            quality: 90,
+            moving_quality: 70,
+            still_after_ms: 300,
+            still_codec: Codec::Png,
+        }
+    }
+}
+
+/// When a session renders.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum StreamMode {
+    /// A frame every tick at the fps cap, changed or not (live timings, load tests).
+    #[default]
+    Continuous,
+    /// Frames only while something changes, then one still.
+    OnChange,
+}
+
+/// Everything a session's owner can set. `POST /v1/sessions` takes it (every field
+/// optional); `PATCH /v1/sessions/{id}` and the WebSocket `update` message take a JSON merge
+/// patch of it (RFC 7396: fields present replace, `null` restores the default).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct SessionParams {
+    pub render: RenderParams,
+    pub encoding: Encoding,
+    /// Most frames per second sent to this session.
+    pub fps_cap: f32,
+    pub mode: StreamMode,
+    pub paused: bool,
+}
+
+impl Default for SessionParams {
+    fn default() -> Self {
+        Self {
+            render: RenderParams::default(),
+            encoding: Encoding::default(),
+            fps_cap: 30.0,
+            mode: StreamMode::Continuous,
+            paused: false,
+        }
+    }
+}
+
+/// Counters of one session since it was created.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionStats {
+    /// Frames the GPU rendered for this session.
+    pub frames_rendered: u64,
+    /// Frames written to the WebSocket.
+    pub frames_sent: u64,
+    /// Encoded frames replaced in the latest-frame slot before the client took them.
+    pub frames_dropped: u64,
+    /// Ticks skipped because the client still had frames in flight (it reads too slowly).
+    pub frames_throttled: u64,
+    /// Frames acknowledged by the client.
+    pub frames_acked: u64,
+    pub bytes_sent: u64,
+    /// Render errors (e.g. a parameter the GPU cannot honour); the last one is in `last_error`.
+    pub errors: u64,
+    pub last_error: Option<ErrorBody>,
+    /// Per-stage GPU milliseconds of the last frame.
+    pub last_stages: Vec<StageMs>,
+}
+
+/// One pipeline stage's time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct StageMs {
+    pub stage: String,
+    pub ms: f64,
+}
+
+/// A session as `GET /v1/sessions/{id}` shows it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionInfo {
+    pub id: String,
+    pub params: SessionParams,
+    /// Path of the session's WebSocket.
+    pub stream: String,
+    /// Whether a WebSocket is attached.
+    pub connected: bool,
+    pub created_unix_ms: u64,
+    pub stats: SessionStats,
+}
+
+/// A short-lived ticket that opens the session's WebSocket where headers cannot be set
+/// (browsers): `GET /v1/sessions/{id}/stream?ticket=…`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct StreamTicket {
+    pub ticket: String,
+    pub expires_in_ms: u64,
+}
+
+/// Answer to `POST /v1/sessions`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionCreated {
+    pub session: SessionInfo,
+    /// Opens the WebSocket without a bearer header.
+    pub ticket: StreamTicket,
+}
+
+/// State of a scene's light-cache precomputation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum PrecomputeState {
+    Queued,
+    Running,
+    Ready,
+    Failed,
+}
+
+/// One set of light caches of a scene (one per distinct cache parameters in use).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct CacheVariant {
+    pub state: PrecomputeState,
+    pub cache_distance: f32,
+    pub cache_angle: f32,
+    /// Number of caches, once ready.
+    pub caches: Option<u64>,
+    /// Current step while running (e.g. `clustering`), with progress.
+    pub step: Option<String>,
+    pub progress: Option<f32>,
+    /// Time the precomputation (or loading from the cache store) took.
+    pub seconds: Option<f64>,
+    pub from_store: Option<bool>,
+    pub error: Option<String>,
+}
+
+/// JSON body of `POST /v1/scenes` that builds a procedural scene instead of uploading one.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ProceduralScene {
+    /// `cornell`, or `street?blocks=N&detail=D&seed=S`.
+    pub procedural: String,
+    /// Display name; default: the spec.
+    #[serde(default)]
+    pub name: Option<String>,
+}
+
+/// Axis-aligned bounds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Bounds {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+}
+
+/// A scene as `GET /v1/scenes/{id}` shows it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SceneInfo {
+    pub id: String,
+    pub name: String,
+    /// Where it came from: `procedural:…` or `upload`.
+    pub source: String,
+    pub triangles: u64,
+    pub vertices: u64,
+    pub materials: u64,
+    pub textures: u64,
+    pub bounds: Bounds,
+    /// The file's `KHR_lights_punctual` lights.
+    pub lights: Vec<Light>,
+    /// The file's cameras.
+    pub cameras: Vec<Camera>,
+    /// What a render uses when it names no camera or light.
+    pub default_camera: Camera,
+    pub default_light: Light,
+    /// Light caches: the default set first.
+    pub caches: Vec<CacheVariant>,
+    /// Sessions using the scene (it cannot be deleted while any do).
+    pub sessions: u64,
+    pub load_ms: f64,
+}
+
+/// Output of a one-shot render.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ImageFormat {
+    #[default]
+    Png,
+    Jpeg,
+    /// Linear float32 RGBA of the final HDR radiance (before exposure), little-endian, rows top
+    /// to bottom.
+    RawFinal,
+    /// Linear float32 RGBA of the indirect light alone.
+    RawIndirect,
+}
+
+impl ImageFormat {
+    pub fn content_type(self) -> &'static str {
+        match self {
+            Self::Png => "image/png",
+            Self::Jpeg => "image/jpeg",
+            Self::RawFinal | Self::RawIndirect => "application/octet-stream",
+        }
+    }
+}
+
+/// Body of `POST /v1/render`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderRequest {
+    pub render: RenderParams,
+    pub format: ImageFormat,
+    /// JPEG quality 1–100 (default 90).
+    pub quality: Option<u8>,
+}
+
+/// The timing report of a one-shot render; sent in the `x-lightcast-report` header of the
+/// image response.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct RenderReport {
+    /// The server build (`lightcast-server` version and git revision).
+    pub build: String,
+    pub adapter: String,
+    /// SHA-256 of the canonical JSON of the request after defaults were applied: equal hashes
+    /// on the same build and adapter give identical pixels.
+    pub request_hash: String,
+    pub width: u32,
+    pub height: u32,
+    pub format: ImageFormat,
+    pub stages: Vec<StageMs>,
+    pub gpu_ms: f64,
+    /// `gpu_timestamps` or `cpu_wall`.
+    pub timing_source: String,
+    pub encode_ms: f64,
+    /// Time waiting for the render loop (queueing behind sessions).
+    pub queue_ms: f64,
+    pub exposure_scale: f32,
+    /// The camera and light actually used (after scene defaults).
+    pub camera: Camera,
+    pub light: Light,
+}
+
+/// The server's limits; requests beyond them are refused with `invalid_field`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Limits {
+    pub max_width: u32,
+    pub max_height: u32,
+    pub max_rsm_size: u32,
+    pub max_val_count: u32,
+    pub max_view_samples: u32,
+    pub max_shadow_map_size: u32,
+    pub max_fps: f32,
+    pub max_sessions: u32,
+    pub max_scenes: u32,
+    pub max_upload_bytes: u64,
+    /// Most triangles of an uploaded or procedural scene.
+    pub max_triangles: u64,
+    pub max_message_bytes: u64,
+    /// WebSocket control messages per second per session.
+    pub max_messages_per_second: u32,
+    pub request_timeout_ms: u64,
+}
+
+/// `GET /v1/server`: who is serving and under which limits.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ServerInfo {
+    pub build: String,
+    pub adapter: String,
+    pub timing_source: String,
+    pub auth: bool,
+    pub limits: Limits,
+}

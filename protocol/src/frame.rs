@@ -1,0 +1,286 @@
+//! The binary frame message: a fixed little-endian header, per-stage timings, then the image.
+//!
+//! ```text
+//! offset size  field
+//!      0    4  magic "LCFR"
+//!      4    2  format version (1)
+//!      6    2  header length in bytes (the payload starts here)
+//!      8    8  sequence number (per session, from 1)
+//!     16    8  input id: the last client input the frame shows (0: none)
+//!     24    8  render start, server clock, µs since the Unix epoch
+//!     32    8  send time, server clock, µs since the Unix epoch
+//!     40    4  width
+//!     44    4  height
+//!     48    1  codec (0 JPEG, 1 PNG)
+//!     49    1  flags (bit 0 still, bit 1 GI pending: direct light only, bit 2 moving)
+//!     50    1  stage count N
+//!     51    1  JPEG quality (0 for PNG)
+//!     52    4  f32 encode ms
+//!     56    4  f32 readback ms (waiting for the GPU copy to be mapped)
+//!     60    4  f32 GPU ms of all stages
+//!     64    4  payload length in bytes
+//!     68  8·N  per stage: u16 index into STAGE_NAMES, u16 zero, f32 GPU ms
+//! ```
+//! A reader must use the header length to find the payload, so later versions can append
+//! fields.
+
+use crate::Codec;
+
+pub const FRAME_MAGIC: [u8; 4] = *b"LCFR";
+pub const FRAME_VERSION: u16 = 1;
+const FIXED_LEN: usize = 68;
+const STAGE_LEN: usize = 8;
+
+/// Names of the pipeline stages, in pipeline order; frame headers refer to them by index.
+pub const STAGE_NAMES: &[&str] = &[
+    "shadow_map",
+    "gbuffer",
+    "rsm",
+    "importance",
+    "cumulative_sums",
+    "val_select",
+    "cache_lighting",
+    "proxy_occlusion",
+    "indirect_light",
+    "indirect_clear",
+    "direct_light",
+    "exposure",
+    "tonemap",
+    "readback_copy",
+];
+
+pub const FLAG_STILL: u8 = 1;
+pub const FLAG_GI_PENDING: u8 = 2;
+pub const FLAG_MOVING: u8 = 4;
+
+/// The decoded header of a binary frame message.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameHeader {
+    pub seq: u64,
+    pub input_id: u64,
+    pub render_start_us: u64,
+    pub send_us: u64,
+    pub width: u32,
+    pub height: u32,
+    pub codec: Codec,
+    pub flags: u8,
+    pub quality: u8,
+    pub encode_ms: f32,
+    pub readback_ms: f32,
+    pub gpu_ms: f32,
+    pub payload_len: u32,
+    /// (index into [`STAGE_NAMES`], GPU ms).
+    pub stages: Vec<(u16, f32)>,
+}
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum FrameHeaderError {
+    #[error("frame message of {0} bytes is shorter than its header")]
+    Short(usize),
+    #[error("not a lightcast frame (bad magic)")]
+    Magic,
+    #[error("frame format version {0} is newer than this client understands ({FRAME_VERSION})")]
+    Version(u16),
+    #[error("header length {header} does not fit the {stages} stages it lists")]
+    HeaderLength { header: usize, stages: usize },
+    #[error("payload length {declared} differs from the {actual} bytes that follow the header")]
+    PayloadLength { declared: usize, actual: usize },
+    #[error("unknown codec {0}")]
+    Codec(u8),
+}
+
+impl FrameHeader {
+    pub fn stage_name(index: u16) -> &'static str {
+        STAGE_NAMES
+            .get(usize::from(index))
+            .copied()
+            .unwrap_or("unknown")
+    }
+
+    /// Index of a stage name in [`STAGE_NAMES`].
+    pub fn stage_index(name: &str) -> Option<u16> {
+        STAGE_NAMES
+            .iter()
+            .position(|&n| n == name)
+            .and_then(|i| u16::try_from(i).ok())
+    }
+
+    pub fn header_len(&self) -> usize {
+        FIXED_LEN + STAGE_LEN * self.stages.len()
+    }
+
+    /// Writes the header followed by `payload` (whose length replaces `payload_len`).
+    pub fn encode_with(&self, payload: &[u8]) -> Vec<u8> {
+        let stages = &self.stages[..self.stages.len().min(usize::from(u8::MAX))];
+        let header_len = FIXED_LEN + STAGE_LEN * stages.len();
+        let mut out = Vec::with_capacity(header_len + payload.len());
+        out.extend_from_slice(&FRAME_MAGIC);
+        out.extend_from_slice(&FRAME_VERSION.to_le_bytes());
+        out.extend_from_slice(&(header_len as u16).to_le_bytes());
+        for v in [self.seq, self.input_id, self.render_start_us, self.send_us] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&self.width.to_le_bytes());
+        out.extend_from_slice(&self.height.to_le_bytes());
+        out.push(match self.codec {
+            Codec::Jpeg => 0,
+            Codec::Png => 1,
+        });
+        out.push(self.flags);
+        out.push(stages.len() as u8);
+        out.push(self.quality);
+        for v in [self.encode_ms, self.readback_ms, self.gpu_ms] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
+        for &(index, ms) in stages {
+            out.extend_from_slice(&index.to_le_bytes());
+            out.extend_from_slice(&0u16.to_le_bytes());
+            out.extend_from_slice(&ms.to_le_bytes());
+        }
+        out.extend_from_slice(payload);
+        out
+    }
+
+    /// Overwrites the send time of an encoded message in place (set just before sending).
+    pub fn patch_send_time(message: &mut [u8], send_us: u64) {
+        if message.len() >= 40 {
+            message[32..40].copy_from_slice(&send_us.to_le_bytes());
+        }
+    }
+
+    /// Splits a binary message into its header and payload.
+    pub fn decode(message: &[u8]) -> Result<(Self, &[u8]), FrameHeaderError> {
+        if message.len() < FIXED_LEN {
+            return Err(FrameHeaderError::Short(message.len()));
+        }
+        if message[0..4] != FRAME_MAGIC {
+            return Err(FrameHeaderError::Magic);
+        }
+        let u16_at = |o: usize| u16::from_le_bytes([message[o], message[o + 1]]);
+        let u32_at = |o: usize| {
+            u32::from_le_bytes([message[o], message[o + 1], message[o + 2], message[o + 3]])
+        };
+        let u64_at = |o: usize| u64::from(u32_at(o)) | (u64::from(u32_at(o + 4)) << 32);
+        let f32_at = |o: usize| f32::from_bits(u32_at(o));
+        let version = u16_at(4);
+        if version > FRAME_VERSION {
+            return Err(FrameHeaderError::Version(version));
+        }
+        let header_len = usize::from(u16_at(6));
+        let stage_count = usize::from(message[50]);
+        if header_len < FIXED_LEN + STAGE_LEN * stage_count || header_len > message.len() {
+            return Err(FrameHeaderError::HeaderLength {
+                header: header_len,
+                stages: stage_count,
+            });
+        }
+        let codec = match message[48] {
+            0 => Codec::Jpeg,
+            1 => Codec::Png,
+            other => return Err(FrameHeaderError::Codec(other)),
+        };
+        let payload = &message[header_len..];
+        let payload_len = u32_at(64);
+        if payload_len as usize != payload.len() {
+            return Err(FrameHeaderError::PayloadLength {
+                declared: payload_len as usize,
+                actual: payload.len(),
+            });
+        }
+        let stages = (0..stage_count)
+            .map(|i| {
+                let o = FIXED_LEN + STAGE_LEN * i;
+                (u16_at(o), f32_at(o + 4))
+            })
+            .collect();
+        let header = Self {
+            seq: u64_at(8),
+            input_id: u64_at(16),
+            render_start_us: u64_at(24),
+            send_us: u64_at(32),
+            width: u32_at(40),
+            height: u32_at(44),
+            codec,
+            flags: message[49],
+            quality: message[51],
+            encode_ms: f32_at(52),
+            readback_ms: f32_at(56),
+            gpu_ms: f32_at(60),
+            payload_len,
+            stages,
+        };
+        Ok((header, payload))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn header() -> FrameHeader {
+        FrameHeader {
+            seq: 42,
+            input_id: 7,
+            render_start_us: 1_700_000_000_000_001,
+            send_us: 1_700_000_000_000_999,
+            width: 320,
+            height: 180,
+            codec: Codec::Png,
+            flags: FLAG_STILL | FLAG_MOVING,
+            quality: 0,
+            encode_ms: 1.5,
+            readback_ms: 0.25,
+            gpu_ms: 3.75,
+            payload_len: 5,
+            stages: vec![
+                (0, 0.5),
+                (FrameHeader::stage_index("tonemap").unwrap(), 0.125),
+            ],
+        }
+    }
+
+    #[test]
+    fn round_trips_with_documented_offsets() {
+        let h = header();
+        let bytes = h.encode_with(b"image");
+        assert_eq!(&bytes[0..4], b"LCFR");
+        assert_eq!(u16::from_le_bytes([bytes[6], bytes[7]]) as usize, 68 + 16);
+        assert_eq!(u64::from_le_bytes(bytes[8..16].try_into().unwrap()), 42);
+        assert_eq!(u32::from_le_bytes(bytes[40..44].try_into().unwrap()), 320);
+        assert_eq!(bytes[48], 1);
+        let (back, payload) = FrameHeader::decode(&bytes).expect("decodes");
+        assert_eq!(back, h);
+        assert_eq!(payload, b"image");
+        assert_eq!(FrameHeader::stage_name(back.stages[1].0), "tonemap");
+    }
+
+    #[test]
+    fn send_time_is_patched_in_place() {
+        let mut bytes = header().encode_with(b"x");
+        FrameHeader::patch_send_time(&mut bytes, 123);
+        assert_eq!(FrameHeader::decode(&bytes).unwrap().0.send_us, 123);
+    }
+
+    #[test]
+    fn rejects_truncated_and_foreign_messages() {
+        let bytes = header().encode_with(b"image");
+        assert_eq!(
+            FrameHeader::decode(&bytes[..10]),
+            Err(FrameHeaderError::Short(10))
+        );
+        assert!(matches!(
+            FrameHeader::decode(&bytes[..bytes.len() - 1]),
+            Err(FrameHeaderError::PayloadLength { .. })
+        ));
+        let mut bad = bytes.clone();
+        bad[0] = b'X';
+        assert_eq!(FrameHeader::decode(&bad), Err(FrameHeaderError::Magic));
+        let mut newer = bytes;
+        newer[4] = 9;
+        assert_eq!(
+            FrameHeader::decode(&newer),
+            Err(FrameHeaderError::Version(9))
+        );
+    }
+}

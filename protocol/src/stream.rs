@@ -1,0 +1,86 @@
+//! Messages on a session's WebSocket (`/v1/sessions/{id}/stream`).
+//!
+//! The client sends JSON text messages ([`ClientMessage`]); the server sends binary frames
+//! (a [`crate::FrameHeader`] then the encoded image) and JSON text events ([`ServerEvent`]).
+
+use crate::{Camera, ErrorBody, Light, SessionInfo};
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// A control message from the client, tagged by `type`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    /// Move the camera. `input_id` (any number the client picks, > 0) comes back in the header
+    /// of the first frame that shows the change, so the client can measure input→frame latency.
+    Camera {
+        camera: Camera,
+        #[serde(default)]
+        input_id: u64,
+    },
+    /// Replace the light.
+    Light {
+        light: Light,
+        #[serde(default)]
+        input_id: u64,
+    },
+    /// A JSON merge patch (RFC 7396) of the session's [`crate::SessionParams`], as for
+    /// `PATCH /v1/sessions/{id}`.
+    Update {
+        #[schema(value_type = Object)]
+        patch: serde_json::Value,
+        #[serde(default)]
+        input_id: u64,
+    },
+    /// Stop rendering until `resume`.
+    Pause,
+    Resume,
+    /// Send one lossless (PNG) still of the current view now.
+    Still,
+    /// The client has shown frame `seq`; frames not acknowledged do not hold anything back,
+    /// but the server measures the round trip from them.
+    Ack {
+        seq: u64,
+    },
+    /// Answered by a `pong` event with the same `nonce`.
+    Ping {
+        #[serde(default)]
+        nonce: u64,
+    },
+}
+
+/// A JSON text message from the server, tagged by `type`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerEvent {
+    /// First message on a new WebSocket: the session as it stands.
+    Hello {
+        session: Box<SessionInfo>,
+    },
+    /// Parameters changed (by this socket, another or `PATCH`); the new state.
+    Updated {
+        session: Box<SessionInfo>,
+    },
+    /// A message was refused; the session goes on unchanged.
+    Error {
+        error: ErrorBody,
+    },
+    /// A frame could not be rendered (e.g. the GPU refused the size); the session goes on.
+    RenderError {
+        error: ErrorBody,
+    },
+    /// The scene's light caches are being computed; frames show direct light until then.
+    CachesPending {
+        scene: String,
+    },
+    CachesReady {
+        scene: String,
+    },
+    Pong {
+        nonce: u64,
+    },
+    /// The session is ending (deleted, or the server is shutting down); the socket closes next.
+    Closing {
+        reason: String,
+    },
+}

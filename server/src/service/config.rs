@@ -1,0 +1,210 @@
+//! `lightcast-server serve` options: where to listen, limits and auth.
+
+use crate::gpu::BackendChoice;
+use crate::renderer::{MAX_RSM_SIZE, MAX_SHADOW_MAP_SIZE, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};
+use lightcast_protocol::Limits;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+/// Options of `lightcast-server serve` (every flag also reads an environment variable).
+#[derive(Clone, Debug, clap::Args)]
+pub struct ServeArgs {
+    /// Address and port to listen on.
+    #[arg(long, env = "LIGHTCAST_LISTEN", default_value = "127.0.0.1:8080")]
+    pub listen: SocketAddr,
+    /// Bearer tokens that may use the API, comma-separated. Without any, auth is off.
+    #[arg(long = "token", env = "LIGHTCAST_TOKENS", value_delimiter = ',')]
+    pub tokens: Vec<String>,
+    /// A file with one bearer token per line (blank lines and `#` comments skipped).
+    #[arg(long, env = "LIGHTCAST_TOKENS_FILE")]
+    pub tokens_file: Option<PathBuf>,
+    /// Count a CPU (software) adapter such as lavapipe as ready in /readyz.
+    #[arg(long, env = "LIGHTCAST_ALLOW_CPU_ADAPTER")]
+    pub allow_cpu_adapter: bool,
+    /// wgpu backend.
+    #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
+    pub backend: BackendChoice,
+    /// Where precomputed light caches are kept (default: the user's cache directory).
+    #[arg(long, env = "LIGHTCAST_CACHE_DIR")]
+    pub cache_dir: Option<PathBuf>,
+    /// Scene loaded at start under the id `default`.
+    #[arg(long, env = "LIGHTCAST_DEFAULT_SCENE", default_value = crate::offline::DEFAULT_SCENE)]
+    pub default_scene: String,
+    /// Threads encoding frames (JPEG/PNG) off the render loop. Default: half the CPUs.
+    #[arg(long, env = "LIGHTCAST_ENCODE_THREADS")]
+    pub encode_threads: Option<usize>,
+    #[command(flatten)]
+    pub limits: LimitArgs,
+}
+
+/// Configurable maxima; requests beyond them get a 400 naming the field.
+#[derive(Clone, Debug, clap::Args)]
+pub struct LimitArgs {
+    /// Largest frame width.
+    #[arg(long, env = "LIGHTCAST_MAX_WIDTH", default_value_t = 3840)]
+    pub max_width: u32,
+    /// Largest frame height.
+    #[arg(long, env = "LIGHTCAST_MAX_HEIGHT", default_value_t = 2160)]
+    pub max_height: u32,
+    /// Largest RSM side.
+    #[arg(long, env = "LIGHTCAST_MAX_RSM_SIZE", default_value_t = 2048)]
+    pub max_rsm_size: u32,
+    /// Most VALs per frame.
+    #[arg(long, env = "LIGHTCAST_MAX_VAL_COUNT", default_value_t = 65536)]
+    pub max_val_count: u32,
+    /// Most view samples per frame.
+    #[arg(long, env = "LIGHTCAST_MAX_VIEW_SAMPLES", default_value_t = 4096)]
+    pub max_view_samples: u32,
+    /// Largest shadow map side.
+    #[arg(long, env = "LIGHTCAST_MAX_SHADOW_MAP_SIZE", default_value_t = 4096)]
+    pub max_shadow_map_size: u32,
+    /// Highest fps cap a session may ask for.
+    #[arg(long, env = "LIGHTCAST_MAX_FPS", default_value_t = 240.0)]
+    pub max_fps: f32,
+    /// Most sessions open at once.
+    #[arg(long, env = "LIGHTCAST_MAX_SESSIONS", default_value_t = 64)]
+    pub max_sessions: u32,
+    /// Most scenes held at once (the default scene included).
+    #[arg(long, env = "LIGHTCAST_MAX_SCENES", default_value_t = 16)]
+    pub max_scenes: u32,
+    /// Largest scene upload in bytes.
+    #[arg(long, env = "LIGHTCAST_MAX_UPLOAD_BYTES", default_value_t = 256 << 20)]
+    pub max_upload_bytes: u64,
+    /// Most triangles of an uploaded or procedural scene.
+    #[arg(long, env = "LIGHTCAST_MAX_TRIANGLES", default_value_t = 10_000_000)]
+    pub max_triangles: u64,
+    /// Largest JSON body or WebSocket message in bytes.
+    #[arg(long, env = "LIGHTCAST_MAX_MESSAGE_BYTES", default_value_t = 64 << 10)]
+    pub max_message_bytes: u64,
+    /// WebSocket control messages accepted per second per session (a burst of twice as many).
+    #[arg(long, env = "LIGHTCAST_MAX_MESSAGES_PER_SECOND", default_value_t = 120)]
+    pub max_messages_per_second: u32,
+    /// Time limit of an HTTP request in milliseconds (WebSockets are not limited).
+    #[arg(long, env = "LIGHTCAST_REQUEST_TIMEOUT_MS", default_value_t = 60_000)]
+    pub request_timeout_ms: u64,
+}
+
+/// Why the options cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("--{flag}: {reason}")]
+    Invalid { flag: &'static str, reason: String },
+    #[error("reading tokens file {path}: {error}")]
+    TokensFile {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+}
+
+impl LimitArgs {
+    /// The limits, refusing values beyond what the renderer itself supports.
+    pub fn limits(&self) -> Result<Limits, ConfigError> {
+        let within = |flag: &'static str, v: u64, lo: u64, hi: u64| {
+            if (lo..=hi).contains(&v) {
+                Ok(())
+            } else {
+                Err(ConfigError::Invalid {
+                    flag,
+                    reason: format!("{v} is outside {lo}..={hi}"),
+                })
+            }
+        };
+        within("max-width", self.max_width.into(), 16, 16384)?;
+        within("max-height", self.max_height.into(), 16, 16384)?;
+        within(
+            "max-rsm-size",
+            self.max_rsm_size.into(),
+            16,
+            MAX_RSM_SIZE.into(),
+        )?;
+        within(
+            "max-val-count",
+            self.max_val_count.into(),
+            1,
+            MAX_VAL_COUNT.into(),
+        )?;
+        within(
+            "max-view-samples",
+            self.max_view_samples.into(),
+            1,
+            MAX_VIEW_SAMPLES.into(),
+        )?;
+        within(
+            "max-shadow-map-size",
+            self.max_shadow_map_size.into(),
+            16,
+            MAX_SHADOW_MAP_SIZE.into(),
+        )?;
+        if !(self.max_fps.is_finite() && (1.0..=1000.0).contains(&self.max_fps)) {
+            return Err(ConfigError::Invalid {
+                flag: "max-fps",
+                reason: format!("{} is outside 1..=1000", self.max_fps),
+            });
+        }
+        within("max-sessions", self.max_sessions.into(), 1, 4096)?;
+        within("max-scenes", self.max_scenes.into(), 1, 1024)?;
+        within("max-message-bytes", self.max_message_bytes, 1024, 16 << 20)?;
+        within(
+            "max-messages-per-second",
+            self.max_messages_per_second.into(),
+            1,
+            100_000,
+        )?;
+        within(
+            "request-timeout-ms",
+            self.request_timeout_ms,
+            100,
+            3_600_000,
+        )?;
+        Ok(Limits {
+            max_width: self.max_width,
+            max_height: self.max_height,
+            max_rsm_size: self.max_rsm_size,
+            max_val_count: self.max_val_count,
+            max_view_samples: self.max_view_samples,
+            max_shadow_map_size: self.max_shadow_map_size,
+            max_fps: self.max_fps,
+            max_sessions: self.max_sessions,
+            max_scenes: self.max_scenes,
+            max_upload_bytes: self.max_upload_bytes,
+            max_triangles: self.max_triangles,
+            max_message_bytes: self.max_message_bytes,
+            max_messages_per_second: self.max_messages_per_second,
+            request_timeout_ms: self.request_timeout_ms,
+        })
+    }
+}
+
+impl ServeArgs {
+    /// Tokens from `--token` and `--tokens-file`; empty means auth is off.
+    pub fn tokens(&self) -> Result<Vec<String>, ConfigError> {
+        let mut tokens: Vec<String> = self
+            .tokens
+            .iter()
+            .map(|t| t.trim().to_string())
+            .filter(|t| !t.is_empty())
+            .collect();
+        if let Some(path) = &self.tokens_file {
+            let text = std::fs::read_to_string(path).map_err(|error| ConfigError::TokensFile {
+                path: path.clone(),
+                error,
+            })?;
+            tokens.extend(
+                text.lines()
+                    .map(str::trim)
+                    .filter(|l| !l.is_empty() && !l.starts_with('#'))
+                    .map(str::to_string),
+            );
+        }
+        if let Some(short) = tokens.iter().find(|t| t.len() < 16) {
+            return Err(ConfigError::Invalid {
+                flag: "token",
+                reason: format!(
+                    "a token of {} characters is too easy to guess; use at least 16",
+                    short.len()
+                ),
+            });
+        }
+        Ok(tokens)
+    }
+}

@@ -1,0 +1,314 @@
+//! The HTTP API: routes, shared state, auth and the OpenAPI document.
+//!
+//! Paths are stable (clients and tests depend on them): `/v1/scenes`, `/v1/scenes/{id}`,
+//! `/v1/sessions`, `/v1/sessions/{id}`, `/v1/sessions/{id}/stream` (WebSocket),
+//! `/v1/render`, `/healthz`, `/readyz`, `/metrics`, `/openapi.json`.
+
+pub mod health;
+pub mod render;
+pub mod scenes;
+pub mod sessions;
+pub mod stream;
+
+use super::error::ApiError;
+use super::ids;
+use super::render_loop::Command;
+use super::scenes::{lock, SceneRegistry};
+use super::sessions::SessionRegistry;
+use axum::extract::{Request, State};
+use axum::http::{header, StatusCode};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::Router;
+use lightcast_protocol::Limits;
+use std::collections::HashMap;
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::{Duration, Instant};
+use utoipa::OpenApi;
+
+/// How long a WebSocket ticket stays valid.
+pub const TICKET_TTL: Duration = Duration::from_secs(60);
+
+/// A WebSocket ticket: opens one session's stream once, for the token that asked for it.
+struct Ticket {
+    session: String,
+    owner: Option<String>,
+    expires: Instant,
+}
+
+/// Everything the handlers share.
+pub struct AppState {
+    pub scenes: Arc<SceneRegistry>,
+    pub sessions: Arc<SessionRegistry>,
+    pub render_tx: mpsc::Sender<Command>,
+    pub limits: Limits,
+    /// Bearer tokens; empty means auth is off.
+    pub tokens: Vec<String>,
+    pub adapter: String,
+    pub adapter_is_cpu: bool,
+    pub allow_cpu_adapter: bool,
+    pub timing_source: String,
+    pub max_texture: u32,
+    pub build: String,
+    pub shutdown: tokio::sync::watch::Receiver<bool>,
+    tickets: Mutex<HashMap<String, Ticket>>,
+}
+
+impl AppState {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        scenes: Arc<SceneRegistry>,
+        sessions: Arc<SessionRegistry>,
+        render_tx: mpsc::Sender<Command>,
+        limits: Limits,
+        tokens: Vec<String>,
+        gpu: &crate::gpu::GpuContext,
+        allow_cpu_adapter: bool,
+        timing_source: String,
+        shutdown: tokio::sync::watch::Receiver<bool>,
+    ) -> Self {
+        Self {
+            scenes,
+            sessions,
+            render_tx,
+            limits,
+            tokens,
+            adapter: crate::gpu::context::AdapterSummary(&gpu.info).to_string(),
+            adapter_is_cpu: gpu.info.device_type == wgpu::DeviceType::Cpu,
+            allow_cpu_adapter,
+            timing_source,
+            max_texture: gpu.device.limits().max_texture_dimension_2d,
+            build: build_id(),
+            shutdown,
+            tickets: Mutex::new(HashMap::new()),
+        }
+    }
+
+    pub fn auth_enabled(&self) -> bool {
+        !self.tokens.is_empty()
+    }
+
+    /// Wakes the render loop (after a session was created or changed).
+    pub fn wake(&self) {
+        let _ = self.render_tx.send(Command::Wake);
+    }
+
+    /// Issues a single-use ticket for `session`'s WebSocket.
+    pub fn issue_ticket(&self, session: &str, owner: Option<String>) -> String {
+        let ticket = ids::random_hex(16);
+        let now = Instant::now();
+        let mut tickets = lock(&self.tickets);
+        tickets.retain(|_, t| t.expires > now);
+        tickets.insert(
+            ticket.clone(),
+            Ticket {
+                session: session.to_string(),
+                owner,
+                expires: now + TICKET_TTL,
+            },
+        );
+        ticket
+    }
+
+    /// Consumes a ticket for `session`; returns the token it stands for.
+    fn redeem_ticket(&self, ticket: &str, session: &str) -> Result<Option<String>, ApiError> {
+        let mut tickets = lock(&self.tickets);
+        match tickets.remove(ticket) {
+            Some(t) if t.session == session && t.expires > Instant::now() => Ok(t.owner),
+            _ => Err(ApiError::unauthorized(
+                "the stream ticket is unknown, used or expired; ask for a new one with \
+                 POST /v1/sessions/{id}/ticket",
+            )),
+        }
+    }
+}
+
+/// `lightcast-server <version> (<git revision>)`.
+pub fn build_id() -> String {
+    format!(
+        "lightcast-server {} ({})",
+        env!("CARGO_PKG_VERSION"),
+        option_env!("LIGHTCAST_GIT_REV").unwrap_or("unknown revision")
+    )
+}
+
+/// The bearer token a request was made with (`None` when auth is off).
+#[derive(Clone, Debug)]
+pub struct Caller(pub Option<String>);
+
+/// Checks the bearer token (or a stream ticket) when auth is on and records the caller.
+async fn authenticate(
+    State(state): State<Arc<AppState>>,
+    mut request: Request,
+    next: Next,
+) -> Response {
+    match caller(&state, &request) {
+        Ok(c) => {
+            request.extensions_mut().insert(c);
+            next.run(request).await
+        }
+        Err(e) => e.into_response(),
+    }
+}
+
+fn caller(state: &AppState, request: &Request) -> Result<Caller, ApiError> {
+    if !state.auth_enabled() {
+        return Ok(Caller(None));
+    }
+    if let Some(value) = request.headers().get(header::AUTHORIZATION) {
+        let token = value
+            .to_str()
+            .ok()
+            .and_then(|v| v.strip_prefix("Bearer "))
+            .map(str::trim)
+            .ok_or_else(|| {
+                ApiError::unauthorized("the Authorization header must be 'Bearer TOKEN'")
+            })?;
+        return if state.tokens.iter().any(|t| ids::constant_time_eq(t, token)) {
+            Ok(Caller(Some(token.to_string())))
+        } else {
+            Err(ApiError::unauthorized("unknown bearer token"))
+        };
+    }
+    // Browsers cannot set headers on a WebSocket: its stream takes a ticket instead.
+    let path = request.uri().path();
+    let ticket = request
+        .uri()
+        .query()
+        .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("ticket=")));
+    if let (Some(session), Some(ticket)) = (
+        path.strip_prefix("/v1/sessions/")
+            .and_then(|rest| rest.strip_suffix("/stream")),
+        ticket,
+    ) {
+        return state.redeem_ticket(ticket, session).map(Caller);
+    }
+    Err(ApiError::unauthorized(
+        "this server needs a bearer token: send 'Authorization: Bearer TOKEN'",
+    ))
+}
+
+async fn not_found() -> ApiError {
+    ApiError::new(
+        StatusCode::NOT_FOUND,
+        "not_found",
+        "no such endpoint; see /openapi.json",
+    )
+}
+
+async fn method_not_allowed() -> ApiError {
+    ApiError::new(
+        StatusCode::METHOD_NOT_ALLOWED,
+        "method_not_allowed",
+        "this endpoint does not take that method; see /openapi.json",
+    )
+}
+
+#[derive(OpenApi)]
+#[openapi(
+    info(
+        title = "lightcast",
+        description = "Remote rendering with real-time global illumination: scenes, streaming \
+                       sessions (WebSocket frames with per-stage GPU timings) and one-shot \
+                       renders. When the server runs with tokens, every endpoint but /healthz \
+                       and /readyz needs 'Authorization: Bearer TOKEN'."
+    ),
+    paths(
+        health::healthz,
+        health::readyz,
+        health::metrics,
+        health::server_info,
+        openapi_json,
+        scenes::list,
+        scenes::create,
+        scenes::show,
+        scenes::delete,
+        sessions::list,
+        sessions::create,
+        sessions::show,
+        sessions::update,
+        sessions::delete,
+        sessions::ticket,
+        stream::stream,
+        render::render,
+    ),
+    components(schemas(lightcast_protocol::ClientMessage, lightcast_protocol::ServerEvent,))
+)]
+pub struct ApiDoc;
+
+/// The OpenAPI document of every endpoint.
+#[utoipa::path(get, path = "/openapi.json", tag = "meta",
+    responses((status = 200, description = "OpenAPI 3.1 document", content_type = "application/json")))]
+pub async fn openapi_json() -> Response {
+    match openapi_document() {
+        Ok(json) => ([(header::CONTENT_TYPE, "application/json")], json).into_response(),
+        Err(e) => ApiError::internal(e.to_string()).into_response(),
+    }
+}
+
+/// The OpenAPI document, pretty-printed.
+pub fn openapi_document() -> Result<String, serde_json::Error> {
+    ApiDoc::openapi().to_pretty_json()
+}
+
+/// The service's router.
+pub fn router(state: Arc<AppState>) -> Router {
+    let timeout = Duration::from_millis(state.limits.request_timeout_ms);
+    let json_limit = state.limits.max_message_bytes as usize;
+    let upload_limit = state.limits.max_upload_bytes as usize;
+    let uploads = Router::new()
+        .route("/v1/scenes", get(scenes::list).post(scenes::create))
+        .route("/v1/render", post(render::render))
+        .layer(axum::extract::DefaultBodyLimit::max(upload_limit));
+    let api = Router::new()
+        .route("/v1/server", get(health::server_info))
+        .route("/v1/scenes/{id}", get(scenes::show).delete(scenes::delete))
+        .route("/v1/sessions", get(sessions::list).post(sessions::create))
+        .route(
+            "/v1/sessions/{id}",
+            get(sessions::show)
+                .patch(sessions::update)
+                .delete(sessions::delete),
+        )
+        .route("/v1/sessions/{id}/ticket", post(sessions::ticket))
+        .route("/metrics", get(health::metrics))
+        .route("/openapi.json", get(openapi_json))
+        .layer(axum::extract::DefaultBodyLimit::max(json_limit))
+        .merge(uploads)
+        .layer(tower_http::timeout::TimeoutLayer::with_status_code(
+            StatusCode::REQUEST_TIMEOUT,
+            timeout,
+        ))
+        // The WebSocket lives beyond any request timeout.
+        .route("/v1/sessions/{id}/stream", get(stream::stream))
+        .layer(axum::middleware::from_fn_with_state(
+            Arc::clone(&state),
+            authenticate,
+        ));
+    Router::new()
+        .route("/healthz", get(health::healthz))
+        .route("/readyz", get(health::readyz))
+        .merge(api)
+        .fallback(not_found)
+        .method_not_allowed_fallback(method_not_allowed)
+        .layer(tower_http::trace::TraceLayer::new_for_http())
+        .with_state(state)
+}
+
+#[cfg(test)]
+mod tests {
+    /// `protocol/openapi.json` is the published copy of the API for client authors; it must
+    /// match what the code serves.
+    #[test]
+    fn committed_openapi_document_is_current() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../protocol/openapi.json");
+        let committed = std::fs::read_to_string(path).unwrap_or_default();
+        let current = super::openapi_document().expect("document serialises");
+        assert!(
+            committed.trim_end() == current.trim_end(),
+            "protocol/openapi.json is stale; regenerate it with \
+             `cargo run -p lightcast-server -- openapi > protocol/openapi.json`"
+        );
+    }
+}

@@ -1,0 +1,243 @@
+//! `POST /v1/render`: one frame, returned as an image with its timing report.
+
+use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
+use super::AppState;
+use crate::service::encode;
+use crate::service::error::{parse_json, ApiError};
+use crate::service::params::{check_quality, resolve};
+use crate::service::render_loop::{Command, OneShot};
+use crate::service::scenes::{CachesNow, SceneEntry};
+use axum::extract::{FromRequest, Multipart, Request, State};
+use axum::http::{header, HeaderValue};
+use axum::response::{IntoResponse, Response};
+use lightcast_protocol::{Codec, ImageFormat, RenderReport, RenderRequest};
+use sha2::{Digest, Sha256};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Header carrying the JSON [`RenderReport`].
+pub const REPORT_HEADER: &str = "x-lightcast-report";
+
+/// The request and, for a multipart body, an uploaded scene to render instead of a stored one.
+async fn read_request(
+    state: &Arc<AppState>,
+    request: Request,
+) -> Result<(RenderRequest, Option<Arc<SceneEntry>>), ApiError> {
+    if !is_multipart(&request) {
+        let body = read_body(request, state).await?;
+        let req = if body.iter().all(u8::is_ascii_whitespace) {
+            RenderRequest::default()
+        } else {
+            parse_json(&body)?
+        };
+        return Ok((req, None));
+    }
+    let multipart = Multipart::from_request(request, state)
+        .await
+        .map_err(|e| ApiError::bad_request("malformed_multipart", e.body_text()))?;
+    let mut req = None;
+    let mut files = Vec::new();
+    for (part, file) in read_multipart(multipart).await? {
+        if part == "request" {
+            req = Some(parse_json::<RenderRequest>(&file.bytes)?);
+        } else {
+            files.push(file);
+        }
+    }
+    let req = req.ok_or_else(|| {
+        ApiError::field(
+            "request",
+            "a multipart render needs a 'request' part (JSON)",
+        )
+    })?;
+    let (main, resources) = split_scene_files(files)?;
+    let started = Instant::now();
+    let scene = load_upload(main, resources, state.limits.max_triangles).await?;
+    // Not registered: the scene lives for this request only (its light caches stay in the
+    // cache store, so the same file renders faster next time).
+    let entry = crate::service::scenes::SceneRegistry::detached(
+        scene,
+        started.elapsed().as_secs_f64() * 1e3,
+    );
+    Ok((req, Some(entry)))
+}
+
+/// Waits until the light caches the frame needs are ready (or failed), within the deadline.
+async fn wait_for_caches(
+    state: &AppState,
+    entry: &Arc<SceneEntry>,
+    params: crate::gi::caches::CacheParams,
+    deadline: Instant,
+) -> Result<(), ApiError> {
+    loop {
+        match state.scenes.caches(entry, params) {
+            CachesNow::Ready(_) => return Ok(()),
+            CachesNow::Failed(e) => {
+                return Err(ApiError::field(
+                    "render.gi.cache_distance",
+                    format!("the light caches failed: {e}"),
+                ))
+            }
+            CachesNow::Pending if Instant::now() >= deadline => {
+                return Err(ApiError::unavailable(
+                    "the scene's light caches are still being computed; try again shortly",
+                ))
+            }
+            CachesNow::Pending => tokio::time::sleep(Duration::from_millis(20)).await,
+        }
+    }
+}
+
+fn request_hash(req: &RenderRequest) -> String {
+    let canonical = serde_json::to_vec(req).unwrap_or_default();
+    Sha256::digest(&canonical)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+/// JSON with every non-ASCII character escaped, so it fits an HTTP header.
+fn ascii_json(json: &str) -> String {
+    let mut out = String::with_capacity(json.len());
+    for c in json.chars() {
+        if c.is_ascii() && !c.is_ascii_control() {
+            out.push(c);
+        } else {
+            let mut units = [0u16; 2];
+            for unit in c.encode_utf16(&mut units) {
+                out.push_str(&format!("\\u{unit:04x}"));
+            }
+        }
+    }
+    out
+}
+
+fn floats_le(data: &[[f32; 4]]) -> Vec<u8> {
+    data.iter()
+        .flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes()))
+        .collect()
+}
+
+/// Renders one frame and answers with the image (PNG, JPEG, or raw little-endian float32
+/// RGBA of the HDR or indirect buffer). The timing report is in the `x-lightcast-report`
+/// header (JSON). The body is JSON (`RenderRequest`), or multipart with a `request` part
+/// (JSON) and a `.glb`/`.gltf` file (plus the files it references) to render instead of a
+/// stored scene. The same request on the same build and adapter gives identical pixels.
+#[utoipa::path(post, path = "/v1/render", tag = "render",
+    request_body(content(
+        (RenderRequest = "application/json"),
+        (Vec<u8> = "multipart/form-data"))),
+    responses(
+        (status = 200, description = "The image; `x-lightcast-report` holds the RenderReport JSON",
+            headers(("x-lightcast-report" = String, description = "RenderReport as JSON")),
+            content(
+                (Vec<u8> = "image/png"),
+                (Vec<u8> = "image/jpeg"),
+                (Vec<u8> = "application/octet-stream"))),
+        (status = 400, description = "A parameter is invalid; `field` names it", body = lightcast_protocol::ErrorBody),
+        (status = 503, description = "Light caches still computing, or shutting down", body = lightcast_protocol::ErrorBody)))]
+pub async fn render(
+    State(state): State<Arc<AppState>>,
+    request: Request,
+) -> Result<Response, ApiError> {
+    let deadline = Instant::now()
+        + Duration::from_millis(state.limits.request_timeout_ms)
+            .saturating_sub(Duration::from_millis(50));
+    let (mut req, uploaded) = read_request(&state, request).await?;
+    let entry = match uploaded {
+        Some(e) => e,
+        None => super::scenes::scene(&state, &req.render.scene)?,
+    };
+    let quality = check_quality(req.quality)?;
+    let raw = matches!(req.format, ImageFormat::RawFinal | ImageFormat::RawIndirect);
+    if raw && req.render.view != lightcast_protocol::View::Final {
+        return Err(ApiError::field(
+            "format",
+            "raw buffers are of the final frame; use view 'final'",
+        ));
+    }
+    if req.format == ImageFormat::RawIndirect
+        && req.render.gi.method == lightcast_protocol::GiMethod::None
+    {
+        return Err(ApiError::field(
+            "format",
+            "raw_indirect needs GI; set render.gi.method to lightskin or brsm",
+        ));
+    }
+    let mut resolved = resolve(&req.render, &entry, &state.limits, state.max_texture)
+        .map_err(|e| e.within("render"))?;
+    resolved.settings.capture_hdr |= raw;
+    if let Some(params) = resolved.caches {
+        wait_for_caches(&state, &entry, params, deadline).await?;
+    }
+    // The report and hash name what was actually rendered, defaults included.
+    req.render.camera = Some(resolved.settings.camera.clone());
+    req.render.light = Some(resolved.settings.light.clone());
+    req.quality = Some(quality);
+    let hash = request_hash(&req);
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    state
+        .render_tx
+        .send(Command::Render(Box::new(OneShot {
+            scene: Arc::clone(&entry),
+            resolved: resolved.clone(),
+            reply: tx,
+            queued: Instant::now(),
+        })))
+        .map_err(|_| ApiError::unavailable("the render loop has stopped"))?;
+    let result = rx
+        .await
+        .map_err(|_| ApiError::unavailable("the render loop has stopped"))??;
+    let rendered = result.rendered;
+    let (gpu_ms, stages) = (rendered.gpu_ms(), rendered.stages());
+    let format = req.format;
+    let encode_started = Instant::now();
+    let body = match format {
+        ImageFormat::Png | ImageFormat::Jpeg => {
+            let codec = if format == ImageFormat::Png {
+                Codec::Png
+            } else {
+                Codec::Jpeg
+            };
+            let image = rendered.image;
+            let task = tokio::task::spawn_blocking(move || encode::encode(&image, codec, quality));
+            task.await
+                .map_err(|e| ApiError::internal(e.to_string()))?
+                .map_err(|e| ApiError::internal(e.to_string()))?
+        }
+        ImageFormat::RawFinal => floats_le(rendered.hdr.as_deref().unwrap_or_default()),
+        ImageFormat::RawIndirect => floats_le(rendered.indirect.as_deref().unwrap_or_default()),
+    };
+    let report = RenderReport {
+        build: state.build.clone(),
+        adapter: state.adapter.clone(),
+        request_hash: hash,
+        width: resolved.settings.width,
+        height: resolved.settings.height,
+        format,
+        gpu_ms,
+        stages,
+        timing_source: serde_json::to_value(rendered.timing_source)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_default(),
+        encode_ms: encode_started.elapsed().as_secs_f64() * 1e3,
+        queue_ms: result.queue_ms,
+        exposure_scale: rendered.exposure_scale,
+        camera: resolved.settings.camera,
+        light: resolved.settings.light,
+    };
+    let report_json =
+        ascii_json(&serde_json::to_string(&report).map_err(|e| ApiError::internal(e.to_string()))?);
+    let mut response = body.into_response();
+    let headers = response.headers_mut();
+    headers.insert(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static(format.content_type()),
+    );
+    headers.insert(
+        REPORT_HEADER,
+        HeaderValue::from_str(&report_json).map_err(|e| ApiError::internal(e.to_string()))?,
+    );
+    Ok(response)
+}

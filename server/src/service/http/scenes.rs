@@ -1,0 +1,310 @@
+//! `/v1/scenes`: upload, list, inspect and delete scenes.
+
+use super::AppState;
+use crate::scene::gltf_loader::load_gltf_slice;
+use crate::scene::procedural::Spec;
+use crate::scene::Scene;
+use crate::service::error::{parse_json, ApiError};
+use crate::service::scenes::SceneEntry;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
+use axum::http::{header, StatusCode};
+use axum::Json;
+use lightcast_protocol::{ProceduralScene, SceneInfo};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// An uploaded file: its name (from the multipart filename) and bytes.
+pub struct UploadedFile {
+    pub name: String,
+    pub bytes: Bytes,
+}
+
+/// Reads every part of a multipart body: (part name, file).
+pub async fn read_multipart(
+    mut multipart: Multipart,
+) -> Result<Vec<(String, UploadedFile)>, ApiError> {
+    let mut parts = Vec::new();
+    while let Some(field) = multipart.next_field().await.map_err(multipart_error)? {
+        let part = field.name().unwrap_or_default().to_string();
+        let name = field.file_name().unwrap_or(&part).to_string();
+        let bytes = field.bytes().await.map_err(multipart_error)?;
+        parts.push((part, UploadedFile { name, bytes }));
+    }
+    Ok(parts)
+}
+
+fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
+    let status = e.status();
+    if status == StatusCode::PAYLOAD_TOO_LARGE {
+        ApiError::new(status, "too_large", e.body_text())
+    } else {
+        ApiError::bad_request("malformed_multipart", e.body_text())
+    }
+}
+
+/// Reads the whole body, answering an oversized one with 413.
+pub async fn read_body(request: Request, state: &Arc<AppState>) -> Result<Bytes, ApiError> {
+    crate::service::error::body(Bytes::from_request(request, state).await)
+}
+
+pub fn is_multipart(request: &Request) -> bool {
+    request
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("multipart/form-data"))
+}
+
+fn is_json(request: &Request) -> bool {
+    request
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("application/json"))
+}
+
+/// A file name safe to create in a fresh directory: no separators, no parent references, no
+/// percent escapes (so a glTF URI that names it cannot decode to anything else).
+fn safe_file_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 255
+        && !name.starts_with('.')
+        && !name.contains(['/', '\\', '%', '\0', ':'])
+}
+
+/// Every external URI of a glTF JSON document (buffers and images, not `data:` URIs).
+fn external_uris(json: &[u8]) -> Result<Vec<String>, ApiError> {
+    let doc: serde_json::Value = serde_json::from_slice(json)
+        .map_err(|e| ApiError::bad_request("invalid_scene", format!("glTF JSON: {e}")))?;
+    let mut uris = Vec::new();
+    for list in ["buffers", "images"] {
+        if let Some(items) = doc.get(list).and_then(|v| v.as_array()) {
+            for uri in items.iter().filter_map(|i| i.get("uri")?.as_str()) {
+                if !uri.starts_with("data:") {
+                    uris.push(uri.to_string());
+                }
+            }
+        }
+    }
+    Ok(uris)
+}
+
+/// Loads an uploaded `.glb`/`.gltf` (`main`) with the files it references (`resources`).
+/// Runs the loader on a blocking thread; external URIs must name uploaded files.
+pub async fn load_upload(
+    main: UploadedFile,
+    resources: Vec<UploadedFile>,
+    max_triangles: u64,
+) -> Result<Scene, ApiError> {
+    let name = main
+        .name
+        .rsplit_once('.')
+        .map_or(main.name.as_str(), |(stem, _)| stem)
+        .to_string();
+    let task = tokio::task::spawn_blocking(move || -> Result<Scene, ApiError> {
+        let invalid = |e: crate::scene::gltf_loader::LoadError| {
+            ApiError::bad_request("invalid_scene", format!("{}: {e}", main.name))
+        };
+        let scene = if main.bytes.starts_with(b"glTF") || resources.is_empty() {
+            load_gltf_slice(&main.bytes, None, &name).map_err(invalid)?
+        } else {
+            for uri in external_uris(&main.bytes)? {
+                if !safe_file_name(&uri) || !resources.iter().any(|r| r.name == uri) {
+                    return Err(ApiError::bad_request(
+                        "invalid_scene",
+                        format!(
+                            "{}: URI '{uri}' must name one of the uploaded files by a plain file name",
+                            main.name
+                        ),
+                    ));
+                }
+            }
+            let dir = std::env::temp_dir().join(crate::service::ids::new_id("lightcast-upload"));
+            let write = || -> std::io::Result<()> {
+                std::fs::create_dir_all(&dir)?;
+                for r in &resources {
+                    std::fs::write(dir.join(&r.name), &r.bytes)?;
+                }
+                Ok(())
+            };
+            let written = write();
+            let loaded = written
+                .map_err(|e| ApiError::internal(format!("storing the upload: {e}")))
+                .and_then(|()| load_gltf_slice(&main.bytes, Some(&dir), &name).map_err(invalid));
+            let _ = std::fs::remove_dir_all(&dir);
+            loaded?
+        };
+        let triangles = scene.triangle_count() as u64;
+        if triangles > max_triangles {
+            return Err(ApiError::field(
+                "scene",
+                format!("{triangles} triangles exceed this server's limit of {max_triangles}"),
+            ));
+        }
+        Ok(scene)
+    });
+    task.await
+        .map_err(|e| ApiError::internal(format!("the scene loader failed: {e}")))?
+}
+
+/// Splits uploaded files into the scene file and the files it references.
+pub fn split_scene_files(
+    files: Vec<UploadedFile>,
+) -> Result<(UploadedFile, Vec<UploadedFile>), ApiError> {
+    let (mains, resources): (Vec<_>, Vec<_>) = files.into_iter().partition(|f| {
+        let lower = f.name.to_ascii_lowercase();
+        lower.ends_with(".gltf") || lower.ends_with(".glb")
+    });
+    let mut mains = mains.into_iter();
+    match (mains.next(), mains.next()) {
+        (Some(main), None) => {
+            if let Some(bad) = resources.iter().find(|r| !safe_file_name(&r.name)) {
+                return Err(ApiError::field(
+                    "files",
+                    format!("'{}' is not a plain file name", bad.name),
+                ));
+            }
+            Ok((main, resources))
+        }
+        (None, _) => Err(ApiError::field(
+            "files",
+            "no .gltf or .glb file among the uploaded parts",
+        )),
+        (Some(_), Some(_)) => Err(ApiError::field(
+            "files",
+            "more than one .gltf/.glb file; upload one scene at a time",
+        )),
+    }
+}
+
+#[derive(serde::Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+pub struct UploadQuery {
+    /// Display name (default: the file's stem).
+    name: Option<String>,
+}
+
+/// Lists the scenes.
+#[utoipa::path(get, path = "/v1/scenes", tag = "scenes",
+    responses((status = 200, body = Vec<SceneInfo>)))]
+pub async fn list(State(state): State<Arc<AppState>>) -> Json<Vec<SceneInfo>> {
+    Json(state.scenes.list().iter().map(|e| e.info()).collect())
+}
+
+/// Adds a scene: a `.glb` body (any content type but JSON or multipart), a
+/// `multipart/form-data` body with one `.gltf`/`.glb` file and the files it references, or a
+/// JSON body naming a procedural scene. Its light caches are computed in the background;
+/// `caches[0].state` shows progress.
+#[utoipa::path(post, path = "/v1/scenes", tag = "scenes",
+    params(UploadQuery),
+    request_body(content(
+        (Vec<u8> = "model/gltf-binary"),
+        (ProceduralScene = "application/json"),
+        (Vec<u8> = "multipart/form-data"))),
+    responses(
+        (status = 201, body = SceneInfo),
+        (status = 400, description = "Invalid or hostile glTF, or bad parameters", body = lightcast_protocol::ErrorBody),
+        (status = 413, description = "Upload too large", body = lightcast_protocol::ErrorBody),
+        (status = 429, description = "Too many scenes", body = lightcast_protocol::ErrorBody)))]
+pub async fn create(
+    State(state): State<Arc<AppState>>,
+    query: Result<Query<UploadQuery>, axum::extract::rejection::QueryRejection>,
+    request: Request,
+) -> Result<(StatusCode, Json<SceneInfo>), ApiError> {
+    let Query(query) = query.map_err(|e| ApiError::bad_request("invalid_query", e.body_text()))?;
+    let started = Instant::now();
+    let max_triangles = state.limits.max_triangles;
+    let (mut scene, source) = if is_multipart(&request) {
+        let multipart = Multipart::from_request(request, &state)
+            .await
+            .map_err(|e| ApiError::bad_request("malformed_multipart", e.body_text()))?;
+        let files = read_multipart(multipart)
+            .await?
+            .into_iter()
+            .map(|(_, f)| f)
+            .collect();
+        let (main, resources) = split_scene_files(files)?;
+        (
+            load_upload(main, resources, max_triangles).await?,
+            "upload".to_string(),
+        )
+    } else if is_json(&request) {
+        let body = read_body(request, &state).await?;
+        let spec: ProceduralScene = parse_json(&body)?;
+        let parsed = Spec::parse(&spec.procedural)
+            .map_err(|e| ApiError::field("procedural", e.to_string()))?;
+        let triangles = parsed.triangle_count();
+        if triangles > max_triangles {
+            return Err(ApiError::field(
+                "procedural",
+                format!("{triangles} triangles exceed this server's limit of {max_triangles}"),
+            ));
+        }
+        let mut scene = tokio::task::spawn_blocking(move || parsed.build())
+            .await
+            .map_err(|e| ApiError::internal(e.to_string()))?
+            .map_err(|e| ApiError::field("procedural", e.to_string()))?;
+        if let Some(name) = spec.name {
+            scene.name = name;
+        }
+        (scene, format!("procedural:{}", spec.procedural))
+    } else {
+        let body = read_body(request, &state).await?;
+        if body.is_empty() {
+            return Err(ApiError::bad_request(
+                "empty_body",
+                "send a .glb file as the body, a multipart upload or a procedural scene as JSON",
+            ));
+        }
+        let main = UploadedFile {
+            name: query.name.clone().unwrap_or_else(|| "upload.glb".into()),
+            bytes: body,
+        };
+        (
+            load_upload(main, Vec::new(), max_triangles).await?,
+            "upload".to_string(),
+        )
+    };
+    if let Some(name) = query.name {
+        scene.name = name;
+    }
+    let load_ms = started.elapsed().as_secs_f64() * 1e3;
+    let entry = state.scenes.insert(scene, source, None, load_ms)?;
+    tracing::info!(scene = %entry.id, triangles = entry.scene.triangle_count(), "scene added");
+    Ok((StatusCode::CREATED, Json(entry.info())))
+}
+
+/// Shows a scene: size, bounds, lights, cameras and the state of its light caches.
+#[utoipa::path(get, path = "/v1/scenes/{id}", tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    responses((status = 200, body = SceneInfo), (status = 404, body = lightcast_protocol::ErrorBody)))]
+pub async fn show(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<SceneInfo>, ApiError> {
+    Ok(Json(state.scenes.get(&id)?.info()))
+}
+
+/// Deletes a scene no session uses (409 while any does; the default scene stays).
+#[utoipa::path(delete, path = "/v1/scenes/{id}", tag = "scenes",
+    params(("id" = String, Path, description = "Scene id")),
+    responses(
+        (status = 204, description = "Deleted"),
+        (status = 404, body = lightcast_protocol::ErrorBody),
+        (status = 409, description = "In use, or the default scene", body = lightcast_protocol::ErrorBody)))]
+pub async fn delete(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    state.scenes.remove(&id)?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// The scene a request names.
+pub fn scene(state: &AppState, id: &str) -> Result<Arc<SceneEntry>, ApiError> {
+    state
+        .scenes
+        .get(id)
+        .map_err(|_| ApiError::field("render.scene", format!("no scene with id '{id}'")))
+}

@@ -1,0 +1,246 @@
+//! `/v1/sessions/{id}/stream`: the session's WebSocket. Binary frames out (see
+//! `lightcast_protocol::frame`), JSON control messages in, JSON events out.
+
+use super::sessions::apply_patch;
+use super::{AppState, Caller};
+use crate::service::error::{parse_json, ApiError};
+use crate::service::sessions::{unix_us, Session};
+use axum::extract::ws::rejection::WebSocketUpgradeRejection;
+use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use axum::response::Response;
+use axum::Extension;
+use lightcast_protocol::{ClientMessage, ErrorBody, FrameHeader, ServerEvent};
+use serde_json::json;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// A client that takes longer than this to accept one message is disconnected.
+const SEND_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Token bucket for control messages: `rate` per second, bursts of twice that.
+struct RateLimit {
+    rate: f64,
+    tokens: f64,
+    last: Instant,
+}
+
+impl RateLimit {
+    fn new(rate: u32) -> Self {
+        Self {
+            rate: f64::from(rate),
+            tokens: 2.0 * f64::from(rate),
+            last: Instant::now(),
+        }
+    }
+
+    fn allow(&mut self) -> bool {
+        let now = Instant::now();
+        let refill = now.duration_since(self.last).as_secs_f64() * self.rate;
+        self.tokens = (self.tokens + refill).min(2.0 * self.rate);
+        self.last = now;
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// Opens the session's WebSocket (one per session at a time). Authenticate with the bearer
+/// header or `?ticket=` from `POST /v1/sessions` or `/v1/sessions/{id}/ticket`.
+#[utoipa::path(get, path = "/v1/sessions/{id}/stream", tag = "sessions",
+    params(
+        ("id" = String, Path, description = "Session id"),
+        ("ticket" = Option<String>, Query, description = "Single-use ticket, for clients that cannot set headers")),
+    responses(
+        (status = 101, description = "WebSocket: binary frames (FrameHeader + image) and JSON ServerEvent text out; JSON ClientMessage text in"),
+        (status = 404, body = ErrorBody),
+        (status = 409, description = "A stream is already attached", body = ErrorBody),
+        (status = 426, description = "Not a WebSocket request", body = ErrorBody)))]
+pub async fn stream(
+    State(state): State<Arc<AppState>>,
+    Extension(caller): Extension<Caller>,
+    Path(id): Path<String>,
+    upgrade: Result<WebSocketUpgrade, WebSocketUpgradeRejection>,
+) -> Result<Response, ApiError> {
+    let session = state.sessions.get(&id, caller.0.as_deref())?;
+    let upgrade = upgrade.map_err(|e| {
+        ApiError::new(
+            StatusCode::UPGRADE_REQUIRED,
+            "websocket_required",
+            format!("{}: open this path as a WebSocket", e.body_text()),
+        )
+    })?;
+    if session
+        .connected
+        .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
+        .is_err()
+    {
+        return Err(ApiError::conflict(
+            "this session already has a stream attached",
+        ));
+    }
+    let failed = Arc::clone(&session);
+    let max = state.limits.max_message_bytes as usize;
+    Ok(upgrade
+        .max_message_size(max)
+        .max_frame_size(max)
+        .on_failed_upgrade(move |_| failed.connected.store(false, Ordering::Release))
+        .on_upgrade(move |socket| async move {
+            state.wake();
+            run(socket, &state, &session).await;
+            session.connected.store(false, Ordering::Release);
+        }))
+}
+
+async fn send(socket: &mut WebSocket, message: Message) -> bool {
+    matches!(
+        tokio::time::timeout(SEND_TIMEOUT, socket.send(message)).await,
+        Ok(Ok(()))
+    )
+}
+
+async fn send_event(socket: &mut WebSocket, event: &ServerEvent) -> bool {
+    match serde_json::to_string(event) {
+        Ok(text) => send(socket, Message::Text(text.into())).await,
+        Err(_) => false,
+    }
+}
+
+fn error_event(e: ApiError) -> ServerEvent {
+    metrics::counter!(crate::service::metrics::ERRORS, "kind" => e.body.error.clone()).increment(1);
+    ServerEvent::Error { error: e.body }
+}
+
+async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
+    let mut events = session.events.subscribe();
+    let mut closed = session.closed();
+    let mut shutdown = state.shutdown.clone();
+    let mut limit = RateLimit::new(state.limits.max_messages_per_second);
+    let hello = ServerEvent::Hello {
+        session: Box::new(session.info()),
+    };
+    if !send_event(&mut socket, &hello).await {
+        return;
+    }
+    let reason = loop {
+        tokio::select! {
+            mut frame = session.slot.take() => {
+                FrameHeader::patch_send_time(&mut frame, unix_us());
+                let len = frame.len();
+                if !send(&mut socket, Message::Binary(frame.into())).await {
+                    session.in_flight.fetch_sub(1, Ordering::Relaxed);
+                    return;
+                }
+                session.record_sent(len);
+            }
+            incoming = socket.recv() => {
+                let reply = match incoming {
+                    None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
+                    Some(Ok(Message::Text(text))) => {
+                        if limit.allow() {
+                            handle(state, session, text.as_bytes())
+                        } else {
+                            Some(error_event(ApiError::too_many(
+                                "rate_limited",
+                                format!(
+                                    "more than {} messages per second; message ignored",
+                                    state.limits.max_messages_per_second
+                                ),
+                            )))
+                        }
+                    }
+                    Some(Ok(Message::Binary(_))) => Some(error_event(ApiError::bad_request(
+                        "binary_not_accepted",
+                        "control messages are JSON text; binary messages are ignored",
+                    ))),
+                    Some(Ok(_)) => None,
+                };
+                if let Some(event) = reply {
+                    if !send_event(&mut socket, &event).await {
+                        return;
+                    }
+                }
+            }
+            event = events.recv() => {
+                match event {
+                    Ok(event) => {
+                        if !send_event(&mut socket, &event).await {
+                            return;
+                        }
+                    }
+                    Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
+                    Err(tokio::sync::broadcast::error::RecvError::Closed) => return,
+                }
+            }
+            _ = closed.changed() => {
+                break closed.borrow().clone().unwrap_or_else(|| "closed".into());
+            }
+            _ = shutdown.changed() => {
+                break "server shutting down".to_string();
+            }
+        }
+    };
+    let _ = send_event(
+        &mut socket,
+        &ServerEvent::Closing {
+            reason: reason.clone(),
+        },
+    )
+    .await;
+    let _ = send(
+        &mut socket,
+        Message::Close(Some(CloseFrame {
+            code: axum::extract::ws::close_code::AWAY,
+            reason: reason.into(),
+        })),
+    )
+    .await;
+}
+
+/// Handles one control message; returns the event to answer with, if any.
+fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEvent> {
+    let message: ClientMessage = match parse_json(text) {
+        Ok(m) => m,
+        Err(e) => return Some(error_event(e)),
+    };
+    let result = match message {
+        ClientMessage::Camera { camera, input_id } => apply_patch(
+            state,
+            session,
+            &json!({"render": {"camera": camera}}),
+            input_id,
+        ),
+        ClientMessage::Light { light, input_id } => apply_patch(
+            state,
+            session,
+            &json!({"render": {"light": light}}),
+            input_id,
+        ),
+        ClientMessage::Update { patch, input_id } => apply_patch(state, session, &patch, input_id),
+        ClientMessage::Pause => {
+            session.set_paused(true);
+            Ok(())
+        }
+        ClientMessage::Resume => {
+            session.set_paused(false);
+            state.wake();
+            Ok(())
+        }
+        ClientMessage::Still => {
+            session.request_still();
+            state.wake();
+            Ok(())
+        }
+        ClientMessage::Ack { .. } => {
+            session.record_ack();
+            Ok(())
+        }
+        ClientMessage::Ping { nonce } => return Some(ServerEvent::Pong { nonce }),
+    };
+    result.err().map(error_event)
+}

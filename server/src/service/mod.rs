@@ -1,0 +1,218 @@
+//! The network service (`lightcast-server serve`): scenes shared by all sessions, one render
+//! loop owning the GPU, an encoder pool, and the HTTP/WebSocket API in [`http`].
+//!
+//! ```text
+//! client JSON ─▶ session state ─▶ render loop (round robin, paced) ─▶ encoder pool
+//!                                                   ─▶ latest-frame slot ─▶ WebSocket
+//! ```
+
+pub mod config;
+pub mod encode;
+pub mod error;
+pub mod http;
+pub mod ids;
+pub mod metrics;
+pub mod params;
+pub mod render_loop;
+pub mod scenes;
+pub mod sessions;
+
+use crate::gi::cache_store::CacheStore;
+use crate::gpu::{GpuContext, GpuError};
+use crate::scene::Scene;
+pub use config::ServeArgs;
+use lightcast_protocol::DEFAULT_SCENE_ID;
+use std::net::SocketAddr;
+use std::sync::{mpsc, Arc};
+use std::time::Instant;
+
+/// Why the service could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    #[error(transparent)]
+    Config(#[from] config::ConfigError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error("default scene '{spec}': {error}")]
+    DefaultScene {
+        spec: String,
+        error: crate::scene::OpenError,
+    },
+    #[error("cannot listen on {addr}: {error}")]
+    Bind {
+        addr: SocketAddr,
+        error: std::io::Error,
+    },
+    #[error("starting the encoder threads: {0}")]
+    Encoder(#[from] rayon::ThreadPoolBuildError),
+    #[error("the server task failed: {0}")]
+    Task(String),
+}
+
+/// A running service.
+pub struct Service {
+    /// The address it listens on (the real port when 0 was asked for).
+    pub addr: SocketAddr,
+    pub adapter: String,
+    shutdown: tokio::sync::watch::Sender<bool>,
+    server: tokio::task::JoinHandle<std::io::Result<()>>,
+    render_tx: mpsc::Sender<render_loop::Command>,
+    render_thread: std::thread::JoinHandle<()>,
+    sessions: Arc<sessions::SessionRegistry>,
+}
+
+impl Service {
+    /// Opens the GPU, loads the default scene, starts the render loop and listens.
+    /// `log` receives progress lines meant for people.
+    pub async fn start(args: &ServeArgs, log: &(dyn Fn(&str) + Sync)) -> Result<Self, ServeError> {
+        let limits = args.limits.limits()?;
+        let tokens = args.tokens()?;
+        let backend = args.backend;
+        let ctx = tokio::task::spawn_blocking(move || GpuContext::new(backend))
+            .await
+            .map_err(|e| ServeError::Task(e.to_string()))??;
+        let adapter = crate::gpu::context::AdapterSummary(&ctx.info).to_string();
+        log(&format!("adapter: {adapter}"));
+        // A validation error is a bug in a pass, not something to take every session down
+        // for: log it and count it instead of wgpu's default panic.
+        ctx.device.on_uncaptured_error(Arc::new(|e: wgpu::Error| {
+            tracing::error!("GPU error: {e}");
+            ::metrics::counter!(metrics::ERRORS, "kind" => "gpu").increment(1);
+        }));
+        metrics::handle();
+
+        let store = CacheStore::new(
+            args.cache_dir
+                .clone()
+                .unwrap_or_else(CacheStore::default_dir),
+        );
+        let scenes = scenes::SceneRegistry::new(store, limits.max_scenes as usize);
+        let spec = args.default_scene.clone();
+        let started = Instant::now();
+        let scene = tokio::task::spawn_blocking(move || Scene::open(&spec))
+            .await
+            .map_err(|e| ServeError::Task(e.to_string()))?
+            .map_err(|error| ServeError::DefaultScene {
+                spec: args.default_scene.clone(),
+                error,
+            })?;
+        let load_ms = started.elapsed().as_secs_f64() * 1e3;
+        log(&format!(
+            "default scene: {} ({} triangles, {load_ms:.0} ms)",
+            args.default_scene,
+            scene.triangle_count()
+        ));
+        let source = if args.default_scene.starts_with("procedural:") {
+            args.default_scene.clone()
+        } else {
+            "file".to_string()
+        };
+        scenes
+            .insert(scene, source, Some(DEFAULT_SCENE_ID), load_ms)
+            .map_err(|e| ServeError::Task(e.body.message))?;
+
+        let sessions = Arc::new(sessions::SessionRegistry::new(limits.max_sessions as usize));
+        let encoder = Arc::new(encode::EncodePool::new(
+            args.encode_threads
+                .unwrap_or_else(encode::EncodePool::default_threads),
+        )?);
+        let timing_source = if ctx.timestamps {
+            "gpu_timestamps"
+        } else {
+            "cpu_wall_clock"
+        };
+        let (render_tx, render_thread) = render_loop::spawn(
+            ctx.clone(),
+            Arc::clone(&scenes),
+            Arc::clone(&sessions),
+            encoder,
+        );
+        let listener = tokio::net::TcpListener::bind(args.listen)
+            .await
+            .map_err(|error| ServeError::Bind {
+                addr: args.listen,
+                error,
+            })?;
+        let addr = listener.local_addr().map_err(|error| ServeError::Bind {
+            addr: args.listen,
+            error,
+        })?;
+        let (shutdown, shutdown_rx) = tokio::sync::watch::channel(false);
+        let state = Arc::new(http::AppState::new(
+            scenes,
+            Arc::clone(&sessions),
+            render_tx.clone(),
+            limits,
+            tokens,
+            &ctx,
+            args.allow_cpu_adapter,
+            timing_source.to_string(),
+            shutdown_rx.clone(),
+        ));
+        if state.auth_enabled() {
+            log("auth: bearer tokens required");
+        }
+        let app = http::router(state);
+        let mut stop = shutdown_rx;
+        let server = tokio::spawn(async move {
+            axum::serve(listener, app)
+                .with_graceful_shutdown(async move {
+                    let _ = stop.wait_for(|s| *s).await;
+                })
+                .await
+        });
+        log(&format!("listening on http://{addr}"));
+        Ok(Self {
+            addr,
+            adapter,
+            shutdown,
+            server,
+            render_tx,
+            render_thread,
+            sessions,
+        })
+    }
+
+    /// Stops: every open session gets a `closing` event and a close frame, the listener
+    /// stops, the render loop finishes its frame and exits. Light caches being written are
+    /// renamed into place atomically, so nothing is left half-written.
+    pub async fn shutdown(self) -> Result<(), ServeError> {
+        for s in self.sessions.all() {
+            s.close("server shutting down");
+        }
+        self.shutdown.send_replace(true);
+        let served = self.server.await;
+        let _ = self.render_tx.send(render_loop::Command::Stop);
+        let thread = self.render_thread;
+        tokio::task::spawn_blocking(move || thread.join())
+            .await
+            .map_err(|e| ServeError::Task(e.to_string()))?
+            .map_err(|_| ServeError::Task("the render loop panicked".into()))?;
+        served
+            .map_err(|e| ServeError::Task(e.to_string()))?
+            .map_err(|e| ServeError::Task(e.to_string()))
+    }
+}
+
+/// Resolves when the process gets SIGINT (Ctrl-C) or SIGTERM.
+pub async fn termination_signal() {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term =
+            match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                Ok(s) => s,
+                Err(e) => {
+                    tracing::warn!("cannot listen for SIGTERM: {e}");
+                    let _ = ctrl_c.await;
+                    return;
+                }
+            };
+        tokio::select! {
+            _ = ctrl_c => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = ctrl_c.await;
+}

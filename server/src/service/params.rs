@@ -1,0 +1,171 @@
+//! Turns request parameters into renderer settings, enforcing the server's limits and naming
+//! the request field at fault.
+
+use super::error::ApiError;
+use super::scenes::SceneEntry;
+use crate::debug_views::{self, ViewError};
+use crate::gi::{caches::CacheParams, GiSettings};
+use crate::passes::exposure::Exposure;
+use crate::renderer::{RenderError, RenderSettings};
+use lightcast_protocol::{Encoding, GiMethod, Limits, RenderParams, SessionParams, View};
+
+/// Settings of one frame, ready for the render loop.
+#[derive(Clone, Debug)]
+pub struct Resolved {
+    pub settings: RenderSettings,
+    pub view: View,
+    /// Light caches the frame needs (`None` without GI).
+    pub caches: Option<CacheParams>,
+}
+
+/// The renderer's own field names, as paths of the request's `render` object.
+fn request_field(renderer_field: &str) -> String {
+    match renderer_field {
+        "rsm_size" | "view_samples" | "val_count" | "jitter" | "defensive" => {
+            format!("gi.{renderer_field}")
+        }
+        "light.cone" => "light.outer_cone".to_string(),
+        other => other.to_string(),
+    }
+}
+
+fn at_most(field: &str, value: u32, max: u32) -> Result<(), ApiError> {
+    if value > max {
+        return Err(ApiError::field(
+            field,
+            format!("{value} exceeds this server's limit of {max}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks `params` against `limits` and the adapter's largest texture (`max_texture`) and
+/// builds the frame settings. Field paths are relative to the `render` object.
+pub fn resolve(
+    params: &RenderParams,
+    entry: &SceneEntry,
+    limits: &Limits,
+    max_texture: u32,
+) -> Result<Resolved, ApiError> {
+    at_most("width", params.width, limits.max_width)?;
+    at_most("height", params.height, limits.max_height)?;
+    at_most(
+        "shadow_map_size",
+        params.shadow_map_size,
+        limits.max_shadow_map_size,
+    )?;
+    let g = &params.gi;
+    if g.method != GiMethod::None {
+        at_most("gi.rsm_size", g.rsm_size, limits.max_rsm_size)?;
+        at_most("gi.val_count", g.val_count, limits.max_val_count)?;
+        at_most("gi.view_samples", g.view_samples, limits.max_view_samples)?;
+    }
+    let exposure = match params.exposure {
+        None => Exposure::Auto,
+        Some(s) if s.is_finite() && s > 0.0 => Exposure::Manual(s),
+        Some(s) => return Err(ApiError::field("exposure", format!("{s} must be > 0"))),
+    };
+    debug_views::check(params.view, g.method).map_err(|e| match e {
+        ViewError::NeedsGi { .. } | ViewError::NeedsBrsm { .. } => {
+            ApiError::field("view", e.to_string())
+        }
+        ViewError::Gpu(g) => ApiError::internal(g.to_string()),
+    })?;
+    let caches = if g.method == GiMethod::None {
+        None
+    } else {
+        Some(entry.cache_params(g.cache_distance, g.cache_angle)?)
+    };
+    let settings = RenderSettings {
+        width: params.width,
+        height: params.height,
+        camera: params
+            .camera
+            .clone()
+            .unwrap_or_else(|| entry.default_camera.clone()),
+        light: params
+            .light
+            .clone()
+            .unwrap_or_else(|| entry.default_light.clone()),
+        exposure,
+        shadow_map_size: params.shadow_map_size,
+        capture_hdr: params.view == View::Indirect,
+        gi: GiSettings {
+            method: g.method,
+            rsm_size: g.rsm_size,
+            view_samples: g.view_samples,
+            val_count: g.val_count,
+            defensive: g.defensive,
+            occlusion: g.occlusion,
+            ..GiSettings::default()
+        },
+    };
+    settings
+        .validate_for(max_texture)
+        .map_err(|e| render_error(&e))?;
+    Ok(Resolved {
+        settings,
+        view: params.view,
+        caches,
+    })
+}
+
+/// A renderer error as the API reports it.
+pub fn render_error(e: &RenderError) -> ApiError {
+    match e {
+        RenderError::InvalidSetting { field, reason } => {
+            ApiError::field(request_field(field), reason.clone())
+        }
+        RenderError::Gpu(crate::gpu::GpuError::OutOfMemory { .. }) => ApiError::new(
+            axum::http::StatusCode::INSUFFICIENT_STORAGE,
+            "out_of_gpu_memory",
+            e.to_string(),
+        ),
+        other => ApiError::internal(other.to_string()),
+    }
+}
+
+fn quality(field: &str, q: u8) -> Result<(), ApiError> {
+    if (1..=100).contains(&q) {
+        Ok(())
+    } else {
+        Err(ApiError::field(field, format!("{q} is outside 1..=100")))
+    }
+}
+
+/// Checks the session-only parameters (encoding, fps cap) and resolves the render part.
+pub fn resolve_session(
+    params: &SessionParams,
+    entry: &SceneEntry,
+    limits: &Limits,
+    max_texture: u32,
+) -> Result<Resolved, ApiError> {
+    let Encoding {
+        quality: q,
+        moving_quality,
+        still_after_ms,
+        ..
+    } = params.encoding;
+    quality("encoding.quality", q)?;
+    quality("encoding.moving_quality", moving_quality)?;
+    if still_after_ms > 60_000 {
+        return Err(ApiError::field(
+            "encoding.still_after_ms",
+            format!("{still_after_ms} is outside 0..=60000"),
+        ));
+    }
+    if !(params.fps_cap.is_finite() && params.fps_cap >= 0.1 && params.fps_cap <= limits.max_fps) {
+        return Err(ApiError::field(
+            "fps_cap",
+            format!("{} is outside 0.1..={}", params.fps_cap, limits.max_fps),
+        ));
+    }
+    resolve(&params.render, entry, limits, max_texture).map_err(|e| e.within("render"))
+}
+
+/// Checks a one-shot render's JPEG quality.
+pub fn check_quality(q: Option<u8>) -> Result<u8, ApiError> {
+    let q = q.unwrap_or(90);
+    quality("quality", q)?;
+    Ok(q)
+}

@@ -1,0 +1,374 @@
+//! The render loop: the one thread that owns the GPU. Each turn it serves the next due session
+//! (round robin, paced to each session's fps cap) or a queued one-shot render, then hands the
+//! frame to the encoder pool; encoded frames land in the session's latest-frame slot.
+
+use super::encode::{self, EncodePool};
+use super::error::ApiError;
+use super::params::{render_error, Resolved};
+use super::scenes::{CachesNow, SceneEntry, SceneRegistry};
+use super::sessions::{unix_us, FramePlan, Session, SessionRegistry};
+use crate::debug_views::{self, Image};
+use crate::gi::caches::{CacheParams, CacheSet};
+use crate::gi::GiSettings;
+use crate::gpu::timing::{StageTiming, TimingSource};
+use crate::gpu::GpuContext;
+use crate::renderer::{Frame, Renderer};
+use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_MOVING, FLAG_STILL};
+use lightcast_protocol::{FrameHeader, StageMs, View};
+use std::collections::{HashMap, VecDeque};
+use std::sync::atomic::Ordering;
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
+use tokio::sync::oneshot;
+
+/// Renderers kept at once (one per scene and light-cache set in use).
+const MAX_RENDERERS: usize = 8;
+/// Longest sleep when nothing is due, so new work is noticed even without a wake-up.
+const IDLE_WAIT: Duration = Duration::from_millis(50);
+
+/// A one-shot render: the frame, read back and handed over unencoded.
+pub struct OneShot {
+    pub scene: Arc<SceneEntry>,
+    pub resolved: Resolved,
+    pub reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
+    pub queued: Instant,
+}
+
+/// A rendered frame: the image of the requested view plus what was measured.
+pub struct Rendered {
+    pub image: Image,
+    pub timings: Vec<StageTiming>,
+    pub timing_source: TimingSource,
+    pub readback_ms: f64,
+    pub exposure_scale: f32,
+    /// Linear HDR radiance and indirect light, when the settings asked to capture them.
+    pub hdr: Option<Vec<[f32; 4]>>,
+    pub indirect: Option<Vec<[f32; 4]>>,
+    /// GI was requested but the light caches are still being computed (direct light only).
+    pub gi_pending: bool,
+}
+
+impl Rendered {
+    pub fn gpu_ms(&self) -> f64 {
+        self.timings.iter().map(|t| t.ms).sum()
+    }
+
+    /// The stage times in the protocol's form.
+    pub fn stages(&self) -> Vec<StageMs> {
+        self.timings
+            .iter()
+            .map(|t| StageMs {
+                stage: t.stage.to_string(),
+                ms: t.ms,
+            })
+            .collect()
+    }
+}
+
+/// What a one-shot render returns to its HTTP handler.
+pub struct OneShotResult {
+    pub rendered: Rendered,
+    pub queue_ms: f64,
+}
+
+pub enum Command {
+    Render(Box<OneShot>),
+    /// Something changed (a session was created or steered): look again now.
+    Wake,
+    Stop,
+}
+
+fn record_metrics(frame: &Frame) {
+    for t in &frame.timings {
+        metrics::histogram!(super::metrics::STAGE_MS, "stage" => t.stage).record(t.ms);
+    }
+    metrics::histogram!(super::metrics::GPU_FRAME_MS).record(frame.total_ms());
+    metrics::histogram!(super::metrics::READBACK_MS).record(frame.readback_ms);
+}
+
+type RendererKey = (String, Option<(u32, u32)>);
+
+struct Slot {
+    renderer: Renderer,
+    caches: Option<Arc<CacheSet>>,
+    last_used: Instant,
+}
+
+struct Loop {
+    ctx: GpuContext,
+    scenes: Arc<SceneRegistry>,
+    sessions: Arc<SessionRegistry>,
+    encoder: Arc<EncodePool>,
+    renderers: HashMap<RendererKey, Slot>,
+    one_shots: VecDeque<Box<OneShot>>,
+    /// Index into the session list where the next round-robin search starts.
+    next_session: usize,
+    /// Alternates one-shot renders with sessions so neither starves the other.
+    one_shot_turn: bool,
+}
+
+/// Starts the render loop thread.
+pub fn spawn(
+    ctx: GpuContext,
+    scenes: Arc<SceneRegistry>,
+    sessions: Arc<SessionRegistry>,
+    encoder: Arc<EncodePool>,
+) -> (mpsc::Sender<Command>, std::thread::JoinHandle<()>) {
+    let (tx, rx) = mpsc::channel();
+    let handle = std::thread::Builder::new()
+        .name("render-loop".into())
+        .spawn(move || {
+            let mut l = Loop {
+                ctx,
+                scenes,
+                sessions,
+                encoder,
+                renderers: HashMap::new(),
+                one_shots: VecDeque::new(),
+                next_session: 0,
+                one_shot_turn: false,
+            };
+            l.run(&rx);
+        })
+        .expect("spawning the render loop thread");
+    (tx, handle)
+}
+
+impl Loop {
+    fn run(&mut self, rx: &mpsc::Receiver<Command>) {
+        loop {
+            loop {
+                match rx.try_recv() {
+                    Ok(Command::Render(job)) => self.one_shots.push_back(job),
+                    Ok(Command::Wake) => {}
+                    Ok(Command::Stop) | Err(mpsc::TryRecvError::Disconnected) => return,
+                    Err(mpsc::TryRecvError::Empty) => break,
+                }
+            }
+            self.prune();
+            let wait = match self.turn() {
+                None => continue,
+                Some(wait) => wait,
+            };
+            match rx.recv_timeout(wait.min(IDLE_WAIT)) {
+                Ok(Command::Render(job)) => self.one_shots.push_back(job),
+                Ok(Command::Wake) | Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Ok(Command::Stop) | Err(mpsc::RecvTimeoutError::Disconnected) => return,
+            }
+        }
+    }
+
+    /// Serves one session or one-shot. `None` when it did work; else how long until
+    /// something is due.
+    fn turn(&mut self) -> Option<Duration> {
+        self.one_shot_turn = !self.one_shot_turn;
+        if self.one_shot_turn {
+            if let Some(job) = self.one_shots.pop_front() {
+                self.one_shot(*job);
+                return None;
+            }
+        }
+        let sessions = self.sessions.all();
+        let now = Instant::now();
+        let mut wait = IDLE_WAIT;
+        for i in 0..sessions.len() {
+            let index = (self.next_session + i) % sessions.len();
+            match sessions[index].plan(now) {
+                Ok(plan) => {
+                    self.next_session = index + 1;
+                    self.session_frame(&sessions[index], plan);
+                    return None;
+                }
+                Err(Some(w)) => wait = wait.min(w),
+                Err(None) => {}
+            }
+        }
+        if let Some(job) = self.one_shots.pop_front() {
+            self.one_shot(*job);
+            return None;
+        }
+        Some(wait)
+    }
+
+    /// Drops renderers of deleted scenes and the least recently used beyond the limit.
+    fn prune(&mut self) {
+        let scenes = &self.scenes;
+        self.renderers.retain(|(id, _), _| scenes.contains(id));
+        while self.renderers.len() > MAX_RENDERERS {
+            let Some(oldest) = self
+                .renderers
+                .iter()
+                .min_by_key(|(_, s)| s.last_used)
+                .map(|(k, _)| k.clone())
+            else {
+                break;
+            };
+            self.renderers.remove(&oldest);
+        }
+    }
+
+    /// Renders `resolved` of `scene`; GI falls back to none while its caches are pending.
+    fn render(
+        &mut self,
+        scene: &Arc<SceneEntry>,
+        resolved: &Resolved,
+    ) -> Result<Rendered, ApiError> {
+        let mut settings = resolved.settings.clone();
+        let (caches, pending) = match resolved.caches {
+            None => (None, false),
+            Some(params) => match self.scenes.caches(scene, params) {
+                CachesNow::Ready(set) => (Some(set), false),
+                CachesNow::Pending => (None, true),
+                CachesNow::Failed(e) => {
+                    return Err(ApiError::field(
+                        "render.gi.cache_distance",
+                        format!("the light caches of scene '{}' failed: {e}", scene.id),
+                    ))
+                }
+            },
+        };
+        if pending {
+            settings.gi = GiSettings::off();
+        }
+        let view = if pending { View::Final } else { resolved.view };
+        let key = (
+            scene.id.clone(),
+            caches.as_ref().map(|c| cache_key(&c.params)),
+        );
+        let slot = match self.renderers.entry(key) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(e) => e.insert(Slot {
+                renderer: Renderer::new(self.ctx.clone(), Arc::clone(&scene.scene)),
+                caches: None,
+                last_used: Instant::now(),
+            }),
+        };
+        slot.last_used = Instant::now();
+        if let (Some(set), None) = (&caches, &slot.caches) {
+            slot.renderer
+                .set_caches(set)
+                .map_err(|e| ApiError::internal(e.to_string()))?;
+            slot.caches = Some(Arc::clone(set));
+        }
+        let mut frame = slot
+            .renderer
+            .render(&settings)
+            .map_err(|e| render_error(&e).within("render"))?;
+        record_metrics(&frame);
+        let hdr = frame.hdr.take();
+        let indirect = if view == View::Indirect {
+            frame.indirect.clone()
+        } else {
+            frame.indirect.take()
+        };
+        let timings = std::mem::take(&mut frame.timings);
+        let (timing_source, readback_ms, exposure_scale) =
+            (frame.timing_source, frame.readback_ms, frame.exposure_scale);
+        let image = debug_views::compose(
+            view,
+            &slot.renderer,
+            frame,
+            &settings.camera,
+            caches.as_ref().map(|c| c.caches.as_slice()),
+        )
+        .map_err(|e| ApiError::internal(e.to_string()))?;
+        Ok(Rendered {
+            image,
+            timings,
+            timing_source,
+            readback_ms,
+            exposure_scale,
+            hdr,
+            indirect,
+            gi_pending: pending,
+        })
+    }
+
+    fn one_shot(&mut self, job: OneShot) {
+        let queue_ms = job.queued.elapsed().as_secs_f64() * 1e3;
+        if job.reply.is_closed() {
+            return;
+        }
+        metrics::counter!(super::metrics::RENDERS).increment(1);
+        let result = self
+            .render(&job.scene, &job.resolved)
+            .map(|rendered| OneShotResult { rendered, queue_ms });
+        let _ = job.reply.send(result);
+    }
+
+    fn session_frame(&mut self, session: &Arc<Session>, plan: FramePlan) {
+        let render_start_us = unix_us();
+        let result = self.render(&plan.lease_scene, &plan.resolved);
+        let rendered = match result {
+            Ok(r) => r,
+            Err(e) => {
+                session.record_error(e.body);
+                return;
+            }
+        };
+        if plan.resolved.caches.is_some() {
+            session.note_caches(&plan.lease_scene.id, rendered.gi_pending);
+        }
+        metrics::counter!(super::metrics::FRAMES_RENDERED).increment(1);
+        session.record_render(&rendered.stages());
+        let mut flags = 0;
+        if plan.still {
+            flags |= FLAG_STILL;
+        }
+        if plan.moving {
+            flags |= FLAG_MOVING;
+        }
+        if rendered.gi_pending {
+            flags |= FLAG_GI_PENDING;
+        }
+        let header = FrameHeader {
+            seq: session.next_seq(),
+            input_id: plan.input_id,
+            render_start_us,
+            send_us: 0,
+            width: rendered.image.width,
+            height: rendered.image.height,
+            codec: plan.codec,
+            flags,
+            quality: if plan.codec == lightcast_protocol::Codec::Jpeg {
+                plan.quality
+            } else {
+                0
+            },
+            encode_ms: 0.0,
+            readback_ms: rendered.readback_ms as f32,
+            gpu_ms: rendered.gpu_ms() as f32,
+            payload_len: 0,
+            stages: rendered
+                .timings
+                .iter()
+                .filter_map(|t| FrameHeader::stage_index(t.stage).map(|i| (i, t.ms as f32)))
+                .collect(),
+        };
+        session.in_flight.fetch_add(1, Ordering::Relaxed);
+        let session = Arc::clone(session);
+        let image = rendered.image;
+        self.encoder.spawn(move || {
+            let started = Instant::now();
+            match encode::encode(&image, plan.codec, plan.quality) {
+                Ok(payload) => {
+                    let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+                    metrics::histogram!(super::metrics::ENCODE_MS).record(encode_ms);
+                    let header = FrameHeader {
+                        encode_ms: encode_ms as f32,
+                        ..header
+                    };
+                    session.deliver(header.encode_with(&payload));
+                }
+                Err(e) => {
+                    session.in_flight.fetch_sub(1, Ordering::Relaxed);
+                    session.record_error(ApiError::internal(e.to_string()).body);
+                }
+            }
+        });
+    }
+}
+
+fn cache_key(p: &CacheParams) -> (u32, u32) {
+    (p.d_eps.to_bits(), p.theta_eps_degrees.to_bits())
+}

@@ -1,0 +1,388 @@
+//! Sessions: the state a client steers, the latest-frame slot the render loop fills and the
+//! WebSocket drains, and the registry the render loop walks round robin.
+
+use super::error::ApiError;
+use super::ids;
+use super::params::Resolved;
+use super::scenes::{lock, SceneLease};
+use lightcast_protocol::{
+    ErrorBody, ServerEvent, SessionInfo, SessionParams, SessionStats, StageMs, StreamMode,
+};
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use tokio::sync::{broadcast, watch, Notify};
+
+/// Frames a session may have rendered but not yet sent before its ticks are skipped.
+pub const MAX_IN_FLIGHT: u32 = 2;
+
+pub fn unix_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+pub fn unix_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64)
+}
+
+/// Holds the newest encoded frame of a session; a newer frame replaces an unsent one.
+#[derive(Default)]
+pub struct FrameSlot {
+    frame: Mutex<Option<Vec<u8>>>,
+    notify: Notify,
+}
+
+impl FrameSlot {
+    /// Stores `message`; returns true when it replaced a frame the client never got.
+    pub fn publish(&self, message: Vec<u8>) -> bool {
+        let replaced = lock(&self.frame).replace(message).is_some();
+        self.notify.notify_one();
+        replaced
+    }
+
+    /// Waits for the next frame.
+    pub async fn take(&self) -> Vec<u8> {
+        loop {
+            if let Some(frame) = lock(&self.frame).take() {
+                return frame;
+            }
+            self.notify.notified().await;
+        }
+    }
+}
+
+/// What the render loop should render for a session now.
+pub struct FramePlan {
+    pub resolved: Resolved,
+    pub lease_scene: Arc<super::scenes::SceneEntry>,
+    pub version: u64,
+    pub input_id: u64,
+    pub still: bool,
+    pub moving: bool,
+    pub codec: lightcast_protocol::Codec,
+    pub quality: u8,
+}
+
+struct State {
+    params: SessionParams,
+    resolved: Resolved,
+    lease: SceneLease,
+    /// Bumped on every change of parameters.
+    version: u64,
+    /// Version shown by the last rendered frame.
+    rendered_version: u64,
+    /// Version shown by the last still (0: none yet).
+    still_version: u64,
+    still_requested: bool,
+    input_id: u64,
+    last_change: Instant,
+    next_due: Instant,
+    /// Scene id whose pending light caches the client was told about.
+    caches_pending_told: Option<String>,
+}
+
+/// One client's stream.
+pub struct Session {
+    pub id: String,
+    /// The bearer token that created the session (auth on), which alone may use it.
+    pub owner: Option<String>,
+    pub created_unix_ms: u64,
+    state: Mutex<State>,
+    stats: Mutex<SessionStats>,
+    pub slot: FrameSlot,
+    pub events: broadcast::Sender<ServerEvent>,
+    /// Rendered frames not yet sent or dropped.
+    pub in_flight: AtomicU32,
+    pub connected: AtomicBool,
+    seq: std::sync::atomic::AtomicU64,
+    closed: watch::Sender<Option<String>>,
+}
+
+impl Session {
+    pub fn new(
+        owner: Option<String>,
+        params: SessionParams,
+        resolved: Resolved,
+        lease: SceneLease,
+    ) -> Arc<Self> {
+        let now = Instant::now();
+        Arc::new(Self {
+            id: ids::new_id("se"),
+            owner,
+            created_unix_ms: unix_ms(),
+            state: Mutex::new(State {
+                params,
+                resolved,
+                lease,
+                version: 1,
+                rendered_version: 0,
+                still_version: 0,
+                still_requested: false,
+                input_id: 0,
+                last_change: now,
+                next_due: now,
+                caches_pending_told: None,
+            }),
+            stats: Mutex::new(SessionStats::default()),
+            slot: FrameSlot::default(),
+            events: broadcast::channel(64).0,
+            in_flight: AtomicU32::new(0),
+            connected: AtomicBool::new(false),
+            seq: std::sync::atomic::AtomicU64::new(0),
+            closed: watch::channel(None).0,
+        })
+    }
+
+    pub fn params(&self) -> SessionParams {
+        lock(&self.state).params.clone()
+    }
+
+    pub fn info(&self) -> SessionInfo {
+        let params = self.params();
+        SessionInfo {
+            stream: format!("/v1/sessions/{}/stream", self.id),
+            id: self.id.clone(),
+            params,
+            connected: self.connected.load(Ordering::Relaxed),
+            created_unix_ms: self.created_unix_ms,
+            stats: lock(&self.stats).clone(),
+        }
+    }
+
+    pub fn scene_id(&self) -> String {
+        lock(&self.state).lease.0.id.clone()
+    }
+
+    /// Replaces the parameters (already checked by the caller) and tells every listener.
+    pub fn apply(&self, params: SessionParams, resolved: Resolved, lease: SceneLease, input: u64) {
+        {
+            let mut s = lock(&self.state);
+            s.params = params;
+            s.resolved = resolved;
+            s.lease = lease;
+            s.version += 1;
+            if input > 0 {
+                s.input_id = input;
+            }
+            s.last_change = Instant::now();
+        }
+        let _ = self.events.send(ServerEvent::Updated {
+            session: Box::new(self.info()),
+        });
+    }
+
+    pub fn set_paused(&self, paused: bool) {
+        let mut s = lock(&self.state);
+        if s.params.paused != paused {
+            s.params.paused = paused;
+            s.version += 1;
+        }
+    }
+
+    pub fn request_still(&self) {
+        lock(&self.state).still_requested = true;
+    }
+
+    /// Decides whether the session wants a frame at `now`. `Err(wait)` says how long until it
+    /// might; `Ok(None)` that nothing is due until something changes.
+    pub fn plan(&self, now: Instant) -> Result<FramePlan, Option<Duration>> {
+        if !self.connected.load(Ordering::Relaxed) {
+            return Err(None);
+        }
+        let mut s = lock(&self.state);
+        if s.params.paused && !s.still_requested {
+            return Err(None);
+        }
+        if now < s.next_due {
+            return Err(Some(s.next_due - now));
+        }
+        let enc = s.params.encoding.clone();
+        let changed = s.version != s.rendered_version;
+        let rest = Duration::from_millis(u64::from(enc.still_after_ms));
+        let rested = now.duration_since(s.last_change) >= rest;
+        let want_still = s.still_requested
+            || (enc.still_after_ms > 0 && rested && !changed && s.still_version != s.version);
+        let due = want_still || changed || s.params.mode == StreamMode::Continuous;
+        if !due {
+            if enc.still_after_ms > 0 && s.still_version != s.version {
+                return Err(Some(rest.saturating_sub(now.duration_since(s.last_change))));
+            }
+            return Err(None);
+        }
+        if self.in_flight.load(Ordering::Relaxed) >= MAX_IN_FLIGHT {
+            drop(s);
+            lock(&self.stats).frames_throttled += 1;
+            metrics::counter!(super::metrics::FRAMES_THROTTLED).increment(1);
+            return Err(Some(Duration::from_millis(2)));
+        }
+        let interval = Duration::from_secs_f32(1.0 / s.params.fps_cap);
+        // Keep the cadence, but never bank ticks a slow frame missed.
+        s.next_due = (s.next_due + interval).max(now);
+        let moving = !rested;
+        let (codec, quality) = if want_still {
+            (enc.still_codec, enc.quality)
+        } else if moving {
+            (enc.codec, enc.moving_quality)
+        } else {
+            (enc.codec, enc.quality)
+        };
+        if want_still {
+            s.still_requested = false;
+            s.still_version = s.version;
+        }
+        s.rendered_version = s.version;
+        Ok(FramePlan {
+            resolved: s.resolved.clone(),
+            lease_scene: Arc::clone(&s.lease.0),
+            version: s.version,
+            input_id: s.input_id,
+            still: want_still,
+            moving,
+            codec,
+            quality,
+        })
+    }
+
+    pub fn next_seq(&self) -> u64 {
+        self.seq.fetch_add(1, Ordering::Relaxed) + 1
+    }
+
+    /// Tells the client once per scene that frames lack GI until the caches are ready.
+    pub fn note_caches(&self, scene: &str, pending: bool) {
+        let mut s = lock(&self.state);
+        let told = s.caches_pending_told.as_deref() == Some(scene);
+        let event = match (pending, told) {
+            (true, false) => {
+                s.caches_pending_told = Some(scene.to_string());
+                ServerEvent::CachesPending {
+                    scene: scene.to_string(),
+                }
+            }
+            (false, true) => {
+                s.caches_pending_told = None;
+                ServerEvent::CachesReady {
+                    scene: scene.to_string(),
+                }
+            }
+            _ => return,
+        };
+        drop(s);
+        let _ = self.events.send(event);
+    }
+
+    pub fn record_render(&self, stages: &[StageMs]) {
+        let mut st = lock(&self.stats);
+        st.frames_rendered += 1;
+        st.last_stages = stages.to_vec();
+    }
+
+    pub fn record_error(&self, error: ErrorBody) {
+        {
+            let mut st = lock(&self.stats);
+            st.errors += 1;
+            st.last_error = Some(error.clone());
+        }
+        let _ = self.events.send(ServerEvent::RenderError { error });
+    }
+
+    /// A frame finished encoding: into the slot, counting the one it replaced as dropped.
+    pub fn deliver(&self, message: Vec<u8>) {
+        if self.slot.publish(message) {
+            self.in_flight.fetch_sub(1, Ordering::Relaxed);
+            lock(&self.stats).frames_dropped += 1;
+            metrics::counter!(super::metrics::FRAMES_DROPPED).increment(1);
+        }
+    }
+
+    /// A frame was written to the socket.
+    pub fn record_sent(&self, bytes: usize) {
+        self.in_flight.fetch_sub(1, Ordering::Relaxed);
+        let mut st = lock(&self.stats);
+        st.frames_sent += 1;
+        st.bytes_sent += bytes as u64;
+        metrics::counter!(super::metrics::FRAMES_SENT).increment(1);
+        metrics::counter!(super::metrics::BYTES_SENT).increment(bytes as u64);
+    }
+
+    pub fn record_ack(&self) {
+        lock(&self.stats).frames_acked += 1;
+    }
+
+    /// Asks the session's socket to close with `reason`.
+    pub fn close(&self, reason: &str) {
+        self.closed.send_replace(Some(reason.to_string()));
+    }
+
+    pub fn closed(&self) -> watch::Receiver<Option<String>> {
+        self.closed.subscribe()
+    }
+}
+
+/// All sessions, in a stable order for round robin.
+pub struct SessionRegistry {
+    sessions: Mutex<BTreeMap<String, Arc<Session>>>,
+    max: usize,
+}
+
+impl SessionRegistry {
+    pub fn new(max: usize) -> Self {
+        Self {
+            sessions: Mutex::new(BTreeMap::new()),
+            max,
+        }
+    }
+
+    pub fn insert(&self, session: Arc<Session>) -> Result<(), ApiError> {
+        let mut all = lock(&self.sessions);
+        if all.len() >= self.max {
+            return Err(ApiError::too_many(
+                "too_many_sessions",
+                format!("the server holds {} sessions, its limit", all.len()),
+            ));
+        }
+        all.insert(session.id.clone(), session);
+        metrics::gauge!(super::metrics::SESSIONS).set(all.len() as f64);
+        Ok(())
+    }
+
+    /// The session `id`, if `token` may use it (the creator's token when auth is on).
+    pub fn get(&self, id: &str, token: Option<&str>) -> Result<Arc<Session>, ApiError> {
+        let session = lock(&self.sessions)
+            .get(id)
+            .cloned()
+            .ok_or_else(|| ApiError::not_found("session", id))?;
+        match (&session.owner, token) {
+            (None, _) => Ok(session),
+            (Some(owner), Some(t)) if ids::constant_time_eq(owner, t) => Ok(session),
+            // Same answer as an unknown id: another token's sessions are not revealed.
+            _ => Err(ApiError::not_found("session", id)),
+        }
+    }
+
+    pub fn list(&self, token: Option<&str>) -> Vec<Arc<Session>> {
+        lock(&self.sessions)
+            .values()
+            .filter(|s| match (&s.owner, token) {
+                (None, _) => true,
+                (Some(owner), Some(t)) => ids::constant_time_eq(owner, t),
+                (Some(_), None) => false,
+            })
+            .cloned()
+            .collect()
+    }
+
+    pub fn all(&self) -> Vec<Arc<Session>> {
+        lock(&self.sessions).values().cloned().collect()
+    }
+
+    pub fn remove(&self, id: &str) -> Option<Arc<Session>> {
+        let mut all = lock(&self.sessions);
+        let removed = all.remove(id);
+        metrics::gauge!(super::metrics::SESSIONS).set(all.len() as f64);
+        removed
+    }
+}

@@ -1,0 +1,110 @@
+//! `lightcast-server` (serve, the default) run as a user would: it starts on the built-in scene,
+//! logs the adapter and URL, answers HTTP, and stops cleanly on SIGTERM.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+fn server(args: &[&str], env: &[(&str, &str)]) -> (Child, mpsc::Receiver<String>) {
+    let cache = std::env::temp_dir().join(format!("lightcast-serve-cli-{}", std::process::id()));
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_lightcast-server"));
+    cmd.args(args)
+        .env("LIGHTCAST_CACHE_DIR", &cache)
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let mut child = cmd.spawn().expect("lightcast-server starts");
+    let stderr = child.stderr.take().expect("stderr");
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    (child, rx)
+}
+
+/// Waits for a log line containing `needle`; returns it.
+fn wait_for(lines: &mpsc::Receiver<String>, needle: &str, seen: &mut Vec<String>) -> String {
+    loop {
+        let line = lines
+            .recv_timeout(Duration::from_secs(120))
+            .unwrap_or_else(|_| panic!("no log line with '{needle}'; saw:\n{}", seen.join("\n")));
+        seen.push(line.clone());
+        if line.contains(needle) {
+            return line;
+        }
+    }
+}
+
+fn get(addr: &str, path: &str) -> String {
+    let mut stream = TcpStream::connect(addr).expect("connect");
+    write!(
+        stream,
+        "GET {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .expect("write");
+    let mut response = String::new();
+    stream.read_to_string(&mut response).expect("read");
+    response
+}
+
+#[test]
+fn serves_by_default_and_stops_on_sigterm() {
+    let (mut child, lines) = server(&[], &[("LIGHTCAST_LISTEN", "127.0.0.1:0")]);
+    let mut seen = Vec::new();
+    wait_for(&lines, "adapter:", &mut seen);
+    let listening = wait_for(&lines, "listening on http://", &mut seen);
+    let addr = listening
+        .rsplit("http://")
+        .next()
+        .expect("address")
+        .trim()
+        .to_string();
+    let health = get(&addr, "/healthz");
+    assert!(health.starts_with("HTTP/1.1 200"), "{health}");
+    let scenes = get(&addr, "/v1/scenes");
+    assert!(scenes.contains("\"id\":\"default\""), "{scenes}");
+
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(status.success());
+    wait_for(&lines, "stopped", &mut seen);
+    let exit = child.wait().expect("exit status");
+    assert!(exit.success(), "exit {exit:?}; log:\n{}", seen.join("\n"));
+}
+
+#[test]
+fn refuses_bad_options_with_a_reason() {
+    let cases: &[(&[&str], &str)] = &[
+        (&["--listen", "not-an-address"], "invalid socket address"),
+        (&["serve", "--max-width", "0"], "--max-width"),
+        (&["serve", "--token", "short"], "too easy to guess"),
+        (&["serve", "--default-scene", "procedural:teapot"], "teapot"),
+    ];
+    for (args, needle) in cases {
+        let mut all = args.to_vec();
+        all.extend(
+            ["--listen", "127.0.0.1:0"]
+                .iter()
+                .filter(|_| !args.contains(&"--listen")),
+        );
+        let output = Command::new(env!("CARGO_BIN_EXE_lightcast-server"))
+            .args(&all)
+            .output()
+            .expect("runs");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success(), "{args:?} must fail");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}

@@ -1,0 +1,270 @@
+//! Helpers for the end-to-end tests: start a real server on a loopback port (in this process,
+//! on lavapipe in CI), talk to it over HTTP and WebSocket, and decode what comes back.
+
+use clap::Parser;
+use futures_util::{SinkExt, StreamExt};
+use lightcast_protocol::{FrameHeader, ServerEvent, SessionCreated};
+use lightcast_server::service::{ServeArgs, Service};
+use serde_json::{json, Value};
+use std::time::Duration;
+use tokio_tungstenite::tungstenite::Message;
+
+/// How long a test waits for any one thing from the server before failing.
+pub const PATIENCE: Duration = Duration::from_secs(120);
+
+#[derive(Parser)]
+struct Wrapper {
+    #[command(flatten)]
+    serve: ServeArgs,
+}
+
+/// A server running in this process on an ephemeral loopback port.
+pub struct TestServer {
+    pub base: String,
+    pub http: reqwest::Client,
+    service: Option<Service>,
+    _cache: tempfile::TempDir,
+}
+
+impl TestServer {
+    /// Starts with the built-in default scene, a fresh light-cache directory and `extra`
+    /// command-line options of `serve`.
+    pub async fn start(extra: &[&str]) -> Self {
+        Self::start_with(extra, true).await
+    }
+
+    /// As [`Self::start`]; `allow_cpu_adapter` says whether a software adapter counts as ready.
+    pub async fn start_with(extra: &[&str], allow_cpu_adapter: bool) -> Self {
+        let cache = tempfile::tempdir().expect("temporary cache directory");
+        let cache_dir = cache.path().to_string_lossy().into_owned();
+        let mut argv = vec![
+            "lightcast-server",
+            "--listen",
+            "127.0.0.1:0",
+            "--cache-dir",
+            &cache_dir,
+            "--encode-threads",
+            "2",
+        ];
+        if allow_cpu_adapter {
+            argv.push("--allow-cpu-adapter");
+        }
+        argv.extend_from_slice(extra);
+        let args = Wrapper::try_parse_from(argv)
+            .expect("valid serve options")
+            .serve;
+        let service = Service::start(&args, &|line: &str| eprintln!("server: {line}"))
+            .await
+            .expect("the server starts");
+        Self {
+            base: format!("http://{}", service.addr),
+            http: reqwest::Client::new(),
+            service: Some(service),
+            _cache: cache,
+        }
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("{}{path}", self.base)
+    }
+
+    pub fn ws_url(&self, path: &str) -> String {
+        format!("{}{path}", self.base.replacen("http://", "ws://", 1))
+    }
+
+    /// Stops the server as SIGTERM would.
+    pub async fn stop(mut self) {
+        if let Some(s) = self.service.take() {
+            s.shutdown().await.expect("clean shutdown");
+        }
+    }
+
+    /// POST /v1/sessions with `params`; panics unless 201.
+    pub async fn create_session(&self, params: Value, token: Option<&str>) -> SessionCreated {
+        let mut req = self.http.post(self.url("/v1/sessions")).json(&params);
+        if let Some(t) = token {
+            req = req.bearer_auth(t);
+        }
+        let resp = req.send().await.expect("request");
+        let status = resp.status();
+        let body = resp.text().await.expect("body");
+        assert_eq!(status, 201, "creating a session: {body}");
+        serde_json::from_str(&body).expect("SessionCreated")
+    }
+
+    /// Opens a session's stream with its ticket.
+    pub async fn connect(&self, created: &SessionCreated) -> Stream {
+        let url = self.ws_url(&format!(
+            "{}?ticket={}",
+            created.session.stream, created.ticket.ticket
+        ));
+        let (ws, _) = tokio_tungstenite::connect_async(url)
+            .await
+            .expect("WebSocket opens");
+        Stream { ws }
+    }
+
+    /// GET a JSON document; panics unless 200.
+    pub async fn get_json(&self, path: &str) -> Value {
+        let resp = self.http.get(self.url(path)).send().await.expect("request");
+        assert_eq!(resp.status(), 200, "GET {path}");
+        resp.json().await.expect("JSON")
+    }
+
+    /// Waits until the default scene's light caches are ready.
+    pub async fn wait_caches_ready(&self, scene: &str) {
+        tokio::time::timeout(PATIENCE, async {
+            loop {
+                let info = self.get_json(&format!("/v1/scenes/{scene}")).await;
+                if info["caches"][0]["state"] == "ready" {
+                    return;
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        })
+        .await
+        .expect("light caches become ready");
+    }
+}
+
+/// A decoded binary frame.
+pub struct ReceivedFrame {
+    pub header: FrameHeader,
+    pub rgba: image::RgbaImage,
+}
+
+impl ReceivedFrame {
+    pub fn stage(&self, name: &str) -> Option<f32> {
+        let index = FrameHeader::stage_index(name)?;
+        self.header
+            .stages
+            .iter()
+            .find(|(i, _)| *i == index)
+            .map(|(_, ms)| *ms)
+    }
+}
+
+/// One side of a session's WebSocket.
+pub struct Stream {
+    pub ws: tokio_tungstenite::WebSocketStream<
+        tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
+    >,
+}
+
+/// What the server sent next.
+pub enum Incoming {
+    Frame(Box<ReceivedFrame>),
+    Event(ServerEvent),
+    Closed,
+}
+
+impl Stream {
+    pub async fn send(&mut self, message: Value) {
+        self.ws
+            .send(Message::Text(message.to_string().into()))
+            .await
+            .expect("send");
+    }
+
+    pub async fn send_raw(&mut self, message: Message) {
+        self.ws.send(message).await.expect("send");
+    }
+
+    /// The next frame or event.
+    pub async fn next(&mut self) -> Incoming {
+        loop {
+            let msg = tokio::time::timeout(PATIENCE, self.ws.next())
+                .await
+                .expect("the server sends something in time");
+            match msg {
+                None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return Incoming::Closed,
+                Some(Ok(Message::Binary(bytes))) => {
+                    let (header, payload) =
+                        FrameHeader::decode(&bytes).expect("valid frame header");
+                    let rgba = image::load_from_memory(payload)
+                        .expect("decodable image")
+                        .to_rgba8();
+                    return Incoming::Frame(Box::new(ReceivedFrame { header, rgba }));
+                }
+                Some(Ok(Message::Text(text))) => {
+                    return Incoming::Event(serde_json::from_str(&text).expect("ServerEvent JSON"))
+                }
+                Some(Ok(_)) => {}
+            }
+        }
+    }
+
+    /// The next frame, skipping events (events are returned in `seen`).
+    pub async fn next_frame(&mut self, seen: &mut Vec<ServerEvent>) -> ReceivedFrame {
+        loop {
+            match self.next().await {
+                Incoming::Frame(f) => {
+                    self.send(json!({"type": "ack", "seq": f.header.seq})).await;
+                    return *f;
+                }
+                Incoming::Event(e) => seen.push(e),
+                Incoming::Closed => {
+                    panic!("stream closed while waiting for a frame; events: {seen:?}")
+                }
+            }
+        }
+    }
+
+    /// The next event, skipping frames.
+    pub async fn next_event(&mut self) -> ServerEvent {
+        loop {
+            match self.next().await {
+                Incoming::Frame(_) => {}
+                Incoming::Event(e) => return e,
+                Incoming::Closed => panic!("stream closed while waiting for an event"),
+            }
+        }
+    }
+}
+
+/// Mean absolute difference of two RGBA images in 0–255 levels.
+pub fn mean_abs_diff(a: &image::RgbaImage, b: &image::RgbaImage) -> f64 {
+    assert_eq!(a.dimensions(), b.dimensions());
+    a.as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(x, y)| f64::from(x.abs_diff(*y)))
+        .sum::<f64>()
+        / a.as_raw().len() as f64
+}
+
+/// Session parameters small enough for lavapipe: `width`×`height`, a small RSM and few VALs.
+pub fn small_session(width: u32, height: u32) -> Value {
+    json!({
+        "render": {
+            "width": width,
+            "height": height,
+            "shadow_map_size": 256,
+            "gi": {"rsm_size": 32, "val_count": 256, "view_samples": 64}
+        },
+        "fps_cap": 60,
+        "encoding": {"still_after_ms": 0}
+    })
+}
+
+/// The shared real-world glTF scene (not written by this project).
+pub fn cornell_glb() -> Vec<u8> {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/scenes/cornell-box/cornell-box.glb"
+    );
+    std::fs::read(path).expect("shared/scenes/cornell-box/cornell-box.glb")
+}
+
+/// Splits a `.glb` into a `.gltf` JSON that references `bin_name` and the binary chunk.
+pub fn glb_to_gltf(glb: &[u8], bin_name: &str) -> (Vec<u8>, Vec<u8>) {
+    let u32_at = |o: usize| u32::from_le_bytes(glb[o..o + 4].try_into().expect("4 bytes")) as usize;
+    let json_len = u32_at(12);
+    let json = &glb[20..20 + json_len];
+    let bin_start = 20 + json_len;
+    let bin_len = u32_at(bin_start);
+    let bin = glb[bin_start + 8..bin_start + 8 + bin_len].to_vec();
+    let mut doc: Value = serde_json::from_slice(json).expect("glTF JSON");
+    doc["buffers"][0]["uri"] = Value::String(bin_name.to_string());
+    (serde_json::to_vec(&doc).expect("JSON"), bin)
+}

@@ -1,0 +1,939 @@
+//! The HTTP API end to end: one-shot renders, scenes, bad input, auth, metrics, OpenAPI.
+
+use futures_util::SinkExt;
+use lightcast_e2e::{cornell_glb, glb_to_gltf, small_session, Incoming, TestServer, PATIENCE};
+use lightcast_protocol::{RenderReport, ServerEvent};
+use serde_json::{json, Value};
+use std::time::Duration;
+use tokio_tungstenite::tungstenite::Message;
+
+fn report(resp: &reqwest::Response) -> RenderReport {
+    let header = resp
+        .headers()
+        .get("x-lightcast-report")
+        .expect("report header")
+        .to_str()
+        .expect("ASCII header");
+    serde_json::from_str(header).expect("RenderReport JSON")
+}
+
+async fn render(server: &TestServer, body: &Value) -> (RenderReport, Vec<u8>) {
+    let resp = server
+        .http
+        .post(server.url("/v1/render"))
+        .json(body)
+        .send()
+        .await
+        .expect("render request");
+    assert_eq!(resp.status(), 200, "render {body}");
+    let report = report(&resp);
+    (report, resp.bytes().await.expect("image").to_vec())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_shot_renders_are_reproducible_and_report_what_ran() {
+    let server = TestServer::start(&[]).await;
+    let request = json!({
+        "render": {"width": 80, "height": 60, "shadow_map_size": 256,
+                   "gi": {"rsm_size": 32, "val_count": 256, "view_samples": 64}},
+        "format": "png"
+    });
+    let (a, png_a) = render(&server, &request).await;
+    let (b, png_b) = render(&server, &request).await;
+    assert_eq!(a.request_hash, b.request_hash);
+    let (img_a, img_b) = (
+        image::load_from_memory(&png_a).expect("png").to_rgba8(),
+        image::load_from_memory(&png_b).expect("png").to_rgba8(),
+    );
+    assert_eq!(img_a.dimensions(), (80, 60));
+    assert_eq!(img_a.as_raw(), img_b.as_raw(), "same request, same pixels");
+    assert!(a.build.starts_with("lightcast-server "), "{}", a.build);
+    assert!(!a.adapter.is_empty());
+    assert!(a.stages.iter().any(|s| s.stage == "cache_lighting"));
+    assert!(a.gpu_ms > 0.0);
+
+    // Another camera: another hash and other pixels.
+    let mut moved = request.clone();
+    moved["render"]["camera"] =
+        json!({"position": [0.5, 1.2, 3.0], "target": [0, 1, 0], "fov_y_degrees": 45});
+    let (c, png_c) = render(&server, &moved).await;
+    assert_ne!(c.request_hash, a.request_hash);
+    assert_ne!(png_c, png_a);
+
+    // Raw float buffers for analysis: indirect light alone, 16 bytes per pixel, finite, lit.
+    let mut raw = request.clone();
+    raw["format"] = json!("raw_indirect");
+    let (r, bytes) = render(&server, &raw).await;
+    assert_eq!(bytes.len(), 80 * 60 * 16);
+    let floats: Vec<f32> = bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    assert!(floats.iter().all(|v| v.is_finite()));
+    assert!(
+        floats.iter().any(|&v| v > 0.0),
+        "indirect light is not all black"
+    );
+    assert_eq!(r.width, 80);
+
+    // JPEG answers with its content type.
+    let mut jpeg = request.clone();
+    jpeg["format"] = json!("jpeg");
+    jpeg["quality"] = json!(50);
+    let resp = server
+        .http
+        .post(server.url("/v1/render"))
+        .json(&jpeg)
+        .send()
+        .await
+        .expect("jpeg render");
+    assert_eq!(resp.headers()["content-type"], "image/jpeg");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scenes_upload_inspect_use_and_delete() {
+    let server = TestServer::start(&[]).await;
+    // A .glb body.
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes?name=box"))
+        .header("content-type", "model/gltf-binary")
+        .body(cornell_glb())
+        .send()
+        .await
+        .expect("upload");
+    assert_eq!(resp.status(), 201);
+    let info: Value = resp.json().await.expect("SceneInfo");
+    let id = info["id"].as_str().expect("id").to_string();
+    assert_eq!(info["name"], "box");
+    assert!(info["triangles"].as_u64().unwrap_or(0) > 100, "{info}");
+    assert!(info["caches"][0]["state"].is_string());
+    server.wait_caches_ready(&id).await;
+    let ready = server.get_json(&format!("/v1/scenes/{id}")).await;
+    assert!(
+        ready["caches"][0]["caches"].as_u64().unwrap_or(0) > 100,
+        "{ready}"
+    );
+    assert!(ready["caches"][0]["seconds"].as_f64().is_some());
+
+    // The same scene as .gltf + .bin in one multipart upload.
+    let (gltf, bin) = glb_to_gltf(&cornell_glb(), "box.bin");
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "scene",
+            reqwest::multipart::Part::bytes(gltf).file_name("box.gltf"),
+        )
+        .part(
+            "bin",
+            reqwest::multipart::Part::bytes(bin).file_name("box.bin"),
+        );
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes"))
+        .multipart(form)
+        .send()
+        .await
+        .expect("multipart upload");
+    assert_eq!(resp.status(), 201);
+    let multi: Value = resp.json().await.expect("SceneInfo");
+    assert_eq!(multi["triangles"], info["triangles"]);
+
+    // A .gltf whose buffer points outside the upload is refused.
+    let (mut gltf, bin) = glb_to_gltf(&cornell_glb(), "../../etc/passwd");
+    gltf.extend_from_slice(b" ");
+    let form = reqwest::multipart::Form::new()
+        .part(
+            "scene",
+            reqwest::multipart::Part::bytes(gltf).file_name("evil.gltf"),
+        )
+        .part(
+            "bin",
+            reqwest::multipart::Part::bytes(bin).file_name("box.bin"),
+        );
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes"))
+        .multipart(form)
+        .send()
+        .await
+        .expect("upload");
+    assert_eq!(resp.status(), 400);
+
+    // A procedural scene.
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes"))
+        .json(&json!({"procedural": "street?blocks=2"}))
+        .send()
+        .await
+        .expect("procedural");
+    assert_eq!(resp.status(), 201);
+
+    let list = server.get_json("/v1/scenes").await;
+    assert_eq!(list.as_array().map(Vec::len), Some(4));
+
+    // In use by a session: cannot be deleted.
+    let mut params = small_session(32, 32);
+    params["render"]["scene"] = json!(id);
+    let created = server.create_session(params, None).await;
+    let resp = server
+        .http
+        .delete(server.url(&format!("/v1/scenes/{id}")))
+        .send()
+        .await
+        .expect("delete");
+    assert_eq!(resp.status(), 409);
+    let used = server.get_json(&format!("/v1/scenes/{id}")).await;
+    assert_eq!(used["sessions"], 1);
+    server
+        .http
+        .delete(server.url(&format!("/v1/sessions/{}", created.session.id)))
+        .send()
+        .await
+        .expect("delete session");
+    let resp = server
+        .http
+        .delete(server.url(&format!("/v1/scenes/{id}")))
+        .send()
+        .await
+        .expect("delete");
+    assert_eq!(resp.status(), 204);
+    let resp = server
+        .http
+        .get(server.url(&format!("/v1/scenes/{id}")))
+        .send()
+        .await
+        .expect("get");
+    assert_eq!(resp.status(), 404);
+    server.stop().await;
+}
+
+struct Case {
+    method: &'static str,
+    path: String,
+    content_type: &'static str,
+    body: Vec<u8>,
+    status: u16,
+    error: &'static str,
+    field: Option<&'static str>,
+}
+
+fn case(
+    method: &'static str,
+    path: &str,
+    body: impl Into<Vec<u8>>,
+    status: u16,
+    error: &'static str,
+    field: Option<&'static str>,
+) -> Case {
+    Case {
+        method,
+        path: path.to_string(),
+        content_type: "application/json",
+        body: body.into(),
+        status,
+        error,
+        field,
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
+    let server = TestServer::start(&[
+        "--max-upload-bytes",
+        "200000",
+        "--max-message-bytes",
+        "4096",
+    ])
+    .await;
+    let created = server.create_session(small_session(32, 32), None).await;
+    let session = format!("/v1/sessions/{}", created.session.id);
+    let glb = cornell_glb();
+    let mut truncated_glb = case(
+        "POST",
+        "/v1/scenes",
+        glb[..glb.len() / 2].to_vec(),
+        400,
+        "invalid_scene",
+        None,
+    );
+    truncated_glb.content_type = "model/gltf-binary";
+    let mut bad_magic = glb.clone();
+    bad_magic[20..24].copy_from_slice(b"XXXX");
+    let mut hostile_glb = case("POST", "/v1/scenes", bad_magic, 400, "invalid_scene", None);
+    hostile_glb.content_type = "model/gltf-binary";
+    let mut garbage_upload = case(
+        "POST",
+        "/v1/scenes",
+        vec![0xff, 0x00, 0x13, 0x37],
+        400,
+        "invalid_scene",
+        None,
+    );
+    garbage_upload.content_type = "application/octet-stream";
+    let mut too_big = case(
+        "POST",
+        "/v1/scenes",
+        vec![0u8; 300_000],
+        413,
+        "too_large",
+        None,
+    );
+    too_big.content_type = "application/octet-stream";
+    let cases = vec![
+        case(
+            "POST",
+            "/v1/sessions",
+            "{bad json",
+            400,
+            "malformed_json",
+            None,
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"width":0}}"#,
+            400,
+            "invalid_field",
+            Some("render.width"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"width":100000}}"#,
+            400,
+            "invalid_field",
+            Some("render.width"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"height":-3}}"#,
+            400,
+            "invalid_field",
+            Some("render.height"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"widht":64}}"#,
+            400,
+            "invalid_field",
+            Some("render.widht"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"colour":"red"}"#,
+            400,
+            "invalid_field",
+            Some("colour"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"gi":{"rsm_size":1000000}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.rsm_size"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"gi":{"val_count":0}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.val_count"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"gi":{"view_samples":99999999}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.view_samples"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"gi":{"method":"photon"}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.method"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"gi":{"defensive":2}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.defensive"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"gi":{"cache_distance":1e-9}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.cache_distance"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"gi":{"cache_angle":120}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.cache_angle"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"camera":{"position":[1e39,0,0],"target":[0,0,0],"fov_y_degrees":45}}}"#,
+            400,
+            "invalid_field",
+            Some("render.camera.position"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"camera":{"position":[0,0,1],"target":[0,0,1],"fov_y_degrees":45}}}"#,
+            400,
+            "invalid_field",
+            Some("render.camera.target"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"camera":{"position":[0,0,1],"target":[0,0,0],"fov_y_degrees":0}}}"#,
+            400,
+            "invalid_field",
+            Some("render.camera.fov_y_degrees"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"camera":{"position":[0,0,NaN],"target":[0,0,0],"fov_y_degrees":45}}}"#,
+            400,
+            "invalid_field",
+            Some("render.camera.position[2]"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"light":{"kind":"laser","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0}}}"#,
+            400,
+            "invalid_field",
+            Some("render.light.kind"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"light":{"kind":"sun","position":[0,1,0]}}}"#,
+            400,
+            "invalid_field",
+            Some("render.light.kind"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"light":{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[-1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0}}}"#,
+            400,
+            "invalid_field",
+            Some("render.light.color"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"scene":"no-such-scene"}}"#,
+            400,
+            "invalid_field",
+            Some("render.scene"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"view":"importance","gi":{"method":"lightskin"}}}"#,
+            400,
+            "invalid_field",
+            Some("render.view"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"exposure":-1}}"#,
+            400,
+            "invalid_field",
+            Some("render.exposure"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"fps_cap":0}"#,
+            400,
+            "invalid_field",
+            Some("fps_cap"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"fps_cap":100000}"#,
+            400,
+            "invalid_field",
+            Some("fps_cap"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"encoding":{"quality":0}}"#,
+            400,
+            "invalid_field",
+            Some("encoding.quality"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"encoding":{"codec":"gif"}}"#,
+            400,
+            "invalid_field",
+            Some("encoding.codec"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            format!(r#"{{"pad":"{}"}}"#, "x".repeat(8000)),
+            413,
+            "too_large",
+            None,
+        ),
+        case(
+            "PATCH",
+            &session,
+            r#"{"render":{"gi":{"rsm_size":"big"}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.rsm_size"),
+        ),
+        case("PATCH", &session, "[1,2,3]", 400, "malformed_json", None),
+        case(
+            "PATCH",
+            "/v1/sessions/se_0000000000000000",
+            "{}",
+            404,
+            "not_found",
+            None,
+        ),
+        case("GET", "/v1/sessions/nope", "", 404, "not_found", None),
+        case("DELETE", "/v1/scenes/default", "", 409, "conflict", None),
+        case("DELETE", "/v1/scenes/unknown", "", 404, "not_found", None),
+        case("GET", "/v1/nothing-here", "", 404, "not_found", None),
+        case("PUT", "/v1/scenes", "", 405, "method_not_allowed", None),
+        case(
+            "POST",
+            "/v1/scenes",
+            r#"{"procedural":"street?blocks=100000"}"#,
+            400,
+            "invalid_field",
+            Some("procedural"),
+        ),
+        case(
+            "POST",
+            "/v1/scenes",
+            r#"{"procedural":"street?blocks=2000&detail=64"}"#,
+            400,
+            "invalid_field",
+            Some("procedural"),
+        ),
+        case(
+            "POST",
+            "/v1/scenes",
+            r#"{"procedural":"teapot"}"#,
+            400,
+            "invalid_field",
+            Some("procedural"),
+        ),
+        truncated_glb,
+        hostile_glb,
+        garbage_upload,
+        too_big,
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"format":"raw_indirect","render":{"gi":{"method":"none"}}}"#,
+            400,
+            "invalid_field",
+            Some("format"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"quality":101}"#,
+            400,
+            "invalid_field",
+            Some("quality"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"shadow_map_size":8}}"#,
+            400,
+            "invalid_field",
+            Some("render.shadow_map_size"),
+        ),
+        case(
+            "GET",
+            &format!("{session}/stream"),
+            "",
+            426,
+            "websocket_required",
+            None,
+        ),
+    ];
+    assert!(cases.len() >= 25);
+    for c in &cases {
+        let method = reqwest::Method::from_bytes(c.method.as_bytes()).expect("method");
+        let resp = server
+            .http
+            .request(method, server.url(&c.path))
+            .header("content-type", c.content_type)
+            .body(c.body.clone())
+            .send()
+            .await
+            .expect("request");
+        let status = resp.status().as_u16();
+        let text = resp.text().await.expect("body");
+        let shown = String::from_utf8_lossy(&c.body[..c.body.len().min(120)]).into_owned();
+        assert_eq!(status, c.status, "{} {} {shown}: {text}", c.method, c.path);
+        let body: Value = serde_json::from_str(&text)
+            .unwrap_or_else(|_| panic!("{} {} {shown}: not JSON: {text}", c.method, c.path));
+        assert_eq!(
+            body["error"], c.error,
+            "{} {} {shown}: {text}",
+            c.method, c.path
+        );
+        assert_eq!(
+            body["field"].as_str(),
+            c.field,
+            "{} {} {shown}: {text}",
+            c.method,
+            c.path
+        );
+        assert!(body["message"].as_str().is_some_and(|m| !m.is_empty()));
+    }
+
+    // The WebSocket: garbage in, precise error events out, the session goes on.
+    let mut stream = server.connect(&created).await;
+    stream
+        .send_raw(Message::Binary(vec![0xde, 0xad, 0xbe, 0xef].into()))
+        .await;
+    stream.send_raw(Message::Text("not json".into())).await;
+    stream.send(json!({"type": "teleport"})).await;
+    stream.send(json!({"type": "camera", "camera": {"position": [0, 0, 0], "target": [0, 0, 0], "fov_y_degrees": 45}})).await;
+    stream
+        .send(json!({"type": "update", "patch": {"render": {"gi": {"val_count": -1}}}}))
+        .await;
+    let expected = [
+        ("binary_not_accepted", None),
+        ("malformed_json", None),
+        ("invalid_field", Some("type")),
+        ("invalid_field", Some("render.camera.target")),
+        ("invalid_field", Some("render.gi.val_count")),
+    ];
+    for (kind, field) in expected {
+        let error = loop {
+            match stream.next_event().await {
+                ServerEvent::Error { error } => break error,
+                ServerEvent::Hello { .. } | ServerEvent::Updated { .. } => {}
+                other => panic!("unexpected event {other:?}"),
+            }
+        };
+        assert_eq!(error.error, kind, "{error:?}");
+        assert_eq!(error.field.as_deref(), field, "{error:?}");
+    }
+    let mut events = Vec::new();
+    let frame = stream.next_frame(&mut events).await;
+    assert_eq!(frame.header.width, 32);
+    // An oversized message closes only that socket; the server keeps serving.
+    stream
+        .ws
+        .send(Message::Text("x".repeat(10_000).into()))
+        .await
+        .ok();
+    let closed = tokio::time::timeout(PATIENCE, async {
+        loop {
+            if matches!(stream.next().await, Incoming::Closed) {
+                return;
+            }
+        }
+    })
+    .await;
+    assert!(closed.is_ok(), "an oversized message ends the connection");
+
+    let health = server
+        .http
+        .get(server.url("/healthz"))
+        .send()
+        .await
+        .expect("healthz");
+    assert_eq!(health.status(), 200);
+    let (_, png) = render_small(&server).await;
+    assert!(!png.is_empty());
+    server.stop().await;
+}
+
+async fn render_small(server: &TestServer) -> (RenderReport, Vec<u8>) {
+    render(
+        server,
+        &json!({"render": {"width": 32, "height": 24, "shadow_map_size": 128, "gi": {"method": "none"}}}),
+    )
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rate_limited_messages_are_refused_not_fatal() {
+    let server = TestServer::start(&["--max-messages-per-second", "5"]).await;
+    let mut params = small_session(32, 32);
+    params["render"]["gi"]["method"] = json!("none");
+    let created = server.create_session(params, None).await;
+    let mut stream = server.connect(&created).await;
+    for nonce in 0..30 {
+        stream.send(json!({"type": "ping", "nonce": nonce})).await;
+    }
+    let (mut pongs, mut limited) = (0, 0);
+    while pongs + limited < 30 {
+        match stream.next_event().await {
+            ServerEvent::Pong { .. } => pongs += 1,
+            ServerEvent::Error { error } if error.error == "rate_limited" => limited += 1,
+            _ => {}
+        }
+    }
+    assert!(
+        pongs >= 10 && limited >= 1,
+        "{pongs} answered, {limited} limited"
+    );
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    stream.send(json!({"type": "ping", "nonce": 99})).await;
+    loop {
+        if let ServerEvent::Pong { nonce } = stream.next_event().await {
+            if nonce == 99 {
+                break;
+            }
+        }
+    }
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() {
+    let alice = "alice-token-0123456789";
+    let bob = "bob-token-9876543210xx";
+    let server = TestServer::start(&["--token", &format!("{alice},{bob}")]).await;
+    for path in [
+        "/v1/scenes",
+        "/v1/sessions",
+        "/metrics",
+        "/openapi.json",
+        "/v1/server",
+    ] {
+        let resp = server
+            .http
+            .get(server.url(path))
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 401, "{path} without a token");
+        let body: Value = resp.json().await.expect("JSON error");
+        assert_eq!(body["error"], "unauthorized");
+        let resp = server
+            .http
+            .get(server.url(path))
+            .bearer_auth("wrong-token-000000000")
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 401, "{path} with a wrong token");
+        let resp = server
+            .http
+            .get(server.url(path))
+            .bearer_auth(alice)
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 200, "{path} with a token");
+    }
+    for path in ["/healthz", "/readyz"] {
+        let resp = server
+            .http
+            .get(server.url(path))
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 200, "{path} needs no token");
+    }
+    let mut params = small_session(32, 32);
+    params["render"]["gi"]["method"] = json!("none");
+    let created = server.create_session(params, Some(alice)).await;
+    let path = format!("/v1/sessions/{}", created.session.id);
+    let resp = server
+        .http
+        .get(server.url(&path))
+        .bearer_auth(bob)
+        .send()
+        .await
+        .expect("get");
+    assert_eq!(resp.status(), 404, "another token cannot see the session");
+    let resp = server
+        .http
+        .patch(server.url(&path))
+        .bearer_auth(bob)
+        .body(r#"{"paused":true}"#)
+        .send()
+        .await
+        .expect("patch");
+    assert_eq!(resp.status(), 404, "nor steer it");
+    let listed: Value = server
+        .http
+        .get(server.url("/v1/sessions"))
+        .bearer_auth(bob)
+        .send()
+        .await
+        .expect("list")
+        .json()
+        .await
+        .expect("JSON");
+    assert_eq!(listed.as_array().map(Vec::len), Some(0));
+
+    // The WebSocket: no ticket → 401; the ticket works once.
+    let bare = server.ws_url(&created.session.stream);
+    assert!(tokio_tungstenite::connect_async(bare).await.is_err());
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    stream.next_frame(&mut events).await;
+    drop(stream);
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let reused = server.ws_url(&format!(
+        "{}?ticket={}",
+        created.session.stream, created.ticket.ticket
+    ));
+    assert!(
+        tokio_tungstenite::connect_async(reused).await.is_err(),
+        "a ticket is single-use"
+    );
+    // Bob cannot get a ticket for Alice's session; Alice can.
+    let resp = server
+        .http
+        .post(server.url(&format!("{path}/ticket")))
+        .bearer_auth(bob)
+        .send()
+        .await
+        .expect("ticket");
+    assert_eq!(resp.status(), 404);
+    let ticket: Value = server
+        .http
+        .post(server.url(&format!("{path}/ticket")))
+        .bearer_auth(alice)
+        .send()
+        .await
+        .expect("ticket")
+        .json()
+        .await
+        .expect("JSON");
+    let url = server.ws_url(&format!(
+        "{}?ticket={}",
+        created.session.stream,
+        ticket["ticket"].as_str().expect("ticket")
+    ));
+    assert!(tokio_tungstenite::connect_async(url).await.is_ok());
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn metrics_openapi_and_readiness_describe_the_service() {
+    let server = TestServer::start(&[]).await;
+    let mut params = small_session(32, 32);
+    params["render"]["gi"]["method"] = json!("none");
+    let created = server.create_session(params, None).await;
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    for _ in 0..2 {
+        stream.next_frame(&mut events).await;
+    }
+    let metrics = server
+        .http
+        .get(server.url("/metrics"))
+        .send()
+        .await
+        .expect("metrics")
+        .text()
+        .await
+        .expect("text");
+    for name in [
+        "lightcast_sessions",
+        "lightcast_frames_rendered_total",
+        "lightcast_frames_sent_total",
+        "lightcast_bytes_sent_total",
+        "lightcast_stage_ms_bucket{stage=\"gbuffer\"",
+        "lightcast_encode_ms_bucket",
+        "lightcast_gpu_frame_ms_count",
+    ] {
+        assert!(metrics.contains(name), "/metrics lacks {name}:\n{metrics}");
+    }
+    let doc = server.get_json("/openapi.json").await;
+    assert!(doc["openapi"].as_str().is_some_and(|v| v.starts_with("3.")));
+    for path in [
+        "/v1/scenes",
+        "/v1/scenes/{id}",
+        "/v1/sessions",
+        "/v1/sessions/{id}",
+        "/v1/sessions/{id}/stream",
+        "/v1/render",
+        "/healthz",
+        "/readyz",
+        "/metrics",
+        "/openapi.json",
+    ] {
+        assert!(doc["paths"][path].is_object(), "openapi.json lacks {path}");
+    }
+    for schema in [
+        "SessionParams",
+        "RenderRequest",
+        "ClientMessage",
+        "ServerEvent",
+        "ErrorBody",
+        "SceneInfo",
+    ] {
+        assert!(
+            doc["components"]["schemas"][schema].is_object(),
+            "openapi.json lacks schema {schema}"
+        );
+    }
+    let ready = server
+        .http
+        .get(server.url("/readyz"))
+        .send()
+        .await
+        .expect("readyz");
+    assert_eq!(ready.status(), 200, "a CPU adapter counts when allowed");
+    server.stop().await;
+
+    // Without --allow-cpu-adapter a software adapter (lavapipe in CI) is not ready; a real GPU
+    // is.
+    let strict = TestServer::start_with(&[], false).await;
+    let adapter = strict.get_json("/v1/server").await["adapter"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    let ready = strict
+        .http
+        .get(strict.url("/readyz"))
+        .send()
+        .await
+        .expect("readyz");
+    let software = adapter.contains("(Cpu,");
+    assert_eq!(ready.status() == 503, software, "{adapter}");
+    if software {
+        let body: Value = ready.json().await.expect("JSON");
+        assert_eq!(body["error"], "not_ready");
+    }
+    strict.stop().await;
+}

@@ -1,0 +1,270 @@
+//! Sessions streaming frames over WebSocket, end to end on loopback.
+
+use lightcast_e2e::{mean_abs_diff, small_session, Incoming, TestServer, PATIENCE};
+use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_STILL};
+use lightcast_protocol::{Codec, ServerEvent};
+use serde_json::json;
+use std::time::Duration;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_session_streams_frames_and_follows_the_camera() {
+    let server = TestServer::start(&[]).await;
+    server.wait_caches_ready("default").await;
+    let created = server.create_session(small_session(96, 64), None).await;
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    match stream.next().await {
+        Incoming::Event(ServerEvent::Hello { session }) => {
+            assert_eq!(session.id, created.session.id)
+        }
+        _ => panic!("the first message must be hello"),
+    }
+
+    let first = stream.next_frame(&mut events).await;
+    let mut last_seq = first.header.seq;
+    for _ in 0..3 {
+        let f = stream.next_frame(&mut events).await;
+        assert!(f.header.seq > last_seq, "sequence numbers rise");
+        last_seq = f.header.seq;
+        assert_eq!((f.header.width, f.header.height), (96, 64));
+        assert_eq!(f.rgba.dimensions(), (96, 64));
+        assert_eq!(f.header.codec, Codec::Jpeg);
+        assert_eq!(f.header.flags & FLAG_GI_PENDING, 0, "caches were ready");
+        for stage in [
+            "shadow_map",
+            "gbuffer",
+            "rsm",
+            "importance",
+            "val_select",
+            "cache_lighting",
+            "tonemap",
+        ] {
+            assert!(f.stage(stage).is_some(), "stage {stage} is timed");
+        }
+        assert!(f.header.gpu_ms > 0.0 && f.header.encode_ms > 0.0);
+        assert!(f.header.send_us >= f.header.render_start_us);
+    }
+
+    // Move the camera to look at the red wall from the side: the frame tagged with the input id
+    // shows it, and it differs clearly from before.
+    stream
+        .send(json!({"type": "camera", "input_id": 7, "camera": {
+            "position": [0.9, 1.0, 2.5], "target": [-1.0, 1.0, 0.0], "fov_y_degrees": 50.0}}))
+        .await;
+    let moved = loop {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.input_id == 7 {
+            break f;
+        }
+        assert!(
+            f.header.seq <= last_seq + 4,
+            "the change shows within a few frames"
+        );
+    };
+    let before = &first.rgba;
+    let diff = mean_abs_diff(before, &moved.rgba);
+    assert!(
+        diff > 10.0,
+        "moving the camera changed the image by only {diff:.2} levels"
+    );
+    assert!(
+        events.iter().any(|e| matches!(e, ServerEvent::Updated { session } if session.params.render.camera.is_some())),
+        "an updated event carries the new camera"
+    );
+
+    // The session's counters and last stage times are visible over HTTP.
+    let info = server
+        .get_json(&format!("/v1/sessions/{}", created.session.id))
+        .await;
+    assert!(
+        info["stats"]["frames_sent"].as_u64().unwrap_or(0) >= 5,
+        "{info}"
+    );
+    assert!(
+        info["stats"]["frames_acked"].as_u64().unwrap_or(0) >= 1,
+        "{info}"
+    );
+    assert!(info["connected"].as_bool().unwrap_or(false));
+
+    // Deleting the session closes its stream with a reason.
+    let resp = server
+        .http
+        .delete(server.url(&format!("/v1/sessions/{}", created.session.id)))
+        .send()
+        .await
+        .expect("delete");
+    assert_eq!(resp.status(), 204);
+    let mut closing = None;
+    loop {
+        match stream.next().await {
+            Incoming::Event(ServerEvent::Closing { reason }) => closing = Some(reason),
+            Incoming::Closed => break,
+            _ => {}
+        }
+    }
+    assert_eq!(closing.as_deref(), Some("session deleted"));
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_resting_view_gets_a_lossless_still_and_on_change_mode_idles() {
+    let server = TestServer::start(&[]).await;
+    let mut params = small_session(64, 48);
+    params["mode"] = json!("on_change");
+    params["render"]["gi"]["method"] = json!("none");
+    params["encoding"] = json!({"still_after_ms": 150, "moving_quality": 40});
+    let created = server.create_session(params, None).await;
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    let mut frames = Vec::new();
+    loop {
+        let f = stream.next_frame(&mut events).await;
+        let still = f.header.flags & FLAG_STILL != 0;
+        frames.push(f);
+        if still {
+            break;
+        }
+        assert!(frames.len() < 20, "a still follows once input rests");
+    }
+    let still = frames.last().expect("a still");
+    assert_eq!(still.header.codec, Codec::Png);
+    // Nothing changes: no further frames arrive until input does.
+    let quiet = tokio::time::timeout(Duration::from_millis(800), stream.next()).await;
+    assert!(
+        !matches!(quiet, Ok(Incoming::Frame(_))),
+        "an on_change session at rest sends nothing"
+    );
+    // A light change brings a low-quality moving frame, then a new still.
+    stream
+        .send(json!({"type": "light", "input_id": 3, "light": {
+            "kind": "point", "position": [0.3, 1.5, 0.3], "direction": [0, -1, 0],
+            "color": [1, 1, 1], "intensity": 20, "inner_cone": 0, "outer_cone": 0}}))
+        .await;
+    let moving = stream.next_frame(&mut events).await;
+    assert_eq!(moving.header.input_id, 3);
+    assert_eq!(moving.header.codec, Codec::Jpeg);
+    assert_eq!(moving.header.quality, 40);
+    let next_still = stream.next_frame(&mut events).await;
+    assert_ne!(next_still.header.flags & FLAG_STILL, 0);
+    // An explicit still request while paused still answers.
+    stream.send(json!({"type": "pause"})).await;
+    stream.send(json!({"type": "still"})).await;
+    let asked = stream.next_frame(&mut events).await;
+    assert_ne!(asked.header.flags & FLAG_STILL, 0);
+    assert_eq!(asked.header.codec, Codec::Png);
+    server.stop().await;
+}
+
+/// A client that stops reading loses its own frames; another session keeps streaming.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stalled_client_does_not_stall_another() {
+    let server = TestServer::start(&[]).await;
+    // The stalled session sends big lossless frames so its socket buffers fill quickly.
+    let mut stalled_params = small_session(256, 192);
+    stalled_params["render"]["gi"]["method"] = json!("none");
+    stalled_params["encoding"] = json!({"codec": "png", "still_after_ms": 0});
+    stalled_params["fps_cap"] = json!(120);
+    let stalled = server.create_session(stalled_params, None).await;
+    let mut healthy_params = small_session(48, 32);
+    healthy_params["render"]["gi"]["method"] = json!("none");
+    let healthy = server.create_session(healthy_params, None).await;
+
+    let _stalled_stream = server.connect(&stalled).await; // never read from
+    let mut stream = server.connect(&healthy).await;
+    let mut events = Vec::new();
+
+    // Wait until the server notices the stalled client (frames dropped or ticks throttled).
+    let stalled_path = format!("/v1/sessions/{}", stalled.session.id);
+    tokio::time::timeout(PATIENCE, async {
+        loop {
+            stream.next_frame(&mut events).await;
+            let info = server.get_json(&stalled_path).await;
+            let st = &info["stats"];
+            if st["frames_throttled"].as_u64().unwrap_or(0) > 0 {
+                return;
+            }
+        }
+    })
+    .await
+    .expect("the stalled session is throttled");
+    let before = server.get_json(&stalled_path).await["stats"]["frames_rendered"]
+        .as_u64()
+        .unwrap_or(0);
+    // The healthy client keeps getting fresh frames meanwhile.
+    let mut seqs = Vec::new();
+    for _ in 0..10 {
+        seqs.push(stream.next_frame(&mut events).await.header.seq);
+    }
+    assert!(seqs.windows(2).all(|w| w[1] > w[0]));
+    let after = server.get_json(&stalled_path).await["stats"].clone();
+    let rendered_meanwhile = after["frames_rendered"].as_u64().unwrap_or(0) - before;
+    assert!(
+        rendered_meanwhile <= 4,
+        "the stalled session should not use the GPU while its frames pile up: {rendered_meanwhile} frames rendered for it during 10 of the other's"
+    );
+    let metrics = server
+        .http
+        .get(server.url("/metrics"))
+        .send()
+        .await
+        .expect("metrics")
+        .text()
+        .await
+        .expect("text");
+    assert!(
+        metrics.contains("lightcast_frames_throttled_total"),
+        "{metrics}"
+    );
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_sessions_each_get_their_own_frames() {
+    let server = TestServer::start(&[]).await;
+    server.wait_caches_ready("default").await;
+    let sizes = [(64u32, 48u32), (80, 40), (48, 48)];
+    let mut tasks = Vec::new();
+    for (w, h) in sizes {
+        let created = server.create_session(small_session(w, h), None).await;
+        let mut stream = server.connect(&created).await;
+        tasks.push(tokio::spawn(async move {
+            let mut events = Vec::new();
+            let mut seqs = Vec::new();
+            for _ in 0..4 {
+                let f = stream.next_frame(&mut events).await;
+                assert_eq!((f.header.width, f.header.height), (w, h));
+                seqs.push(f.header.seq);
+            }
+            seqs
+        }));
+    }
+    for t in tasks {
+        let seqs = t.await.expect("session task");
+        assert!(seqs.windows(2).all(|w| w[1] > w[0]), "{seqs:?}");
+    }
+    let sessions = server.get_json("/v1/sessions").await;
+    assert_eq!(sessions.as_array().map(Vec::len), Some(3));
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shutdown_sends_closing_to_open_streams() {
+    let server = TestServer::start(&[]).await;
+    let mut params = small_session(32, 32);
+    params["render"]["gi"]["method"] = json!("none");
+    let created = server.create_session(params, None).await;
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    stream.next_frame(&mut events).await;
+    let stopping = tokio::spawn(server.stop());
+    let mut reason = None;
+    loop {
+        match stream.next().await {
+            Incoming::Event(ServerEvent::Closing { reason: r }) => reason = Some(r),
+            Incoming::Closed => break,
+            _ => {}
+        }
+    }
+    assert_eq!(reason.as_deref(), Some("server shutting down"));
+    stopping.await.expect("shutdown task");
+}

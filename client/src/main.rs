@@ -1,0 +1,402 @@
+//! `lightcast`: the command-line client of a lightcast server (scenes, one-shot renders,
+//! streaming and load tests). It speaks only the public protocol.
+
+mod api;
+mod drive;
+mod flags;
+mod loadtest;
+mod stats;
+
+use anyhow::Context;
+use api::Client;
+use clap::{Parser, Subcommand};
+use flags::RenderFlags;
+use lightcast_protocol::{Codec, ImageFormat, RenderRequest, StreamMode};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+#[derive(Parser)]
+#[command(
+    name = "lightcast",
+    version,
+    about = "Client of a lightcast remote-rendering server"
+)]
+struct Cli {
+    /// Server URL.
+    #[arg(
+        long,
+        global = true,
+        env = "LIGHTCAST_SERVER",
+        default_value = "http://127.0.0.1:8080"
+    )]
+    server: String,
+    /// Bearer token (when the server has auth on).
+    #[arg(long, global = true, env = "LIGHTCAST_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Print results as JSON instead of tables.
+    #[arg(long, global = true)]
+    json: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// List, upload, show or delete scenes.
+    #[command(subcommand)]
+    Scenes(ScenesCommand),
+    /// Render one frame to a file and print its timing report.
+    Render(RenderCmd),
+    /// Open a session and receive frames; print fps, latency and drops.
+    Stream(StreamCmd),
+    /// Many concurrent sessions with a moving camera; report latency percentiles, fps and drops.
+    Loadtest(loadtest::LoadtestCmd),
+}
+
+#[derive(Subcommand)]
+enum ScenesCommand {
+    /// List the scenes.
+    List,
+    /// Upload a .glb, or a .gltf with the files it references.
+    Upload {
+        file: PathBuf,
+        /// Display name (default: the file's stem).
+        #[arg(long)]
+        name: Option<String>,
+    },
+    /// Show a scene.
+    Show { id: String },
+    /// Delete a scene.
+    Rm { id: String },
+}
+
+#[derive(clap::Args)]
+struct RenderCmd {
+    /// Output file.
+    #[arg(long)]
+    out: PathBuf,
+    /// png, jpeg, raw_final or raw_indirect (float32 RGBA, little-endian).
+    #[arg(long, default_value = "png", value_parser = parse_format)]
+    format: ImageFormat,
+    /// JPEG quality 1–100.
+    #[arg(long)]
+    quality: Option<u8>,
+    /// Render this many times and report timing statistics (the last image is written).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
+    repeat: u32,
+    #[command(flatten)]
+    render: RenderFlags,
+}
+
+fn parse_format(s: &str) -> Result<ImageFormat, String> {
+    serde_json::from_value(serde_json::Value::String(s.to_string()))
+        .map_err(|_| format!("'{s}' is not one of png, jpeg, raw_final, raw_indirect"))
+}
+
+#[derive(clap::Args)]
+struct StreamCmd {
+    /// Seconds to stream.
+    #[arg(long, default_value_t = 10.0)]
+    duration: f64,
+    /// Stop after this many frames.
+    #[arg(long)]
+    frames: Option<u64>,
+    /// Save every frame into this directory (NNNNNN.jpg / .png by sequence number).
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// Replay a camera path: JSON `{"keyframes": [{"t": SECONDS, "camera": {...}}, ...]}`.
+    #[arg(long)]
+    camera_path: Option<PathBuf>,
+    /// Camera messages per second while replaying a path.
+    #[arg(long, default_value_t = 30.0)]
+    input_hz: f64,
+    /// Most frames per second the server sends.
+    #[arg(long, default_value_t = 30.0)]
+    fps_cap: f32,
+    #[arg(long, value_enum, default_value = "jpeg")]
+    codec: Codec,
+    /// JPEG quality 1–100.
+    #[arg(long, default_value_t = 85)]
+    quality: u8,
+    #[command(flatten)]
+    render: RenderFlags,
+}
+
+/// Session parameters for streaming commands.
+pub fn session_params(
+    render: lightcast_protocol::RenderParams,
+    fps_cap: f32,
+    codec: Codec,
+    quality: u8,
+) -> serde_json::Value {
+    serde_json::json!({
+        "render": render,
+        "fps_cap": fps_cap,
+        "mode": StreamMode::Continuous,
+        "encoding": {"codec": codec, "quality": quality, "moving_quality": quality, "still_after_ms": 0},
+    })
+}
+
+/// The scene's default camera and light, when the flags change part of them.
+async fn scene_defaults(
+    client: &Client,
+    flags: &RenderFlags,
+) -> anyhow::Result<(
+    Option<lightcast_protocol::Camera>,
+    Option<lightcast_protocol::Light>,
+)> {
+    if !flags.needs_scene_defaults() {
+        return Ok((None, None));
+    }
+    let scene = client.scene(&flags.scene).await?;
+    Ok((Some(scene.default_camera), Some(scene.default_light)))
+}
+
+async fn run(cli: Cli) -> anyhow::Result<()> {
+    let client = Client::new(&cli.server, cli.token.clone())?;
+    match cli.command {
+        Command::Scenes(cmd) => scenes(&client, cmd, cli.json).await,
+        Command::Render(cmd) => render(&client, cmd, cli.json).await,
+        Command::Stream(cmd) => stream(&client, cmd, cli.json).await,
+        Command::Loadtest(cmd) => loadtest::run(&client, cmd, cli.json).await,
+    }
+}
+
+fn print_json<T: serde::Serialize>(value: &T) -> anyhow::Result<()> {
+    println!("{}", serde_json::to_string_pretty(value)?);
+    Ok(())
+}
+
+async fn scenes(client: &Client, cmd: ScenesCommand, json: bool) -> anyhow::Result<()> {
+    match cmd {
+        ScenesCommand::List => {
+            let list = client.scenes().await?;
+            if json {
+                return print_json(&list);
+            }
+            println!(
+                "{:<22} {:<20} {:>10} {:>8}  caches",
+                "id", "name", "triangles", "sessions"
+            );
+            for s in list {
+                let caches = s.caches.first().map_or("-".to_string(), |c| {
+                    format!(
+                        "{:?}{}",
+                        c.state,
+                        c.caches.map(|n| format!(" ({n})")).unwrap_or_default()
+                    )
+                    .to_lowercase()
+                });
+                println!(
+                    "{:<22} {:<20} {:>10} {:>8}  {caches}",
+                    s.id, s.name, s.triangles, s.sessions
+                );
+            }
+        }
+        ScenesCommand::Upload { file, name } => {
+            let info = client.upload_scene(&file, name.as_deref()).await?;
+            if json {
+                return print_json(&info);
+            }
+            println!(
+                "uploaded {} as {} ({} triangles); light caches: {:?}",
+                file.display(),
+                info.id,
+                info.triangles,
+                info.caches.first().map(|c| c.state)
+            );
+        }
+        ScenesCommand::Show { id } => {
+            let info = client.scene(&id).await?;
+            if json {
+                return print_json(&info);
+            }
+            println!("{} ({}), source {}", info.id, info.name, info.source);
+            println!(
+                "  {} triangles, {} vertices, {} materials, {} textures",
+                info.triangles, info.vertices, info.materials, info.textures
+            );
+            println!("  bounds {:?} … {:?}", info.bounds.min, info.bounds.max);
+            println!(
+                "  {} lights, {} cameras, used by {} sessions",
+                info.lights.len(),
+                info.cameras.len(),
+                info.sessions
+            );
+            for c in &info.caches {
+                println!(
+                    "  light caches d_eps {} theta_eps {}°: {:?}{}{}",
+                    c.cache_distance,
+                    c.cache_angle,
+                    c.state,
+                    c.caches
+                        .map(|n| format!(", {n} caches"))
+                        .unwrap_or_default(),
+                    c.seconds.map(|s| format!(", {s:.2} s")).unwrap_or_default()
+                );
+            }
+        }
+        ScenesCommand::Rm { id } => {
+            client.delete_scene(&id).await?;
+            if json {
+                return print_json(&serde_json::json!({"deleted": id}));
+            }
+            println!("deleted {id}");
+        }
+    }
+    Ok(())
+}
+
+async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<()> {
+    let (camera, light) = scene_defaults(client, &cmd.render).await?;
+    let request = RenderRequest {
+        render: cmd.render.params(camera.as_ref(), light.as_ref()),
+        format: cmd.format,
+        quality: cmd.quality,
+    };
+    let mut reports = Vec::new();
+    let mut walls = Vec::new();
+    let mut image = Vec::new();
+    for _ in 0..cmd.repeat {
+        let started = Instant::now();
+        let (bytes, report) = client.render(&request).await?;
+        walls.push(started.elapsed().as_secs_f64() * 1e3);
+        image = bytes;
+        reports.push(report);
+    }
+    std::fs::write(&cmd.out, &image).with_context(|| format!("writing {}", cmd.out.display()))?;
+    let last = reports.last().context("no render")?;
+    let mut gpu: Vec<f64> = reports.iter().map(|r| r.gpu_ms).collect();
+    let gpu_median = stats::median(&mut gpu);
+    let wall_median = stats::median(&mut walls.clone());
+    if json {
+        return print_json(&serde_json::json!({
+            "out": cmd.out, "report": last, "repeat": cmd.repeat,
+            "gpu_ms_median": gpu_median, "wall_ms_median": wall_median, "wall_ms": walls,
+        }));
+    }
+    println!("{} on {}", last.build, last.adapter);
+    println!("request {}", last.request_hash);
+    println!("{:<18} {:>10}", "stage", "GPU ms");
+    for s in &last.stages {
+        println!("{:<18} {:>10.3}", s.stage, s.ms);
+    }
+    println!(
+        "{:<18} {:>10.3}  ({})",
+        "total", last.gpu_ms, last.timing_source
+    );
+    println!(
+        "queue {:.1} ms, encode {:.1} ms",
+        last.queue_ms, last.encode_ms
+    );
+    if cmd.repeat > 1 {
+        println!(
+            "{} renders: GPU median {gpu_median:.3} ms, request median {wall_median:.1} ms",
+            cmd.repeat
+        );
+    }
+    println!(
+        "wrote {} ({}×{}, {:?})",
+        cmd.out.display(),
+        last.width,
+        last.height,
+        last.format
+    );
+    Ok(())
+}
+
+async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<()> {
+    if !(cmd.duration.is_finite() && cmd.duration > 0.0 && cmd.duration <= 86_400.0) {
+        anyhow::bail!("--duration must be between 0 and 86400 seconds");
+    }
+    let motion = match &cmd.camera_path {
+        Some(p) => drive::Motion::Path(drive::CameraPath::load(p).map_err(anyhow::Error::msg)?),
+        None => drive::Motion::Still,
+    };
+    let (camera, light) = scene_defaults(client, &cmd.render).await?;
+    let now = Instant::now();
+    let opts = drive::DriveOptions {
+        params: session_params(
+            cmd.render.params(camera.as_ref(), light.as_ref()),
+            cmd.fps_cap,
+            cmd.codec,
+            cmd.quality,
+        ),
+        motion,
+        input_hz: if cmd.camera_path.is_some() {
+            cmd.input_hz
+        } else {
+            0.0
+        },
+        max_frames: cmd.frames,
+        save_dir: cmd.save.clone(),
+        measure_from: now,
+        deadline: now + Duration::from_secs_f64(cmd.duration),
+    };
+    let result = drive::drive(client, &opts, &|| {}).await?;
+    let secs = result.window.as_secs_f64().max(1e-9);
+    let server = result.server_stats.clone().unwrap_or_default();
+    let summary = serde_json::json!({
+        "frames": result.frames,
+        "seconds": secs,
+        "fps": result.frames as f64 / secs,
+        "bytes_per_second": result.bytes as f64 / secs,
+        "connect_ms": result.connect.as_secs_f64() * 1e3,
+        "first_frame_ms": result.first_frame.map(|d| d.as_secs_f64() * 1e3),
+        "input_to_frame_ms": result.latencies.summary(),
+        "split": result.split,
+        "dropped": server.frames_dropped,
+        "throttled": server.frames_throttled,
+        "errors": result.errors,
+        "saved_to": cmd.save,
+    });
+    if json {
+        return print_json(&summary);
+    }
+    println!(
+        "{} frames in {secs:.1} s: {:.1} fps, {:.0} KiB/s",
+        result.frames,
+        result.frames as f64 / secs,
+        result.bytes as f64 / secs / 1024.0
+    );
+    let l = result.latencies.summary();
+    if l.samples > 0 {
+        println!(
+            "input→frame: p50 {:.1} ms, p95 {:.1} ms, p99 {:.1} ms ({} samples)",
+            l.p50, l.p95, l.p99, l.samples
+        );
+    }
+    println!(
+        "per frame: GPU {:.2} ms, readback {:.2} ms, encode {:.2} ms, server {:.2} ms, network {:.2} ms",
+        result.split.gpu_ms, result.split.readback_ms, result.split.encode_ms, result.split.server_ms, result.split.network_ms
+    );
+    println!(
+        "dropped {}, throttled {} (server counters)",
+        server.frames_dropped, server.frames_throttled
+    );
+    for e in &result.errors {
+        println!("error: {e}");
+    }
+    Ok(())
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("lightcast: starting the async runtime: {e}");
+            return std::process::ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(run(cli)) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("lightcast: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

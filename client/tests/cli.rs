@@ -1,0 +1,273 @@
+//! The `lightcast` binary run as a user would, against a real server on loopback.
+
+use lightcast_e2e::{cornell_glb, TestServer};
+use serde_json::Value;
+use std::process::Output;
+
+/// Runs `lightcast --server URL ARGS…` off the async runtime.
+async fn lightcast(server: &str, args: &[&str]) -> Output {
+    let mut all = vec!["--server".to_string(), server.to_string()];
+    all.extend(args.iter().map(|s| s.to_string()));
+    tokio::task::spawn_blocking(move || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_lightcast"))
+            .args(&all)
+            .output()
+            .expect("lightcast runs")
+    })
+    .await
+    .expect("join")
+}
+
+fn json(o: &Output) -> Value {
+    assert!(
+        o.status.success(),
+        "lightcast failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout)
+        .unwrap_or_else(|e| panic!("not JSON ({e}): {}", String::from_utf8_lossy(&o.stdout)))
+}
+
+const SMALL: &[&str] = &[
+    "--width",
+    "64",
+    "--height",
+    "48",
+    "--shadow-map-size",
+    "256",
+    "--rsm-size",
+    "32",
+    "--vals",
+    "256",
+    "--view-samples",
+    "64",
+];
+
+fn with<'a>(head: &[&'a str], tail: &[&'a str]) -> Vec<&'a str> {
+    head.iter().chain(tail).copied().collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scenes_subcommands() {
+    let server = TestServer::start(&[]).await;
+    let base = server.base.clone();
+    let list = json(&lightcast(&base, &["--json", "scenes", "list"]).await);
+    assert_eq!(list[0]["id"], "default");
+    let table = lightcast(&base, &["scenes", "list"]).await;
+    assert!(String::from_utf8_lossy(&table.stdout).contains("cornell"));
+
+    let dir = tempfile::tempdir().expect("tempdir");
+    let glb = dir.path().join("box.glb");
+    std::fs::write(&glb, cornell_glb()).expect("write glb");
+    let (gltf, bin) = lightcast_e2e::glb_to_gltf(&cornell_glb(), "box.bin");
+    let gltf_path = dir.path().join("box.gltf");
+    std::fs::write(&gltf_path, gltf).expect("write gltf");
+    std::fs::write(dir.path().join("box.bin"), bin).expect("write bin");
+    let uploaded = json(
+        &lightcast(
+            &base,
+            &[
+                "--json",
+                "scenes",
+                "upload",
+                glb.to_str().unwrap(),
+                "--name",
+                "my box",
+            ],
+        )
+        .await,
+    );
+    assert_eq!(uploaded["name"], "my box");
+    let from_gltf = json(
+        &lightcast(
+            &base,
+            &["--json", "scenes", "upload", gltf_path.to_str().unwrap()],
+        )
+        .await,
+    );
+    assert_eq!(from_gltf["triangles"], uploaded["triangles"]);
+    let id = uploaded["id"].as_str().expect("id");
+    let shown = json(&lightcast(&base, &["--json", "scenes", "show", id]).await);
+    assert_eq!(shown["id"], id);
+    let removed = lightcast(&base, &["scenes", "rm", id]).await;
+    assert!(removed.status.success());
+    let missing = lightcast(&base, &["scenes", "show", id]).await;
+    assert!(!missing.status.success());
+    let stderr = String::from_utf8_lossy(&missing.stderr);
+    assert!(stderr.contains("404") && stderr.contains(id), "{stderr}");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn render_writes_the_image_and_a_report() {
+    let server = TestServer::start(&[]).await;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("frame.png");
+    let args = with(
+        &[
+            "--json",
+            "render",
+            "--out",
+            out.to_str().unwrap(),
+            "--repeat",
+            "2",
+            "--camera-pos",
+            "0.5,1.2,3",
+        ],
+        SMALL,
+    );
+    let report = json(&lightcast(&server.base, &args).await);
+    assert_eq!(report["repeat"], 2);
+    assert_eq!(report["report"]["width"], 64);
+    assert!(report["report"]["stages"]
+        .as_array()
+        .is_some_and(|s| !s.is_empty()));
+    let position: Vec<f64> = report["report"]["camera"]["position"]
+        .as_array()
+        .expect("camera position")
+        .iter()
+        .filter_map(Value::as_f64)
+        .collect();
+    let expected = [0.5, 1.2, 3.0];
+    assert!(
+        position.len() == 3
+            && position
+                .iter()
+                .zip(expected)
+                .all(|(a, b)| (a - b).abs() < 1e-5),
+        "{position:?}"
+    );
+    let img = image::open(&out).expect("PNG").to_rgba8();
+    assert_eq!(img.dimensions(), (64, 48));
+    let table = lightcast(
+        &server.base,
+        &with(&["render", "--out", out.to_str().unwrap()], SMALL),
+    )
+    .await;
+    let text = String::from_utf8_lossy(&table.stdout);
+    assert!(
+        text.contains("cache_lighting") && text.contains("wrote"),
+        "{text}"
+    );
+    // A parameter the server refuses: exit 1 and the server's reason with the field.
+    let bad = lightcast(
+        &server.base,
+        &["render", "--out", out.to_str().unwrap(), "--width", "0"],
+    )
+    .await;
+    assert!(!bad.status.success());
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(stderr.contains("render.width"), "{stderr}");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stream_replays_a_camera_path_and_saves_frames() {
+    let server = TestServer::start(&[]).await;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("path.json");
+    std::fs::write(
+        &path,
+        r#"{"keyframes": [
+            {"t": 0, "camera": {"position": [0, 1, 3.9], "target": [0, 1, 0], "fov_y_degrees": 40}},
+            {"t": 2, "camera": {"position": [1.5, 1, 3.5], "target": [0, 1, 0], "fov_y_degrees": 40}}]}"#,
+    )
+    .expect("path file");
+    let frames_dir = dir.path().join("frames");
+    let args = with(
+        &[
+            "--json",
+            "stream",
+            "--frames",
+            "4",
+            "--duration",
+            "120",
+            "--camera-path",
+            path.to_str().unwrap(),
+            "--input-hz",
+            "10",
+            "--save",
+            frames_dir.to_str().unwrap(),
+            "--gi",
+            "none",
+        ],
+        SMALL,
+    );
+    let summary = json(&lightcast(&server.base, &args).await);
+    assert_eq!(summary["frames"], 4);
+    assert!(summary["fps"].as_f64().is_some_and(|f| f > 0.0));
+    assert!(summary["split"]["gpu_ms"].as_f64().is_some_and(|g| g > 0.0));
+    let saved: Vec<_> = std::fs::read_dir(&frames_dir)
+        .expect("frames dir")
+        .collect();
+    assert_eq!(saved.len(), 4);
+    let bad_path = dir.path().join("bad.json");
+    std::fs::write(&bad_path, r#"{"keyframes": []}"#).expect("write");
+    let refused = lightcast(
+        &server.base,
+        &["stream", "--camera-path", bad_path.to_str().unwrap()],
+    )
+    .await;
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("no keyframes"));
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn loadtest_reports_latency_fps_and_refuses_remote_targets() {
+    let server = TestServer::start(&[]).await;
+    let args = with(
+        &[
+            "--json",
+            "loadtest",
+            "--sessions",
+            "3",
+            "--duration",
+            "3",
+            "--ramp",
+            "0.5",
+            "--input-hz",
+            "10",
+            "--gi",
+            "none",
+        ],
+        SMALL,
+    );
+    let report = json(&lightcast(&server.base, &args).await);
+    assert_eq!(report["sessions"], 3);
+    assert_eq!(report["failed_sessions"], 0, "{report}");
+    assert!(
+        report["frames"].as_u64().is_some_and(|f| f >= 3),
+        "{report}"
+    );
+    assert!(
+        report["fps_min"].as_f64().is_some_and(|f| f > 0.0),
+        "{report}"
+    );
+    assert!(
+        report["input_to_frame_ms"]["samples"]
+            .as_u64()
+            .is_some_and(|n| n > 0),
+        "{report}"
+    );
+    assert!(report["connect_ms"]["samples"] == 3);
+    let remote = lightcast(
+        "http://10.255.255.1:8080",
+        &["loadtest", "--sessions", "1", "--duration", "1"],
+    )
+    .await;
+    assert!(!remote.status.success());
+    assert!(String::from_utf8_lossy(&remote.stderr).contains("--allow-remote"));
+    let too_many = lightcast(&server.base, &["loadtest", "--sessions", "100000"]).await;
+    assert!(!too_many.status.success());
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_unreachable_server_is_reported_plainly() {
+    let out = lightcast("http://127.0.0.1:9", &["scenes", "list"]).await;
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("cannot reach"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

@@ -17,9 +17,12 @@ const MAX_SECONDS: f64 = 600.0;
 
 #[derive(clap::Args)]
 pub struct LoadtestCmd {
-    /// Concurrent sessions (1–256).
-    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_SESSIONS)))]
-    sessions: u32,
+    /// Concurrent sessions (1–256); a comma-separated list runs one test per count, in order.
+    #[arg(long, default_value = "4", value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_SESSIONS)))]
+    sessions: Vec<u32>,
+    /// Also write the results as a markdown table to this file.
+    #[arg(long)]
+    markdown: Option<std::path::PathBuf>,
     /// Seconds measured after ramp-up (at most 600).
     #[arg(long, default_value_t = 10.0)]
     duration: f64,
@@ -109,6 +112,53 @@ impl LoadtestCmd {
 
 pub async fn run(client: &Client, cmd: LoadtestCmd, json: bool) -> anyhow::Result<()> {
     cmd.check(client.base())?;
+    let mut reports = Vec::new();
+    for &sessions in &cmd.sessions {
+        let report = run_one(client, &cmd, sessions, json).await?;
+        if !json {
+            print_table(&report);
+            println!();
+        }
+        reports.push(report);
+    }
+    if json {
+        match reports.as_slice() {
+            [one] => println!("{}", serde_json::to_string_pretty(one)?),
+            all => println!("{}", serde_json::to_string_pretty(all)?),
+        }
+    }
+    if let Some(path) = &cmd.markdown {
+        std::fs::write(path, markdown(&reports))
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// One row per load test.
+fn markdown(reports: &[LoadReport]) -> String {
+    let mut out = String::from(
+        "| sessions | size | GI | fps/client min | fps/client median | fps total | input→frame p50 / p95 / p99 ms | GPU ms | readback ms | encode ms | server ms | network ms | dropped | throttled | KiB/s | failed |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in reports {
+        let l = &r.input_to_frame_ms;
+        out.push_str(&format!(
+            "| {} | {}×{} | {:?} | {:.1} | {:.1} | {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {:.0} | {} |\n",
+            r.sessions, r.width, r.height, r.gi, r.fps_min, r.fps_median, r.fps_total,
+            l.p50, l.p95, l.p99, r.split.gpu_ms, r.split.readback_ms, r.split.encode_ms,
+            r.split.server_ms, r.split.network_ms, r.dropped, r.throttled,
+            r.bytes_per_second / 1024.0, r.failed_sessions
+        ));
+    }
+    out
+}
+
+async fn run_one(
+    client: &Client,
+    cmd: &LoadtestCmd,
+    sessions: u32,
+    json: bool,
+) -> anyhow::Result<LoadReport> {
     let scene = client.scene(&cmd.render.scene).await?;
     let params = crate::session_params(
         cmd.render
@@ -132,16 +182,16 @@ pub async fn run(client: &Client, cmd: LoadtestCmd, json: bool) -> anyhow::Resul
     }
     let frames_seen = Arc::new(std::sync::atomic::AtomicU64::new(0));
     let mut tasks = Vec::new();
-    for i in 0..cmd.sessions {
+    for i in 0..sessions {
         let client = client.clone();
-        let offset = ramp.mul_f64(f64::from(i) / f64::from(cmd.sessions));
+        let offset = ramp.mul_f64(f64::from(i) / f64::from(sessions));
         let opts = DriveOptions {
             params: params.clone(),
             // Spread the sessions around the orbit so they render different views.
             motion: Motion::Orbit {
                 base: orbit_start(
                     &scene.default_camera,
-                    360.0 * f64::from(i) / f64::from(cmd.sessions),
+                    360.0 * f64::from(i) / f64::from(sessions),
                 ),
                 degrees_per_second: cmd.orbit_degrees_per_second,
             },
@@ -185,19 +235,14 @@ pub async fn run(client: &Client, cmd: LoadtestCmd, json: bool) -> anyhow::Resul
     }
     ticker.abort();
     bar.finish_and_clear();
-    let report = summarise(client.base(), &cmd, &results, errors);
-    if json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print_table(&report);
-    }
-    if report.failed_sessions == cmd.sessions {
+    let report = summarise(client.base(), cmd, sessions, &results, errors);
+    if report.failed_sessions == sessions {
         anyhow::bail!(
             "every session failed: {}",
             report.errors.first().cloned().unwrap_or_default()
         );
     }
-    Ok(())
+    Ok(report)
 }
 
 /// `base` rotated `degrees` about its target's vertical axis.
@@ -213,6 +258,7 @@ fn orbit_start(base: &lightcast_protocol::Camera, degrees: f64) -> lightcast_pro
 fn summarise(
     server: &str,
     cmd: &LoadtestCmd,
+    sessions: u32,
     results: &[DriveResult],
     mut errors: Vec<String>,
 ) -> LoadReport {
@@ -245,7 +291,7 @@ fn summarise(
     let fps_total = fps.iter().sum();
     LoadReport {
         server: server.to_string(),
-        sessions: cmd.sessions,
+        sessions,
         width: cmd.render.width,
         height: cmd.render.height,
         gi: cmd.render.gi,
@@ -265,7 +311,7 @@ fn summarise(
         throttled,
         bytes_per_second: bytes as f64 / window.max(1e-9),
         split,
-        failed_sessions: cmd.sessions - results.len() as u32,
+        failed_sessions: sessions - results.len() as u32,
         errors,
     }
 }

@@ -9,8 +9,8 @@ use crate::gi::{
     GiMethod, GiSettings,
 };
 use crate::gpu::{
-    readback::{map_read, TextureReadback},
-    timing::{FrameTimer, StageTiming, TimingSource},
+    readback::{map_read, PendingMap, TextureReadback},
+    timing::{timestamp_staging, FrameTimer, PendingTimings, StageTiming, TimingSource},
     GpuContext, GpuError,
 };
 use crate::passes::{
@@ -29,6 +29,7 @@ use crate::passes::{
 use crate::scene::Scene;
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
@@ -236,12 +237,106 @@ struct SizedTargets {
     gbuffer: GBuffer,
     hdr: Target,
     ldr: Target,
-    ldr_readback: TextureReadback,
-    hdr_readback: TextureReadback,
     indirect: Target,
-    indirect_readback: TextureReadback,
+    /// Staging buffers of the frames in flight (see [`PendingFrame`]).
+    readbacks: Vec<ReadbackSet>,
     exposure: ExposureBindings,
     tonemap: wgpu::BindGroup,
+}
+
+/// Frames of one size that may be in flight at once (submitted, not yet read back).
+const READBACK_RING: usize = 3;
+
+/// Where one frame's results are copied for reading back.
+struct ReadbackSet {
+    ldr: TextureReadback,
+    hdr: TextureReadback,
+    indirect: TextureReadback,
+    exposure: wgpu::Buffer,
+    timestamps: wgpu::Buffer,
+    /// Held by the [`PendingFrame`] using the set.
+    busy: Arc<AtomicBool>,
+}
+
+impl ReadbackSet {
+    fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
+        Self {
+            ldr: TextureReadback::new(device, "ldr readback", width, height, 4),
+            hdr: TextureReadback::new(device, "hdr readback", width, height, 8),
+            indirect: TextureReadback::new(device, "indirect readback", width, height, 8),
+            exposure: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("exposure readback"),
+                size: std::mem::size_of::<ExposureResult>() as u64,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
+            timestamps: timestamp_staging(device),
+            busy: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+/// Marks a readback set free again when the frame using it is done (or abandoned).
+struct SetLease(Arc<AtomicBool>);
+
+impl Drop for SetLease {
+    fn drop(&mut self) {
+        self.0.store(false, Ordering::Release);
+    }
+}
+
+/// A submitted frame whose results are on their way to staging buffers. [`PendingFrame::wait`]
+/// blocks until they are readable; it may run on another thread while the renderer encodes
+/// the next frame.
+pub struct PendingFrame {
+    ctx: GpuContext,
+    width: u32,
+    height: u32,
+    ldr: TextureReadback,
+    hdr: Option<(TextureReadback, TextureReadback)>,
+    exposure: wgpu::Buffer,
+    timings: PendingTimings,
+    timing_source: TimingSource,
+    submission: Option<wgpu::SubmissionIndex>,
+    _lease: SetLease,
+}
+
+impl PendingFrame {
+    /// Waits for the GPU to finish the frame and reads it back.
+    pub fn wait(self) -> Result<Frame, GpuError> {
+        let started = std::time::Instant::now();
+        let ldr = self.ldr.begin_read();
+        let hdr = self
+            .hdr
+            .as_ref()
+            .map(|(hdr, indirect)| (hdr.begin_read(), indirect.begin_read()));
+        let exposure = PendingMap::new(&self.exposure);
+        let timings = self.timings.begin();
+        self.ctx.device.poll(wgpu::PollType::Wait {
+            submission_index: self.submission,
+            timeout: None,
+        })?;
+        let rgba8 = ldr.finish()?;
+        let (hdr, indirect) = match hdr {
+            Some((h, i)) => (
+                Some(rgba16f_to_f32(&h.finish()?)),
+                Some(rgba16f_to_f32(&i.finish()?)),
+            ),
+            None => (None, None),
+        };
+        let exposure: ExposureResult = bytemuck::pod_read_unaligned(&exposure.finish()?);
+        Ok(Frame {
+            width: self.width,
+            height: self.height,
+            rgba8,
+            hdr,
+            indirect,
+            timings: timings.finish()?,
+            timing_source: self.timing_source,
+            exposure_scale: exposure.scale,
+            readback_ms: started.elapsed().as_secs_f64() * 1e3,
+        })
+    }
 }
 
 /// Renders one scene; keeps GPU resources between frames.
@@ -257,7 +352,6 @@ pub struct Renderer {
     tonemap_pass: TonemapPass,
     camera_buffer: wgpu::Buffer,
     light_buffer: wgpu::Buffer,
-    exposure_readback: wgpu::Buffer,
     /// Targets of the most recently used output sizes, most recent first (sessions of
     /// different sizes share one renderer).
     sized: Vec<SizedTargets>,
@@ -292,12 +386,6 @@ impl Renderer {
             "light",
             bytemuck::bytes_of(&bytemuck::Zeroable::zeroed() as &LightUniform),
         );
-        let exposure_readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("exposure readback"),
-            size: std::mem::size_of::<ExposureResult>() as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
         let material_layout = material_layout(device);
         Self {
             sampling: ValSampling::new(device, &light_buffer, &material_layout),
@@ -321,7 +409,6 @@ impl Renderer {
             tonemap_pass: TonemapPass::new(device),
             camera_buffer,
             light_buffer,
-            exposure_readback,
             sized: Vec::new(),
             shadow_map: None,
             scene,
@@ -443,9 +530,9 @@ impl Renderer {
             width,
             height,
             gbuffer: GBuffer::new(device, width, height),
-            ldr_readback: TextureReadback::new(device, "ldr readback", width, height, 4),
-            hdr_readback: TextureReadback::new(device, "hdr readback", width, height, 8),
-            indirect_readback: TextureReadback::new(device, "indirect readback", width, height, 8),
+            readbacks: (0..READBACK_RING)
+                .map(|_| ReadbackSet::new(device, width, height))
+                .collect(),
             indirect,
             hdr,
             ldr,
@@ -474,6 +561,12 @@ impl Renderer {
 
     /// Renders one frame and reads it back (blocking).
     pub fn render(&mut self, settings: &RenderSettings) -> Result<Frame, RenderError> {
+        Ok(self.submit(settings)?.wait()?)
+    }
+
+    /// Encodes and submits one frame without waiting for it. Up to [`READBACK_RING`] frames
+    /// of one size may be pending; beyond that this waits for the oldest to be read.
+    pub fn submit(&mut self, settings: &RenderSettings) -> Result<PendingFrame, RenderError> {
         settings.validate(&self.ctx)?;
         let (width, height) = (settings.width, settings.height);
         self.ensure_targets(width, height)?;
@@ -566,6 +659,8 @@ impl Renderer {
             },
         );
 
+        let set = free_set(&self.ctx, &sized.readbacks)?;
+        let lease = SetLease(Arc::clone(&set.busy));
         let mut stages = self.timer.begin(&self.ctx);
         stages.stage("shadow_map", |e| {
             self.shadow_pass.encode(e, shadow_map, &self.scene_buffers)
@@ -615,46 +710,50 @@ impl Renderer {
             self.tonemap_pass.encode(e, &sized.tonemap, width, height)
         })?;
         stages.stage("readback_copy", |e| {
-            sized.ldr_readback.encode_copy(e, &sized.ldr.texture);
+            set.ldr.encode_copy(e, &sized.ldr.texture);
             if settings.capture_hdr {
-                sized.hdr_readback.encode_copy(e, &sized.hdr.texture);
-                sized
-                    .indirect_readback
-                    .encode_copy(e, &sized.indirect.texture);
+                set.hdr.encode_copy(e, &sized.hdr.texture);
+                set.indirect.encode_copy(e, &sized.indirect.texture);
             }
-            e.copy_buffer_to_buffer(
-                &self.exposure_pass.result,
-                0,
-                &self.exposure_readback,
-                0,
-                None,
-            );
+            e.copy_buffer_to_buffer(&self.exposure_pass.result, 0, &set.exposure, 0, None);
         })?;
-        let timings = stages.finish()?;
-
-        let readback_start = std::time::Instant::now();
-        let rgba8 = sized.ldr_readback.read(&self.ctx)?;
-        let (hdr, indirect) = if settings.capture_hdr {
-            (
-                Some(read_rgba16f(&self.ctx, &sized.hdr_readback)?),
-                Some(read_rgba16f(&self.ctx, &sized.indirect_readback)?),
-            )
-        } else {
-            (None, None)
-        };
-        let exposure_bytes = map_read(&self.ctx, &self.exposure_readback)?;
-        let exposure: ExposureResult = bytemuck::pod_read_unaligned(&exposure_bytes);
-        Ok(Frame {
+        let (timings, submission) = stages.submit_frame(&set.timestamps);
+        Ok(PendingFrame {
+            ctx: self.ctx.clone(),
             width,
             height,
-            rgba8,
-            hdr,
-            indirect,
+            ldr: set.ldr.clone(),
+            hdr: settings
+                .capture_hdr
+                .then(|| (set.hdr.clone(), set.indirect.clone())),
+            exposure: set.exposure.clone(),
             timings,
             timing_source: self.timer.source(),
-            exposure_scale: exposure.scale,
-            readback_ms: readback_start.elapsed().as_secs_f64() * 1e3,
+            submission,
+            _lease: lease,
         })
+    }
+}
+
+/// A readback set no pending frame holds, marked busy. Waits (polling the device) while all
+/// are held by frames other threads are still reading.
+fn free_set<'a>(ctx: &GpuContext, sets: &'a [ReadbackSet]) -> Result<&'a ReadbackSet, GpuError> {
+    let started = std::time::Instant::now();
+    loop {
+        if let Some(set) = sets.iter().find(|s| {
+            s.busy
+                .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
+                .is_ok()
+        }) {
+            return Ok(set);
+        }
+        if started.elapsed() > std::time::Duration::from_secs(30) {
+            return Err(GpuError::Map(
+                "every readback buffer is held by a frame nobody reads".into(),
+            ));
+        }
+        ctx.device.poll(wgpu::PollType::Poll)?;
+        std::thread::sleep(std::time::Duration::from_micros(200));
     }
 }
 
@@ -669,14 +768,13 @@ fn check_allocation(scope: wgpu::ErrorScopeGuard, what: String) -> Result<(), Gp
     }
 }
 
-/// Reads an RGBA16F readback as f32 texels.
-fn read_rgba16f(ctx: &GpuContext, readback: &TextureReadback) -> Result<Vec<[f32; 4]>, GpuError> {
-    let bytes = readback.read(ctx)?;
-    let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(&bytes);
-    Ok(halves
+/// RGBA16F texels as f32.
+fn rgba16f_to_f32(bytes: &[u8]) -> Vec<[f32; 4]> {
+    let halves: Vec<half::f16> = bytemuck::pod_collect_to_vec(bytes);
+    halves
         .chunks_exact(4)
         .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
-        .collect())
+        .collect()
 }
 
 /// Clears a colour target to zero.

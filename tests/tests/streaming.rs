@@ -173,20 +173,24 @@ async fn a_stalled_client_does_not_stall_another() {
     let mut stream = server.connect(&healthy).await;
     let mut events = Vec::new();
 
-    // Wait until the server notices the stalled client (frames dropped or ticks throttled).
+    // Wait until the stalled client's socket is full: its sent count stops moving for several
+    // of the healthy client's frames while the server skips its ticks.
     let stalled_path = format!("/v1/sessions/{}", stalled.session.id);
     tokio::time::timeout(PATIENCE, async {
+        let (mut last_sent, mut unchanged) = (u64::MAX, 0);
         loop {
             stream.next_frame(&mut events).await;
-            let info = server.get_json(&stalled_path).await;
-            let st = &info["stats"];
-            if st["frames_throttled"].as_u64().unwrap_or(0) > 0 {
+            let st = server.get_json(&stalled_path).await["stats"].clone();
+            let sent = st["frames_sent"].as_u64().unwrap_or(0);
+            unchanged = if sent == last_sent { unchanged + 1 } else { 0 };
+            last_sent = sent;
+            if unchanged >= 5 && st["frames_throttled"].as_u64().unwrap_or(0) > 0 {
                 return;
             }
         }
     })
     .await
-    .expect("the stalled session is throttled");
+    .expect("the stalled session's socket fills and its ticks are skipped");
     let before = server.get_json(&stalled_path).await["stats"]["frames_rendered"]
         .as_u64()
         .unwrap_or(0);

@@ -23,6 +23,7 @@ pub fn strip_row_padding(padded: &[u8], width: u32, height: u32, bytes_per_pixel
 }
 
 /// A staging buffer sized for one texture.
+#[derive(Clone)]
 pub struct TextureReadback {
     buffer: wgpu::Buffer,
     width: u32,
@@ -72,9 +73,36 @@ impl TextureReadback {
         );
     }
 
-    /// Maps the buffer (blocking until the copy has finished) and returns packed rows.
+    /// Starts mapping the buffer; [`PendingRows::finish`] returns packed rows once the copy
+    /// has finished (after the caller polled the device).
+    pub fn begin_read(&self) -> PendingRows {
+        PendingRows {
+            map: PendingMap::new(&self.buffer),
+            width: self.width,
+            height: self.height,
+            bytes_per_pixel: self.bytes_per_pixel,
+        }
+    }
+
+    /// Maps the buffer (blocking until all submitted work has finished) and returns packed rows.
     pub fn read(&self, ctx: &GpuContext) -> Result<Vec<u8>, GpuError> {
-        let bytes = map_read(ctx, &self.buffer)?;
+        let pending = self.begin_read();
+        ctx.wait_idle()?;
+        pending.finish()
+    }
+}
+
+/// A texture copy being mapped.
+pub struct PendingRows {
+    map: PendingMap,
+    width: u32,
+    height: u32,
+    bytes_per_pixel: u32,
+}
+
+impl PendingRows {
+    pub fn finish(self) -> Result<Vec<u8>, GpuError> {
+        let bytes = self.map.finish()?;
         Ok(strip_row_padding(
             &bytes,
             self.width,
@@ -84,23 +112,49 @@ impl TextureReadback {
     }
 }
 
-/// Blocking map of a whole `MAP_READ` buffer; copies the contents out and unmaps.
+/// A whole `MAP_READ` buffer being mapped. Mapping completes once the GPU work that writes the
+/// buffer is done and the device was polled; [`PendingMap::finish`] then copies the contents
+/// out and unmaps.
+pub struct PendingMap {
+    buffer: wgpu::Buffer,
+    done: std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>,
+}
+
+impl PendingMap {
+    pub fn new(buffer: &wgpu::Buffer) -> Self {
+        let (tx, done) = std::sync::mpsc::channel();
+        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+            // The receiver only disappears if the frame was abandoned.
+            let _ = tx.send(r);
+        });
+        Self {
+            buffer: buffer.clone(),
+            done,
+        }
+    }
+
+    /// The contents; the device must have been polled past the writing submission.
+    pub fn finish(self) -> Result<Vec<u8>, GpuError> {
+        self.done
+            .recv()
+            .map_err(|e| GpuError::Map(e.to_string()))?
+            .map_err(|e| GpuError::Map(e.to_string()))?;
+        let bytes = self
+            .buffer
+            .get_mapped_range(..)
+            .map_err(|e| GpuError::Map(e.to_string()))?
+            .to_vec();
+        self.buffer.unmap();
+        Ok(bytes)
+    }
+}
+
+/// Blocking map of a whole `MAP_READ` buffer (waits for all submitted work); copies the
+/// contents out and unmaps.
 pub fn map_read(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-        // The receiver only disappears if this function already returned with an error.
-        let _ = tx.send(r);
-    });
+    let pending = PendingMap::new(buffer);
     ctx.wait_idle()?;
-    rx.recv()
-        .map_err(|e| GpuError::Map(e.to_string()))?
-        .map_err(|e| GpuError::Map(e.to_string()))?;
-    let bytes = buffer
-        .get_mapped_range(..)
-        .map_err(|e| GpuError::Map(e.to_string()))?
-        .to_vec();
-    buffer.unmap();
-    Ok(bytes)
+    pending.finish()
 }
 
 #[cfg(test)]

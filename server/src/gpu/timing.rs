@@ -5,7 +5,7 @@
 //! some drivers, lavapipe among them). Without them each stage is submitted on its own and timed
 //! by the CPU until the GPU is idle, which is slower and says so in [`TimingSource`].
 
-use super::{readback::map_read, GpuContext, GpuError};
+use super::{GpuContext, GpuError};
 use std::time::Instant;
 
 /// Where the stage times came from.
@@ -34,14 +34,74 @@ pub struct FrameTimer {
 struct Queries {
     set: wgpu::QuerySet,
     resolve: wgpu::Buffer,
-    staging: wgpu::Buffer,
     period_ns: f64,
+}
+
+/// Bytes of a staging buffer that receives one frame's timestamps.
+pub const TIMESTAMP_STAGING_BYTES: u64 = MAX_STAGES as u64 * 2 * 8;
+
+/// A `MAP_READ` buffer for one frame's timestamps (frames in flight need one each).
+pub fn timestamp_staging(device: &wgpu::Device) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("timestamp readback"),
+        size: TIMESTAMP_STAGING_BYTES,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    })
+}
+
+/// Stage times of a submitted frame: known already (CPU wall clock) or still in a staging
+/// buffer the GPU will fill.
+pub struct PendingTimings {
+    names: Vec<&'static str>,
+    ready: Vec<StageTiming>,
+    staging: Option<(wgpu::Buffer, f64)>,
+}
+
+impl PendingTimings {
+    /// Starts mapping the staging buffer (see [`super::readback::PendingMap`]).
+    pub fn begin(self) -> TimingsMap {
+        TimingsMap {
+            map: self
+                .staging
+                .map(|(buffer, period)| (super::readback::PendingMap::new(&buffer), period)),
+            names: self.names,
+            ready: self.ready,
+        }
+    }
+}
+
+/// Timestamps being mapped.
+pub struct TimingsMap {
+    names: Vec<&'static str>,
+    ready: Vec<StageTiming>,
+    map: Option<(super::readback::PendingMap, f64)>,
+}
+
+impl TimingsMap {
+    /// The stage times, in order, once the GPU work they time has finished (the caller polled).
+    pub fn finish(self) -> Result<Vec<StageTiming>, GpuError> {
+        let Some((map, period_ns)) = self.map else {
+            return Ok(self.ready);
+        };
+        let bytes = map.finish()?;
+        let ticks: &[u64] = bytemuck::cast_slice(&bytes);
+        Ok(self
+            .names
+            .iter()
+            .enumerate()
+            .map(|(i, &stage)| StageTiming {
+                stage,
+                ms: ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns / 1e6,
+            })
+            .collect())
+    }
 }
 
 impl FrameTimer {
     pub fn new(ctx: &GpuContext) -> Self {
         let queries = ctx.timestamps.then(|| {
-            let bytes = u64::from(MAX_STAGES) * 2 * 8;
+            let bytes = TIMESTAMP_STAGING_BYTES;
             Queries {
                 set: ctx.device.create_query_set(&wgpu::QuerySetDescriptor {
                     label: Some("stage timestamps"),
@@ -52,12 +112,6 @@ impl FrameTimer {
                     label: Some("timestamp resolve"),
                     size: bytes,
                     usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                    mapped_at_creation: false,
-                }),
-                staging: ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("timestamp readback"),
-                    size: bytes,
-                    usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
                     mapped_at_creation: false,
                 }),
                 period_ns: f64::from(ctx.queue.get_timestamp_period()),
@@ -82,6 +136,7 @@ impl FrameTimer {
             encoder: None,
             names: Vec::new(),
             wall: Vec::new(),
+            submitted: None,
         }
     }
 }
@@ -93,6 +148,7 @@ pub struct FrameStages<'a> {
     encoder: Option<wgpu::CommandEncoder>,
     names: Vec<&'static str>,
     wall: Vec<StageTiming>,
+    submitted: Option<wgpu::SubmissionIndex>,
 }
 
 impl FrameStages<'_> {
@@ -145,43 +201,40 @@ impl FrameStages<'_> {
 
     fn submit(&mut self) {
         if let Some(encoder) = self.encoder.take() {
-            self.ctx.queue.submit([encoder.finish()]);
+            self.submitted = Some(self.ctx.queue.submit([encoder.finish()]));
         }
     }
 
-    /// Submits what is left, waits for the GPU and returns the stage times in order.
-    pub fn finish(mut self) -> Result<Vec<StageTiming>, GpuError> {
+    /// Submits what is left without waiting; the timestamps are copied into `staging` (a
+    /// [`timestamp_staging`] buffer not in use by another frame in flight). Returns the last
+    /// submission, whose completion makes every result of the frame readable.
+    pub fn submit_frame(
+        mut self,
+        staging: &wgpu::Buffer,
+    ) -> (PendingTimings, Option<wgpu::SubmissionIndex>) {
         let count = self.names.len() as u32;
-        let Some((set, resolve, staging, period_ns)) = self.timer.queries.as_ref().map(|q| {
-            (
-                q.set.clone(),
-                q.resolve.clone(),
-                q.staging.clone(),
-                q.period_ns,
-            )
-        }) else {
-            self.submit();
-            self.ctx.wait_idle()?;
-            return Ok(self.wall);
+        let queries = self
+            .timer
+            .queries
+            .as_ref()
+            .map(|q| (q.set.clone(), q.resolve.clone(), q.period_ns));
+        let staging = match queries {
+            Some((set, resolve, period_ns)) if count > 0 => {
+                let encoder = self.encoder();
+                encoder.resolve_query_set(&set, 0..count * 2, &resolve, 0);
+                encoder.copy_buffer_to_buffer(&resolve, 0, staging, 0, u64::from(count) * 16);
+                Some((staging.clone(), period_ns))
+            }
+            _ => None,
         };
-        if count == 0 {
-            self.submit();
-            return Ok(Vec::new());
-        }
-        let encoder = self.encoder();
-        encoder.resolve_query_set(&set, 0..count * 2, &resolve, 0);
-        encoder.copy_buffer_to_buffer(&resolve, 0, &staging, 0, u64::from(count) * 16);
         self.submit();
-        let bytes = map_read(self.ctx, &staging)?;
-        let ticks: &[u64] = bytemuck::cast_slice(&bytes);
-        Ok(self
-            .names
-            .iter()
-            .enumerate()
-            .map(|(i, &stage)| StageTiming {
-                stage,
-                ms: ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns / 1e6,
-            })
-            .collect())
+        (
+            PendingTimings {
+                names: self.names,
+                ready: self.wall,
+                staging,
+            },
+            self.submitted,
+        )
     }
 }

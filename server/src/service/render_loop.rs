@@ -12,11 +12,10 @@ use crate::gi::caches::{CacheParams, CacheSet};
 use crate::gi::GiSettings;
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
-use crate::renderer::{Frame, Renderer};
+use crate::renderer::{Frame, PendingFrame, Renderer};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_MOVING, FLAG_STILL};
 use lightcast_protocol::{FrameHeader, StageMs, View};
 use std::collections::{HashMap, VecDeque};
-use std::sync::atomic::Ordering;
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 use tokio::sync::oneshot;
@@ -105,6 +104,8 @@ struct Loop {
     next_session: usize,
     /// Alternates one-shot renders with sessions so neither starves the other.
     one_shot_turn: bool,
+    /// Session frames waiting for the GPU, to the readback thread.
+    readback: mpsc::SyncSender<ReadbackJob>,
 }
 
 /// Starts the render loop thread.
@@ -115,10 +116,19 @@ pub fn spawn(
     encoder: Arc<EncodePool>,
 ) -> (mpsc::Sender<Command>, std::thread::JoinHandle<()>) {
     let (tx, rx) = mpsc::channel();
+    // Two frames may wait for the GPU while the loop encodes a third; beyond that the loop
+    // waits here (and each renderer's readback ring bounds it too).
+    let (readback, readback_rx) = mpsc::sync_channel(2);
+    let readback_encoder = Arc::clone(&encoder);
+    let readback_thread = std::thread::Builder::new()
+        .name("readback".into())
+        .spawn(move || readback_thread(readback_rx, readback_encoder))
+        .expect("spawning the readback thread");
     let handle = std::thread::Builder::new()
         .name("render-loop".into())
         .spawn(move || {
             let mut l = Loop {
+                readback,
                 ctx,
                 scenes,
                 sessions,
@@ -129,6 +139,9 @@ pub fn spawn(
                 one_shot_turn: false,
             };
             l.run(&rx);
+            // Closing the channel lets the readback thread finish the frames in flight.
+            drop(l);
+            let _ = readback_thread.join();
         })
         .expect("spawning the render loop thread");
     (tx, handle)
@@ -207,14 +220,15 @@ impl Loop {
         }
     }
 
-    /// Renders `resolved` of `scene`; GI falls back to none while its caches are pending.
-    fn render(
+    /// Submits `resolved` of `scene` to the GPU; GI falls back to none while its caches are
+    /// pending.
+    fn submit(
         &mut self,
         scene: &Arc<SceneEntry>,
         resolved: &Resolved,
-    ) -> Result<Rendered, ApiError> {
+    ) -> Result<Submitted, ApiError> {
         let mut settings = resolved.settings.clone();
-        let (caches, pending) = match resolved.caches {
+        let (caches, gi_pending) = match resolved.caches {
             None => (None, false),
             Some(params) => match self.scenes.caches(scene, params) {
                 CachesNow::Ready(set) => (Some(set), false),
@@ -227,15 +241,19 @@ impl Loop {
                 }
             },
         };
-        if pending {
+        if gi_pending {
             settings.gi = GiSettings::off();
         }
-        let view = if pending { View::Final } else { resolved.view };
+        let view = if gi_pending {
+            View::Final
+        } else {
+            resolved.view
+        };
         let key = (
             scene.id.clone(),
             caches.as_ref().map(|c| cache_key(&c.params)),
         );
-        let slot = match self.renderers.entry(key) {
+        let slot = match self.renderers.entry(key.clone()) {
             std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::hash_map::Entry::Vacant(e) => e.insert(Slot {
                 renderer: Renderer::new(self.ctx.clone(), Arc::clone(&scene.scene)),
@@ -250,38 +268,48 @@ impl Loop {
                 .map_err(|e| ApiError::internal(e.to_string()))?;
             slot.caches = Some(Arc::clone(set));
         }
-        let mut frame = slot
+        let pending = slot
             .renderer
-            .render(&settings)
+            .submit(&settings)
             .map_err(|e| render_error(&e).within("render"))?;
-        record_metrics(&frame);
-        let hdr = frame.hdr.take();
-        let indirect = if view == View::Indirect {
-            frame.indirect.clone()
-        } else {
-            frame.indirect.take()
-        };
-        let timings = std::mem::take(&mut frame.timings);
-        let (timing_source, readback_ms, exposure_scale) =
-            (frame.timing_source, frame.readback_ms, frame.exposure_scale);
-        let image = debug_views::compose(
+        Ok(Submitted {
+            pending,
             view,
-            &slot.renderer,
-            frame,
-            &settings.camera,
-            caches.as_ref().map(|c| c.caches.as_slice()),
-        )
-        .map_err(|e| ApiError::internal(e.to_string()))?;
-        Ok(Rendered {
-            image,
-            timings,
-            timing_source,
-            readback_ms,
-            exposure_scale,
-            hdr,
-            indirect,
-            gi_pending: pending,
+            gi_pending,
+            camera: settings.camera,
+            key,
         })
+    }
+
+    /// Renders and reads back at once (one-shots and debug views, which read more of the
+    /// renderer's buffers after the frame).
+    fn render(
+        &mut self,
+        scene: &Arc<SceneEntry>,
+        resolved: &Resolved,
+    ) -> Result<Rendered, ApiError> {
+        let submitted = self.submit(scene, resolved)?;
+        let frame = submitted
+            .pending
+            .wait()
+            .map_err(|e| ApiError::internal(e.to_string()))?;
+        let Some(slot) = self.renderers.get(&submitted.key) else {
+            return Err(ApiError::internal("the renderer vanished mid-frame"));
+        };
+        finish(
+            frame,
+            submitted.view,
+            submitted.gi_pending,
+            |view, frame| {
+                debug_views::compose(
+                    view,
+                    &slot.renderer,
+                    frame,
+                    &submitted.camera,
+                    slot.caches.as_ref().map(|c| c.caches.as_slice()),
+                )
+            },
+        )
     }
 
     fn one_shot(&mut self, job: OneShot) {
@@ -298,75 +326,173 @@ impl Loop {
 
     fn session_frame(&mut self, session: &Arc<Session>, plan: FramePlan) {
         let render_start_us = unix_us();
-        let result = self.render(&plan.lease_scene, &plan.resolved);
-        let rendered = match result {
-            Ok(r) => r,
-            Err(e) => {
-                session.record_error(e.body);
-                return;
+        if plan.resolved.view != View::Final {
+            match self.render(&plan.lease_scene, &plan.resolved) {
+                Ok(rendered) => deliver(session, &plan, rendered, render_start_us, &self.encoder),
+                Err(e) => session.frame_failed(e.body),
             }
-        };
-        if plan.resolved.caches.is_some() {
-            session.note_caches(&plan.lease_scene.id, rendered.gi_pending);
+            return;
         }
-        metrics::counter!(super::metrics::FRAMES_RENDERED).increment(1);
-        session.record_render(&rendered.stages());
-        let mut flags = 0;
-        if plan.still {
-            flags |= FLAG_STILL;
-        }
-        if plan.moving {
-            flags |= FLAG_MOVING;
-        }
-        if rendered.gi_pending {
-            flags |= FLAG_GI_PENDING;
-        }
-        let header = FrameHeader {
-            seq: session.next_seq(),
-            input_id: plan.input_id,
-            render_start_us,
-            send_us: 0,
-            width: rendered.image.width,
-            height: rendered.image.height,
-            codec: plan.codec,
-            flags,
-            quality: if plan.codec == lightcast_protocol::Codec::Jpeg {
-                plan.quality
-            } else {
-                0
-            },
-            encode_ms: 0.0,
-            readback_ms: rendered.readback_ms as f32,
-            gpu_ms: rendered.gpu_ms() as f32,
-            payload_len: 0,
-            stages: rendered
-                .timings
-                .iter()
-                .filter_map(|t| FrameHeader::stage_index(t.stage).map(|i| (i, t.ms as f32)))
-                .collect(),
-        };
-        session.in_flight.fetch_add(1, Ordering::Relaxed);
-        let session = Arc::clone(session);
-        let image = rendered.image;
-        self.encoder.spawn(move || {
-            let started = Instant::now();
-            match encode::encode(&image, plan.codec, plan.quality) {
-                Ok(payload) => {
-                    let encode_ms = started.elapsed().as_secs_f64() * 1e3;
-                    metrics::histogram!(super::metrics::ENCODE_MS).record(encode_ms);
-                    let header = FrameHeader {
-                        encode_ms: encode_ms as f32,
-                        ..header
-                    };
-                    session.deliver(header.encode_with(&payload));
-                }
-                Err(e) => {
-                    session.in_flight.fetch_sub(1, Ordering::Relaxed);
-                    session.record_error(ApiError::internal(e.to_string()).body);
+        match self.submit(&plan.lease_scene, &plan.resolved) {
+            // The wait for the GPU happens on the readback thread while this one encodes the
+            // next frame.
+            Ok(submitted) => {
+                let job = ReadbackJob {
+                    pending: submitted.pending,
+                    gi_pending: submitted.gi_pending,
+                    session: Arc::clone(session),
+                    plan,
+                    render_start_us,
+                };
+                if let Err(mpsc::SendError(job)) = self.readback.send(job) {
+                    job.session
+                        .frame_failed(ApiError::internal("the readback thread has stopped").body);
                 }
             }
-        });
+            Err(e) => session.frame_failed(e.body),
+        }
     }
+}
+
+/// A session frame on its way from the GPU to the encoder.
+struct ReadbackJob {
+    pending: PendingFrame,
+    gi_pending: bool,
+    session: Arc<Session>,
+    plan: FramePlan,
+    render_start_us: u64,
+}
+
+/// Waits for session frames and hands them to the encoder pool, in submission order.
+fn readback_thread(jobs: mpsc::Receiver<ReadbackJob>, encoder: Arc<EncodePool>) {
+    for job in jobs {
+        let rendered = job
+            .pending
+            .wait()
+            .map_err(|e| ApiError::internal(e.to_string()))
+            .and_then(|frame| {
+                finish(frame, View::Final, job.gi_pending, |_, frame| {
+                    Ok(Image {
+                        width: frame.width,
+                        height: frame.height,
+                        rgba8: frame.rgba8,
+                    })
+                })
+            });
+        match rendered {
+            Ok(r) => deliver(&job.session, &job.plan, r, job.render_start_us, &encoder),
+            Err(e) => job.session.frame_failed(e.body),
+        }
+    }
+}
+
+/// A read-back frame as the service hands it on: the image of `view` (made by `image`) plus
+/// what was measured.
+fn finish(
+    mut frame: Frame,
+    view: View,
+    gi_pending: bool,
+    image: impl FnOnce(View, Frame) -> Result<Image, debug_views::ViewError>,
+) -> Result<Rendered, ApiError> {
+    record_metrics(&frame);
+    let hdr = frame.hdr.take();
+    let indirect = if view == View::Indirect {
+        frame.indirect.clone()
+    } else {
+        frame.indirect.take()
+    };
+    let timings = std::mem::take(&mut frame.timings);
+    let (timing_source, readback_ms, exposure_scale) =
+        (frame.timing_source, frame.readback_ms, frame.exposure_scale);
+    let image = image(view, frame).map_err(|e| ApiError::internal(e.to_string()))?;
+    Ok(Rendered {
+        image,
+        timings,
+        timing_source,
+        readback_ms,
+        exposure_scale,
+        hdr,
+        indirect,
+        gi_pending,
+    })
+}
+
+/// Records a session frame and encodes it on the pool; the encoded frame lands in the
+/// session's latest-frame slot.
+fn deliver(
+    session: &Arc<Session>,
+    plan: &FramePlan,
+    rendered: Rendered,
+    render_start_us: u64,
+    encoder: &EncodePool,
+) {
+    if plan.resolved.caches.is_some() {
+        session.note_caches(&plan.lease_scene.id, rendered.gi_pending);
+    }
+    metrics::counter!(super::metrics::FRAMES_RENDERED).increment(1);
+    session.record_render(&rendered.stages());
+    let mut flags = 0;
+    if plan.still {
+        flags |= FLAG_STILL;
+    }
+    if plan.moving {
+        flags |= FLAG_MOVING;
+    }
+    if rendered.gi_pending {
+        flags |= FLAG_GI_PENDING;
+    }
+    let (codec, quality) = (plan.codec, plan.quality);
+    let header = FrameHeader {
+        seq: session.next_seq(),
+        input_id: plan.input_id,
+        render_start_us,
+        send_us: 0,
+        width: rendered.image.width,
+        height: rendered.image.height,
+        codec,
+        flags,
+        quality: if codec == lightcast_protocol::Codec::Jpeg {
+            quality
+        } else {
+            0
+        },
+        encode_ms: 0.0,
+        readback_ms: rendered.readback_ms as f32,
+        gpu_ms: rendered.gpu_ms() as f32,
+        payload_len: 0,
+        stages: rendered
+            .timings
+            .iter()
+            .filter_map(|t| FrameHeader::stage_index(t.stage).map(|i| (i, t.ms as f32)))
+            .collect(),
+    };
+    let seq = header.seq;
+    let session = Arc::clone(session);
+    let image = rendered.image;
+    encoder.spawn(move || {
+        let started = Instant::now();
+        match encode::encode(&image, codec, quality) {
+            Ok(payload) => {
+                let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+                metrics::histogram!(super::metrics::ENCODE_MS).record(encode_ms);
+                let header = FrameHeader {
+                    encode_ms: encode_ms as f32,
+                    ..header
+                };
+                session.deliver(seq, header.encode_with(&payload));
+            }
+            Err(e) => session.frame_failed(ApiError::internal(e.to_string()).body),
+        }
+    });
+}
+
+/// A frame submitted by the render loop.
+struct Submitted {
+    pending: PendingFrame,
+    view: View,
+    gi_pending: bool,
+    camera: lightcast_protocol::Camera,
+    key: RendererKey,
 }
 
 fn cache_key(p: &CacheParams) -> (u32, u32) {

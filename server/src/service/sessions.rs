@@ -99,6 +99,8 @@ pub struct Session {
     pub in_flight: AtomicU32,
     pub connected: AtomicBool,
     seq: std::sync::atomic::AtomicU64,
+    /// Sequence number of the newest frame put into the slot.
+    newest_delivered: std::sync::atomic::AtomicU64,
     closed: watch::Sender<Option<String>>,
 }
 
@@ -133,6 +135,7 @@ impl Session {
             in_flight: AtomicU32::new(0),
             connected: AtomicBool::new(false),
             seq: std::sync::atomic::AtomicU64::new(0),
+            newest_delivered: std::sync::atomic::AtomicU64::new(0),
             closed: watch::channel(None).0,
         })
     }
@@ -235,6 +238,8 @@ impl Session {
             s.still_version = s.version;
         }
         s.rendered_version = s.version;
+        // In flight from now until it is sent, dropped or fails.
+        self.in_flight.fetch_add(1, Ordering::Relaxed);
         Ok(FramePlan {
             resolved: s.resolved.clone(),
             lease_scene: Arc::clone(&s.lease.0),
@@ -280,6 +285,12 @@ impl Session {
         st.last_stages = stages.to_vec();
     }
 
+    /// A planned frame could not be rendered, read back or encoded.
+    pub fn frame_failed(&self, error: ErrorBody) {
+        self.in_flight.fetch_sub(1, Ordering::Relaxed);
+        self.record_error(error);
+    }
+
     pub fn record_error(&self, error: ErrorBody) {
         {
             let mut st = lock(&self.stats);
@@ -289,8 +300,15 @@ impl Session {
         let _ = self.events.send(ServerEvent::RenderError { error });
     }
 
-    /// A frame finished encoding: into the slot, counting the one it replaced as dropped.
-    pub fn deliver(&self, message: Vec<u8>) {
+    /// Frame `seq` finished encoding: into the slot, counting the one it replaced as dropped.
+    /// Frames are encoded in parallel, so one may finish after a newer one; it is dropped too.
+    pub fn deliver(&self, seq: u64, message: Vec<u8>) {
+        if self.newest_delivered.fetch_max(seq, Ordering::AcqRel) > seq {
+            self.in_flight.fetch_sub(1, Ordering::Relaxed);
+            lock(&self.stats).frames_dropped += 1;
+            metrics::counter!(super::metrics::FRAMES_DROPPED).increment(1);
+            return;
+        }
         if self.slot.publish(message) {
             self.in_flight.fetch_sub(1, Ordering::Relaxed);
             lock(&self.stats).frames_dropped += 1;

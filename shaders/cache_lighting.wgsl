@@ -16,7 +16,8 @@ struct CacheLightingParams {
     // This dispatch's VALs: [first_val, end_val).
     first_val: u32,
     end_val: u32,
-    pad0: u32,
+    // Phong exponent k for every cache, overriding the materials'; 0 keeps their own.
+    glossy_exponent: f32,
     pad1: u32,
     pad2: u32,
 }
@@ -58,6 +59,10 @@ fn load_val(index: u32) -> Val {
 }
 
 // Mirrored by `CacheAccum` in server/src/passes/cache_lighting.rs.
+fn cache_exponent(c: LightCache) -> f32 {
+    return select(c.exponent, params.glossy_exponent, params.glossy_exponent > 0.0);
+}
+
 struct Accum {
     // Σ w·Φ_l·G (diffuse) and Σ w·Φ_l·G·cos^k θ_e (glossy): eq. 14/15 without ρ.
     e_d: vec3<f32>,
@@ -96,7 +101,7 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
         return;
     }
     let form_factor = val.area * g;
-    let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), c.exponent);
+    let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), cache_exponent(c));
     (*acc).e_d += val.weight * val.flux * g;
     (*acc).e_g += val.weight * val.flux * g * lobe;
     let a_d = val.weight * (EPS_P * val.area + form_factor);
@@ -189,7 +194,7 @@ fn finish_proxies(@builtin(global_invocation_id) id: vec3<u32>) {
     let to_g = pg.position - c.position;
     let dist2_g = max(dot(to_g, to_g), MIN_DIST2);
     let w_g = normalize(to_g);
-    let lobe_g = pow(max(dot(mirror(c.normal, w_g), v), 0.0), c.exponent);
+    let lobe_g = pow(max(dot(mirror(c.normal, w_g), v), 0.0), cache_exponent(c));
     let flux_g = 4.0 * PI * dist2_g * acc.e_g / max(dot(c.normal, w_g) * lobe_g, MIN_COS_GLOSSY);
 
     lighting[i] = CacheLighting(pd.position, pd.radius, flux_d, 0.0, pg.position, pg.radius, flux_g, 0.0);

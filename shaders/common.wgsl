@@ -6,5 +6,6 @@ const PI: f32 = 3.14159265358979;
 struct CameraUniform {
     view_proj: mat4x4<f32>,
     position: vec3<f32>,
-    pad0: f32,
+    // Phong exponent k for every material, overriding theirs; 0 keeps the materials' own.
+    glossy_exponent: f32,
 }

@@ -32,7 +32,8 @@ fn write_gbuffer(in: SurfaceVaryings, front: bool, id: u32) -> GBufferOut {
     var out: GBufferOut;
     // w = 1 marks covered pixels; the clear value 0 marks background.
     out.position = vec4<f32>(in.world, 1.0);
-    out.normal_exponent = vec4<f32>(n, m.brdf.exponent);
+    let k = select(m.brdf.exponent, camera.glossy_exponent, camera.glossy_exponent > 0.0);
+    out.normal_exponent = vec4<f32>(n, k);
     out.diffuse = vec4<f32>(m.brdf.diffuse, 1.0);
     out.glossy = vec4<f32>(m.brdf.glossy, 1.0);
     out.emissive = vec4<f32>(m.emissive, 1.0);

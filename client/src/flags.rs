@@ -1,24 +1,7 @@
 //! Camera, light and GI flags shared by `render`, `stream` and `loadtest`; the same names as the
 //! offline `lightcast-server render`.
 
-use lightcast_protocol::{Camera, GiMethod, Light, LightKind, RenderParams, View};
-
-/// Three comma-separated finite numbers, e.g. `1.5,2,-3`.
-pub fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
-    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-    let [x, y, z] = parts.as_slice() else {
-        return Err(format!(
-            "expected three comma-separated numbers X,Y,Z, got '{s}'"
-        ));
-    };
-    let parse = |p: &str| {
-        p.parse::<f32>()
-            .ok()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| format!("'{p}' is not a finite number"))
-    };
-    Ok([parse(x)?, parse(y)?, parse(z)?])
-}
+use lightcast_protocol::{parse_vec3, Camera, GiMethod, Light, LightKind, RenderParams, View};
 
 /// What to render. Unset options keep the server's defaults (the scene's camera and light).
 #[derive(Clone, Debug, clap::Args)]
@@ -75,6 +58,9 @@ pub struct RenderFlags {
     /// Do not dim proxy lights hidden behind other caches.
     #[arg(long)]
     pub no_occlusion: bool,
+    /// Phong exponent k for every material; default: each material's own.
+    #[arg(long)]
+    pub glossy_exponent: Option<f32>,
     /// Light-cache distance d_eps (scene units); default: the scene's.
     #[arg(long)]
     pub cache_distance: Option<f32>,
@@ -136,6 +122,7 @@ impl RenderFlags {
                 val_count: self.vals,
                 defensive: self.defensive,
                 occlusion: !self.no_occlusion,
+                glossy_exponent: self.glossy_exponent,
                 cache_distance: self.cache_distance,
                 cache_angle: self.cache_angle,
             },
@@ -153,17 +140,5 @@ impl RenderFlags {
             || self.light_dir.is_some()
             || self.light_color.is_some()
             || self.light_intensity.is_some()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn parses_vectors_and_refuses_garbage() {
-        assert_eq!(parse_vec3("1, -2.5,3"), Ok([1.0, -2.5, 3.0]));
-        assert!(parse_vec3("1,2").is_err());
-        assert!(parse_vec3("1,2,inf").is_err());
     }
 }

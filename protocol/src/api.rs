@@ -97,6 +97,9 @@ pub struct GiParams {
     pub defensive: f32,
     /// Dim proxy lights hidden behind other caches (the paper's double projection).
     pub occlusion: bool,
+    /// Phong exponent k (eq. 3–4) for every material, in direct and indirect shading alike;
+    /// `null` keeps the materials' own. At most 10000.
+    pub glossy_exponent: Option<f32>,
     /// Light caches: largest distance d_eps between a surface point and its cache, in scene
     /// units; `null` derives it from the scene's surface area. A value other than the scene's
     /// default starts a precomputation of its own.
@@ -115,6 +118,7 @@ impl Default for GiParams {
             val_count: 8192,
             defensive: 0.3,
             occlusion: true,
+            glossy_exponent: None,
             cache_distance: None,
             cache_angle: None,
         }

@@ -15,6 +15,24 @@ pub use api::*;
 pub use frame::{FrameHeader, FrameHeaderError, STAGE_NAMES};
 pub use stream::{ClientMessage, ServerEvent};
 
+/// Parses three comma-separated finite numbers, e.g. `1.5,2,-3` (command-line vectors of the
+/// server and the client).
+pub fn parse_vec3(s: &str) -> Result<[f32; 3], String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [x, y, z] = parts.as_slice() else {
+        return Err(format!(
+            "expected three comma-separated numbers X,Y,Z, got '{s}'"
+        ));
+    };
+    let parse = |p: &str| {
+        p.parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| format!("'{p}' is not a finite number"))
+    };
+    Ok([parse(x)?, parse(y)?, parse(z)?])
+}
+
 /// Version of the HTTP/WebSocket API; the paths carry it as `/v{API_VERSION}/…`.
 pub const API_VERSION: u32 = 1;
 
@@ -79,6 +97,13 @@ mod tests {
         assert!(json.contains("\"kind\":\"spot\""), "{json}");
         let back: Light = serde_json::from_str(&json).expect("parse");
         assert_eq!(back, light);
+    }
+
+    #[test]
+    fn parses_vectors_and_refuses_garbage() {
+        assert_eq!(parse_vec3("1, -2.5,3"), Ok([1.0, -2.5, 3.0]));
+        assert!(parse_vec3("1,2").is_err());
+        assert!(parse_vec3("1,2,inf").is_err());
     }
 
     #[test]

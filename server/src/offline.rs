@@ -29,19 +29,7 @@ pub struct Vec3Arg(pub [f32; 3]);
 impl FromStr for Vec3Arg {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        let parts: Vec<&str> = s.split(',').map(str::trim).collect();
-        let [x, y, z] = parts.as_slice() else {
-            return Err(format!(
-                "expected three comma-separated numbers X,Y,Z, got '{s}'"
-            ));
-        };
-        let parse = |p: &str| {
-            p.parse::<f32>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| format!("'{p}' is not a finite number"))
-        };
-        Ok(Self([parse(x)?, parse(y)?, parse(z)?]))
+        lightcast_protocol::parse_vec3(s).map(Self)
     }
 }
 
@@ -209,6 +197,10 @@ pub struct RenderArgs {
     /// Turn off the occlusion of proxy lights by other caches (double projection).
     #[arg(long)]
     pub no_occlusion: bool,
+    /// Phong exponent k for every material (direct and indirect shading); default: each
+    /// material's own.
+    #[arg(long)]
+    pub glossy_exponent: Option<f32>,
     #[command(flatten)]
     pub caches: CacheArgs,
     /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
@@ -346,6 +338,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
             val_count: args.vals,
             occlusion: !args.no_occlusion,
             defensive: args.defensive,
+            glossy_exponent: args.glossy_exponent,
             ..GiSettings::default()
         },
     }

@@ -46,6 +46,8 @@ pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
 pub const MAX_VIEW_SAMPLES: u32 = 4096;
 /// Most VALs drawn per frame.
 pub const MAX_VAL_COUNT: u32 = 1 << 20;
+/// Largest Phong exponent accepted (a mirror-like lobe; beyond it the lobe is a single texel).
+pub const MAX_GLOSSY_EXPONENT: f32 = 10_000.0;
 /// Most output pixels: the frame's targets take about 70 bytes per pixel (4.5 GiB at this size).
 pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
 
@@ -215,6 +217,14 @@ impl RenderSettings {
                 return Err(invalid(
                     "defensive",
                     format!("{} is outside [0, 1]", g.defensive),
+                ));
+            }
+        }
+        if let Some(k) = self.gi.glossy_exponent {
+            if !(k.is_finite() && k > 0.0 && k <= MAX_GLOSSY_EXPONENT) {
+                return Err(invalid(
+                    "glossy_exponent",
+                    format!("{k} is outside (0, {MAX_GLOSSY_EXPONENT}]"),
                 ));
             }
         }
@@ -577,7 +587,12 @@ impl Renderer {
         };
 
         let bounds = &self.scene.bounds;
-        let camera = CameraUniform::new(&settings.camera, width as f32 / height as f32, bounds);
+        let camera = CameraUniform::new(
+            &settings.camera,
+            width as f32 / height as f32,
+            bounds,
+            settings.gi.glossy_exponent,
+        );
         let light = LightUniform::new(&settings.light, bounds, settings.shadow_map_size);
         let queue = &self.ctx.queue;
         queue.write_buffer(&self.camera_buffer, 0, bytemuck::bytes_of(&camera));
@@ -611,6 +626,7 @@ impl Renderer {
                 caches.count,
                 self.sampling.rsm(),
                 source,
+                gi.glossy_exponent,
             );
             occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
             self.indirect_pass

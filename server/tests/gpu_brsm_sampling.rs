@@ -28,6 +28,7 @@ fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiSettings {
         defensive: 0.0,
         uniform_importance: false,
         occlusion: false,
+        glossy_exponent: None,
     }
 }
 

@@ -29,6 +29,7 @@ fn gi(method: GiMethod, rsm_size: u32, val_count: u32) -> GiSettings {
         defensive: lightcast_server::gi::DEFAULT_DEFENSIVE,
         uniform_importance: false,
         occlusion: false,
+        glossy_exponent: None,
     }
 }
 
@@ -72,11 +73,16 @@ fn run_with(scene: Scene, d_eps: f32, gi: GiSettings, triangle_ids: bool) -> Run
     }
 }
 
-fn ref_cache(c: &lightcast_server::gi::caches::LightCache) -> RefCache {
+/// The reference cache; `glossy_exponent` replaces the material's exponent as the frame's
+/// override does.
+fn ref_cache(
+    c: &lightcast_server::gi::caches::LightCache,
+    glossy_exponent: Option<f32>,
+) -> RefCache {
     RefCache {
         position: Vec3::from(c.position),
         normal: Vec3::from(c.normal),
-        exponent: c.exponent,
+        exponent: glossy_exponent.unwrap_or(c.exponent),
     }
 }
 
@@ -97,6 +103,11 @@ fn proxies(l: &CacheLighting) -> ProxyLights {
 
 /// Relative differences of GPU proxies against the CPU reference, one per cache and quantity.
 fn proxy_errors(run: &Run, vals: &[RefVal]) -> Vec<f32> {
+    proxy_errors_with(run, vals, run.settings.gi.glossy_exponent)
+}
+
+/// As [`proxy_errors`], the reference using `glossy_exponent` in place of the materials'.
+fn proxy_errors_with(run: &Run, vals: &[RefVal], glossy_exponent: Option<f32>) -> Vec<f32> {
     let lighting = run
         .renderer
         .read_cache_lighting()
@@ -112,7 +123,7 @@ fn proxy_errors(run: &Run, vals: &[RefVal]) -> Vec<f32> {
     let scale = run.scene.bounds.radius();
     let mut errors = Vec::new();
     for (c, gpu) in run.caches.caches.iter().zip(&lighting) {
-        let cpu = light_cache(&ref_cache(c), vals, camera);
+        let cpu = light_cache(&ref_cache(c, glossy_exponent), vals, camera);
         let gpu = proxies(gpu);
         for (g, r) in [(gpu.diffuse, cpu.diffuse), (gpu.glossy, cpu.glossy)] {
             errors.push(g.position.distance(r.position) / scale);
@@ -145,6 +156,29 @@ fn brsm_cache_lighting_matches_the_cpu_reference() {
         .expect("sampled");
     let vals = ref_vals(&sampling.vals);
     assert_small(proxy_errors(&run, &vals), 1e-4, 1e-2);
+}
+
+#[test]
+fn a_glossy_exponent_override_matches_the_cpu_reference_with_that_exponent() {
+    let run = run(GiSettings {
+        glossy_exponent: Some(80.0),
+        ..gi(GiMethod::Brsm, 32, 2048)
+    });
+    let sampling = run
+        .renderer
+        .read_sampling()
+        .expect("readback")
+        .expect("sampled");
+    let vals = ref_vals(&sampling.vals);
+    assert_small(proxy_errors(&run, &vals), 1e-4, 1e-2);
+    // The reference with the materials' own exponents does not match: the override took effect.
+    let mut own = proxy_errors_with(&run, &vals, None);
+    own.sort_by(f32::total_cmp);
+    let worst = own[own.len() - 1];
+    assert!(
+        worst > 0.05,
+        "largest difference to the materials' exponents only {worst}"
+    );
 }
 
 /// The same frame without and with occlusion: proxy lights before, after, and every cache
@@ -322,7 +356,7 @@ fn check_interpolation(triangle_ids: bool) {
                     .filter(|&&ci| ci != u32::MAX)
                     .map(|&ci| {
                         (
-                            ref_cache(&run.caches.caches[ci as usize]),
+                            ref_cache(&run.caches.caches[ci as usize], None),
                             proxies(&lighting[ci as usize]),
                         )
                     })
@@ -471,7 +505,7 @@ fn chunked_dispatches_give_the_unchunked_results() {
     let scale = scene.bounds.radius();
     let mut errors = Vec::new();
     for i in (0..caches.caches.len()).step_by(50) {
-        let cpu = light_cache(&ref_cache(&caches.caches[i]), &vals, camera);
+        let cpu = light_cache(&ref_cache(&caches.caches[i], None), &vals, camera);
         let gpu = proxies(&lighting[i]);
         errors.push(gpu.diffuse.position.distance(cpu.diffuse.position) / scale);
         let flux_scale = cpu.diffuse.flux.max_element().max(1e-9);

@@ -389,6 +389,14 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         case(
             "POST",
             "/v1/sessions",
+            r#"{"render":{"gi":{"glossy_exponent":-4}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.glossy_exponent"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
             r#"{"render":{"camera":{"position":[1e39,0,0],"target":[0,0,0],"fov_y_degrees":45}}}"#,
             400,
             "invalid_field",

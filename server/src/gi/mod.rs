@@ -40,6 +40,9 @@ pub struct GiSettings {
     pub uniform_importance: bool,
     /// Dim proxy lights hidden behind other caches (the paper's double projection).
     pub occlusion: bool,
+    /// Phong exponent k (eq. 3–4) for every material, in direct and indirect shading alike;
+    /// `None` keeps the materials' own.
+    pub glossy_exponent: Option<f32>,
 }
 
 impl Default for GiSettings {
@@ -54,6 +57,7 @@ impl Default for GiSettings {
             defensive: DEFAULT_DEFENSIVE,
             uniform_importance: false,
             occlusion: true,
+            glossy_exponent: None,
         }
     }
 }

@@ -30,7 +30,8 @@ pub struct CacheLightingParams {
     pub rsm_width: u32,
     pub first_val: u32,
     pub end_val: u32,
-    pub pad0: u32,
+    /// Phong exponent k for every cache, overriding the materials'; 0 keeps their own.
+    pub glossy_exponent: f32,
     pub pad1: u32,
     pub pad2: u32,
 }
@@ -147,6 +148,7 @@ impl CacheLightingPass {
         cache_count: u32,
         rsm: &Rsm,
         source: ValSource,
+        glossy_exponent: Option<f32>,
     ) -> u32 {
         let (val_count, every_texel) = match source {
             ValSource::Selected { count } => (count, 0),
@@ -163,7 +165,7 @@ impl CacheLightingPass {
                 rsm_width: rsm.width(),
                 first_val: range.start,
                 end_val: range.end,
-                pad0: 0,
+                glossy_exponent: glossy_exponent.unwrap_or(0.0),
                 pad1: 0,
                 pad2: 0,
             })
@@ -233,7 +235,10 @@ mod tests {
                 ("rsm_width", offset_of!(CacheLightingParams, rsm_width)),
                 ("first_val", offset_of!(CacheLightingParams, first_val)),
                 ("end_val", offset_of!(CacheLightingParams, end_val)),
-                ("pad0", offset_of!(CacheLightingParams, pad0)),
+                (
+                    "glossy_exponent",
+                    offset_of!(CacheLightingParams, glossy_exponent),
+                ),
                 ("pad1", offset_of!(CacheLightingParams, pad1)),
                 ("pad2", offset_of!(CacheLightingParams, pad2)),
             ],

@@ -12,7 +12,8 @@ use lightcast_protocol::{Camera, Light, LightKind};
 pub struct CameraUniform {
     pub view_proj: [[f32; 4]; 4],
     pub position: [f32; 3],
-    pub pad0: f32,
+    /// Phong exponent k for every material, overriding theirs; 0 keeps the materials' own.
+    pub glossy_exponent: f32,
 }
 
 /// Mirrors `LightUniform` in `shaders/lights.wgsl`.
@@ -50,11 +51,12 @@ pub fn camera_view_proj(camera: &Camera, aspect: f32, bounds: &Aabb) -> Mat4 {
 }
 
 impl CameraUniform {
-    pub fn new(camera: &Camera, aspect: f32, bounds: &Aabb) -> Self {
+    /// `glossy_exponent` overrides every material's Phong exponent (`None`: their own).
+    pub fn new(camera: &Camera, aspect: f32, bounds: &Aabb, glossy_exponent: Option<f32>) -> Self {
         Self {
             view_proj: camera_view_proj(camera, aspect, bounds).to_cols_array_2d(),
             position: camera.position,
-            pad0: 0.0,
+            glossy_exponent: glossy_exponent.unwrap_or(0.0),
         }
     }
 }
@@ -214,7 +216,10 @@ mod tests {
             &[
                 ("view_proj", offset_of!(CameraUniform, view_proj)),
                 ("position", offset_of!(CameraUniform, position)),
-                ("pad0", offset_of!(CameraUniform, pad0)),
+                (
+                    "glossy_exponent",
+                    offset_of!(CameraUniform, glossy_exponent),
+                ),
             ],
         );
     }

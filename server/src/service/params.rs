@@ -21,7 +21,7 @@ pub struct Resolved {
 /// The renderer's own field names, as paths of the request's `render` object.
 fn request_field(renderer_field: &str) -> String {
     match renderer_field {
-        "rsm_size" | "view_samples" | "val_count" | "jitter" | "defensive" => {
+        "rsm_size" | "view_samples" | "val_count" | "jitter" | "defensive" | "glossy_exponent" => {
             format!("gi.{renderer_field}")
         }
         "light.cone" => "light.outer_cone".to_string(),
@@ -97,6 +97,7 @@ pub fn resolve(
             val_count: g.val_count,
             defensive: g.defensive,
             occlusion: g.occlusion,
+            glossy_exponent: g.glossy_exponent,
             ..GiSettings::default()
         },
     };

@@ -9,7 +9,6 @@ use super::scenes::{CachesNow, SceneEntry, SceneRegistry};
 use super::sessions::{unix_us, FramePlan, Session, SessionRegistry};
 use crate::debug_views::{self, Image};
 use crate::gi::caches::{CacheParams, CacheSet};
-use crate::gi::GiSettings;
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::renderer::{Frame, PendingFrame, Renderer};
@@ -116,9 +115,10 @@ pub fn spawn(
     encoder: Arc<EncodePool>,
 ) -> (mpsc::Sender<Command>, std::thread::JoinHandle<()>) {
     let (tx, rx) = mpsc::channel();
-    // Two frames may wait for the GPU while the loop encodes a third; beyond that the loop
-    // waits here (and each renderer's readback ring bounds it too).
-    let (readback, readback_rx) = mpsc::sync_channel(2);
+    // Double buffering: one frame is read back while the loop encodes and submits the next,
+    // which it hands over once the readback thread is free. Deeper queues only made the
+    // frames wait longer on lavapipe (where the "GPU" shares the CPU).
+    let (readback, readback_rx) = mpsc::sync_channel(0);
     let readback_encoder = Arc::clone(&encoder);
     let readback_thread = std::thread::Builder::new()
         .name("readback".into())
@@ -242,7 +242,7 @@ impl Loop {
             },
         };
         if gi_pending {
-            settings.gi = GiSettings::off();
+            settings.gi.method = lightcast_protocol::GiMethod::None;
         }
         let view = if gi_pending {
             View::Final

@@ -48,20 +48,20 @@ pub async fn read_body(request: Request, state: &Arc<AppState>) -> Result<Bytes,
     crate::service::error::body(Bytes::from_request(request, state).await)
 }
 
-pub fn is_multipart(request: &Request) -> bool {
+fn content_type_is(request: &Request, mime: &str) -> bool {
     request
         .headers()
         .get(header::CONTENT_TYPE)
         .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.starts_with("multipart/form-data"))
+        .is_some_and(|v| v.starts_with(mime))
+}
+
+pub fn is_multipart(request: &Request) -> bool {
+    content_type_is(request, "multipart/form-data")
 }
 
 fn is_json(request: &Request) -> bool {
-    request
-        .headers()
-        .get(header::CONTENT_TYPE)
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.starts_with("application/json"))
+    content_type_is(request, "application/json")
 }
 
 /// A file name safe to create in a fresh directory: no separators, no parent references, no

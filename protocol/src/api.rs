@@ -1,7 +1,9 @@
 //! Bodies of the HTTP API (`/v1/scenes`, `/v1/sessions`, `/v1/render`) and its error format.
 //!
-//! Request bodies reject unknown fields, so a misspelt parameter is an error that names it
-//! rather than a silently ignored value. Every field has a default, so `{}` is a valid request.
+//! Every field has a default, so `{}` is a valid request. The types accept fields they do not
+//! know, so a client keeps reading the answers of a newer server; the server itself refuses
+//! unknown fields in requests, so a misspelt parameter is an error that names it rather than a
+//! silently ignored value.
 
 use crate::{Camera, Light};
 use serde::{Deserialize, Serialize};
@@ -83,7 +85,7 @@ impl View {
 
 /// Parameters of the GI methods. Defaults are the paper's evaluation settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct GiParams {
     pub method: GiMethod,
     /// RSM side per light face in texels (16 … the server's limit).
@@ -127,7 +129,7 @@ impl Default for GiParams {
 
 /// What to render: scene, size, camera, light and GI. Shared by sessions and one-shot renders.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct RenderParams {
     /// Scene id (see `/v1/scenes`).
     pub scene: String,
@@ -175,7 +177,7 @@ pub enum Codec {
 /// `moving_quality`; once input has rested for `still_after_ms` one still follows in
 /// `still_codec` at `quality` (as remote-visualisation tools do).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct Encoding {
     pub codec: Codec,
     /// JPEG quality 1–100 at rest.
@@ -214,7 +216,7 @@ pub enum StreamMode {
 /// optional); `PATCH /v1/sessions/{id}` and the WebSocket `update` message take a JSON merge
 /// patch of it (RFC 7396: fields present replace, `null` restores the default).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct SessionParams {
     pub render: RenderParams,
     pub encoding: Encoding,
@@ -322,7 +324,6 @@ pub struct CacheVariant {
 
 /// JSON body of `POST /v1/scenes` that builds a procedural scene instead of uploading one.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields)]
 pub struct ProceduralScene {
     /// `cornell`, or `street?blocks=N&detail=D&seed=S`.
     pub procedural: String,
@@ -390,7 +391,7 @@ impl ImageFormat {
 
 /// Body of `POST /v1/render`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(deny_unknown_fields, default)]
+#[serde(default)]
 pub struct RenderRequest {
     pub render: RenderParams,
     pub format: ImageFormat,

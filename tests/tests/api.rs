@@ -640,12 +640,20 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
     stream
         .send(json!({"type": "update", "patch": {"render": {"gi": {"val_count": -1}}}}))
         .await;
+    stream
+        .send(json!({"type": "camera", "camera": {"position": [0, 0, 1], "target": [0, 0, 0], "fov_y_degrees": 45, "zoom": 2}}))
+        .await;
+    stream
+        .send(json!({"type": "ping", "nonce": 1, "extra": true}))
+        .await;
     let expected = [
         ("binary_not_accepted", None),
         ("malformed_json", None),
         ("invalid_field", Some("type")),
         ("invalid_field", Some("render.camera.target")),
         ("invalid_field", Some("render.gi.val_count")),
+        ("invalid_field", Some("render.camera.zoom")),
+        ("invalid_field", Some("extra")),
     ];
     for (kind, field) in expected {
         let error = loop {

@@ -89,22 +89,56 @@ impl IntoResponse for ApiError {
 }
 
 /// Parses JSON into `T`, naming the field at fault (`render.gi.rsm_size`) in the error.
+/// Unknown fields are refused (the protocol types themselves tolerate them, for clients).
 pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let mut de = serde_json::Deserializer::from_slice(bytes);
-    let value = serde_path_to_error::deserialize(&mut de).map_err(json_error)?;
+    let value = strict(&mut de)?;
     de.end()
         .map_err(|e| ApiError::bad_request("malformed_json", e.to_string()))?;
     Ok(value)
 }
 
-/// Converts an already-parsed JSON value into `T`, naming the field at fault.
+/// Converts an already-parsed JSON value into `T`, as strictly as [`parse_json`].
 pub fn from_value<T: serde::de::DeserializeOwned>(value: serde_json::Value) -> Result<T, ApiError> {
-    serde_path_to_error::deserialize(value).map_err(json_error)
+    strict(value)
+}
+
+fn strict<'de, D, T>(de: D) -> Result<T, ApiError>
+where
+    D: serde::Deserializer<'de>,
+    D::Error: std::fmt::Display,
+    T: serde::Deserialize<'de>,
+{
+    let mut unknown: Option<String> = None;
+    let mut track = serde_path_to_error::Track::new();
+    let parsed = serde_ignored::deserialize(
+        serde_path_to_error::Deserializer::new(de, &mut track),
+        |path| {
+            unknown.get_or_insert_with(|| {
+                // serde_ignored marks `Option` levels with `?`; the request has no such level.
+                path.to_string().replace(".?", "").replace("?.", "")
+            });
+        },
+    );
+    match (parsed, unknown) {
+        (Err(e), _) => Err(json_error(serde_path_to_error::Error::new(track.path(), e))),
+        (Ok(_), Some(field)) => Err(ApiError::field(field, "unknown field")),
+        (Ok(v), None) => Ok(v),
+    }
 }
 
 fn json_error<E: std::fmt::Display>(e: serde_path_to_error::Error<E>) -> ApiError {
-    let path = e.path().to_string();
+    let mut path = e.path().to_string();
     let inner = e.inner().to_string();
+    // Tagged enums report an unknown field without a path; the message names it.
+    if path == "." {
+        if let Some(name) = inner
+            .strip_prefix("unknown field `")
+            .and_then(|rest| rest.split('`').next())
+        {
+            path = name.to_string();
+        }
+    }
     // "." is the document itself; "?" a place the parser never reached (a syntax error).
     if path == "." || path.contains('?') {
         ApiError::bad_request("malformed_json", inner)

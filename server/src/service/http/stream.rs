@@ -3,7 +3,7 @@
 
 use super::sessions::apply_patch;
 use super::{AppState, Caller};
-use crate::service::error::{parse_json, ApiError};
+use crate::service::error::{from_value, parse_json, ApiError};
 use crate::service::sessions::{unix_us, Session};
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
@@ -204,21 +204,27 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
 
 /// Handles one control message; returns the event to answer with, if any.
 fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEvent> {
-    let message: ClientMessage = match parse_json(text) {
+    let raw: serde_json::Value = match parse_json(text) {
+        Ok(v) => v,
+        Err(e) => return Some(error_event(e)),
+    };
+    let message: ClientMessage = match from_value(raw.clone()) {
         Ok(m) => m,
         Err(e) => return Some(error_event(e)),
     };
+    // Camera and light go through the session's strict parameter path as they were sent, so
+    // a misspelt field inside them is named (`render.camera.zoom`) rather than dropped.
     let result = match message {
-        ClientMessage::Camera { camera, input_id } => apply_patch(
+        ClientMessage::Camera { input_id, .. } => apply_patch(
             state,
             session,
-            &json!({"render": {"camera": camera}}),
+            &json!({"render": {"camera": raw["camera"]}}),
             input_id,
         ),
-        ClientMessage::Light { light, input_id } => apply_patch(
+        ClientMessage::Light { input_id, .. } => apply_patch(
             state,
             session,
-            &json!({"render": {"light": light}}),
+            &json!({"render": {"light": raw["light"]}}),
             input_id,
         ),
         ClientMessage::Update { patch, input_id } => apply_patch(state, session, &patch, input_id),

@@ -2,8 +2,7 @@
 //! RSM flux and disk areas (eq. 1), view samples, importance (eq. 10–11), cumulative sums and
 //! VAL selection with its probabilities (eq. 13–15).
 
-mod support;
-
+use crate::support::*;
 use glam::Vec3;
 use lightcast_protocol::{Light, LightKind};
 use lightcast_server::gi::caches::{precompute, CacheParams};
@@ -13,7 +12,6 @@ use lightcast_server::passes::frame_uniforms::light_faces;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::{procedural, Scene};
-use support::*;
 
 const W: u32 = 64;
 const H: u32 = 48;

@@ -1,15 +1,13 @@
 //! Whole-scene renders on the GPU (lavapipe in CI) at small sizes, checked with image metrics
 //! and a CPU ray caster rather than byte comparisons.
 
-mod support;
-
+use crate::support::*;
 use glam::Vec3;
 use lightcast_protocol::{Camera, LightKind};
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::renderer::{RenderError, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::{load_gltf, procedural, Scene, Texture};
-use support::*;
 
 fn default_settings(scene: &Scene, w: u32, h: u32) -> lightcast_server::renderer::RenderSettings {
     let mut s = settings(w, h, default_camera(scene), default_light(scene));

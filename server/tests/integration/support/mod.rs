@@ -1,8 +1,6 @@
 //! Helpers shared by the GPU tests: tiny scenes, a CPU ray caster for planes and CPU ports of
 //! the shading equations in `shaders/` (the references the GPU output is compared against).
 
-#![allow(dead_code)] // each test binary uses a different subset
-
 use glam::{Vec3, Vec4Swizzles};
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gpu::{BackendChoice, GpuContext};
@@ -186,18 +184,6 @@ pub fn rgba_at(frame: &Frame, x: u32, y: u32) -> [u8; 4] {
 
 pub fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
-}
-
-/// Mean of a rectangle of the 8-bit image, per channel, in 0..255.
-pub fn mean_rgb(frame: &Frame, x0: u32, y0: u32, x1: u32, y1: u32) -> Vec3 {
-    let mut sum = Vec3::ZERO;
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let [r, g, b, _] = rgba_at(frame, x, y);
-            sum += Vec3::new(r as f32, g as f32, b as f32);
-        }
-    }
-    sum / ((x1 - x0) * (y1 - y0)) as f32
 }
 
 /// Re-exported so tests can state which material split they expect.

@@ -1,11 +1,9 @@
 //! Direct lighting on the GPU (lavapipe in CI) against CPU ports of the shading equations,
 //! at small sizes. Radiance is compared in the HDR buffer, before exposure and tone mapping.
 
-mod support;
-
+use crate::support::*;
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
-use support::*;
 
 const W: u32 = 64;
 const H: u32 = 48;

@@ -1,8 +1,7 @@
 //! Cache lighting (eq. 3–7, 13–15) and per-pixel interpolation (eq. 8–9) on the GPU (lavapipe
 //! in CI) against the CPU reference in `gi::reference`, plus the BRSM-equals-LightSkin check.
 
-mod support;
-
+use crate::support::*;
 use glam::Vec3;
 use lightcast_server::gi::caches::{precompute, CacheParams, CacheSet};
 use lightcast_server::gi::reference::{
@@ -14,7 +13,6 @@ use lightcast_server::passes::cache_lighting::CacheLighting;
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::{load_gltf, procedural, Scene};
-use support::*;
 
 const W: u32 = 64;
 const H: u32 = 48;

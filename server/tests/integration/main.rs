@@ -1,0 +1,12 @@
+//! The server's integration tests, in one test binary (one link of the GPU stack instead of
+//! one per file): GPU passes against CPU references, light caches, and the binary run as a
+//! user would.
+
+mod caches;
+mod gpu_brsm_sampling;
+mod gpu_cache_lighting;
+mod gpu_direct_light;
+mod gpu_scenes;
+mod render_cli;
+mod serve_cli;
+mod support;

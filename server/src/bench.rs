@@ -49,6 +49,10 @@ pub struct BenchArgs {
     /// Weight α of the uniform part of BRSM's selection pdf (0 = the paper's plain BRSM).
     #[arg(long, default_value_t = crate::gi::DEFAULT_DEFENSIVE)]
     pub defensive: f32,
+    /// Phong exponent k for every material, for LightSkin and BRSM alike (default: each
+    /// material's own).
+    #[arg(long)]
+    pub glossy_exponent: Option<f32>,
     /// Timed frames per configuration.
     #[arg(long, default_value_t = 30)]
     pub frames: u32,
@@ -115,6 +119,8 @@ pub struct BenchReport {
     pub warmup: u32,
     /// α of BRSM's defensive selection mixture.
     pub defensive: f32,
+    /// The Phong exponent every material used, if overridden.
+    pub glossy_exponent: Option<f32>,
     pub rows: Vec<BenchRow>,
 }
 
@@ -289,6 +295,7 @@ pub fn run(
         let lightskin = GiSettings {
             method: GiMethod::Lightskin,
             rsm_size,
+            glossy_exponent: args.glossy_exponent,
             ..GiSettings::default()
         };
         let configs = std::iter::once(lightskin).chain(brsm_configs.iter().map(
@@ -298,6 +305,7 @@ pub fn run(
                 val_count,
                 view_samples,
                 defensive: args.defensive,
+                glossy_exponent: args.glossy_exponent,
                 ..GiSettings::default()
             },
         ));
@@ -357,6 +365,7 @@ pub fn run(
         frames: args.frames,
         warmup: args.warmup,
         defensive: args.defensive,
+        glossy_exponent: args.glossy_exponent,
         rows,
     })
 }
@@ -377,6 +386,12 @@ impl BenchReport {
             self.warmup,
             self.defensive
         );
+        if let Some(k) = self.glossy_exponent {
+            s.insert_str(
+                s.len() - 2,
+                &format!(" Every material's Phong exponent set to {k}."),
+            );
+        }
         s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD | MAD / mean |\n";
         s += "|---|---|---|---|---|---|---|---|---|---|\n";
         for r in &self.rows {

@@ -204,6 +204,7 @@ mod tests {
             frames: 1,
             warmup: 0,
             defensive: 0.1,
+            glossy_exponent: None,
             rows,
         };
         // Two configurations of BRSM plus LightSkin: three lines in the fps plot.

@@ -45,20 +45,29 @@ pub struct GiSettings {
     pub glossy_exponent: Option<f32>,
 }
 
-impl Default for GiSettings {
-    /// The paper's evaluation settings: 512 view samples and 8,192 VALs; a 1024² RSM.
-    fn default() -> Self {
+impl From<&lightcast_protocol::GiParams> for GiSettings {
+    /// A request's GI parameters (the light-cache ones are the scene's business, not the
+    /// frame's).
+    fn from(p: &lightcast_protocol::GiParams) -> Self {
         Self {
-            method: GiMethod::Brsm,
-            rsm_size: 1024,
-            view_samples: 512,
-            val_count: 8192,
+            method: p.method,
+            rsm_size: p.rsm_size,
+            view_samples: p.view_samples,
+            val_count: p.val_count,
             jitter: 0.5,
-            defensive: DEFAULT_DEFENSIVE,
+            defensive: p.defensive,
             uniform_importance: false,
-            occlusion: true,
-            glossy_exponent: None,
+            occlusion: p.occlusion,
+            glossy_exponent: p.glossy_exponent,
         }
+    }
+}
+
+impl Default for GiSettings {
+    /// The protocol's defaults, which are the paper's evaluation settings: 512 view samples
+    /// and 8,192 VALs; a 1024² RSM.
+    fn default() -> Self {
+        (&lightcast_protocol::GiParams::default()).into()
     }
 }
 
@@ -69,5 +78,16 @@ impl GiSettings {
             method: GiMethod::None,
             ..Self::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn the_protocol_default_alpha_is_the_measured_one() {
+        assert_eq!(
+            super::GiSettings::default().defensive,
+            super::DEFAULT_DEFENSIVE
+        );
     }
 }

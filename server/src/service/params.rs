@@ -90,16 +90,7 @@ pub fn resolve(
         exposure,
         shadow_map_size: params.shadow_map_size,
         capture_hdr: params.view == View::Indirect,
-        gi: GiSettings {
-            method: g.method,
-            rsm_size: g.rsm_size,
-            view_samples: g.view_samples,
-            val_count: g.val_count,
-            defensive: g.defensive,
-            occlusion: g.occlusion,
-            glossy_exponent: g.glossy_exponent,
-            ..GiSettings::default()
-        },
+        gi: GiSettings::from(g),
     };
     settings
         .validate_for(max_texture)

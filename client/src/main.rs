@@ -199,11 +199,14 @@ async fn scenes(client: &Client, cmd: ScenesCommand, json: bool) -> anyhow::Resu
                 return print_json(&info);
             }
             println!(
-                "uploaded {} as {} ({} triangles); light caches: {:?}",
+                "uploaded {} as {} ({} triangles); light caches: {}",
                 file.display(),
                 info.id,
                 info.triangles,
-                info.caches.first().map(|c| c.state)
+                info.caches
+                    .first()
+                    .map_or("none".to_string(), |c| format!("{:?}", c.state)
+                        .to_lowercase())
             );
         }
         ScenesCommand::Show { id } => {

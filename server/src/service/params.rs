@@ -29,11 +29,12 @@ fn request_field(renderer_field: &str) -> String {
     }
 }
 
-fn at_most(field: &str, value: u32, max: u32) -> Result<(), ApiError> {
-    if value > max {
+/// `value` within `min..=max`, the error naming this server's range.
+fn within(field: &str, value: u32, min: u32, max: u32) -> Result<(), ApiError> {
+    if !(min..=max).contains(&value) {
         return Err(ApiError::field(
             field,
-            format!("{value} exceeds this server's limit of {max}"),
+            format!("{value} is outside this server's range {min}..={max}"),
         ));
     }
     Ok(())
@@ -47,18 +48,24 @@ pub fn resolve(
     limits: &Limits,
     max_texture: u32,
 ) -> Result<Resolved, ApiError> {
-    at_most("width", params.width, limits.max_width)?;
-    at_most("height", params.height, limits.max_height)?;
-    at_most(
+    within("width", params.width, 1, limits.max_width)?;
+    within("height", params.height, 1, limits.max_height)?;
+    within(
         "shadow_map_size",
         params.shadow_map_size,
+        16,
         limits.max_shadow_map_size,
     )?;
     let g = &params.gi;
     if g.method != GiMethod::None {
-        at_most("gi.rsm_size", g.rsm_size, limits.max_rsm_size)?;
-        at_most("gi.val_count", g.val_count, limits.max_val_count)?;
-        at_most("gi.view_samples", g.view_samples, limits.max_view_samples)?;
+        within("gi.rsm_size", g.rsm_size, 16, limits.max_rsm_size)?;
+        within("gi.val_count", g.val_count, 1, limits.max_val_count)?;
+        within(
+            "gi.view_samples",
+            g.view_samples,
+            1,
+            limits.max_view_samples,
+        )?;
     }
     let exposure = match params.exposure {
         None => Exposure::Auto,

@@ -444,6 +444,9 @@ pub struct Limits {
     /// WebSocket control messages per second per session.
     pub max_messages_per_second: u32,
     pub request_timeout_ms: u64,
+    /// A session with no stream attached for this long ends (0: never).
+    #[serde(default)]
+    pub session_idle_secs: u64,
 }
 
 /// `GET /v1/server`: who is serving and under which limits.
@@ -454,4 +457,7 @@ pub struct ServerInfo {
     pub timing_source: String,
     pub auth: bool,
     pub limits: Limits,
+    /// Names of the pipeline stages; a frame header's per-stage timings index this list.
+    #[serde(default)]
+    pub stages: Vec<String>,
 }

@@ -82,6 +82,10 @@ pub struct LimitArgs {
     /// Time limit of an HTTP request in milliseconds (WebSockets are not limited).
     #[arg(long, env = "LIGHTCAST_REQUEST_TIMEOUT_MS", default_value_t = 60_000)]
     pub request_timeout_ms: u64,
+    /// Seconds a session may go without a stream attached before it ends, so sessions of
+    /// clients that vanished do not pile up (0: never).
+    #[arg(long, env = "LIGHTCAST_SESSION_IDLE_SECS", default_value_t = 300)]
+    pub session_idle_secs: u64,
 }
 
 /// Why the options cannot be used.
@@ -156,6 +160,7 @@ impl LimitArgs {
             100,
             3_600_000,
         )?;
+        within("session-idle-secs", self.session_idle_secs, 0, 7 * 86_400)?;
         Ok(Limits {
             max_width: self.max_width,
             max_height: self.max_height,
@@ -171,6 +176,7 @@ impl LimitArgs {
             max_message_bytes: self.max_message_bytes,
             max_messages_per_second: self.max_messages_per_second,
             request_timeout_ms: self.request_timeout_ms,
+            session_idle_secs: self.session_idle_secs,
         })
     }
 }

@@ -24,7 +24,7 @@ pub use config::ServeArgs;
 use lightcast_protocol::DEFAULT_SCENE_ID;
 use std::net::SocketAddr;
 use std::sync::{mpsc, Arc};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Why the service could not start.
 #[derive(Debug, thiserror::Error)]
@@ -138,6 +138,7 @@ impl Service {
             error,
         })?;
         let (shutdown, shutdown_rx) = tokio::sync::watch::channel(false);
+        let limits_idle_secs = limits.session_idle_secs;
         let state = Arc::new(http::AppState::new(
             scenes,
             Arc::clone(&sessions),
@@ -151,6 +152,13 @@ impl Service {
         ));
         if state.auth_enabled() {
             log("auth: bearer tokens required");
+        }
+        if limits_idle_secs > 0 {
+            tokio::spawn(reap_idle_sessions(
+                Arc::clone(&sessions),
+                Duration::from_secs(limits_idle_secs),
+                shutdown_rx.clone(),
+            ));
         }
         let app = http::router(state);
         let mut stop = shutdown_rx;
@@ -191,6 +199,30 @@ impl Service {
         served
             .map_err(|e| ServeError::Task(e.to_string()))?
             .map_err(|e| ServeError::Task(e.to_string()))
+    }
+}
+
+/// Ends sessions that had no stream attached for `timeout` (clients that vanished without
+/// deleting them), until the server shuts down.
+async fn reap_idle_sessions(
+    sessions: Arc<sessions::SessionRegistry>,
+    timeout: Duration,
+    mut shutdown: tokio::sync::watch::Receiver<bool>,
+) {
+    let period = (timeout / 4).clamp(Duration::from_millis(100), Duration::from_secs(30));
+    let mut ticks = tokio::time::interval(period);
+    loop {
+        tokio::select! {
+            _ = ticks.tick() => {}
+            _ = shutdown.wait_for(|s| *s) => return,
+        }
+        for s in sessions.remove_idle(timeout, Instant::now()) {
+            tracing::info!(session = %s.id, "ending a session with no stream for {} s", timeout.as_secs());
+            s.close(&format!(
+                "session idle: no stream for {} s",
+                timeout.as_secs()
+            ));
+        }
     }
 }
 

@@ -97,7 +97,9 @@ pub struct Session {
     pub events: broadcast::Sender<ServerEvent>,
     /// Rendered frames not yet sent or dropped.
     pub in_flight: AtomicU32,
-    pub connected: AtomicBool,
+    connected: AtomicBool,
+    /// Since when no stream has been attached (creation, or the last disconnect).
+    detached_at: Mutex<Instant>,
     seq: std::sync::atomic::AtomicU64,
     /// Sequence number of the newest frame put into the slot.
     newest_delivered: std::sync::atomic::AtomicU64,
@@ -134,10 +136,37 @@ impl Session {
             events: broadcast::channel(64).0,
             in_flight: AtomicU32::new(0),
             connected: AtomicBool::new(false),
+            detached_at: Mutex::new(now),
             seq: std::sync::atomic::AtomicU64::new(0),
             newest_delivered: std::sync::atomic::AtomicU64::new(0),
             closed: watch::channel(None).0,
         })
+    }
+
+    /// Claims the session's one stream; false when another is attached.
+    pub fn attach(&self) -> bool {
+        self.connected
+            .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
+
+    /// The stream went away (or never came).
+    pub fn detach(&self) {
+        *lock(&self.detached_at) = Instant::now();
+        self.connected.store(false, Ordering::Release);
+    }
+
+    pub fn is_connected(&self) -> bool {
+        self.connected.load(Ordering::Acquire)
+    }
+
+    /// How long the session has gone without a stream, as of `now` (`None` while attached).
+    pub fn idle_for(&self, now: Instant) -> Option<Duration> {
+        if self.is_connected() {
+            None
+        } else {
+            Some(now.saturating_duration_since(*lock(&self.detached_at)))
+        }
     }
 
     pub fn params(&self) -> SessionParams {
@@ -150,7 +179,7 @@ impl Session {
             stream: format!("/v1/sessions/{}/stream", self.id),
             id: self.id.clone(),
             params,
-            connected: self.connected.load(Ordering::Relaxed),
+            connected: self.is_connected(),
             created_unix_ms: self.created_unix_ms,
             stats: lock(&self.stats).clone(),
         }
@@ -193,7 +222,7 @@ impl Session {
     /// Decides whether the session wants a frame at `now`. `Err(wait)` says how long until it
     /// might; `Ok(None)` that nothing is due until something changes.
     pub fn plan(&self, now: Instant) -> Result<FramePlan, Option<Duration>> {
-        if !self.connected.load(Ordering::Relaxed) {
+        if !self.is_connected() {
             return Err(None);
         }
         let mut s = lock(&self.state);
@@ -395,6 +424,21 @@ impl SessionRegistry {
 
     pub fn all(&self) -> Vec<Arc<Session>> {
         lock(&self.sessions).values().cloned().collect()
+    }
+
+    /// Removes and returns the sessions without a stream for longer than `timeout`.
+    pub fn remove_idle(&self, timeout: Duration, now: Instant) -> Vec<Arc<Session>> {
+        let mut all = lock(&self.sessions);
+        let idle: Vec<Arc<Session>> = all
+            .values()
+            .filter(|s| s.idle_for(now).is_some_and(|d| d > timeout))
+            .cloned()
+            .collect();
+        for s in &idle {
+            all.remove(&s.id);
+        }
+        metrics::gauge!(super::metrics::SESSIONS).set(all.len() as f64);
+        idle
     }
 
     pub fn remove(&self, id: &str) -> Option<Arc<Session>> {

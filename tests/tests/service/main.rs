@@ -1,5 +1,6 @@
 //! End-to-end tests of the service, in one test binary: real servers on loopback ports, driven
-//! over HTTP and WebSocket.
+//! over HTTP and WebSocket, and the browser viewer driven in headless Chromium.
 
 mod api;
 mod streaming;
+mod viewer;

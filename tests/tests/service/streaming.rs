@@ -272,3 +272,48 @@ async fn shutdown_sends_closing_to_open_streams() {
     assert_eq!(reason.as_deref(), Some("server shutting down"));
     stopping.await.expect("shutdown task");
 }
+
+/// A session whose client went away without deleting it ends after `--session-idle-secs`;
+/// one with its stream attached lives on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sessions_without_a_stream_end_after_the_idle_time() {
+    let server = TestServer::start(&["--session-idle-secs", "1"]).await;
+    assert_eq!(
+        server.get_json("/v1/server").await["limits"]["session_idle_secs"],
+        1
+    );
+    let mut params = small_session(32, 24);
+    params["render"]["gi"]["method"] = json!("none");
+    let abandoned = server.create_session(params.clone(), None).await;
+    let watched = server.create_session(params, None).await;
+    let mut stream = server.connect(&watched).await;
+    let mut events = Vec::new();
+    let abandoned_path = format!("/v1/sessions/{}", abandoned.session.id);
+    tokio::time::timeout(PATIENCE, async {
+        loop {
+            stream.next_frame(&mut events).await;
+            let status = server
+                .http
+                .get(server.url(&abandoned_path))
+                .send()
+                .await
+                .expect("request")
+                .status();
+            if status == 404 {
+                return;
+            }
+            assert_eq!(status, 200);
+        }
+    })
+    .await
+    .expect("the abandoned session ends");
+    // Well past the idle time, the watched session still streams and exists.
+    tokio::time::sleep(std::time::Duration::from_millis(1500)).await;
+    let seq = stream.next_frame(&mut events).await.header.seq;
+    assert!(seq > 1);
+    server
+        .get_json(&format!("/v1/sessions/{}", watched.session.id))
+        .await;
+    drop(stream);
+    server.stop().await;
+}

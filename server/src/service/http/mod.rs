@@ -2,13 +2,15 @@
 //!
 //! Paths are stable (clients and tests depend on them): `/v1/scenes`, `/v1/scenes/{id}`,
 //! `/v1/sessions`, `/v1/sessions/{id}`, `/v1/sessions/{id}/stream` (WebSocket),
-//! `/v1/render`, `/healthz`, `/readyz`, `/metrics`, `/openapi.json`.
+//! `/v1/render`, `/healthz`, `/readyz`, `/metrics`, `/openapi.json`; the browser viewer at `/`
+//! (its files under `/viewer/`).
 
 pub mod health;
 pub mod render;
 pub mod scenes;
 pub mod sessions;
 pub mod stream;
+pub mod viewer;
 
 use super::error::ApiError;
 use super::ids;
@@ -211,8 +213,8 @@ async fn method_not_allowed() -> ApiError {
         title = "lightcast",
         description = "Remote rendering with real-time global illumination: scenes, streaming \
                        sessions (WebSocket frames with per-stage GPU timings) and one-shot \
-                       renders. When the server runs with tokens, every endpoint but /healthz \
-                       and /readyz needs 'Authorization: Bearer TOKEN'."
+                       renders. When the server runs with tokens, every endpoint but /healthz, \
+                       /readyz and the viewer (/ and /viewer/) needs 'Authorization: Bearer TOKEN'."
     ),
     paths(
         health::healthz,
@@ -232,6 +234,8 @@ async fn method_not_allowed() -> ApiError {
         sessions::ticket,
         stream::stream,
         render::render,
+        viewer::index,
+        viewer::file,
     ),
     components(schemas(lightcast_protocol::ClientMessage, lightcast_protocol::ServerEvent,))
 )]
@@ -289,6 +293,8 @@ pub fn router(state: Arc<AppState>) -> Router {
     Router::new()
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
+        .route("/", get(viewer::index))
+        .route("/viewer/{*path}", get(viewer::file))
         .merge(api)
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)

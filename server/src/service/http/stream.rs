@@ -75,11 +75,7 @@ pub async fn stream(
             format!("{}: open this path as a WebSocket", e.body_text()),
         )
     })?;
-    if session
-        .connected
-        .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
-        .is_err()
-    {
+    if !session.attach() {
         return Err(ApiError::conflict(
             "this session already has a stream attached",
         ));
@@ -89,11 +85,11 @@ pub async fn stream(
     Ok(upgrade
         .max_message_size(max)
         .max_frame_size(max)
-        .on_failed_upgrade(move |_| failed.connected.store(false, Ordering::Release))
+        .on_failed_upgrade(move |_| failed.detach())
         .on_upgrade(move |socket| async move {
             state.wake();
             run(socket, &state, &session).await;
-            session.connected.store(false, Ordering::Release);
+            session.detach();
         }))
 }
 

@@ -1,0 +1,220 @@
+// Mouse, touch and keyboard on the frame: orbit, pan, zoom and WASD fly for the camera, and
+// dragging the light (a sun's azimuth/elevation, a spot or point light's position).
+// The camera is kept as an orbit (target, yaw, pitch, radius) and sent as the protocol's
+// position/target pair; +Y is up, as in glTF.
+
+const DEG = Math.PI / 180;
+const MAX_PITCH = 89 * DEG;
+const ORBIT_PER_PIXEL = 0.006;
+const ZOOM_PER_WHEEL_UNIT = 0.0015;
+const FLY_FRACTION_PER_SECOND = 0.35;
+
+const add = (a, b) => [a[0] + b[0], a[1] + b[1], a[2] + b[2]];
+const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+const scale = (a, s) => [a[0] * s, a[1] * s, a[2] * s];
+const length = (a) => Math.hypot(a[0], a[1], a[2]);
+const normalize = (a) => scale(a, 1 / (length(a) || 1));
+const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+const clamp = (v, lo, hi) => Math.min(hi, Math.max(lo, v));
+
+/** Sun angles in degrees of a directional light's travel direction. */
+export function sunAngles(direction) {
+  const toSun = normalize(scale(direction, -1));
+  return {
+    azimuth: Math.atan2(toSun[0], toSun[2]) / DEG,
+    elevation: Math.asin(clamp(toSun[1], -1, 1)) / DEG,
+  };
+}
+
+/** The travel direction of a sun at `azimuth`, `elevation` (degrees). */
+export function sunDirection(azimuth, elevation) {
+  const a = azimuth * DEG;
+  const e = elevation * DEG;
+  return [-Math.cos(e) * Math.sin(a), -Math.sin(e), -Math.cos(e) * Math.cos(a)];
+}
+
+export class Controls {
+  /** `onCamera(camera)` and `onLight(light)` are called on every change. */
+  constructor(canvas, { onCamera, onLight }) {
+    this.canvas = canvas;
+    this.onCamera = onCamera;
+    this.onLight = onLight;
+    this.mode = 'camera';
+    this.orbit = null;
+    this.light = null;
+    this.sceneSize = 1;
+    this.pointers = new Map();
+    this.keys = new Set();
+    this.lastFly = null;
+
+    canvas.addEventListener('pointerdown', (e) => this.pointerDown(e));
+    canvas.addEventListener('pointermove', (e) => this.pointerMove(e));
+    canvas.addEventListener('pointerup', (e) => this.pointerUp(e));
+    canvas.addEventListener('pointercancel', (e) => this.pointerUp(e));
+    canvas.addEventListener('wheel', (e) => this.wheel(e), { passive: false });
+    canvas.addEventListener('contextmenu', (e) => e.preventDefault());
+    window.addEventListener('keydown', (e) => this.key(e, true));
+    window.addEventListener('keyup', (e) => this.key(e, false));
+    window.addEventListener('blur', () => this.keys.clear());
+  }
+
+  setCamera(camera) {
+    const offset = sub(camera.position, camera.target);
+    const radius = length(offset) || this.sceneSize;
+    this.orbit = {
+      target: [...camera.target],
+      radius,
+      yaw: Math.atan2(offset[0], offset[2]),
+      pitch: Math.asin(clamp(offset[1] / radius, -1, 1)),
+      fov: camera.fov_y_degrees,
+    };
+  }
+
+  setLight(light) {
+    this.light = structuredClone(light);
+  }
+
+  setSceneSize(size) {
+    this.sceneSize = size > 0 ? size : 1;
+  }
+
+  camera() {
+    const o = this.orbit;
+    const offset = [
+      o.radius * Math.cos(o.pitch) * Math.sin(o.yaw),
+      o.radius * Math.sin(o.pitch),
+      o.radius * Math.cos(o.pitch) * Math.cos(o.yaw),
+    ];
+    return { position: add(o.target, offset), target: [...o.target], fov_y_degrees: o.fov };
+  }
+
+  /** Camera basis: forward (towards the target), right and up. */
+  basis() {
+    const c = this.camera();
+    const forward = normalize(sub(c.target, c.position));
+    const right = normalize(cross(forward, [0, 1, 0]));
+    return { forward, right, up: cross(right, forward), position: c.position };
+  }
+
+  /** World units per CSS pixel at distance `distance` from the camera. */
+  worldPerPixel(distance) {
+    const height = this.canvas.clientHeight || 1;
+    return (2 * distance * Math.tan((this.orbit.fov * DEG) / 2)) / height;
+  }
+
+  pointerDown(e) {
+    if (!this.orbit) return;
+    this.canvas.setPointerCapture(e.pointerId);
+    this.pointers.set(e.pointerId, { x: e.clientX, y: e.clientY, button: e.button, shift: e.shiftKey, ctrl: e.ctrlKey });
+    this.canvas.focus();
+    e.preventDefault();
+  }
+
+  pointerUp(e) {
+    this.pointers.delete(e.pointerId);
+  }
+
+  pointerMove(e) {
+    const p = this.pointers.get(e.pointerId);
+    if (!p) return;
+    const dx = e.clientX - p.x;
+    const dy = e.clientY - p.y;
+    if (this.pointers.size === 2) {
+      this.pinch(e.pointerId, e.clientX, e.clientY);
+      return;
+    }
+    p.x = e.clientX;
+    p.y = e.clientY;
+    if (this.mode === 'light' || p.ctrl) {
+      this.dragLight(dx, dy);
+    } else if (p.button === 2 || p.button === 1 || p.shift) {
+      this.pan(dx, dy);
+    } else {
+      this.orbit.yaw -= dx * ORBIT_PER_PIXEL;
+      this.orbit.pitch = clamp(this.orbit.pitch + dy * ORBIT_PER_PIXEL, -MAX_PITCH, MAX_PITCH);
+      this.onCamera(this.camera());
+    }
+  }
+
+  /** Two fingers: their distance zooms, their midpoint pans. */
+  pinch(id, x, y) {
+    const [a, b] = [...this.pointers.entries()];
+    const before = { mid: [(a[1].x + b[1].x) / 2, (a[1].y + b[1].y) / 2], dist: Math.hypot(a[1].x - b[1].x, a[1].y - b[1].y) };
+    this.pointers.get(id).x = x;
+    this.pointers.get(id).y = y;
+    const after = { mid: [(a[1].x + b[1].x) / 2, (a[1].y + b[1].y) / 2], dist: Math.hypot(a[1].x - b[1].x, a[1].y - b[1].y) };
+    if (before.dist > 0 && after.dist > 0) this.zoom(before.dist / after.dist);
+    this.pan(after.mid[0] - before.mid[0], after.mid[1] - before.mid[1]);
+  }
+
+  pan(dx, dy) {
+    const { right, up } = this.basis();
+    const wpp = this.worldPerPixel(this.orbit.radius);
+    this.orbit.target = add(this.orbit.target, add(scale(right, -dx * wpp), scale(up, dy * wpp)));
+    this.onCamera(this.camera());
+  }
+
+  zoom(factor) {
+    this.orbit.radius = clamp(this.orbit.radius * factor, this.sceneSize * 0.01, this.sceneSize * 20);
+    this.onCamera(this.camera());
+  }
+
+  wheel(e) {
+    if (!this.orbit) return;
+    e.preventDefault();
+    const units = e.deltaMode === 1 ? e.deltaY * 16 : e.deltaY;
+    this.zoom(Math.exp(units * ZOOM_PER_WHEEL_UNIT));
+  }
+
+  dragLight(dx, dy) {
+    const light = this.light;
+    if (!light) return;
+    if (light.kind === 'directional') {
+      const { azimuth, elevation } = sunAngles(light.direction);
+      light.direction = sunDirection(azimuth + dx * 0.4, clamp(elevation - dy * 0.4, 1, 89));
+    } else {
+      const { right, up, position } = this.basis();
+      const wpp = this.worldPerPixel(Math.max(length(sub(light.position, position)), this.sceneSize * 0.05));
+      light.position = add(light.position, add(scale(right, dx * wpp), scale(up, -dy * wpp)));
+    }
+    this.onLight(structuredClone(light));
+  }
+
+  key(e, down) {
+    const target = e.target;
+    if (target && (target.tagName === 'INPUT' || target.tagName === 'SELECT' || target.tagName === 'TEXTAREA')) return;
+    const k = e.key.toLowerCase();
+    if (!['w', 'a', 's', 'd', 'q', 'e', 'shift'].includes(k)) return;
+    if (down) this.keys.add(k);
+    else this.keys.delete(k);
+    if (this.keys.size > 0 && this.lastFly === null) {
+      this.lastFly = performance.now();
+      requestAnimationFrame((t) => this.fly(t));
+    }
+  }
+
+  /** WASD moves the camera and its target along the view; Q/E down and up; Shift is faster. */
+  fly(now) {
+    const moving = [...this.keys].some((k) => k !== 'shift');
+    if (!moving || !this.orbit) {
+      this.lastFly = null;
+      return;
+    }
+    const dt = Math.min((now - this.lastFly) / 1000, 0.1);
+    this.lastFly = now;
+    const { forward, right } = this.basis();
+    const speed = this.sceneSize * FLY_FRACTION_PER_SECOND * (this.keys.has('shift') ? 4 : 1) * dt;
+    let step = [0, 0, 0];
+    if (this.keys.has('w')) step = add(step, forward);
+    if (this.keys.has('s')) step = sub(step, forward);
+    if (this.keys.has('d')) step = add(step, right);
+    if (this.keys.has('a')) step = sub(step, right);
+    if (this.keys.has('e')) step = add(step, [0, 1, 0]);
+    if (this.keys.has('q')) step = sub(step, [0, 1, 0]);
+    if (length(step) > 0) {
+      this.orbit.target = add(this.orbit.target, scale(normalize(step), speed));
+      this.onCamera(this.camera());
+    }
+    requestAnimationFrame((t) => this.fly(t));
+  }
+}

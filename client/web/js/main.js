@@ -1,0 +1,404 @@
+// The viewer's page: wires the stream, the controls, the parameter form and the numbers
+// together. Everything it shows comes from the public API (`/v1/…`) and the session's
+// WebSocket; nothing is fetched from anywhere else.
+
+import { ApiError, Unreachable, getJson, request, setToken, takeTokenFromFragment } from './api.js';
+import { Connection } from './connection.js';
+import { Controls, sunAngles, sunDirection } from './controls.js';
+import { FLAG_GI_PENDING, FrameError, decodeFrame } from './frame.js';
+import { Panel, patchFor } from './panel.js';
+import { Stats } from './stats.js';
+import { download, renderStill } from './still.js';
+
+const $ = (id) => document.getElementById(id);
+const MAX_MESSAGES = 4;
+const RESIZE_DEBOUNCE_MS = 250;
+const SCENE_POLL_MS = 500;
+
+const canvas = $('frame');
+const context = canvas.getContext('2d');
+const state = {
+  server: null,
+  scenes: new Map(),
+  scene: null,
+  params: null,
+  connection: null,
+  inputId: 0,
+  sentInputs: new Map(),
+  drawnSeq: 0,
+  queued: { camera: null, light: null },
+  light: null,
+  sessionId: null,
+};
+
+const stats = new Stats({
+  frameCount: $('frame-count'), fps: $('fps'), latency: $('latency'), bandwidth: $('bandwidth'),
+  gpu: $('gpu-ms'), readback: $('readback-ms'), encode: $('encode-ms'), dropped: $('dropped'),
+  frameInfo: $('frame-info'), stageRows: $('stage-rows'), stageChart: $('stage-chart'),
+  fpsChart: $('fps-chart'), latencyChart: $('latency-chart'), bandwidthChart: $('bandwidth-chart'),
+});
+const panel = new Panel($('panel'), (patch) => sendUpdate(patch));
+const controls = new Controls(canvas, {
+  onCamera: (camera) => queueInput('camera', camera),
+  onLight: (light) => {
+    state.light = light;
+    showLight();
+    queueInput('light', light);
+  },
+});
+
+function message(text, kind = 'error', ttlMs = 10000) {
+  const box = $('messages');
+  const div = document.createElement('div');
+  div.className = `message ${kind}`;
+  div.textContent = text;
+  box.append(div);
+  while (box.children.length > MAX_MESSAGES) box.firstElementChild.remove();
+  setTimeout(() => div.remove(), ttlMs);
+}
+
+function showError(error, what) {
+  // The server's messages usually start with the field; name it only where they do not.
+  const field = error.field && !error.message.startsWith(error.field) ? ` (${error.field})` : '';
+  message(`${what}: ${error.message}${field}`);
+  if (error.field) panel.markError(error.field, error.message);
+}
+
+function setStatus(kind, text) {
+  const status = $('status');
+  status.dataset.state = kind;
+  status.textContent = text;
+  if (kind === 'unauthorized') askToken(text);
+}
+
+// ---- input: at most one camera and one light message per animation frame ----
+
+function queueInput(kind, value) {
+  const idle = !state.queued.camera && !state.queued.light;
+  state.queued[kind] = value;
+  if (idle) requestAnimationFrame(flushInput);
+}
+
+function flushInput() {
+  for (const kind of ['camera', 'light']) {
+    const value = state.queued[kind];
+    if (!value) continue;
+    state.queued[kind] = null;
+    send({ type: kind, [kind]: value });
+  }
+}
+
+/** Sends a control message with a fresh input id, remembered to measure input→frame latency. */
+function send(msg) {
+  const id = ++state.inputId;
+  if (state.connection && state.connection.send({ ...msg, input_id: id })) {
+    state.sentInputs.set(id, performance.now());
+    return true;
+  }
+  return false;
+}
+
+function sendUpdate(patch) {
+  if (!send({ type: 'update', patch })) {
+    message('not connected: the change was not sent; try again once the stream is live');
+  }
+}
+
+// ---- frames ----
+
+async function onFrame(buffer) {
+  let frame;
+  try {
+    frame = decodeFrame(buffer);
+  } catch (e) {
+    if (e instanceof FrameError) message(`bad frame: ${e.message}`);
+    return;
+  }
+  const received = performance.now();
+  let latency = null;
+  if (frame.inputId && state.sentInputs.has(frame.inputId)) {
+    latency = received - state.sentInputs.get(frame.inputId);
+    for (const id of state.sentInputs.keys()) if (id <= frame.inputId) state.sentInputs.delete(id);
+  }
+  let bitmap;
+  try {
+    bitmap = await createImageBitmap(new Blob([frame.payload], { type: frame.mime }));
+  } catch (e) {
+    message(`frame ${frame.seq} could not be decoded: ${e.message}`);
+    return;
+  }
+  // Decoding finishes out of order sometimes; never paint an older frame over a newer one.
+  if (frame.seq > state.drawnSeq) {
+    state.drawnSeq = frame.seq;
+    if (canvas.width !== frame.width || canvas.height !== frame.height) {
+      canvas.width = frame.width;
+      canvas.height = frame.height;
+    }
+    context.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
+    stats.frame(frame, latency);
+    $('hud').dataset.giPending = String((frame.flags & FLAG_GI_PENDING) !== 0);
+    state.connection.send({ type: 'ack', seq: frame.seq });
+  }
+  bitmap.close();
+}
+
+// ---- session and scene ----
+
+function onSession(session) {
+  const first = !state.params || state.params.render.scene !== session.params.render.scene;
+  const restarted = state.sessionId !== session.id;
+  state.sessionId = session.id;
+  state.params = session.params;
+  if (restarted) {
+    state.drawnSeq = 0;
+    stats.resetSequence();
+  }
+  panel.clearErrors();
+  panel.show(session.params);
+  $('scene-select').value = session.params.render.scene;
+  $('pause').textContent = session.params.paused ? 'Resume' : 'Pause';
+  if (first) useScene(session.params.render.scene, session.params.render);
+}
+
+async function useScene(id, render) {
+  let scene;
+  try {
+    scene = await getJson(`v1/scenes/${encodeURIComponent(id)}`);
+  } catch (e) {
+    showError(e, `scene ${id}`);
+    return;
+  }
+  state.scene = scene;
+  const [min, max] = [scene.bounds.min, scene.bounds.max];
+  controls.setSceneSize(Math.hypot(max[0] - min[0], max[1] - min[1], max[2] - min[2]));
+  controls.setCamera(render.camera || scene.default_camera);
+  state.light = structuredClone(render.light || scene.default_light);
+  controls.setLight(state.light);
+  showLight();
+  watchScene(id);
+}
+
+/** Shows the scene's light-cache state until it is ready. */
+async function watchScene(id) {
+  for (;;) {
+    let scene;
+    try {
+      scene = await getJson(`v1/scenes/${encodeURIComponent(id)}`);
+    } catch {
+      return;
+    }
+    if (state.params && state.params.render.scene !== id) return;
+    const caches = scene.caches[0];
+    const text = !caches ? 'no light caches'
+      : caches.state === 'ready' ? `${scene.triangles.toLocaleString()} triangles · ${caches.caches.toLocaleString()} light caches (${caches.seconds.toFixed(1)} s${caches.from_store ? ', from the store' : ''})`
+      : caches.state === 'failed' ? `light caches failed: ${caches.error}`
+      : `light caches ${caches.state}${caches.step ? `: ${caches.step}` : ''}${caches.progress !== null && caches.progress !== undefined ? ` ${(caches.progress * 100).toFixed(0)} %` : ''}`;
+    $('scene-state').textContent = text;
+    if (!caches || caches.state === 'ready' || caches.state === 'failed') return;
+    await new Promise((r) => setTimeout(r, SCENE_POLL_MS));
+  }
+}
+
+async function refreshScenes() {
+  const scenes = await getJson('v1/scenes');
+  state.scenes = new Map(scenes.map((s) => [s.id, s]));
+  const select = $('scene-select');
+  select.replaceChildren(...scenes.map((s) => new Option(`${s.name} (${s.id})`, s.id)));
+  if (state.params) select.value = state.params.render.scene;
+}
+
+function switchScene(id) {
+  sendUpdate({ render: { scene: id, camera: null, light: null } });
+}
+
+async function uploadScene(files) {
+  const form = new FormData();
+  for (const f of files) form.append('files', f, f.name);
+  await createScene(() => request('POST', 'v1/scenes', { body: form }), [...files].map((f) => f.name).join(', '));
+}
+
+async function createScene(post, what) {
+  $('scene-state').textContent = `uploading ${what}…`;
+  try {
+    const scene = await (await post()).json();
+    await refreshScenes();
+    switchScene(scene.id);
+    message(`scene ${scene.name} added as ${scene.id}`, 'info');
+  } catch (e) {
+    $('scene-state').textContent = '';
+    showError(e, `adding ${what}`);
+  }
+}
+
+// ---- light ----
+
+function showLight() {
+  const light = state.light;
+  if (!light) return;
+  const sun = light.kind === 'directional';
+  $('sun-controls').hidden = !sun;
+  if (sun) {
+    const { azimuth, elevation } = sunAngles(light.direction);
+    $('sun-azimuth').value = azimuth.toFixed(0);
+    $('sun-elevation').value = elevation.toFixed(0);
+    $('sun-azimuth-value').textContent = `${azimuth.toFixed(0)}°`;
+    $('sun-elevation-value').textContent = `${elevation.toFixed(0)}°`;
+    $('light-position').textContent = 'directional light (sun): drag in light mode, or use the sliders';
+  } else {
+    $('light-position').textContent = `${light.kind} light at ${light.position.map((v) => v.toFixed(2)).join(', ')}: drag in light mode to move it`;
+  }
+  if (document.activeElement !== $('light-intensity')) $('light-intensity').value = String(light.intensity);
+}
+
+function changeLight(mutate) {
+  if (!state.light) return;
+  mutate(state.light);
+  controls.setLight(state.light);
+  showLight();
+  queueInput('light', structuredClone(state.light));
+}
+
+// ---- sizing ----
+
+function streamSize() {
+  const scale = Number($('resolution-scale').value);
+  const limits = state.server.limits;
+  const w = Math.round(canvas.clientWidth * devicePixelRatio * scale);
+  const h = Math.round(canvas.clientHeight * devicePixelRatio * scale);
+  return {
+    width: Math.max(16, Math.min(limits.max_width, w)),
+    height: Math.max(16, Math.min(limits.max_height, h)),
+  };
+}
+
+let resizeTimer = null;
+function onResize() {
+  clearTimeout(resizeTimer);
+  resizeTimer = setTimeout(() => {
+    if (!state.params) return;
+    const { width, height } = streamSize();
+    if (width !== state.params.render.width || height !== state.params.render.height) {
+      sendUpdate({ render: { width, height } });
+    }
+  }, RESIZE_DEBOUNCE_MS);
+}
+
+// ---- start ----
+
+/** Session parameters of a new viewer: `?scene=&method=&view=&rsm=&fps=&scale=` may preset them. */
+function initialParams() {
+  const q = new URLSearchParams(location.search);
+  if (q.has('scale')) $('resolution-scale').value = q.get('scale');
+  const render = { ...streamSize(), gi: {} };
+  if (q.has('scene')) render.scene = q.get('scene');
+  if (q.has('method')) render.gi.method = q.get('method');
+  if (q.has('view')) render.view = q.get('view');
+  if (q.has('rsm')) render.gi.rsm_size = Number(q.get('rsm'));
+  const params = { render };
+  if (q.has('fps')) params.fps_cap = Number(q.get('fps'));
+  return params;
+}
+
+function askToken(reason) {
+  const dialog = $('token-dialog');
+  $('token-reason').textContent = reason;
+  if (!dialog.open) dialog.showModal();
+}
+
+async function boot() {
+  takeTokenFromFragment();
+  try {
+    state.server = await getJson('v1/server');
+    await refreshScenes();
+  } catch (e) {
+    if (e instanceof ApiError && e.status === 401) {
+      setStatus('unauthorized', e.message);
+    } else {
+      setStatus(e instanceof Unreachable ? 'unreachable' : 'reconnecting', `${e.message} · retrying in 2 s`);
+      setTimeout(boot, 2000);
+    }
+    return;
+  }
+  const s = state.server;
+  $('server-info').textContent = `${s.build} · ${s.adapter}`;
+  stats.setStageNames(s.stages);
+  panel.applyLimits(s.limits);
+  state.connection = new Connection(initialParams(), {
+    onFrame,
+    onSession,
+    onStatus: setStatus,
+    onEvent: (event) => {
+      if (event.type === 'error') showError(event.error, 'refused');
+      else if (event.type === 'render_error') showError(event.error, 'render failed');
+      else if (event.type === 'caches_pending') message(`computing light caches of ${event.scene}: direct light until they are ready`, 'info');
+      else if (event.type === 'caches_ready') message(`light caches of ${event.scene} ready`, 'info', 4000);
+      else if (event.type === 'closing') message(`session ended: ${event.reason}`, 'error');
+    },
+  });
+  state.connection.start();
+}
+
+$('token-form').addEventListener('submit', () => {
+  setToken($('token-input').value.trim());
+  if (state.connection) state.connection.start();
+  else boot();
+});
+document.querySelectorAll('input[name="drag-mode"]').forEach((r) => r.addEventListener('change', () => {
+  controls.mode = r.value;
+}));
+$('reset-camera').addEventListener('click', () => {
+  if (!state.scene) return;
+  controls.setCamera(state.scene.default_camera);
+  sendUpdate(patchFor('render.camera', null));
+});
+$('pause').addEventListener('click', () => {
+  const paused = state.params && state.params.paused;
+  sendUpdate({ paused: !paused });
+});
+$('scene-select').addEventListener('change', (e) => switchScene(e.target.value));
+$('scene-upload').addEventListener('change', (e) => {
+  if (e.target.files.length) uploadScene(e.target.files);
+  e.target.value = '';
+});
+$('procedural-form').addEventListener('submit', (e) => {
+  e.preventDefault();
+  const spec = $('procedural-spec').value.trim();
+  createScene(() => request('POST', 'v1/scenes', { json: { procedural: spec } }), spec);
+});
+$('sun-azimuth').addEventListener('input', () => changeLight((l) => {
+  l.direction = sunDirection(Number($('sun-azimuth').value), Number($('sun-elevation').value));
+}));
+$('sun-elevation').addEventListener('input', () => changeLight((l) => {
+  l.direction = sunDirection(Number($('sun-azimuth').value), Number($('sun-elevation').value));
+}));
+$('light-intensity').addEventListener('change', () => {
+  const v = Number($('light-intensity').value);
+  if (Number.isFinite(v) && v >= 0) changeLight((l) => { l.intensity = v; });
+  else message('light intensity: enter a number ≥ 0');
+});
+$('resolution-scale').addEventListener('change', onResize);
+new ResizeObserver(onResize).observe(canvas);
+$('still').addEventListener('click', async () => {
+  if (!state.params) return;
+  const button = $('still');
+  button.disabled = true;
+  button.textContent = 'Rendering still…';
+  try {
+    const render = { ...state.params.render, camera: controls.camera(), light: state.light };
+    const { png, report } = await renderStill(render);
+    const stamp = new Date().toISOString().replace(/[:.]/g, '-');
+    download(png, `lightcast-${render.scene}-${stamp}.png`, 'image/png');
+    const json = JSON.stringify(report, null, 2);
+    $('still-report-text').textContent = json;
+    $('still-report-link').href = `data:application/json;charset=utf-8,${encodeURIComponent(json)}`;
+    $('still-report').hidden = false;
+  } catch (e) {
+    showError(e, 'still');
+  } finally {
+    button.disabled = false;
+    button.textContent = 'Download lossless still';
+  }
+});
+window.addEventListener('pagehide', () => state.connection && state.connection.stop());
+
+boot();

@@ -1,0 +1,253 @@
+// End-to-end test of the browser viewer in Debian's headless Chromium, driven by playwright-core.
+//
+//   LIGHTCAST_URL=http://127.0.0.1:8080 node tests/viewer.test.mjs
+//
+// The server must be running (the Rust test `viewer` in tests/tests/service starts one and runs
+// this script). Environment: LIGHTCAST_URL (server), LIGHTCAST_ARTIFACTS (where the screenshot
+// and the downloaded still go; default ./test-artifacts), CHROMIUM (default /usr/bin/chromium);
+// LIGHTCAST_AUTH_URL and LIGHTCAST_AUTH_TOKEN (optional): a second server with auth on, where
+// the page must ask for the token. Exits non-zero with the failing step named.
+
+import { chromium } from 'playwright-core';
+import assert from 'node:assert/strict';
+import { mkdir, readFile } from 'node:fs/promises';
+import path from 'node:path';
+
+const base = process.env.LIGHTCAST_URL || 'http://127.0.0.1:8080';
+const artifacts = path.resolve(process.env.LIGHTCAST_ARTIFACTS || 'test-artifacts');
+const executablePath = process.env.CHROMIUM || '/usr/bin/chromium';
+// lavapipe renders slowly; waits are generous, and each names what it waited for.
+const PATIENCE_MS = 120000;
+
+// Chromium on a closed network: no background connections, no GPU, no sandbox (CI runs as root).
+const CHROMIUM_ARGS = ['--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+  '--disable-background-networking', '--disable-component-update', '--disable-sync'];
+
+async function step(name, fn) {
+  const started = Date.now();
+  process.stdout.write(`viewer test: ${name} … `);
+  try {
+    const result = await fn();
+    console.log(`ok (${((Date.now() - started) / 1000).toFixed(1)} s)`);
+    return result;
+  } catch (e) {
+    console.log('FAILED');
+    throw new Error(`step '${name}' failed: ${e.stack || e}`);
+  }
+}
+
+async function api(method, p) {
+  const response = await fetch(`${base}${p}`, { method });
+  assert.ok(response.ok, `${method} ${p}: HTTP ${response.status}`);
+  return response.status === 204 ? null : response.json();
+}
+
+/** Frames painted so far, from the page's counter. */
+const frameCount = (page) => page.$eval('#frame-count', (e) => Number(e.dataset.count));
+
+async function waitForFrames(page, atLeast, what) {
+  await page.waitForFunction((n) => Number(document.getElementById('frame-count').dataset.count) >= n,
+    atLeast, { timeout: PATIENCE_MS, polling: 100 }).catch(() => {
+    throw new Error(`${what}: fewer than ${atLeast} frames painted`);
+  });
+}
+
+/** The canvas as 64×48 grey levels (0–255) plus their mean and standard deviation. */
+function snapshot(page) {
+  return page.evaluate(() => {
+    const source = document.getElementById('frame');
+    const small = document.createElement('canvas');
+    small.width = 64;
+    small.height = 48;
+    const ctx = small.getContext('2d');
+    ctx.drawImage(source, 0, 0, 64, 48);
+    const { data } = ctx.getImageData(0, 0, 64, 48);
+    const grey = [];
+    for (let i = 0; i < data.length; i += 4) grey.push((data[i] + data[i + 1] + data[i + 2]) / 3);
+    const mean = grey.reduce((a, b) => a + b, 0) / grey.length;
+    const sd = Math.sqrt(grey.reduce((a, b) => a + (b - mean) ** 2, 0) / grey.length);
+    return { grey, mean, sd };
+  });
+}
+
+const meanAbsDiff = (a, b) => a.grey.reduce((s, v, i) => s + Math.abs(v - b.grey[i]), 0) / a.grey.length;
+
+/** Every chunk of a PNG file: [type, data]. */
+function pngChunks(bytes) {
+  assert.deepEqual([...bytes.subarray(0, 8)], [137, 80, 78, 71, 13, 10, 26, 10], 'PNG signature');
+  const chunks = [];
+  for (let o = 8; o < bytes.length;) {
+    const length = bytes.readUInt32BE(o);
+    chunks.push([bytes.toString('latin1', o + 4, o + 8), bytes.subarray(o + 8, o + 8 + length)]);
+    o += 12 + length;
+  }
+  return chunks;
+}
+
+/** A server with auth on: the page asks for the token, refuses a wrong one, streams with the right one. */
+async function withAuth(browser, authBase, goodToken) {
+  const context = await browser.newContext({ viewport: { width: 800, height: 600 } });
+  const page = await context.newPage();
+  try {
+    await step('with auth on, the page asks for a token', async () => {
+      await page.goto(`${authBase}/?method=none&scale=0.25`);
+      await page.waitForSelector('#token-dialog[open]', { timeout: PATIENCE_MS });
+    });
+    await step('a wrong token is refused with the reason', async () => {
+      await page.fill('#token-input', 'not-the-right-token-at-all');
+      await page.click('#token-form button[type="submit"]');
+      await page.waitForFunction(() => document.getElementById('token-dialog').open
+        && document.getElementById('token-reason').textContent.includes('unknown bearer token'), null, { timeout: PATIENCE_MS });
+    });
+    await step('the right token streams (the WebSocket opens with a ticket)', async () => {
+      await page.fill('#token-input', goodToken);
+      await page.click('#token-form button[type="submit"]');
+      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+      await waitForFrames(page, 2, 'frames with auth on');
+    });
+  } finally {
+    await context.close();
+  }
+}
+
+async function main() {
+  await mkdir(artifacts, { recursive: true });
+  const browser = await chromium.launch({ executablePath, args: CHROMIUM_ARGS, headless: true });
+  const context = await browser.newContext({ viewport: { width: 800, height: 600 }, acceptDownloads: true });
+  const page = await context.newPage();
+  const pageErrors = [];
+  page.on('pageerror', (e) => pageErrors.push(e.message));
+  page.on('console', (m) => {
+    if (m.type() === 'error') pageErrors.push(m.text());
+  });
+
+  try {
+    // Direct light only at first and a small RSM for when BRSM is switched on: lavapipe is slow.
+    await step('the page loads and goes live', async () => {
+      await page.goto(`${base}/?method=none&rsm=128&scale=0.5&fps=20`);
+      assert.equal(await page.title(), 'lightcast viewer');
+      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+    });
+
+    await step('frames arrive and paint', async () => {
+      await waitForFrames(page, 3, 'first frames');
+      const first = await frameCount(page);
+      await waitForFrames(page, first + 3, 'frame counter rising');
+      const shot = await snapshot(page);
+      assert.ok(shot.mean > 3 && shot.sd > 3, `canvas is blank: mean ${shot.mean.toFixed(1)}, sd ${shot.sd.toFixed(1)}`);
+    });
+
+    await step('a drag changes the image', async () => {
+      const before = await snapshot(page);
+      const box = await page.locator('#frame').boundingBox();
+      const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
+      await page.mouse.move(x, y);
+      await page.mouse.down();
+      for (let i = 1; i <= 10; i++) await page.mouse.move(x + i * 12, y + i * 3);
+      await page.mouse.up();
+      // Frames tagged with the drag's input ids come back; let a few more paint.
+      const after = (await frameCount(page)) + 4;
+      await waitForFrames(page, after, 'frames after the drag');
+      const shot = await snapshot(page);
+      const diff = meanAbsDiff(before, shot);
+      assert.ok(diff > 4, `the image hardly changed after the drag: mean abs diff ${diff.toFixed(2)} grey levels`);
+      const latency = await page.$eval('#latency', (e) => e.textContent);
+      assert.match(latency, /^\d+ \/ \d+$/, `input→frame latency is measured (got '${latency}')`);
+    });
+
+    await step('a GI parameter change shows up in the timings', async () => {
+      assert.equal(await page.locator('#stage-rows tr[data-stage="importance"]').count(), 0, 'no BRSM stage with GI off');
+      await page.selectOption('[data-field="render.gi.method"]', 'brsm');
+      await page.waitForSelector('#stage-rows tr[data-stage="importance"]', { timeout: PATIENCE_MS });
+      await page.waitForSelector('#stage-rows tr[data-stage="cache_lighting"]', { timeout: PATIENCE_MS });
+    });
+
+    await step('a rejected parameter is shown, naming the field', async () => {
+      const limits = (await api('GET', '/v1/server')).limits;
+      const control = page.locator('[data-field="render.gi.view_samples"]');
+      await control.fill(String(limits.max_view_samples + 1));
+      await control.press('Enter');
+      await control.blur();
+      await page.waitForSelector('[data-field="render.gi.view_samples"].invalid', { timeout: PATIENCE_MS });
+      const messages = await page.$eval('#messages', (e) => e.textContent);
+      assert.match(messages, /view_samples/, `the message names the field: '${messages}'`);
+    });
+
+    await step('the still downloads as PNG with its timing report', async () => {
+      const [download] = await Promise.all([
+        page.waitForEvent('download', { timeout: PATIENCE_MS }),
+        page.click('#still'),
+      ]);
+      const file = path.join(artifacts, 'still.png');
+      await download.saveAs(file);
+      const chunks = pngChunks(await readFile(file));
+      const itxt = chunks.find(([type, data]) => type === 'iTXt' && data.toString('latin1').startsWith('lightcast-report\0'));
+      assert.ok(itxt, `the PNG has a lightcast-report chunk (chunks: ${chunks.map((c) => c[0]).join(' ')})`);
+      const report = JSON.parse(itxt[1].subarray('lightcast-report'.length + 5).toString('utf8'));
+      assert.match(report.request_hash, /^[0-9a-f]{64}$/);
+      assert.ok(report.stages.some((s) => s.stage === 'importance'), 'the still was rendered with BRSM');
+      await page.waitForSelector('#still-report:not([hidden])');
+    });
+
+    await step('a deleted session is replaced by itself', async () => {
+      const [session] = await api('GET', '/v1/sessions');
+      await api('DELETE', `/v1/sessions/${session.id}`);
+      await page.waitForFunction(() => document.getElementById('messages').textContent.includes('session ended'),
+        null, { timeout: PATIENCE_MS });
+      await page.waitForFunction((old) => {
+        const status = document.getElementById('status');
+        return status.dataset.state === 'live' && !status.textContent.includes(old);
+      }, session.id, { timeout: PATIENCE_MS });
+      const sessions = await api('GET', '/v1/sessions');
+      assert.equal(sessions.length, 1, 'one new session');
+      assert.equal(sessions[0].params.render.gi.method, 'brsm', 'the new session keeps the parameters');
+      const count = await frameCount(page);
+      await waitForFrames(page, count + 2, 'frames of the new session');
+    });
+
+    assert.deepEqual(pageErrors, [], 'the page logged errors');
+
+    await step('an unreachable server is reported, and the viewer comes back by itself', async () => {
+      // Every API request of the page now fails as if the server were down; ending the session
+      // makes the page reconnect into that.
+      await page.route('**/v1/**', (route) => route.abort('connectionrefused'));
+      const [session] = await api('GET', '/v1/sessions');
+      await api('DELETE', `/v1/sessions/${session.id}`);
+      await page.waitForSelector('#status[data-state="unreachable"]', { timeout: PATIENCE_MS });
+      const status = await page.$eval('#status', (e) => e.textContent);
+      assert.match(status, /cannot be reached.*retrying/, `status: '${status}'`);
+      await page.unroute('**/v1/**');
+      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+      const count = await frameCount(page);
+      await waitForFrames(page, count + 2, 'frames after coming back');
+    });
+
+    await step('screenshot', () => page.screenshot({ path: path.join(artifacts, 'viewer.png') }));
+    const unexpected = pageErrors.filter((e) => !e.includes('ERR_CONNECTION_REFUSED'));
+    assert.deepEqual(unexpected, [], 'the page logged errors other than the refused requests of the outage');
+
+    await step('closing the page ends its session', async () => {
+      await page.close({ runBeforeUnload: true });
+      const deadline = Date.now() + 10000;
+      let sessions;
+      do {
+        sessions = await api('GET', '/v1/sessions');
+        if (sessions.length === 0) return;
+        await new Promise((r) => setTimeout(r, 200));
+      } while (Date.now() < deadline);
+      throw new Error(`${sessions.length} session(s) left after the page closed`);
+    });
+    if (process.env.LIGHTCAST_AUTH_URL) await withAuth(browser, process.env.LIGHTCAST_AUTH_URL, process.env.LIGHTCAST_AUTH_TOKEN);
+  } catch (e) {
+    if (!page.isClosed()) await page.screenshot({ path: path.join(artifacts, 'viewer-failure.png') }).catch(() => {});
+    throw e;
+  } finally {
+    await browser.close();
+  }
+  console.log(`viewer test: passed; screenshot and still in ${artifacts}`);
+}
+
+main().catch((e) => {
+  console.error(e.message);
+  process.exit(1);
+});

@@ -1,0 +1,66 @@
+//! The browser viewer in a real headless Chromium: `client/web/tests/viewer.test.mjs` (driven
+//! by playwright-core, installed with Debian's `chromium` by `deploy/setup-debian.sh`) against a
+//! server started here, and a second server with auth on for the token prompt. Its screenshot and the still it downloads are kept under
+//! `target/tmp/viewer/`.
+
+use lightcast_e2e::TestServer;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+/// The whole browser session, all steps included (each step also has its own wait limit).
+const BROWSER_TEST_LIMIT: Duration = Duration::from_secs(600);
+
+fn chromium() -> PathBuf {
+    std::env::var_os("LIGHTCAST_CHROMIUM")
+        .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
+    let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("../client/web");
+    let browser = chromium();
+    assert!(
+        browser.exists(),
+        "Chromium not found at {}: run deploy/setup-debian.sh (or set LIGHTCAST_CHROMIUM)",
+        browser.display()
+    );
+    assert!(
+        web.join("node_modules/playwright-core/package.json")
+            .exists(),
+        "playwright-core is not installed in client/web: run deploy/setup-debian.sh \
+         (it runs `npm ci` there)"
+    );
+    let artifacts = Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer");
+    let server = TestServer::start(&[]).await;
+    let token = "viewer-test-token-0123456789";
+    let auth_server = TestServer::start(&["--token", token]).await;
+    let run = tokio::process::Command::new("node")
+        .arg("tests/viewer.test.mjs")
+        .current_dir(&web)
+        .env("LIGHTCAST_URL", &server.base)
+        .env("LIGHTCAST_ARTIFACTS", &artifacts)
+        .env("CHROMIUM", &browser)
+        .env("LIGHTCAST_AUTH_URL", &auth_server.base)
+        .env("LIGHTCAST_AUTH_TOKEN", token)
+        .kill_on_drop(true)
+        .output();
+    let output = tokio::time::timeout(BROWSER_TEST_LIMIT, run)
+        .await
+        .expect("the browser test finishes within its limit")
+        .expect("node runs (install Node.js: deploy/setup-debian.sh)");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    eprintln!("{stdout}{stderr}");
+    assert!(
+        output.status.success(),
+        "the viewer test failed ({}); screenshots in {}",
+        output.status,
+        artifacts.display()
+    );
+    assert!(
+        artifacts.join("viewer.png").exists(),
+        "the screenshot artifact is missing"
+    );
+    server.stop().await;
+    auth_server.stop().await;
+}

@@ -93,6 +93,9 @@ function send(msg) {
   const id = ++state.inputId;
   if (state.connection && state.connection.send({ ...msg, input_id: id })) {
     state.sentInputs.set(id, performance.now());
+    // Exposed for tests and for anyone inspecting the page: the newest input sent and the
+    // newest one a painted frame shows.
+    canvas.dataset.sentInput = String(id);
     return true;
   }
   return false;
@@ -135,6 +138,7 @@ async function onFrame(buffer) {
       canvas.height = frame.height;
     }
     context.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
+    canvas.dataset.shownInput = String(frame.inputId);
     stats.frame(frame, latency);
     $('hud').dataset.giPending = String((frame.flags & FLAG_GI_PENDING) !== 0);
     state.connection.send({ type: 'ack', seq: frame.seq });

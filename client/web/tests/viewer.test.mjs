@@ -5,6 +5,7 @@
 // The server must be running (the Rust test `viewer` in tests/tests/service starts one and runs
 // this script). Environment: LIGHTCAST_URL (server), LIGHTCAST_ARTIFACTS (where the screenshot
 // and the downloaded still go; default ./test-artifacts), CHROMIUM (default /usr/bin/chromium);
+// LIGHTCAST_UPLOAD_SCENE (optional): a .glb to upload through the page;
 // LIGHTCAST_AUTH_URL and LIGHTCAST_AUTH_TOKEN (optional): a second server with auth on, where
 // the page must ask for the token. Exits non-zero with the failing step named.
 
@@ -68,6 +69,29 @@ function snapshot(page) {
     const sd = Math.sqrt(grey.reduce((a, b) => a + (b - mean) ** 2, 0) / grey.length);
     return { grey, mean, sd };
   });
+}
+
+const inputIds = (page) => page.$eval('#frame', (c) => ({
+  sent: Number(c.dataset.sentInput || 0), shown: Number(c.dataset.shownInput || 0),
+}));
+
+/**
+ * Runs `act` (which must send input), waits until a painted frame shows the newest input, and
+ * returns how much the canvas changed.
+ */
+async function changeAfter(page, act, what) {
+  const before = await snapshot(page);
+  const sentBefore = (await inputIds(page)).sent;
+  await act();
+  // Input is sent once per animation frame; let the last of it go out.
+  await page.waitForTimeout(200);
+  const { sent } = await inputIds(page);
+  assert.ok(sent > sentBefore, `${what} sent no input`);
+  await page.waitForFunction((id) => Number(document.getElementById('frame').dataset.shownInput) >= id,
+    sent, { timeout: PATIENCE_MS, polling: 50 }).catch(() => {
+    throw new Error(`no frame showed the input of ${what}`);
+  });
+  return meanAbsDiff(before, await snapshot(page));
 }
 
 const meanAbsDiff = (a, b) => a.grey.reduce((s, v, i) => s + Math.abs(v - b.grey[i]), 0) / a.grey.length;
@@ -138,21 +162,51 @@ async function main() {
     });
 
     await step('a drag changes the image', async () => {
-      const before = await snapshot(page);
       const box = await page.locator('#frame').boundingBox();
       const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
-      await page.mouse.move(x, y);
-      await page.mouse.down();
-      for (let i = 1; i <= 10; i++) await page.mouse.move(x + i * 12, y + i * 3);
-      await page.mouse.up();
-      // Frames tagged with the drag's input ids come back; let a few more paint.
-      const after = (await frameCount(page)) + 4;
-      await waitForFrames(page, after, 'frames after the drag');
-      const shot = await snapshot(page);
-      const diff = meanAbsDiff(before, shot);
+      const diff = await changeAfter(page, async () => {
+        await page.mouse.move(x, y);
+        await page.mouse.down();
+        for (let i = 1; i <= 10; i++) await page.mouse.move(x + i * 12, y + i * 3);
+        await page.mouse.up();
+      }, 'the drag');
       assert.ok(diff > 4, `the image hardly changed after the drag: mean abs diff ${diff.toFixed(2)} grey levels`);
       const latency = await page.$eval('#latency', (e) => e.textContent);
       assert.match(latency, /^\d+ \/ \d+$/, `input→frame latency is measured (got '${latency}')`);
+    });
+
+    await step('the wheel zooms and W flies forward', async () => {
+      const box = await page.locator('#frame').boundingBox();
+      const zoom = await changeAfter(page, async () => {
+        await page.mouse.move(box.x + box.width / 2, box.y + box.height / 2);
+        await page.mouse.wheel(0, 300);
+      }, 'the wheel');
+      assert.ok(zoom > 4, `the wheel hardly changed the image: ${zoom.toFixed(2)}`);
+      const fly = await changeAfter(page, async () => {
+        await page.focus('#frame');
+        await page.keyboard.down('w');
+        await page.waitForTimeout(700);
+        await page.keyboard.up('w');
+      }, 'the W key');
+      assert.ok(fly > 4, `W hardly changed the image: ${fly.toFixed(2)}`);
+    });
+
+    await step('dragging in light mode moves the light', async () => {
+      const [before] = await api('GET', '/v1/sessions');
+      assert.equal(before.params.render.light, null, 'the scene light at first');
+      await page.check('input[name="drag-mode"][value="light"]');
+      const box = await page.locator('#frame').boundingBox();
+      const diff = await changeAfter(page, async () => {
+        const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
+        await page.mouse.move(x, y);
+        await page.mouse.down();
+        for (let i = 1; i <= 8; i++) await page.mouse.move(x - i * 10, y + i * 4);
+        await page.mouse.up();
+      }, 'the light drag');
+      assert.ok(diff > 2, `moving the light hardly changed the image: ${diff.toFixed(2)}`);
+      const [after] = await api('GET', '/v1/sessions');
+      assert.ok(after.params.render.light, 'the session has its own light now');
+      await page.check('input[name="drag-mode"][value="camera"]');
     });
 
     await step('a GI parameter change shows up in the timings', async () => {
@@ -160,6 +214,12 @@ async function main() {
       await page.selectOption('[data-field="render.gi.method"]', 'brsm');
       await page.waitForSelector('#stage-rows tr[data-stage="importance"]', { timeout: PATIENCE_MS });
       await page.waitForSelector('#stage-rows tr[data-stage="cache_lighting"]', { timeout: PATIENCE_MS });
+    });
+
+    await step('a debug view shows', async () => {
+      const diff = await changeAfter(page, () => page.selectOption('[data-field="render.view"]', 'rsm-flux'), 'the RSM flux view');
+      assert.ok(diff > 4, `the RSM flux view looks like the frame: ${diff.toFixed(2)}`);
+      await page.selectOption('[data-field="render.view"]', 'final');
     });
 
     await step('a rejected parameter is shown, naming the field', async () => {
@@ -221,6 +281,24 @@ async function main() {
       const count = await frameCount(page);
       await waitForFrames(page, count + 2, 'frames after coming back');
     });
+
+    if (process.env.LIGHTCAST_UPLOAD_SCENE) {
+      await step('a scene uploaded from the page streams', async () => {
+        // The new scene starts from its own camera, so the orbited view changes.
+        const diff = await changeAfter(page, async () => {
+          await page.setInputFiles('#scene-upload', process.env.LIGHTCAST_UPLOAD_SCENE);
+          await page.waitForFunction(() => document.getElementById('messages').textContent.includes('added as'),
+            null, { timeout: PATIENCE_MS });
+          await page.waitForFunction(() => document.getElementById('scene-select').value !== 'default',
+            null, { timeout: PATIENCE_MS });
+        }, 'switching to the uploaded scene');
+        assert.ok(diff > 4, `the uploaded scene looks like the orbited default scene: ${diff.toFixed(2)}`);
+        const [session] = await api('GET', '/v1/sessions');
+        assert.notEqual(session.params.render.scene, 'default', 'the session switched to the upload');
+        await page.waitForFunction(() => /\d light caches/.test(document.getElementById('scene-state').textContent),
+          null, { timeout: PATIENCE_MS });
+      });
+    }
 
     await step('screenshot', () => page.screenshot({ path: path.join(artifacts, 'viewer.png') }));
     const unexpected = pageErrors.filter((e) => !e.includes('ERR_CONNECTION_REFUSED'));

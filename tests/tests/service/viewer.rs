@@ -30,6 +30,9 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
         "playwright-core is not installed in client/web: run deploy/setup-debian.sh \
          (it runs `npm ci` there)"
     );
+    let upload = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/scenes/cornell-box/cornell-box.glb");
+    assert!(upload.exists(), "{} is missing", upload.display());
     let artifacts = Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer");
     let server = TestServer::start(&[]).await;
     let token = "viewer-test-token-0123456789";
@@ -40,6 +43,7 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
         .env("LIGHTCAST_URL", &server.base)
         .env("LIGHTCAST_ARTIFACTS", &artifacts)
         .env("CHROMIUM", &browser)
+        .env("LIGHTCAST_UPLOAD_SCENE", &upload)
         .env("LIGHTCAST_AUTH_URL", &auth_server.base)
         .env("LIGHTCAST_AUTH_TOKEN", token)
         .kill_on_drop(true)

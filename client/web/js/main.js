@@ -404,5 +404,9 @@ $('still').addEventListener('click', async () => {
   }
 });
 window.addEventListener('pagehide', () => state.connection && state.connection.stop());
+// A page restored from the back/forward cache had its session ended on the way out.
+window.addEventListener('pageshow', (e) => {
+  if (e.persisted && state.connection) state.connection.start();
+});
 
 boot();

@@ -137,7 +137,7 @@ async function withAuth(browser, authBase, goodToken) {
 async function main() {
   await mkdir(artifacts, { recursive: true });
   const browser = await chromium.launch({ executablePath, args: CHROMIUM_ARGS, headless: true });
-  const context = await browser.newContext({ viewport: { width: 800, height: 600 }, acceptDownloads: true });
+  const context = await browser.newContext({ viewport: { width: 800, height: 600 }, hasTouch: true, acceptDownloads: true });
   const page = await context.newPage();
   const pageErrors = [];
   page.on('pageerror', (e) => pageErrors.push(e.message));
@@ -189,6 +189,35 @@ async function main() {
         await page.keyboard.up('w');
       }, 'the W key');
       assert.ok(fly > 4, `W hardly changed the image: ${fly.toFixed(2)}`);
+    });
+
+    await step('touch: one finger orbits, two fingers pinch', async () => {
+      const cdp = await page.context().newCDPSession(page);
+      const box = await page.locator('#frame').boundingBox();
+      const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
+      const touch = (type, points) => cdp.send('Input.dispatchTouchEvent', {
+        type, touchPoints: points.map(([px, py], id) => ({ x: px, y: py, id })),
+      });
+      const orbit = await changeAfter(page, async () => {
+        await touch('touchStart', [[x, y]]);
+        for (let i = 1; i <= 8; i++) await touch('touchMove', [[x - i * 12, y]]);
+        await touch('touchEnd', []);
+      }, 'a one-finger drag');
+      assert.ok(orbit > 4, `a one-finger drag hardly changed the image: ${orbit.toFixed(2)}`);
+      const distance = async () => {
+        const [{ params: { render: { camera } } }] = await api('GET', '/v1/sessions');
+        return Math.hypot(...camera.position.map((p, i) => p - camera.target[i]));
+      };
+      const before = await distance();
+      const pinch = await changeAfter(page, async () => {
+        await touch('touchStart', [[x - 20, y], [x + 20, y]]);
+        for (let i = 1; i <= 8; i++) await touch('touchMove', [[x - 20 - i * 10, y], [x + 20 + i * 10, y]]);
+        await touch('touchEnd', []);
+      }, 'a pinch');
+      assert.ok(pinch > 4, `a pinch hardly changed the image: ${pinch.toFixed(2)}`);
+      const after = await distance();
+      assert.ok(after < 0.8 * before, `spreading two fingers moves the camera closer: ${before.toFixed(2)} → ${after.toFixed(2)}`);
+      await cdp.detach();
     });
 
     await step('dragging in light mode moves the light', async () => {

@@ -43,6 +43,17 @@ async function api(method, p) {
   return response.status === 204 ? null : response.json();
 }
 
+/** The id of the page's session, from its status line. */
+async function pageSessionId(page) {
+  const status = await page.$eval('#status', (e) => e.textContent);
+  const match = status.match(/session (se_[0-9a-f]+)/);
+  assert.ok(match, `the status names the session: '${status}'`);
+  return match[1];
+}
+
+/** The page's session as the server has it. */
+const pageSession = async (page) => api('GET', `/v1/sessions/${await pageSessionId(page)}`);
+
 /** Frames painted so far, from the page's counter. */
 const frameCount = (page) => page.$eval('#frame-count', (e) => Number(e.dataset.count));
 
@@ -175,6 +186,24 @@ async function main() {
       assert.match(latency, /^\d+ \/ \d+$/, `input→frame latency is measured (got '${latency}')`);
     });
 
+    await step('shift-drag pans: the camera target moves', async () => {
+      const before = (await pageSession(page)).params.render.camera.target;
+      const box = await page.locator('#frame').boundingBox();
+      const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
+      const diff = await changeAfter(page, async () => {
+        await page.keyboard.down('Shift');
+        await page.mouse.move(x, y);
+        await page.mouse.down();
+        for (let i = 1; i <= 6; i++) await page.mouse.move(x + i * 10, y - i * 6);
+        await page.mouse.up();
+        await page.keyboard.up('Shift');
+      }, 'the shift-drag');
+      assert.ok(diff > 2, `panning hardly changed the image: ${diff.toFixed(2)}`);
+      const after = (await pageSession(page)).params.render.camera.target;
+      const moved = Math.hypot(...after.map((v, i) => v - before[i]));
+      assert.ok(moved > 0.05, `the target moved by only ${moved.toFixed(3)}`);
+    });
+
     await step('the wheel zooms and W flies forward', async () => {
       const box = await page.locator('#frame').boundingBox();
       const zoom = await changeAfter(page, async () => {
@@ -205,7 +234,7 @@ async function main() {
       }, 'a one-finger drag');
       assert.ok(orbit > 4, `a one-finger drag hardly changed the image: ${orbit.toFixed(2)}`);
       const distance = async () => {
-        const [{ params: { render: { camera } } }] = await api('GET', '/v1/sessions');
+        const { params: { render: { camera } } } = await pageSession(page);
         return Math.hypot(...camera.position.map((p, i) => p - camera.target[i]));
       };
       const before = await distance();
@@ -221,7 +250,7 @@ async function main() {
     });
 
     await step('dragging in light mode moves the light', async () => {
-      const [before] = await api('GET', '/v1/sessions');
+      const before = await pageSession(page);
       assert.equal(before.params.render.light, null, 'the scene light at first');
       await page.check('input[name="drag-mode"][value="light"]');
       const box = await page.locator('#frame').boundingBox();
@@ -233,7 +262,7 @@ async function main() {
         await page.mouse.up();
       }, 'the light drag');
       assert.ok(diff > 2, `moving the light hardly changed the image: ${diff.toFixed(2)}`);
-      const [after] = await api('GET', '/v1/sessions');
+      const after = await pageSession(page);
       assert.ok(after.params.render.light, 'the session has its own light now');
       await page.check('input[name="drag-mode"][value="camera"]');
     });
@@ -279,7 +308,7 @@ async function main() {
     });
 
     await step('a deleted session is replaced by itself', async () => {
-      const [session] = await api('GET', '/v1/sessions');
+      const session = await pageSession(page);
       await api('DELETE', `/v1/sessions/${session.id}`);
       await page.waitForFunction(() => document.getElementById('messages').textContent.includes('session ended'),
         null, { timeout: PATIENCE_MS });
@@ -287,9 +316,9 @@ async function main() {
         const status = document.getElementById('status');
         return status.dataset.state === 'live' && !status.textContent.includes(old);
       }, session.id, { timeout: PATIENCE_MS });
-      const sessions = await api('GET', '/v1/sessions');
-      assert.equal(sessions.length, 1, 'one new session');
-      assert.equal(sessions[0].params.render.gi.method, 'brsm', 'the new session keeps the parameters');
+      const replacement = await pageSession(page);
+      assert.notEqual(replacement.id, session.id);
+      assert.equal(replacement.params.render.gi.method, 'brsm', 'the new session keeps the parameters');
       const count = await frameCount(page);
       await waitForFrames(page, count + 2, 'frames of the new session');
     });
@@ -300,7 +329,7 @@ async function main() {
       // Every API request of the page now fails as if the server were down; ending the session
       // makes the page reconnect into that.
       await page.route('**/v1/**', (route) => route.abort('connectionrefused'));
-      const [session] = await api('GET', '/v1/sessions');
+      const session = await pageSession(page);
       await api('DELETE', `/v1/sessions/${session.id}`);
       await page.waitForSelector('#status[data-state="unreachable"]', { timeout: PATIENCE_MS });
       const status = await page.$eval('#status', (e) => e.textContent);
@@ -309,6 +338,23 @@ async function main() {
       await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
       const count = await frameCount(page);
       await waitForFrames(page, count + 2, 'frames after coming back');
+    });
+
+    await step('a procedural street scene built from the page, its sun turned by the slider', async () => {
+      await changeAfter(page, async () => {
+        await page.fill('#procedural-spec', 'street?blocks=2');
+        await page.click('#procedural-form button[type="submit"]');
+        await page.waitForFunction(() => document.getElementById('messages').textContent.includes('added as'),
+          null, { timeout: PATIENCE_MS });
+      }, 'switching to the street');
+      await page.waitForSelector('#sun-controls:not([hidden])', { timeout: PATIENCE_MS });
+      const diff = await changeAfter(page, async () => {
+        const slider = page.locator('#sun-elevation');
+        await slider.fill(Number(await slider.inputValue()) > 45 ? '10' : '80');
+      }, 'the sun elevation slider');
+      assert.ok(diff > 4, `turning the sun hardly changed the street: ${diff.toFixed(2)}`);
+      const session = await pageSession(page);
+      assert.equal(session.params.render.light.kind, 'directional');
     });
 
     if (process.env.LIGHTCAST_UPLOAD_SCENE) {
@@ -322,7 +368,7 @@ async function main() {
             null, { timeout: PATIENCE_MS });
         }, 'switching to the uploaded scene');
         assert.ok(diff > 4, `the uploaded scene looks like the orbited default scene: ${diff.toFixed(2)}`);
-        const [session] = await api('GET', '/v1/sessions');
+        const session = await pageSession(page);
         assert.notEqual(session.params.render.scene, 'default', 'the session switched to the upload');
         await page.waitForFunction(() => /\d light caches/.test(document.getElementById('scene-state').textContent),
           null, { timeout: PATIENCE_MS });
@@ -334,15 +380,14 @@ async function main() {
     assert.deepEqual(unexpected, [], 'the page logged errors other than the refused requests of the outage');
 
     await step('closing the page ends its session', async () => {
+      const id = await pageSessionId(page);
       await page.close({ runBeforeUnload: true });
       const deadline = Date.now() + 10000;
-      let sessions;
       do {
-        sessions = await api('GET', '/v1/sessions');
-        if (sessions.length === 0) return;
+        if ((await fetch(`${base}/v1/sessions/${id}`)).status === 404) return;
         await new Promise((r) => setTimeout(r, 200));
       } while (Date.now() < deadline);
-      throw new Error(`${sessions.length} session(s) left after the page closed`);
+      throw new Error(`session ${id} is left after the page closed`);
     });
     if (process.env.LIGHTCAST_AUTH_URL) await withAuth(browser, process.env.LIGHTCAST_AUTH_URL, process.env.LIGHTCAST_AUTH_TOKEN);
   } catch (e) {

@@ -383,7 +383,7 @@ $('light-intensity').addEventListener('change', () => {
 $('resolution-scale').addEventListener('change', onResize);
 new ResizeObserver(onResize).observe(canvas);
 $('still').addEventListener('click', async () => {
-  if (!state.params) return;
+  if (!state.params || !state.light) return;
   const button = $('still');
   button.disabled = true;
   button.textContent = 'Rendering still…';

@@ -2,7 +2,8 @@
 // seconds) and fps, input→frame latency and bandwidth (counters and sparklines).
 
 const WINDOW_MS = 10000;
-const RATE_WINDOW_MS = 1000;
+// Long enough to show a rate for slow streams (a software adapter renders BRSM at < 1 fps).
+const RATE_WINDOW_MS = 5000;
 const SAMPLE_EVERY_MS = 250;
 const PALETTE = ['#4e79a7', '#f28e2b', '#e15759', '#76b7b2', '#59a14f', '#edc948', '#b07aa1',
   '#ff9da7', '#9c755f', '#bab0ac', '#86bcb6', '#d37295', '#fabfd2', '#8cd17d'];
@@ -24,6 +25,7 @@ export class Stats {
     this.total = 0;
     this.dropped = 0;
     this.lastSeq = 0;
+    this.firstFrameAt = null;
     setInterval(() => this.sample(), SAMPLE_EVERY_MS);
   }
 
@@ -41,6 +43,7 @@ export class Stats {
     if (this.lastSeq && header.seq > this.lastSeq + 1) this.dropped += header.seq - this.lastSeq - 1;
     this.lastSeq = Math.max(this.lastSeq, header.seq);
     this.total += 1;
+    if (this.firstFrameAt === null) this.firstFrameAt = now;
     this.frames.push({ t: now, header, latencyMs });
     while (this.frames.length && this.frames[0].t < now - WINDOW_MS) this.frames.shift();
     this.el.frameCount.textContent = String(this.total);
@@ -58,12 +61,15 @@ export class Stats {
   }
 
   sample() {
+    const now = performance.now();
     const recent = this.recent(RATE_WINDOW_MS);
-    const latencies = this.recent(5000).map((f) => f.latencyMs).filter((v) => v !== null);
+    const latencies = recent.map((f) => f.latencyMs).filter((v) => v !== null);
+    // Over the window, or since the first frame while the stream is younger than that.
+    const seconds = this.firstFrameAt === null ? 1 : Math.max(0.25, Math.min(RATE_WINDOW_MS, now - this.firstFrameAt) / 1000);
     const sample = {
-      t: performance.now(),
-      fps: recent.length * (1000 / RATE_WINDOW_MS),
-      mbps: (recent.reduce((sum, f) => sum + f.header.bytes, 0) * 8) / 1e6 * (1000 / RATE_WINDOW_MS),
+      t: now,
+      fps: recent.length / seconds,
+      mbps: (recent.reduce((sum, f) => sum + f.header.bytes, 0) * 8) / 1e6 / seconds,
       latency: percentile(latencies, 0.5),
     };
     this.samples.push(sample);

@@ -1,0 +1,119 @@
+#!/usr/bin/env bash
+# The GPU benchmarks the issues ask for, in one command, on a machine with a GPU:
+#   - the paper's evaluation (`lightcast-server bench`, issue 3) at 1920×1080 on the
+#     procedural street scene, LightSkin against BRSM over RSM sizes, VAL counts and view samples;
+#   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
+#     1280×720 and 1920×1080.
+#
+#   bench/gpu-run.sh KIT_DIR OUT_DIR [gi|service|all] [--quick]
+#
+# KIT_DIR comes from bench/gpu-kit.sh (binaries, font, Vulkan loader .debs). Results land in
+# OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-service.md, environment.txt and
+# run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
+# adapter (a software one included) to check this script; its numbers mean nothing.
+set -euo pipefail
+kit="$(cd "${1:?usage: $0 KIT_DIR OUT_DIR [gi|service|all] [--quick]}" && pwd)"
+out="${2:?usage: $0 KIT_DIR OUT_DIR [gi|service|all] [--quick]}"
+what="${3:-all}"
+quick=false
+[ "${4:-}" = "--quick" ] || [ "$what" = "--quick" ] && quick=true
+[ "$what" = "--quick" ] && what=all
+case "$what" in gi|service|all) ;; *) echo "gpu-run: unknown part '$what'" >&2; exit 2 ;; esac
+mkdir -p "$out"
+exec > >(tee -a "$out/run.log") 2>&1
+
+# Vulkan loader from the kit where the machine has none (the device machines ship only the
+# NVIDIA driver's ICD).
+if ! ldconfig -p | grep -q libvulkan.so.1 && ls "$kit"/gl/*.deb >/dev/null 2>&1; then
+  for f in "$kit"/gl/*.deb; do dpkg -x "$f" /; done
+  ldconfig
+fi
+nvidia_icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+if [ -f "$nvidia_icd" ] && [ -z "${VK_DRIVER_FILES:-}" ]; then
+  export VK_DRIVER_FILES="$nvidia_icd"
+fi
+font_dir=/usr/share/fonts/truetype/dejavu
+if [ ! -f "$font_dir/DejaVuSans.ttf" ]; then
+  mkdir -p "$font_dir" && cp "$kit/DejaVuSans.ttf" "$font_dir/"
+fi
+
+server="$kit/lightcast-server"
+client="$kit/lightcast"
+cache=$(mktemp -d)
+export LIGHTCAST_CACHE_DIR="$cache"
+cpu_flag=()
+if $quick; then
+  cpu_flag=(--allow-cpu-adapter)
+fi
+
+{
+  echo "date: $(date -u +%FT%TZ)"
+  echo "lightcast revision: $(cat "$kit/revision" 2>/dev/null || echo unknown)"
+  echo "host: $(uname -srm), $(nproc) CPUs"
+  if command -v nvidia-smi >/dev/null 2>&1; then
+    nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv
+  else
+    echo "nvidia-smi: not found"
+  fi
+} > "$out/environment.txt"
+cat "$out/environment.txt"
+
+if [ "$what" = gi ] || [ "$what" = all ]; then
+  if $quick; then
+    sizes=(--width 160 --height 90 --rsm-sizes 32,64 --vals 256,512 --view-samples 64 --frames 2 --warmup 1)
+    scene='procedural:street?blocks=2'
+  else
+    sizes=(--width 1920 --height 1080)
+    scene='procedural:street?blocks=40&detail=4'
+  fi
+  echo "gpu-run: GI benchmark on $scene" >&2
+  cmd=("$server" bench --scene "$scene" "${sizes[@]}" --json "$out/gpu-street.json"
+    --markdown "$out/gpu-street.md" --plots "$out/gpu-street")
+  echo "command: ${cmd[*]}" >> "$out/environment.txt"
+  "${cmd[@]}"
+fi
+
+if [ "$what" = service ] || [ "$what" = all ]; then
+  port=8090
+  "$server" --listen "127.0.0.1:$port" "${cpu_flag[@]}" > "$out/server.log" 2>&1 &
+  server_pid=$!
+  trap 'kill $server_pid 2>/dev/null || true; rm -rf "$cache"' EXIT
+  for _ in $(seq 1 300); do
+    curl -fs "http://127.0.0.1:$port/readyz" >/dev/null 2>&1 && break
+    kill -0 $server_pid 2>/dev/null || { echo "gpu-run: the server exited" >&2; cat "$out/server.log" >&2; exit 1; }
+    sleep 0.2
+  done
+  curl -fs "http://127.0.0.1:$port/readyz" >/dev/null || { echo "gpu-run: the server is not ready" >&2; cat "$out/server.log" >&2; exit 1; }
+  grep -m1 "adapter" "$out/server.log" | sed 's/\x1b\[[0-9;]*m//g' >> "$out/environment.txt" || true
+  # Sessions would show direct light only while the default scene's light caches compute.
+  for _ in $(seq 1 600); do
+    curl -fs "http://127.0.0.1:$port/v1/scenes/default" | grep -q '"state":"ready"' && break
+    sleep 0.5
+  done
+  if $quick; then
+    runs=("64 36" "96 54"); sessions=1,4; duration=2; methods=(none)
+  else
+    runs=("1280 720" "1920 1080"); sessions=1,4,16,32; duration=10; methods=(brsm none)
+  fi
+  : > "$out/gpu-service.md"
+  for gi in "${methods[@]}"; do
+    for size in "${runs[@]}"; do
+      set -- $size
+      echo "gpu-run: service load test at $1×$2, GI $gi" >&2
+      part="$out/service-$gi-$2.md"
+      cmd=("$client" --server "http://127.0.0.1:$port" loadtest --sessions "$sessions"
+        --duration "$duration" --ramp 2 --input-hz 30 --fps-cap 240 --width "$1" --height "$2"
+        --scene default --gi "$gi" --markdown "$part")
+      echo "command: ${cmd[*]}" >> "$out/environment.txt"
+      "${cmd[@]}"
+      { echo "## ${1}×${2}, GI $gi"; echo; cat "$part"; echo; } >> "$out/gpu-service.md"
+      rm "$part"
+    done
+  done
+  kill $server_pid
+  wait $server_pid || true
+  trap - EXIT
+  rm "$out/server.log"
+fi
+rm -rf "$cache"
+echo "gpu-run: done; results in $out" >&2

@@ -14,6 +14,8 @@ const $ = (id) => document.getElementById(id);
 const MAX_MESSAGES = 4;
 const RESIZE_DEBOUNCE_MS = 250;
 const SCENE_POLL_MS = 500;
+// Inputs whose frame never comes (a paused session) are forgotten beyond this many.
+const MAX_PENDING_INPUTS = 1000;
 
 const canvas = $('frame');
 const context = canvas.getContext('2d');
@@ -93,6 +95,7 @@ function send(msg) {
   const id = ++state.inputId;
   if (state.connection && state.connection.send({ ...msg, input_id: id })) {
     state.sentInputs.set(id, performance.now());
+    if (state.sentInputs.size > MAX_PENDING_INPUTS) state.sentInputs.delete(state.sentInputs.keys().next().value);
     // Exposed for tests and for anyone inspecting the page: the newest input sent and the
     // newest one a painted frame shows.
     canvas.dataset.sentInput = String(id);

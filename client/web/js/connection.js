@@ -1,11 +1,14 @@
 // One streaming session: creates it, opens its WebSocket with a ticket, and keeps it alive.
 // When the socket drops it reconnects by itself (with backoff); when the session is gone
 // (deleted, or the server restarted) it creates a new one with the last known parameters.
+// A ping every few seconds notices links that died silently (sleep, NAT timeouts).
 
 import { ApiError, Unreachable, request, sendJson, wsUrl } from './api.js';
 
 const MIN_BACKOFF_MS = 500;
 const MAX_BACKOFF_MS = 8000;
+const PING_EVERY_MS = 5000;
+const SILENCE_LIMIT_MS = 15000;
 
 export class Connection {
   /**
@@ -19,13 +22,15 @@ export class Connection {
     this.sessionId = null;
     this.ws = null;
     this.backoff = MIN_BACKOFF_MS;
-    this.stopped = false;
+    // Bumped by start() and stop(): work begun under an older generation is abandoned.
+    this.generation = 0;
     this.timer = null;
+    this.watchdog = null;
   }
 
   start() {
-    this.stopped = false;
-    this.connect();
+    this.generation += 1;
+    this.connect(this.generation);
   }
 
   /** Sends a control message; false when no socket is open (the caller may retry later). */
@@ -39,32 +44,59 @@ export class Connection {
 
   /** Ends the session on the server (also when the page goes away). */
   stop() {
-    this.stopped = true;
+    this.generation += 1;
+    this.dropSocket('viewer closed');
     clearTimeout(this.timer);
-    if (this.ws) this.ws.close(1000, 'viewer closed');
     if (this.sessionId) {
-      request('DELETE', `v1/sessions/${this.sessionId}`, { keepalive: true }).catch(() => {});
+      this.deleteSession(this.sessionId);
       this.sessionId = null;
     }
     this.handlers.onStatus('stopped', 'stopped');
   }
 
-  async connect() {
-    if (this.stopped) return;
+  deleteSession(id) {
+    request('DELETE', `v1/sessions/${encodeURIComponent(id)}`, { keepalive: true }).catch(() => {});
+  }
+
+  dropSocket(reason) {
+    clearInterval(this.watchdog);
+    const ws = this.ws;
+    this.ws = null;
+    if (ws) ws.close(1000, reason);
+  }
+
+  async connect(generation) {
+    if (generation !== this.generation) return;
     this.handlers.onStatus('connecting', this.sessionId ? 'reconnecting to the session…' : 'starting a session…');
-    let ticket;
+    let ws;
     try {
-      ticket = await this.ticket();
+      const ticket = await this.ticket(generation);
+      if (generation !== this.generation) return;
+      const path = `v1/sessions/${encodeURIComponent(this.sessionId)}/stream?ticket=${encodeURIComponent(ticket)}`;
+      ws = new WebSocket(wsUrl(path));
     } catch (e) {
-      this.failed(e);
+      if (generation === this.generation) this.failed(e, generation);
       return;
     }
-    if (this.stopped) return;
-    const ws = new WebSocket(wsUrl(`v1/sessions/${this.sessionId}/stream?ticket=${ticket}`));
     ws.binaryType = 'arraybuffer';
     this.ws = ws;
     let closingReason = null;
+    let lastMessage = performance.now();
+    let nonce = 0;
+    clearInterval(this.watchdog);
+    this.watchdog = setInterval(() => {
+      if (this.ws !== ws) return;
+      if (performance.now() - lastMessage > SILENCE_LIMIT_MS) {
+        // onclose does not fire for a socket we drop ourselves: reconnect from here.
+        this.dropSocket('no answer');
+        this.retry(`no word from the server for ${SILENCE_LIMIT_MS / 1000} s`, 'reconnecting', generation);
+      } else if (ws.readyState === WebSocket.OPEN) {
+        ws.send(JSON.stringify({ type: 'ping', nonce: ++nonce }));
+      }
+    }, PING_EVERY_MS);
     ws.onmessage = (message) => {
+      if (this.ws !== ws) return;
+      lastMessage = performance.now();
       if (typeof message.data !== 'string') {
         this.handlers.onFrame(message.data);
         return;
@@ -88,22 +120,23 @@ export class Connection {
       this.handlers.onEvent(event);
     };
     ws.onclose = (close) => {
-      if (this.ws !== ws || this.stopped) return;
+      if (this.ws !== ws) return;
+      clearInterval(this.watchdog);
       this.ws = null;
       const reason = closingReason || close.reason || `connection lost (code ${close.code})`;
-      if (closingReason === 'session deleted') {
-        // Someone ended the session; a new one carries on with the same view.
+      if (closingReason && closingReason.startsWith('session')) {
+        // The session was deleted or ended idle; a new one carries on with the same view.
         this.sessionId = null;
       }
-      this.retry(`${reason}; reconnecting`);
+      this.retry(`${reason}; reconnecting`, 'reconnecting', generation);
     };
   }
 
   /** A ticket for the current session, creating the session first when there is none. */
-  async ticket() {
+  async ticket(generation) {
     if (this.sessionId) {
       try {
-        const t = await sendJson('POST', `v1/sessions/${this.sessionId}/ticket`);
+        const t = await sendJson('POST', `v1/sessions/${encodeURIComponent(this.sessionId)}/ticket`);
         return t.ticket;
       } catch (e) {
         if (!(e instanceof ApiError) || e.status !== 404) throw e;
@@ -121,28 +154,32 @@ export class Connection {
       this.params = { ...this.params, render: { ...this.params.render, scene: 'default' } };
       created = await sendJson('POST', 'v1/sessions', this.params);
     }
+    if (generation !== this.generation) {
+      // Stopped while the session was being created: it must not outlive the page.
+      this.deleteSession(created.session.id);
+      return null;
+    }
     this.sessionId = created.session.id;
     this.params = created.session.params;
     this.handlers.onSession(created.session);
     return created.ticket.ticket;
   }
 
-  failed(error) {
+  failed(error, generation) {
     if (error instanceof ApiError && error.status === 401) {
-      this.stopped = true;
+      this.generation += 1;
       this.handlers.onStatus('unauthorized', error.message);
       return;
     }
-    const what = error instanceof Unreachable ? 'unreachable' : 'reconnecting';
-    this.retry(error.message, what);
+    this.retry(error.message, error instanceof Unreachable ? 'unreachable' : 'reconnecting', generation);
   }
 
-  retry(message, state = 'reconnecting') {
-    if (this.stopped) return;
+  retry(message, state, generation) {
+    if (generation !== this.generation) return;
     const wait = this.backoff;
     this.backoff = Math.min(this.backoff * 2, MAX_BACKOFF_MS);
     this.handlers.onStatus(state, `${message} · retrying in ${(wait / 1000).toFixed(1)} s`);
     clearTimeout(this.timer);
-    this.timer = setTimeout(() => this.connect(), wait);
+    this.timer = setTimeout(() => this.connect(generation), wait);
   }
 }

@@ -65,7 +65,8 @@ export class Controls {
       target: [...camera.target],
       radius,
       yaw: Math.atan2(offset[0], offset[2]),
-      pitch: Math.asin(clamp(offset[1] / radius, -1, 1)),
+      // Clamped so that a camera looking straight down keeps a usable right vector.
+      pitch: clamp(Math.asin(clamp(offset[1] / radius, -1, 1)), -MAX_PITCH, MAX_PITCH),
       fov: camera.fov_y_degrees,
     };
   }
@@ -181,12 +182,16 @@ export class Controls {
   }
 
   key(e, down) {
+    const k = e.key.toLowerCase();
+    if (!down) {
+      // Releases count wherever the focus went meanwhile, or the camera would fly on.
+      this.keys.delete(k);
+      return;
+    }
     const target = e.target;
     if (target && (target.tagName === 'INPUT' || target.tagName === 'SELECT' || target.tagName === 'TEXTAREA')) return;
-    const k = e.key.toLowerCase();
     if (!['w', 'a', 's', 'd', 'q', 'e', 'shift'].includes(k)) return;
-    if (down) this.keys.add(k);
-    else this.keys.delete(k);
+    this.keys.add(k);
     if (this.keys.size > 0 && this.lastFly === null) {
       this.lastFly = performance.now();
       requestAnimationFrame((t) => this.fly(t));

@@ -16,6 +16,11 @@ const RESIZE_DEBOUNCE_MS = 250;
 const SCENE_POLL_MS = 500;
 // Inputs whose frame never comes (a paused session) are forgotten beyond this many.
 const MAX_PENDING_INPUTS = 1000;
+// Camera and light messages at most this often, acknowledgements at most every ACK_EVERY_MS:
+// together well inside the server's default of 120 control messages per second, also on
+// 144 Hz displays and at high fps caps.
+const MIN_INPUT_INTERVAL_MS = 16;
+const ACK_EVERY_MS = 100;
 
 const canvas = $('frame');
 const context = canvas.getContext('2d');
@@ -29,6 +34,8 @@ const state = {
   sentInputs: new Map(),
   drawnSeq: 0,
   queued: { camera: null, light: null },
+  lastFlush: 0,
+  lastAck: 0,
   light: null,
   sessionId: null,
 };
@@ -81,7 +88,12 @@ function queueInput(kind, value) {
   if (idle) requestAnimationFrame(flushInput);
 }
 
-function flushInput() {
+function flushInput(now) {
+  if (now - state.lastFlush < MIN_INPUT_INTERVAL_MS) {
+    requestAnimationFrame(flushInput);
+    return;
+  }
+  state.lastFlush = now;
   for (const kind of ['camera', 'light']) {
     const value = state.queued[kind];
     if (!value) continue;
@@ -136,15 +148,19 @@ async function onFrame(buffer) {
   // Decoding finishes out of order sometimes; never paint an older frame over a newer one.
   if (frame.seq > state.drawnSeq) {
     state.drawnSeq = frame.seq;
-    if (canvas.width !== frame.width || canvas.height !== frame.height) {
-      canvas.width = frame.width;
-      canvas.height = frame.height;
+    // Sized by the decoded image, not the header's claim.
+    if (canvas.width !== bitmap.width || canvas.height !== bitmap.height) {
+      canvas.width = bitmap.width;
+      canvas.height = bitmap.height;
     }
     context.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
     canvas.dataset.shownInput = String(frame.inputId);
     stats.frame(frame, latency);
     $('hud').dataset.giPending = String((frame.flags & FLAG_GI_PENDING) !== 0);
-    state.connection.send({ type: 'ack', seq: frame.seq });
+    if (received - state.lastAck >= ACK_EVERY_MS) {
+      state.lastAck = received;
+      state.connection.send({ type: 'ack', seq: frame.seq });
+    }
   }
   bitmap.close();
 }
@@ -175,6 +191,8 @@ async function useScene(id, render) {
     showError(e, `scene ${id}`);
     return;
   }
+  // A quicker switch to another scene may have overtaken this one.
+  if (!state.params || state.params.render.scene !== id) return;
   state.scene = scene;
   const [min, max] = [scene.bounds.min, scene.bounds.max];
   controls.setSceneSize(Math.hypot(max[0] - min[0], max[1] - min[1], max[2] - min[2]));
@@ -195,9 +213,10 @@ async function watchScene(id) {
       return;
     }
     if (state.params && state.params.render.scene !== id) return;
+    // The default cache set: the viewer does not change cache_distance or cache_angle.
     const caches = scene.caches[0];
     const text = !caches ? 'no light caches'
-      : caches.state === 'ready' ? `${scene.triangles.toLocaleString()} triangles · ${caches.caches.toLocaleString()} light caches (${caches.seconds.toFixed(1)} s${caches.from_store ? ', from the store' : ''})`
+      : caches.state === 'ready' ? `${scene.triangles.toLocaleString()} triangles · ${(caches.caches ?? 0).toLocaleString()} light caches (${(caches.seconds ?? 0).toFixed(1)} s${caches.from_store ? ', from the store' : ''})`
       : caches.state === 'failed' ? `light caches failed: ${caches.error}`
       : `light caches ${caches.state}${caches.step ? `: ${caches.step}` : ''}${caches.progress !== null && caches.progress !== undefined ? ` ${(caches.progress * 100).toFixed(0)} %` : ''}`;
     $('scene-state').textContent = text;

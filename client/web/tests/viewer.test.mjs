@@ -86,6 +86,12 @@ const inputIds = (page) => page.$eval('#frame', (c) => ({
   sent: Number(c.dataset.sentInput || 0), shown: Number(c.dataset.shownInput || 0),
 }));
 
+/** Waits until the scene picker shows a scene other than `previous`. */
+async function waitForSceneSwitch(page, previous) {
+  await page.waitForFunction((old) => document.getElementById('scene-select').value !== old,
+    previous, { timeout: PATIENCE_MS });
+}
+
 /**
  * Runs `act` (which must send input), waits until a painted frame shows the newest input, and
  * returns how much the canvas changed.
@@ -182,8 +188,11 @@ async function main() {
         await page.mouse.up();
       }, 'the drag');
       assert.ok(diff > 4, `the image hardly changed after the drag: mean abs diff ${diff.toFixed(2)} grey levels`);
-      const latency = await page.$eval('#latency', (e) => e.textContent);
-      assert.match(latency, /^\d+ \/ \d+$/, `input→frame latency is measured (got '${latency}')`);
+      // The counters are redrawn four times a second.
+      await page.waitForFunction(() => /^\d+ \/ \d+$/.test(document.getElementById('latency').textContent),
+        null, { timeout: 5000 }).catch(async () => {
+        throw new Error(`input→frame latency is not shown (got '${await page.$eval('#latency', (e) => e.textContent)}')`);
+      });
     });
 
     await step('shift-drag pans: the camera target moves', async () => {
@@ -331,9 +340,10 @@ async function main() {
       await page.route('**/v1/**', (route) => route.abort('connectionrefused'));
       const session = await pageSession(page);
       await api('DELETE', `/v1/sessions/${session.id}`);
-      await page.waitForSelector('#status[data-state="unreachable"]', { timeout: PATIENCE_MS });
-      const status = await page.$eval('#status', (e) => e.textContent);
-      assert.match(status, /cannot be reached.*retrying/, `status: '${status}'`);
+      await page.waitForFunction(() => {
+        const status = document.getElementById('status');
+        return status.dataset.state === 'unreachable' && /cannot be reached.*retrying/.test(status.textContent);
+      }, null, { timeout: PATIENCE_MS });
       await page.unroute('**/v1/**');
       await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
       const count = await frameCount(page);
@@ -341,11 +351,11 @@ async function main() {
     });
 
     await step('a procedural street scene built from the page, its sun turned by the slider', async () => {
+      const previous = await page.inputValue('#scene-select');
       await changeAfter(page, async () => {
         await page.fill('#procedural-spec', 'street?blocks=2');
         await page.click('#procedural-form button[type="submit"]');
-        await page.waitForFunction(() => document.getElementById('messages').textContent.includes('added as'),
-          null, { timeout: PATIENCE_MS });
+        await waitForSceneSwitch(page, previous);
       }, 'switching to the street');
       await page.waitForSelector('#sun-controls:not([hidden])', { timeout: PATIENCE_MS });
       const diff = await changeAfter(page, async () => {
@@ -360,16 +370,15 @@ async function main() {
     if (process.env.LIGHTCAST_UPLOAD_SCENE) {
       await step('a scene uploaded from the page streams', async () => {
         // The new scene starts from its own camera, so the orbited view changes.
+        const previous = await page.inputValue('#scene-select');
         const diff = await changeAfter(page, async () => {
           await page.setInputFiles('#scene-upload', process.env.LIGHTCAST_UPLOAD_SCENE);
-          await page.waitForFunction(() => document.getElementById('messages').textContent.includes('added as'),
-            null, { timeout: PATIENCE_MS });
-          await page.waitForFunction(() => document.getElementById('scene-select').value !== 'default',
-            null, { timeout: PATIENCE_MS });
+          await waitForSceneSwitch(page, previous);
         }, 'switching to the uploaded scene');
         assert.ok(diff > 4, `the uploaded scene looks like the orbited default scene: ${diff.toFixed(2)}`);
         const session = await pageSession(page);
-        assert.notEqual(session.params.render.scene, 'default', 'the session switched to the upload');
+        assert.equal(session.params.render.scene, await page.inputValue('#scene-select'), 'the session switched to the upload');
+        assert.notEqual(session.params.render.scene, previous);
         await page.waitForFunction(() => /\d light caches/.test(document.getElementById('scene-state').textContent),
           null, { timeout: PATIENCE_MS });
       });

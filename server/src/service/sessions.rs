@@ -426,14 +426,17 @@ impl SessionRegistry {
         lock(&self.sessions).values().cloned().collect()
     }
 
-    /// Removes and returns the sessions without a stream for longer than `timeout`.
+    /// Removes and returns the sessions without a stream for longer than `timeout`. Each is
+    /// claimed as if a stream attached, so a client attaching at this very moment gets 409
+    /// instead of a socket to a session that is gone.
     pub fn remove_idle(&self, timeout: Duration, now: Instant) -> Vec<Arc<Session>> {
         let mut all = lock(&self.sessions);
-        let idle: Vec<Arc<Session>> = all
-            .values()
-            .filter(|s| s.idle_for(now).is_some_and(|d| d > timeout))
-            .cloned()
-            .collect();
+        let mut idle = Vec::new();
+        for s in all.values() {
+            if s.idle_for(now).is_some_and(|d| d > timeout) && s.attach() {
+                idle.push(Arc::clone(s));
+            }
+        }
         for s in &idle {
             all.remove(&s.id);
         }

@@ -786,6 +786,46 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
             .expect("request");
         assert_eq!(resp.status(), 200, "{path} needs no token");
     }
+    // The viewer's files load without a token (the page asks for one), as their own types,
+    // under a content security policy; its page lives at `/` only.
+    for (path, content_type) in [
+        ("/", "text/html"),
+        ("/viewer/js/main.js", "text/javascript"),
+        ("/viewer/viewer.css", "text/css"),
+        ("/viewer/index.html", "text/html"),
+    ] {
+        let resp = server
+            .http
+            .get(server.url(path))
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 200, "{path} needs no token");
+        assert_eq!(
+            resp.url().path(),
+            if content_type == "text/html" {
+                "/"
+            } else {
+                path
+            }
+        );
+        let header = |name: &str| {
+            resp.headers()
+                .get(name)
+                .and_then(|v| v.to_str().ok())
+                .unwrap_or_default()
+                .to_string()
+        };
+        assert!(header("content-type").starts_with(content_type), "{path}");
+        assert!(header("content-security-policy").contains("default-src 'self'"));
+    }
+    let resp = server
+        .http
+        .get(server.url("/viewer/missing.js"))
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(resp.status(), 404);
     let mut params = small_session(32, 32);
     params["render"]["gi"]["method"] = json!("none");
     let created = server.create_session(params, Some(alice)).await;

@@ -7,7 +7,8 @@ use lightcast_e2e::TestServer;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-/// The whole browser session, all steps included (each step also has its own wait limit).
+/// The whole browser session, all steps included: a normal run takes about 30 s on lavapipe,
+/// so this only ends a hang (each step also has its own wait limit).
 const BROWSER_TEST_LIMIT: Duration = Duration::from_secs(600);
 
 fn chromium() -> PathBuf {
@@ -47,18 +48,15 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
         .env("LIGHTCAST_AUTH_URL", &auth_server.base)
         .env("LIGHTCAST_AUTH_TOKEN", token)
         .kill_on_drop(true)
-        .output();
-    let output = tokio::time::timeout(BROWSER_TEST_LIMIT, run)
+        .status();
+    // The script's step log goes straight to the terminal, so it survives a timeout too.
+    let status = tokio::time::timeout(BROWSER_TEST_LIMIT, run)
         .await
         .expect("the browser test finishes within its limit")
         .expect("node runs (install Node.js: deploy/setup-debian.sh)");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    eprintln!("{stdout}{stderr}");
     assert!(
-        output.status.success(),
-        "the viewer test failed ({}); screenshots in {}",
-        output.status,
+        status.success(),
+        "the viewer test failed ({status}); screenshots in {}",
         artifacts.display()
     );
     assert!(

@@ -116,6 +116,14 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
     let mut events = session.events.subscribe();
     let mut closed = session.closed();
     let mut shutdown = state.shutdown.clone();
+    // A session ended (DELETE) or a shutdown begun between the lookup and the attach has set
+    // its value already, which `changed()` would not report.
+    if closed.borrow().is_some() {
+        closed.mark_changed();
+    }
+    if *shutdown.borrow() {
+        shutdown.mark_changed();
+    }
     let mut limit = RateLimit::new(state.limits.max_messages_per_second);
     let hello = ServerEvent::Hello {
         session: Box::new(session.info()),

@@ -5,7 +5,7 @@
 use super::not_found;
 use axum::extract::Path;
 use axum::http::header;
-use axum::response::{IntoResponse, Response};
+use axum::response::{IntoResponse, Redirect, Response};
 
 /// One file of the viewer, served at `/viewer/{path}` (`index.html` also at `/`).
 struct Asset {
@@ -64,7 +64,7 @@ fn serve(asset: &Asset) -> Response {
 #[utoipa::path(get, path = "/", tag = "viewer",
     responses((status = 200, description = "The browser viewer", content_type = "text/html")))]
 pub async fn index() -> Response {
-    file(Path("index.html".to_string())).await
+    serve_or_404("index.html").await
 }
 
 /// The viewer's scripts and style sheet.
@@ -74,6 +74,14 @@ pub async fn index() -> Response {
         (status = 200, description = "The file"),
         (status = 404, body = lightcast_protocol::ErrorBody)))]
 pub async fn file(Path(path): Path<String>) -> Response {
+    // The page's relative links only work from `/`.
+    if path == "index.html" {
+        return Redirect::permanent("../").into_response();
+    }
+    serve_or_404(&path).await
+}
+
+async fn serve_or_404(path: &str) -> Response {
     match ASSETS.iter().find(|a| a.path == path) {
         Some(asset) => serve(asset),
         None => not_found().await.into_response(),

@@ -104,9 +104,14 @@ impl TestServer {
         Stream { ws }
     }
 
+    /// GET without a token; panics only when the request cannot be made.
+    pub async fn get(&self, path: &str) -> reqwest::Response {
+        self.http.get(self.url(path)).send().await.expect("request")
+    }
+
     /// GET a JSON document; panics unless 200.
     pub async fn get_json(&self, path: &str) -> Value {
-        let resp = self.http.get(self.url(path)).send().await.expect("request");
+        let resp = self.get(path).await;
         assert_eq!(resp.status(), 200, "GET {path}");
         resp.json().await.expect("JSON")
     }

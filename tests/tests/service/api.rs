@@ -751,12 +751,7 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
         "/openapi.json",
         "/v1/server",
     ] {
-        let resp = server
-            .http
-            .get(server.url(path))
-            .send()
-            .await
-            .expect("request");
+        let resp = server.get(path).await;
         assert_eq!(resp.status(), 401, "{path} without a token");
         let body: Value = resp.json().await.expect("JSON error");
         assert_eq!(body["error"], "unauthorized");
@@ -778,12 +773,7 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
         assert_eq!(resp.status(), 200, "{path} with a token");
     }
     for path in ["/healthz", "/readyz"] {
-        let resp = server
-            .http
-            .get(server.url(path))
-            .send()
-            .await
-            .expect("request");
+        let resp = server.get(path).await;
         assert_eq!(resp.status(), 200, "{path} needs no token");
     }
     // The viewer's files load without a token (the page asks for one), as their own types,
@@ -794,12 +784,7 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
         ("/viewer/viewer.css", "text/css"),
         ("/viewer/index.html", "text/html"),
     ] {
-        let resp = server
-            .http
-            .get(server.url(path))
-            .send()
-            .await
-            .expect("request");
+        let resp = server.get(path).await;
         assert_eq!(resp.status(), 200, "{path} needs no token");
         assert_eq!(
             resp.url().path(),
@@ -819,12 +804,7 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
         assert!(header("content-type").starts_with(content_type), "{path}");
         assert!(header("content-security-policy").contains("default-src 'self'"));
     }
-    let resp = server
-        .http
-        .get(server.url("/viewer/missing.js"))
-        .send()
-        .await
-        .expect("request");
+    let resp = server.get("/viewer/missing.js").await;
     assert_eq!(resp.status(), 404);
     let mut params = small_session(32, 32);
     params["render"]["gi"]["method"] = json!("none");

@@ -292,13 +292,7 @@ async fn sessions_without_a_stream_end_after_the_idle_time() {
     tokio::time::timeout(PATIENCE, async {
         loop {
             stream.next_frame(&mut events).await;
-            let status = server
-                .http
-                .get(server.url(&abandoned_path))
-                .send()
-                .await
-                .expect("request")
-                .status();
+            let status = server.get(&abandoned_path).await.status();
             if status == 404 {
                 return;
             }

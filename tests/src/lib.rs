@@ -239,6 +239,14 @@ pub fn mean_abs_diff(a: &image::RgbaImage, b: &image::RgbaImage) -> f64 {
 }
 
 /// Session parameters small enough for lavapipe: `width`×`height`, a small RSM and few VALs.
+/// [`small_session`] with direct light only: the fastest frames, for tests about the stream
+/// rather than GI.
+pub fn direct_session(width: u32, height: u32) -> Value {
+    let mut params = small_session(width, height);
+    params["render"]["gi"]["method"] = json!("none");
+    params
+}
+
 pub fn small_session(width: u32, height: u32) -> Value {
     json!({
         "render": {

@@ -138,7 +138,6 @@ impl Service {
             error,
         })?;
         let (shutdown, shutdown_rx) = tokio::sync::watch::channel(false);
-        let limits_idle_secs = limits.session_idle_secs;
         let state = Arc::new(http::AppState::new(
             scenes,
             Arc::clone(&sessions),
@@ -153,10 +152,10 @@ impl Service {
         if state.auth_enabled() {
             log("auth: bearer tokens required");
         }
-        if limits_idle_secs > 0 {
+        if state.limits.session_idle_secs > 0 {
             tokio::spawn(reap_idle_sessions(
                 Arc::clone(&sessions),
-                Duration::from_secs(limits_idle_secs),
+                Duration::from_secs(state.limits.session_idle_secs),
                 shutdown_rx.clone(),
             ));
         }

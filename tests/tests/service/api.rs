@@ -1,7 +1,9 @@
 //! The HTTP API end to end: one-shot renders, scenes, bad input, auth, metrics, OpenAPI.
 
 use futures_util::SinkExt;
-use lightcast_e2e::{cornell_glb, glb_to_gltf, small_session, Incoming, TestServer, PATIENCE};
+use lightcast_e2e::{
+    cornell_glb, direct_session, glb_to_gltf, small_session, Incoming, TestServer, PATIENCE,
+};
 use lightcast_protocol::{RenderReport, ServerEvent};
 use serde_json::{json, Value};
 use std::time::Duration;
@@ -15,6 +17,15 @@ fn report(resp: &reqwest::Response) -> RenderReport {
         .to_str()
         .expect("ASCII header");
     serde_json::from_str(header).expect("RenderReport JSON")
+}
+
+/// A multipart scene upload: a `.gltf` named `gltf_name` and its buffer `box.bin`.
+fn gltf_upload(gltf: Vec<u8>, gltf_name: &str, bin: Vec<u8>) -> reqwest::multipart::Form {
+    let part =
+        |bytes, name: &str| reqwest::multipart::Part::bytes(bytes).file_name(name.to_string());
+    reqwest::multipart::Form::new()
+        .part("scene", part(gltf, gltf_name))
+        .part("bin", part(bin, "box.bin"))
 }
 
 async fn render(server: &TestServer, body: &Value) -> (RenderReport, Vec<u8>) {
@@ -119,15 +130,7 @@ async fn scenes_upload_inspect_use_and_delete() {
 
     // The same scene as .gltf + .bin in one multipart upload.
     let (gltf, bin) = glb_to_gltf(&cornell_glb(), "box.bin");
-    let form = reqwest::multipart::Form::new()
-        .part(
-            "scene",
-            reqwest::multipart::Part::bytes(gltf).file_name("box.gltf"),
-        )
-        .part(
-            "bin",
-            reqwest::multipart::Part::bytes(bin).file_name("box.bin"),
-        );
+    let form = gltf_upload(gltf, "box.gltf", bin);
     let resp = server
         .http
         .post(server.url("/v1/scenes"))
@@ -142,15 +145,7 @@ async fn scenes_upload_inspect_use_and_delete() {
     // A .gltf whose buffer points outside the upload is refused.
     let (mut gltf, bin) = glb_to_gltf(&cornell_glb(), "../../etc/passwd");
     gltf.extend_from_slice(b" ");
-    let form = reqwest::multipart::Form::new()
-        .part(
-            "scene",
-            reqwest::multipart::Part::bytes(gltf).file_name("evil.gltf"),
-        )
-        .part(
-            "bin",
-            reqwest::multipart::Part::bytes(bin).file_name("box.bin"),
-        );
+    let form = gltf_upload(gltf, "evil.gltf", bin);
     let resp = server
         .http
         .post(server.url("/v1/scenes"))
@@ -708,8 +703,7 @@ async fn render_small(server: &TestServer) -> (RenderReport, Vec<u8>) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn rate_limited_messages_are_refused_not_fatal() {
     let server = TestServer::start(&["--max-messages-per-second", "5"]).await;
-    let mut params = small_session(32, 32);
-    params["render"]["gi"]["method"] = json!("none");
+    let params = direct_session(32, 32);
     let created = server.create_session(params, None).await;
     let mut stream = server.connect(&created).await;
     for nonce in 0..30 {
@@ -806,8 +800,7 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
     }
     let resp = server.get("/viewer/missing.js").await;
     assert_eq!(resp.status(), 404);
-    let mut params = small_session(32, 32);
-    params["render"]["gi"]["method"] = json!("none");
+    let params = direct_session(32, 32);
     let created = server.create_session(params, Some(alice)).await;
     let path = format!("/v1/sessions/{}", created.session.id);
     let resp = server
@@ -886,8 +879,7 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn metrics_openapi_and_readiness_describe_the_service() {
     let server = TestServer::start(&[]).await;
-    let mut params = small_session(32, 32);
-    params["render"]["gi"]["method"] = json!("none");
+    let params = direct_session(32, 32);
     let created = server.create_session(params, None).await;
     let mut stream = server.connect(&created).await;
     let mut events = Vec::new();

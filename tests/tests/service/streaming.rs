@@ -1,6 +1,6 @@
 //! Sessions streaming frames over WebSocket, end to end on loopback.
 
-use lightcast_e2e::{mean_abs_diff, small_session, Incoming, TestServer, PATIENCE};
+use lightcast_e2e::{direct_session, mean_abs_diff, small_session, Incoming, TestServer, PATIENCE};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_STILL};
 use lightcast_protocol::{Codec, ServerEvent};
 use serde_json::json;
@@ -109,9 +109,8 @@ async fn a_session_streams_frames_and_follows_the_camera() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_resting_view_gets_a_lossless_still_and_on_change_mode_idles() {
     let server = TestServer::start(&[]).await;
-    let mut params = small_session(64, 48);
+    let mut params = direct_session(64, 48);
     params["mode"] = json!("on_change");
-    params["render"]["gi"]["method"] = json!("none");
     params["encoding"] = json!({"still_after_ms": 150, "moving_quality": 40});
     let created = server.create_session(params, None).await;
     let mut stream = server.connect(&created).await;
@@ -160,13 +159,11 @@ async fn a_resting_view_gets_a_lossless_still_and_on_change_mode_idles() {
 async fn a_stalled_client_does_not_stall_another() {
     let server = TestServer::start(&[]).await;
     // The stalled session sends big lossless frames so its socket buffers fill quickly.
-    let mut stalled_params = small_session(256, 192);
-    stalled_params["render"]["gi"]["method"] = json!("none");
+    let mut stalled_params = direct_session(256, 192);
     stalled_params["encoding"] = json!({"codec": "png", "still_after_ms": 0});
     stalled_params["fps_cap"] = json!(120);
     let stalled = server.create_session(stalled_params, None).await;
-    let mut healthy_params = small_session(48, 32);
-    healthy_params["render"]["gi"]["method"] = json!("none");
+    let healthy_params = direct_session(48, 32);
     let healthy = server.create_session(healthy_params, None).await;
 
     let _stalled_stream = server.connect(&stalled).await; // never read from
@@ -254,8 +251,7 @@ async fn concurrent_sessions_each_get_their_own_frames() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shutdown_sends_closing_to_open_streams() {
     let server = TestServer::start(&[]).await;
-    let mut params = small_session(32, 32);
-    params["render"]["gi"]["method"] = json!("none");
+    let params = direct_session(32, 32);
     let created = server.create_session(params, None).await;
     let mut stream = server.connect(&created).await;
     let mut events = Vec::new();
@@ -282,8 +278,7 @@ async fn sessions_without_a_stream_end_after_the_idle_time() {
         server.get_json("/v1/server").await["limits"]["session_idle_secs"],
         1
     );
-    let mut params = small_session(32, 24);
-    params["render"]["gi"]["method"] = json!("none");
+    let params = direct_session(32, 24);
     let abandoned = server.create_session(params.clone(), None).await;
     let watched = server.create_session(params, None).await;
     let mut stream = server.connect(&watched).await;

@@ -26,6 +26,7 @@ use gltf::json::{
 };
 use lightcast_protocol::{Camera, Light, LightKind};
 use std::borrow::Cow;
+use std::cell::Cell;
 use std::path::{Path, PathBuf};
 use std::{fs, io};
 
@@ -36,9 +37,43 @@ const SUPPORTED_EXTENSIONS: &[&str] = &["KHR_lights_punctual", "KHR_materials_em
 /// Largest texture width or height accepted; larger images exceed common GPU limits.
 pub const MAX_TEXTURE_SIZE: u32 = 8192;
 
-/// An accessor without a buffer view is zero-filled, so its size is not bounded by any data in
-/// the file; without a cap a few bytes of JSON could ask for terabytes.
+/// Accessors without a buffer view are zero-filled, so their size is not bounded by any data in
+/// the file; without a cap on their total a few bytes of JSON could ask for terabytes.
 const MAX_UNBACKED_ELEMENTS: u64 = 1 << 24;
+
+/// What one load may build. A few bytes of JSON can reuse one accessor in thousands of
+/// primitives, or one small but highly compressible image in many textures, so sizes are
+/// bounded while loading, before the memory is taken, rather than checked afterwards.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoadLimits {
+    pub max_triangles: u64,
+    /// Vertices over all primitives.
+    pub max_vertices: u64,
+    /// Decoded RGBA8 bytes over all textures.
+    pub max_texture_bytes: u64,
+}
+
+impl LoadLimits {
+    /// For files the operator names: only the hard caps of the format apply.
+    pub const NONE: Self = Self {
+        max_triangles: u64::MAX,
+        max_vertices: u64::MAX,
+        max_texture_bytes: u64::MAX,
+    };
+
+    /// Decoded texture memory an upload may take: four textures at the largest size.
+    pub const UPLOAD_TEXTURE_BYTES: u64 = 4 * 4 * (MAX_TEXTURE_SIZE as u64).pow(2);
+
+    /// Limits for an upload to a server that allows `max_triangles`. Three vertices per
+    /// triangle is what a scene without shared vertices needs; more would be unreferenced.
+    pub fn upload(max_triangles: u64) -> Self {
+        Self {
+            max_triangles,
+            max_vertices: max_triangles.saturating_mul(3),
+            max_texture_bytes: Self::UPLOAD_TEXTURE_BYTES,
+        }
+    }
+}
 
 /// Validation can report thousands of problems for a broken file; the first few locate it.
 const MAX_VALIDATION_ERRORS_SHOWN: usize = 5;
@@ -109,7 +144,7 @@ pub fn load_gltf(path: &Path) -> Result<Scene, LoadError> {
         |s| s.to_string_lossy().into_owned(),
     );
     let base_dir = path.parent().unwrap_or(Path::new(""));
-    load_gltf_slice(&bytes, Some(base_dir), &name)
+    load_gltf_slice(&bytes, Some(base_dir), &name, LoadLimits::NONE)
 }
 
 /// Loads `.glb` or `.gltf` JSON bytes. External buffers and images are resolved against
@@ -118,6 +153,7 @@ pub fn load_gltf_slice(
     bytes: &[u8],
     base_dir: Option<&Path>,
     name: &str,
+    limits: LoadLimits,
 ) -> Result<Scene, LoadError> {
     let (json_bytes, bin) = if bytes.starts_with(b"glTF") {
         split_glb(bytes)?
@@ -130,6 +166,9 @@ pub fn load_gltf_slice(
         root: &root,
         buffers: &buffers,
         base_dir,
+        limits,
+        unbacked_elements: Cell::new(0),
+        texture_bytes: 0,
         material_map: vec![None; root.materials.len()],
         default_material: None,
         image_map: vec![None; root.images.len()],
@@ -591,6 +630,11 @@ struct Loader<'a> {
     root: &'a json::Root,
     buffers: &'a [Cow<'a, [u8]>],
     base_dir: Option<&'a Path>,
+    limits: LoadLimits,
+    /// Zero-filled elements handed out so far, against [`MAX_UNBACKED_ELEMENTS`].
+    unbacked_elements: Cell<u64>,
+    /// Decoded texture bytes so far, against `limits.max_texture_bytes`.
+    texture_bytes: u64,
     /// glTF material index → index in `materials`, filled on first use.
     material_map: Vec<Option<u32>>,
     default_material: Option<u32>,
@@ -722,6 +766,12 @@ impl Loader<'_> {
         };
         let position_accessor = attribute(Semantic::Positions)
             .ok_or_else(|| invalid(part, "has no POSITION attribute"))?;
+        self.check_budget(
+            mode,
+            position_accessor,
+            primitive.indices.map(|a| a.value()),
+            part,
+        )?;
         let positions = self.read_floats(position_accessor, Type::Vec3, part, "POSITION")?;
         let count = positions.len() / 3;
         let positions: Vec<Vec3> = positions.chunks_exact(3).map(Vec3::from_slice).collect();
@@ -831,6 +881,47 @@ impl Loader<'_> {
         Ok(())
     }
 
+    /// Refuses a primitive whose accessor counts alone would take the scene past its limits,
+    /// before any of its data is read.
+    fn check_budget(
+        &self,
+        mode: Mode,
+        positions: usize,
+        indices: Option<usize>,
+        part: &str,
+    ) -> Result<(), LoadError> {
+        let count = |accessor: usize| self.root.accessors.get(accessor).map_or(0, |a| a.count.0);
+        let vertices = count(positions);
+        let corners = indices.map_or(vertices, count);
+        let triangles = match mode {
+            Mode::Triangles => corners / 3,
+            _ => corners.saturating_sub(2),
+        };
+        let total_vertices = (self.vertices.len() as u64).saturating_add(vertices);
+        if total_vertices > self.limits.max_vertices {
+            return Err(invalid(
+                part,
+                format!(
+                    "the scene would have {total_vertices} vertices or more; at most {} are \
+                     allowed",
+                    self.limits.max_vertices
+                ),
+            ));
+        }
+        let total_triangles = (self.indices.len() as u64 / 3).saturating_add(triangles);
+        if total_triangles > self.limits.max_triangles {
+            return Err(invalid(
+                part,
+                format!(
+                    "the scene would have {total_triangles} triangles or more; at most {} are \
+                     allowed",
+                    self.limits.max_triangles
+                ),
+            ));
+        }
+        Ok(())
+    }
+
     fn read_floats(
         &self,
         accessor: usize,
@@ -885,8 +976,18 @@ impl Loader<'_> {
         let element_size = (multiplicity * component_size) as u64;
         let count = accessor.count.0;
         let too_large = || invalid(&part, format!("count {count} is too large"));
-        if accessor.buffer_view.is_none() && count > MAX_UNBACKED_ELEMENTS {
-            return Err(too_large());
+        if accessor.buffer_view.is_none() {
+            let unbacked = self.unbacked_elements.get().saturating_add(count);
+            if unbacked > MAX_UNBACKED_ELEMENTS {
+                return Err(invalid(
+                    &part,
+                    format!(
+                        "has no buffer view, and with it the file's zero-filled accessors \
+                         hold {unbacked} elements; at most {MAX_UNBACKED_ELEMENTS} are allowed"
+                    ),
+                ));
+            }
+            self.unbacked_elements.set(unbacked);
         }
         let values_len = usize::try_from(count)
             .ok()
@@ -1139,7 +1240,9 @@ impl Loader<'_> {
             .clone()
             .or_else(|| image.uri.clone().filter(|u| !u.starts_with("data:")))
             .unwrap_or_else(|| format!("image {image_index}"));
-        let decoded = decode_image(&bytes, name, &part)?;
+        let remaining = self.limits.max_texture_bytes - self.texture_bytes;
+        let decoded = decode_image(&bytes, name, &part, remaining)?;
+        self.texture_bytes += decoded.rgba8.len() as u64;
         let mapped = self.textures.len();
         self.textures.push(decoded);
         if let Some(slot) = self.image_map.get_mut(image_index) {
@@ -1251,8 +1354,14 @@ fn check_count(actual: usize, expected: usize, part: &str, usage: &str) -> Resul
     }
 }
 
-/// Decodes a PNG or JPEG to RGBA8, keeping the sRGB-encoded bytes as they are.
-fn decode_image(bytes: &[u8], name: String, part: &str) -> Result<Texture, LoadError> {
+/// Decodes a PNG or JPEG to RGBA8, keeping the sRGB-encoded bytes as they are, if its pixels
+/// fit in `max_bytes`.
+fn decode_image(
+    bytes: &[u8],
+    name: String,
+    part: &str,
+    max_bytes: u64,
+) -> Result<Texture, LoadError> {
     let decode_error = |error| LoadError::ImageDecode {
         part: part.to_owned(),
         error,
@@ -1275,6 +1384,18 @@ fn decode_image(bytes: &[u8], name: String, part: &str) -> Result<Texture, LoadE
             format!(
                 "image is {width}×{height} pixels; at most {MAX_TEXTURE_SIZE} in either \
                  dimension is supported"
+            ),
+        ));
+    }
+    let decoded_bytes = 4 * u64::from(width) * u64::from(height);
+    if decoded_bytes > max_bytes {
+        return Err(invalid(
+            part,
+            format!(
+                "decoding this {width}×{height} image takes {} MiB, more than the {} MiB \
+                 left of the scene's texture memory limit",
+                decoded_bytes.div_ceil(1 << 20),
+                max_bytes >> 20
             ),
         ));
     }
@@ -1599,7 +1720,8 @@ mod tests {
         );
         let (doc, _) = quad_document(Some(&uri));
         let bytes = serde_json::to_vec(&doc).expect("serialise");
-        let scene = load_gltf_slice(&bytes, None, "embedded").expect("loads without base dir");
+        let scene = load_gltf_slice(&bytes, None, "embedded", LoadLimits::NONE)
+            .expect("loads without base dir");
         let (external, bin) = quad_document(Some("data.bin"));
         let reference = load_document(&external, &bin.bytes).expect("loads");
         assert_eq!(scene.name, "embedded");
@@ -1618,7 +1740,8 @@ mod tests {
         assert_eq!(scene.name, "box");
         assert_eq!(scene.vertices, reference.vertices);
         assert_eq!(scene.indices, reference.indices);
-        let from_memory = load_gltf_slice(&bytes, None, "mem").expect("glb needs no base dir");
+        let from_memory =
+            load_gltf_slice(&bytes, None, "mem", LoadLimits::NONE).expect("glb needs no base dir");
         assert_eq!(from_memory.vertices, reference.vertices);
     }
 
@@ -1805,7 +1928,8 @@ mod tests {
         fields["textures"] = json!([{"source": 0}]);
         fields["materials"] = json!([{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
         let doc = bin.document(None, fields);
-        let scene = load_gltf_slice(&glb(&doc, &bin.bytes), None, "t").expect("loads");
+        let scene =
+            load_gltf_slice(&glb(&doc, &bin.bytes), None, "t", LoadLimits::NONE).expect("loads");
         assert_eq!(scene.textures.len(), 1);
         assert_eq!(scene.textures[0].rgba8, pixels);
     }
@@ -1896,7 +2020,7 @@ mod tests {
         for cut in 0..bytes.len() {
             let truncated = &bytes[..cut];
             assert!(
-                load_gltf_slice(truncated, None, "t").is_err(),
+                load_gltf_slice(truncated, None, "t", LoadLimits::NONE).is_err(),
                 "cut at {cut}"
             );
             // Also with a header that agrees with the new length, to reach the chunk checks.
@@ -1904,13 +2028,13 @@ mod tests {
                 let mut patched = truncated.to_vec();
                 patched[8..12].copy_from_slice(&(cut as u32).to_le_bytes());
                 assert!(
-                    load_gltf_slice(&patched, None, "t").is_err(),
+                    load_gltf_slice(&patched, None, "t", LoadLimits::NONE).is_err(),
                     "patched cut at {cut}"
                 );
             }
         }
         let message = |bytes: &[u8]| {
-            load_gltf_slice(bytes, None, "t")
+            load_gltf_slice(bytes, None, "t", LoadLimits::NONE)
                 .expect_err("truncated")
                 .to_string()
         };
@@ -1944,29 +2068,40 @@ mod tests {
         };
         for length in (0..2000).step_by(37) {
             let mut bytes: Vec<u8> = (0..length).map(|_| next()).collect();
-            assert!(load_gltf_slice(&bytes, None, "t").is_err());
+            assert!(load_gltf_slice(&bytes, None, "t", LoadLimits::NONE).is_err());
             for prefix in [&b"glTF\x02\0\0\0"[..], b"{", b"{\"asset\":"] {
                 let n = prefix.len().min(bytes.len());
                 bytes[..n].copy_from_slice(&prefix[..n]);
-                assert!(load_gltf_slice(&bytes, None, "t").is_err());
+                assert!(load_gltf_slice(&bytes, None, "t", LoadLimits::NONE).is_err());
             }
         }
     }
 
     #[test]
     fn refuses_wrong_json_types_and_other_versions() {
-        let err = load_gltf_slice(br#"{"asset":{"version":"2.0"},"meshes":"nope"}"#, None, "t")
-            .expect_err("wrong type")
-            .to_string();
+        let err = load_gltf_slice(
+            br#"{"asset":{"version":"2.0"},"meshes":"nope"}"#,
+            None,
+            "t",
+            LoadLimits::NONE,
+        )
+        .expect_err("wrong type")
+        .to_string();
         assert!(err.starts_with("invalid glTF JSON"), "{err}");
-        let err = load_gltf_slice(br#"{"asset":{"version":"1.0"},"meshes":{}}"#, None, "t")
-            .expect_err("glTF 1")
-            .to_string();
+        let err = load_gltf_slice(
+            br#"{"asset":{"version":"1.0"},"meshes":{}}"#,
+            None,
+            "t",
+            LoadLimits::NONE,
+        )
+        .expect_err("glTF 1")
+        .to_string();
         assert!(
             err.contains("asset.version") && err.contains("1.0"),
             "{err}"
         );
-        let err = load_gltf_slice(b"[1, 2]", None, "t").expect_err("not an object");
+        let err =
+            load_gltf_slice(b"[1, 2]", None, "t", LoadLimits::NONE).expect_err("not an object");
         assert!(matches!(err, LoadError::Json(_)), "{err}");
     }
 
@@ -1987,6 +2122,126 @@ mod tests {
         );
     }
 
+    /// A GLB whose one primitive reuses a zero-filled POSITION accessor (3 vertices) and a
+    /// zero-filled index accessor (`corners` indices), `primitives` times. glTF only allows
+    /// an accessor without a buffer view when it is sparse, so each has one substitution of 0.
+    fn reused_unbacked_accessors(corners: u64, primitives: usize) -> Vec<u8> {
+        let mut bin = Bin::default();
+        bin.bytes = vec![0; 16];
+        bin.views
+            .push(json!({"buffer": 0, "byteOffset": 0, "byteLength": 16}));
+        let sparse = json!({
+            "count": 1,
+            "indices": {"bufferView": 0, "componentType": 5125},
+            "values": {"bufferView": 0},
+        });
+        bin.accessors = vec![
+            json!({"componentType": 5126, "type": "VEC3", "count": 3, "sparse": sparse}),
+            json!({"componentType": 5125, "type": "SCALAR", "count": corners, "sparse": sparse}),
+        ];
+        let primitive = json!({"attributes": {"POSITION": 0}, "indices": 1});
+        let doc = bin.document(None, single_mesh(json!(vec![primitive; primitives])));
+        glb(&doc, &bin.bytes)
+    }
+
+    #[test]
+    fn refuses_reused_accessors_beyond_the_triangle_limit_before_building_them() {
+        let limits = LoadLimits::upload(1_000);
+        let small = reused_unbacked_accessors(300, 3);
+        let scene = load_gltf_slice(&small, None, "t", limits).expect("300 triangles fit");
+        assert_eq!(scene.triangle_count(), 300);
+
+        // ~50 KB asking for a billion triangles through one reused accessor: refused at the
+        // primitive that would cross the limit, before its data is read.
+        let bomb = reused_unbacked_accessors(3_000_000, 1_000);
+        assert!(bomb.len() < 64 << 10);
+        let err = load_gltf_slice(&bomb, None, "t", LoadLimits::upload(1_000_000))
+            .expect_err("bomb")
+            .to_string();
+        assert!(
+            err.contains("mesh 0 ('quad') primitive 1:")
+                && err.contains("at most 1000000 are allowed"),
+            "{err}"
+        );
+        let err = load_gltf_slice(&small, None, "t", LoadLimits::upload(250))
+            .expect_err("third primitive crosses")
+            .to_string();
+        assert!(
+            err.contains("primitive 2:") && err.contains("300 triangles"),
+            "{err}"
+        );
+        let nine_vertices_too_many = LoadLimits {
+            max_vertices: 8,
+            ..LoadLimits::NONE
+        };
+        let err = load_gltf_slice(&small, None, "t", nine_vertices_too_many)
+            .expect_err("too many vertices")
+            .to_string();
+        assert!(
+            err.contains("primitive 2:") && err.contains("9 vertices"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn caps_zero_filled_elements_over_the_whole_file() {
+        // One such accessor is allowed, but its reuse adds up.
+        // Whole triangles, and twice them plus the two 3-vertex POSITION reads cross the cap.
+        let corners = (MAX_UNBACKED_ELEMENTS / 2 - 1) / 3 * 3;
+        let once = reused_unbacked_accessors(corners, 1);
+        assert!(load_gltf_slice(&once, None, "t", LoadLimits::NONE).is_ok());
+        let twice = reused_unbacked_accessors(corners, 2);
+        let err = load_gltf_slice(&twice, None, "t", LoadLimits::NONE)
+            .expect_err("second reuse crosses the cap")
+            .to_string();
+        assert!(
+            err.contains("primitive 1") && err.contains("zero-filled"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn caps_decoded_texture_memory_over_all_images() {
+        // Three images that are the same 64×64 PNG (16 KiB each decoded); the cap admits two.
+        let png = png(64, 64, &[128; 64 * 64 * 4]);
+        let mut bin = Bin::default();
+        let primitives: Vec<Value> = (0..3)
+            .map(|material| {
+                let mut p = quad_primitive(&mut bin, true);
+                p["material"] = json!(material);
+                p
+            })
+            .collect();
+        let image_view = bin.views.len();
+        bin.views
+            .push(json!({"buffer": 0, "byteOffset": bin.bytes.len(), "byteLength": png.len()}));
+        bin.bytes.extend_from_slice(&png);
+        let mut fields = single_mesh(json!(primitives));
+        fields["images"] = json!([
+            {"bufferView": image_view, "mimeType": "image/png"},
+            {"bufferView": image_view, "mimeType": "image/png"},
+            {"bufferView": image_view, "mimeType": "image/png"},
+        ]);
+        fields["textures"] = json!([{"source": 0}, {"source": 1}, {"source": 2}]);
+        fields["materials"] =
+            json!([0, 1, 2]
+                .map(|t| json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": t}}})));
+        let doc = glb(&bin.document(None, fields), &bin.bytes);
+        let limits = |max_texture_bytes| LoadLimits {
+            max_texture_bytes,
+            ..LoadLimits::NONE
+        };
+        let scene = load_gltf_slice(&doc, None, "t", limits(3 * 64 * 64 * 4)).expect("fits");
+        assert_eq!(scene.textures.len(), 3);
+        let err = load_gltf_slice(&doc, None, "t", limits(3 * 64 * 64 * 4 - 1))
+            .expect_err("third image crosses")
+            .to_string();
+        assert!(
+            err.contains("texture 2 (image 2)") && err.contains("texture memory limit"),
+            "{err}"
+        );
+    }
+
     #[test]
     fn refuses_a_missing_bin_file() {
         let (doc, bin) = quad_document(Some("x.bin"));
@@ -1998,7 +2253,7 @@ mod tests {
     fn refuses_external_files_when_loading_from_memory_without_base_dir() {
         let (doc, _) = quad_document(Some("data.bin"));
         let bytes = serde_json::to_vec(&doc).expect("serialise");
-        let err = load_gltf_slice(&bytes, None, "t")
+        let err = load_gltf_slice(&bytes, None, "t", LoadLimits::NONE)
             .expect_err("needs a base dir")
             .to_string();
         assert!(
@@ -2103,7 +2358,11 @@ mod tests {
             "values": {"bufferView": 0},
         });
         let err = load_error(&doc, &bin.bytes);
-        assert!(err.contains("POSITION accessor 0: count"), "{err}");
+        assert!(
+            err.contains("POSITION accessor 0: has no buffer view")
+                && err.contains(&format!("at most {MAX_UNBACKED_ELEMENTS} are allowed")),
+            "{err}"
+        );
     }
 
     #[test]

@@ -204,6 +204,36 @@ async fn scenes_upload_inspect_use_and_delete() {
     server.stop().await;
 }
 
+/// A ~50 KB GLB whose 1,000 primitives reuse one index accessor of 10 million zero-filled
+/// entries (allowed when it is sparse): billions of triangles from a small upload.
+fn reused_accessor_bomb() -> Vec<u8> {
+    let sparse = json!({
+        "count": 1,
+        "indices": {"bufferView": 0, "componentType": 5125},
+        "values": {"bufferView": 0},
+    });
+    let primitive = json!({"attributes": {"POSITION": 0}, "indices": 1});
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": 16}],
+        "bufferViews": [{"buffer": 0, "byteLength": 16}],
+        "accessors": [
+            {"componentType": 5126, "type": "VEC3", "count": 3, "sparse": sparse},
+            {"componentType": 5125, "type": "SCALAR", "count": 9_999_999, "sparse": sparse},
+        ],
+        "meshes": [{"primitives": vec![primitive; 1000]}],
+        "nodes": [{"mesh": 0}],
+    });
+    let mut json = serde_json::to_vec(&doc).expect("serialise");
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let chunk =
+        |kind: &[u8; 4], data: &[u8]| [&(data.len() as u32).to_le_bytes()[..], kind, data].concat();
+    let body = [chunk(b"JSON", &json), chunk(b"BIN\0", &[0; 16])].concat();
+    let length = 12 + body.len() as u32;
+    let header = [&b"glTF"[..], &2u32.to_le_bytes(), &length.to_le_bytes()].concat();
+    [header, body].concat()
+}
+
 struct Case {
     method: &'static str,
     path: String,
@@ -267,6 +297,15 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         None,
     );
     garbage_upload.content_type = "application/octet-stream";
+    let mut bomb = case(
+        "POST",
+        "/v1/scenes",
+        reused_accessor_bomb(),
+        400,
+        "invalid_scene",
+        None,
+    );
+    bomb.content_type = "model/gltf-binary";
     let mut too_big = case(
         "POST",
         "/v1/scenes",
@@ -558,6 +597,7 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         truncated_glb,
         hostile_glb,
         garbage_upload,
+        bomb,
         too_big,
         case(
             "POST",

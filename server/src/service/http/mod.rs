@@ -54,8 +54,13 @@ pub struct AppState {
     pub max_texture: u32,
     pub build: String,
     pub shutdown: tokio::sync::watch::Receiver<bool>,
+    /// Permits for glTF loads running at once; see [`scenes::load_upload`].
+    pub loads: Arc<tokio::sync::Semaphore>,
     tickets: Mutex<HashMap<String, Ticket>>,
 }
+
+/// glTF uploads decoded at once; more wait. Each may take up to its limits in memory.
+const CONCURRENT_LOADS: usize = 2;
 
 impl AppState {
     #[allow(clippy::too_many_arguments)]
@@ -83,6 +88,7 @@ impl AppState {
             max_texture: gpu.device.limits().max_texture_dimension_2d,
             build: build_id(),
             shutdown,
+            loads: Arc::new(tokio::sync::Semaphore::new(CONCURRENT_LOADS)),
             tickets: Mutex::new(HashMap::new()),
         }
     }

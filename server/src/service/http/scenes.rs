@@ -1,7 +1,7 @@
 //! `/v1/scenes`: upload, list, inspect and delete scenes.
 
 use super::AppState;
-use crate::scene::gltf_loader::load_gltf_slice;
+use crate::scene::gltf_loader::{load_gltf_slice, LoadLimits};
 use crate::scene::procedural::Spec;
 use crate::scene::Scene;
 use crate::service::error::{parse_json, ApiError};
@@ -91,23 +91,31 @@ fn external_uris(json: &[u8]) -> Result<Vec<String>, ApiError> {
 }
 
 /// Loads an uploaded `.glb`/`.gltf` (`main`) with the files it references (`resources`).
-/// Runs the loader on a blocking thread; external URIs must name uploaded files.
+/// Runs the loader on a blocking thread, at most [`AppState::loads`] at once: a load goes on
+/// after its request times out, so unbounded, retries could pile up loads. External URIs must
+/// name uploaded files.
 pub async fn load_upload(
+    state: &AppState,
     main: UploadedFile,
     resources: Vec<UploadedFile>,
-    max_triangles: u64,
 ) -> Result<Scene, ApiError> {
+    let limits = LoadLimits::upload(state.limits.max_triangles);
+    let permit = Arc::clone(&state.loads)
+        .acquire_owned()
+        .await
+        .map_err(|_| ApiError::unavailable("the server is shutting down"))?;
     let name = main
         .name
         .rsplit_once('.')
         .map_or(main.name.as_str(), |(stem, _)| stem)
         .to_string();
     let task = tokio::task::spawn_blocking(move || -> Result<Scene, ApiError> {
+        let _permit = permit;
         let invalid = |e: crate::scene::gltf_loader::LoadError| {
             ApiError::bad_request("invalid_scene", format!("{}: {e}", main.name))
         };
         let scene = if main.bytes.starts_with(b"glTF") || resources.is_empty() {
-            load_gltf_slice(&main.bytes, None, &name).map_err(invalid)?
+            load_gltf_slice(&main.bytes, None, &name, limits).map_err(invalid)?
         } else {
             for uri in external_uris(&main.bytes)? {
                 if !safe_file_name(&uri) || !resources.iter().any(|r| r.name == uri) {
@@ -131,17 +139,12 @@ pub async fn load_upload(
             let written = write();
             let loaded = written
                 .map_err(|e| ApiError::internal(format!("storing the upload: {e}")))
-                .and_then(|()| load_gltf_slice(&main.bytes, Some(&dir), &name).map_err(invalid));
+                .and_then(|()| {
+                    load_gltf_slice(&main.bytes, Some(&dir), &name, limits).map_err(invalid)
+                });
             let _ = std::fs::remove_dir_all(&dir);
             loaded?
         };
-        let triangles = scene.triangle_count() as u64;
-        if triangles > max_triangles {
-            return Err(ApiError::field(
-                "scene",
-                format!("{triangles} triangles exceed this server's limit of {max_triangles}"),
-            ));
-        }
         Ok(scene)
     });
     task.await
@@ -226,7 +229,7 @@ pub async fn create(
             .collect();
         let (main, resources) = split_scene_files(files)?;
         (
-            load_upload(main, resources, max_triangles).await?,
+            load_upload(&state, main, resources).await?,
             "upload".to_string(),
         )
     } else if is_json(&request) {
@@ -262,7 +265,7 @@ pub async fn create(
             bytes: body,
         };
         (
-            load_upload(main, Vec::new(), max_triangles).await?,
+            load_upload(&state, main, Vec::new()).await?,
             "upload".to_string(),
         )
     };

@@ -447,6 +447,10 @@ pub struct Limits {
     /// A session with no stream attached for this long ends (0: never).
     #[serde(default)]
     pub session_idle_secs: u64,
+    /// A stream whose client sends nothing for this long, not even the pong to the server's
+    /// pings (sent every third of it), is closed.
+    #[serde(default)]
+    pub stream_silence_secs: u64,
 }
 
 /// `GET /v1/server`: who is serving and under which limits.

@@ -100,10 +100,9 @@ impl CacheParams {
     }
 
     /// [`CacheParams::validate`] plus an estimate of the cache count from the scene's surface
-    /// area, so absurd parameters fail before any work is done.
-    pub fn validate_for(&self, scene: &Scene) -> Result<(), CacheError> {
+    /// area ([`surface_area`]), so absurd parameters fail before any work is done.
+    pub fn validate_for_area(&self, area: f64) -> Result<(), CacheError> {
         self.validate()?;
-        let area = surface_area(scene);
         let estimated = estimated_caches(area, self.d_eps);
         if estimated > MAX_CACHES as f64 {
             let min_d_eps = (2.0 * (area / MAX_CACHES as f64).sqrt()) as f32;
@@ -290,12 +289,13 @@ pub fn precompute(
     params: &CacheParams,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<CacheSet, CacheError> {
-    params.validate_for(scene)?;
+    let area = surface_area(scene);
+    params.validate_for_area(area)?;
     let start = Instant::now();
     let setup = Setup::new(params);
     let mut stats = CacheStats {
         triangles: scene.triangle_count() as u64,
-        surface_area: surface_area(scene),
+        surface_area: area,
         ..CacheStats::default()
     };
 

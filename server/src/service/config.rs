@@ -86,6 +86,11 @@ pub struct LimitArgs {
     /// clients that vanished do not pile up (0: never).
     #[arg(long, env = "LIGHTCAST_SESSION_IDLE_SECS", default_value_t = 300)]
     pub session_idle_secs: u64,
+    /// Seconds a stream's client may send nothing, not even the pong to the server's pings
+    /// (sent every third of this), before the stream is closed: clients that vanish without
+    /// closing their connection would otherwise hold their session forever.
+    #[arg(long, env = "LIGHTCAST_STREAM_SILENCE_SECS", default_value_t = 45)]
+    pub stream_silence_secs: u64,
 }
 
 /// Why the options cannot be used.
@@ -161,6 +166,7 @@ impl LimitArgs {
             3_600_000,
         )?;
         within("session-idle-secs", self.session_idle_secs, 0, 7 * 86_400)?;
+        within("stream-silence-secs", self.stream_silence_secs, 1, 3_600)?;
         Ok(Limits {
             max_width: self.max_width,
             max_height: self.max_height,
@@ -177,6 +183,7 @@ impl LimitArgs {
             max_messages_per_second: self.max_messages_per_second,
             request_timeout_ms: self.request_timeout_ms,
             session_idle_secs: self.session_idle_secs,
+            stream_silence_secs: self.stream_silence_secs,
         })
     }
 }

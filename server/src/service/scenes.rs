@@ -66,6 +66,8 @@ pub struct SceneEntry {
     pub default_camera: Camera,
     pub default_light: Light,
     pub default_params: CacheParams,
+    /// Summed once: checking a request's cache parameters against it happens per message.
+    surface_area: f64,
     pub load_ms: f64,
     variants: Mutex<Vec<Variant>>,
     sessions: AtomicU64,
@@ -85,6 +87,7 @@ impl SceneEntry {
             default_camera: default_camera(&scene),
             default_light: default_light(&scene),
             default_params: CacheParams::for_scene(&scene),
+            surface_area: crate::gi::caches::surface_area(&scene),
             scene: Arc::new(scene),
             load_ms,
             variants: Mutex::new(Vec::new()),
@@ -128,7 +131,7 @@ impl SceneEntry {
             d_eps: distance.unwrap_or(self.default_params.d_eps),
             theta_eps_degrees: angle.unwrap_or(self.default_params.theta_eps_degrees),
         };
-        if let Err(e) = params.validate_for(&self.scene) {
+        if let Err(e) = params.validate_for_area(self.surface_area) {
             let field = if matches!(e, crate::gi::caches::CacheError::InvalidAngle(_)) {
                 "gi.cache_angle"
             } else {

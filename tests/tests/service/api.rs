@@ -1005,3 +1005,38 @@ async fn metrics_openapi_and_readiness_describe_the_service() {
     }
     strict.stop().await;
 }
+
+/// A request that outlasts `--request-timeout-ms` (here a client that stops sending its body
+/// halfway) is answered with the documented JSON error, and the server goes on serving.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_over_the_time_limit_get_a_json_error() {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let server = TestServer::start(&["--request-timeout-ms", "300"]).await;
+    let address = server.base.trim_start_matches("http://");
+    let mut tcp = tokio::net::TcpStream::connect(address)
+        .await
+        .expect("connect");
+    let head = format!(
+        "POST /v1/scenes HTTP/1.1\r\nHost: {address}\r\nContent-Type: model/gltf-binary\r\n\
+         Content-Length: 1000\r\nConnection: close\r\n\r\nglTF"
+    );
+    tcp.write_all(head.as_bytes()).await.expect("write");
+    let mut response = Vec::new();
+    tokio::time::timeout(PATIENCE, tcp.read_to_end(&mut response))
+        .await
+        .expect("answered in time")
+        .expect("read");
+    let response = String::from_utf8_lossy(&response);
+    assert!(response.starts_with("HTTP/1.1 408"), "{response}");
+    let body = response.split("\r\n\r\n").nth(1).unwrap_or_default();
+    let error: Value = serde_json::from_str(body).expect("a JSON body");
+    assert_eq!(error["error"], "request_timeout", "{error}");
+    assert!(
+        error["message"]
+            .as_str()
+            .is_some_and(|m| m.contains("300 ms")),
+        "{error}"
+    );
+    assert_eq!(server.get("/healthz").await.status(), 200);
+    server.stop().await;
+}

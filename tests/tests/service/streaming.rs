@@ -306,3 +306,58 @@ async fn sessions_without_a_stream_end_after_the_idle_time() {
     drop(stream);
     server.stop().await;
 }
+
+/// A client that stops reading (so never answers the server's pings) loses its stream after
+/// `--stream-silence-secs`, which frees the session for a new stream; one that keeps reading
+/// but sends nothing of its own keeps its stream, because its WebSocket library answers pings.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn streams_of_clients_that_stop_answering_pings_close() {
+    let server = TestServer::start(&["--stream-silence-secs", "1"]).await;
+    let mut params = direct_session(32, 24);
+    params["fps_cap"] = json!(10);
+    let silent = server.create_session(params.clone(), None).await;
+    let silent_path = format!("/v1/sessions/{}", silent.session.id);
+    let silent_stream = server.connect(&silent).await;
+    let connected = |info: serde_json::Value| info["connected"].as_bool();
+    assert_eq!(connected(server.get_json(&silent_path).await), Some(true));
+
+    let reading = server.create_session(params, None).await;
+    let mut stream = server.connect(&reading).await;
+    let mut events = Vec::new();
+    let until = tokio::time::Instant::now() + Duration::from_millis(3500);
+    let mut frames = 0;
+    while tokio::time::Instant::now() < until {
+        stream.next_frame(&mut events).await;
+        frames += 1;
+    }
+    assert!(frames > 3, "{frames} frames");
+    assert!(
+        !events
+            .iter()
+            .any(|e| matches!(e, ServerEvent::Closing { .. })),
+        "a reading client keeps its stream: {events:?}"
+    );
+
+    tokio::time::timeout(PATIENCE, async {
+        while connected(server.get_json(&silent_path).await) != Some(false) {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    })
+    .await
+    .expect("the silent client's stream is closed");
+    drop(silent_stream);
+    let ticket: serde_json::Value = server
+        .http
+        .post(server.url(&format!("{silent_path}/ticket")))
+        .send()
+        .await
+        .expect("ticket")
+        .json()
+        .await
+        .expect("ticket json");
+    let mut again = silent.clone();
+    again.ticket.ticket = ticket["ticket"].as_str().expect("ticket").to_string();
+    server.connect(&again).await.next_frame(&mut events).await;
+    drop(stream);
+    server.stop().await;
+}

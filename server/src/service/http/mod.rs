@@ -146,6 +146,21 @@ pub fn build_id() -> String {
 pub struct Caller(pub Option<String>);
 
 /// Checks the bearer token (or a stream ticket) when auth is on and records the caller.
+/// Ends a request that outlasts `--request-timeout-ms`, whether the client is slow to send its
+/// body or the server to answer, with the JSON error every other refusal has.
+async fn time_limit(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
+    let limit_ms = state.limits.request_timeout_ms;
+    match tokio::time::timeout(Duration::from_millis(limit_ms), next.run(request)).await {
+        Ok(response) => response,
+        Err(_) => ApiError::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "request_timeout",
+            format!("the request took longer than this server's limit of {limit_ms} ms"),
+        )
+        .into_response(),
+    }
+}
+
 async fn authenticate(
     State(state): State<Arc<AppState>>,
     mut request: Request,
@@ -264,7 +279,6 @@ pub fn openapi_document() -> Result<String, serde_json::Error> {
 
 /// The service's router.
 pub fn router(state: Arc<AppState>) -> Router {
-    let timeout = Duration::from_millis(state.limits.request_timeout_ms);
     let json_limit = state.limits.max_message_bytes as usize;
     let upload_limit = state.limits.max_upload_bytes as usize;
     let uploads = Router::new()
@@ -286,9 +300,9 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/openapi.json", get(openapi_json))
         .layer(axum::extract::DefaultBodyLimit::max(json_limit))
         .merge(uploads)
-        .layer(tower_http::timeout::TimeoutLayer::with_status_code(
-            StatusCode::REQUEST_TIMEOUT,
-            timeout,
+        .layer(axum::middleware::from_fn_with_state(
+            Arc::clone(&state),
+            time_limit,
         ))
         // The WebSocket lives beyond any request timeout.
         .route("/v1/sessions/{id}/stream", get(stream::stream))

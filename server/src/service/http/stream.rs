@@ -125,6 +125,12 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
         shutdown.mark_changed();
     }
     let mut limit = RateLimit::new(state.limits.max_messages_per_second);
+    // Browsers and WebSocket libraries answer pings by themselves, so a client that is still
+    // there is heard from at least every `silence / 3` even when it sends nothing of its own.
+    let silence = Duration::from_secs(state.limits.stream_silence_secs);
+    let mut pings = tokio::time::interval_at((Instant::now() + silence / 3).into(), silence / 3);
+    pings.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut last_heard = Instant::now();
     let hello = ServerEvent::Hello {
         session: Box::new(session.info()),
     };
@@ -143,6 +149,7 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
                 session.record_sent(len);
             }
             incoming = socket.recv() => {
+                last_heard = Instant::now();
                 let reply = match incoming {
                     None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
                     Some(Ok(Message::Text(text))) => {
@@ -179,6 +186,17 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
                     }
                     Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
                     Err(tokio::sync::broadcast::error::RecvError::Closed) => return,
+                }
+            }
+            _ = pings.tick() => {
+                if last_heard.elapsed() >= silence {
+                    break format!(
+                        "nothing heard from the client for {} s, not even a pong",
+                        silence.as_secs()
+                    );
+                }
+                if !send(&mut socket, Message::Ping(Default::default())).await {
+                    return;
                 }
             }
             _ = closed.changed() => {

@@ -108,10 +108,12 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
     let a_g = val.weight * (EPS_P * val.area + lobe * form_factor);
     (*acc).s_d += a_d;
     (*acc).s_g += a_g;
-    (*acc).p_d += a_d * val.position;
-    (*acc).p_g += a_g * val.position;
-    (*acc).q_d += a_d * val.position * val.position;
-    (*acc).q_g += a_g * val.position * val.position;
+    // Moments about the cache rather than the origin: E[x²] − E[x]² in f32 loses the spread
+    // to cancellation when coordinates are large next to it (open-world scenes in metres).
+    (*acc).p_d += a_d * delta;
+    (*acc).p_g += a_g * delta;
+    (*acc).q_d += a_d * delta * delta;
+    (*acc).q_g += a_g * delta * delta;
 }
 
 struct Proxy {
@@ -119,14 +121,15 @@ struct Proxy {
     radius: f32,
 }
 
-// Eq. 5/13 position and the extent 2σ of the weighted VAL positions (largest axis).
+// Eq. 5/13 position and the extent 2σ of the weighted VAL positions (largest axis); `p` and
+// `q` are moments of the offsets from the cache.
 fn proxy(c: LightCache, s: f32, p: vec3<f32>, q: vec3<f32>) -> Proxy {
     if s <= 0.0 {
         return Proxy(c.position, 0.0);
     }
     let mean = p / s;
     let sigma = sqrt(max(q / s - mean * mean, vec3<f32>(0.0)));
-    return Proxy(mean, 2.0 * max(sigma.x, max(sigma.y, sigma.z)));
+    return Proxy(c.position + mean, 2.0 * max(sigma.x, max(sigma.y, sigma.z)));
 }
 
 fn zero_accum() -> Accum {
@@ -148,7 +151,7 @@ fn accumulate_vals(
     let i = id.x;
     let in_range = i < params.cache_count;
     let c = load_cache(i);
-    let v = normalize(params.camera - c.position);
+    let v = direction(params.camera - c.position);
     var acc = zero_accum();
     if in_range && params.first_val > 0u {
         acc = accum[i];
@@ -176,7 +179,7 @@ fn finish_proxies(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let c = caches[i];
-    let v = normalize(params.camera - c.position);
+    let v = direction(params.camera - c.position);
     var acc = zero_accum();
     if params.val_count > 0u {
         acc = accum[i];
@@ -187,13 +190,13 @@ fn finish_proxies(@builtin(global_invocation_id) id: vec3<u32>) {
     let pd = proxy(c, acc.s_d, acc.p_d, acc.q_d);
     let to_d = pd.position - c.position;
     let dist2_d = max(dot(to_d, to_d), MIN_DIST2);
-    let cos_d = dot(c.normal, normalize(to_d));
+    let cos_d = dot(c.normal, direction(to_d));
     let flux_d = 4.0 * PI * dist2_d * acc.e_d / max(cos_d, MIN_COS_DIFFUSE);
 
     let pg = proxy(c, acc.s_g, acc.p_g, acc.q_g);
     let to_g = pg.position - c.position;
     let dist2_g = max(dot(to_g, to_g), MIN_DIST2);
-    let w_g = normalize(to_g);
+    let w_g = direction(to_g);
     let lobe_g = pow(max(dot(mirror(c.normal, w_g), v), 0.0), cache_exponent(c));
     let flux_g = 4.0 * PI * dist2_g * acc.e_g / max(dot(c.normal, w_g) * lobe_g, MIN_COS_GLOSSY);
 

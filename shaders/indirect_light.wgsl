@@ -54,8 +54,13 @@ fn shade_from_vertex(s: Surface, vertex: u32) -> vec3<f32> {
             d_max = max(d_max, distance(s.x, caches[ci].position));
         }
     }
+    // Eq. 9 averages flux over all neighbours, so unlit ones dim the result as they should, but
+    // positions only over lit ones: an unlit proxy sits on its own cache, and averaging it in
+    // would pull the light onto the surface and brighten it by 1/d².
     var sum_d = 0.0;
     var sum_g = 0.0;
+    var lit_d = 0.0;
+    var lit_g = 0.0;
     var pos_d = vec3<f32>(0.0);
     var pos_g = vec3<f32>(0.0);
     var flux_d = vec3<f32>(0.0);
@@ -72,29 +77,37 @@ fn shade_from_vertex(s: Surface, vertex: u32) -> vec3<f32> {
             a = 1.0 - distance(s.x, c.position) / d_max;
         }
         // Eq. 8: normals for the diffuse term, mirrored incident directions for the glossy one.
+        // An unlit glossy proxy has no incident direction and falls back to the normals.
         let w_d = a * sqrt(max(dot(s.n, c.normal), 0.0));
-        let r_x = mirror(s.n, normalize(l.glossy_position - s.x));
-        let r_c = mirror(c.normal, normalize(l.glossy_position - c.position));
-        let w_g = a * sqrt(max(dot(r_x, r_c), 0.0));
+        var w_g = w_d;
+        if !unlit(l.glossy_flux) {
+            let r_x = mirror(s.n, direction(l.glossy_position - s.x));
+            let r_c = mirror(c.normal, direction(l.glossy_position - c.position));
+            w_g = a * sqrt(max(dot(r_x, r_c), 0.0));
+            lit_g += w_g;
+            pos_g += w_g * l.glossy_position;
+        }
+        if !unlit(l.diffuse_flux) {
+            lit_d += w_d;
+            pos_d += w_d * l.diffuse_position;
+        }
         sum_d += w_d;
         sum_g += w_g;
-        pos_d += w_d * l.diffuse_position;
-        pos_g += w_g * l.glossy_position;
         flux_d += w_d * l.diffuse_flux;
         flux_g += w_g * l.glossy_flux;
     }
     var radiance = vec3<f32>(0.0);
-    if sum_d > 0.0 {
+    if lit_d > 0.0 {
         // Eq. 9, then the interpolated proxy as a point light of intensity Φ/4π.
-        let to_light = pos_d / sum_d - s.x;
+        let to_light = pos_d / lit_d - s.x;
         let d2 = max(dot(to_light, to_light), MIN_DIST2);
-        let w = normalize(to_light);
+        let w = direction(to_light);
         radiance += s.diffuse / PI * (flux_d / sum_d) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
     }
-    if sum_g > 0.0 {
-        let to_light = pos_g / sum_g - s.x;
+    if lit_g > 0.0 {
+        let to_light = pos_g / lit_g - s.x;
         let d2 = max(dot(to_light, to_light), MIN_DIST2);
-        let w = normalize(to_light);
+        let w = direction(to_light);
         let lobe = (s.k + 2.0) / (2.0 * PI) * pow(max(dot(mirror(s.n, w), s.v), 0.0), s.k);
         radiance += s.glossy * lobe * (flux_g / sum_g) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
     }

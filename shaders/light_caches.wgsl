@@ -31,6 +31,18 @@ fn mirror(n: vec3<f32>, w: vec3<f32>) -> vec3<f32> {
     return 2.0 * dot(n, w) * n - w;
 }
 
+// `v` normalised, or zero for a zero vector (`normalize` would give NaN, which `max` may or
+// may not swallow: SPIR-V leaves that undefined).
+fn direction(v: vec3<f32>) -> vec3<f32> {
+    let len2 = dot(v, v);
+    return select(vec3<f32>(0.0), v * inverseSqrt(len2), len2 > 0.0);
+}
+
+// A proxy light without flux: its cache saw no VAL, so its position means nothing.
+fn unlit(flux: vec3<f32>) -> bool {
+    return all(flux <= vec3<f32>(0.0));
+}
+
 // Proxy-light occlusion by double projection (paper, "Occlusion"): the proxy's bounding sphere
 // and the occluding caches' disks are projected onto the unit hemisphere around the target
 // cache and from there onto its unit base disk (Nusselt's analogue: the projected area is π

@@ -44,17 +44,26 @@ fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> RsmOut {
     }
     let n = facing_normal(in.normal, front);
     var area = face.texel_area;
+    // Cross-section of the texel's beam across the ray, which is what E⊥ falls on.
+    var cross_section = area;
     if face.perspective != 0u {
-        let z = dot(in.world - light.position, face.axis);
+        let to_texel = in.world - light.position;
+        let z = dot(to_texel, face.axis);
         area *= z * z;
+        // A_disk (eq. 1) lies across the face's axis; tilted by θ off the axis, the beam's
+        // cross-section is A_disk·cosθ (so the texel receives I·Ω with Ω = texel_area·cos³θ).
+        cross_section = area * z / max(length(to_texel), 1e-20);
     }
-    // The texel's footprint perpendicular to the light is A_disk, so it receives E⊥·A_disk and
-    // reflects the diffuse part of that (the VAL emits diffusely, eq. 3).
+    // The texel receives E⊥ times its beam's cross-section and reflects the diffuse part of
+    // that (the VAL emits diffusely, eq. 3).
     let incident = light_incident(light, in.world);
     let facing = select(0.0, 1.0, dot(n, incident.to_light) > 0.0);
     var out: RsmOut;
     out.position = vec4<f32>(in.world, 1.0);
     out.normal = vec4<f32>(n, 0.0);
-    out.flux_area = vec4<f32>(m.brdf.diffuse * incident.irradiance * area * facing, area);
+    out.flux_area = vec4<f32>(
+        m.brdf.diffuse * incident.irradiance * cross_section * facing,
+        area,
+    );
     return out;
 }

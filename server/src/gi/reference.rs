@@ -68,6 +68,13 @@ pub struct ProxyLight {
     pub radius: f32,
 }
 
+impl ProxyLight {
+    /// Without flux: its cache saw no VAL, so its position means nothing.
+    pub fn is_unlit(&self) -> bool {
+        self.flux.cmple(Vec3::ZERO).all()
+    }
+}
+
 /// The two proxy lights of one cache.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProxyLights {
@@ -102,24 +109,26 @@ fn phong_lobe(n: Vec3, w: Vec3, view: Vec3, exponent: f32) -> f32 {
 
 /// Weighted first and second moments of VAL positions (eq. 5 / 13 and the σ of "Occlusion").
 #[derive(Default)]
+/// Moments of the VAL positions relative to the cache, as the shader keeps them: about the
+/// origin, E[x²] − E[x]² in f32 would lose the spread to cancellation in large scenes.
 struct Moments {
     /// S = Σ a.
     sum: f32,
-    /// P = Σ a·x_l.
+    /// P = Σ a·(x_l − c).
     first: Vec3,
-    /// Q = Σ a·x_l² (componentwise).
+    /// Q = Σ a·(x_l − c)² (componentwise).
     second: Vec3,
 }
 
 impl Moments {
-    fn add(&mut self, a: f32, x: Vec3) {
+    fn add(&mut self, a: f32, offset: Vec3) {
         self.sum += a;
-        self.first += a * x;
-        self.second += a * x * x;
+        self.first += a * offset;
+        self.second += a * offset * offset;
     }
 
-    /// (x_p, radius), or `None` when nothing was accumulated.
-    fn position_and_radius(&self) -> Option<(Vec3, f32)> {
+    /// (x_p, radius) for the cache at `cache`, or `None` when nothing was accumulated.
+    fn position_and_radius(&self, cache: Vec3) -> Option<(Vec3, f32)> {
         if self.sum <= 0.0 {
             return None;
         }
@@ -128,13 +137,13 @@ impl Moments {
             .max(Vec3::ZERO)
             .map(f32::sqrt);
         // Box of extent 2σ → sphere whose radius matches its largest dimension.
-        Some((mean, 2.0 * sigma.max_element()))
+        Some((cache + mean, 2.0 * sigma.max_element()))
     }
 }
 
 /// Builds a proxy light at the position given by `moments`; `flux_at` gives Φ_p from x_p.
 fn proxy_light(cache: Vec3, moments: &Moments, flux_at: impl Fn(Vec3) -> Vec3) -> ProxyLight {
-    match moments.position_and_radius() {
+    match moments.position_and_radius(cache) {
         Some((position, radius)) => ProxyLight {
             position,
             flux: flux_at(position),
@@ -191,8 +200,8 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
         e_d += w * g * val.flux;
         e_g += w * g * lobe * val.flux;
         // Eq. 6 weights times the BRSM weight 1/(N_sVAL·P_VAL) of eq. 13.
-        m_d.add(w * (EPS_P * val.area + form_factor), val.position);
-        m_g.add(w * (EPS_P * val.area + lobe * form_factor), val.position);
+        m_d.add(w * (EPS_P * val.area + form_factor), delta);
+        m_g.add(w * (EPS_P * val.area + lobe * form_factor), delta);
     }
 
     // Eq. 7 with L_o,d = ρ_d/π·E_d and f_r = ρ_d/π: ρ_d cancels.
@@ -215,24 +224,31 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
     ProxyLights { diffuse, glossy }
 }
 
-/// Running sums of eq. 9 for one proxy kind: Σ w', Σ w'·x_p and Σ w'·Φ_p.
+/// Running sums of eq. 9 for one proxy kind: Σ w' and Σ w'·Φ_p over all neighbours, Σ w'
+/// and Σ w'·x_p over lit ones. Unlit neighbours dim the flux as they should, but their proxy
+/// sits on their own cache, and averaging that position in would pull the light onto the
+/// surface and brighten it by 1/d².
 #[derive(Default)]
 struct Interpolated {
     weight: f32,
-    position: Vec3,
     flux: Vec3,
+    lit_weight: f32,
+    position: Vec3,
 }
 
 impl Interpolated {
     fn add(&mut self, w: f32, proxy: &ProxyLight) {
         self.weight += w;
-        self.position += w * proxy.position;
         self.flux += w * proxy.flux;
+        if !proxy.is_unlit() {
+            self.lit_weight += w;
+            self.position += w * proxy.position;
+        }
     }
 
-    /// (x_v, Φ_v) of eq. 9, or `None` when Σ w' = 0.
+    /// (x_v, Φ_v) of eq. 9, or `None` when no neighbour is lit.
     fn finish(&self) -> Option<(Vec3, Vec3)> {
-        (self.weight > 0.0).then(|| (self.position / self.weight, self.flux / self.weight))
+        (self.lit_weight > 0.0).then(|| (self.position / self.lit_weight, self.flux / self.weight))
     }
 }
 
@@ -259,11 +275,16 @@ pub fn shade(surface: &RefSurface, camera: Vec3, neighbours: &[(RefCache, ProxyL
         };
         // Eq. 8, diffuse: normal similarity.
         let w_d = a * n_x.dot(cache.normal).max(0.0).sqrt();
-        // Eq. 8, glossy: similarity of the glossy proxy's direction mirrored at x and at c.
-        let x_pg = proxies.glossy.position;
-        let r_x = reflect_about(n_x, (x_pg - x).normalize_or_zero());
-        let r_c = reflect_about(cache.normal, (x_pg - c).normalize_or_zero());
-        let w_g = a * r_x.dot(r_c).max(0.0).sqrt();
+        // Eq. 8, glossy: similarity of the glossy proxy's direction mirrored at x and at c. An
+        // unlit proxy has no direction and falls back to the normals.
+        let w_g = if proxies.glossy.is_unlit() {
+            w_d
+        } else {
+            let x_pg = proxies.glossy.position;
+            let r_x = reflect_about(n_x, (x_pg - x).normalize_or_zero());
+            let r_c = reflect_about(cache.normal, (x_pg - c).normalize_or_zero());
+            a * r_x.dot(r_c).max(0.0).sqrt()
+        };
         diffuse.add(w_d, &proxies.diffuse);
         glossy.add(w_g, &proxies.glossy);
     }
@@ -540,6 +561,31 @@ mod tests {
                 assert_close(proxy.position, CACHE.position, 1e-6);
             }
         }
+    }
+
+    #[test]
+    fn unlit_neighbours_dim_but_do_not_move_the_interpolated_light() {
+        let camera = Vec3::new(0.3, 4.0, 1.0);
+        let vals = [val(Vec3::new(0.2, 2.0, -0.1), -Vec3::Y, Vec3::ONE)];
+        let lit = light_cache(&CACHE, &vals, camera);
+        // Same normal, no VAL in front: both proxies unlit, sitting on their caches.
+        let dark = |x: f32| {
+            let cache = RefCache {
+                position: Vec3::new(x, 0.0, 0.0),
+                ..CACHE
+            };
+            let proxies = light_cache(&cache, &[], camera);
+            assert!(proxies.diffuse.is_unlit() && proxies.glossy.is_unlit());
+            (cache, proxies)
+        };
+        let surface = surface_at(&CACHE, Vec3::new(0.8, 0.6, 0.4), Vec3::new(0.3, 0.2, 0.1));
+        let alone = shade(&surface, camera, &[(CACHE, lit)]);
+        assert!(alone.min_element() > 0.0);
+        // Weights a = 1 (lit, at the surface), 0.5 and 0 (the farthest, which sets d_max): the
+        // light stays where the lit proxy puts it, its flux averaged over weight 1.5.
+        let mixed = shade(&surface, camera, &[(CACHE, lit), dark(0.5), dark(1.0)]);
+        assert_close(mixed, alone / 1.5, 1e-5);
+        assert_eq!(shade(&surface, camera, &[dark(0.0), dark(0.5)]), Vec3::ZERO);
     }
 
     #[test]

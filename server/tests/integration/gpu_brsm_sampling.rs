@@ -59,8 +59,11 @@ fn halton(mut i: u32, base: u32) -> f32 {
     r
 }
 
-/// CPU port of rsm.wgsl for every covered texel: flux = ρ_d · E⊥ · A_disk (eq. 1), with the
-/// material found by casting a ray from the light to the texel's position.
+/// Every covered texel's disk area (eq. 1) and flux, the flux derived independently of the
+/// shader as the power through the texel: ρ_d · intensity · solid angle (s²·cos³θ for a
+/// perspective texel of side s at unit depth, θ off the face's axis), or ρ_d · E · texel area
+/// for an orthographic one. The material is found by casting a ray from the light to the
+/// texel's position.
 fn check_rsm_flux(scene: &Scene, light: &Light, rb: &SamplingReadback, size: u32) {
     let faces = light_faces(light, &scene.bounds);
     let light_pos = Vec3::from(light.position);
@@ -110,7 +113,15 @@ fn check_rsm_flux(scene: &Scene, light: &Light, rb: &SamplingReadback, size: u32
         let m = &scene.materials[triangle_material(scene, tri) as usize];
         let (l, e) = incident(light, p);
         let facing = if n.dot(l) > 0.0 { 1.0 } else { 0.0 };
-        let expected = m.diffuse_glossy().diffuse * e * area * facing;
+        let received = if face.perspective {
+            let r = (p - light_pos).length();
+            let cos_theta = (p - light_pos).dot(face.axis) / r;
+            let intensity = e * r * r;
+            intensity * texel_area * cos_theta.powi(3)
+        } else {
+            e * texel_area
+        };
+        let expected = m.diffuse_glossy().diffuse * received * facing;
         let got = Vec3::new(fa[0], fa[1], fa[2]);
         let err = (got - expected).abs().max_element() / expected.max_element().max(1e-12);
         if expected.max_element() > 0.0 {

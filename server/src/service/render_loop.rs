@@ -232,7 +232,7 @@ impl Loop {
             None => (None, false),
             Some(params) => match self.scenes.caches(scene, params) {
                 CachesNow::Ready(set) => (Some(set), false),
-                CachesNow::Pending => (None, true),
+                CachesNow::Pending | CachesNow::Busy => (None, true),
                 CachesNow::Failed(e) => {
                     return Err(ApiError::field(
                         "render.gi.cache_distance",

@@ -12,7 +12,7 @@ use lightcast_protocol::{
 };
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{mpsc, Arc, Mutex, MutexGuard};
+use std::sync::{mpsc, Arc, Mutex, MutexGuard, Weak};
 use std::time::Instant;
 
 /// Most cache parameter sets kept per scene.
@@ -55,6 +55,8 @@ impl Variant {
 pub enum CachesNow {
     Ready(Arc<CacheSet>),
     Pending,
+    /// Not queued: the precompute queue is full; asking again later queues them.
+    Busy,
     Failed(String),
 }
 
@@ -155,6 +157,15 @@ impl SceneEntry {
         Ok(params)
     }
 
+    fn update_variant(&self, params: &CacheParams, f: &mut dyn FnMut(&mut Variant)) {
+        if let Some(v) = lock(&self.variants)
+            .iter_mut()
+            .find(|v| same_params(&v.params, params))
+        {
+            f(v);
+        }
+    }
+
     /// Marks the scene in use until the lease is dropped.
     pub fn lease(self: &Arc<Self>) -> SceneLease {
         self.sessions.fetch_add(1, Ordering::Relaxed);
@@ -175,24 +186,55 @@ impl Drop for SceneLease {
     }
 }
 
-type Job = (Arc<SceneEntry>, CacheParams);
+/// A queued precomputation. The queue holds its scene weakly: a scene deleted, or a one-shot
+/// render's upload whose request has ended, is skipped and its memory freed at once instead
+/// of waiting in the queue.
+type Job = (Weak<SceneEntry>, CacheParams);
+
+/// Precomputations waiting at most; beyond them a request is refused for now.
+const MAX_QUEUED_JOBS: usize = 32;
 
 /// All scenes, plus the worker thread that precomputes their light caches.
 pub struct SceneRegistry {
     scenes: Mutex<BTreeMap<String, Arc<SceneEntry>>>,
-    jobs: Mutex<mpsc::Sender<Job>>,
+    jobs: Mutex<mpsc::SyncSender<Job>>,
     max_scenes: usize,
 }
 
 impl SceneRegistry {
     /// Starts the precompute worker (one thread; the precomputation itself uses rayon).
     pub fn new(store: CacheStore, max_scenes: usize) -> Arc<Self> {
-        let (tx, rx) = mpsc::channel::<Job>();
+        Self::with_worker(max_scenes, move |entry, params| {
+            precompute(&store, entry, params)
+        })
+    }
+
+    /// [`SceneRegistry::new`] with `work` run on the worker thread for each queued job.
+    fn with_worker(
+        max_scenes: usize,
+        mut work: impl FnMut(&SceneEntry, CacheParams) + Send + 'static,
+    ) -> Arc<Self> {
+        let (tx, rx) = mpsc::sync_channel::<Job>(MAX_QUEUED_JOBS);
         std::thread::Builder::new()
             .name("precompute".into())
             .spawn(move || {
                 for (entry, params) in rx {
-                    precompute(&store, &entry, params);
+                    let Some(entry) = entry.upgrade() else {
+                        continue;
+                    };
+                    // A bug in one scene's precomputation must not stop every later scene's.
+                    let run = || work(&entry, params);
+                    if std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).is_err() {
+                        tracing::error!(scene = %entry.id, "the light-cache precomputation panicked");
+                        entry.update_variant(&params, &mut |v| {
+                            v.state = PrecomputeState::Failed;
+                            v.error = Some(
+                                "the precomputation failed on an internal error (see the \
+                                 server log)"
+                                    .into(),
+                            );
+                        });
+                    }
                 }
             })
             .expect("spawning the precompute thread");
@@ -293,6 +335,14 @@ impl SceneRegistry {
                 (None, None) => CachesNow::Pending,
             };
         }
+        match lock(&self.jobs).try_send((Arc::downgrade(entry), params)) {
+            Ok(()) => {}
+            Err(mpsc::TrySendError::Full(_)) => return CachesNow::Busy,
+            Err(mpsc::TrySendError::Disconnected(_)) => {
+                tracing::error!("the precompute thread has stopped");
+                return CachesNow::Failed("the precompute thread has stopped".into());
+            }
+        }
         variants.push(Variant {
             params,
             state: PrecomputeState::Queued,
@@ -303,24 +353,13 @@ impl SceneRegistry {
             error: None,
             caches: None,
         });
-        drop(variants);
-        if lock(&self.jobs).send((Arc::clone(entry), params)).is_err() {
-            tracing::error!("the precompute thread has stopped");
-        }
         CachesNow::Pending
     }
 }
 
 /// Runs on the precompute thread: loads or computes one set of caches and records the outcome.
 fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
-    let update = |f: &mut dyn FnMut(&mut Variant)| {
-        if let Some(v) = lock(&entry.variants)
-            .iter_mut()
-            .find(|v| same_params(&v.params, &params))
-        {
-            f(v);
-        }
-    };
+    let update = |f: &mut dyn FnMut(&mut Variant)| entry.update_variant(&params, f);
     if entry.removed.load(Ordering::Relaxed) {
         return;
     }
@@ -364,6 +403,108 @@ fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
                 v.seconds = Some(seconds);
                 v.error = Some(e.to_string());
             });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::procedural;
+    use std::time::Duration;
+
+    fn params(d_eps: f32) -> CacheParams {
+        CacheParams {
+            d_eps,
+            theta_eps_degrees: 30.0,
+        }
+    }
+
+    fn state(entry: &SceneEntry, p: &CacheParams) -> Option<PrecomputeState> {
+        lock(&entry.variants)
+            .iter()
+            .find(|v| same_params(&v.params, p))
+            .map(|v| v.state)
+    }
+
+    /// A worker that reports each job's scene id and then waits for a go-ahead.
+    fn gated() -> (Arc<SceneRegistry>, mpsc::Receiver<String>, mpsc::Sender<()>) {
+        let (seen_tx, seen) = mpsc::channel();
+        let (go, go_rx) = mpsc::channel::<()>();
+        let registry = SceneRegistry::with_worker(4, move |entry, _| {
+            let _ = seen_tx.send(entry.id.clone());
+            let _ = go_rx.recv();
+        });
+        (registry, seen, go)
+    }
+
+    const WAIT: Duration = Duration::from_secs(10);
+
+    #[test]
+    fn a_full_queue_refuses_new_work_until_it_drains() {
+        let (registry, seen, go) = gated();
+        let entry = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        assert!(matches!(
+            registry.caches(&entry, params(1.0)),
+            CachesNow::Pending
+        ));
+        assert_eq!(seen.recv_timeout(WAIT).as_deref(), Ok(entry.id.as_str()));
+        // The worker holds the first job; the queue takes MAX_QUEUED_JOBS more.
+        for k in 0..MAX_QUEUED_JOBS {
+            let p = params(2.0 + k as f32);
+            assert!(
+                matches!(registry.caches(&entry, p), CachesNow::Pending),
+                "job {k}"
+            );
+        }
+        let refused = params(100.0);
+        assert!(matches!(registry.caches(&entry, refused), CachesNow::Busy));
+        assert_eq!(
+            state(&entry, &refused),
+            None,
+            "a refused job leaves no variant"
+        );
+        go.send(()).expect("worker alive");
+        assert!(seen.recv_timeout(WAIT).is_ok());
+        assert!(matches!(
+            registry.caches(&entry, refused),
+            CachesNow::Pending
+        ));
+        drop(go);
+    }
+
+    #[test]
+    fn jobs_of_scenes_gone_from_every_holder_are_skipped() {
+        let (registry, seen, go) = gated();
+        let kept = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        registry.caches(&kept, params(1.0));
+        assert_eq!(seen.recv_timeout(WAIT).as_deref(), Ok(kept.id.as_str()));
+        let dropped = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        registry.caches(&dropped, params(1.0));
+        registry.caches(&kept, params(2.0));
+        drop(dropped);
+        go.send(()).expect("worker alive");
+        go.send(()).expect("worker alive");
+        assert_eq!(seen.recv_timeout(WAIT).as_deref(), Ok(kept.id.as_str()));
+        drop(go);
+        assert!(seen.recv_timeout(Duration::from_millis(200)).is_err());
+    }
+
+    #[test]
+    fn a_panicking_precomputation_fails_its_variant_and_the_worker_goes_on() {
+        let (done_tx, done) = mpsc::channel();
+        let registry = SceneRegistry::with_worker(4, move |entry, p| {
+            assert!(p.d_eps != 1.0, "a bug in the precomputation");
+            let _ = done_tx.send(entry.id.clone());
+        });
+        let entry = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        registry.caches(&entry, params(1.0));
+        registry.caches(&entry, params(2.0));
+        assert_eq!(done.recv_timeout(WAIT).as_deref(), Ok(entry.id.as_str()));
+        assert_eq!(state(&entry, &params(1.0)), Some(PrecomputeState::Failed));
+        match registry.caches(&entry, params(1.0)) {
+            CachesNow::Failed(e) => assert!(e.contains("internal error"), "{e}"),
+            _ => panic!("the panicked variant must read as failed"),
         }
     }
 }

@@ -25,6 +25,8 @@ pub async fn healthz() -> Json<serde_json::Value> {
 pub async fn readyz(State(state): State<Arc<AppState>>) -> Response {
     let reason = if *state.shutdown.borrow() {
         Some("shutting down".to_string())
+    } else if !state.render_loop_alive() {
+        Some("the render loop has stopped; see the server log".to_string())
     } else if state.adapter_is_cpu && !state.allow_cpu_adapter {
         Some(format!(
             "adapter {} is a CPU (software) adapter; start with --allow-cpu-adapter to serve \

@@ -102,6 +102,12 @@ impl AppState {
         let _ = self.render_tx.send(Command::Wake);
     }
 
+    /// Whether the render loop thread still runs (its end drops the receiving side, so a wake
+    /// cannot be sent), for `/readyz`.
+    pub fn render_loop_alive(&self) -> bool {
+        self.render_tx.send(Command::Wake).is_ok()
+    }
+
     /// Issues a single-use ticket for `session`'s WebSocket.
     pub fn issue_ticket(&self, session: &str, owner: Option<String>) -> String {
         let ticket = ids::random_hex(16);

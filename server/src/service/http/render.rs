@@ -78,6 +78,11 @@ async fn wait_for_caches(
                     format!("the light caches failed: {e}"),
                 ))
             }
+            CachesNow::Busy => {
+                return Err(ApiError::unavailable(
+                    "the server is computing the light caches of other scenes; try again shortly",
+                ))
+            }
             CachesNow::Pending if Instant::now() >= deadline => {
                 return Err(ApiError::unavailable(
                     "the scene's light caches are still being computed; try again shortly",

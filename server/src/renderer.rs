@@ -501,6 +501,8 @@ impl Renderer {
         // Release the least recently used targets first so a new size does not need them all
         // in memory at once.
         self.sized.truncate(MAX_SIZES - 1);
+        self.sampling
+            .retain_gbuffers(self.sized.iter().map(|s| &s.gbuffer));
         let device = &self.ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let hdr = Target::new(
@@ -610,7 +612,6 @@ impl Renderer {
             self.sampling.prepare(
                 &self.ctx,
                 &sized.gbuffer,
-                (width, height),
                 &light_faces(&settings.light, bounds),
                 &gi,
             );

@@ -14,9 +14,25 @@ use crate::passes::{
     val_select::{SelectionBuffers, Val, ValSelectPass},
 };
 
-/// Buffers and bind groups for one RSM size, light face count, output size and VAL count.
+/// What one set of sampling buffers is for. The G-buffer itself, not just its size, is part of
+/// it: the importance stage's bind group reads that G-buffer, and targets of a size evicted
+/// and created again are new textures.
+#[derive(Clone, PartialEq, Eq)]
+struct Key {
+    rsm_size: u32,
+    faces: u32,
+    view_samples: u32,
+    val_count: u32,
+    gbuffer: wgpu::Texture,
+}
+
+/// Sets of sampling buffers kept at once, most recently used first, so that sessions of
+/// different sizes or GI parameters served in turn do not rebuild them every frame.
+const MAX_SETS: usize = 4;
+
+/// Buffers and bind groups for one [`Key`].
 struct Resources {
-    key: (u32, u32, u32, u32, u32),
+    key: Key,
     rsm: Rsm,
     samples: wgpu::Buffer,
     importance: wgpu::Buffer,
@@ -33,7 +49,8 @@ pub struct ValSampling {
     importance_pass: ImportancePass,
     sums_pass: CumulativeSumsPass,
     select_pass: ValSelectPass,
-    resources: Option<Resources>,
+    /// Most recently used first; the first is the current frame's.
+    resources: Vec<Resources>,
     /// RSM rows of each importance dispatch, chosen by the last `prepare`.
     importance_bands: Vec<std::ops::Range<u32>>,
 }
@@ -76,36 +93,40 @@ impl ValSampling {
             importance_pass: ImportancePass::new(device),
             sums_pass: CumulativeSumsPass::new(device),
             select_pass: ValSelectPass::new(device),
-            resources: None,
+            resources: Vec::new(),
             importance_bands: Vec::new(),
         }
     }
 
-    /// Creates the buffers for this frame's sizes (kept while the sizes stay the same) and
-    /// writes the uniforms.
+    /// Makes the buffers for this frame's G-buffer and parameters current (reusing a kept set)
+    /// and writes the uniforms.
     pub fn prepare(
         &mut self,
         ctx: &GpuContext,
         gbuffer: &GBuffer,
-        gbuffer_size: (u32, u32),
         faces: &[LightFace],
         settings: &GiSettings,
     ) {
-        let face_count = faces.len() as u32;
-        let key = (
-            settings.rsm_size,
-            face_count,
-            settings.view_samples,
-            settings.val_count,
-            gbuffer_size.0 ^ (gbuffer_size.1 << 16),
-        );
-        if self.resources.as_ref().map(|r| r.key) != Some(key) {
-            self.resources = None;
-            self.resources = Some(self.create_resources(ctx, gbuffer, key, settings));
-        }
-        let Some(res) = &self.resources else {
-            unreachable!("resources were just created");
+        let key = Key {
+            rsm_size: settings.rsm_size,
+            faces: faces.len() as u32,
+            view_samples: settings.view_samples,
+            val_count: settings.val_count,
+            gbuffer: gbuffer.position.texture.clone(),
         };
+        match self.resources.iter().position(|r| r.key == key) {
+            Some(i) => {
+                let hit = self.resources.remove(i);
+                self.resources.insert(0, hit);
+            }
+            None => {
+                // Release the least recently used set before allocating the new one.
+                self.resources.truncate(MAX_SETS - 1);
+                let created = self.create_resources(ctx, gbuffer, key, settings);
+                self.resources.insert(0, created);
+            }
+        }
+        let res = &self.resources[0];
         let queue = &ctx.queue;
         let rsm_faces: Vec<RsmFace> = faces
             .iter()
@@ -127,15 +148,22 @@ impl ValSampling {
         self.importance_bands = bands;
     }
 
+    /// Drops the sets made for G-buffers other than `live` (the renderer's current targets),
+    /// so evicted targets do not stay alive through them.
+    pub fn retain_gbuffers<'a>(&mut self, live: impl Iterator<Item = &'a GBuffer> + Clone) {
+        self.resources
+            .retain(|r| live.clone().any(|g| g.position.texture == r.key.gbuffer));
+    }
+
     fn create_resources(
         &self,
         ctx: &GpuContext,
         gbuffer: &GBuffer,
-        key: (u32, u32, u32, u32, u32),
+        key: Key,
         settings: &GiSettings,
     ) -> Resources {
         let device = &ctx.device;
-        let rsm = Rsm::new(device, settings.rsm_size, key.1);
+        let rsm = Rsm::new(device, settings.rsm_size, key.faces);
         let texels = u64::from(rsm.texels());
         let samples = storage(
             device,
@@ -182,7 +210,7 @@ impl ValSampling {
 
     fn res(&self) -> &Resources {
         self.resources
-            .as_ref()
+            .first()
             .expect("ValSampling::prepare must run before encoding")
     }
 
@@ -269,7 +297,7 @@ impl ValSampling {
             v
         };
         let texels = rsm.texels() as usize;
-        let (_, _, view_samples, val_count, _) = res.key;
+        let (view_samples, val_count) = (res.key.view_samples, res.key.val_count);
         let mut samples: Vec<ViewSample> =
             bytemuck::pod_collect_to_vec(&read_buffer(&res.samples)?);
         samples.truncate(view_samples as usize);

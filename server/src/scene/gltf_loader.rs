@@ -1276,10 +1276,19 @@ impl Loader<'_> {
                     .transform_vector3(Vec3::NEG_Z)
                     .try_normalize()
                     .ok_or_else(|| invalid(&part, "node transform collapses the view direction"))?;
+                // A valid file may ask for a field of view the renderer refuses; the camera is
+                // still the file's intended view, so it is kept within the renderer's range.
+                let fov_y_degrees = yfov.to_degrees().clamp(1.0, 179.0);
+                if fov_y_degrees != yfov.to_degrees() {
+                    tracing::warn!(
+                        "{part}: yfov of {}° is outside 1°–179°; using {fov_y_degrees}°",
+                        yfov.to_degrees()
+                    );
+                }
                 self.cameras.push(Camera {
                     position: position.to_array(),
                     target: (position + forward).to_array(),
-                    fov_y_degrees: yfov.to_degrees(),
+                    fov_y_degrees,
                 });
             }
             Checked::Valid(CameraType::Orthographic) => {
@@ -1325,6 +1334,22 @@ impl Loader<'_> {
             .chain([&light.intensity, &inner_cone, &outer_cone]);
         if !parameters.into_iter().all(|p| p.is_finite()) {
             return Err(invalid(part, "has a non-finite parameter"));
+        }
+        // KHR_lights_punctual's own ranges, which the renderer relies on too.
+        if light.color.iter().any(|&c| c < 0.0) || light.intensity < 0.0 {
+            return Err(invalid(part, "color and intensity must not be negative"));
+        }
+        if !(0.0 <= inner_cone
+            && inner_cone <= outer_cone
+            && outer_cone <= std::f32::consts::FRAC_PI_2)
+        {
+            return Err(invalid(
+                part,
+                format!(
+                    "spot cone angles need 0 ≤ innerConeAngle ≤ outerConeAngle ≤ π/2, got \
+                     {inner_cone} and {outer_cone}"
+                ),
+            ));
         }
         let direction = world
             .transform_vector3(Vec3::NEG_Z)
@@ -1981,6 +2006,69 @@ mod tests {
             (point.inner_cone, point.outer_cone),
             (0.0, std::f32::consts::FRAC_PI_4)
         );
+    }
+
+    #[test]
+    fn refuses_lights_outside_their_ranges_and_clamps_extreme_fields_of_view() {
+        let document = |light: Value, yfov: f64| {
+            let mut bin = Bin::default();
+            let primitive = quad_primitive(&mut bin, true);
+            let doc = bin.document(
+                Some("data.bin"),
+                json!({
+                    "extensionsUsed": ["KHR_lights_punctual"],
+                    "extensions": {"KHR_lights_punctual": {"lights": [light]}},
+                    "cameras": [{"type": "perspective", "perspective": {"yfov": yfov, "znear": 0.1}}],
+                    "scene": 0,
+                    "scenes": [{"nodes": [0, 1, 2]}],
+                    "nodes": [
+                        {"mesh": 0},
+                        {"translation": [0, 5, 0], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+                        {"translation": [0, 1, 5], "camera": 0},
+                    ],
+                    "meshes": [{"primitives": [primitive]}],
+                }),
+            );
+            (doc, bin)
+        };
+        for (light, expected) in [
+            (
+                json!({"type": "point", "color": [1, -0.5, 1]}),
+                "must not be negative",
+            ),
+            (
+                json!({"type": "point", "intensity": -3}),
+                "must not be negative",
+            ),
+            (
+                json!({"type": "spot", "spot": {"innerConeAngle": 0.6, "outerConeAngle": 0.5}}),
+                "innerConeAngle ≤ outerConeAngle",
+            ),
+            (
+                json!({"type": "spot", "spot": {"outerConeAngle": 2.0}}),
+                "outerConeAngle ≤ π/2",
+            ),
+        ] {
+            let (doc, bin) = document(light.clone(), 0.8);
+            let err = load_error(&doc, &bin.bytes);
+            assert!(
+                err.starts_with("light 0") && err.contains(expected),
+                "{light}: {err}"
+            );
+        }
+        let (doc, bin) = document(json!({"type": "point"}), 0.001);
+        let scene = load_document(&doc, &bin.bytes).expect("a tiny yfov is valid glTF");
+        assert_eq!(scene.cameras[0].fov_y_degrees, 1.0);
+    }
+
+    #[test]
+    fn refuses_scenes_too_large_for_f32() {
+        let mut bin = Bin::default();
+        let far = [[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [3e30, 0.0, 1.0]];
+        let primitive = json!({"attributes": {"POSITION": bin.vec3(&far)}});
+        let doc = bin.document(Some("data.bin"), single_mesh(json!([primitive])));
+        let err = load_error(&doc, &bin.bytes);
+        assert!(err.contains("scene spans 3e30 units"), "{err}");
     }
 
     #[test]

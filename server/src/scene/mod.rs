@@ -108,7 +108,16 @@ pub enum SceneError {
     NonFinitePosition(usize),
     #[error("scene has {0} vertices; at most {max} are supported", max = u32::MAX)]
     TooManyVertices(usize),
+    #[error(
+        "scene spans {0:e} units; at most {max:e} are supported (f32 positions lose all \
+         detail beyond that, and derived light intensities overflow)",
+        max = MAX_SCENE_EXTENT
+    )]
+    TooLarge(f32),
 }
+
+/// Largest extent of a scene's bounding box along any axis, in scene units.
+pub const MAX_SCENE_EXTENT: f32 = 1e7;
 
 /// A renderable scene.
 #[derive(Clone, Debug)]
@@ -184,6 +193,10 @@ impl Scene {
             let p = Vec3::from(vertices[i as usize].position);
             min = min.min(p);
             max = max.max(p);
+        }
+        let extent = (max - min).max_element();
+        if !(extent <= MAX_SCENE_EXTENT) {
+            return Err(SceneError::TooLarge(extent));
         }
 
         let mut triangles: Vec<[u32; 3]> = indices

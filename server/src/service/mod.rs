@@ -108,7 +108,7 @@ impl Service {
             "file".to_string()
         };
         scenes
-            .insert(scene, source, Some(DEFAULT_SCENE_ID), load_ms)
+            .insert(scene, source, Some(DEFAULT_SCENE_ID), load_ms, None)
             .map_err(|e| ServeError::Task(e.body.message))?;
 
         let sessions = Arc::new(sessions::SessionRegistry::new(limits.max_sessions as usize));

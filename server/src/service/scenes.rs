@@ -71,6 +71,9 @@ pub struct SceneEntry {
     /// Summed once: checking a request's cache parameters against it happens per message.
     surface_area: f64,
     pub load_ms: f64,
+    /// The token that uploaded the scene, the only one that may delete it (`None`: the
+    /// server's own scenes, or auth off).
+    owner: Option<String>,
     variants: Mutex<Vec<Variant>>,
     sessions: AtomicU64,
     removed: AtomicBool,
@@ -82,10 +85,11 @@ fn same_params(a: &CacheParams, b: &CacheParams) -> bool {
 }
 
 impl SceneEntry {
-    fn new(scene: Scene, source: String, id: String, load_ms: f64) -> Self {
+    fn new(scene: Scene, source: String, id: String, load_ms: f64, owner: Option<String>) -> Self {
         Self {
             id,
             source,
+            owner,
             default_camera: default_camera(&scene),
             default_light: default_light(&scene),
             default_params: CacheParams::for_scene(&scene),
@@ -245,20 +249,23 @@ impl SceneRegistry {
         })
     }
 
-    /// Adds a loaded scene under `id` (a new random id when `None`) and queues the
-    /// precomputation of its default light caches.
+    /// Adds a loaded scene under `id` (a new random id when `None`), deletable only with the
+    /// `owner` token when there is one, and queues the precomputation of its default light
+    /// caches.
     pub fn insert(
         &self,
         scene: Scene,
         source: String,
         id: Option<&str>,
         load_ms: f64,
+        owner: Option<String>,
     ) -> Result<Arc<SceneEntry>, ApiError> {
         let entry = Arc::new(SceneEntry::new(
             scene,
             source,
             id.map_or_else(|| ids::new_id("sc"), str::to_string),
             load_ms,
+            owner,
         ));
         {
             let mut scenes = lock(&self.scenes);
@@ -286,6 +293,7 @@ impl SceneRegistry {
             "upload".to_string(),
             ids::new_id("upload"),
             load_ms,
+            None,
         ))
     }
 
@@ -304,14 +312,20 @@ impl SceneRegistry {
         lock(&self.scenes).contains_key(id)
     }
 
-    /// Deletes a scene no session uses.
-    pub fn remove(&self, id: &str) -> Result<(), ApiError> {
+    /// Deletes a scene no session uses, for the `caller` token that uploaded it (scenes are
+    /// shared, but one client must not pull another's scene away).
+    pub fn remove(&self, id: &str, caller: Option<&str>) -> Result<(), ApiError> {
         let mut scenes = lock(&self.scenes);
         let entry = scenes
             .get(id)
             .ok_or_else(|| ApiError::not_found("scene", id))?;
         if id == DEFAULT_SCENE_ID {
             return Err(ApiError::conflict("the default scene cannot be deleted"));
+        }
+        if entry.owner.is_some() && entry.owner.as_deref() != caller {
+            return Err(ApiError::forbidden(format!(
+                "scene '{id}' was uploaded with another token; only that token can delete it"
+            )));
         }
         let users = entry.in_use();
         if users > 0 {

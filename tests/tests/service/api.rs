@@ -913,6 +913,32 @@ async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() 
         ticket["ticket"].as_str().expect("ticket")
     ));
     assert!(tokio_tungstenite::connect_async(url).await.is_ok());
+
+    // Scenes are shared, but only the token that uploaded one can delete it.
+    let uploaded: Value = server
+        .http
+        .post(server.url("/v1/scenes"))
+        .bearer_auth(alice)
+        .json(&json!({"procedural": "street?blocks=1"}))
+        .send()
+        .await
+        .expect("upload")
+        .json()
+        .await
+        .expect("JSON");
+    let scene = format!("/v1/scenes/{}", uploaded["id"].as_str().expect("id"));
+    let delete = |token| {
+        server
+            .http
+            .delete(server.url(&scene))
+            .bearer_auth(token)
+            .send()
+    };
+    let resp = delete(bob).await.expect("delete");
+    assert_eq!(resp.status(), 403);
+    let body: Value = resp.json().await.expect("JSON error");
+    assert_eq!(body["error"], "forbidden", "{body}");
+    assert_eq!(delete(alice).await.expect("delete").status(), 204);
     server.stop().await;
 }
 

@@ -151,7 +151,6 @@ pub fn build_id() -> String {
 #[derive(Clone, Debug)]
 pub struct Caller(pub Option<String>);
 
-/// Checks the bearer token (or a stream ticket) when auth is on and records the caller.
 /// Ends a request that outlasts `--request-timeout-ms`, whether the client is slow to send its
 /// body or the server to answer, with the JSON error every other refusal has.
 async fn time_limit(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
@@ -167,6 +166,7 @@ async fn time_limit(State(state): State<Arc<AppState>>, request: Request, next: 
     }
 }
 
+/// Checks the bearer token (or a stream ticket) when auth is on and records the caller.
 async fn authenticate(
     State(state): State<Arc<AppState>>,
     mut request: Request,

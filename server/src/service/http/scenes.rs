@@ -1,6 +1,6 @@
 //! `/v1/scenes`: upload, list, inspect and delete scenes.
 
-use super::AppState;
+use super::{AppState, Caller};
 use crate::scene::gltf_loader::{load_gltf_slice, LoadLimits};
 use crate::scene::procedural::Spec;
 use crate::scene::Scene;
@@ -9,7 +9,7 @@ use crate::service::scenes::SceneEntry;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
 use axum::http::{header, StatusCode};
-use axum::Json;
+use axum::{Extension, Json};
 use lightcast_protocol::{ProceduralScene, SceneInfo};
 use std::sync::Arc;
 use std::time::Instant;
@@ -212,6 +212,7 @@ pub async fn list(State(state): State<Arc<AppState>>) -> Json<Vec<SceneInfo>> {
         (status = 429, description = "Too many scenes", body = lightcast_protocol::ErrorBody)))]
 pub async fn create(
     State(state): State<Arc<AppState>>,
+    Extension(caller): Extension<Caller>,
     query: Result<Query<UploadQuery>, axum::extract::rejection::QueryRejection>,
     request: Request,
 ) -> Result<(StatusCode, Json<SceneInfo>), ApiError> {
@@ -273,7 +274,9 @@ pub async fn create(
         scene.name = name;
     }
     let load_ms = started.elapsed().as_secs_f64() * 1e3;
-    let entry = state.scenes.insert(scene, source, None, load_ms)?;
+    let entry = state
+        .scenes
+        .insert(scene, source, None, load_ms, caller.0)?;
     tracing::info!(scene = %entry.id, triangles = entry.scene.triangle_count(), "scene added");
     Ok((StatusCode::CREATED, Json(entry.info())))
 }
@@ -289,18 +292,21 @@ pub async fn show(
     Ok(Json(state.scenes.get(&id)?.info()))
 }
 
-/// Deletes a scene no session uses (409 while any does; the default scene stays).
+/// Deletes a scene no session uses (409 while any does; the default scene stays). With auth
+/// on, only the token that uploaded a scene can delete it.
 #[utoipa::path(delete, path = "/v1/scenes/{id}", tag = "scenes",
     params(("id" = String, Path, description = "Scene id")),
     responses(
         (status = 204, description = "Deleted"),
+        (status = 403, description = "Uploaded with another token", body = lightcast_protocol::ErrorBody),
         (status = 404, body = lightcast_protocol::ErrorBody),
         (status = 409, description = "In use, or the default scene", body = lightcast_protocol::ErrorBody)))]
 pub async fn delete(
     State(state): State<Arc<AppState>>,
+    Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    state.scenes.remove(&id)?;
+    state.scenes.remove(&id, caller.0.as_deref())?;
     Ok(StatusCode::NO_CONTENT)
 }
 

@@ -53,6 +53,10 @@ pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
 
 /// Output sizes whose targets a renderer keeps at once.
 const MAX_SIZES: usize = 4;
+/// Shadow maps a renderer keeps at once: sessions with different shadow-map sizes or light
+/// kinds take turns without rebuilding them, while the largest (6 × 8192² depth texels,
+/// 1.6 GB) are not kept many times over.
+const MAX_SHADOW_MAPS: usize = 2;
 
 /// What one frame should show.
 #[derive(Clone, Debug)]
@@ -365,7 +369,8 @@ pub struct Renderer {
     /// Targets of the most recently used output sizes, most recent first (sessions of
     /// different sizes share one renderer).
     sized: Vec<SizedTargets>,
-    shadow_map: Option<ShadowMap>,
+    /// Shadow maps of the most recently used size and face count, most recent first.
+    shadow_maps: Vec<ShadowMap>,
     sampling: ValSampling,
     /// Whether the last frame ran the sampling stages.
     sampled: bool,
@@ -420,7 +425,7 @@ impl Renderer {
             camera_buffer,
             light_buffer,
             sized: Vec::new(),
-            shadow_map: None,
+            shadow_maps: Vec::new(),
             scene,
             ctx,
         }
@@ -556,18 +561,25 @@ impl Renderer {
         Ok(())
     }
 
+    /// Makes the shadow map of `size`² × `faces` the first of [`Self::shadow_maps`].
     fn ensure_shadow_map(&mut self, size: u32, faces: u32) -> Result<(), GpuError> {
-        if matches!(&self.shadow_map, Some(m) if m.size == size && m.faces() == faces) {
+        let found = self
+            .shadow_maps
+            .iter()
+            .position(|m| m.size == size && m.faces() == faces);
+        if let Some(i) = found {
+            let hit = self.shadow_maps.remove(i);
+            self.shadow_maps.insert(0, hit);
             return Ok(());
         }
-        self.shadow_map = None;
+        self.shadow_maps.truncate(MAX_SHADOW_MAPS - 1);
         let scope = self
             .ctx
             .device
             .push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let map = ShadowMap::new(&self.ctx.device, size, faces);
         check_allocation(scope, format!("{faces}×{size}² shadow map"))?;
-        self.shadow_map = Some(map);
+        self.shadow_maps.insert(0, map);
         Ok(())
     }
 
@@ -584,7 +596,7 @@ impl Renderer {
         self.ensure_targets(width, height)?;
         let faces = LightUniform::face_count(settings.light.kind);
         self.ensure_shadow_map(settings.shadow_map_size, faces)?;
-        let (Some(sized), Some(shadow_map)) = (self.sized.first(), &self.shadow_map) else {
+        let (Some(sized), Some(shadow_map)) = (self.sized.first(), self.shadow_maps.first()) else {
             unreachable!("targets were just ensured");
         };
 

@@ -541,8 +541,8 @@ fn chunked_occlusion_matches_the_cpu_double_projection() {
     assert!(worst < 2e-3, "largest relative flux difference {worst}");
 }
 
-/// One renderer serving sizes and views in turn, as the render loop does for sessions: kept
-/// sampling buffers are found by G-buffer, not by size, so a size whose targets were evicted
+/// One renderer serving sizes, views and shadow-map sizes in turn, as the render loop does for
+/// sessions: kept sampling buffers are found by G-buffer, not by size, so a size whose targets were evicted
 /// and made anew samples its new G-buffer, and every frame matches a fresh renderer's.
 #[test]
 fn frames_of_sizes_served_in_turn_match_fresh_renderers() {
@@ -582,7 +582,8 @@ fn frames_of_sizes_served_in_turn_match_fresh_renderers() {
             .expect("render");
     }
     let moved = at(W, H, 0.4, GiMethod::Brsm);
-    let other = at(W + 16, H + 8, 0.0, GiMethod::Brsm);
+    let mut other = at(W + 16, H + 8, 0.0, GiMethod::Brsm);
+    other.shadow_map_size *= 2;
     for s in [&moved, &other, &moved, &other] {
         let got = shared.render(s).expect("render").rgba8;
         let diff = mean_abs_diff(&got, &fresh(s));

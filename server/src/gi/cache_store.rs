@@ -34,6 +34,8 @@ const VERTEX_ENTRY_SIZE: usize = 4 * NEIGHBOURS;
 #[derive(Clone, Debug)]
 pub struct CacheStore {
     dir: PathBuf,
+    /// Total bytes of cache files kept; beyond it the least recently used go first.
+    max_bytes: Option<u64>,
 }
 
 /// Why a stored file was not used (only ever logged).
@@ -70,7 +72,17 @@ enum DecodeError {
 impl CacheStore {
     /// A store in `dir`, which is created on the first write.
     pub fn new(dir: impl Into<PathBuf>) -> Self {
-        Self { dir: dir.into() }
+        Self {
+            dir: dir.into(),
+            max_bytes: None,
+        }
+    }
+
+    /// Keeps at most `max_bytes` of cache files: after each write the least recently used
+    /// others are deleted (a server that takes uploads would otherwise fill its disk).
+    pub fn with_max_bytes(mut self, max_bytes: u64) -> Self {
+        self.max_bytes = Some(max_bytes);
+        self
     }
 
     /// `$LIGHTCAST_CACHE_DIR`, else `$XDG_CACHE_HOME/lightcast`, else `~/.cache/lightcast`,
@@ -142,6 +154,14 @@ impl CacheStore {
             Ok(bytes) => match decode(&bytes, &key, params, scene.vertices.len()) {
                 Ok(set) => {
                     tracing::info!(path = %path.display(), caches = set.caches.len(), "light caches loaded");
+                    // Eviction goes by modification time, so a use counts as one.
+                    let touched = std::fs::File::options()
+                        .append(true)
+                        .open(&path)
+                        .and_then(|f| f.set_modified(std::time::SystemTime::now()));
+                    if let Err(e) = touched {
+                        tracing::debug!(path = %path.display(), "cannot mark the file used: {e}");
+                    }
                     return Ok((set, true));
                 }
                 Err(e) => {
@@ -154,10 +174,47 @@ impl CacheStore {
             }
         }
         let set = precompute(scene, params, progress)?;
-        if let Err(e) = self.write(&key, &set) {
-            tracing::warn!(path = %path.display(), "cannot store light caches: {e}");
+        match self.write(&key, &set) {
+            Ok(()) => self.evict(&path),
+            Err(e) => tracing::warn!(path = %path.display(), "cannot store light caches: {e}"),
         }
         Ok((set, false))
+    }
+
+    /// Deletes the least recently used cache files other than `keep` until the rest fit in
+    /// `max_bytes`.
+    fn evict(&self, keep: &Path) {
+        let Some(max_bytes) = self.max_bytes else {
+            return;
+        };
+        let Ok(entries) = std::fs::read_dir(&self.dir) else {
+            return;
+        };
+        let mut files: Vec<(std::time::SystemTime, u64, PathBuf)> = entries
+            .flatten()
+            .filter(|e| e.path().extension().is_some_and(|x| x == "lcc"))
+            .filter_map(|e| {
+                let meta = e.metadata().ok()?;
+                Some((meta.modified().ok()?, meta.len(), e.path()))
+            })
+            .collect();
+        let mut total: u64 = files.iter().map(|f| f.1).sum();
+        files.sort();
+        for (_, len, path) in files {
+            if total <= max_bytes {
+                break;
+            }
+            if path == keep {
+                continue;
+            }
+            match std::fs::remove_file(&path) {
+                Ok(()) => {
+                    total -= len;
+                    tracing::info!(path = %path.display(), "evicted stored light caches");
+                }
+                Err(e) => tracing::warn!(path = %path.display(), "cannot evict: {e}"),
+            }
+        }
     }
 
     /// Writes atomically: a temporary file in the same directory, then a rename.
@@ -431,6 +488,41 @@ mod tests {
                 ..CacheStats::default()
             },
         }
+    }
+
+    #[test]
+    fn keeps_the_most_recently_used_files_within_its_size() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let scene = crate::scene::procedural::cornell_box();
+        let params = |d_eps| CacheParams {
+            d_eps,
+            theta_eps_degrees: 30.0,
+        };
+        let unlimited = CacheStore::new(dir.path());
+        let run = |store: &CacheStore, d_eps| {
+            store
+                .load_or_compute(&scene, &params(d_eps), &mut |_| {})
+                .expect("caches")
+                .1
+        };
+        assert!(!run(&unlimited, 0.5));
+        let one_file = std::fs::metadata(unlimited.path(&CacheStore::key(&scene, &params(0.5))))
+            .expect("stored")
+            .len();
+        // Room for two files of about this size.
+        let store = CacheStore::new(dir.path()).with_max_bytes(2 * one_file + one_file / 2);
+        let stored = |d_eps| {
+            store
+                .path(&CacheStore::key(&scene, &params(d_eps)))
+                .exists()
+        };
+        assert!(!run(&store, 0.51));
+        std::thread::sleep(Duration::from_millis(20));
+        // Loading 0.5 again makes it the most recently used; 0.51 is now the oldest.
+        assert!(run(&store, 0.5));
+        std::thread::sleep(Duration::from_millis(20));
+        assert!(!run(&store, 0.52));
+        assert!(stored(0.5) && stored(0.52) && !stored(0.51));
     }
 
     #[test]

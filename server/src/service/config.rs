@@ -27,6 +27,10 @@ pub struct ServeArgs {
     /// Where precomputed light caches are kept (default: the user's cache directory).
     #[arg(long, env = "LIGHTCAST_CACHE_DIR")]
     pub cache_dir: Option<PathBuf>,
+    /// Most bytes of light-cache files kept there; the least recently used beyond it are
+    /// deleted (every uploaded scene adds files).
+    #[arg(long, env = "LIGHTCAST_CACHE_MAX_BYTES", default_value_t = 4 << 30)]
+    pub cache_max_bytes: u64,
     /// Scene loaded at start under the id `default`.
     #[arg(long, env = "LIGHTCAST_DEFAULT_SCENE", default_value = crate::offline::DEFAULT_SCENE)]
     pub default_scene: String,

@@ -85,7 +85,8 @@ impl Service {
             args.cache_dir
                 .clone()
                 .unwrap_or_else(CacheStore::default_dir),
-        );
+        )
+        .with_max_bytes(args.cache_max_bytes);
         let scenes = scenes::SceneRegistry::new(store, limits.max_scenes as usize);
         let spec = args.default_scene.clone();
         let started = Instant::now();

@@ -2214,10 +2214,11 @@ mod tests {
     /// zero-filled index accessor (`corners` indices), `primitives` times. glTF only allows
     /// an accessor without a buffer view when it is sparse, so each has one substitution of 0.
     fn reused_unbacked_accessors(corners: u64, primitives: usize) -> Vec<u8> {
-        let mut bin = Bin::default();
-        bin.bytes = vec![0; 16];
-        bin.views
-            .push(json!({"buffer": 0, "byteOffset": 0, "byteLength": 16}));
+        let mut bin = Bin {
+            bytes: vec![0; 16],
+            views: vec![json!({"buffer": 0, "byteOffset": 0, "byteLength": 16})],
+            ..Bin::default()
+        };
         let sparse = json!({
             "count": 1,
             "indices": {"bufferView": 0, "componentType": 5125},

@@ -195,7 +195,7 @@ impl Scene {
             max = max.max(p);
         }
         let extent = (max - min).max_element();
-        if !(extent <= MAX_SCENE_EXTENT) {
+        if extent.is_nan() || extent > MAX_SCENE_EXTENT {
             return Err(SceneError::TooLarge(extent));
         }
 

@@ -52,7 +52,7 @@ async fn read_request(
     })?;
     let (main, resources) = split_scene_files(files)?;
     let started = Instant::now();
-    let scene = load_upload(&state, main, resources).await?;
+    let scene = load_upload(state, main, resources).await?;
     // Not registered: the scene lives for this request only (its light caches stay in the
     // cache store, so the same file renders faster next time).
     let entry = crate::service::scenes::SceneRegistry::detached(

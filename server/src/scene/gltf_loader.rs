@@ -2291,7 +2291,8 @@ mod tests {
 
     #[test]
     fn caps_decoded_texture_memory_over_all_images() {
-        // Three images that are the same 64×64 PNG (16 KiB each decoded); the cap admits two.
+        // Three images that are the same 64×64 PNG (16 KiB each decoded): a cap of exactly
+        // three admits them, one byte less refuses the third.
         let png = png(64, 64, &[128; 64 * 64 * 4]);
         let mut bin = Bin::default();
         let primitives: Vec<Value> = (0..3)

@@ -19,8 +19,13 @@ use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 use tokio::sync::oneshot;
 
-/// Renderers kept at once (one per scene and light-cache set in use).
-const MAX_RENDERERS: usize = 8;
+/// Renderers kept at once (one per scene and light-cache set in use). As many as the default
+/// `--max-scenes`, so that one viewer per scene does not make them rebuild in turn (each
+/// rebuild uploads its scene again).
+const MAX_RENDERERS: usize = 16;
+/// A renderer unused this long is dropped even under the limit: its scene buffers, targets,
+/// shadow maps and sampling buffers hold GPU memory nobody is watching.
+const RENDERER_IDLE: Duration = Duration::from_secs(60);
 /// Longest sleep when nothing is due, so new work is noticed even without a wake-up.
 const IDLE_WAIT: Duration = Duration::from_millis(50);
 
@@ -85,6 +90,19 @@ fn record_metrics(frame: &Frame) {
 }
 
 type RendererKey = (String, Option<(u32, u32)>);
+
+/// The renderers to drop, given when each was last used: those idle for [`RENDERER_IDLE`],
+/// then the least recently used beyond [`MAX_RENDERERS`].
+fn evictions<K>(mut used: Vec<(K, Instant)>, now: Instant) -> Vec<K> {
+    used.sort_by_key(|(_, at)| std::cmp::Reverse(*at));
+    let mut drop = Vec::new();
+    for (rank, (key, at)) in used.into_iter().enumerate() {
+        if rank >= MAX_RENDERERS || now.duration_since(at) >= RENDERER_IDLE {
+            drop.push(key);
+        }
+    }
+    drop
+}
 
 struct Slot {
     renderer: Renderer,
@@ -203,20 +221,18 @@ impl Loop {
         Some(wait)
     }
 
-    /// Drops renderers of deleted scenes and the least recently used beyond the limit.
+    /// Drops renderers of deleted scenes, idle ones, and the least recently used beyond the
+    /// limit.
     fn prune(&mut self) {
         let scenes = &self.scenes;
         self.renderers.retain(|(id, _), _| scenes.contains(id));
-        while self.renderers.len() > MAX_RENDERERS {
-            let Some(oldest) = self
-                .renderers
-                .iter()
-                .min_by_key(|(_, s)| s.last_used)
-                .map(|(k, _)| k.clone())
-            else {
-                break;
-            };
-            self.renderers.remove(&oldest);
+        let used: Vec<(RendererKey, Instant)> = self
+            .renderers
+            .iter()
+            .map(|(k, s)| (k.clone(), s.last_used))
+            .collect();
+        for key in evictions(used, Instant::now()) {
+            self.renderers.remove(&key);
         }
     }
 
@@ -497,4 +513,30 @@ struct Submitted {
 
 fn cache_key(p: &CacheParams) -> (u32, u32) {
     (p.d_eps.to_bits(), p.theta_eps_degrees.to_bits())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn evicts_idle_renderers_and_the_least_recently_used_beyond_the_limit() {
+        let now = Instant::now() + RENDERER_IDLE * 2;
+        let ago = |ms: u64| now - Duration::from_millis(ms);
+        // Within the limit and recently used: all kept.
+        let recent: Vec<(usize, Instant)> =
+            (0..MAX_RENDERERS).map(|k| (k, ago(k as u64))).collect();
+        assert!(evictions(recent.clone(), now).is_empty());
+        // One idle for longer than RENDERER_IDLE goes even though there is room.
+        let mut with_idle = recent[..3].to_vec();
+        with_idle.push((99, now - RENDERER_IDLE));
+        assert_eq!(evictions(with_idle, now), vec![99]);
+        // Two more than the limit: the two least recently used go.
+        let mut over = recent;
+        over.push((100, ago(5_000)));
+        over.push((101, ago(4_000)));
+        let mut dropped = evictions(over, now);
+        dropped.sort();
+        assert_eq!(dropped, vec![100, 101]);
+    }
 }

@@ -22,7 +22,7 @@ struct CacheLightingParams {
     pad2: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: CacheLightingParams;
+@group(0) @binding(0) var<storage, read> params: CacheLightingParams;
 @group(0) @binding(1) var<storage, read> caches: array<LightCache>;
 @group(0) @binding(2) var<storage, read> vals: array<Val>;
 @group(0) @binding(3) var rsm_position: texture_2d<f32>;

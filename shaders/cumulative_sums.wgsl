@@ -10,7 +10,7 @@ struct ScanParams {
     pad1: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: ScanParams;
+@group(0) @binding(0) var<storage, read> params: ScanParams;
 @group(0) @binding(1) var<storage, read> importance: array<f32>;
 // Inclusive sums down each column, same layout as `importance` (row-major).
 @group(0) @binding(2) var<storage, read_write> column_sums: array<f32>;

@@ -1,8 +1,8 @@
 // Deferred lighting: emission, one punctual light with PCF shadows, and the indirect light
 // computed before, into HDR.
 
-@group(0) @binding(0) var<uniform> camera: CameraUniform;
-@group(0) @binding(1) var<uniform> light: LightUniform;
+@group(0) @binding(0) var<storage, read> camera: CameraUniform;
+@group(0) @binding(1) var<storage, read> light: LightUniform;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
 @group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
 @group(0) @binding(4) var g_diffuse: texture_2d<f32>;

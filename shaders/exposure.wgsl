@@ -10,7 +10,7 @@ struct ExposureParams {
     max_scale: f32,
 }
 
-@group(0) @binding(0) var<uniform> params: ExposureParams;
+@group(0) @binding(0) var<storage, read> params: ExposureParams;
 @group(0) @binding(1) var hdr: texture_2d<f32>;
 @group(0) @binding(2) var<storage, read_write> tiles: array<vec2<f32>>;
 @group(0) @binding(3) var<storage, read_write> result: ExposureResult;

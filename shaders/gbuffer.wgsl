@@ -3,7 +3,7 @@
 // caches. The fragment entry point comes from gbuffer_triangle_ids.wgsl (scene-wide triangle
 // ids, needs the primitive_index extension) or gbuffer_vertex_ids.wgsl (provoking vertex).
 
-@group(0) @binding(0) var<uniform> camera: CameraUniform;
+@group(0) @binding(0) var<storage, read> camera: CameraUniform;
 
 @vertex
 fn vs_main(

@@ -18,7 +18,7 @@ struct ImportanceParams {
     pad2: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: ImportanceParams;
+@group(0) @binding(0) var<storage, read> params: ImportanceParams;
 @group(0) @binding(1) var g_position: texture_2d<f32>;
 @group(0) @binding(2) var g_normal_exponent: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> samples: array<ViewSample>;

@@ -14,8 +14,8 @@ struct IndirectParams {
     pad1: u32,
 }
 
-@group(0) @binding(0) var<uniform> camera: CameraUniform;
-@group(0) @binding(1) var<uniform> params: IndirectParams;
+@group(0) @binding(0) var<storage, read> camera: CameraUniform;
+@group(0) @binding(1) var<storage, read> params: IndirectParams;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
 @group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
 @group(0) @binding(4) var g_diffuse: texture_2d<f32>;

@@ -12,7 +12,7 @@ struct OcclusionParams {
     pad0: u32,
 }
 
-@group(0) @binding(0) var<uniform> params: OcclusionParams;
+@group(0) @binding(0) var<storage, read> params: OcclusionParams;
 @group(0) @binding(1) var<storage, read> caches: array<LightCache>;
 @group(0) @binding(2) var<storage, read_write> lighting: array<CacheLighting>;
 // Covered area of the diffuse (x) and glossy (y) proxy squares so far.

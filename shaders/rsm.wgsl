@@ -16,8 +16,8 @@ struct RsmFace {
     pad2: u32,
 }
 
-@group(0) @binding(0) var<uniform> face: RsmFace;
-@group(0) @binding(1) var<uniform> light: LightUniform;
+@group(0) @binding(0) var<storage, read> face: RsmFace;
+@group(0) @binding(1) var<storage, read> light: LightUniform;
 
 @vertex
 fn vs_main(

@@ -22,7 +22,7 @@ struct SelectParams {
     pad1: f32,
 }
 
-@group(0) @binding(0) var<uniform> params: SelectParams;
+@group(0) @binding(0) var<storage, read> params: SelectParams;
 @group(0) @binding(1) var<storage, read> importance_map: array<f32>;
 @group(0) @binding(2) var<storage, read> column_sums: array<f32>;
 @group(0) @binding(3) var<storage, read> row_sums: array<f32>;

@@ -390,7 +390,7 @@ impl Renderer {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
                 contents,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                usage: crate::passes::PARAMS_USAGE,
             })
         };
         let camera_buffer = uniform(

@@ -221,6 +221,26 @@ mod tests {
     }
 
     #[test]
+    fn no_pass_binds_a_uniform_buffer() {
+        // lavapipe recompiles, and leaks, a shader variant per dispatch for uniform values
+        // that steer control flow; parameters are bound as storage (`passes::PARAMS_BINDING`).
+        for source in ALL {
+            let module = layout_check::parse(source);
+            let uniforms: Vec<_> = module
+                .global_variables
+                .iter()
+                .filter(|(_, v)| v.space == naga::AddressSpace::Uniform)
+                .map(|(_, v)| v.name.clone().unwrap_or_default())
+                .collect();
+            assert!(
+                uniforms.is_empty(),
+                "{}: var<uniform> {uniforms:?}; use var<storage, read>",
+                source.name
+            );
+        }
+    }
+
+    #[test]
     fn every_file_in_shaders_dir_belongs_to_a_pass() {
         let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shaders");
         let on_disk: BTreeSet<String> = std::fs::read_dir(dir)

@@ -70,12 +70,12 @@ pub struct CacheLightingPass {
     accumulate: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: super::UniformSlots,
+    params: super::ParamSlots,
 }
 
 impl CacheLightingPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = super::UniformSlots::new(
+        let params = super::ParamSlots::new(
             device,
             "cache lighting params",
             std::mem::size_of::<CacheLightingParams>() as u64,

@@ -26,7 +26,7 @@ impl CumulativeSumsPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cumulative sums"),
             entries: &[
-                super::uniform_entry(0),
+                super::params_entry(0),
                 super::storage_entry(1, true),
                 super::storage_entry(2, false),
                 super::storage_entry(3, false),
@@ -43,7 +43,7 @@ impl CumulativeSumsPass {
             ),
             rows: super::compute_pipeline(device, "scan rows", &layout, &module, "scan_rows"),
             layout,
-            params: super::uniform_buffer(device, "scan params", std::mem::size_of::<ScanParams>()),
+            params: super::params_buffer(device, "scan params", std::mem::size_of::<ScanParams>()),
         }
     }
 

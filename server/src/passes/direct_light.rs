@@ -27,8 +27,8 @@ impl DirectLightPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("direct light"),
             entries: &[
-                super::uniform_entry(0),
-                super::uniform_entry(1),
+                super::params_entry(0),
+                super::params_entry(1),
                 super::compute_texture_entry(2, false),
                 super::compute_texture_entry(3, false),
                 super::compute_texture_entry(4, false),

@@ -62,7 +62,7 @@ impl ExposurePass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("exposure"),
             entries: &[
-                super::uniform_entry(0),
+                super::params_entry(0),
                 super::compute_texture_entry(1, false),
                 super::storage_entry(2, false),
                 super::storage_entry(3, false),
@@ -72,7 +72,7 @@ impl ExposurePass {
         let reduce =
             super::compute_pipeline(device, "exposure tiles", &layout, &module, "reduce_tiles");
         let finish = super::compute_pipeline(device, "exposure finish", &layout, &module, "finish");
-        let params = super::uniform_buffer(
+        let params = super::params_buffer(
             device,
             "exposure params",
             std::mem::size_of::<ExposureParams>(),

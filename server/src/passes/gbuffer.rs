@@ -78,7 +78,7 @@ impl GBufferPass {
             entries: &[super::buffer_entry(
                 0,
                 wgpu::ShaderStages::VERTEX_FRAGMENT,
-                wgpu::BufferBindingType::Uniform,
+                super::PARAMS_BINDING,
             )],
         });
         let camera_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {

@@ -33,12 +33,12 @@ pub struct ImportancePass {
     gather: wgpu::ComputePipeline,
     estimate: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: super::UniformSlots,
+    params: super::ParamSlots,
 }
 
 impl ImportancePass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = super::UniformSlots::new(
+        let params = super::ParamSlots::new(
             device,
             "importance params",
             std::mem::size_of::<ImportanceParams>() as u64,
@@ -139,12 +139,12 @@ impl ImportancePass {
         bands: &[std::ops::Range<u32>],
     ) {
         let mut pass = super::begin_compute(encoder, "importance");
-        pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(0)]);
+        pass.set_bind_group(0, bind_group, &[super::ParamSlots::offset(0)]);
         pass.set_pipeline(&self.gather);
         pass.dispatch_workgroups(params.sample_count.div_ceil(64), 1, 1);
         pass.set_pipeline(&self.estimate);
         for (b, rows) in bands.iter().enumerate() {
-            pass.set_bind_group(0, bind_group, &[super::UniformSlots::offset(b as u32)]);
+            pass.set_bind_group(0, bind_group, &[super::ParamSlots::offset(b as u32)]);
             pass.dispatch_workgroups(
                 params.rsm_width.div_ceil(super::TILE),
                 rows.len().div_ceil(super::TILE as usize) as u32,

@@ -36,8 +36,8 @@ impl IndirectLightPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("indirect light"),
             entries: &[
-                super::uniform_entry(0),
-                super::uniform_entry(1),
+                super::params_entry(0),
+                super::params_entry(1),
                 super::compute_texture_entry(2, false),
                 super::compute_texture_entry(3, false),
                 super::compute_texture_entry(4, false),
@@ -61,7 +61,7 @@ impl IndirectLightPass {
             ],
         });
         let module = shaders::INDIRECT_LIGHT.create_module(device);
-        let params = super::uniform_buffer(
+        let params = super::params_buffer(
             device,
             "indirect params",
             std::mem::size_of::<IndirectParams>(),

@@ -184,26 +184,39 @@ pub fn view_binding(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEn
     }
 }
 
-/// Distance between uniform slots addressed by dynamic offsets (wgpu's largest alignment).
-pub const UNIFORM_SLOT: u64 = 256;
+/// How per-frame parameters (camera, light, pass parameters) are bound: as read-only storage
+/// buffers, not uniform buffers. lavapipe (Mesa 22.3, the driver of CI and GPU-less machines)
+/// inlines uniform-buffer values that steer branches or loops into the shader and JIT-compiles
+/// a new variant at every dispatch, never freeing the old one: with uniform buffers the server
+/// grew by ~450 KiB per frame without GI and ~1.3 MiB with it (issue 15;
+/// `server/examples/memory_probe.rs` reproduces it). Storage loads are never inlined, and on
+/// real GPUs these small read-only structs are served by the same caches.
+pub const PARAMS_BINDING: wgpu::BufferBindingType =
+    wgpu::BufferBindingType::Storage { read_only: true };
+/// Usage of a parameter buffer bound with [`PARAMS_BINDING`] and written by the queue.
+pub const PARAMS_USAGE: wgpu::BufferUsages =
+    wgpu::BufferUsages::STORAGE.union(wgpu::BufferUsages::COPY_DST);
 
-/// A uniform buffer of equally sized slots, each bound through a dynamic offset: lets one
+/// Distance between parameter slots addressed by dynamic offsets (wgpu's largest alignment).
+pub const PARAM_SLOT: u64 = 256;
+
+/// A parameter buffer of equally sized slots, each bound through a dynamic offset: lets one
 /// command buffer run a pass several times with different parameters (for example one
 /// dispatch per chunk of work, so no single dispatch runs long enough to trip a driver's
 /// watchdog).
-pub struct UniformSlots {
+pub struct ParamSlots {
     pub buffer: wgpu::Buffer,
     slots: u32,
     slot_size: u64,
 }
 
-impl UniformSlots {
+impl ParamSlots {
     pub fn new(device: &wgpu::Device, label: &str, slot_size: u64, slots: u32) -> Self {
         Self {
             buffer: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: UNIFORM_SLOT * u64::from(slots.max(1)),
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                size: PARAM_SLOT * u64::from(slots.max(1)),
+                usage: PARAMS_USAGE,
                 mapped_at_creation: false,
             }),
             slots: slots.max(1),
@@ -221,7 +234,7 @@ impl UniformSlots {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
             ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
+                ty: PARAMS_BINDING,
                 has_dynamic_offset: true,
                 min_binding_size: wgpu::BufferSize::new(self.slot_size),
             },
@@ -244,13 +257,13 @@ impl UniformSlots {
     /// Writes `values` into consecutive slots from slot 0 (at most [`Self::slots`]).
     pub fn write<T: bytemuck::Pod>(&self, queue: &wgpu::Queue, values: &[T]) {
         for (i, v) in values.iter().enumerate().take(self.slots as usize) {
-            queue.write_buffer(&self.buffer, i as u64 * UNIFORM_SLOT, bytemuck::bytes_of(v));
+            queue.write_buffer(&self.buffer, i as u64 * PARAM_SLOT, bytemuck::bytes_of(v));
         }
     }
 
     /// Dynamic offset of slot `i`.
     pub fn offset(i: u32) -> u32 {
-        i * UNIFORM_SLOT as u32
+        i * PARAM_SLOT as u32
     }
 }
 
@@ -276,13 +289,9 @@ pub fn chunk_ranges(total: u32, cost_per_item: u64, granule: u32) -> Vec<std::op
         .collect()
 }
 
-/// Layout entry for a uniform buffer read by a compute shader.
-pub fn uniform_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    buffer_entry(
-        binding,
-        wgpu::ShaderStages::COMPUTE,
-        wgpu::BufferBindingType::Uniform,
-    )
+/// Layout entry for a parameter buffer read by a compute shader.
+pub fn params_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    buffer_entry(binding, wgpu::ShaderStages::COMPUTE, PARAMS_BINDING)
 }
 
 /// Layout entry for a storage buffer used by a compute shader.
@@ -294,12 +303,12 @@ pub fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntr
     )
 }
 
-/// A uniform buffer of `size` bytes written with `queue.write_buffer`.
-pub fn uniform_buffer(device: &wgpu::Device, label: &str, size: usize) -> wgpu::Buffer {
+/// A parameter buffer of `size` bytes written with `queue.write_buffer`.
+pub fn params_buffer(device: &wgpu::Device, label: &str, size: usize) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: size as u64,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        usage: PARAMS_USAGE,
         mapped_at_creation: false,
     })
 }
@@ -316,7 +325,7 @@ pub fn begin_compute<'e>(
 }
 
 /// The chunked-reduction pattern: `accumulate` once per chunk (slot k of the bind group's
-/// [`UniformSlots`] describes chunk k), then `finish` once (slot 0), each over `groups`
+/// [`ParamSlots`] describes chunk k), then `finish` once (slot 0), each over `groups`
 /// workgroups.
 pub fn dispatch_chunked(
     encoder: &mut wgpu::CommandEncoder,
@@ -330,11 +339,11 @@ pub fn dispatch_chunked(
     let mut pass = begin_compute(encoder, label);
     pass.set_pipeline(accumulate);
     for k in 0..chunks {
-        pass.set_bind_group(0, bind_group, &[UniformSlots::offset(k)]);
+        pass.set_bind_group(0, bind_group, &[ParamSlots::offset(k)]);
         pass.dispatch_workgroups(groups, 1, 1);
     }
     pass.set_pipeline(finish);
-    pass.set_bind_group(0, bind_group, &[UniformSlots::offset(0)]);
+    pass.set_bind_group(0, bind_group, &[ParamSlots::offset(0)]);
     pass.dispatch_workgroups(groups, 1, 1);
 }
 

@@ -21,12 +21,12 @@ pub struct ProxyOcclusionPass {
     accumulate: wgpu::ComputePipeline,
     apply: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: super::UniformSlots,
+    params: super::ParamSlots,
 }
 
 impl ProxyOcclusionPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = super::UniformSlots::new(
+        let params = super::ParamSlots::new(
             device,
             "occlusion params",
             std::mem::size_of::<OcclusionParams>() as u64,

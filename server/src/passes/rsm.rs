@@ -112,7 +112,7 @@ impl RsmPass {
                     binding: 0,
                     visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
                     ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
+                        ty: super::PARAMS_BINDING,
                         has_dynamic_offset: true,
                         min_binding_size: wgpu::BufferSize::new(
                             std::mem::size_of::<RsmFace>() as u64
@@ -120,17 +120,13 @@ impl RsmPass {
                     },
                     count: None,
                 },
-                super::buffer_entry(
-                    1,
-                    wgpu::ShaderStages::FRAGMENT,
-                    wgpu::BufferBindingType::Uniform,
-                ),
+                super::buffer_entry(1, wgpu::ShaderStages::FRAGMENT, super::PARAMS_BINDING),
             ],
         });
         let faces = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("rsm faces"),
             size: FACE_STRIDE * MAX_FACES as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: super::PARAMS_USAGE,
             mapped_at_creation: false,
         });
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {

@@ -76,7 +76,7 @@ impl ShadowMapPass {
                 binding: 0,
                 visibility: wgpu::ShaderStages::VERTEX,
                 ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
+                    ty: super::PARAMS_BINDING,
                     has_dynamic_offset: true,
                     min_binding_size: wgpu::BufferSize::new(64),
                 },
@@ -86,7 +86,7 @@ impl ShadowMapPass {
         let face_matrices = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("shadow face matrices"),
             size: FACE_STRIDE * u64::from(MAX_FACES),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            usage: super::PARAMS_USAGE,
             mapped_at_creation: false,
         });
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {

@@ -54,7 +54,7 @@ impl ValSelectPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("val select"),
             entries: &[
-                super::uniform_entry(0),
+                super::params_entry(0),
                 super::storage_entry(1, true),
                 super::storage_entry(2, true),
                 super::storage_entry(3, true),
@@ -74,7 +74,7 @@ impl ValSelectPass {
                 "select_vals",
             ),
             layout,
-            params: super::uniform_buffer(
+            params: super::params_buffer(
                 device,
                 "val select params",
                 std::mem::size_of::<SelectParams>(),

@@ -3,6 +3,7 @@
 //! user would.
 
 mod caches;
+mod frame_memory;
 mod gpu_brsm_sampling;
 mod gpu_cache_lighting;
 mod gpu_direct_light;

@@ -9,7 +9,7 @@ use crate::gi::{
     GiMethod, GiSettings,
 };
 use crate::gpu::{
-    readback::{map_read, PendingMap, TextureReadback},
+    readback::{read_buffer, PendingMap, TextureReadback},
     timing::{timestamp_staging, FrameTimer, PendingTimings, StageTiming, TimingSource},
     GpuContext, GpuError,
 };
@@ -466,20 +466,8 @@ impl Renderer {
         let Some(caches) = self.caches.as_ref().filter(|_| self.sampled) else {
             return Ok(None);
         };
-        let staging = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("cache lighting readback"),
-            size: caches.lighting.size(),
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
-        let mut encoder = self
-            .ctx
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-        encoder.copy_buffer_to_buffer(&caches.lighting, 0, &staging, 0, None);
-        self.ctx.queue.submit([encoder.finish()]);
         let mut lighting: Vec<CacheLighting> =
-            bytemuck::pod_collect_to_vec(&map_read(&self.ctx, &staging)?);
+            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, &caches.lighting)?);
         lighting.truncate(caches.count as usize);
         Ok(Some(lighting))
     }

@@ -2,11 +2,14 @@
 //! (seed paper 004). Per model, [`caches`] are precomputed once and kept by [`cache_store`];
 //! per frame, [`sampling`] runs the BRSM stages (RSM, importance, cumulative sums, VAL
 //! selection) and [`cache_buffers`] holds the caches and their proxy lights on the GPU. The
-//! GPU passes themselves live in `crate::passes`.
+//! GPU passes themselves live in `crate::passes`; [`lightskin_cpu`] is their CPU reference.
+//!
+//! [`reference`] is the path tracer every method is measured against.
 
 pub mod cache_buffers;
 pub mod cache_store;
 pub mod caches;
+pub mod lightskin_cpu;
 pub mod reference;
 pub mod sampling;
 

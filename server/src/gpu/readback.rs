@@ -149,6 +149,23 @@ impl PendingMap {
     }
 }
 
+/// Copies a whole `COPY_SRC` buffer into a new staging buffer and reads it (blocking: for
+/// tests and debugging, not the frame loop).
+pub fn read_buffer(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: buffer.size(),
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, None);
+    ctx.queue.submit([encoder.finish()]);
+    map_read(ctx, &staging)
+}
+
 /// Blocking map of a whole `MAP_READ` buffer (waits for all submitted work); copies the
 /// contents out and unmaps.
 pub fn map_read(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {

@@ -118,6 +118,27 @@ pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
 };
 
 /// Every pass module; tests validate each with naga.
+/// The reference path tracer (`gi::reference`).
+pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
+    name: "reference_path_trace",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("lights.wgsl"),
+        wgsl!("reference/bvh.wgsl"),
+        wgsl!("reference/path_trace.wgsl"),
+    ],
+};
+
+/// Nearest hits of a list of rays, to test the BVH traversal against the CPU.
+pub const REFERENCE_BVH_TEST: ShaderSource = ShaderSource {
+    name: "reference_bvh_test",
+    files: &[
+        wgsl!("reference/bvh.wgsl"),
+        wgsl!("reference/bvh_test.wgsl"),
+    ],
+};
+
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
     &GBUFFER_TRIANGLE_IDS,
@@ -132,6 +153,8 @@ pub const ALL: &[&ShaderSource] = &[
     &CACHE_LIGHTING,
     &INDIRECT_LIGHT,
     &PROXY_OCCLUSION,
+    &REFERENCE_PATH_TRACE,
+    &REFERENCE_BVH_TEST,
 ];
 
 impl ShaderSource {
@@ -242,17 +265,21 @@ mod tests {
 
     #[test]
     fn every_file_in_shaders_dir_belongs_to_a_pass() {
-        let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../shaders");
-        let on_disk: BTreeSet<String> = std::fs::read_dir(dir)
-            .expect("shaders/ exists")
-            .map(|e| {
-                e.expect("dir entry")
-                    .file_name()
-                    .to_string_lossy()
-                    .into_owned()
-            })
-            .filter(|n| n.ends_with(".wgsl"))
-            .collect();
+        let root = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shaders"));
+        // shaders/ and one level of method folders (shaders/<method>/).
+        let mut on_disk = BTreeSet::new();
+        let mut dirs = vec![root.to_path_buf()];
+        while let Some(dir) = dirs.pop() {
+            for entry in std::fs::read_dir(&dir).expect("shaders/ exists") {
+                let path = entry.expect("dir entry").path();
+                if path.is_dir() {
+                    dirs.push(path);
+                } else if path.extension().is_some_and(|e| e == "wgsl") {
+                    let relative = path.strip_prefix(root).expect("under shaders/");
+                    on_disk.insert(relative.to_string_lossy().into_owned());
+                }
+            }
+        }
         let used: BTreeSet<String> = ALL
             .iter()
             .flat_map(|s| s.files.iter().map(|(n, _)| n.to_string()))

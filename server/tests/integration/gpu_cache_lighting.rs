@@ -1,10 +1,10 @@
 //! Cache lighting (eq. 3–7, 13–15) and per-pixel interpolation (eq. 8–9) on the GPU (lavapipe
-//! in CI) against the CPU reference in `gi::reference`, plus the BRSM-equals-LightSkin check.
+//! in CI) against the CPU reference in `gi::lightskin_cpu`, plus the BRSM-equals-LightSkin check.
 
 use crate::support::*;
 use glam::Vec3;
 use lightcast_server::gi::caches::{precompute, CacheParams, CacheSet};
-use lightcast_server::gi::reference::{
+use lightcast_server::gi::lightskin_cpu::{
     light_cache, proxy_visibility, shade, OccluderDisk, ProxyLight, ProxyLights, RefCache,
     RefSurface, RefVal,
 };

@@ -7,6 +7,7 @@ mod frame_memory;
 mod gpu_brsm_sampling;
 mod gpu_cache_lighting;
 mod gpu_direct_light;
+mod gpu_reference;
 mod gpu_scenes;
 mod render_cli;
 mod serve_cli;

@@ -268,9 +268,9 @@ pub fn cpu_importance(rb: &lightcast_server::gi::sampling::SamplingReadback, i: 
 /// The selected VALs as inputs of the CPU reference.
 pub fn ref_vals(
     vals: &[lightcast_server::passes::val_select::Val],
-) -> Vec<lightcast_server::gi::reference::RefVal> {
+) -> Vec<lightcast_server::gi::lightskin_cpu::RefVal> {
     vals.iter()
-        .map(|v| lightcast_server::gi::reference::RefVal {
+        .map(|v| lightcast_server::gi::lightskin_cpu::RefVal {
             position: Vec3::from(v.position),
             normal: Vec3::from(v.normal),
             flux: Vec3::from(v.flux),

@@ -1,0 +1,111 @@
+// The scene's BVH (group 1), built on the CPU by `gi::reference::bvh`, and ray traversal.
+// `SceneBvh::intersect` in server/src/gi/reference/bvh.rs is the CPU port of `trace`.
+
+// Mirrored by `BvhNode` in server/src/gi/reference/bvh.rs. An inner node (`prim_count` 0) has
+// its children at `first_index` and `first_index + 1`; a leaf's triangles are
+// `first_index .. first_index + prim_count` of `bvh_triangles`.
+struct BvhNode {
+    min: vec3<f32>,
+    prim_count: u32,
+    max: vec3<f32>,
+    first_index: u32,
+}
+
+// Deepest stack the traversal keeps (`bvh::MAX_STACK`; deeper trees are refused on the CPU).
+const BVH_STACK: u32 = 48u;
+const NO_HIT: u32 = 0xffffffffu;
+
+@group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
+// Three vec4 per triangle in leaf order: vertices in xyz; the first w holds the bits of the
+// triangle's index in the scene.
+@group(1) @binding(1) var<storage, read> bvh_triangles: array<vec4<f32>>;
+
+struct RayHit {
+    t: f32,
+    // Index into the scene's triangles, NO_HIT when nothing was hit.
+    triangle: u32,
+    // Barycentric coordinates of the hit for the second and third vertex.
+    uv: vec2<f32>,
+}
+
+// Entry distance into the node's box, or a huge value when the ray misses it or enters it
+// beyond `t_max`.
+fn bvh_slab(node: BvhNode, origin: vec3<f32>, inv_dir: vec3<f32>, t_max: f32) -> f32 {
+    let t0 = (node.min - origin) * inv_dir;
+    let t1 = (node.max - origin) * inv_dir;
+    let t_enter = max(max(max(min(t0.x, t1.x), min(t0.y, t1.y)), min(t0.z, t1.z)), 0.0);
+    let t_exit = min(min(min(max(t0.x, t1.x), max(t0.y, t1.y)), max(t0.z, t1.z)), t_max);
+    return select(3.4e38, t_enter, t_enter <= t_exit);
+}
+
+// Möller–Trumbore, two-sided. Writes `best` when the hit is nearer.
+fn bvh_triangle(i: u32, origin: vec3<f32>, dir: vec3<f32>, best: ptr<function, RayHit>) {
+    let a = bvh_triangles[3u * i];
+    let v0 = a.xyz;
+    let e1 = bvh_triangles[3u * i + 1u].xyz - v0;
+    let e2 = bvh_triangles[3u * i + 2u].xyz - v0;
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if abs(det) < 1e-12 {
+        return;
+    }
+    let inv_det = 1.0 / det;
+    let s = origin - v0;
+    let u = dot(s, p) * inv_det;
+    if u < 0.0 || u > 1.0 {
+        return;
+    }
+    let q = cross(s, e1);
+    let v = dot(dir, q) * inv_det;
+    if v < 0.0 || u + v > 1.0 {
+        return;
+    }
+    let t = dot(e2, q) * inv_det;
+    if t > 0.0 && t < (*best).t {
+        *best = RayHit(t, bitcast<u32>(a.w), vec2<f32>(u, v));
+    }
+}
+
+// The nearest hit with t in (0, t_max): nearer child first, the other on a stack.
+fn trace(origin: vec3<f32>, dir: vec3<f32>, t_max: f32) -> RayHit {
+    var best = RayHit(t_max, NO_HIT, vec2<f32>(0.0));
+    if arrayLength(&bvh_nodes) == 0u {
+        return best;
+    }
+    let inv_dir = 1.0 / dir;
+    var stack: array<u32, BVH_STACK>;
+    var depth = 0u;
+    var node = 0u;
+    loop {
+        let n = bvh_nodes[node];
+        var next = false;
+        if n.prim_count > 0u {
+            for (var i = n.first_index; i < n.first_index + n.prim_count; i++) {
+                bvh_triangle(i, origin, dir, &best);
+            }
+        } else {
+            let a = n.first_index;
+            let b = a + 1u;
+            let ta = bvh_slab(bvh_nodes[a], origin, inv_dir, best.t);
+            let tb = bvh_slab(bvh_nodes[b], origin, inv_dir, best.t);
+            let near = select(b, a, ta <= tb);
+            let far = select(a, b, ta <= tb);
+            if min(ta, tb) < 3.4e38 {
+                if max(ta, tb) < 3.4e38 && depth < BVH_STACK {
+                    stack[depth] = far;
+                    depth++;
+                }
+                node = near;
+                next = true;
+            }
+        }
+        if !next {
+            if depth == 0u {
+                break;
+            }
+            depth--;
+            node = stack[depth];
+        }
+    }
+    return best;
+}

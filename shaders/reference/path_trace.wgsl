@@ -1,0 +1,219 @@
+// The reference: progressive path tracing of the indirect light leaving each pixel's surface
+// point towards the camera, with the same BRDF (eq. 3–4), punctual light and emitters as the
+// other methods but exact visibility (BVH rays instead of shadow maps or caches).
+//
+// A path starts at the surface the pixel centre sees (the point the G-buffer rasterises) and
+// reflects `bounces` times. At each vertex y it reached it adds y's emission and, by next-event
+// estimation with a shadow ray, the punctual light y reflects. So `bounces` = 1 is the
+// single-bounce light seed 004 approximates; more add inter-reflections (seed 001).
+
+// Mirrored by `TraceParams` in server/src/gi/reference/mod.rs.
+struct TraceParams {
+    inv_view_proj: mat4x4<f32>,
+    camera_position: vec3<f32>,
+    width: u32,
+    height: u32,
+    // Index of this dispatch's sample among all accumulated so far (decorrelates the streams).
+    sample_index: u32,
+    bounces: u32,
+    seed: u32,
+    // Offset of continuation rays along the geometric normal, in scene units.
+    ray_epsilon: f32,
+    // Phong exponent k for every material; 0 keeps each material's own.
+    glossy_exponent: f32,
+    pad0: u32,
+    pad1: u32,
+}
+
+// Mirrored by `SurfaceGpu` in server/src/gi/reference/mod.rs: a material's BRDF split.
+struct SurfaceGpu {
+    diffuse: vec3<f32>,
+    exponent: f32,
+    glossy: vec3<f32>,
+    pad0: f32,
+    emissive: vec3<f32>,
+    pad1: f32,
+}
+
+@group(0) @binding(0) var<storage, read> params: TraceParams;
+@group(0) @binding(1) var<storage, read> light: LightUniform;
+// Per pixel: the sum of the samples' indirect radiance (rgb) and of their squared luminance (w).
+@group(0) @binding(2) var<storage, read_write> accum: array<vec4<f32>>;
+
+// Nine floats per vertex (`scene::Vertex`): position, normal, uv, material bits.
+@group(1) @binding(2) var<storage, read> vertices: array<f32>;
+@group(1) @binding(3) var<storage, read> indices: array<u32>;
+@group(1) @binding(4) var<storage, read> surfaces: array<SurfaceGpu>;
+
+// PCG hash (Jarzynski & Olano 2020): the random stream of a path is a pure function of the
+// pixel, the sample index and the seed, so the same request gives the same pixels.
+fn pcg(v: u32) -> u32 {
+    let state = v * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+fn rand(state: ptr<function, u32>) -> f32 {
+    *state = pcg(*state);
+    return f32(*state >> 8u) * (1.0 / 16777216.0);
+}
+
+struct SurfaceHit {
+    position: vec3<f32>,
+    // Shading normal on the side the ray came from.
+    normal: vec3<f32>,
+    // Geometric normal on the side the ray came from.
+    geometric: vec3<f32>,
+    brdf: SurfaceBrdf,
+    emissive: vec3<f32>,
+}
+
+fn vertex_position(i: u32) -> vec3<f32> {
+    return vec3<f32>(vertices[9u * i], vertices[9u * i + 1u], vertices[9u * i + 2u]);
+}
+
+fn vertex_normal(i: u32) -> vec3<f32> {
+    return vec3<f32>(vertices[9u * i + 3u], vertices[9u * i + 4u], vertices[9u * i + 5u]);
+}
+
+fn surface_at(hit: RayHit, origin: vec3<f32>, dir: vec3<f32>) -> SurfaceHit {
+    let i0 = indices[3u * hit.triangle];
+    let i1 = indices[3u * hit.triangle + 1u];
+    let i2 = indices[3u * hit.triangle + 2u];
+    let p0 = vertex_position(i0);
+    let g = normalize(cross(vertex_position(i1) - p0, vertex_position(i2) - p0));
+    let w = vec3<f32>(1.0 - hit.uv.x - hit.uv.y, hit.uv.x, hit.uv.y);
+    let interpolated = vertex_normal(i0) * w.x + vertex_normal(i1) * w.y + vertex_normal(i2) * w.z;
+    // Two-sided like the G-buffer: the side facing the ray (by winding) is the front.
+    let front = dot(g, dir) < 0.0;
+    let geometric = select(-g, g, front);
+    var normal = select(-interpolated, interpolated, front);
+    let len = length(normal);
+    normal = select(geometric, normal / len, len > 1e-12);
+    let s = surfaces[bitcast<u32>(vertices[9u * i0 + 8u])];
+    var exponent = s.exponent;
+    if params.glossy_exponent > 0.0 {
+        exponent = params.glossy_exponent;
+    }
+    return SurfaceHit(
+        origin + dir * hit.t,
+        normal,
+        geometric,
+        SurfaceBrdf(s.diffuse, s.glossy, exponent),
+        s.emissive,
+    );
+}
+
+// An orthonormal basis around unit `n` (Duff et al. 2017).
+fn basis(n: vec3<f32>) -> mat3x3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    return mat3x3<f32>(
+        vec3<f32>(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        vec3<f32>(b, sign + n.y * n.y * a, -n.y),
+        n,
+    );
+}
+
+fn luminance(c: vec3<f32>) -> f32 {
+    return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
+}
+
+// Probability of sampling the diffuse lobe: proportional to its albedo's luminance.
+fn diffuse_probability(s: SurfaceBrdf) -> f32 {
+    let d = luminance(s.diffuse);
+    let total = d + luminance(s.glossy);
+    return select(0.0, d / total, total > 0.0);
+}
+
+// Density (per solid angle) of `sample_brdf` choosing `wi`: cosine-weighted diffuse mixed with
+// the Phong lobe cos^k α about the mirror direction, (k+1)/2π cos^k α.
+fn brdf_pdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
+    let p_d = diffuse_probability(s);
+    let cos_mirror = max(dot(reflect(-wo, n), wi), 0.0);
+    let glossy = (s.exponent + 1.0) / (2.0 * PI) * pow(cos_mirror, s.exponent);
+    return p_d * max(dot(n, wi), 0.0) / PI + (1.0 - p_d) * glossy;
+}
+
+fn sample_brdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, state: ptr<function, u32>) -> vec3<f32> {
+    let u0 = rand(state);
+    let u1 = rand(state);
+    let u2 = rand(state);
+    let phi = 2.0 * PI * u1;
+    if u0 < diffuse_probability(s) {
+        let r = sqrt(u2);
+        return basis(n) * vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(1.0 - u2, 0.0)));
+    }
+    let cos_a = pow(u2, 1.0 / (s.exponent + 1.0));
+    let sin_a = sqrt(max(1.0 - cos_a * cos_a, 0.0));
+    return basis(reflect(-wo, n)) * vec3<f32>(sin_a * cos(phi), sin_a * sin(phi), cos_a);
+}
+
+// Whether nothing blocks the segment from `p` (already offset) towards the light.
+fn light_visible(p: vec3<f32>, to_light: vec3<f32>) -> bool {
+    var t_max = 3.4e38;
+    if light.kind != LIGHT_DIRECTIONAL {
+        t_max = distance(light.position, p) * (1.0 - 1e-4);
+    }
+    return trace(p, to_light, t_max).triangle == NO_HIT;
+}
+
+// Indirect radiance leaving `x` towards `wo` along one path.
+fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -> vec3<f32> {
+    var radiance = vec3<f32>(0.0);
+    var throughput = vec3<f32>(1.0);
+    var surface = x;
+    var wo = wo_in;
+    for (var bounce = 0u; bounce < params.bounces; bounce++) {
+        let n = surface.normal;
+        let wi = sample_brdf(surface.brdf, n, wo, state);
+        let cos_i = dot(n, wi);
+        let pdf = brdf_pdf(surface.brdf, n, wo, wi);
+        if cos_i <= 0.0 || dot(surface.geometric, wi) <= 0.0 || pdf <= 0.0 {
+            break;
+        }
+        throughput *= eval_brdf(surface.brdf, n, wi, wo) * cos_i / pdf;
+        let origin = surface.position + surface.geometric * params.ray_epsilon;
+        let hit = trace(origin, wi, 3.4e38);
+        if hit.triangle == NO_HIT {
+            break;
+        }
+        surface = surface_at(hit, origin, wi);
+        wo = -wi;
+        radiance += throughput * surface.emissive;
+        let incident = light_incident(light, surface.position);
+        let cos_y = dot(surface.normal, incident.to_light);
+        let lifted = surface.position + surface.geometric * params.ray_epsilon;
+        if cos_y > 0.0 && dot(surface.geometric, incident.to_light) > 0.0
+            && light_visible(lifted, incident.to_light) {
+            radiance += throughput * eval_brdf(surface.brdf, surface.normal, incident.to_light, wo)
+                * incident.irradiance * cos_y;
+        }
+    }
+    return radiance;
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= params.width || id.y >= params.height {
+        return;
+    }
+    let pixel = id.y * params.width + id.x;
+    // The pixel centre, as rasterisation samples it.
+    let ndc = vec2<f32>(
+        (f32(id.x) + 0.5) / f32(params.width) * 2.0 - 1.0,
+        1.0 - (f32(id.y) + 0.5) / f32(params.height) * 2.0,
+    );
+    let far = params.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
+    let dir = normalize(far.xyz / far.w - params.camera_position);
+    let primary = trace(params.camera_position, dir, 3.4e38);
+    if primary.triangle == NO_HIT {
+        return;
+    }
+    let x = surface_at(primary, params.camera_position, dir);
+    var state = pcg(pixel ^ pcg(params.sample_index ^ pcg(params.seed)));
+    let l = indirect_sample(x, -dir, &state);
+    let y = luminance(l);
+    accum[pixel] += vec4<f32>(l, y * y);
+}

@@ -60,10 +60,12 @@ cat "$out/environment.txt"
 
 if [ "$what" = gi ] || [ "$what" = all ]; then
   if $quick; then
-    sizes=(--width 160 --height 90 --rsm-sizes 32,64 --vals 256,512 --view-samples 64 --frames 2 --warmup 1)
+    sizes=(--width 160 --height 90 --rsm-sizes 32,64 --vals 256,512 --view-samples 64 --frames 2 --warmup 1
+      --reference-spp 16)
     scene='procedural:street?blocks=2'
   else
-    sizes=(--width 1920 --height 1080)
+    # Every configuration is also compared with a 1024-spp path-traced reference (issue 10).
+    sizes=(--width 1920 --height 1080 --reference-spp 1024)
     scene='procedural:street?blocks=40&detail=4'
   fi
   echo "gpu-run: GI benchmark on $scene" >&2

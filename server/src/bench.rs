@@ -4,7 +4,12 @@
 //! count × view samples) is then timed at the same RSM size and its indirect buffer compared
 //! with the baseline's (mean absolute difference, absolute and relative to the baseline's
 //! mean). All configurations run in one process on one GPU, so ratios between them are fair.
+//!
+//! With `--reference-spp` above 0, the reference path tracer (`gi::reference`) first renders
+//! the indirect light at the same camera, light and size, and every configuration's indirect
+//! buffer is also compared with it: the error against the truth, not only against LightSkin.
 
+use crate::gi::reference::luminance;
 use crate::gi::{GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
@@ -53,6 +58,13 @@ pub struct BenchArgs {
     /// material's own).
     #[arg(long)]
     pub glossy_exponent: Option<f32>,
+    /// Samples per pixel of the path-traced reference every configuration is compared with
+    /// (0: no reference).
+    #[arg(long, default_value_t = 256)]
+    pub reference_spp: u32,
+    /// Bounces of the reference's paths (1: the single-bounce light seed 004 approximates).
+    #[arg(long, default_value_t = 1)]
+    pub reference_bounces: u32,
     /// Timed frames per configuration.
     #[arg(long, default_value_t = 30)]
     pub frames: u32,
@@ -103,6 +115,42 @@ pub struct BenchRow {
     pub mad_relative: f64,
     /// LightSkin's frame time divided by this configuration's.
     pub speedup_vs_lightskin: f64,
+    /// Errors of the indirect buffer against the path-traced reference, when one was rendered.
+    pub vs_reference: Option<ErrorStats>,
+    /// RGB8 difference image against the reference (red: too bright, blue: too dark), when
+    /// plots were asked for (written by `bench_plots`, not serialized).
+    #[serde(skip)]
+    pub difference_image: Option<Vec<u8>>,
+}
+
+/// Errors of an indirect buffer against the reference's, per channel over all pixels.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ErrorStats {
+    /// Mean absolute error.
+    pub mae: f64,
+    /// Root-mean-square error.
+    pub rmse: f64,
+    /// `mae` divided by the reference's mean.
+    pub mae_relative: f64,
+    /// MAE of the means of 8×8-pixel blocks over the reference's mean: the reference's noise
+    /// averages out over a block while errors in the light's distribution remain.
+    pub block_mae_relative: f64,
+    /// Signed difference of the image means over the reference's mean (too bright > 0).
+    pub bias_relative: f64,
+}
+
+/// Side of the pixel blocks of [`ErrorStats::block_mae_relative`].
+const BLOCK: usize = 8;
+
+/// The reference the rows were compared with.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ReferenceSummary {
+    pub spp: u32,
+    pub bounces: u32,
+    /// The reference's own convergence estimate (relative standard error).
+    pub relative_standard_error: f32,
+    /// Mean of its indirect buffer, per channel.
+    pub mean: f64,
 }
 
 /// The whole run.
@@ -121,6 +169,10 @@ pub struct BenchReport {
     pub defensive: f32,
     /// The Phong exponent every material used, if overridden.
     pub glossy_exponent: Option<f32>,
+    pub reference: Option<ReferenceSummary>,
+    /// RGB8 picture of the reference's indirect light, when plots were asked for.
+    #[serde(skip)]
+    pub reference_image: Option<Vec<u8>>,
     pub rows: Vec<BenchRow>,
 }
 
@@ -143,6 +195,8 @@ pub enum BenchError {
     EmptyList { what: &'static str },
     #[error("--frames must be at least 1")]
     NoFrames,
+    #[error("reference: {0}")]
+    Reference(#[from] crate::gi::reference::ReferenceError),
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -170,6 +224,110 @@ fn mad(reference: &[[f32; 4]], other: &[[f32; 4]]) -> (f64, f64) {
     }
     let n = (reference.len() * 3).max(1) as f64;
     (diff / n, sum / n)
+}
+
+/// Errors of `other` against `truth`, both `width` pixels wide (RGB channels).
+fn errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> ErrorStats {
+    let (mut abs, mut sq, mut sum, mut other_sum) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let height = truth.len() / width.max(1);
+    let (bw, bh) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
+    let mut blocks = vec![[0.0f64; 3]; bw * bh];
+    for (i, (a, b)) in truth.iter().zip(other).enumerate() {
+        let block = &mut blocks[(i / width / BLOCK) * bw + (i % width) / BLOCK];
+        for k in 0..3 {
+            let d = f64::from(a[k] - b[k]);
+            abs += d.abs();
+            sq += d * d;
+            sum += f64::from(a[k]);
+            other_sum += f64::from(b[k]);
+            block[k] += d;
+        }
+    }
+    let n = (truth.len() * 3).max(1) as f64;
+    let relative = |v: f64| if sum > 0.0 { v / sum } else { 0.0 };
+    // Block sums of differences; their absolute values summed over the image's sum is the
+    // MAE of block means over the mean.
+    let block_abs: f64 = blocks.iter().flatten().map(|d| d.abs()).sum();
+    ErrorStats {
+        mae: abs / n,
+        rmse: (sq / n).sqrt(),
+        mae_relative: relative(abs),
+        block_mae_relative: relative(block_abs),
+        bias_relative: relative(other_sum - sum),
+    }
+}
+
+/// sRGB-ish 8-bit value of a linear one (display gamma 2.2; the pictures are diagnostics).
+fn to_u8(v: f64) -> u8 {
+    (v.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8
+}
+
+/// The reference's indirect light as RGB8, tone mapped by x / (x + mean).
+fn reference_picture(truth: &[[f32; 3]], mean: f64) -> Vec<u8> {
+    let key = mean.max(1e-12);
+    truth
+        .iter()
+        .flat_map(|p| p.map(|c| to_u8(f64::from(c) / (f64::from(c) + key))))
+        .collect()
+}
+
+/// |other − truth| in luminance as RGB8: red where `other` is brighter, blue where darker,
+/// full intensity at twice the reference's mean.
+fn difference_picture(truth: &[[f32; 3]], other: &[[f32; 4]], mean: f64) -> Vec<u8> {
+    let scale = 1.0 / (2.0 * mean.max(1e-12));
+    truth
+        .iter()
+        .zip(other)
+        .flat_map(|(a, b)| {
+            let d = f64::from(luminance([b[0], b[1], b[2]]) - luminance(*a)) * scale;
+            let v = to_u8(d.abs());
+            if d > 0.0 {
+                [v, 0, 0]
+            } else {
+                [0, 0, v]
+            }
+        })
+        .collect()
+}
+
+/// Renders the reference's indirect light for `settings`' camera, light and size.
+fn render_reference(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: &RenderSettings,
+    args: &BenchArgs,
+    progress: &mut dyn FnMut(u64, u64, &str),
+) -> Result<crate::gi::reference::ReferenceImage, BenchError> {
+    use crate::gi::reference::{PathTracer, ReferenceSettings, MAX_SAMPLES_PER_CALL};
+    let mut tracer = PathTracer::new(ctx.clone(), scene)?;
+    let reference = ReferenceSettings {
+        bounces: args.reference_bounces,
+        seed: 0,
+        glossy_exponent: args.glossy_exponent,
+    };
+    // Small calls keep each submission short (lavapipe drops long ones) and show progress.
+    let per_call = 4.min(MAX_SAMPLES_PER_CALL);
+    let mut done = 0;
+    while done < args.reference_spp {
+        let n = per_call.min(args.reference_spp - done);
+        tracer.accumulate(
+            settings.width,
+            settings.height,
+            &settings.camera,
+            &settings.light,
+            &reference,
+            n,
+        )?;
+        done += n;
+        progress(
+            u64::from(done),
+            u64::from(args.reference_spp),
+            "reference path tracing",
+        );
+    }
+    Ok(tracer
+        .read()?
+        .expect("the reference has accumulated samples"))
 }
 
 struct Timed {
@@ -277,6 +435,23 @@ pub fn run(
         scene.triangle_count(),
         caches.caches.len(),
     );
+    let truth = if args.reference_spp > 0 {
+        let image = render_reference(&ctx, &scene, &base, args, progress)?;
+        log(&format!(
+            "reference: {} spp, {} bounce(s), relative standard error {:.2} %",
+            image.samples,
+            args.reference_bounces,
+            image.relative_standard_error * 100.0
+        ));
+        Some(image)
+    } else {
+        None
+    };
+    let truth_mean = truth.as_ref().map_or(0.0, |r| {
+        let zero = vec![[0.0f32; 4]; r.indirect.len()];
+        errors(&r.indirect, &zero, args.width as usize).mae
+    });
+    let pictures = args.plots.is_some();
     let mut renderer = Renderer::new(ctx, scene);
     renderer.set_caches(&caches)?;
     let timing_source = renderer.timing_source();
@@ -348,6 +523,13 @@ pub fn run(
                     0.0
                 },
                 speedup_vs_lightskin: *reference_ms / timed.frame.median_ms,
+                vs_reference: truth
+                    .as_ref()
+                    .map(|r| errors(&r.indirect, &timed.indirect, args.width as usize)),
+                difference_image: truth
+                    .as_ref()
+                    .filter(|_| pictures)
+                    .map(|r| difference_picture(&r.indirect, &timed.indirect, truth_mean)),
                 stages: timed.stages,
                 gi: timed.gi,
                 frame: timed.frame,
@@ -366,6 +548,16 @@ pub fn run(
         warmup: args.warmup,
         defensive: args.defensive,
         glossy_exponent: args.glossy_exponent,
+        reference_image: truth
+            .as_ref()
+            .filter(|_| pictures)
+            .map(|r| reference_picture(&r.indirect, truth_mean)),
+        reference: truth.map(|r| ReferenceSummary {
+            spp: r.samples,
+            bounces: args.reference_bounces,
+            relative_standard_error: r.relative_standard_error,
+            mean: truth_mean,
+        }),
         rows,
     })
 }
@@ -392,12 +584,24 @@ impl BenchReport {
                 &format!(" Every material's Phong exponent set to {k}."),
             );
         }
-        s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD | MAD / mean |\n";
-        s += "|---|---|---|---|---|---|---|---|---|---|\n";
+        if let Some(r) = &self.reference {
+            s.insert_str(
+                s.len() - 2,
+                &format!(
+                    " Reference: path traced, {} spp, {} bounce(s), relative standard error {:.2} %, mean {:.4e}.",
+                    r.spp,
+                    r.bounces,
+                    r.relative_standard_error * 100.0,
+                    r.mean
+                ),
+            );
+        }
+        s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD vs LightSkin | MAD / mean | MAE vs reference | RMSE vs reference | MAE / mean vs reference | 8×8-block MAE / mean vs reference | bias vs reference |\n";
+        s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
         for r in &self.rows {
             let opt = |v: Option<u32>| v.map_or("all".to_string(), |v| v.to_string());
             s += &format!(
-                "| {:?} | {}² | {} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.1} | {:.2}× | {:.3e} | {:.2} % |\n",
+                "| {:?} | {}² | {} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.1} | {:.2}× | {:.3e} | {:.2} % | {} |\n",
                 r.method,
                 r.rsm_size,
                 opt(r.val_count),
@@ -409,7 +613,15 @@ impl BenchReport {
                 r.fps,
                 r.speedup_vs_lightskin,
                 r.mad,
-                r.mad_relative * 100.0
+                r.mad_relative * 100.0,
+                r.vs_reference.map_or("- | - | - | - | -".to_string(), |e| format!(
+                    "{:.3e} | {:.3e} | {:.2} % | {:.2} % | {:+.2} %",
+                    e.mae,
+                    e.rmse,
+                    e.mae_relative * 100.0,
+                    e.block_mae_relative * 100.0,
+                    e.bias_relative * 100.0
+                ))
             );
         }
         s += "\nPer-stage medians (ms):\n\n| method | RSM | VALs | view samples |";
@@ -461,6 +673,26 @@ mod tests {
         let s = stats(vec![5.0, 1.0, 3.0, 2.0, 4.0]);
         assert_eq!(s.median_ms, 3.0);
         assert_eq!(s.p95_ms, 5.0);
+    }
+
+    #[test]
+    fn errors_against_the_reference() {
+        // Two pixels in one block: +1 in red on the first, −1 in blue on the second... and a
+        // third pixel in the next block exactly right.
+        let truth = [[1.0, 2.0, 3.0], [0.0, 0.0, 2.0], [1.0; 3], [1.0; 3]];
+        let other = [
+            [2.0, 2.0, 3.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0],
+            [1.0, 1.0, 1.0, 1.0],
+            [1.0, 1.0, 1.0, 1.0],
+        ];
+        let e = errors(&truth, &other, 2);
+        assert!((e.mae - 2.0 / 12.0).abs() < 1e-12);
+        assert!((e.rmse - (2.0f64 / 12.0).sqrt()).abs() < 1e-12);
+        assert!((e.mae_relative - 2.0 / 14.0).abs() < 1e-12);
+        // All four pixels share one 8×8 block: red +1 and blue −1 do not cancel (per channel).
+        assert!((e.block_mae_relative - 2.0 / 14.0).abs() < 1e-12);
+        assert!(e.bias_relative.abs() < 1e-12);
     }
 
     #[test]

@@ -1,5 +1,6 @@
-//! PNG plots of a [`BenchReport`]: relative error against LightSkin and frames per second, both
-//! over the RSM size, one line per configuration (the paper's Figures 3 and 5).
+//! PNG plots of a [`BenchReport`]: relative error against LightSkin, against the path-traced
+//! reference (when the run had one) and frames per second, over the RSM size, one line per
+//! configuration (the paper's Figures 3 and 5).
 
 use crate::bench::{BenchReport, BenchRow};
 use crate::gi::GiMethod;
@@ -18,6 +19,27 @@ pub enum PlotError {
     NoFont(Vec<&'static str>),
     #[error("drawing {path}: {message}")]
     Draw { path: PathBuf, message: String },
+    #[error("writing {path}: {error}")]
+    Image {
+        path: PathBuf,
+        error: image::ImageError,
+    },
+}
+
+/// Writes an RGB8 picture of the report's frame size.
+fn write_rgb(report: &BenchReport, path: PathBuf, rgb: &[u8]) -> Result<PathBuf, PlotError> {
+    image::save_buffer(
+        &path,
+        rgb,
+        report.width,
+        report.height,
+        image::ExtendedColorType::Rgb8,
+    )
+    .map_err(|error| PlotError::Image {
+        path: path.clone(),
+        error,
+    })?;
+    Ok(path)
 }
 
 /// Registers the plot font once per process.
@@ -126,7 +148,11 @@ fn draw(
     Ok(())
 }
 
-/// Writes `<prefix>-error.png` and `<prefix>-fps.png`; returns their paths.
+/// Writes `<prefix>-error.png`, `<prefix>-fps.png` and, when the report has a reference,
+/// `<prefix>-error-vs-reference.png`, the reference's indirect light
+/// (`<prefix>-reference.png`) and each configuration's difference from it
+/// (`<prefix>-diff-<method>-<rsm>[-<vals>].png`, the paper's Figure 6 right column); returns
+/// their paths.
 pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, PlotError> {
     ensure_font()?;
     let with_suffix = |suffix: &str| {
@@ -152,7 +178,31 @@ pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, 
         "fps (median frame time)",
         &series(report, |r| r.fps),
     )?;
-    Ok(vec![error_path, fps_path])
+    let mut paths = vec![error_path, fps_path];
+    if report.reference.is_some() {
+        let path = with_suffix("-error-vs-reference.png");
+        let block_error = |r: &BenchRow| r.vs_reference.map_or(0.0, |e| e.block_mae_relative);
+        draw(
+            &path,
+            "Indirect light: error against the path-traced reference",
+            "8×8-block MAE / reference mean (%)",
+            &series(report, |r| block_error(r) * 100.0),
+        )?;
+        paths.push(path);
+    }
+    if let Some(rgb) = &report.reference_image {
+        paths.push(write_rgb(report, with_suffix("-reference.png"), rgb)?);
+    }
+    for row in &report.rows {
+        if let Some(rgb) = &row.difference_image {
+            let mut name = format!("-diff-{:?}-{}", row.method, row.rsm_size).to_lowercase();
+            if let (Some(v), Some(s)) = (row.val_count, row.view_samples) {
+                name += &format!("-{v}-{s}");
+            }
+            paths.push(write_rgb(report, with_suffix(&format!("{name}.png")), rgb)?);
+        }
+    }
+    Ok(paths)
 }
 
 #[cfg(test)]
@@ -178,6 +228,14 @@ mod tests {
             mad,
             mad_relative: mad,
             speedup_vs_lightskin: 1.0,
+            vs_reference: Some(crate::bench::ErrorStats {
+                mae: mad,
+                rmse: mad,
+                mae_relative: mad,
+                block_mae_relative: mad,
+                bias_relative: 0.0,
+            }),
+            difference_image: Some(vec![0; 3]),
         }
     }
 
@@ -205,6 +263,13 @@ mod tests {
             warmup: 0,
             defensive: 0.1,
             glossy_exponent: None,
+            reference: Some(crate::bench::ReferenceSummary {
+                spp: 1,
+                bounces: 1,
+                relative_standard_error: 0.1,
+                mean: 1.0,
+            }),
+            reference_image: Some(vec![255; 3]),
             rows,
         };
         // Two configurations of BRSM plus LightSkin: three lines in the fps plot.
@@ -212,9 +277,20 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("lightcast-plots-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
         let paths = write_plots(&report, &dir.join("bench")).expect("plots");
-        assert_eq!(paths.len(), 2);
-        for path in paths {
-            let image = image::open(&path).expect("a PNG");
+        // Three plots, the reference picture and one difference picture per row.
+        assert_eq!(paths.len(), 4 + 9);
+        let (plots, pictures) = paths.split_at(3);
+        for path in pictures {
+            let image = image::open(path).expect("a PNG");
+            assert_eq!(
+                (image.width(), image.height()),
+                (1, 1),
+                "{}",
+                path.display()
+            );
+        }
+        for path in plots {
+            let image = image::open(path).expect("a PNG");
             assert_eq!((image.width(), image.height()), (960, 600));
             // Not a blank canvas: some pixels are not white.
             let rgb = image.to_rgb8();

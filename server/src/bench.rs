@@ -58,6 +58,10 @@ pub struct BenchArgs {
     /// material's own).
     #[arg(long)]
     pub glossy_exponent: Option<f32>,
+    /// Dim proxy lights hidden behind other caches (the paper's double projection), for
+    /// LightSkin and BRSM alike.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub occlusion: bool,
     /// Samples per pixel of the path-traced reference every configuration is compared with
     /// (0: no reference).
     #[arg(long, default_value_t = 256)]
@@ -169,6 +173,8 @@ pub struct BenchReport {
     pub defensive: f32,
     /// The Phong exponent every material used, if overridden.
     pub glossy_exponent: Option<f32>,
+    /// Whether proxy occlusion was on.
+    pub occlusion: bool,
     pub reference: Option<ReferenceSummary>,
     /// RGB8 picture of the reference's indirect light, when plots were asked for.
     #[serde(skip)]
@@ -470,6 +476,7 @@ pub fn run(
         let lightskin = GiSettings {
             method: GiMethod::Lightskin,
             rsm_size,
+            occlusion: args.occlusion,
             glossy_exponent: args.glossy_exponent,
             ..GiSettings::default()
         };
@@ -480,6 +487,7 @@ pub fn run(
                 val_count,
                 view_samples,
                 defensive: args.defensive,
+                occlusion: args.occlusion,
                 glossy_exponent: args.glossy_exponent,
                 ..GiSettings::default()
             },
@@ -548,6 +556,7 @@ pub fn run(
         warmup: args.warmup,
         defensive: args.defensive,
         glossy_exponent: args.glossy_exponent,
+        occlusion: args.occlusion,
         reference_image: truth
             .as_ref()
             .filter(|_| pictures)
@@ -583,6 +592,9 @@ impl BenchReport {
                 s.len() - 2,
                 &format!(" Every material's Phong exponent set to {k}."),
             );
+        }
+        if !self.occlusion {
+            s.insert_str(s.len() - 2, " Proxy occlusion off.");
         }
         if let Some(r) = &self.reference {
             s.insert_str(

@@ -263,6 +263,7 @@ mod tests {
             warmup: 0,
             defensive: 0.1,
             glossy_exponent: None,
+            occlusion: true,
             reference: Some(crate::bench::ReferenceSummary {
                 spp: 1,
                 bounces: 1,

@@ -185,7 +185,9 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
         let incident = light_incident(light, surface.position);
         let cos_y = dot(surface.normal, incident.to_light);
         let lifted = surface.position + surface.geometric * params.ray_epsilon;
+        // The shadow ray last: only where the light could reach (cone, facing, intensity).
         if cos_y > 0.0 && dot(surface.geometric, incident.to_light) > 0.0
+            && any(incident.irradiance > vec3<f32>(0.0))
             && light_visible(lifted, incident.to_light) {
             radiance += throughput * eval_brdf(surface.brdf, surface.normal, incident.to_light, wo)
                 * incident.irradiance * cos_y;

@@ -3,7 +3,7 @@
 //! buffers between them.
 
 use super::GiSettings;
-use crate::gpu::{readback::map_read, GpuContext, GpuError};
+use crate::gpu::{GpuContext, GpuError};
 use crate::passes::{
     cumulative_sums::CumulativeSumsPass,
     frame_uniforms::LightFace,
@@ -252,20 +252,7 @@ impl ValSampling {
     pub fn read_back(&self, ctx: &GpuContext) -> Result<SamplingReadback, GpuError> {
         let res = self.res();
         let rsm = &res.rsm;
-        let read_buffer = |buffer: &wgpu::Buffer| -> Result<Vec<u8>, GpuError> {
-            let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("sampling readback"),
-                size: buffer.size(),
-                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-                mapped_at_creation: false,
-            });
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-            encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, None);
-            ctx.queue.submit([encoder.finish()]);
-            map_read(ctx, &staging)
-        };
+        let read_buffer = |buffer: &wgpu::Buffer| crate::gpu::readback::read_buffer(ctx, buffer);
         // RGBA textures of 32-bit (16 bytes per texel) or 16-bit (8 bytes) floats.
         let read_texture = |texture: &wgpu::Texture, bytes_per_texel: u32| {
             let readback = crate::gpu::readback::TextureReadback::new(

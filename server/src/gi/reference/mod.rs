@@ -193,30 +193,6 @@ fn scene_group(
     })
 }
 
-/// A pipeline of `source`'s `main` with the given groups.
-fn pipeline(
-    device: &wgpu::Device,
-    label: &str,
-    source: &shaders::ShaderSource,
-    layouts: &[&wgpu::BindGroupLayout],
-) -> wgpu::ComputePipeline {
-    let module = source.create_module(device);
-    let layouts: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().copied().map(Some).collect();
-    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &layouts,
-        immediate_size: 0,
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: Some(&layout),
-        module: &module,
-        entry_point: Some("main"),
-        compilation_options: Default::default(),
-        cache: None,
-    })
-}
-
 impl PathTracer {
     /// A tracer for `scene` with its materials' untextured BRDF.
     pub fn new(ctx: GpuContext, scene: &Scene) -> Result<Self, ReferenceError> {
@@ -252,11 +228,12 @@ impl PathTracer {
                 passes::storage_entry(2, false),
             ],
         });
-        let pipeline = pipeline(
+        let pipeline = passes::compute_pipeline_with_groups(
             device,
             "reference path trace",
-            &shaders::REFERENCE_PATH_TRACE,
             &[&pass_layout, &scene_layout],
+            &shaders::REFERENCE_PATH_TRACE.create_module(device),
+            "main",
         );
         let light = passes::params_buffer(
             device,
@@ -316,9 +293,9 @@ impl PathTracer {
                 label: Some("reference accumulation"),
                 size: u64::from(width) * u64::from(height) * 16,
                 usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: true,
+                // wgpu zero-initialises it: the sums start at 0.
+                mapped_at_creation: false,
             });
-            buffer.unmap();
             self.accum = Some((key, buffer, 0));
         }
         let Some((_, accum, done)) = self.accum.as_mut() else {
@@ -366,16 +343,19 @@ impl PathTracer {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("reference"),
         });
-        for i in 0..samples {
+        {
             let mut pass = passes::begin_compute(&mut encoder, "reference path trace");
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &group, &[ParamSlots::offset(i)]);
             pass.set_bind_group(1, &self.scene_group, &[]);
-            pass.dispatch_workgroups(
-                width.div_ceil(passes::TILE),
-                height.div_ceil(passes::TILE),
-                1,
-            );
+            // One dispatch per sample, each reading its own parameter slot.
+            for i in 0..samples {
+                pass.set_bind_group(0, &group, &[ParamSlots::offset(i)]);
+                pass.dispatch_workgroups(
+                    width.div_ceil(passes::TILE),
+                    height.div_ceil(passes::TILE),
+                    1,
+                );
+            }
         }
         self.ctx.queue.submit([encoder.finish()]);
         self.ctx.wait_idle()?;

@@ -260,13 +260,14 @@ pub fn small_session(width: u32, height: u32) -> Value {
     })
 }
 
-/// The shared real-world glTF scene (not written by this project).
+/// The real-world glTF scene of `shared/scenes/`, copied into `tests/data/` (not written by
+/// this project).
 pub fn cornell_glb() -> Vec<u8> {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/scenes/cornell-box/cornell-box.glb"
+        "/data/cornell-box/cornell-box.glb"
     );
-    std::fs::read(path).expect("shared/scenes/cornell-box/cornell-box.glb")
+    std::fs::read(path).expect("tests/data/cornell-box/cornell-box.glb")
 }
 
 /// Splits a `.glb` into a `.gltf` JSON that references `bin_name` and the binary chunk.

@@ -1443,7 +1443,7 @@ mod tests {
 
     const CORNELL_BOX: &str = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/scenes/cornell-box/cornell-box.glb"
+        "/../tests/data/cornell-box/cornell-box.glb"
     );
 
     /// A directory under the system temp dir, removed on drop.

@@ -289,7 +289,7 @@ fn check_interpolation(triangle_ids: bool) {
     // their normals and the weights of eq. 8 matter.
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/scenes/cornell-box/cornell-box.glb"
+        "/../tests/data/cornell-box/cornell-box.glb"
     );
     let scene = load_gltf(std::path::Path::new(path)).expect("cornell-box.glb");
     let mut settings = gi(GiMethod::Brsm, 32, 2048);

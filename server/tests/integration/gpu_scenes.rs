@@ -157,7 +157,7 @@ fn floor_in_the_boxes_shadow_is_darker_than_lit_floor_as_a_cpu_ray_caster_predic
 fn shared_cornell_box_glb_renders_recognisably() {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/scenes/cornell-box/cornell-box.glb"
+        "/../tests/data/cornell-box/cornell-box.glb"
     );
     let scene = load_gltf(std::path::Path::new(path)).expect("cornell-box.glb loads");
     assert_red_left_green_right(&scene, 128, 128);

@@ -5,7 +5,7 @@ use std::process::{Command, Output};
 
 const CORNELL_GLB: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/scenes/cornell-box/cornell-box.glb"
+    "/../tests/data/cornell-box/cornell-box.glb"
 );
 
 fn out_dir() -> PathBuf {

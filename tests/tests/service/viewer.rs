@@ -31,8 +31,7 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
         "playwright-core is not installed in client/web: run deploy/setup-debian.sh \
          (it runs `npm ci` there)"
     );
-    let upload = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/scenes/cornell-box/cornell-box.glb");
+    let upload = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/cornell-box/cornell-box.glb");
     assert!(upload.exists(), "{} is missing", upload.display());
     let artifacts = Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer");
     let server = TestServer::start(&[]).await;

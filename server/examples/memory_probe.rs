@@ -16,7 +16,8 @@
 //! inlines uniform values that steer control flow and recompiles at every dispatch without
 //! freeing the previous variant. That is why every pass binds its parameters as storage
 //! (`passes::PARAMS_BINDING`).
-use lightcast_server::gi::{caches, GiMethod, GiSettings};
+use lightcast_server::gi::lightskin::caches;
+use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::gpu::{BackendChoice, GpuContext};
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::renderer::{RenderSettings, Renderer};

@@ -192,7 +192,7 @@ pub enum BenchError {
         error: crate::scene::OpenError,
     },
     #[error("light caches: {0}")]
-    Caches(crate::gi::caches::CacheError),
+    Caches(crate::gi::lightskin::caches::CacheError),
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
@@ -670,8 +670,8 @@ impl BenchReport {
     }
 }
 
-impl From<crate::gi::caches::CacheError> for BenchError {
-    fn from(error: crate::gi::caches::CacheError) -> Self {
+impl From<crate::gi::lightskin::caches::CacheError> for BenchError {
+    fn from(error: crate::gi::lightskin::caches::CacheError) -> Self {
         Self::Caches(error)
     }
 }

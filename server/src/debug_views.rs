@@ -2,13 +2,12 @@
 //! views): indirect light alone, RSM flux, importance map, selected VALs and the light caches.
 //! They are built on the CPU from buffers read back after a frame.
 
-use crate::gi::GiMethod;
-use crate::gi::{caches::LightCache, sampling::SamplingReadback};
-use crate::gpu::GpuError;
-use crate::passes::{
-    cache_lighting::CacheLighting, exposure::KEY, frame_uniforms::camera_view_proj,
-    tonemap::tonemap_cpu,
+use crate::gi::lightskin::{
+    cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback,
 };
+use crate::gi::GiMethod;
+use crate::gpu::GpuError;
+use crate::passes::{exposure::KEY, frame_uniforms::camera_view_proj, tonemap::tonemap_cpu};
 use crate::renderer::{Frame, Renderer};
 use crate::scene::Aabb;
 use glam::{Vec3, Vec4Swizzles};

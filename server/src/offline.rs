@@ -1,11 +1,11 @@
 //! The offline `render` command: one frame of a scene to an image file, no network.
 
 use crate::debug_views::{self, View};
-use crate::gi::{
+use crate::gi::lightskin::{
     cache_store::CacheStore,
     caches::{CacheParams, CacheSet, Progress},
-    GiMethod, GiSettings,
 };
+use crate::gi::{GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderSettings, Renderer};
@@ -92,7 +92,7 @@ impl CacheArgs {
         &self,
         scene: &Scene,
         log: &mut dyn FnMut(&str),
-    ) -> Result<CacheSet, crate::gi::caches::CacheError> {
+    ) -> Result<CacheSet, crate::gi::lightskin::caches::CacheError> {
         let mut params = CacheParams::for_scene(scene);
         if let Some(d) = self.cache_distance {
             params.d_eps = d;
@@ -248,7 +248,7 @@ pub enum OfflineError {
         error: crate::scene::OpenError,
     },
     #[error("light caches: {0}")]
-    Caches(crate::gi::caches::CacheError),
+    Caches(crate::gi::lightskin::caches::CacheError),
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
@@ -447,8 +447,8 @@ impl RenderReport {
     }
 }
 
-impl From<crate::gi::caches::CacheError> for OfflineError {
-    fn from(error: crate::gi::caches::CacheError) -> Self {
+impl From<crate::gi::lightskin::caches::CacheError> for OfflineError {
+    fn from(error: crate::gi::lightskin::caches::CacheError) -> Self {
         Self::Caches(error)
     }
 }

@@ -2,25 +2,25 @@
 //!
 //! No async runtime is involved; the offline `render` command and tests drive it directly.
 
-use crate::gi::{
+use crate::gi::lightskin::{
     cache_buffers::CacheBuffers,
+    cache_lighting::{CacheLighting, CacheLightingPass, ValSource},
     caches::CacheSet,
+    indirect_light::{CacheInputs, IndirectLightPass, INDIRECT_FORMAT},
+    proxy_occlusion::ProxyOcclusionPass,
     sampling::{SamplingReadback, ValSampling},
-    GiMethod, GiSettings,
 };
+use crate::gi::{GiMethod, GiSettings};
 use crate::gpu::{
     readback::{read_buffer, PendingMap, TextureReadback},
     timing::{timestamp_staging, FrameTimer, PendingTimings, StageTiming, TimingSource},
     GpuContext, GpuError,
 };
 use crate::passes::{
-    cache_lighting::{CacheLighting, CacheLightingPass, ValSource},
     direct_light::{DirectLightInputs, DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
     frame_uniforms::{light_faces, CameraUniform, LightUniform},
     gbuffer::{GBuffer, GBufferPass},
-    indirect_light::{CacheInputs, IndirectLightPass, INDIRECT_FORMAT},
-    proxy_occlusion::ProxyOcclusionPass,
     scene_buffers::{material_layout, SceneBuffers},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},

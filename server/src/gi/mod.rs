@@ -6,12 +6,8 @@
 //!
 //! [`reference`] is the path tracer every method is measured against.
 
-pub mod cache_buffers;
-pub mod cache_store;
-pub mod caches;
-pub mod lightskin_cpu;
+pub mod lightskin;
 pub mod reference;
-pub mod sampling;
 
 pub use lightcast_protocol::GiMethod;
 

@@ -76,26 +76,32 @@ pub const RSM: ShaderSource = ShaderSource {
 
 pub const IMPORTANCE: ShaderSource = ShaderSource {
     name: "importance",
-    files: &[wgsl!("view_samples.wgsl"), wgsl!("importance.wgsl")],
+    files: &[
+        wgsl!("lightskin/view_samples.wgsl"),
+        wgsl!("lightskin/importance.wgsl"),
+    ],
 };
 
 pub const CUMULATIVE_SUMS: ShaderSource = ShaderSource {
     name: "cumulative_sums",
-    files: &[wgsl!("cumulative_sums.wgsl")],
+    files: &[wgsl!("lightskin/cumulative_sums.wgsl")],
 };
 
 pub const VAL_SELECT: ShaderSource = ShaderSource {
     name: "val_select",
-    files: &[wgsl!("vals.wgsl"), wgsl!("val_select.wgsl")],
+    files: &[
+        wgsl!("lightskin/vals.wgsl"),
+        wgsl!("lightskin/val_select.wgsl"),
+    ],
 };
 
 pub const CACHE_LIGHTING: ShaderSource = ShaderSource {
     name: "cache_lighting",
     files: &[
         wgsl!("common.wgsl"),
-        wgsl!("vals.wgsl"),
-        wgsl!("light_caches.wgsl"),
-        wgsl!("cache_lighting.wgsl"),
+        wgsl!("lightskin/vals.wgsl"),
+        wgsl!("lightskin/light_caches.wgsl"),
+        wgsl!("lightskin/cache_lighting.wgsl"),
     ],
 };
 
@@ -103,8 +109,8 @@ pub const INDIRECT_LIGHT: ShaderSource = ShaderSource {
     name: "indirect_light",
     files: &[
         wgsl!("common.wgsl"),
-        wgsl!("light_caches.wgsl"),
-        wgsl!("indirect_light.wgsl"),
+        wgsl!("lightskin/light_caches.wgsl"),
+        wgsl!("lightskin/indirect_light.wgsl"),
     ],
 };
 
@@ -112,8 +118,8 @@ pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
     name: "proxy_occlusion",
     files: &[
         wgsl!("common.wgsl"),
-        wgsl!("light_caches.wgsl"),
-        wgsl!("proxy_occlusion.wgsl"),
+        wgsl!("lightskin/light_caches.wgsl"),
+        wgsl!("lightskin/proxy_occlusion.wgsl"),
     ],
 };
 

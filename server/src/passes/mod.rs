@@ -16,20 +16,14 @@
 //! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry
 //! and materials.
 
-pub mod cache_lighting;
-pub mod cumulative_sums;
 pub mod direct_light;
 pub mod exposure;
 pub mod frame_uniforms;
 pub mod gbuffer;
-pub mod importance;
-pub mod indirect_light;
-pub mod proxy_occlusion;
 pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;
 pub mod tonemap;
-pub mod val_select;
 
 /// Workgroup edge of the 2D compute passes (8×8 threads).
 pub const TILE: u32 = 8;

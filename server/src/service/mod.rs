@@ -17,7 +17,7 @@ pub mod render_loop;
 pub mod scenes;
 pub mod sessions;
 
-use crate::gi::cache_store::CacheStore;
+use crate::gi::lightskin::cache_store::CacheStore;
 use crate::gpu::{GpuContext, GpuError};
 use crate::scene::Scene;
 pub use config::ServeArgs;

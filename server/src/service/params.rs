@@ -4,7 +4,7 @@
 use super::error::ApiError;
 use super::scenes::SceneEntry;
 use crate::debug_views::{self, ViewError};
-use crate::gi::{caches::CacheParams, GiSettings};
+use crate::gi::{lightskin::caches::CacheParams, GiSettings};
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
 use lightcast_protocol::{Encoding, GiMethod, Limits, RenderParams, SessionParams, View};

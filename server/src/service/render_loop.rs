@@ -8,7 +8,7 @@ use super::params::{render_error, Resolved};
 use super::scenes::{CachesNow, SceneEntry, SceneRegistry};
 use super::sessions::{unix_us, FramePlan, Session, SessionRegistry};
 use crate::debug_views::{self, Image};
-use crate::gi::caches::{CacheParams, CacheSet};
+use crate::gi::lightskin::caches::{CacheParams, CacheSet};
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::renderer::{Frame, PendingFrame, Renderer};

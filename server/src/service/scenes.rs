@@ -3,8 +3,8 @@
 
 use super::error::ApiError;
 use super::ids;
-use crate::gi::cache_store::CacheStore;
-use crate::gi::caches::{CacheParams, CacheSet};
+use crate::gi::lightskin::cache_store::CacheStore;
+use crate::gi::lightskin::caches::{CacheParams, CacheSet};
 use crate::scene::default_light::{default_camera, default_light};
 use crate::scene::Scene;
 use lightcast_protocol::{
@@ -93,7 +93,7 @@ impl SceneEntry {
             default_camera: default_camera(&scene),
             default_light: default_light(&scene),
             default_params: CacheParams::for_scene(&scene),
-            surface_area: crate::gi::caches::surface_area(&scene),
+            surface_area: crate::gi::lightskin::caches::surface_area(&scene),
             scene: Arc::new(scene),
             load_ms,
             variants: Mutex::new(Vec::new()),
@@ -138,7 +138,7 @@ impl SceneEntry {
             theta_eps_degrees: angle.unwrap_or(self.default_params.theta_eps_degrees),
         };
         if let Err(e) = params.validate_for_area(self.surface_area) {
-            let field = if matches!(e, crate::gi::caches::CacheError::InvalidAngle(_)) {
+            let field = if matches!(e, crate::gi::lightskin::caches::CacheError::InvalidAngle(_)) {
                 "gi.cache_angle"
             } else {
                 "gi.cache_distance"
@@ -379,7 +379,7 @@ fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
     }
     update(&mut |v| v.state = PrecomputeState::Running);
     let started = Instant::now();
-    let mut progress = |p: crate::gi::caches::Progress| {
+    let mut progress = |p: crate::gi::lightskin::caches::Progress| {
         update(&mut |v| {
             v.step = Some(p.step.to_string());
             v.progress = Some(if p.total == 0 {

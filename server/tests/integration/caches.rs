@@ -1,10 +1,10 @@
-//! Light cache precomputation (`gi::caches`) and its on-disk store (`gi::cache_store`) checked
+//! Light cache precomputation (`gi::lightskin::caches`) and its on-disk store (`gi::lightskin::cache_store`) checked
 //! against independent references: random surface points, brute-force nearest neighbours and
 //! triangle areas summed here.
 
 use glam::Vec3;
-use lightcast_server::gi::cache_store::CacheStore;
-use lightcast_server::gi::caches::{
+use lightcast_server::gi::lightskin::cache_store::CacheStore;
+use lightcast_server::gi::lightskin::caches::{
     precompute, CacheError, CacheParams, CacheSet, Progress, NEIGHBOURS,
 };
 use lightcast_server::scene::{procedural, Material, Scene, Texture, Vertex};

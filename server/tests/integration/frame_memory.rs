@@ -6,7 +6,8 @@
 //! measurement runs in a child process that runs only this test.
 
 use super::support;
-use lightcast_server::gi::{caches, GiMethod, GiSettings};
+use lightcast_server::gi::lightskin::caches;
+use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::renderer::Renderer;
 use lightcast_server::scene::{default_light, procedural};
 

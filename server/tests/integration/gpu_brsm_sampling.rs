@@ -5,8 +5,8 @@
 use crate::support::*;
 use glam::Vec3;
 use lightcast_protocol::{Light, LightKind};
-use lightcast_server::gi::caches::{precompute, CacheParams};
-use lightcast_server::gi::sampling::SamplingReadback;
+use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
+use lightcast_server::gi::lightskin::sampling::SamplingReadback;
 use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::passes::frame_uniforms::light_faces;
 use lightcast_server::renderer::{RenderSettings, Renderer};

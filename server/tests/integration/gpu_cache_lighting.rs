@@ -1,15 +1,15 @@
 //! Cache lighting (eq. 3–7, 13–15) and per-pixel interpolation (eq. 8–9) on the GPU (lavapipe
-//! in CI) against the CPU reference in `gi::lightskin_cpu`, plus the BRSM-equals-LightSkin check.
+//! in CI) against the CPU reference in `gi::lightskin::cpu`, plus the BRSM-equals-LightSkin check.
 
 use crate::support::*;
 use glam::Vec3;
-use lightcast_server::gi::caches::{precompute, CacheParams, CacheSet};
-use lightcast_server::gi::lightskin_cpu::{
+use lightcast_server::gi::lightskin::cache_lighting::CacheLighting;
+use lightcast_server::gi::lightskin::caches::{precompute, CacheParams, CacheSet};
+use lightcast_server::gi::lightskin::cpu::{
     light_cache, proxy_visibility, shade, OccluderDisk, ProxyLight, ProxyLights, RefCache,
     RefSurface, RefVal,
 };
 use lightcast_server::gi::{GiMethod, GiSettings};
-use lightcast_server::passes::cache_lighting::CacheLighting;
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::{load_gltf, procedural, Scene};
@@ -74,7 +74,7 @@ fn run_with(scene: Scene, d_eps: f32, gi: GiSettings, triangle_ids: bool) -> Run
 /// The reference cache; `glossy_exponent` replaces the material's exponent as the frame's
 /// override does.
 fn ref_cache(
-    c: &lightcast_server::gi::caches::LightCache,
+    c: &lightcast_server::gi::lightskin::caches::LightCache,
     glossy_exponent: Option<f32>,
 ) -> RefCache {
     RefCache {

@@ -66,7 +66,7 @@ async fn read_request(
 async fn wait_for_caches(
     state: &AppState,
     entry: &Arc<SceneEntry>,
-    params: crate::gi::caches::CacheParams,
+    params: crate::gi::lightskin::caches::CacheParams,
     deadline: Instant,
 ) -> Result<(), ApiError> {
     loop {

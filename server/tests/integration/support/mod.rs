@@ -241,7 +241,10 @@ pub fn triangle_material(scene: &Scene, tri: usize) -> u32 {
 
 /// CPU port of `estimate_importance` in `shaders/importance.wgsl` (eq. 10–11) for RSM texel
 /// `i` of a read-back sampling run.
-pub fn cpu_importance(rb: &lightcast_server::gi::sampling::SamplingReadback, i: usize) -> f32 {
+pub fn cpu_importance(
+    rb: &lightcast_server::gi::lightskin::sampling::SamplingReadback,
+    i: usize,
+) -> f32 {
     let p = rb.rsm_position[i];
     if p[3] == 0.0 {
         return 0.0;
@@ -267,10 +270,10 @@ pub fn cpu_importance(rb: &lightcast_server::gi::sampling::SamplingReadback, i: 
 
 /// The selected VALs as inputs of the CPU reference.
 pub fn ref_vals(
-    vals: &[lightcast_server::passes::val_select::Val],
-) -> Vec<lightcast_server::gi::lightskin_cpu::RefVal> {
+    vals: &[lightcast_server::gi::lightskin::val_select::Val],
+) -> Vec<lightcast_server::gi::lightskin::cpu::RefVal> {
     vals.iter()
-        .map(|v| lightcast_server::gi::lightskin_cpu::RefVal {
+        .map(|v| lightcast_server::gi::lightskin::cpu::RefVal {
             position: Vec3::from(v.position),
             normal: Vec3::from(v.normal),
             flux: Vec3::from(v.flux),

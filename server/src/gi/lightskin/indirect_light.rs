@@ -1,8 +1,8 @@
 //! Indirect light per pixel (`shaders/indirect_light.wgsl`): interpolation of the proxy
 //! lights of the pixel's 16 light caches (eq. 8–9), into the indirect target.
 
-use super::{gbuffer::GBuffer, Target};
 use crate::gpu::shaders;
+use crate::passes::{gbuffer::GBuffer, Target};
 use bytemuck::{Pod, Zeroable};
 
 pub const INDIRECT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
@@ -22,7 +22,7 @@ pub struct CacheInputs<'a> {
     pub caches: &'a wgpu::Buffer,
     pub lighting: &'a wgpu::Buffer,
     pub vertex_caches: &'a wgpu::Buffer,
-    pub scene: &'a super::scene_buffers::SceneBuffers,
+    pub scene: &'a crate::passes::scene_buffers::SceneBuffers,
 }
 
 pub struct IndirectLightPass {
@@ -36,12 +36,12 @@ impl IndirectLightPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("indirect light"),
             entries: &[
-                super::params_entry(0),
-                super::params_entry(1),
-                super::compute_texture_entry(2, false),
-                super::compute_texture_entry(3, false),
-                super::compute_texture_entry(4, false),
-                super::compute_texture_entry(5, false),
+                crate::passes::params_entry(0),
+                crate::passes::params_entry(1),
+                crate::passes::compute_texture_entry(2, false),
+                crate::passes::compute_texture_entry(3, false),
+                crate::passes::compute_texture_entry(4, false),
+                crate::passes::compute_texture_entry(5, false),
                 wgpu::BindGroupLayoutEntry {
                     binding: 6,
                     visibility: wgpu::ShaderStages::COMPUTE,
@@ -52,22 +52,28 @@ impl IndirectLightPass {
                     },
                     count: None,
                 },
-                super::storage_entry(7, true),
-                super::storage_entry(8, true),
-                super::storage_entry(9, true),
-                super::storage_texture_entry(10, INDIRECT_FORMAT),
-                super::storage_entry(11, true),
-                super::storage_entry(12, true),
+                crate::passes::storage_entry(7, true),
+                crate::passes::storage_entry(8, true),
+                crate::passes::storage_entry(9, true),
+                crate::passes::storage_texture_entry(10, INDIRECT_FORMAT),
+                crate::passes::storage_entry(11, true),
+                crate::passes::storage_entry(12, true),
             ],
         });
         let module = shaders::INDIRECT_LIGHT.create_module(device);
-        let params = super::params_buffer(
+        let params = crate::passes::params_buffer(
             device,
             "indirect params",
             std::mem::size_of::<IndirectParams>(),
         );
         Self {
-            pipeline: super::compute_pipeline(device, "indirect light", &layout, &module, "main"),
+            pipeline: crate::passes::compute_pipeline(
+                device,
+                "indirect light",
+                &layout,
+                &module,
+                "main",
+            ),
             layout,
             params,
         }
@@ -85,19 +91,19 @@ impl IndirectLightPass {
             label: Some("indirect light"),
             layout: &self.layout,
             entries: &[
-                super::buffer_binding(0, camera),
-                super::buffer_binding(1, &self.params),
-                super::view_binding(2, &gbuffer.position.view),
-                super::view_binding(3, &gbuffer.normal_exponent.view),
-                super::view_binding(4, &gbuffer.diffuse.view),
-                super::view_binding(5, &gbuffer.glossy.view),
-                super::view_binding(6, &gbuffer.id.view),
-                super::buffer_binding(7, caches.caches),
-                super::buffer_binding(8, caches.lighting),
-                super::buffer_binding(9, caches.vertex_caches),
-                super::view_binding(10, &indirect.view),
-                super::buffer_binding(11, &caches.scene.indices),
-                super::buffer_binding(12, &caches.scene.vertices),
+                crate::passes::buffer_binding(0, camera),
+                crate::passes::buffer_binding(1, &self.params),
+                crate::passes::view_binding(2, &gbuffer.position.view),
+                crate::passes::view_binding(3, &gbuffer.normal_exponent.view),
+                crate::passes::view_binding(4, &gbuffer.diffuse.view),
+                crate::passes::view_binding(5, &gbuffer.glossy.view),
+                crate::passes::view_binding(6, &gbuffer.id.view),
+                crate::passes::buffer_binding(7, caches.caches),
+                crate::passes::buffer_binding(8, caches.lighting),
+                crate::passes::buffer_binding(9, caches.vertex_caches),
+                crate::passes::view_binding(10, &indirect.view),
+                crate::passes::buffer_binding(11, &caches.scene.indices),
+                crate::passes::buffer_binding(12, &caches.scene.vertices),
             ],
         })
     }
@@ -120,7 +126,7 @@ impl IndirectLightPass {
         width: u32,
         height: u32,
     ) {
-        super::dispatch_2d(
+        crate::passes::dispatch_2d(
             encoder,
             "indirect light",
             &self.pipeline,

@@ -1,8 +1,8 @@
 //! Cache lighting (`shaders/cache_lighting.wgsl`): the diffuse and glossy proxy lights of every
 //! light cache from the VALs (eq. 3–7 for LightSkin, eq. 13–15 for the BRSM subset).
 
-use super::rsm::Rsm;
 use crate::gpu::shaders;
+use crate::passes::rsm::Rsm;
 use bytemuck::{Pod, Zeroable};
 
 /// Mirrors `CacheLighting` in `shaders/light_caches.wgsl`.
@@ -70,40 +70,40 @@ pub struct CacheLightingPass {
     accumulate: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: super::ParamSlots,
+    params: crate::passes::ParamSlots,
 }
 
 impl CacheLightingPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = super::ParamSlots::new(
+        let params = crate::passes::ParamSlots::new(
             device,
             "cache lighting params",
             std::mem::size_of::<CacheLightingParams>() as u64,
-            super::MAX_CHUNKS,
+            crate::passes::MAX_CHUNKS,
         );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cache lighting"),
             entries: &[
                 params.layout_entry(0),
-                super::storage_entry(1, true),
-                super::storage_entry(2, true),
-                super::compute_texture_entry(3, false),
-                super::compute_texture_entry(4, false),
-                super::compute_texture_entry(5, false),
-                super::storage_entry(6, false),
-                super::storage_entry(7, false),
+                crate::passes::storage_entry(1, true),
+                crate::passes::storage_entry(2, true),
+                crate::passes::compute_texture_entry(3, false),
+                crate::passes::compute_texture_entry(4, false),
+                crate::passes::compute_texture_entry(5, false),
+                crate::passes::storage_entry(6, false),
+                crate::passes::storage_entry(7, false),
             ],
         });
         let module = shaders::CACHE_LIGHTING.create_module(device);
         Self {
-            accumulate: super::compute_pipeline(
+            accumulate: crate::passes::compute_pipeline(
                 device,
                 "cache lighting",
                 &layout,
                 &module,
                 "accumulate_vals",
             ),
-            finish: super::compute_pipeline(
+            finish: crate::passes::compute_pipeline(
                 device,
                 "proxy lights",
                 &layout,
@@ -129,13 +129,13 @@ impl CacheLightingPass {
             layout: &self.layout,
             entries: &[
                 self.params.binding(0),
-                super::buffer_binding(1, caches),
-                super::buffer_binding(2, vals),
-                super::view_binding(3, &rsm.position.view),
-                super::view_binding(4, &rsm.normal.view),
-                super::view_binding(5, &rsm.flux_area.view),
-                super::buffer_binding(6, lighting),
-                super::buffer_binding(7, accum),
+                crate::passes::buffer_binding(1, caches),
+                crate::passes::buffer_binding(2, vals),
+                crate::passes::view_binding(3, &rsm.position.view),
+                crate::passes::view_binding(4, &rsm.normal.view),
+                crate::passes::view_binding(5, &rsm.flux_area.view),
+                crate::passes::buffer_binding(6, lighting),
+                crate::passes::buffer_binding(7, accum),
             ],
         })
     }
@@ -154,7 +154,8 @@ impl CacheLightingPass {
             ValSource::Selected { count } => (count, 0),
             ValSource::EveryTexel => (rsm.texels(), 1),
         };
-        let chunks = super::chunk_ranges(val_count, u64::from(cache_count.max(1)), WORKGROUP);
+        let chunks =
+            crate::passes::chunk_ranges(val_count, u64::from(cache_count.max(1)), WORKGROUP);
         let params: Vec<CacheLightingParams> = chunks
             .iter()
             .map(|range| CacheLightingParams {
@@ -182,7 +183,7 @@ impl CacheLightingPass {
         cache_count: u32,
         chunks: u32,
     ) {
-        super::dispatch_chunked(
+        crate::passes::dispatch_chunked(
             encoder,
             "cache lighting",
             (&self.accumulate, &self.finish),
@@ -196,7 +197,7 @@ impl CacheLightingPass {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gi::caches::LightCache;
+    use crate::gi::lightskin::caches::LightCache;
     use crate::gpu::shaders::{layout_check::assert_struct, CACHE_LIGHTING};
     use std::mem::{offset_of, size_of};
 

@@ -21,36 +21,36 @@ pub struct ProxyOcclusionPass {
     accumulate: wgpu::ComputePipeline,
     apply: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: super::ParamSlots,
+    params: crate::passes::ParamSlots,
 }
 
 impl ProxyOcclusionPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = super::ParamSlots::new(
+        let params = crate::passes::ParamSlots::new(
             device,
             "occlusion params",
             std::mem::size_of::<OcclusionParams>() as u64,
-            super::MAX_CHUNKS,
+            crate::passes::MAX_CHUNKS,
         );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("proxy occlusion"),
             entries: &[
                 params.layout_entry(0),
-                super::storage_entry(1, true),
-                super::storage_entry(2, false),
-                super::storage_entry(3, false),
+                crate::passes::storage_entry(1, true),
+                crate::passes::storage_entry(2, false),
+                crate::passes::storage_entry(3, false),
             ],
         });
         let module = shaders::PROXY_OCCLUSION.create_module(device);
         Self {
-            accumulate: super::compute_pipeline(
+            accumulate: crate::passes::compute_pipeline(
                 device,
                 "occlusion coverage",
                 &layout,
                 &module,
                 "accumulate_coverage",
             ),
-            apply: super::compute_pipeline(
+            apply: crate::passes::compute_pipeline(
                 device,
                 "proxy occlusion",
                 &layout,
@@ -74,16 +74,17 @@ impl ProxyOcclusionPass {
             layout: &self.layout,
             entries: &[
                 self.params.binding(0),
-                super::buffer_binding(1, caches),
-                super::buffer_binding(2, lighting),
-                super::buffer_binding(3, coverage),
+                crate::passes::buffer_binding(1, caches),
+                crate::passes::buffer_binding(2, lighting),
+                crate::passes::buffer_binding(3, coverage),
             ],
         })
     }
 
     /// Writes one parameter slot per chunk of occluders; returns the number of chunks.
     pub fn prepare(&self, queue: &wgpu::Queue, cache_count: u32) -> u32 {
-        let chunks = super::chunk_ranges(cache_count, u64::from(cache_count.max(1)), WORKGROUP);
+        let chunks =
+            crate::passes::chunk_ranges(cache_count, u64::from(cache_count.max(1)), WORKGROUP);
         let params: Vec<OcclusionParams> = chunks
             .iter()
             .map(|range| OcclusionParams {
@@ -105,7 +106,7 @@ impl ProxyOcclusionPass {
         cache_count: u32,
         chunks: u32,
     ) {
-        super::dispatch_chunked(
+        crate::passes::dispatch_chunked(
             encoder,
             "proxy occlusion",
             (&self.accumulate, &self.apply),

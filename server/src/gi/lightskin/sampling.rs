@@ -2,16 +2,18 @@
 //! sums → selection of N_sVAL VALs with their weights (eq. 13–15). Owns the passes and the
 //! buffers between them.
 
-use super::GiSettings;
+use super::{
+    cumulative_sums::CumulativeSumsPass,
+    importance::{ImportanceParams, ImportancePass, ViewSample},
+    val_select::{SelectionBuffers, Val, ValSelectPass},
+};
+use crate::gi::GiSettings;
 use crate::gpu::{GpuContext, GpuError};
 use crate::passes::{
-    cumulative_sums::CumulativeSumsPass,
     frame_uniforms::LightFace,
     gbuffer::GBuffer,
-    importance::{ImportanceParams, ImportancePass, ViewSample},
     rsm::{Rsm, RsmFace, RsmPass},
     scene_buffers::SceneBuffers,
-    val_select::{SelectionBuffers, Val, ValSelectPass},
 };
 
 /// What one set of sampling buffers is for. The G-buffer itself, not just its size, is part of

@@ -26,24 +26,34 @@ impl CumulativeSumsPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cumulative sums"),
             entries: &[
-                super::params_entry(0),
-                super::storage_entry(1, true),
-                super::storage_entry(2, false),
-                super::storage_entry(3, false),
+                crate::passes::params_entry(0),
+                crate::passes::storage_entry(1, true),
+                crate::passes::storage_entry(2, false),
+                crate::passes::storage_entry(3, false),
             ],
         });
         let module = shaders::CUMULATIVE_SUMS.create_module(device);
         Self {
-            columns: super::compute_pipeline(
+            columns: crate::passes::compute_pipeline(
                 device,
                 "scan columns",
                 &layout,
                 &module,
                 "scan_columns",
             ),
-            rows: super::compute_pipeline(device, "scan rows", &layout, &module, "scan_rows"),
+            rows: crate::passes::compute_pipeline(
+                device,
+                "scan rows",
+                &layout,
+                &module,
+                "scan_rows",
+            ),
             layout,
-            params: super::params_buffer(device, "scan params", std::mem::size_of::<ScanParams>()),
+            params: crate::passes::params_buffer(
+                device,
+                "scan params",
+                std::mem::size_of::<ScanParams>(),
+            ),
         }
     }
 
@@ -58,10 +68,10 @@ impl CumulativeSumsPass {
             label: Some("cumulative sums"),
             layout: &self.layout,
             entries: &[
-                super::buffer_binding(0, &self.params),
-                super::buffer_binding(1, importance),
-                super::buffer_binding(2, column_sums),
-                super::buffer_binding(3, row_sums),
+                crate::passes::buffer_binding(0, &self.params),
+                crate::passes::buffer_binding(1, importance),
+                crate::passes::buffer_binding(2, column_sums),
+                crate::passes::buffer_binding(3, row_sums),
             ],
         })
     }
@@ -82,7 +92,7 @@ impl CumulativeSumsPass {
         bind_group: &wgpu::BindGroup,
         width: u32,
     ) {
-        let mut pass = super::begin_compute(encoder, "cumulative sums");
+        let mut pass = crate::passes::begin_compute(encoder, "cumulative sums");
         pass.set_bind_group(0, bind_group, &[]);
         pass.set_pipeline(&self.columns);
         pass.dispatch_workgroups(width, 1, 1);

@@ -1,8 +1,8 @@
 //! VAL importance (`shaders/importance.wgsl`, eq. 10–11): view samples gathered from the
 //! G-buffer at Halton positions, then one importance value per RSM texel.
 
-use super::{gbuffer::GBuffer, rsm::Rsm};
 use crate::gpu::shaders;
+use crate::passes::{gbuffer::GBuffer, rsm::Rsm};
 use bytemuck::{Pod, Zeroable};
 
 /// Mirrors `ViewSample` in `shaders/view_samples.wgsl`.
@@ -33,40 +33,40 @@ pub struct ImportancePass {
     gather: wgpu::ComputePipeline,
     estimate: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    params: super::ParamSlots,
+    params: crate::passes::ParamSlots,
 }
 
 impl ImportancePass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = super::ParamSlots::new(
+        let params = crate::passes::ParamSlots::new(
             device,
             "importance params",
             std::mem::size_of::<ImportanceParams>() as u64,
-            super::MAX_CHUNKS,
+            crate::passes::MAX_CHUNKS,
         );
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("importance"),
             entries: &[
                 params.layout_entry(0),
-                super::compute_texture_entry(1, false),
-                super::compute_texture_entry(2, false),
-                super::storage_entry(3, false),
-                super::compute_texture_entry(4, false),
-                super::compute_texture_entry(5, false),
-                super::compute_texture_entry(6, false),
-                super::storage_entry(7, false),
+                crate::passes::compute_texture_entry(1, false),
+                crate::passes::compute_texture_entry(2, false),
+                crate::passes::storage_entry(3, false),
+                crate::passes::compute_texture_entry(4, false),
+                crate::passes::compute_texture_entry(5, false),
+                crate::passes::compute_texture_entry(6, false),
+                crate::passes::storage_entry(7, false),
             ],
         });
         let module = shaders::IMPORTANCE.create_module(device);
         Self {
-            gather: super::compute_pipeline(
+            gather: crate::passes::compute_pipeline(
                 device,
                 "view samples",
                 &layout,
                 &module,
                 "gather_view_samples",
             ),
-            estimate: super::compute_pipeline(
+            estimate: crate::passes::compute_pipeline(
                 device,
                 "importance",
                 &layout,
@@ -91,15 +91,15 @@ impl ImportancePass {
             layout: &self.layout,
             entries: &[
                 self.params.binding(0),
-                super::view_binding(1, &gbuffer.position.view),
-                super::view_binding(2, &gbuffer.normal_exponent.view),
+                crate::passes::view_binding(1, &gbuffer.position.view),
+                crate::passes::view_binding(2, &gbuffer.normal_exponent.view),
                 wgpu::BindGroupEntry {
                     binding: 3,
                     resource: samples.as_entire_binding(),
                 },
-                super::view_binding(4, &rsm.position.view),
-                super::view_binding(5, &rsm.normal.view),
-                super::view_binding(6, &rsm.flux_area.view),
+                crate::passes::view_binding(4, &rsm.position.view),
+                crate::passes::view_binding(5, &rsm.normal.view),
+                crate::passes::view_binding(6, &rsm.flux_area.view),
                 wgpu::BindGroupEntry {
                     binding: 7,
                     resource: importance.as_entire_binding(),
@@ -114,10 +114,10 @@ impl ImportancePass {
         queue: &wgpu::Queue,
         params: &ImportanceParams,
     ) -> Vec<std::ops::Range<u32>> {
-        let bands = super::chunk_ranges(
+        let bands = crate::passes::chunk_ranges(
             params.rsm_height,
             u64::from(params.rsm_width) * u64::from(params.sample_count.max(1)),
-            super::TILE,
+            crate::passes::TILE,
         );
         let slots: Vec<ImportanceParams> = bands
             .iter()
@@ -138,16 +138,20 @@ impl ImportancePass {
         params: &ImportanceParams,
         bands: &[std::ops::Range<u32>],
     ) {
-        let mut pass = super::begin_compute(encoder, "importance");
-        pass.set_bind_group(0, bind_group, &[super::ParamSlots::offset(0)]);
+        let mut pass = crate::passes::begin_compute(encoder, "importance");
+        pass.set_bind_group(0, bind_group, &[crate::passes::ParamSlots::offset(0)]);
         pass.set_pipeline(&self.gather);
         pass.dispatch_workgroups(params.sample_count.div_ceil(64), 1, 1);
         pass.set_pipeline(&self.estimate);
         for (b, rows) in bands.iter().enumerate() {
-            pass.set_bind_group(0, bind_group, &[super::ParamSlots::offset(b as u32)]);
+            pass.set_bind_group(
+                0,
+                bind_group,
+                &[crate::passes::ParamSlots::offset(b as u32)],
+            );
             pass.dispatch_workgroups(
-                params.rsm_width.div_ceil(super::TILE),
-                rows.len().div_ceil(super::TILE as usize) as u32,
+                params.rsm_width.div_ceil(crate::passes::TILE),
+                rows.len().div_ceil(crate::passes::TILE as usize) as u32,
                 1,
             );
         }

@@ -1,8 +1,8 @@
 //! VAL selection (`shaders/val_select.wgsl`): N_sVAL stratified draws from the importance
 //! distribution by binary search on the cumulative sums, each with its Monte Carlo weight.
 
-use super::rsm::Rsm;
 use crate::gpu::shaders;
+use crate::passes::rsm::Rsm;
 use bytemuck::{Pod, Zeroable};
 
 /// Mirrors `SelectParams` in `shaders/val_select.wgsl`.
@@ -54,19 +54,19 @@ impl ValSelectPass {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("val select"),
             entries: &[
-                super::params_entry(0),
-                super::storage_entry(1, true),
-                super::storage_entry(2, true),
-                super::storage_entry(3, true),
-                super::compute_texture_entry(4, false),
-                super::compute_texture_entry(5, false),
-                super::compute_texture_entry(6, false),
-                super::storage_entry(7, false),
+                crate::passes::params_entry(0),
+                crate::passes::storage_entry(1, true),
+                crate::passes::storage_entry(2, true),
+                crate::passes::storage_entry(3, true),
+                crate::passes::compute_texture_entry(4, false),
+                crate::passes::compute_texture_entry(5, false),
+                crate::passes::compute_texture_entry(6, false),
+                crate::passes::storage_entry(7, false),
             ],
         });
         let module = shaders::VAL_SELECT.create_module(device);
         Self {
-            pipeline: super::compute_pipeline(
+            pipeline: crate::passes::compute_pipeline(
                 device,
                 "val select",
                 &layout,
@@ -74,7 +74,7 @@ impl ValSelectPass {
                 "select_vals",
             ),
             layout,
-            params: super::params_buffer(
+            params: crate::passes::params_buffer(
                 device,
                 "val select params",
                 std::mem::size_of::<SelectParams>(),
@@ -92,14 +92,14 @@ impl ValSelectPass {
             label: Some("val select"),
             layout: &self.layout,
             entries: &[
-                super::buffer_binding(0, &self.params),
-                super::buffer_binding(1, buffers.importance),
-                super::buffer_binding(2, buffers.column_sums),
-                super::buffer_binding(3, buffers.row_sums),
-                super::view_binding(4, &rsm.position.view),
-                super::view_binding(5, &rsm.normal.view),
-                super::view_binding(6, &rsm.flux_area.view),
-                super::buffer_binding(7, buffers.vals),
+                crate::passes::buffer_binding(0, &self.params),
+                crate::passes::buffer_binding(1, buffers.importance),
+                crate::passes::buffer_binding(2, buffers.column_sums),
+                crate::passes::buffer_binding(3, buffers.row_sums),
+                crate::passes::view_binding(4, &rsm.position.view),
+                crate::passes::view_binding(5, &rsm.normal.view),
+                crate::passes::view_binding(6, &rsm.flux_area.view),
+                crate::passes::buffer_binding(7, buffers.vals),
             ],
         })
     }
@@ -133,7 +133,7 @@ impl ValSelectPass {
         count: u32,
     ) {
         let (x, y) = Self::grid(count);
-        let mut pass = super::begin_compute(encoder, "val select");
+        let mut pass = crate::passes::begin_compute(encoder, "val select");
         pass.set_bind_group(0, bind_group, &[]);
         pass.set_pipeline(&self.pipeline);
         pass.dispatch_workgroups(x, y, 1);

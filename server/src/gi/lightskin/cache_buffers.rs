@@ -2,7 +2,7 @@
 //! lights written every frame by cache lighting.
 
 use super::caches::{CacheSet, LightCache, NEIGHBOURS};
-use crate::passes::cache_lighting::{CacheAccum, CacheLighting};
+use crate::gi::lightskin::cache_lighting::{CacheAccum, CacheLighting};
 use wgpu::util::DeviceExt;
 
 pub struct CacheBuffers {

@@ -31,15 +31,17 @@ struct CacheLightingParams {
 @group(0) @binding(6) var<storage, read_write> lighting: array<CacheLighting>;
 @group(0) @binding(7) var<storage, read_write> accum: array<Accum>;
 
-// ε_p of eq. 6, per unit of VAL disk area: a constant ε_p summed over a million tiny VALs of a
-// high-resolution RSM would outweigh their form factors (area × G) and drag every proxy to the
-// mean of the whole RSM; scaled by the area it stays negligible at any resolution.
+// ε_p of eq. 6 as a fraction of F_max = A_l / (A_l + π d²), the largest form factor the VAL's
+// disk could have at its distance (facing the cache): eq. 6's weight becomes ε_p·F_max + F.
+// Dimensionless, and it shrinks with the VAL as F does: a constant ε_p summed over a million
+// tiny VALs of a high-resolution RSM would outweigh their form factors and drag every proxy to
+// the mean of the whole RSM, and ε_p·A_l (length²) outweighed them in kilometre-sized scenes.
+// Mirrored by `EPS_P` in server/src/gi/lightskin/cpu.rs, which says more.
 const EPS_P: f32 = 1e-6;
 // Floors of eq. 7's denominator: a proxy at grazing incidence (or outside the glossy lobe)
 // would otherwise get an unbounded flux.
 const MIN_COS_DIFFUSE: f32 = 1e-3;
 const MIN_COS_GLOSSY: f32 = 1e-2;
-const MIN_DIST2: f32 = 1e-4;
 const TILE_VALS: u32 = 64u;
 
 var<workgroup> tile: array<Val, 64>;
@@ -87,13 +89,13 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
     if val.weight <= 0.0 || len2 <= 0.0 {
         return;
     }
-    let d2 = max(len2, MIN_DIST2);
     let w_dir = delta * inverseSqrt(len2);
     let cos_l = max(dot(val.normal, -w_dir), 0.0);
     let cos_x = max(dot(c.normal, w_dir), 0.0);
-    // Geometric factor of eq. 3/4 with the VAL's disk area; A·G is the disk-to-point form
-    // factor of eq. 6.
-    let g = cos_l * cos_x / (val.area + PI * d2);
+    // Geometric factor of eq. 3/4 with the VAL's disk area (which keeps it finite at any
+    // distance); A·G is the disk-to-point form factor of eq. 6, at most F_max.
+    let g = cos_l * cos_x / (val.area + PI * len2);
+    let f_max = val.area / (val.area + PI * len2);
     // A VAL that cannot light the cache takes no part, not even through ε_p: summed over the
     // many VALs behind a cache, ε_p alone would drag the proxy far off, and eq. 9 then
     // interpolates that far proxy's large flux onto nearby points.
@@ -104,8 +106,8 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
     let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), cache_exponent(c));
     (*acc).e_d += val.weight * val.flux * g;
     (*acc).e_g += val.weight * val.flux * g * lobe;
-    let a_d = val.weight * (EPS_P * val.area + form_factor);
-    let a_g = val.weight * (EPS_P * val.area + lobe * form_factor);
+    let a_d = val.weight * (EPS_P * f_max + form_factor);
+    let a_g = val.weight * (EPS_P * f_max + lobe * form_factor);
     (*acc).s_d += a_d;
     (*acc).s_g += a_g;
     // Moments about the cache rather than the origin: E[x²] − E[x]² in f32 loses the spread
@@ -187,15 +189,16 @@ fn finish_proxies(@builtin(global_invocation_id) id: vec3<u32>) {
     // Eq. 7 with eq. 3/4 (or 14/15) plugged in as L_o: the cache's ρ_d/π (ρ_g·(k+2)/2π) appears
     // in L_o and in f_r and cancels, so the proxies carry incident light only and any
     // surface near the cache can apply its own BRDF to them.
+    let min_dist2 = MIN_DIST2_PER_AREA * c.area;
     let pd = proxy(c, acc.s_d, acc.p_d, acc.q_d);
     let to_d = pd.position - c.position;
-    let dist2_d = max(dot(to_d, to_d), MIN_DIST2);
+    let dist2_d = max(dot(to_d, to_d), min_dist2);
     let cos_d = dot(c.normal, direction(to_d));
     let flux_d = 4.0 * PI * dist2_d * acc.e_d / max(cos_d, MIN_COS_DIFFUSE);
 
     let pg = proxy(c, acc.s_g, acc.p_g, acc.q_g);
     let to_g = pg.position - c.position;
-    let dist2_g = max(dot(to_g, to_g), MIN_DIST2);
+    let dist2_g = max(dot(to_g, to_g), min_dist2);
     let w_g = direction(to_g);
     let lobe_g = pow(max(dot(mirror(c.normal, w_g), v), 0.0), cache_exponent(c));
     let flux_g = 4.0 * PI * dist2_g * acc.e_g / max(dot(c.normal, w_g) * lobe_g, MIN_COS_GLOSSY);

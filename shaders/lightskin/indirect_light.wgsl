@@ -32,7 +32,6 @@ struct IndirectParams {
 
 const NEIGHBOURS: u32 = 16u;
 const NO_CACHE: u32 = 0xffffffffu;
-const MIN_DIST2: f32 = 1e-4;
 const VERTEX_FLOATS: u32 = 9u;
 
 struct Surface {
@@ -65,6 +64,9 @@ fn shade_from_vertex(s: Surface, vertex: u32) -> vec3<f32> {
     var pos_g = vec3<f32>(0.0);
     var flux_d = vec3<f32>(0.0);
     var flux_g = vec3<f32>(0.0);
+    // Σ w'·A_c: the interpolated cache area sets the distance floor, as A_c did in eq. 7.
+    var area_d = 0.0;
+    var area_g = 0.0;
     for (var j = 0u; j < NEIGHBOURS; j++) {
         let ci = vertex_caches[first + j];
         if ci == NO_CACHE {
@@ -95,21 +97,29 @@ fn shade_from_vertex(s: Surface, vertex: u32) -> vec3<f32> {
         sum_g += w_g;
         flux_d += w_d * l.diffuse_flux;
         flux_g += w_g * l.glossy_flux;
+        area_d += w_d * c.area;
+        area_g += w_g * c.area;
     }
     var radiance = vec3<f32>(0.0);
+    // A proxy on the surface point itself (possible only for caches without area) lights it
+    // from no direction: no light rather than 0/0.
     if lit_d > 0.0 {
         // Eq. 9, then the interpolated proxy as a point light of intensity Φ/4π.
         let to_light = pos_d / lit_d - s.x;
-        let d2 = max(dot(to_light, to_light), MIN_DIST2);
+        let d2 = max(dot(to_light, to_light), MIN_DIST2_PER_AREA * area_d / sum_d);
         let w = direction(to_light);
-        radiance += s.diffuse / PI * (flux_d / sum_d) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
+        if d2 > 0.0 {
+            radiance += s.diffuse / PI * (flux_d / sum_d) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
+        }
     }
     if lit_g > 0.0 {
         let to_light = pos_g / lit_g - s.x;
-        let d2 = max(dot(to_light, to_light), MIN_DIST2);
+        let d2 = max(dot(to_light, to_light), MIN_DIST2_PER_AREA * area_g / sum_g);
         let w = direction(to_light);
         let lobe = (s.k + 2.0) / (2.0 * PI) * pow(max(dot(mirror(s.n, w), s.v), 0.0), s.k);
-        radiance += s.glossy * lobe * (flux_g / sum_g) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
+        if d2 > 0.0 {
+            radiance += s.glossy * lobe * (flux_g / sum_g) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
+        }
     }
     return radiance;
 }

@@ -26,6 +26,13 @@ struct CacheLighting {
     pad1: f32,
 }
 
+// Floor of the squared proxy–cache distance (eq. 7) and proxy–surface distance (eq. 9's point
+// light) per unit of cache area A_c: (r_c/2)² for the cache's cell as a disk of radius
+// √(A_c/π). Relative to the cache distribution's own resolution, so it holds at any scene
+// scale (a floor in scene units flattened a centimetre-sized model's indirect light). Mirrored
+// by `MIN_DIST2_PER_AREA` in server/src/gi/lightskin/cpu.rs.
+const MIN_DIST2_PER_AREA: f32 = 1.0 / (4.0 * PI);
+
 // 2(n·w)n − w: `w` mirrored about `n` (both unit, `w` pointing away from the surface).
 fn mirror(n: vec3<f32>, w: vec3<f32>) -> vec3<f32> {
     return 2.0 * dot(n, w) * n - w;

@@ -81,6 +81,7 @@ fn ref_cache(
         position: Vec3::from(c.position),
         normal: Vec3::from(c.normal),
         exponent: glossy_exponent.unwrap_or(c.exponent),
+        area: c.area,
     }
 }
 

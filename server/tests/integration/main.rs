@@ -10,5 +10,6 @@ mod gpu_direct_light;
 mod gpu_reference;
 mod gpu_scenes;
 mod render_cli;
+mod scale_invariance;
 mod serve_cli;
 mod support;

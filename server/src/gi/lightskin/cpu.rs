@@ -20,18 +20,26 @@
 use glam::Vec3;
 use std::f32::consts::PI;
 
-/// ε_p of eq. 6, per unit of VAL disk area: keeps the position weights of eq. 5 non-zero.
-/// Scaling it by the VAL's area keeps it negligible next to the form factor (itself area × G)
-/// at any RSM resolution; a constant ε_p summed over a million tiny VALs would outweigh them
-/// and drag every proxy to the mean of the whole RSM.
+/// ε_p of eq. 6 as a fraction of the largest form factor the VAL could have at its distance:
+/// each position weight of eq. 5 is ε_p·F_max + F with F_max = A_l/(A_l + π d²), the form factor
+/// of the VAL's disk facing the cache head-on (eq. 3's denominator without the cosines). Eq. 6's
+/// ε_p only keeps the sums of eq. 5 non-zero; added as a plain constant it would outweigh the
+/// form factors of a high-resolution RSM's many tiny VALs (F shrinks with the texel) and drag
+/// every proxy to the mean of the whole RSM, and multiplied by A_l alone (as before) it had
+/// units of length²: 1e-6·A_l outweighed F in a kilometre-sized scene. F_max is dimensionless
+/// and shrinks with the VAL like F does, so ε_p stays a relative 10⁻⁶ at any scale and RSM size.
 pub const EPS_P: f32 = 1e-6;
 /// Floor of (n_c·ω_p)⁺ in the diffuse flux of eq. 7.
 pub const MIN_COS_DIFFUSE: f32 = 1e-3;
 /// Floor of (n_c·ω_p)⁺·cos^k θ_e in the glossy flux of eq. 7.
 pub const MIN_COS_GLOSSY: f32 = 1e-2;
-/// Floor of squared distances (VAL–cache, proxy–cache, proxy–surface).
-pub const MIN_DIST2: f32 = 1e-4;
-
+/// Floor of the squared proxy–cache distance in eq. 7 and of the squared proxy–surface
+/// distance when eq. 9's interpolated proxy lights a point, per unit of the cache's surface
+/// area A_c: (r_c/2)² for the cache's cell seen as a disk of radius r_c = √(A_c/π). A proxy
+/// nearer than that is below the resolution of the cache distribution, and a floor in scene
+/// units (it was 1 cm) would flatten all indirect light in a centimetre-sized model. The two
+/// floors match, so a point at the cache still receives exactly the cache's irradiance.
+pub const MIN_DIST2_PER_AREA: f32 = 1.0 / (4.0 * PI);
 /// A light cache: a point on a surface with its unit normal and Phong exponent k.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RefCache {
@@ -40,6 +48,9 @@ pub struct RefCache {
     pub normal: Vec3,
     /// Phong exponent k of the glossy lobe (eq. 4).
     pub exponent: f32,
+    /// Surface area the cache stands for (its Voronoi cell): the scale of the distance floors
+    /// ([`MIN_DIST2_PER_AREA`]).
+    pub area: f32,
 }
 
 /// A virtual area light (VAL) taken from the reflective shadow map.
@@ -179,35 +190,40 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
         if len2 == 0.0 {
             continue;
         }
-        let d2 = len2.max(MIN_DIST2);
+        let d = len2.sqrt();
         // Direction cache → VAL.
-        let omega = delta / d2.sqrt();
+        let omega = delta / d;
         let cos_l = val.normal.dot(-omega).max(0.0);
         let cos_x = n_c.dot(omega).max(0.0);
+        // Largest form factor of the VAL's disk at this distance (facing the cache); the
+        // disk's own area keeps it finite at any distance, so no distance floor is needed.
+        let f_max = val.area / (val.area + PI * len2);
         // Geometric factor of eq. 3 / 4 for the VAL's disk.
-        let g = cos_l * cos_x / (val.area + PI * d2);
+        let g = cos_l * cos_x / (val.area + PI * len2);
         // A VAL that cannot light the cache takes no part, not even through ε_p: summed over
         // the many VALs behind a cache, ε_p alone would drag the proxy far off, and eq. 9 then
         // interpolates that far proxy's large flux onto nearby points.
         if g <= 0.0 {
             continue;
         }
-        // Form factor disk → point at c (eq. 6).
+        // Form factor disk → point at c (eq. 6): F_max·cos_l·cos_x.
         let form_factor = val.area * g;
         // cos^k θ_e of eq. 4 with the cache's k.
         let lobe = phong_lobe(n_c, omega, view, k);
         let w = val.weight;
         e_d += w * g * val.flux;
         e_g += w * g * lobe * val.flux;
-        // Eq. 6 weights times the BRSM weight 1/(N_sVAL·P_VAL) of eq. 13.
-        m_d.add(w * (EPS_P * val.area + form_factor), delta);
-        m_g.add(w * (EPS_P * val.area + lobe * form_factor), delta);
+        // Eq. 6 weights (ε_p relative to F_max, see [`EPS_P`]) times the BRSM weight
+        // 1/(N_sVAL·P_VAL) of eq. 13.
+        m_d.add(w * (EPS_P * f_max + form_factor), delta);
+        m_g.add(w * (EPS_P * f_max + lobe * form_factor), delta);
     }
 
+    let min_dist2 = MIN_DIST2_PER_AREA * cache.area;
     // Eq. 7 with L_o,d = ρ_d/π·E_d and f_r = ρ_d/π: ρ_d cancels.
     let diffuse = proxy_light(c, &m_d, |x_p| {
         let to_proxy = x_p - c;
-        let d_p2 = to_proxy.length_squared().max(MIN_DIST2);
+        let d_p2 = to_proxy.length_squared().max(min_dist2);
         let cos_p = n_c.dot(to_proxy.normalize_or_zero());
         4.0 * PI * d_p2 * e_d / cos_p.max(MIN_COS_DIFFUSE)
     });
@@ -215,7 +231,7 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
     // cancels.
     let glossy = proxy_light(c, &m_g, |x_p| {
         let to_proxy = x_p - c;
-        let d_p2 = to_proxy.length_squared().max(MIN_DIST2);
+        let d_p2 = to_proxy.length_squared().max(min_dist2);
         let omega_p = to_proxy.normalize_or_zero();
         let cos_p = n_c.dot(omega_p);
         let lobe_p = phong_lobe(n_c, omega_p, view, k);
@@ -224,22 +240,32 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
     ProxyLights { diffuse, glossy }
 }
 
-/// Running sums of eq. 9 for one proxy kind: Σ w' and Σ w'·Φ_p over all neighbours, Σ w'
-/// and Σ w'·x_p over lit ones. Unlit neighbours dim the flux as they should, but their proxy
-/// sits on their own cache, and averaging that position in would pull the light onto the
-/// surface and brighten it by 1/d².
+/// Running sums of eq. 9 for one proxy kind: Σ w', Σ w'·Φ_p and Σ w'·A_c over all
+/// neighbours, Σ w' and Σ w'·x_p over lit ones. Unlit neighbours dim the flux as they should,
+/// but their proxy sits on their own cache, and averaging that position in would pull the light
+/// onto the surface and brighten it by 1/d².
 #[derive(Default)]
 struct Interpolated {
     weight: f32,
     flux: Vec3,
+    area: f32,
     lit_weight: f32,
     position: Vec3,
 }
 
+/// An interpolated proxy light (eq. 9) and the floor of its squared distance to the surface.
+struct Interpolation {
+    position: Vec3,
+    flux: Vec3,
+    /// [`MIN_DIST2_PER_AREA`] times the interpolated cache area, the floor eq. 7 used.
+    min_dist2: f32,
+}
+
 impl Interpolated {
-    fn add(&mut self, w: f32, proxy: &ProxyLight) {
+    fn add(&mut self, w: f32, cache: &RefCache, proxy: &ProxyLight) {
         self.weight += w;
         self.flux += w * proxy.flux;
+        self.area += w * cache.area;
         if !proxy.is_unlit() {
             self.lit_weight += w;
             self.position += w * proxy.position;
@@ -247,8 +273,12 @@ impl Interpolated {
     }
 
     /// (x_v, Φ_v) of eq. 9, or `None` when no neighbour is lit.
-    fn finish(&self) -> Option<(Vec3, Vec3)> {
-        (self.lit_weight > 0.0).then(|| (self.position / self.lit_weight, self.flux / self.weight))
+    fn finish(&self) -> Option<Interpolation> {
+        (self.lit_weight > 0.0).then(|| Interpolation {
+            position: self.position / self.lit_weight,
+            flux: self.flux / self.weight,
+            min_dist2: MIN_DIST2_PER_AREA * self.area / self.weight,
+        })
     }
 }
 
@@ -285,24 +315,31 @@ pub fn shade(surface: &RefSurface, camera: Vec3, neighbours: &[(RefCache, ProxyL
             let r_c = reflect_about(cache.normal, (x_pg - c).normalize_or_zero());
             a * r_x.dot(r_c).max(0.0).sqrt()
         };
-        diffuse.add(w_d, &proxies.diffuse);
-        glossy.add(w_g, &proxies.glossy);
+        diffuse.add(w_d, cache, &proxies.diffuse);
+        glossy.add(w_g, cache, &proxies.glossy);
     }
 
     let mut radiance = Vec3::ZERO;
-    if let Some((x_vd, flux)) = diffuse.finish() {
-        let to_light = x_vd - x;
-        let d2 = to_light.length_squared().max(MIN_DIST2);
-        let cos = n_x.dot(to_light.normalize_or_zero()).max(0.0);
-        radiance += surface.diffuse / PI * flux / (4.0 * PI * d2) * cos;
+    // A proxy on the surface point itself (possible only for caches without area) lights it
+    // from no direction: no light rather than 0/0.
+    if let Some(v) = diffuse.finish() {
+        let to_light = v.position - x;
+        let d2 = to_light.length_squared().max(v.min_dist2);
+        if d2 > 0.0 {
+            let cos = n_x.dot(to_light.normalize_or_zero()).max(0.0);
+            radiance += surface.diffuse / PI * v.flux / (4.0 * PI * d2) * cos;
+        }
     }
-    if let Some((x_vg, flux)) = glossy.finish() {
-        let to_light = x_vg - x;
-        let d2 = to_light.length_squared().max(MIN_DIST2);
-        let omega = to_light.normalize_or_zero();
-        let cos = n_x.dot(omega).max(0.0);
-        let lobe = phong_lobe(n_x, omega, view, k);
-        radiance += surface.glossy * (k + 2.0) / (2.0 * PI) * lobe * flux / (4.0 * PI * d2) * cos;
+    if let Some(v) = glossy.finish() {
+        let to_light = v.position - x;
+        let d2 = to_light.length_squared().max(v.min_dist2);
+        if d2 > 0.0 {
+            let omega = to_light.normalize_or_zero();
+            let cos = n_x.dot(omega).max(0.0);
+            let lobe = phong_lobe(n_x, omega, view, k);
+            radiance +=
+                surface.glossy * (k + 2.0) / (2.0 * PI) * lobe * v.flux / (4.0 * PI * d2) * cos;
+        }
     }
     radiance
 }
@@ -315,6 +352,7 @@ mod tests {
         position: Vec3::ZERO,
         normal: Vec3::Y,
         exponent: 8.0,
+        area: 0.01,
     };
 
     fn val(position: Vec3, normal: Vec3, flux: Vec3) -> RefVal {
@@ -411,6 +449,7 @@ mod tests {
             position: Vec3::new(1.0, -0.5, 2.0),
             normal: Vec3::new(0.2, 1.0, -0.1).normalize(),
             exponent: 4.0,
+            area: 0.01,
         };
         let vals = [
             val(
@@ -657,11 +696,13 @@ mod tests {
                 position: Vec3::new(1.0, 0.0, 0.0),
                 normal: Vec3::new(0.1, 1.0, 0.0).normalize(),
                 exponent: 8.0,
+                area: 0.01,
             },
             RefCache {
                 position: Vec3::new(0.0, 0.0, 1.5),
                 normal: Vec3::new(0.0, 1.0, 0.2).normalize(),
                 exponent: 8.0,
+                area: 0.01,
             },
         ];
         let surface = RefSurface {
@@ -690,6 +731,75 @@ mod tests {
             })
             .collect();
         assert_close(shade_with(&brighter), base * s, 1e-5);
+    }
+
+    /// Every length times `s` (VAL areas s², VAL flux s² since E·A is reflected, cache areas
+    /// s²): the proxies move with the scene, their flux grows by s² (eq. 7's 4π·d²·E) and the
+    /// radiance leaving a surface is unchanged. Fails with a floor or ε_p in scene units.
+    #[test]
+    fn proxies_and_shading_are_invariant_under_a_change_of_length_unit() {
+        let camera = Vec3::new(0.5, 3.0, 2.0);
+        let caches = [
+            CACHE,
+            RefCache {
+                position: Vec3::new(0.4, 0.0, 0.1),
+                area: 0.02,
+                ..CACHE
+            },
+            RefCache {
+                position: Vec3::new(0.0, 0.0, 0.5),
+                normal: Vec3::new(0.0, 1.0, 0.2).normalize(),
+                ..CACHE
+            },
+        ];
+        let surface = RefSurface {
+            position: Vec3::new(0.1, 0.0, 0.2),
+            normal: Vec3::Y,
+            diffuse: Vec3::new(0.8, 0.6, 0.4),
+            glossy: Vec3::new(0.3, 0.2, 0.1),
+            exponent: 8.0,
+        };
+        let run = |s: f32| {
+            let vals: Vec<RefVal> = brsm_vals()
+                .iter()
+                .map(|v| RefVal {
+                    position: v.position * s,
+                    area: v.area * s * s,
+                    flux: v.flux * s * s,
+                    ..*v
+                })
+                .collect();
+            let neighbours: Vec<(RefCache, ProxyLights)> = caches
+                .iter()
+                .map(|c| {
+                    let c = RefCache {
+                        position: c.position * s,
+                        area: c.area * s * s,
+                        ..*c
+                    };
+                    (c, light_cache(&c, &vals, camera * s))
+                })
+                .collect();
+            let at = RefSurface {
+                position: surface.position * s,
+                ..surface
+            };
+            let radiance = shade(&at, camera * s, &neighbours);
+            (neighbours[0].1, radiance)
+        };
+        let (base_proxies, base) = run(1.0);
+        assert!(base.min_element() > 0.0);
+        for s in [1e-3, 1e3] {
+            let (proxies, radiance) = run(s);
+            for (p, q) in [
+                (proxies.diffuse, base_proxies.diffuse),
+                (proxies.glossy, base_proxies.glossy),
+            ] {
+                assert_close(p.position / s, q.position, 1e-4);
+                assert_close(p.flux / (s * s), q.flux, 1e-4);
+            }
+            assert_close(radiance, base, 1e-4);
+        }
     }
 }
 

@@ -77,7 +77,9 @@ fn estimate_importance(
                 let vs = tile[k];
                 let l = vs.position - val_position;
                 let dist2 = dot(l, l);
-                let d = l * inverseSqrt(max(dist2, 1e-12));
+                // Unit direction, zero for a view sample on the VAL itself (no floor in
+                // scene units: eq. 11's clamp below keeps g finite).
+                let d = select(vec3<f32>(0.0), l * inverseSqrt(dist2), dist2 > 0.0);
                 // Eq. 11: the squared distance is clamped to at least 1.
                 let g = max(dot(val_normal, d), 0.0) * max(dot(vs.normal, -d), 0.0) / max(dist2, 1.0);
                 sum += vs.valid * g;

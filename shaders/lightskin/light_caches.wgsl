@@ -58,6 +58,10 @@ fn unlit(flux: vec3<f32>) -> bool {
 
 // Smallest side of a proxy's square on the unit base disk.
 const MIN_PROXY_SIDE: f32 = 1e-3;
+// Occluders nearer to the target than this fraction of their disk area (squared distance) sit
+// on the target itself and have no direction; mirrored by `MIN_OCCLUDER_DIST2_PER_AREA` in
+// server/src/gi/lightskin/cpu.rs.
+const MIN_OCCLUDER_DIST2_PER_AREA: f32 = 1e-8;
 
 struct Square {
     center: vec2<f32>,
@@ -90,10 +94,15 @@ fn overlap(a: Square, b: Square) -> f32 {
 // The sphere's form factor is (r/d)²·cos θ.
 fn proxy_square(frame: mat2x3<f32>, c: LightCache, center: vec3<f32>, radius: f32) -> Square {
     let to = center - c.position;
-    let d2 = max(dot(to, to), 1e-8);
-    let w = to * inverseSqrt(d2);
+    let d2 = dot(to, to);
+    let w = direction(to);
     let cos_c = max(dot(c.normal, w), 0.0);
-    let square = projected_square(frame, w, min(radius * radius / d2, 1.0) * cos_c);
+    // (r/d)², or the whole hemisphere from inside the sphere.
+    var subtended = 1.0;
+    if d2 > radius * radius {
+        subtended = radius * radius / d2;
+    }
+    let square = projected_square(frame, w, subtended * cos_c);
     // A point-like proxy still needs a footprint for the overlap test to see it covered.
     return Square(square.center, max(square.side, MIN_PROXY_SIDE));
 }
@@ -107,7 +116,7 @@ fn occluder_square(frame: mat2x3<f32>, c: LightCache, o: LightCache, center: vec
     let d2 = dot(to, to);
     let to_proxy = center - c.position;
     let from_proxy = o.position - center;
-    if d2 <= 1e-10 || d2 >= dot(to_proxy, to_proxy) || dot(from_proxy, from_proxy) < radius * radius {
+    if d2 <= MIN_OCCLUDER_DIST2_PER_AREA * o.disk_area || d2 >= dot(to_proxy, to_proxy) || dot(from_proxy, from_proxy) < radius * radius {
         return Square(vec2<f32>(0.0), 0.0);
     }
     let w = to * inverseSqrt(d2);

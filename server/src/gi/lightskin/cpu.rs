@@ -815,6 +815,11 @@ pub struct OccluderDisk {
 /// footprint that occluders can cover).
 pub const MIN_PROXY_SIDE: f32 = 1e-3;
 
+/// Occluders nearer to the target than this fraction of their own disk area (squared
+/// distance), i.e. within 1/10⁴ of their radius, sit on the target itself: they have no
+/// direction to project along. Relative to the disk so that it holds at any scene scale.
+pub const MIN_OCCLUDER_DIST2_PER_AREA: f32 = 1e-8;
+
 /// An axis-aligned square on the target cache's unit base disk: centre and side.
 type Square = (glam::Vec2, f32);
 
@@ -851,10 +856,16 @@ pub fn proxy_visibility(
         )
     };
     let to = center - target.position;
-    let d2 = to.length_squared().max(1e-8);
-    let w = to / d2.sqrt();
+    let d2 = to.length_squared();
+    let w = to.normalize_or_zero();
     let cos_c = target.normal.dot(w).max(0.0);
-    let mut proxy = square(w, (radius * radius / d2).min(1.0) * cos_c);
+    // (r/d)², or the whole hemisphere from inside the sphere.
+    let subtended = if d2 > radius * radius {
+        radius * radius / d2
+    } else {
+        1.0
+    };
+    let mut proxy = square(w, subtended * cos_c);
     proxy.1 = proxy.1.max(MIN_PROXY_SIDE);
     let covered: f32 = occluders
         .iter()
@@ -863,7 +874,7 @@ pub fn proxy_visibility(
             let od2 = to_o.length_squared();
             // Caches inside the proxy's sphere carry its VALs: they are the light itself.
             let inside = (o.position - center).length_squared() < radius * radius;
-            if od2 <= 1e-10 || od2 >= to.length_squared() || inside {
+            if od2 <= MIN_OCCLUDER_DIST2_PER_AREA * o.disk_area || od2 >= d2 || inside {
                 return None;
             }
             let wo = to_o / od2.sqrt();
@@ -929,5 +940,26 @@ mod occlusion_tests {
         let one = [disk(Vec3::new(0.0, 0.5, 0.0), Vec3::NEG_Y, 0.01)];
         let v = proxy_visibility(&target, Vec3::new(0.0, 2.0, 0.0), 1.0, &one);
         assert!(v > 0.5 && v < 1.0, "visibility {v}");
+    }
+
+    /// Form factors are ratios of areas, so visibility cannot depend on the unit of length;
+    /// a floor of squared distances in scene units (it was 10⁻⁸) would change a micro-scale
+    /// model's. Two occluders at different distances cover a small proxy in part.
+    #[test]
+    fn visibility_is_invariant_under_a_change_of_length_unit() {
+        let visibility = |s: f32| {
+            let target = disk(Vec3::ZERO, Vec3::Y, 0.01 * s * s);
+            let occluders = [
+                disk(Vec3::new(0.02, 0.01, 0.0) * s, Vec3::NEG_Y, 1e-5 * s * s),
+                disk(Vec3::new(-0.01, 0.05, 0.01) * s, Vec3::NEG_Y, 4e-4 * s * s),
+            ];
+            proxy_visibility(&target, Vec3::new(0.0, 0.1, 0.0) * s, 0.01 * s, &occluders)
+        };
+        let base = visibility(1.0);
+        assert!(base > 0.1 && base < 0.9, "visibility {base}");
+        for s in [1e-4, 1e4] {
+            let v = visibility(s);
+            assert!((v - base).abs() < 1e-4, "×{s}: {v} vs {base}");
+        }
     }
 }

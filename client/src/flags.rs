@@ -67,6 +67,12 @@ pub struct RenderFlags {
     /// Light-cache angle theta_eps in degrees.
     #[arg(long)]
     pub cache_angle: Option<f32>,
+    /// `--gi reference`: reflections after the visible surface (1: single bounce).
+    #[arg(long, default_value_t = 1)]
+    pub bounces: u32,
+    /// `--gi reference`: samples per pixel per frame (a render takes exactly this many).
+    #[arg(long, default_value_t = 4)]
+    pub spp: u32,
     /// The final frame or a debug view.
     #[arg(long, value_enum, default_value = "final")]
     pub view: View,
@@ -125,6 +131,8 @@ impl RenderFlags {
                 glossy_exponent: self.glossy_exponent,
                 cache_distance: self.cache_distance,
                 cache_angle: self.cache_angle,
+                bounces: self.bounces,
+                spp: self.spp,
             },
             view: self.view,
         }

@@ -36,6 +36,71 @@ pub enum GiMethod {
     /// BRSM: an importance-sampled subset of VALs (eq. 10–15).
     #[default]
     Brsm,
+    /// A progressive path tracer: the converged indirect light the other methods approximate.
+    Reference,
+}
+
+impl GiMethod {
+    /// Every method, in the order `/v1/server` describes them.
+    pub const ALL: &'static [GiMethod] =
+        &[Self::None, Self::Lightskin, Self::Brsm, Self::Reference];
+
+    /// The name requests use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Lightskin => "lightskin",
+            Self::Brsm => "brsm",
+            Self::Reference => "reference",
+        }
+    }
+}
+
+impl std::fmt::Display for GiMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The type of a GI parameter, for clients that build their controls from `/v1/server`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum GiParamKind {
+    Integer,
+    Number,
+    Boolean,
+    /// A number or `null` (the default named in the description).
+    OptionalNumber,
+}
+
+/// One parameter of a GI method: a field of `render.gi`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct GiParamInfo {
+    /// The field name in `render.gi`.
+    pub name: String,
+    pub kind: GiParamKind,
+    /// Default value (`null` for an optional number left unset).
+    #[schema(value_type = Object)]
+    pub default: serde_json::Value,
+    /// Smallest accepted value (numbers).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    /// Largest accepted value on this server (numbers).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max: Option<f64>,
+    pub description: String,
+}
+
+/// A GI method as `/v1/server` describes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct GiMethodInfo {
+    pub method: GiMethod,
+    /// One line for people, naming the paper and equations.
+    pub summary: String,
+    /// Whether frames refine while nothing changes (the frame header carries the samples).
+    pub progressive: bool,
+    /// The fields of `render.gi` this method reads; the others are accepted and ignored.
+    pub parameters: Vec<GiParamInfo>,
 }
 
 /// Which image a frame shows: the final frame or one of the GI debug views.
@@ -83,7 +148,9 @@ impl View {
     }
 }
 
-/// Parameters of the GI methods. Defaults are the paper's evaluation settings.
+/// Parameters of the GI methods, tagged by `method`: each method reads the fields
+/// `/v1/server` lists for it (`gi_methods`) and ignores the others, so switching methods keeps
+/// every other method's settings. Defaults are the seed paper's evaluation settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(default)]
 pub struct GiParams {
@@ -109,6 +176,12 @@ pub struct GiParams {
     /// Light caches: largest angle theta_eps between surface and cache normals, in degrees;
     /// `null` for the default (30°).
     pub cache_angle: Option<f32>,
+    /// `reference`: reflections after the surface a pixel sees; 1 is the single-bounce light
+    /// seed 004 approximates, more give multi-bounce light.
+    pub bounces: u32,
+    /// `reference`: samples per pixel added each frame. Sessions keep accumulating while the
+    /// camera, light and parameters stay the same; a one-shot render takes exactly this many.
+    pub spp: u32,
 }
 
 impl Default for GiParams {
@@ -123,6 +196,8 @@ impl Default for GiParams {
             glossy_exponent: None,
             cache_distance: None,
             cache_angle: None,
+            bounces: 1,
+            spp: 4,
         }
     }
 }
@@ -433,6 +508,12 @@ pub struct Limits {
     pub max_rsm_size: u32,
     pub max_val_count: u32,
     pub max_view_samples: u32,
+    /// `reference`: most samples per pixel per frame.
+    #[serde(default)]
+    pub max_spp: u32,
+    /// `reference`: most bounces.
+    #[serde(default)]
+    pub max_bounces: u32,
     pub max_shadow_map_size: u32,
     pub max_fps: f32,
     pub max_sessions: u32,
@@ -464,4 +545,7 @@ pub struct ServerInfo {
     /// Names of the pipeline stages; a frame header's per-stage timings index this list.
     #[serde(default)]
     pub stages: Vec<String>,
+    /// The GI methods this server runs, with their parameters and limits.
+    #[serde(default)]
+    pub gi_methods: Vec<GiMethodInfo>,
 }

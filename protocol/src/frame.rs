@@ -20,9 +20,12 @@
 //!     60    4  f32 GPU ms of all stages
 //!     64    4  payload length in bytes
 //!     68  8·N  per stage: u16 index into STAGE_NAMES, u16 zero, f32 GPU ms
+//! 68+8N    4  samples per pixel accumulated so far (progressive methods: `reference`; else 0)
+//! 72+8N    4  f32 relative standard error of that accumulation (0 when not progressive)
 //! ```
 //! A reader must use the header length to find the payload, so later versions can append
-//! fields.
+//! fields. The two fields after the stage list were appended that way: a header without them
+//! (an older server) reads as 0 samples.
 
 use crate::Codec;
 
@@ -30,24 +33,114 @@ pub const FRAME_MAGIC: [u8; 4] = *b"LCFR";
 pub const FRAME_VERSION: u16 = 1;
 const FIXED_LEN: usize = 68;
 const STAGE_LEN: usize = 8;
+/// Bytes of the fields appended after the stage list (samples, relative error).
+const PROGRESS_LEN: usize = 8;
 
-/// Names of the pipeline stages, in pipeline order; frame headers refer to them by index.
-pub const STAGE_NAMES: &[&str] = &[
-    "shadow_map",
-    "gbuffer",
-    "rsm",
-    "importance",
-    "cumulative_sums",
-    "val_select",
-    "cache_lighting",
-    "proxy_occlusion",
-    "indirect_light",
-    "indirect_clear",
-    "direct_light",
-    "exposure",
-    "tonemap",
-    "readback_copy",
-];
+/// Declares [`Stage`] and [`STAGE_NAMES`] from one list, so a stage's wire index, its
+/// variant and its name cannot drift apart.
+macro_rules! stages {
+    ($($(#[$doc:meta])* $variant:ident => $name:literal,)*) => {
+        /// A pipeline stage. Frame headers refer to it by its index in [`STAGE_NAMES`]; new
+        /// stages are appended so that the indices of older ones never change.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum Stage {
+            $($(#[$doc])* $variant,)*
+        }
+
+        /// Names of the pipeline stages, indexed by [`Stage::index`].
+        pub const STAGE_NAMES: &[&str] = &[$($name,)*];
+
+        impl Stage {
+            /// Every stage, in index order.
+            pub const ALL: &'static [Stage] = &[$(Stage::$variant,)*];
+
+            /// The name reports, metrics and `/v1/server` use.
+            pub const fn name(self) -> &'static str {
+                match self {
+                    $(Stage::$variant => $name,)*
+                }
+            }
+        }
+    };
+}
+
+stages! {
+    /// Depth from the light (1 or 6 faces).
+    ShadowMap => "shadow_map",
+    /// Position, normal, material and triangle id from the camera.
+    Gbuffer => "gbuffer",
+    /// The reflective shadow map (`lightskin`, `brsm`).
+    Rsm => "rsm",
+    /// Importance of every RSM texel from the view samples (`brsm`).
+    Importance => "importance",
+    /// Cumulative importance (`brsm`).
+    CumulativeSums => "cumulative_sums",
+    /// VALs drawn from the importance (`brsm`).
+    ValSelect => "val_select",
+    /// Proxy lights per light cache (`lightskin`, `brsm`).
+    CacheLighting => "cache_lighting",
+    /// Proxies dimmed by the caches in between (`lightskin`, `brsm`).
+    ProxyOcclusion => "proxy_occlusion",
+    /// Proxy lights interpolated per pixel (`lightskin`, `brsm`).
+    IndirectLight => "indirect_light",
+    /// The indirect buffer cleared (`none`).
+    IndirectClear => "indirect_clear",
+    /// Emission, direct light with shadows, plus the indirect buffer.
+    DirectLight => "direct_light",
+    /// Automatic exposure.
+    Exposure => "exposure",
+    /// Tone curve into the 8-bit output.
+    Tonemap => "tonemap",
+    /// Copies of the results into the read-back buffers.
+    ReadbackCopy => "readback_copy",
+    /// Path-traced samples added to the accumulation (`reference`).
+    PathTrace => "path_trace",
+    /// The accumulated mean written to the indirect buffer (`reference`).
+    ReferenceResolve => "reference_resolve",
+}
+
+impl Stage {
+    /// Index in [`STAGE_NAMES`], as frame headers carry it.
+    pub fn index(self) -> u16 {
+        self as u16
+    }
+
+    /// The stage of a frame header's index.
+    pub fn from_index(index: u16) -> Option<Self> {
+        Self::ALL.get(usize::from(index)).copied()
+    }
+
+    /// Whether the stage belongs to the frame's GI method rather than to the stages every
+    /// frame runs (shadow map, G-buffer, direct light, exposure, tone map, readback).
+    pub fn is_gi(self) -> bool {
+        !matches!(
+            self,
+            Self::ShadowMap
+                | Self::Gbuffer
+                | Self::DirectLight
+                | Self::Exposure
+                | Self::Tonemap
+                | Self::ReadbackCopy
+        )
+    }
+
+    /// The stage of a name in [`STAGE_NAMES`].
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.iter().copied().find(|s| s.name() == name)
+    }
+}
+
+impl serde::Serialize for Stage {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.name())
+    }
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
 
 pub const FLAG_STILL: u8 = 1;
 pub const FLAG_GI_PENDING: u8 = 2;
@@ -71,6 +164,12 @@ pub struct FrameHeader {
     pub payload_len: u32,
     /// (index into [`STAGE_NAMES`], GPU ms).
     pub stages: Vec<(u16, f32)>,
+    /// Samples per pixel a progressive method has accumulated for this image (0: the method
+    /// is not progressive).
+    pub samples: u32,
+    /// Mean relative standard error of the accumulated indirect light (0 when not
+    /// progressive).
+    pub relative_error: f32,
 }
 
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -91,28 +190,22 @@ pub enum FrameHeaderError {
 
 impl FrameHeader {
     pub fn stage_name(index: u16) -> &'static str {
-        STAGE_NAMES
-            .get(usize::from(index))
-            .copied()
-            .unwrap_or("unknown")
+        Stage::from_index(index).map_or("unknown", Stage::name)
     }
 
     /// Index of a stage name in [`STAGE_NAMES`].
     pub fn stage_index(name: &str) -> Option<u16> {
-        STAGE_NAMES
-            .iter()
-            .position(|&n| n == name)
-            .and_then(|i| u16::try_from(i).ok())
+        Stage::from_name(name).map(Stage::index)
     }
 
     pub fn header_len(&self) -> usize {
-        FIXED_LEN + STAGE_LEN * self.stages.len()
+        FIXED_LEN + STAGE_LEN * self.stages.len().min(usize::from(u8::MAX)) + PROGRESS_LEN
     }
 
     /// Writes the header followed by `payload` (whose length replaces `payload_len`).
     pub fn encode_with(&self, payload: &[u8]) -> Vec<u8> {
         let stages = &self.stages[..self.stages.len().min(usize::from(u8::MAX))];
-        let header_len = FIXED_LEN + STAGE_LEN * stages.len();
+        let header_len = FIXED_LEN + STAGE_LEN * stages.len() + PROGRESS_LEN;
         let mut out = Vec::with_capacity(header_len + payload.len());
         out.extend_from_slice(&FRAME_MAGIC);
         out.extend_from_slice(&FRAME_VERSION.to_le_bytes());
@@ -138,6 +231,8 @@ impl FrameHeader {
             out.extend_from_slice(&0u16.to_le_bytes());
             out.extend_from_slice(&ms.to_le_bytes());
         }
+        out.extend_from_slice(&self.samples.to_le_bytes());
+        out.extend_from_slice(&self.relative_error.to_le_bytes());
         out.extend_from_slice(payload);
         out
     }
@@ -194,6 +289,12 @@ impl FrameHeader {
                 (u16_at(o), f32_at(o + 4))
             })
             .collect();
+        let progress = FIXED_LEN + STAGE_LEN * stage_count;
+        let (samples, relative_error) = if header_len >= progress + PROGRESS_LEN {
+            (u32_at(progress), f32_at(progress + 4))
+        } else {
+            (0, 0.0)
+        };
         let header = Self {
             seq: u64_at(8),
             input_id: u64_at(16),
@@ -209,6 +310,8 @@ impl FrameHeader {
             gpu_ms: f32_at(60),
             payload_len,
             stages,
+            samples,
+            relative_error,
         };
         Ok((header, payload))
     }
@@ -217,6 +320,48 @@ impl FrameHeader {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Clients index stages by number: the indices of the first format must never move.
+    #[test]
+    fn stage_indices_of_the_first_format_never_move() {
+        let first = [
+            "shadow_map",
+            "gbuffer",
+            "rsm",
+            "importance",
+            "cumulative_sums",
+            "val_select",
+            "cache_lighting",
+            "proxy_occlusion",
+            "indirect_light",
+            "indirect_clear",
+            "direct_light",
+            "exposure",
+            "tonemap",
+            "readback_copy",
+        ];
+        for (i, name) in first.iter().enumerate() {
+            assert_eq!(FrameHeader::stage_index(name), Some(i as u16), "{name}");
+        }
+        for &stage in Stage::ALL {
+            assert_eq!(Stage::from_index(stage.index()), Some(stage));
+            assert_eq!(STAGE_NAMES[usize::from(stage.index())], stage.name());
+        }
+    }
+
+    /// A header of a server from before the progress fields still decodes, as 0 samples.
+    #[test]
+    fn headers_without_progress_fields_decode() {
+        let h = header();
+        let mut bytes = h.encode_with(b"image");
+        let end = h.header_len();
+        bytes.drain(end - PROGRESS_LEN..end);
+        bytes[6..8].copy_from_slice(&((end - PROGRESS_LEN) as u16).to_le_bytes());
+        let (back, payload) = FrameHeader::decode(&bytes).expect("decodes");
+        assert_eq!((back.samples, back.relative_error), (0, 0.0));
+        assert_eq!(back.stages, h.stages);
+        assert_eq!(payload, b"image");
+    }
 
     fn header() -> FrameHeader {
         FrameHeader {
@@ -237,6 +382,8 @@ mod tests {
                 (0, 0.5),
                 (FrameHeader::stage_index("tonemap").unwrap(), 0.125),
             ],
+            samples: 96,
+            relative_error: 0.03125,
         }
     }
 
@@ -245,7 +392,11 @@ mod tests {
         let h = header();
         let bytes = h.encode_with(b"image");
         assert_eq!(&bytes[0..4], b"LCFR");
-        assert_eq!(u16::from_le_bytes([bytes[6], bytes[7]]) as usize, 68 + 16);
+        assert_eq!(
+            u16::from_le_bytes([bytes[6], bytes[7]]) as usize,
+            68 + 16 + 8
+        );
+        assert_eq!(u32::from_le_bytes(bytes[84..88].try_into().unwrap()), 96);
         assert_eq!(u64::from_le_bytes(bytes[8..16].try_into().unwrap()), 42);
         assert_eq!(u32::from_le_bytes(bytes[40..44].try_into().unwrap()), 320);
         assert_eq!(bytes[48], 1);

@@ -12,7 +12,7 @@ pub mod frame;
 pub mod stream;
 
 pub use api::*;
-pub use frame::{FrameHeader, FrameHeaderError, STAGE_NAMES};
+pub use frame::{FrameHeader, FrameHeaderError, Stage, STAGE_NAMES};
 pub use stream::{ClientMessage, ServerEvent};
 
 /// Parses three comma-separated finite numbers, e.g. `1.5,2,-3` (command-line vectors of the

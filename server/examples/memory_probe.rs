@@ -17,6 +17,7 @@
 //! freeing the previous variant. That is why every pass binds its parameters as storage
 //! (`passes::PARAMS_BINDING`).
 use lightcast_server::gi::lightskin::caches;
+use lightcast_server::gi::lightskin::LightSkin;
 use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::gpu::{BackendChoice, GpuContext};
 use lightcast_server::passes::exposure::Exposure;
@@ -176,11 +177,15 @@ fn main() -> anyhow::Result<()> {
                     val_count: 256,
                     ..GiSettings::default()
                 },
+                history: None,
             };
             let set =
                 caches::precompute(&scene, &caches::CacheParams::for_scene(&scene), &mut |_| {})?;
             let mut renderer = Renderer::new(ctx.clone(), scene);
-            renderer.set_caches(&set)?;
+            renderer
+                .gi::<LightSkin>()
+                .expect("LightSkin is registered")
+                .set_caches(&set)?;
             Box::new(move || renderer.render(&settings).map(drop).map_err(Into::into))
         }
         other => anyhow::bail!("unknown mode {other:?}; see the doc comment"),

@@ -10,7 +10,7 @@
 //! buffer is also compared with it: the error against the truth, not only against LightSkin.
 
 use crate::gi::reference::luminance;
-use crate::gi::{GiMethod, GiSettings};
+use crate::gi::{lightskin::LightSkin, GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
 use crate::renderer::{RenderSettings, Renderer};
@@ -18,19 +18,9 @@ use crate::scene::{
     default_light::{default_camera, default_light},
     Scene,
 };
+use lightcast_protocol::Stage;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-
-/// Stages that belong to global illumination (summed into `gi_ms`).
-const GI_STAGES: [&str; 7] = [
-    "rsm",
-    "importance",
-    "cumulative_sums",
-    "val_select",
-    "cache_lighting",
-    "proxy_occlusion",
-    "indirect_light",
-];
 
 /// Options of `lightcast-server bench`.
 #[derive(Clone, Debug, clap::Args)]
@@ -364,11 +354,11 @@ fn time_config(
         }
         let mut gi_ms = 0.0;
         for t in &frame.timings {
-            if t.stage == "readback_copy" {
+            if t.stage == Stage::ReadbackCopy {
                 continue;
             }
             per_stage.entry(t.stage.to_string()).or_default().push(t.ms);
-            if GI_STAGES.contains(&t.stage) {
+            if t.stage.is_gi() {
                 gi_ms += t.ms;
             }
         }
@@ -377,7 +367,7 @@ fn time_config(
             frame
                 .timings
                 .iter()
-                .filter(|t| t.stage != "readback_copy")
+                .filter(|t| t.stage != Stage::ReadbackCopy)
                 .map(|t| t.ms)
                 .sum(),
         );
@@ -435,6 +425,7 @@ pub fn run(
         shadow_map_size: 2048,
         capture_hdr: false,
         gi: GiSettings::default(),
+        history: None,
     };
     let (name, triangles, cache_count) = (
         scene.name.clone(),
@@ -459,7 +450,10 @@ pub fn run(
     });
     let pictures = args.plots.is_some();
     let mut renderer = Renderer::new(ctx, scene);
-    renderer.set_caches(&caches)?;
+    renderer
+        .gi::<LightSkin>()?
+        .set_caches(&caches)
+        .map_err(crate::renderer::RenderError::from)?;
     let timing_source = renderer.timing_source();
 
     let brsm_configs: Vec<(u32, u32)> = args

@@ -3,9 +3,9 @@
 //! They are built on the CPU from buffers read back after a frame.
 
 use crate::gi::lightskin::{
-    cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback,
+    cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback, LightSkin,
 };
-use crate::gi::GiMethod;
+use crate::gi::{lightskin::uses_light_caches, GiMethod};
 use crate::gpu::GpuError;
 use crate::passes::{exposure::KEY, frame_uniforms::camera_view_proj, tonemap::tonemap_cpu};
 use crate::renderer::{Frame, Renderer};
@@ -18,8 +18,10 @@ pub use lightcast_protocol::View;
 /// Why a debug view cannot be shown.
 #[derive(Debug, thiserror::Error)]
 pub enum ViewError {
-    #[error("view {view} needs global illumination; use GI method lightskin or brsm")]
+    #[error("view {view} needs global illumination; use a GI method other than none")]
     NeedsGi { view: View },
+    #[error("view {view} shows light-cache data; use GI method lightskin or brsm")]
+    NeedsLightCaches { view: View },
     #[error("view {view} shows a BRSM stage; use GI method brsm")]
     NeedsBrsm { view: View },
     #[error(transparent)]
@@ -30,6 +32,9 @@ pub enum ViewError {
 pub fn check(view: View, method: GiMethod) -> Result<(), ViewError> {
     if view.needs_gi() && method == GiMethod::None {
         return Err(ViewError::NeedsGi { view });
+    }
+    if view.needs_gi() && view != View::Indirect && !uses_light_caches(method) {
+        return Err(ViewError::NeedsLightCaches { view });
     }
     if view.needs_brsm() && method != GiMethod::Brsm {
         return Err(ViewError::NeedsBrsm { view });
@@ -47,6 +52,7 @@ pub fn compose(
     caches: Option<&[LightCache]>,
 ) -> Result<Image, ViewError> {
     let needs_gi = ViewError::NeedsGi { view };
+    let lightskin = renderer.gi_if_created::<LightSkin>();
     Ok(match view {
         View::Final => Image {
             width: frame.width,
@@ -55,7 +61,11 @@ pub fn compose(
         },
         View::Indirect => indirect(&frame).ok_or(needs_gi)?,
         View::RsmFlux | View::Importance | View::SelectedVals => {
-            let sampling = renderer.read_sampling()?.ok_or(needs_gi)?;
+            let sampling = match lightskin {
+                Some(l) => l.read_sampling()?,
+                None => None,
+            }
+            .ok_or(needs_gi)?;
             match view {
                 View::RsmFlux => rsm_flux(&sampling),
                 View::Importance => importance(&sampling),
@@ -63,7 +73,10 @@ pub fn compose(
             }
         }
         View::Caches => {
-            let lighting = renderer.read_cache_lighting()?;
+            let lighting = match lightskin {
+                Some(l) => l.read_cache_lighting()?,
+                None => None,
+            };
             let (Some(lighting), Some(caches)) = (lighting, caches) else {
                 return Err(needs_gi);
             };

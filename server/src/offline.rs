@@ -5,10 +5,11 @@ use crate::gi::lightskin::{
     cache_store::CacheStore,
     caches::{CacheParams, CacheSet, Progress},
 };
+use crate::gi::lightskin::{uses_light_caches, LightSkin};
 use crate::gi::{GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
-use crate::renderer::{RenderSettings, Renderer};
+use crate::renderer::{RenderError, RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
     Scene,
@@ -199,6 +200,12 @@ pub struct RenderArgs {
     /// Turn off the occlusion of proxy lights by other caches (double projection).
     #[arg(long)]
     pub no_occlusion: bool,
+    /// `reference`: reflections after the visible surface (1: single-bounce light, 1 … 16).
+    #[arg(long, default_value_t = 1)]
+    pub bounces: u32,
+    /// `reference`: samples per pixel (1 … 1024).
+    #[arg(long, default_value_t = 256)]
+    pub spp: u32,
     /// Phong exponent k for every material (direct and indirect shading); default: each
     /// material's own.
     #[arg(long)]
@@ -253,8 +260,10 @@ pub enum OfflineError {
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
     Render(#[from] crate::renderer::RenderError),
-    #[error("--view {view} needs global illumination; use --gi lightskin or --gi brsm")]
+    #[error("--view {view} needs global illumination; use a --gi other than none")]
     ViewNeedsGi { view: View },
+    #[error("--view {view} shows light-cache data; use --gi lightskin or --gi brsm")]
+    ViewNeedsLightCaches { view: View },
     #[error("--view {view} shows a BRSM stage; use --gi brsm")]
     ViewNeedsBrsm { view: View },
     #[error("writing {path}: {error}")]
@@ -269,6 +278,9 @@ impl From<debug_views::ViewError> for OfflineError {
     fn from(e: debug_views::ViewError) -> Self {
         match e {
             debug_views::ViewError::NeedsGi { view } => Self::ViewNeedsGi { view },
+            debug_views::ViewError::NeedsLightCaches { view } => {
+                Self::ViewNeedsLightCaches { view }
+            }
             debug_views::ViewError::NeedsBrsm { view } => Self::ViewNeedsBrsm { view },
             debug_views::ViewError::Gpu(g) => Self::Gpu(g),
         }
@@ -341,8 +353,11 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
             occlusion: !args.no_occlusion,
             defensive: args.defensive,
             glossy_exponent: args.glossy_exponent,
+            bounces: args.bounces,
+            spp: args.spp,
             ..GiSettings::default()
         },
+        history: None,
     }
 }
 
@@ -369,14 +384,17 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let settings = settings_from_args(args, &scene);
     settings.validate(&ctx)?;
     let setup_start = Instant::now();
-    let caches = if args.gi == GiMethod::None {
-        None
-    } else {
+    let caches = if uses_light_caches(args.gi) {
         Some(args.caches.load(&scene, log)?)
+    } else {
+        None
     };
     let mut renderer = Renderer::new(ctx, scene);
     if let Some(set) = &caches {
-        renderer.set_caches(set)?;
+        renderer
+            .gi::<LightSkin>()?
+            .set_caches(set)
+            .map_err(RenderError::from)?;
     }
     let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
     debug_views::check(args.view, args.gi)?;

@@ -1,34 +1,29 @@
-//! The frame: runs the passes in order for one scene and reads the image back.
+//! The frame: runs the shared passes in order for one scene, asks the frame's GI method
+//! (`crate::gi`) for the indirect light in between, and reads the image back.
 //!
 //! No async runtime is involved; the offline `render` command and tests drive it directly.
 
-use crate::gi::lightskin::{
-    cache_buffers::CacheBuffers,
-    cache_lighting::{CacheLighting, CacheLightingPass, ValSource},
-    caches::CacheSet,
-    indirect_light::{CacheInputs, IndirectLightPass, INDIRECT_FORMAT},
-    proxy_occlusion::ProxyOcclusionPass,
-    sampling::{SamplingReadback, ValSampling},
+use crate::gi::{
+    self, FrameInputs, GiError, GiSettings, Method, ProgressBuffer, ProgressSums, SceneResources,
 };
-use crate::gi::{GiMethod, GiSettings};
 use crate::gpu::{
-    readback::{read_buffer, PendingMap, TextureReadback},
+    readback::{PendingMap, TextureReadback},
     timing::{timestamp_staging, FrameTimer, PendingTimings, StageTiming, TimingSource},
     GpuContext, GpuError,
 };
 use crate::passes::{
     direct_light::{DirectLightInputs, DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
-    frame_uniforms::{light_faces, CameraUniform, LightUniform},
+    frame_uniforms::{CameraUniform, LightUniform},
     gbuffer::{GBuffer, GBufferPass},
     scene_buffers::{material_layout, SceneBuffers},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},
-    Target,
+    Target, INDIRECT_FORMAT,
 };
 use crate::scene::Scene;
 use glam::Vec3;
-use lightcast_protocol::{Camera, Light};
+use lightcast_protocol::{Camera, Light, Stage};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -38,14 +33,6 @@ pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
 /// Most shadow-map texels over all faces (a point light's six faces share this budget): 256 MiB
 /// of depth.
 pub const MAX_SHADOW_TEXELS: u64 = 8192 * 8192;
-/// Largest RSM side per light face.
-pub const MAX_RSM_SIZE: u32 = 4096;
-/// Most RSM texels over all faces (each costs ~50 bytes across the sampling stages).
-pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
-/// Most view samples for the importance estimate.
-pub const MAX_VIEW_SAMPLES: u32 = 4096;
-/// Most VALs drawn per frame.
-pub const MAX_VAL_COUNT: u32 = 1 << 20;
 /// Largest Phong exponent accepted (a mirror-like lobe; beyond it the lobe is a single texel).
 pub const MAX_GLOSSY_EXPONENT: f32 = 10_000.0;
 /// Most output pixels: the frame's targets take about 70 bytes per pixel (4.5 GiB at this size).
@@ -72,6 +59,9 @@ pub struct RenderSettings {
     pub capture_hdr: bool,
     /// Indirect light: method and parameters.
     pub gi: GiSettings,
+    /// The image history a progressive GI method may continue (a session's id); `None`
+    /// starts afresh, so equal settings give equal pixels.
+    pub history: Option<u64>,
 }
 
 /// A rendered frame.
@@ -92,6 +82,17 @@ pub struct Frame {
     pub exposure_scale: f32,
     /// CPU time spent waiting for the read-back buffers to be mapped.
     pub readback_ms: f64,
+    /// How far a progressive GI method (`reference`) has converged.
+    pub progress: Option<FrameProgress>,
+}
+
+/// Convergence of a progressive method's image.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FrameProgress {
+    /// Samples per pixel accumulated, this frame's included.
+    pub samples: u32,
+    /// Root-mean-square standard error of the pixels' luminance over their mean luminance.
+    pub relative_standard_error: f32,
 }
 
 impl Frame {
@@ -105,12 +106,20 @@ impl Frame {
 pub enum RenderError {
     #[error("invalid {field}: {reason}")]
     InvalidSetting { field: &'static str, reason: String },
-    #[error("global illumination needs the scene's light caches; call Renderer::set_caches first")]
-    CachesMissing,
-    #[error("light caches were computed for {caches} vertices, but the scene has {scene}")]
-    CachesMismatch { caches: usize, scene: usize },
+    #[error(transparent)]
+    Gi(GiError),
     #[error(transparent)]
     Gpu(#[from] GpuError),
+}
+
+impl From<GiError> for RenderError {
+    fn from(e: GiError) -> Self {
+        match e {
+            GiError::Invalid(i) => invalid(i.field, i.reason),
+            GiError::Gpu(g) => Self::Gpu(g),
+            other => Self::Gi(other),
+        }
+    }
 }
 
 fn invalid(field: &'static str, reason: impl Into<String>) -> RenderError {
@@ -192,38 +201,9 @@ impl RenderSettings {
         {
             return Err(invalid("light.cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees"));
         }
-        let g = &self.gi;
-        if g.method != GiMethod::None {
-            let faces = u64::from(LightUniform::face_count(self.light.kind));
-            let max_rsm = MAX_RSM_SIZE.min(((MAX_RSM_TEXELS / faces) as f64).sqrt() as u32);
-            if !(16..=max_rsm).contains(&g.rsm_size) {
-                return Err(invalid(
-                    "rsm_size",
-                    format!("{} is outside 16..={max_rsm}", g.rsm_size),
-                ));
-            }
-            if !(1..=MAX_VIEW_SAMPLES).contains(&g.view_samples) {
-                return Err(invalid(
-                    "view_samples",
-                    format!("{} is outside 1..={MAX_VIEW_SAMPLES}", g.view_samples),
-                ));
-            }
-            if !(1..=MAX_VAL_COUNT).contains(&g.val_count) {
-                return Err(invalid(
-                    "val_count",
-                    format!("{} is outside 1..={MAX_VAL_COUNT}", g.val_count),
-                ));
-            }
-            if !(0.0..1.0).contains(&g.jitter) {
-                return Err(invalid("jitter", format!("{} is outside [0, 1)", g.jitter)));
-            }
-            if !(0.0..=1.0).contains(&g.defensive) {
-                return Err(invalid(
-                    "defensive",
-                    format!("{} is outside [0, 1]", g.defensive),
-                ));
-            }
-        }
+        let faces = LightUniform::face_count(self.light.kind);
+        (gi::entry(self.gi.method).1.validate)(&self.gi, faces)
+            .map_err(|e| invalid(e.field, e.reason))?;
         if let Some(k) = self.gi.glossy_exponent {
             if !(k.is_finite() && k > 0.0 && k <= MAX_GLOSSY_EXPONENT) {
                 return Err(invalid(
@@ -268,6 +248,8 @@ struct ReadbackSet {
     indirect: TextureReadback,
     exposure: wgpu::Buffer,
     timestamps: wgpu::Buffer,
+    /// The GI method's [`ProgressSums`], when it is progressive.
+    progress: wgpu::Buffer,
     /// Held by the [`PendingFrame`] using the set.
     busy: Arc<AtomicBool>,
 }
@@ -285,6 +267,12 @@ impl ReadbackSet {
                 mapped_at_creation: false,
             }),
             timestamps: timestamp_staging(device),
+            progress: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("gi progress readback"),
+                size: std::mem::size_of::<ProgressSums>() as u64,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
             busy: Arc::new(AtomicBool::new(false)),
         }
     }
@@ -309,6 +297,8 @@ pub struct PendingFrame {
     ldr: TextureReadback,
     hdr: Option<(TextureReadback, TextureReadback)>,
     exposure: wgpu::Buffer,
+    /// Samples accumulated and the staging buffer of the [`ProgressSums`].
+    progress: Option<(u32, wgpu::Buffer)>,
     timings: PendingTimings,
     timing_source: TimingSource,
     submission: Option<wgpu::SubmissionIndex>,
@@ -325,6 +315,10 @@ impl PendingFrame {
             .as_ref()
             .map(|(hdr, indirect)| (hdr.begin_read(), indirect.begin_read()));
         let exposure = PendingMap::new(&self.exposure);
+        let progress = self
+            .progress
+            .as_ref()
+            .map(|(samples, buffer)| (*samples, PendingMap::new(buffer)));
         let timings = self.timings.begin();
         self.ctx.device.poll(wgpu::PollType::Wait {
             submission_index: self.submission,
@@ -339,6 +333,16 @@ impl PendingFrame {
             None => (None, None),
         };
         let exposure: ExposureResult = bytemuck::pod_read_unaligned(&exposure.finish()?);
+        let progress = match progress {
+            Some((samples, map)) => {
+                let sums: ProgressSums = bytemuck::pod_read_unaligned(&map.finish()?);
+                Some(FrameProgress {
+                    samples,
+                    relative_standard_error: sums.relative_standard_error(),
+                })
+            }
+            None => None,
+        };
         Ok(Frame {
             width: self.width,
             height: self.height,
@@ -349,6 +353,7 @@ impl PendingFrame {
             timing_source: self.timing_source,
             exposure_scale: exposure.scale,
             readback_ms: started.elapsed().as_secs_f64() * 1e3,
+            progress,
         })
     }
 }
@@ -359,6 +364,7 @@ pub struct Renderer {
     timer: FrameTimer,
     scene: Arc<Scene>,
     scene_buffers: SceneBuffers,
+    material_layout: wgpu::BindGroupLayout,
     gbuffer_pass: GBufferPass,
     shadow_pass: ShadowMapPass,
     direct_pass: DirectLightPass,
@@ -371,15 +377,8 @@ pub struct Renderer {
     sized: Vec<SizedTargets>,
     /// Shadow maps of the most recently used size and face count, most recent first.
     shadow_maps: Vec<ShadowMap>,
-    sampling: ValSampling,
-    /// Whether the last frame ran the sampling stages.
-    sampled: bool,
-    cache_pass: CacheLightingPass,
-    occlusion_pass: ProxyOcclusionPass,
-    indirect_pass: IndirectLightPass,
-    caches: Option<CacheBuffers>,
-    /// The indirect target holds light from an earlier frame that must be cleared.
-    indirect_stale: bool,
+    /// The GI methods used so far, by index in [`gi::REGISTRY`] (created on first use).
+    methods: Vec<Option<Box<dyn Method>>>,
 }
 
 impl Renderer {
@@ -403,13 +402,6 @@ impl Renderer {
         );
         let material_layout = material_layout(device);
         Self {
-            sampling: ValSampling::new(device, &light_buffer, &material_layout),
-            sampled: false,
-            cache_pass: CacheLightingPass::new(device),
-            occlusion_pass: ProxyOcclusionPass::new(device),
-            indirect_pass: IndirectLightPass::new(device),
-            caches: None,
-            indirect_stale: false,
             timer: FrameTimer::new(&ctx),
             gbuffer_pass: GBufferPass::new(
                 device,
@@ -424,8 +416,10 @@ impl Renderer {
             tonemap_pass: TonemapPass::new(device),
             camera_buffer,
             light_buffer,
+            material_layout,
             sized: Vec::new(),
             shadow_maps: Vec::new(),
+            methods: gi::REGISTRY.iter().map(|_| None).collect(),
             scene,
             ctx,
         }
@@ -449,35 +443,44 @@ impl Renderer {
         self.timer.source()
     }
 
-    /// Uploads the scene's light caches (needed by every GI method).
-    pub fn set_caches(&mut self, set: &CacheSet) -> Result<(), RenderError> {
-        if set.vertex_caches.len() != self.scene.vertices.len() {
-            return Err(RenderError::CachesMismatch {
-                caches: set.vertex_caches.len(),
-                scene: self.scene.vertices.len(),
-            });
+    /// The scene's instance of the registered method at `index` in [`gi::REGISTRY`], created
+    /// on first use.
+    fn method_at(&mut self, index: usize) -> Result<&mut Box<dyn Method>, RenderError> {
+        let slot = &mut self.methods[index];
+        if slot.is_none() {
+            let resources = SceneResources {
+                ctx: &self.ctx,
+                scene: &self.scene,
+                scene_buffers: &self.scene_buffers,
+                material_layout: &self.material_layout,
+                camera: &self.camera_buffer,
+                light: &self.light_buffer,
+            };
+            *slot = Some((gi::REGISTRY[index].create)(&resources)?);
         }
-        self.caches = Some(CacheBuffers::new(&self.ctx.device, set));
-        Ok(())
+        Ok(slot.as_mut().expect("the method was just created"))
     }
 
-    /// Proxy lights of every cache from the last GI frame (blocking; for tests and debugging).
-    pub fn read_cache_lighting(&self) -> Result<Option<Vec<CacheLighting>>, GpuError> {
-        let Some(caches) = self.caches.as_ref().filter(|_| self.sampled) else {
-            return Ok(None);
-        };
-        let mut lighting: Vec<CacheLighting> =
-            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, &caches.lighting)?);
-        lighting.truncate(caches.count as usize);
-        Ok(Some(lighting))
+    /// The scene's instance of GI method type `M` (e.g. to hand it per-scene data such as
+    /// light caches), created on first use.
+    pub fn gi<M: Method>(&mut self) -> Result<&mut M, RenderError> {
+        let index = gi::REGISTRY
+            .iter()
+            .position(|e| (e.type_id)() == std::any::TypeId::of::<M>())
+            .unwrap_or_else(|| panic!("{} is not in gi::REGISTRY", std::any::type_name::<M>()));
+        let method = self.method_at(index)?;
+        Ok(method
+            .as_any_mut()
+            .downcast_mut()
+            .expect("the registry entry creates its own type"))
     }
 
-    /// The sampling stages' results of the last frame, if it ran them (blocking readback).
-    pub fn read_sampling(&self) -> Result<Option<SamplingReadback>, GpuError> {
-        if !self.sampled {
-            return Ok(None);
-        }
-        self.sampling.read_back(&self.ctx).map(Some)
+    /// The scene's instance of GI method type `M`, if a frame or [`Self::gi`] created it.
+    pub fn gi_if_created<M: Method>(&self) -> Option<&M> {
+        self.methods
+            .iter()
+            .flatten()
+            .find_map(|m| m.as_any().downcast_ref())
     }
 
     /// Makes the targets of `width`×`height` the first of [`Self::sized`].
@@ -494,8 +497,10 @@ impl Renderer {
         // Release the least recently used targets first so a new size does not need them all
         // in memory at once.
         self.sized.truncate(MAX_SIZES - 1);
-        self.sampling
-            .retain_gbuffers(self.sized.iter().map(|s| &s.gbuffer));
+        let live: Vec<&GBuffer> = self.sized.iter().map(|s| &s.gbuffer).collect();
+        for method in self.methods.iter_mut().flatten() {
+            method.retain_targets(&live);
+        }
         let device = &self.ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let hdr = Target::new(
@@ -584,6 +589,9 @@ impl Renderer {
         self.ensure_targets(width, height)?;
         let faces = LightUniform::face_count(settings.light.kind);
         self.ensure_shadow_map(settings.shadow_map_size, faces)?;
+        let (method_index, _) = gi::entry(settings.gi.method);
+        // Created before the targets are borrowed below.
+        self.method_at(method_index)?;
         let (Some(sized), Some(shadow_map)) = (self.sized.first(), self.shadow_maps.first()) else {
             unreachable!("targets were just ensured");
         };
@@ -603,67 +611,6 @@ impl Renderer {
             .set_faces(queue, &light.face_view_proj[..faces as usize]);
         self.exposure_pass
             .prepare(queue, &sized.exposure, settings.exposure);
-        let gi = settings.gi;
-        let gi_on = gi.method != GiMethod::None;
-        let mut lighting_chunks = 0;
-        let mut occlusion_chunks = 0;
-        if gi_on {
-            let caches = self.caches.as_ref().ok_or(RenderError::CachesMissing)?;
-            self.sampling.prepare(
-                &self.ctx,
-                &sized.gbuffer,
-                &light_faces(&settings.light, bounds),
-                &gi,
-            );
-            let source = match gi.method {
-                GiMethod::Brsm => ValSource::Selected {
-                    count: gi.val_count,
-                },
-                GiMethod::Lightskin | GiMethod::None => ValSource::EveryTexel,
-            };
-            lighting_chunks = self.cache_pass.prepare(
-                queue,
-                settings.camera.position,
-                caches.count,
-                self.sampling.rsm(),
-                source,
-                gi.glossy_exponent,
-            );
-            occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
-            self.indirect_pass
-                .prepare(queue, true, self.ctx.primitive_index);
-        }
-        self.sampled = gi_on;
-        let gi_bind_groups = self.caches.as_ref().filter(|_| gi_on).map(|caches| {
-            let device = &self.ctx.device;
-            let lighting = self.cache_pass.bind(
-                device,
-                &caches.caches,
-                self.sampling.vals(),
-                self.sampling.rsm(),
-                &caches.lighting,
-                &caches.accum,
-            );
-            let indirect = self.indirect_pass.bind(
-                device,
-                &self.camera_buffer,
-                &sized.gbuffer,
-                &CacheInputs {
-                    caches: &caches.caches,
-                    lighting: &caches.lighting,
-                    vertex_caches: &caches.vertex_caches,
-                    scene: &self.scene_buffers,
-                },
-                &sized.indirect,
-            );
-            let occlusion = self.occlusion_pass.bind(
-                device,
-                &caches.caches,
-                &caches.lighting,
-                &caches.coverage,
-            );
-            (caches.count, lighting, occlusion, indirect)
-        });
         let direct_bind_group = self.direct_pass.bind(
             &self.ctx.device,
             &DirectLightInputs {
@@ -679,60 +626,59 @@ impl Renderer {
         let set = free_set(&self.ctx, &sized.readbacks)?;
         let lease = SetLease(Arc::clone(&set.busy));
         let mut stages = self.timer.begin(&self.ctx);
-        stages.stage("shadow_map", |e| {
+        stages.stage(Stage::ShadowMap, |e| {
             self.shadow_pass.encode(e, shadow_map, &self.scene_buffers)
         })?;
-        stages.stage("gbuffer", |e| {
+        stages.stage(Stage::Gbuffer, |e| {
             self.gbuffer_pass
                 .encode(e, &sized.gbuffer, &self.scene_buffers)
         })?;
-        if let Some((cache_count, lighting_group, occlusion_group, indirect_group)) =
-            &gi_bind_groups
-        {
-            let sampling = &self.sampling;
-            stages.stage("rsm", |e| sampling.encode_rsm(e, &self.scene_buffers))?;
-            if gi.method == GiMethod::Brsm {
-                stages.stage("importance", |e| sampling.encode_importance(e, &gi))?;
-                stages.stage("cumulative_sums", |e| sampling.encode_cumulative_sums(e))?;
-                stages.stage("val_select", |e| sampling.encode_selection(e, &gi))?;
-            }
-            stages.stage("cache_lighting", |e| {
-                self.cache_pass
-                    .encode(e, lighting_group, *cache_count, lighting_chunks)
-            })?;
-            if gi.occlusion {
-                stages.stage("proxy_occlusion", |e| {
-                    self.occlusion_pass
-                        .encode(e, occlusion_group, *cache_count, occlusion_chunks)
-                })?;
-            }
-            stages.stage("indirect_light", |e| {
-                self.indirect_pass.encode(e, indirect_group, width, height)
-            })?;
-        } else if self.indirect_stale {
-            stages.stage("indirect_clear", |e| clear_target(e, &sized.indirect))?;
-        }
-        self.indirect_stale = gi_on;
-        stages.stage("direct_light", |e| {
+        let resources = SceneResources {
+            ctx: &self.ctx,
+            scene: &self.scene,
+            scene_buffers: &self.scene_buffers,
+            material_layout: &self.material_layout,
+            camera: &self.camera_buffer,
+            light: &self.light_buffer,
+        };
+        let frame = FrameInputs {
+            resources: &resources,
+            width,
+            height,
+            camera: &settings.camera,
+            light: &settings.light,
+            settings: &settings.gi,
+            gbuffer: &sized.gbuffer,
+            indirect: &sized.indirect,
+            history: settings.history,
+        };
+        let Some(method) = self.methods[method_index].as_mut() else {
+            unreachable!("the method was just created");
+        };
+        let progress: Option<ProgressBuffer> = method.encode(&frame, &mut stages)?;
+        stages.stage(Stage::DirectLight, |e| {
             self.direct_pass
                 .encode(e, &direct_bind_group, width, height)
         })?;
         if settings.exposure == Exposure::Auto {
-            stages.stage("exposure", |e| {
+            stages.stage(Stage::Exposure, |e| {
                 self.exposure_pass
                     .encode(e, &sized.exposure, settings.exposure)
             })?;
         }
-        stages.stage("tonemap", |e| {
+        stages.stage(Stage::Tonemap, |e| {
             self.tonemap_pass.encode(e, &sized.tonemap, width, height)
         })?;
-        stages.stage("readback_copy", |e| {
+        stages.stage(Stage::ReadbackCopy, |e| {
             set.ldr.encode_copy(e, &sized.ldr.texture);
             if settings.capture_hdr {
                 set.hdr.encode_copy(e, &sized.hdr.texture);
                 set.indirect.encode_copy(e, &sized.indirect.texture);
             }
             e.copy_buffer_to_buffer(&self.exposure_pass.result, 0, &set.exposure, 0, None);
+            if let Some(p) = &progress {
+                e.copy_buffer_to_buffer(&p.buffer, 0, &set.progress, 0, None);
+            }
         })?;
         let (timings, submission) = stages.submit_frame(&set.timestamps);
         Ok(PendingFrame {
@@ -744,6 +690,7 @@ impl Renderer {
                 .capture_hdr
                 .then(|| (set.hdr.clone(), set.indirect.clone())),
             exposure: set.exposure.clone(),
+            progress: progress.map(|p| (p.samples, set.progress.clone())),
             timings,
             timing_source: self.timer.source(),
             submission,
@@ -792,16 +739,4 @@ fn rgba16f_to_f32(bytes: &[u8]) -> Vec<[f32; 4]> {
         .chunks_exact(4)
         .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
         .collect()
-}
-
-/// Clears a colour target to zero.
-fn clear_target(encoder: &mut wgpu::CommandEncoder, target: &Target) {
-    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-        label: Some("clear"),
-        color_attachments: &[Some(crate::passes::cleared_attachment(&target.view))],
-        depth_stencil_attachment: None,
-        timestamp_writes: None,
-        occlusion_query_set: None,
-        multiview_mask: None,
-    });
 }

@@ -1,8 +1,10 @@
 // Decoder of the binary frame message (protocol/src/frame.rs is the reference):
-// a 68-byte little-endian header, 8 bytes per stage, then the JPEG or PNG payload.
+// a 68-byte little-endian header, 8 bytes per stage, the progressive method's sample count and
+// relative error (8 bytes, absent from older servers), then the JPEG or PNG payload.
 
 const FIXED_LEN = 68;
 const STAGE_LEN = 8;
+const PROGRESS_LEN = 8;
 const MAGIC = 0x5246434c; // "LCFR" read as a little-endian u32
 const SUPPORTED_VERSION = 1;
 
@@ -39,6 +41,8 @@ export function decodeFrame(buffer) {
     const o = FIXED_LEN + STAGE_LEN * i;
     stages.push({ index: v.getUint16(o, true), ms: v.getFloat32(o + 4, true) });
   }
+  const progress = FIXED_LEN + STAGE_LEN * stageCount;
+  const hasProgress = headerLen >= progress + PROGRESS_LEN;
   return {
     seq: Number(v.getBigUint64(8, true)),
     inputId: Number(v.getBigUint64(16, true)),
@@ -53,6 +57,8 @@ export function decodeFrame(buffer) {
     readbackMs: v.getFloat32(56, true),
     gpuMs: v.getFloat32(60, true),
     stages,
+    samples: hasProgress ? v.getUint32(progress, true) : 0,
+    relativeError: hasProgress ? v.getFloat32(progress + 4, true) : 0,
     payload: new Uint8Array(buffer, headerLen, payloadLen),
     bytes: buffer.byteLength,
   };

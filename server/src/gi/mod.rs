@@ -1,13 +1,27 @@
-//! Global illumination: LightSkin light caches fed by Bidirectional Reflective Shadow Maps
-//! (seed paper 004). Per model, [`caches`] are precomputed once and kept by [`cache_store`];
-//! per frame, [`sampling`] runs the BRSM stages (RSM, importance, cumulative sums, VAL
-//! selection) and [`cache_buffers`] holds the caches and their proxy lights on the GPU. The
-//! GPU passes themselves live in `crate::passes`; [`lightskin_cpu`] is their CPU reference.
+//! Global illumination: the indirect light of a frame, computed by exactly one method.
 //!
-//! [`reference`] is the path tracer every method is measured against.
+//! The renderer runs the shared stages (shadow map, G-buffer, direct light, exposure, tone
+//! map, readback) and asks the frame's [`Method`] to fill the indirect buffer in between. A
+//! method is one module with its WGSL in `shaders/<method>/`:
+//!
+//! - [`none`]: no indirect light.
+//! - [`lightskin`]: LightSkin light caches fed by Bidirectional Reflective Shadow Maps (seed
+//!   paper 004), the `lightskin` and `brsm` methods.
+//! - [`reference`]: a progressive path tracer, the truth the others are measured against.
+//!
+//! Adding a method: a module implementing [`Method`], an entry in [`REGISTRY`], a
+//! [`GiMethod`] variant and its parameters in the protocol's `GiParams`.
 
 pub mod lightskin;
+pub mod none;
 pub mod reference;
+
+use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
+use crate::passes::{gbuffer::GBuffer, scene_buffers::SceneBuffers, Target};
+use crate::scene::Scene;
+use lightcast_protocol::{Camera, GiMethodInfo, Light, Limits};
+use std::any::{Any, TypeId};
+use std::sync::Arc;
 
 pub use lightcast_protocol::GiMethod;
 
@@ -42,6 +56,10 @@ pub struct GiSettings {
     /// Phong exponent k (eq. 3–4) for every material, in direct and indirect shading alike;
     /// `None` keeps the materials' own.
     pub glossy_exponent: Option<f32>,
+    /// `reference`: reflections after the surface a pixel sees (1: single bounce).
+    pub bounces: u32,
+    /// `reference`: samples per pixel added per frame.
+    pub spp: u32,
 }
 
 impl From<&lightcast_protocol::GiParams> for GiSettings {
@@ -58,6 +76,8 @@ impl From<&lightcast_protocol::GiParams> for GiSettings {
             uniform_importance: false,
             occlusion: p.occlusion,
             glossy_exponent: p.glossy_exponent,
+            bounces: p.bounces,
+            spp: p.spp,
         }
     }
 }
@@ -78,6 +98,146 @@ impl GiSettings {
             ..Self::default()
         }
     }
+}
+
+/// A setting a method cannot use, naming its field (as the renderer's settings name it).
+#[derive(Debug, thiserror::Error)]
+#[error("invalid {field}: {reason}")]
+pub struct InvalidSetting {
+    pub field: &'static str,
+    pub reason: String,
+}
+
+impl InvalidSetting {
+    pub fn new(field: &'static str, reason: impl Into<String>) -> Self {
+        Self {
+            field,
+            reason: reason.into(),
+        }
+    }
+}
+
+/// Why a method could not encode its frame.
+#[derive(Debug, thiserror::Error)]
+pub enum GiError {
+    #[error(transparent)]
+    Invalid(#[from] InvalidSetting),
+    /// The method cannot use the scene, or needs per-scene data the caller has not supplied.
+    #[error("{0}")]
+    Scene(String),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+}
+
+/// Per-scene resources the renderer shares with every method it creates.
+pub struct SceneResources<'a> {
+    pub ctx: &'a GpuContext,
+    pub scene: &'a Arc<Scene>,
+    pub scene_buffers: &'a SceneBuffers,
+    pub material_layout: &'a wgpu::BindGroupLayout,
+    /// `CameraUniform` (see `passes::frame_uniforms`), written every frame.
+    pub camera: &'a wgpu::Buffer,
+    /// `LightUniform`, written every frame.
+    pub light: &'a wgpu::Buffer,
+}
+
+/// What a method reads of the frame being encoded, and the buffer it fills.
+pub struct FrameInputs<'a> {
+    pub resources: &'a SceneResources<'a>,
+    pub width: u32,
+    pub height: u32,
+    pub camera: &'a Camera,
+    pub light: &'a Light,
+    pub settings: &'a GiSettings,
+    pub gbuffer: &'a GBuffer,
+    /// Indirect radiance per pixel (RGBA16F storage texture); the method writes every pixel.
+    pub indirect: &'a Target,
+    /// Which image history a progressive method may continue: a session's id, or `None` to
+    /// start afresh (one-shot renders, so that equal requests give equal pixels).
+    pub history: Option<u64>,
+}
+
+/// One GI method's per-scene GPU state and per-frame passes.
+pub trait Method: Any {
+    /// Encodes the frame's GI stages into `stages`; they must write every pixel of
+    /// `frame.indirect`. Returns the convergence of a progressive method.
+    fn encode(
+        &mut self,
+        frame: &FrameInputs,
+        stages: &mut FrameStages,
+    ) -> Result<Option<ProgressBuffer>, GiError>;
+
+    /// The renderer dropped the targets of output sizes other than `live`: release anything
+    /// made for them.
+    fn retain_targets(&mut self, live: &[&GBuffer]) {
+        let _ = live;
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any;
+
+    fn as_any(&self) -> &dyn Any;
+}
+
+/// A progressive method's convergence sums for the frame, on the GPU: the renderer copies
+/// `buffer` (one [`ProgressSums`]) with the frame's results and reads it without waiting.
+pub struct ProgressBuffer {
+    pub samples: u32,
+    pub buffer: wgpu::Buffer,
+}
+
+/// Mirrors `ProgressSums` in `shaders/reference/resolve.wgsl`: sums over the pixels of the
+/// variance of their mean luminance and of their mean luminance.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ProgressSums {
+    pub variance_of_mean: f32,
+    pub luminance: f32,
+    pub pixels: f32,
+    pub pad0: f32,
+}
+
+impl ProgressSums {
+    /// Root-mean-square standard error of the pixels' luminance over their mean luminance.
+    pub fn relative_standard_error(&self) -> f32 {
+        if self.luminance > 0.0 && self.pixels > 0.0 {
+            (self.variance_of_mean / self.pixels).sqrt() / (self.luminance / self.pixels)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// One registered method family.
+pub struct MethodEntry {
+    /// The protocol's method names this implementation serves.
+    pub methods: &'static [GiMethod],
+    /// The Rust type of the implementation (for [`crate::renderer::Renderer::gi`]).
+    pub type_id: fn() -> TypeId,
+    /// Checks the settings a frame of one of `methods` uses. `faces` is the light's face
+    /// count (6 for point lights).
+    pub validate: fn(&GiSettings, faces: u32) -> Result<(), InvalidSetting>,
+    /// Builds the per-scene state.
+    pub create: fn(&SceneResources) -> Result<Box<dyn Method>, GiError>,
+    /// Parameter descriptions and limits for `/v1/server`, one per name in `methods`.
+    pub describe: fn(&Limits) -> Vec<GiMethodInfo>,
+}
+
+/// Every method the renderer can run.
+pub const REGISTRY: &[MethodEntry] = &[none::ENTRY, lightskin::ENTRY, reference::ENTRY];
+
+/// The registry entry serving `method` and its index.
+pub fn entry(method: GiMethod) -> (usize, &'static MethodEntry) {
+    REGISTRY
+        .iter()
+        .enumerate()
+        .find(|(_, e)| e.methods.contains(&method))
+        .unwrap_or_else(|| panic!("GI method {method:?} is not registered in gi::REGISTRY"))
+}
+
+/// Descriptions of every registered method, in registry order, with the limits of a server
+/// configured with `limits`.
+pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
+    REGISTRY.iter().flat_map(|e| (e.describe)(limits)).collect()
 }
 
 #[cfg(test)]

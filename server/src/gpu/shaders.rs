@@ -136,6 +136,12 @@ pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
     ],
 };
 
+/// The reference's accumulation into the indirect buffer, with its convergence sums.
+pub const REFERENCE_RESOLVE: ShaderSource = ShaderSource {
+    name: "reference_resolve",
+    files: &[wgsl!("reference/resolve.wgsl")],
+};
+
 /// Nearest hits of a list of rays, to test the BVH traversal against the CPU.
 pub const REFERENCE_BVH_TEST: ShaderSource = ShaderSource {
     name: "reference_bvh_test",
@@ -160,6 +166,7 @@ pub const ALL: &[&ShaderSource] = &[
     &INDIRECT_LIGHT,
     &PROXY_OCCLUSION,
     &REFERENCE_PATH_TRACE,
+    &REFERENCE_RESOLVE,
     &REFERENCE_BVH_TEST,
 ];
 

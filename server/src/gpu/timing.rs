@@ -6,6 +6,7 @@
 //! by the CPU until the GPU is idle, which is slower and says so in [`TimingSource`].
 
 use super::{GpuContext, GpuError};
+use lightcast_protocol::Stage;
 use std::time::Instant;
 
 /// Where the stage times came from.
@@ -19,7 +20,7 @@ pub enum TimingSource {
 /// Time one stage took.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct StageTiming {
-    pub stage: &'static str,
+    pub stage: Stage,
     pub ms: f64,
 }
 
@@ -53,7 +54,7 @@ pub fn timestamp_staging(device: &wgpu::Device) -> wgpu::Buffer {
 /// Stage times of a submitted frame: known already (CPU wall clock) or still in a staging
 /// buffer the GPU will fill.
 pub struct PendingTimings {
-    names: Vec<&'static str>,
+    names: Vec<Stage>,
     ready: Vec<StageTiming>,
     staging: Option<(wgpu::Buffer, f64)>,
 }
@@ -73,7 +74,7 @@ impl PendingTimings {
 
 /// Timestamps being mapped.
 pub struct TimingsMap {
-    names: Vec<&'static str>,
+    names: Vec<Stage>,
     ready: Vec<StageTiming>,
     map: Option<(super::readback::PendingMap, f64)>,
 }
@@ -146,7 +147,7 @@ pub struct FrameStages<'a> {
     ctx: &'a GpuContext,
     timer: &'a mut FrameTimer,
     encoder: Option<wgpu::CommandEncoder>,
-    names: Vec<&'static str>,
+    names: Vec<Stage>,
     wall: Vec<StageTiming>,
     submitted: Option<wgpu::SubmissionIndex>,
 }
@@ -164,7 +165,7 @@ impl FrameStages<'_> {
     /// Encodes one named stage.
     pub fn stage(
         &mut self,
-        name: &'static str,
+        name: Stage,
         encode: impl FnOnce(&mut wgpu::CommandEncoder),
     ) -> Result<(), GpuError> {
         let index = self.names.len() as u32;

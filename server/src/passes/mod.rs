@@ -25,6 +25,9 @@ pub mod scene_buffers;
 pub mod shadow_map;
 pub mod tonemap;
 
+/// Format of the indirect-light buffer every GI method writes and direct light adds in.
+pub const INDIRECT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
 /// Workgroup edge of the 2D compute passes (8×8 threads).
 pub const TILE: u32 = 8;
 

@@ -1,7 +1,9 @@
 //! `lightcast-server serve` options: where to listen, limits and auth.
 
+use crate::gi::lightskin::{MAX_RSM_SIZE, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};
+use crate::gi::reference::{MAX_BOUNCES, MAX_SAMPLES_PER_CALL};
 use crate::gpu::BackendChoice;
-use crate::renderer::{MAX_RSM_SIZE, MAX_SHADOW_MAP_SIZE, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};
+use crate::renderer::MAX_SHADOW_MAP_SIZE;
 use lightcast_protocol::Limits;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -59,6 +61,9 @@ pub struct LimitArgs {
     /// Most view samples per frame.
     #[arg(long, env = "LIGHTCAST_MAX_VIEW_SAMPLES", default_value_t = 4096)]
     pub max_view_samples: u32,
+    /// `reference`: most samples per pixel a frame (or one-shot render) may take.
+    #[arg(long, env = "LIGHTCAST_MAX_SPP", default_value_t = 256)]
+    pub max_spp: u32,
     /// Largest shadow map side.
     #[arg(long, env = "LIGHTCAST_MAX_SHADOW_MAP_SIZE", default_value_t = 4096)]
     pub max_shadow_map_size: u32,
@@ -143,6 +148,12 @@ impl LimitArgs {
             MAX_VIEW_SAMPLES.into(),
         )?;
         within(
+            "max-spp",
+            self.max_spp.into(),
+            1,
+            MAX_SAMPLES_PER_CALL.into(),
+        )?;
+        within(
             "max-shadow-map-size",
             self.max_shadow_map_size.into(),
             16,
@@ -177,6 +188,8 @@ impl LimitArgs {
             max_rsm_size: self.max_rsm_size,
             max_val_count: self.max_val_count,
             max_view_samples: self.max_view_samples,
+            max_spp: self.max_spp,
+            max_bounces: MAX_BOUNCES,
             max_shadow_map_size: self.max_shadow_map_size,
             max_fps: self.max_fps,
             max_sessions: self.max_sessions,
@@ -223,5 +236,43 @@ impl ServeArgs {
             });
         }
         Ok(tokens)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    #[derive(clap::Parser)]
+    struct Args {
+        #[command(flatten)]
+        limits: super::LimitArgs,
+    }
+
+    /// Every protocol method has exactly one implementation and one description, whose
+    /// maxima are the server's.
+    #[test]
+    fn every_gi_method_is_registered_once_and_described() {
+        use lightcast_protocol::GiMethod;
+        let limits = Args::parse_from(["test", "--max-spp", "64"])
+            .limits
+            .limits()
+            .expect("default limits are valid");
+        for &m in GiMethod::ALL {
+            let serving = crate::gi::REGISTRY
+                .iter()
+                .filter(|e| e.methods.contains(&m))
+                .count();
+            assert_eq!(serving, 1, "{m:?}");
+        }
+        let described = crate::gi::describe_all(&limits);
+        let names: Vec<GiMethod> = described.iter().map(|d| d.method).collect();
+        assert_eq!(names, GiMethod::ALL);
+        let spp = described
+            .iter()
+            .flat_map(|d| &d.parameters)
+            .find(|p| p.name == "spp")
+            .expect("the reference describes spp");
+        assert_eq!(spp.max, Some(64.0));
     }
 }

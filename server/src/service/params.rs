@@ -4,7 +4,8 @@
 use super::error::ApiError;
 use super::scenes::SceneEntry;
 use crate::debug_views::{self, ViewError};
-use crate::gi::{lightskin::caches::CacheParams, GiSettings};
+use crate::gi::lightskin::{caches::CacheParams, uses_light_caches};
+use crate::gi::GiSettings;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
 use lightcast_protocol::{Encoding, GiMethod, Limits, RenderParams, SessionParams, View};
@@ -21,7 +22,8 @@ pub struct Resolved {
 /// The renderer's own field names, as paths of the request's `render` object.
 fn request_field(renderer_field: &str) -> String {
     match renderer_field {
-        "rsm_size" | "view_samples" | "val_count" | "jitter" | "defensive" | "glossy_exponent" => {
+        "rsm_size" | "view_samples" | "val_count" | "jitter" | "defensive" | "glossy_exponent"
+        | "bounces" | "spp" => {
             format!("gi.{renderer_field}")
         }
         "light.cone" => "light.outer_cone".to_string(),
@@ -57,15 +59,23 @@ pub fn resolve(
         limits.max_shadow_map_size,
     )?;
     let g = &params.gi;
-    if g.method != GiMethod::None {
-        within("gi.rsm_size", g.rsm_size, 16, limits.max_rsm_size)?;
-        within("gi.val_count", g.val_count, 1, limits.max_val_count)?;
-        within(
-            "gi.view_samples",
-            g.view_samples,
-            1,
-            limits.max_view_samples,
-        )?;
+    match g.method {
+        GiMethod::None => {}
+        GiMethod::Lightskin => within("gi.rsm_size", g.rsm_size, 16, limits.max_rsm_size)?,
+        GiMethod::Brsm => {
+            within("gi.rsm_size", g.rsm_size, 16, limits.max_rsm_size)?;
+            within("gi.val_count", g.val_count, 1, limits.max_val_count)?;
+            within(
+                "gi.view_samples",
+                g.view_samples,
+                1,
+                limits.max_view_samples,
+            )?;
+        }
+        GiMethod::Reference => {
+            within("gi.bounces", g.bounces, 1, limits.max_bounces)?;
+            within("gi.spp", g.spp, 1, limits.max_spp)?;
+        }
     }
     let exposure = match params.exposure {
         None => Exposure::Auto,
@@ -73,15 +83,15 @@ pub fn resolve(
         Some(s) => return Err(ApiError::field("exposure", format!("{s} must be > 0"))),
     };
     debug_views::check(params.view, g.method).map_err(|e| match e {
-        ViewError::NeedsGi { .. } | ViewError::NeedsBrsm { .. } => {
-            ApiError::field("view", e.to_string())
-        }
+        ViewError::NeedsGi { .. }
+        | ViewError::NeedsLightCaches { .. }
+        | ViewError::NeedsBrsm { .. } => ApiError::field("view", e.to_string()),
         ViewError::Gpu(g) => ApiError::internal(g.to_string()),
     })?;
-    let caches = if g.method == GiMethod::None {
-        None
-    } else {
+    let caches = if uses_light_caches(g.method) {
         Some(entry.cache_params(g.cache_distance, g.cache_angle)?)
+    } else {
+        None
     };
     let settings = RenderSettings {
         width: params.width,
@@ -98,6 +108,7 @@ pub fn resolve(
         shadow_map_size: params.shadow_map_size,
         capture_hdr: params.view == View::Indirect,
         gi: GiSettings::from(g),
+        history: None,
     };
     settings
         .validate_for(max_texture)

@@ -11,7 +11,7 @@ use crate::debug_views::{self, Image};
 use crate::gi::lightskin::caches::{CacheParams, CacheSet};
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
-use crate::renderer::{Frame, PendingFrame, Renderer};
+use crate::renderer::{Frame, FrameProgress, PendingFrame, Renderer};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_MOVING, FLAG_STILL};
 use lightcast_protocol::{FrameHeader, StageMs, View};
 use std::collections::{HashMap, VecDeque};
@@ -49,6 +49,8 @@ pub struct Rendered {
     pub indirect: Option<Vec<[f32; 4]>>,
     /// GI was requested but the light caches are still being computed (direct light only).
     pub gi_pending: bool,
+    /// Convergence of a progressive GI method (`reference`).
+    pub progress: Option<FrameProgress>,
 }
 
 impl Rendered {
@@ -83,7 +85,7 @@ pub enum Command {
 
 fn record_metrics(frame: &Frame) {
     for t in &frame.timings {
-        metrics::histogram!(super::metrics::STAGE_MS, "stage" => t.stage).record(t.ms);
+        metrics::histogram!(super::metrics::STAGE_MS, "stage" => t.stage.name()).record(t.ms);
     }
     metrics::histogram!(super::metrics::GPU_FRAME_MS).record(frame.total_ms());
     metrics::histogram!(super::metrics::READBACK_MS).record(frame.readback_ms);
@@ -280,6 +282,8 @@ impl Loop {
         slot.last_used = Instant::now();
         if let (Some(set), None) = (&caches, &slot.caches) {
             slot.renderer
+                .gi::<crate::gi::lightskin::LightSkin>()
+                .map_err(|e| render_error(&e))?
                 .set_caches(set)
                 .map_err(|e| ApiError::internal(e.to_string()))?;
             slot.caches = Some(Arc::clone(set));
@@ -340,8 +344,10 @@ impl Loop {
         let _ = job.reply.send(result);
     }
 
-    fn session_frame(&mut self, session: &Arc<Session>, plan: FramePlan) {
+    fn session_frame(&mut self, session: &Arc<Session>, mut plan: FramePlan) {
         let render_start_us = unix_us();
+        // A progressive method keeps refining this session's image while nothing changes.
+        plan.resolved.settings.history = Some(history_id(&session.id));
         if plan.resolved.view != View::Final {
             match self.render(&plan.lease_scene, &plan.resolved) {
                 Ok(rendered) => deliver(session, &plan, rendered, render_start_us, &self.encoder),
@@ -418,8 +424,12 @@ fn finish(
         frame.indirect.take()
     };
     let timings = std::mem::take(&mut frame.timings);
-    let (timing_source, readback_ms, exposure_scale) =
-        (frame.timing_source, frame.readback_ms, frame.exposure_scale);
+    let (timing_source, readback_ms, exposure_scale, progress) = (
+        frame.timing_source,
+        frame.readback_ms,
+        frame.exposure_scale,
+        frame.progress,
+    );
     let image = image(view, frame).map_err(|e| ApiError::internal(e.to_string()))?;
     Ok(Rendered {
         image,
@@ -430,6 +440,7 @@ fn finish(
         hdr,
         indirect,
         gi_pending,
+        progress,
     })
 }
 
@@ -479,8 +490,10 @@ fn deliver(
         stages: rendered
             .timings
             .iter()
-            .filter_map(|t| FrameHeader::stage_index(t.stage).map(|i| (i, t.ms as f32)))
+            .map(|t| (t.stage.index(), t.ms as f32))
             .collect(),
+        samples: rendered.progress.map_or(0, |p| p.samples),
+        relative_error: rendered.progress.map_or(0.0, |p| p.relative_standard_error),
     };
     let seq = header.seq;
     let session = Arc::clone(session);
@@ -513,6 +526,14 @@ struct Submitted {
 
 fn cache_key(p: &CacheParams) -> (u32, u32) {
     (p.d_eps.to_bits(), p.theta_eps_degrees.to_bits())
+}
+
+/// The image history of a session (see `RenderSettings::history`): a hash of its id.
+fn history_id(session_id: &str) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    session_id.hash(&mut hasher);
+    hasher.finish()
 }
 
 #[cfg(test)]

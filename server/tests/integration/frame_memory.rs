@@ -7,6 +7,7 @@
 
 use super::support;
 use lightcast_server::gi::lightskin::caches;
+use lightcast_server::gi::lightskin::LightSkin;
 use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::renderer::Renderer;
 use lightcast_server::scene::{default_light, procedural};
@@ -45,7 +46,11 @@ fn measure_in_child() {
     };
     let set = caches::precompute(&scene, &params, &mut |_| {}).expect("caches");
     let mut renderer = Renderer::new(ctx, scene.clone());
-    renderer.set_caches(&set).expect("caches fit the scene");
+    renderer
+        .gi::<LightSkin>()
+        .expect("LightSkin is registered")
+        .set_caches(&set)
+        .expect("caches fit the scene");
     for method in [GiMethod::None, GiMethod::Lightskin, GiMethod::Brsm] {
         let mut settings = support::settings(
             32,

@@ -7,6 +7,7 @@ use glam::Vec3;
 use lightcast_protocol::{Light, LightKind};
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::sampling::SamplingReadback;
+use lightcast_server::gi::lightskin::LightSkin;
 use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::passes::frame_uniforms::light_faces;
 use lightcast_server::renderer::{RenderSettings, Renderer};
@@ -27,13 +28,18 @@ fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiSettings {
         uniform_importance: false,
         occlusion: false,
         glossy_exponent: None,
+        ..GiSettings::default()
     }
 }
 
 fn renderer_with_caches(scene: &Scene) -> Renderer {
     let caches = precompute(scene, &CacheParams::for_scene(scene), &mut |_| {}).expect("caches");
     let mut renderer = Renderer::new(gpu(), scene.clone());
-    renderer.set_caches(&caches).expect("caches fit the scene");
+    renderer
+        .gi::<LightSkin>()
+        .expect("LightSkin is registered")
+        .set_caches(&caches)
+        .expect("caches fit the scene");
     renderer
 }
 
@@ -43,6 +49,8 @@ fn run(scene: &Scene, light: Light, sampling: GiSettings) -> (RenderSettings, Sa
     let mut renderer = renderer_with_caches(scene);
     renderer.render(&s).expect("render");
     let readback = renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_sampling()
         .expect("readback")
         .expect("sampling ran");

@@ -9,6 +9,7 @@ use lightcast_server::gi::lightskin::cpu::{
     light_cache, proxy_visibility, shade, OccluderDisk, ProxyLight, ProxyLights, RefCache,
     RefSurface, RefVal,
 };
+use lightcast_server::gi::lightskin::LightSkin;
 use lightcast_server::gi::{GiMethod, GiSettings};
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -28,6 +29,7 @@ fn gi(method: GiMethod, rsm_size: u32, val_count: u32) -> GiSettings {
         uniform_importance: false,
         occlusion: false,
         glossy_exponent: None,
+        ..GiSettings::default()
     }
 }
 
@@ -58,7 +60,11 @@ fn run_with(scene: Scene, d_eps: f32, gi: GiSettings, triangle_ids: bool) -> Run
     let mut ctx = gpu();
     ctx.primitive_index &= triangle_ids;
     let mut renderer = Renderer::new(ctx, scene.clone());
-    renderer.set_caches(&caches).expect("caches fit");
+    renderer
+        .gi::<LightSkin>()
+        .expect("LightSkin is registered")
+        .set_caches(&caches)
+        .expect("caches fit");
     let mut settings = settings(W, H, default_camera(&scene), default_light(&scene));
     settings.gi = gi;
     let frame = renderer.render(&settings).expect("render");
@@ -109,6 +115,8 @@ fn proxy_errors(run: &Run, vals: &[RefVal]) -> Vec<f32> {
 fn proxy_errors_with(run: &Run, vals: &[RefVal], glossy_exponent: Option<f32>) -> Vec<f32> {
     let lighting = run
         .renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_cache_lighting()
         .expect("readback")
         .expect("GI ran");
@@ -150,6 +158,8 @@ fn brsm_cache_lighting_matches_the_cpu_reference() {
     let run = run(gi(GiMethod::Brsm, 32, 2048));
     let sampling = run
         .renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_sampling()
         .expect("readback")
         .expect("sampled");
@@ -165,6 +175,8 @@ fn a_glossy_exponent_override_matches_the_cpu_reference_with_that_exponent() {
     });
     let sampling = run
         .renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_sampling()
         .expect("readback")
         .expect("sampled");
@@ -190,6 +202,8 @@ fn occlusion_runs(d_eps: f32) -> (Vec<CacheLighting>, Vec<CacheLighting>, Vec<Oc
     let occluded = run_scene(procedural::cornell_box(), d_eps, settings);
     let read = |run: &Run| {
         run.renderer
+            .gi_if_created::<LightSkin>()
+            .expect("a GI frame ran")
             .read_cache_lighting()
             .expect("readback")
             .expect("GI ran")
@@ -255,6 +269,8 @@ fn lightskin_cache_lighting_matches_the_cpu_reference_over_every_texel() {
     let run = run(gi(GiMethod::Lightskin, 24, 1));
     let sampling = run
         .renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_sampling()
         .expect("readback")
         .expect("sampled");
@@ -300,6 +316,8 @@ fn check_interpolation(triangle_ids: bool) {
     assert!(triangle_ids || !blend, "provoking vertices were asked for");
     let lighting = run
         .renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_cache_lighting()
         .expect("readback")
         .expect("GI ran");
@@ -473,7 +491,11 @@ fn chunked_dispatches_give_the_unchunked_results() {
     let caches = precompute(&scene, &CacheParams::for_scene(&scene), &mut |_| {}).expect("caches");
     assert!(caches.caches.len() as u64 * 16_384 > 1 << 26);
     let mut renderer = Renderer::new(gpu(), scene.clone());
-    renderer.set_caches(&caches).expect("caches fit");
+    renderer
+        .gi::<LightSkin>()
+        .expect("LightSkin is registered")
+        .set_caches(&caches)
+        .expect("caches fit");
     let mut settings = settings(W, H, default_camera(&scene), default_light(&scene));
     settings.gi = GiSettings {
         view_samples: 4096,
@@ -481,10 +503,14 @@ fn chunked_dispatches_give_the_unchunked_results() {
     };
     renderer.render(&settings).expect("render");
     let sampling = renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_sampling()
         .expect("readback")
         .expect("sampled");
     let lighting = renderer
+        .gi_if_created::<LightSkin>()
+        .expect("a GI frame ran")
         .read_cache_lighting()
         .expect("readback")
         .expect("GI ran");
@@ -555,7 +581,10 @@ fn frames_of_sizes_served_in_turn_match_fresh_renderers() {
     let caches = precompute(&scene, &params, &mut |_| {}).expect("caches");
     let renderer = || {
         let mut r = Renderer::new(gpu(), scene.clone());
-        r.set_caches(&caches).expect("caches fit");
+        r.gi::<LightSkin>()
+            .expect("LightSkin is registered")
+            .set_caches(&caches)
+            .expect("caches fit");
         r
     };
     let at = |width, height, shift: f32, method| {

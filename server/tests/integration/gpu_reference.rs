@@ -396,3 +396,72 @@ fn accumulation_restarts_when_the_camera_moves() {
         .expect("accumulate");
     assert_eq!(tracer.samples(), 2);
 }
+
+/// `reference` as a frame's GI method: each frame adds `spp` samples to its history's
+/// accumulation and writes the mean into the indirect buffer, equal (within the buffer's f16
+/// precision) to the tracer's own accumulation of as many samples; histories do not reset
+/// each other; frames without a history start afresh; the convergence the frame reports is
+/// the CPU resolve's.
+#[test]
+fn reference_frames_accumulate_per_history_and_match_the_tracer() {
+    use lightcast_server::gi::{GiMethod, GiSettings};
+    use lightcast_server::renderer::Renderer;
+    let p = plates();
+    let (w, h) = (16, 12);
+    let mut renderer = Renderer::new(support::gpu(), p.scene.clone());
+    let mut settings = support::settings(w, h, p.camera.clone(), p.light.clone());
+    settings.gi = GiSettings {
+        method: GiMethod::Reference,
+        spp: 8,
+        ..GiSettings::default()
+    };
+    let mut frame_of = |history| {
+        let mut s = settings.clone();
+        s.history = history;
+        renderer.render(&s).expect("frame")
+    };
+    let first = frame_of(Some(1));
+    frame_of(Some(2));
+    let third = frame_of(Some(1));
+    let samples = |f: &lightcast_server::renderer::Frame| f.progress.expect("progress").samples;
+    assert_eq!(samples(&first), 8);
+    assert_eq!(samples(&third), 16, "history 2 must not restart history 1");
+    let fresh = frame_of(None);
+    assert_eq!(samples(&fresh), 8);
+    assert_eq!(samples(&frame_of(None)), 8);
+
+    let mut tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
+    let truth = converge(
+        &mut tracer,
+        (w, h),
+        &p.camera,
+        &p.light,
+        &ReferenceSettings::default(),
+        16,
+    );
+    let indirect = third.indirect.as_ref().expect("captured");
+    let mut lit = 0;
+    for (got, want) in indirect.iter().zip(&truth.indirect) {
+        for c in 0..3 {
+            // f16 has an 11-bit significand: 2^-11 relative, plus denormals near 0.
+            let tolerance = want[c].abs() * 2e-3 + 1e-6;
+            assert!(
+                (got[c] - want[c]).abs() <= tolerance,
+                "frame {got:?} vs tracer {want:?}"
+            );
+        }
+        lit += usize::from(luminance(*want) > 0.0);
+    }
+    assert!(lit > indirect.len() / 2, "most pixels see indirect light");
+    let reported = third.progress.expect("progress").relative_standard_error;
+    let expected = truth.relative_standard_error;
+    assert!(
+        (reported - expected).abs() <= expected * 1e-3,
+        "GPU-reduced relative error {reported} vs CPU {expected}"
+    );
+    let after_8 = first.progress.expect("progress").relative_standard_error;
+    assert!(
+        reported < after_8,
+        "error falls with samples: {after_8} at 8 spp, {reported} at 16"
+    );
+}

@@ -357,12 +357,13 @@ fn base_colour_texture_is_sampled_as_srgb() {
 fn every_stage_is_timed_in_order() {
     let scene = procedural::cornell_box();
     let frame = render(scene.clone(), &default_settings(&scene, 32, 32));
-    let names: Vec<&str> = frame.timings.iter().map(|t| t.stage).collect();
+    let names: Vec<&str> = frame.timings.iter().map(|t| t.stage.name()).collect();
     assert_eq!(
         names,
         [
             "shadow_map",
             "gbuffer",
+            "indirect_clear",
             "direct_light",
             "exposure",
             "tonemap",

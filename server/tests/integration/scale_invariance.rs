@@ -9,6 +9,7 @@ use crate::support::*;
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
+use lightcast_server::gi::lightskin::LightSkin;
 use lightcast_server::gi::{GiMethod, GiSettings, DEFAULT_DEFENSIVE};
 use lightcast_server::renderer::{Frame, Renderer};
 use lightcast_server::scene::{procedural, Scene};
@@ -83,6 +84,7 @@ fn methods() -> [GiSettings; 3] {
         uniform_importance: method == GiMethod::Brsm,
         occlusion: true,
         glossy_exponent: None,
+        ..GiSettings::default()
     };
     [
         GiSettings::off(),
@@ -97,7 +99,11 @@ fn render_methods(scene: &Scene, camera: &Camera, light: &Light) -> (f32, Vec<Fr
     let params = CacheParams::for_scene(scene);
     let caches = precompute(scene, &params, &mut |_| {}).expect("caches");
     let mut renderer = Renderer::new(gpu(), scene.clone());
-    renderer.set_caches(&caches).expect("caches fit the scene");
+    renderer
+        .gi::<LightSkin>()
+        .expect("LightSkin is registered")
+        .set_caches(&caches)
+        .expect("caches fit the scene");
     let frames = methods()
         .into_iter()
         .map(|gi| {

@@ -5,7 +5,7 @@ use crate::gpu::shaders;
 use crate::passes::{gbuffer::GBuffer, Target};
 use bytemuck::{Pod, Zeroable};
 
-pub const INDIRECT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+use crate::passes::INDIRECT_FORMAT;
 
 /// Mirrors `IndirectParams` in `shaders/indirect_light.wgsl`.
 #[repr(C)]

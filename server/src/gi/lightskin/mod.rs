@@ -16,3 +16,329 @@ pub mod indirect_light;
 pub mod proxy_occlusion;
 pub mod sampling;
 pub mod val_select;
+
+use super::{
+    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
+    SceneResources,
+};
+use crate::gpu::{readback::read_buffer, timing::FrameStages, GpuContext, GpuError};
+use crate::passes::{frame_uniforms::light_faces, gbuffer::GBuffer};
+use cache_buffers::CacheBuffers;
+use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
+use caches::CacheSet;
+use indirect_light::{CacheInputs, IndirectLightPass};
+use lightcast_protocol::{GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage};
+use proxy_occlusion::ProxyOcclusionPass;
+use sampling::{SamplingReadback, ValSampling};
+use std::any::{Any, TypeId};
+
+/// Whether frames of `method` need the scene's light caches (precomputed per model).
+pub fn uses_light_caches(method: GiMethod) -> bool {
+    ENTRY.methods.contains(&method)
+}
+
+/// Largest RSM side per light face.
+pub const MAX_RSM_SIZE: u32 = 4096;
+/// Most RSM texels over all faces (each costs ~50 bytes across the sampling stages).
+pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
+/// Most view samples for the importance estimate.
+pub const MAX_VIEW_SAMPLES: u32 = 4096;
+/// Most VALs drawn per frame.
+pub const MAX_VAL_COUNT: u32 = 1 << 20;
+
+pub const ENTRY: MethodEntry = MethodEntry {
+    methods: &[GiMethod::Lightskin, GiMethod::Brsm],
+    type_id: TypeId::of::<LightSkin>,
+    validate,
+    create: |r| Ok(Box::new(LightSkin::new(r))),
+    describe,
+};
+
+/// Checks the parameters the two methods read.
+fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
+    let max_rsm = MAX_RSM_SIZE.min(((MAX_RSM_TEXELS / u64::from(faces)) as f64).sqrt() as u32);
+    let range = |field, v: u32, lo: u32, hi: u32| {
+        if (lo..=hi).contains(&v) {
+            Ok(())
+        } else {
+            Err(InvalidSetting::new(
+                field,
+                format!("{v} is outside {lo}..={hi}"),
+            ))
+        }
+    };
+    range("rsm_size", g.rsm_size, 16, max_rsm)?;
+    if g.method == GiMethod::Brsm {
+        range("view_samples", g.view_samples, 1, MAX_VIEW_SAMPLES)?;
+        range("val_count", g.val_count, 1, MAX_VAL_COUNT)?;
+        if !(0.0..1.0).contains(&g.jitter) {
+            return Err(InvalidSetting::new(
+                "jitter",
+                format!("{} is outside [0, 1)", g.jitter),
+            ));
+        }
+        if !(0.0..=1.0).contains(&g.defensive) {
+            return Err(InvalidSetting::new(
+                "defensive",
+                format!("{} is outside [0, 1]", g.defensive),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Parameters of both methods, with the limits of a server configured with `limits`.
+fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
+    let d = lightcast_protocol::GiParams::default();
+    let int = |name: &str, default: u32, min: u32, max: u32, description: &str| GiParamInfo {
+        name: name.into(),
+        kind: GiParamKind::Integer,
+        default: default.into(),
+        min: Some(min.into()),
+        max: Some(max.into()),
+        description: description.into(),
+    };
+    let shared = [
+        int(
+            "rsm_size",
+            d.rsm_size,
+            16,
+            limits.max_rsm_size,
+            "RSM side per light face in texels; every texel is a virtual area light (VAL)",
+        ),
+        GiParamInfo {
+            name: "occlusion".into(),
+            kind: GiParamKind::Boolean,
+            default: d.occlusion.into(),
+            min: None,
+            max: None,
+            description: "Dim proxy lights hidden behind other caches (double projection)".into(),
+        },
+        GiParamInfo {
+            name: "cache_distance".into(),
+            kind: GiParamKind::OptionalNumber,
+            default: serde_json::Value::Null,
+            min: Some(0.0),
+            max: None,
+            description: "Light caches: largest distance d_eps from a surface point to its \
+                          cache, in scene units (null: from the scene's surface area)"
+                .into(),
+        },
+        GiParamInfo {
+            name: "cache_angle".into(),
+            kind: GiParamKind::OptionalNumber,
+            default: serde_json::Value::Null,
+            min: Some(0.0),
+            max: Some(90.0),
+            description: "Light caches: largest angle theta_eps between surface and cache \
+                          normals in degrees (null: 30)"
+                .into(),
+        },
+    ];
+    let brsm = [
+        int(
+            "val_count",
+            d.val_count,
+            1,
+            limits.max_val_count,
+            "N_sVAL: VALs drawn from the importance distribution per frame (eq. 13)",
+        ),
+        int(
+            "view_samples",
+            d.view_samples,
+            1,
+            limits.max_view_samples,
+            "N_VS: view samples estimating each VAL's importance (eq. 10-11)",
+        ),
+        GiParamInfo {
+            name: "defensive".into(),
+            kind: GiParamKind::Number,
+            default: f64::from(d.defensive).into(),
+            min: Some(0.0),
+            max: Some(1.0),
+            description: "Weight alpha of a uniform pdf mixed into the selection pdf (0: the \
+                          paper's plain importance sampling)"
+                .into(),
+        },
+    ];
+    vec![
+        GiMethodInfo {
+            method: GiMethod::Lightskin,
+            summary: "LightSkin (seed 004, eq. 3-9): every RSM texel lights every light \
+                      cache; caches are interpolated per pixel"
+                .into(),
+            progressive: false,
+            parameters: shared.to_vec(),
+        },
+        GiMethodInfo {
+            method: GiMethod::Brsm,
+            summary: "Bidirectional RSM (seed 004, eq. 10-15): LightSkin fed by an \
+                      importance-sampled subset of the RSM texels"
+                .into(),
+            progressive: false,
+            parameters: shared.iter().chain(&brsm).cloned().collect(),
+        },
+    ]
+}
+
+/// Per-scene state of the `lightskin` and `brsm` methods.
+pub struct LightSkin {
+    ctx: GpuContext,
+    sampling: ValSampling,
+    cache_pass: CacheLightingPass,
+    occlusion_pass: ProxyOcclusionPass,
+    indirect_pass: IndirectLightPass,
+    caches: Option<CacheBuffers>,
+    vertices: usize,
+    /// Whether the last frame ran the sampling stages (their buffers hold its results).
+    sampled: bool,
+}
+
+impl LightSkin {
+    pub fn new(r: &SceneResources) -> Self {
+        let device = &r.ctx.device;
+        Self {
+            ctx: r.ctx.clone(),
+            sampling: ValSampling::new(device, r.light, r.material_layout),
+            cache_pass: CacheLightingPass::new(device),
+            occlusion_pass: ProxyOcclusionPass::new(device),
+            indirect_pass: IndirectLightPass::new(device),
+            caches: None,
+            vertices: r.scene.vertices.len(),
+            sampled: false,
+        }
+    }
+
+    /// Uploads the scene's light caches (the per-model precomputation, see [`cache_store`]).
+    pub fn set_caches(&mut self, set: &CacheSet) -> Result<(), GiError> {
+        if set.vertex_caches.len() != self.vertices {
+            return Err(GiError::Scene(format!(
+                "light caches were computed for {} vertices, but the scene has {}",
+                set.vertex_caches.len(),
+                self.vertices
+            )));
+        }
+        self.caches = Some(CacheBuffers::new(&self.ctx.device, set));
+        Ok(())
+    }
+
+    /// Proxy lights of every cache from the last frame (blocking; for tests and debugging).
+    pub fn read_cache_lighting(&self) -> Result<Option<Vec<CacheLighting>>, GpuError> {
+        let Some(caches) = self.caches.as_ref().filter(|_| self.sampled) else {
+            return Ok(None);
+        };
+        let mut lighting: Vec<CacheLighting> =
+            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, &caches.lighting)?);
+        lighting.truncate(caches.count as usize);
+        Ok(Some(lighting))
+    }
+
+    /// The sampling stages' results of the last frame, if it ran them (blocking readback).
+    pub fn read_sampling(&self) -> Result<Option<SamplingReadback>, GpuError> {
+        if !self.sampled {
+            return Ok(None);
+        }
+        self.sampling.read_back(&self.ctx).map(Some)
+    }
+}
+
+impl Method for LightSkin {
+    fn encode(
+        &mut self,
+        frame: &FrameInputs,
+        stages: &mut FrameStages,
+    ) -> Result<Option<ProgressBuffer>, GiError> {
+        let caches = self.caches.as_ref().ok_or_else(|| {
+            GiError::Scene(
+                "LightSkin needs the scene's light caches; call LightSkin::set_caches first".into(),
+            )
+        })?;
+        let r = frame.resources;
+        let gi = frame.settings;
+        let queue = &r.ctx.queue;
+        let device = &r.ctx.device;
+        self.sampling.prepare(
+            r.ctx,
+            frame.gbuffer,
+            &light_faces(frame.light, &r.scene.bounds),
+            gi,
+        );
+        let source = match gi.method {
+            GiMethod::Brsm => ValSource::Selected {
+                count: gi.val_count,
+            },
+            _ => ValSource::EveryTexel,
+        };
+        let lighting_chunks = self.cache_pass.prepare(
+            queue,
+            frame.camera.position,
+            caches.count,
+            self.sampling.rsm(),
+            source,
+            gi.glossy_exponent,
+        );
+        let occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
+        self.indirect_pass
+            .prepare(queue, true, r.ctx.primitive_index);
+        let lighting_group = self.cache_pass.bind(
+            device,
+            &caches.caches,
+            self.sampling.vals(),
+            self.sampling.rsm(),
+            &caches.lighting,
+            &caches.accum,
+        );
+        let occlusion_group =
+            self.occlusion_pass
+                .bind(device, &caches.caches, &caches.lighting, &caches.coverage);
+        let indirect_group = self.indirect_pass.bind(
+            device,
+            r.camera,
+            frame.gbuffer,
+            &CacheInputs {
+                caches: &caches.caches,
+                lighting: &caches.lighting,
+                vertex_caches: &caches.vertex_caches,
+                scene: r.scene_buffers,
+            },
+            frame.indirect,
+        );
+        self.sampled = true;
+        let sampling = &self.sampling;
+        stages.stage(Stage::Rsm, |e| sampling.encode_rsm(e, r.scene_buffers))?;
+        if gi.method == GiMethod::Brsm {
+            stages.stage(Stage::Importance, |e| sampling.encode_importance(e, gi))?;
+            stages.stage(Stage::CumulativeSums, |e| {
+                sampling.encode_cumulative_sums(e)
+            })?;
+            stages.stage(Stage::ValSelect, |e| sampling.encode_selection(e, gi))?;
+        }
+        stages.stage(Stage::CacheLighting, |e| {
+            self.cache_pass
+                .encode(e, &lighting_group, caches.count, lighting_chunks)
+        })?;
+        if gi.occlusion {
+            stages.stage(Stage::ProxyOcclusion, |e| {
+                self.occlusion_pass
+                    .encode(e, &occlusion_group, caches.count, occlusion_chunks)
+            })?;
+        }
+        stages.stage(Stage::IndirectLight, |e| {
+            self.indirect_pass
+                .encode(e, &indirect_group, frame.width, frame.height)
+        })?;
+        Ok(None)
+    }
+
+    fn retain_targets(&mut self, live: &[&GBuffer]) {
+        self.sampling.retain_gbuffers(live.iter().copied());
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

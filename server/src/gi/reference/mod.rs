@@ -11,24 +11,100 @@
 //! Samples accumulate while the camera, light, size and settings stay the same; each sample
 //! is one dispatch (short enough for lavapipe's silent dispatch limit at small sizes). Random
 //! numbers are a hash of pixel, sample index and seed, so the same request gives the same
-//! pixels on the same adapter.
+//! pixels on the same adapter. Each image history (a session; see [`FrameInputs::history`])
+//! keeps its own accumulation, so sessions on one scene do not restart each other; one-shot
+//! renders start afresh. As a frame's method it adds `spp` samples, then [`resolve`] writes
+//! the mean into the indirect buffer with the convergence sums the frame header reports.
 //!
 //! Not yet modelled: base-colour textures (materials use their factors) and alpha masks.
 
 pub mod bvh;
+pub mod resolve;
 
-use crate::gpu::{readback::read_buffer, shaders, GpuContext, GpuError};
+use super::{
+    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
+};
+use crate::gpu::{readback::read_buffer, shaders, timing::FrameStages, GpuContext, GpuError};
 use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
 use crate::passes::{self, ParamSlots};
 use crate::scene::{material, Material, Scene};
 use bytemuck::{Pod, Zeroable};
-use lightcast_protocol::{Camera, Light};
+use lightcast_protocol::{
+    Camera, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Light, Limits, Stage,
+};
+use std::any::{Any, TypeId};
 use wgpu::util::DeviceExt;
 
 /// Most bounces a path may take.
 pub const MAX_BOUNCES: u32 = 16;
-/// Samples per pixel one [`PathTracer::accumulate`] call encodes at most (one dispatch each).
-pub const MAX_SAMPLES_PER_CALL: u32 = 256;
+/// Samples per pixel one frame or [`PathTracer::accumulate`] call adds at most (one dispatch
+/// each).
+pub const MAX_SAMPLES_PER_CALL: u32 = 1024;
+/// Image histories (sessions) whose accumulations a scene's tracer keeps at once.
+const MAX_HISTORIES: usize = 4;
+/// The history of [`PathTracer::accumulate`]'s callers (bench, tests).
+const DIRECT_HISTORY: u64 = u64::MAX;
+
+pub const ENTRY: MethodEntry = MethodEntry {
+    methods: &[GiMethod::Reference],
+    type_id: TypeId::of::<PathTracer>,
+    validate,
+    create: |r| Ok(Box::new(PathTracer::new(r.ctx.clone(), r.scene)?)),
+    describe,
+};
+
+fn validate(g: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {
+    check_counts(g.bounces, g.spp)
+}
+
+fn check_counts(bounces: u32, spp: u32) -> Result<(), InvalidSetting> {
+    if !(1..=MAX_BOUNCES).contains(&bounces) {
+        return Err(InvalidSetting::new(
+            "bounces",
+            format!("{bounces} is outside 1..={MAX_BOUNCES}"),
+        ));
+    }
+    if !(1..=MAX_SAMPLES_PER_CALL).contains(&spp) {
+        return Err(InvalidSetting::new(
+            "spp",
+            format!("{spp} is outside 1..={MAX_SAMPLES_PER_CALL}"),
+        ));
+    }
+    Ok(())
+}
+
+fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
+    let d = lightcast_protocol::GiParams::default();
+    vec![GiMethodInfo {
+        method: GiMethod::Reference,
+        summary: "Path-traced reference: the converged indirect light (exact visibility, \
+                  the same BRDF and light), accumulated while nothing changes"
+            .into(),
+        progressive: true,
+        parameters: vec![
+            GiParamInfo {
+                name: "bounces".into(),
+                kind: GiParamKind::Integer,
+                default: d.bounces.into(),
+                min: Some(1.0),
+                max: Some(limits.max_bounces.into()),
+                description: "Reflections after the visible surface (1: the single bounce \
+                              seed 004 approximates)"
+                    .into(),
+            },
+            GiParamInfo {
+                name: "spp".into(),
+                kind: GiParamKind::Integer,
+                default: d.spp.into(),
+                min: Some(1.0),
+                max: Some(limits.max_spp.into()),
+                description: "Samples per pixel added each frame (a one-shot render takes \
+                              exactly this many)"
+                    .into(),
+            },
+        ],
+    }]
+}
 
 /// Mirrors `TraceParams` in `shaders/reference/path_trace.wgsl`.
 #[repr(C)]
@@ -108,6 +184,18 @@ pub enum ReferenceError {
     Gpu(#[from] GpuError),
 }
 
+impl From<ReferenceError> for GiError {
+    fn from(e: ReferenceError) -> Self {
+        match e {
+            ReferenceError::Bvh(b) => GiError::Scene(b.to_string()),
+            ReferenceError::InvalidSetting { field, reason } => {
+                GiError::Invalid(InvalidSetting { field, reason })
+            }
+            ReferenceError::Gpu(g) => GiError::Gpu(g),
+        }
+    }
+}
+
 /// The converged-so-far indirect light of every pixel.
 #[derive(Clone, Debug)]
 pub struct ReferenceImage {
@@ -126,6 +214,7 @@ pub struct ReferenceImage {
 /// What the accumulated samples were rendered with; a change restarts accumulation.
 #[derive(Clone, Debug, PartialEq)]
 struct AccumKey {
+    history: Option<u64>,
     width: u32,
     height: u32,
     camera: Camera,
@@ -142,7 +231,16 @@ pub struct PathTracer {
     params: ParamSlots,
     light: wgpu::Buffer,
     bounds: crate::scene::Aabb,
-    accum: Option<(AccumKey, wgpu::Buffer, u32)>,
+    /// Accumulations of the most recently used histories, most recent first.
+    accumulations: Vec<Accumulation>,
+    resolve: resolve::ResolvePass,
+}
+
+/// Per-pixel sums of radiance (rgb) and squared luminance (w) for one key.
+struct Accumulation {
+    key: AccumKey,
+    buffer: wgpu::Buffer,
+    samples: u32,
 }
 
 /// Layout of group 1: the BVH and the scene data shading reads (`bvh.wgsl`, `path_trace.wgsl`).
@@ -247,14 +345,67 @@ impl PathTracer {
             params,
             light,
             bounds: scene.bounds,
-            accum: None,
+            accumulations: Vec::new(),
+            resolve: resolve::ResolvePass::new(device),
             ctx,
         })
     }
 
-    /// Samples per pixel accumulated for the current camera, light, size and settings.
+    /// Samples per pixel accumulated by [`Self::accumulate`] for its last key.
     pub fn samples(&self) -> u32 {
-        self.accum.as_ref().map_or(0, |(_, _, n)| *n)
+        self.direct().map_or(0, |a| a.samples)
+    }
+
+    fn direct(&self) -> Option<&Accumulation> {
+        self.accumulations
+            .iter()
+            .find(|a| a.key.history == Some(DIRECT_HISTORY))
+    }
+
+    /// Makes the accumulation of `key` the first, restarting it (zeroed sums) when the key
+    /// is new or has no history to continue; clears are encoded into `encoder`.
+    fn ensure_accumulation(&mut self, encoder: &mut wgpu::CommandEncoder, key: AccumKey) {
+        let found = self.accumulations.iter().position(|a| a.key == key);
+        if let (Some(i), Some(_)) = (found, key.history) {
+            let hit = self.accumulations.remove(i);
+            self.accumulations.insert(0, hit);
+            return;
+        }
+        // A history that moved on (new camera, light, …) gives its buffer to the new key.
+        let same_history = self
+            .accumulations
+            .iter()
+            .position(|a| a.key.history == key.history);
+        let bytes = u64::from(key.width) * u64::from(key.height) * 16;
+        let reused = same_history
+            .map(|i| self.accumulations.remove(i))
+            .filter(|a| a.buffer.size() == bytes);
+        let buffer = match reused {
+            Some(a) => {
+                encoder.clear_buffer(&a.buffer, 0, None);
+                a.buffer
+            }
+            None => {
+                self.accumulations.truncate(MAX_HISTORIES - 1);
+                self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("reference accumulation"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::STORAGE
+                        | wgpu::BufferUsages::COPY_SRC
+                        | wgpu::BufferUsages::COPY_DST,
+                    // wgpu zero-initialises it: the sums start at 0.
+                    mapped_at_creation: false,
+                })
+            }
+        };
+        self.accumulations.insert(
+            0,
+            Accumulation {
+                key,
+                buffer,
+                samples: 0,
+            },
+        );
     }
 
     /// Adds `samples` samples per pixel (at most [`MAX_SAMPLES_PER_CALL`]), restarting the
@@ -268,39 +419,51 @@ impl PathTracer {
         settings: &ReferenceSettings,
         samples: u32,
     ) -> Result<(), ReferenceError> {
-        if !(1..=MAX_BOUNCES).contains(&settings.bounces) {
-            return Err(ReferenceError::InvalidSetting {
-                field: "bounces",
-                reason: format!("{} is outside 1..={MAX_BOUNCES}", settings.bounces),
+        check_counts(settings.bounces, samples).map_err(|e| ReferenceError::InvalidSetting {
+            field: e.field,
+            reason: e.reason,
+        })?;
+        let mut encoder = self
+            .ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("reference"),
             });
-        }
-        if !(1..=MAX_SAMPLES_PER_CALL).contains(&samples) {
-            return Err(ReferenceError::InvalidSetting {
-                field: "spp",
-                reason: format!("{samples} is outside 1..={MAX_SAMPLES_PER_CALL}"),
-            });
-        }
         let key = AccumKey {
+            history: Some(DIRECT_HISTORY),
             width,
             height,
             camera: camera.clone(),
             light: light.clone(),
             settings: *settings,
         };
+        self.ensure_accumulation(&mut encoder, key);
+        self.encode_samples(&mut encoder, samples);
+        self.ctx.queue.submit([encoder.finish()]);
+        self.ctx.wait_idle()?;
+        Ok(())
+    }
+
+    /// Encodes `samples` more samples into the first accumulation.
+    fn encode_samples(&mut self, encoder: &mut wgpu::CommandEncoder, samples: u32) {
         let device = &self.ctx.device;
-        if self.accum.as_ref().is_none_or(|(k, _, _)| *k != key) {
-            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("reference accumulation"),
-                size: u64::from(width) * u64::from(height) * 16,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                // wgpu zero-initialises it: the sums start at 0.
-                mapped_at_creation: false,
-            });
-            self.accum = Some((key, buffer, 0));
-        }
-        let Some((_, accum, done)) = self.accum.as_mut() else {
-            unreachable!("accumulation was just ensured");
+        let Some(Accumulation {
+            key:
+                AccumKey {
+                    width,
+                    height,
+                    camera,
+                    light,
+                    settings,
+                    ..
+                },
+            buffer: accum,
+            samples: done,
+        }) = self.accumulations.first_mut()
+        else {
+            return;
         };
+        let (width, height) = (*width, *height);
         let view_proj = camera_view_proj(camera, width as f32 / height as f32, &self.bounds);
         let scale = self
             .bounds
@@ -340,36 +503,83 @@ impl PathTracer {
                 passes::buffer_binding(2, accum),
             ],
         });
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("reference"),
-        });
-        {
-            let mut pass = passes::begin_compute(&mut encoder, "reference path trace");
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(1, &self.scene_group, &[]);
-            // One dispatch per sample, each reading its own parameter slot.
-            for i in 0..samples {
-                pass.set_bind_group(0, &group, &[ParamSlots::offset(i)]);
-                pass.dispatch_workgroups(
-                    width.div_ceil(passes::TILE),
-                    height.div_ceil(passes::TILE),
-                    1,
-                );
-            }
+        let mut pass = passes::begin_compute(encoder, "reference path trace");
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(1, &self.scene_group, &[]);
+        // One dispatch per sample, each reading its own parameter slot.
+        for i in 0..samples {
+            pass.set_bind_group(0, &group, &[ParamSlots::offset(i)]);
+            pass.dispatch_workgroups(
+                width.div_ceil(passes::TILE),
+                height.div_ceil(passes::TILE),
+                1,
+            );
         }
-        self.ctx.queue.submit([encoder.finish()]);
-        self.ctx.wait_idle()?;
+        drop(pass);
         *done += samples;
-        Ok(())
     }
 
-    /// The accumulated image (blocking readback).
+    /// The image [`Self::accumulate`] accumulated (blocking readback).
     pub fn read(&self) -> Result<Option<ReferenceImage>, ReferenceError> {
-        let Some((key, accum, samples)) = self.accum.as_ref() else {
+        let Some(a) = self.direct() else {
             return Ok(None);
         };
-        let sums: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, accum)?);
-        Ok(Some(resolve(key.width, key.height, *samples, &sums)))
+        let sums: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, &a.buffer)?);
+        Ok(Some(resolve(a.key.width, a.key.height, a.samples, &sums)))
+    }
+}
+
+impl Method for PathTracer {
+    fn encode(
+        &mut self,
+        frame: &FrameInputs,
+        stages: &mut FrameStages,
+    ) -> Result<Option<ProgressBuffer>, GiError> {
+        let g = frame.settings;
+        check_counts(g.bounces, g.spp)?;
+        let key = AccumKey {
+            history: frame.history,
+            width: frame.width,
+            height: frame.height,
+            camera: frame.camera.clone(),
+            light: frame.light.clone(),
+            settings: ReferenceSettings {
+                bounces: g.bounces,
+                seed: 0,
+                glossy_exponent: g.glossy_exponent,
+            },
+        };
+        stages.stage(Stage::PathTrace, |e| {
+            self.ensure_accumulation(e, key);
+            self.encode_samples(e, g.spp);
+        })?;
+        let Some(accumulation) = self.accumulations.first() else {
+            unreachable!("the accumulation was just ensured");
+        };
+        let samples = accumulation.samples;
+        let group = self.resolve.prepare(
+            &self.ctx.device,
+            &self.ctx.queue,
+            &accumulation.buffer,
+            samples,
+            frame.gbuffer,
+            frame.indirect,
+        );
+        stages.stage(Stage::ReferenceResolve, |e| {
+            self.resolve.encode(e, &group, frame.width, frame.height)
+        })?;
+        Ok(Some(ProgressBuffer {
+            samples,
+            buffer: self.resolve.progress.clone(),
+        }))
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
     }
 }
 

@@ -76,5 +76,6 @@ pub async fn server_info(State(state): State<Arc<AppState>>) -> Json<ServerInfo>
             .iter()
             .map(|s| s.to_string())
             .collect(),
+        gi_methods: crate::gi::describe_all(&state.limits),
     })
 }

@@ -166,7 +166,7 @@ pub async fn render(
     {
         return Err(ApiError::field(
             "format",
-            "raw_indirect needs GI; set render.gi.method to lightskin or brsm",
+            "raw_indirect needs GI; set render.gi.method to anything but none",
         ));
     }
     let mut resolved = resolve(&req.render, &entry, &state.limits, state.max_texture)

@@ -66,6 +66,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         shadow_map_size: 256,
         capture_hdr: true,
         gi: lightcast_server::gi::GiSettings::off(),
+        history: None,
     }
 }
 

@@ -1,0 +1,60 @@
+//! `none`: direct light only. Its one stage clears the indirect buffer, which the direct-light
+//! pass adds in (the buffer is shared by every method, so it may hold an earlier frame's light).
+
+use super::{
+    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
+};
+use crate::gpu::timing::FrameStages;
+use lightcast_protocol::{GiMethod, GiMethodInfo, Stage};
+use std::any::{Any, TypeId};
+
+pub struct NoIndirect;
+
+pub const ENTRY: MethodEntry = MethodEntry {
+    methods: &[GiMethod::None],
+    type_id: TypeId::of::<NoIndirect>,
+    validate,
+    create: |_| Ok(Box::new(NoIndirect)),
+    describe: |_| {
+        vec![GiMethodInfo {
+            method: GiMethod::None,
+            summary: "Direct light only.".into(),
+            progressive: false,
+            parameters: Vec::new(),
+        }]
+    },
+};
+
+fn validate(_: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {
+    Ok(())
+}
+
+impl Method for NoIndirect {
+    fn encode(
+        &mut self,
+        frame: &FrameInputs,
+        stages: &mut FrameStages,
+    ) -> Result<Option<ProgressBuffer>, GiError> {
+        stages.stage(Stage::IndirectClear, |e| {
+            e.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("clear indirect"),
+                color_attachments: &[Some(crate::passes::cleared_attachment(
+                    &frame.indirect.view,
+                ))],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+        })?;
+        Ok(None)
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

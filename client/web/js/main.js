@@ -349,6 +349,7 @@ async function boot() {
   $('server-info').textContent = `${s.build} · ${s.adapter}`;
   stats.setStageNames(s.stages);
   panel.applyLimits(s.limits);
+  panel.applyGiMethods(s.gi_methods || []);
   state.connection = new Connection(initialParams(), {
     onFrame,
     onSession,

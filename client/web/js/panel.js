@@ -30,21 +30,32 @@ function read(control) {
   }
 }
 
+/** The form's `data-kind` of a parameter kind of `/v1/server`'s `gi_methods`. */
+const KINDS = { integer: 'int', number: 'float', boolean: 'bool', optional_number: 'optional-float' };
+
 export class Panel {
   constructor(root, onPatch) {
-    this.controls = [...root.querySelectorAll('[data-field]')];
+    this.root = root;
+    this.onPatch = onPatch;
+    this.controls = [];
     this.outputs = new Map([...root.querySelectorAll('[data-output-for]')].map((o) => [o.dataset.outputFor, o]));
-    for (const control of this.controls) {
-      control.addEventListener('input', () => this.showOutput(control));
-      control.addEventListener('change', () => {
-        const { value, error } = read(control);
-        if (error) {
-          this.markError(control.dataset.field, error);
-          return;
-        }
-        onPatch(patchFor(control.dataset.field, value), control.dataset.field);
-      });
-    }
+    /** Per GI method: the names of the parameters it reads. */
+    this.methodParams = new Map();
+    this.summaries = new Map();
+    for (const control of root.querySelectorAll('[data-field]')) this.wire(control);
+  }
+
+  wire(control) {
+    this.controls.push(control);
+    control.addEventListener('input', () => this.showOutput(control));
+    control.addEventListener('change', () => {
+      const { value, error } = read(control);
+      if (error) {
+        this.markError(control.dataset.field, error);
+        return;
+      }
+      this.onPatch(patchFor(control.dataset.field, value), control.dataset.field);
+    });
   }
 
   control(field) {
@@ -53,17 +64,65 @@ export class Panel {
 
   /** Sets ranges from the server's limits (`GET /v1/server`). */
   applyLimits(limits) {
-    const rsm = this.control('render.gi.rsm_size');
-    const sizes = [];
-    for (let s = 64; s <= limits.max_rsm_size; s *= 2) sizes.push(s);
-    rsm.replaceChildren(...sizes.map((s) => new Option(`${s}²`, String(s))));
-    this.control('render.gi.view_samples').max = limits.max_view_samples;
-    this.control('render.gi.val_count').max = limits.max_val_count;
     this.control('fps_cap').max = limits.max_fps;
+  }
+
+  /**
+   * Builds the method list and every method's parameter controls from the server's
+   * description (`gi_methods` of `GET /v1/server`); only the current method's are shown.
+   */
+  applyGiMethods(methods) {
+    const select = this.control('render.gi.method');
+    select.replaceChildren(...methods.map((m) => {
+      const option = new Option(m.method, m.method);
+      option.title = m.summary;
+      return option;
+    }));
+    const container = this.root.querySelector('#gi-params');
+    const built = new Map();
+    for (const m of methods) {
+      this.summaries.set(m.method, m.summary);
+      this.methodParams.set(m.method, new Set(m.parameters.map((p) => p.name)));
+      for (const p of m.parameters) {
+        if (built.has(p.name)) continue;
+        const label = document.createElement('label');
+        label.dataset.giParam = p.name;
+        label.title = p.description;
+        const control = document.createElement('input');
+        control.dataset.field = `render.gi.${p.name}`;
+        control.dataset.kind = KINDS[p.kind] || 'string';
+        if (p.kind === 'boolean') {
+          control.type = 'checkbox';
+          label.className = 'inline';
+          label.append(control, ` ${p.name}`);
+        } else {
+          control.type = 'number';
+          control.step = p.kind === 'integer' ? '1' : 'any';
+          if (p.min !== undefined) control.min = String(p.min);
+          if (p.max !== undefined) control.max = String(p.max);
+          if (p.default === null) control.placeholder = 'default';
+          label.append(`${p.name} `, control);
+        }
+        container.append(label);
+        built.set(p.name, label);
+        this.wire(control);
+      }
+    }
+    this.giParamLabels = built;
+  }
+
+  /** Shows the parameters of `method` and hides the others'. */
+  showMethod(method) {
+    const names = this.methodParams.get(method) || new Set();
+    for (const [name, label] of this.giParamLabels || []) label.hidden = !names.has(name);
+    const summary = this.root.querySelector('#gi-method-summary');
+    if (summary) summary.textContent = this.summaries.get(method) || '';
   }
 
   /** Shows the session's parameters, leaving alone a control that is being edited. */
   show(params) {
+    const method = valueAt(params, 'render.gi.method');
+    if (method) this.showMethod(method);
     for (const control of this.controls) {
       if (document.activeElement === control && control.type === 'number') continue;
       const value = valueAt(params, control.dataset.field);

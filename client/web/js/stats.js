@@ -89,7 +89,8 @@ export class Stats {
     this.el.readback.textContent = fmt(mean((f) => f.header.readbackMs), 2);
     if (last) {
       const h = last.header;
-      this.el.frameInfo.textContent = `#${h.seq} · ${h.width}×${h.height} · ${h.mime === 'image/png' ? 'PNG' : `JPEG q${h.quality}`} · ${(h.bytes / 1024).toFixed(0)} KiB`;
+      const progress = h.samples > 0 ? ` · ${h.samples} spp, ±${(h.relativeError * 100).toFixed(1)} %` : '';
+      this.el.frameInfo.textContent = `#${h.seq} · ${h.width}×${h.height} · ${h.mime === 'image/png' ? 'PNG' : `JPEG q${h.quality}`} · ${(h.bytes / 1024).toFixed(0)} KiB${progress}`;
     }
     this.renderStageTable(recent);
     this.drawStages();

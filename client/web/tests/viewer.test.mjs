@@ -283,6 +283,19 @@ async function main() {
       await page.waitForSelector('#stage-rows tr[data-stage="cache_lighting"]', { timeout: PATIENCE_MS });
     });
 
+    await step('the parameter panel follows the method and the reference converges', async () => {
+      assert.ok(await page.locator('[data-field="render.gi.view_samples"]').isVisible(), 'brsm shows its view samples');
+      await page.selectOption('[data-field="render.gi.method"]', 'reference');
+      await page.waitForSelector('[data-field="render.gi.spp"]', { state: 'visible', timeout: PATIENCE_MS });
+      assert.ok(!(await page.locator('[data-field="render.gi.view_samples"]').isVisible()), 'reference hides BRSM parameters');
+      await page.waitForFunction(() => {
+        const m = /(\d+) spp/.exec(document.getElementById('frame-info').textContent);
+        return m && Number(m[1]) >= 8;
+      }, null, { timeout: PATIENCE_MS });
+      await page.selectOption('[data-field="render.gi.method"]', 'brsm');
+      await page.waitForSelector('[data-field="render.gi.view_samples"]', { state: 'visible', timeout: PATIENCE_MS });
+    });
+
     await step('a debug view shows', async () => {
       const diff = await changeAfter(page, () => page.selectOption('[data-field="render.view"]', 'rsm-flux'), 'the RSM flux view');
       assert.ok(diff > 4, `the RSM flux view looks like the frame: ${diff.toFixed(2)}`);

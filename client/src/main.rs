@@ -11,7 +11,7 @@ use anyhow::Context;
 use api::Client;
 use clap::{Parser, Subcommand};
 use flags::RenderFlags;
-use lightcast_protocol::{Codec, ImageFormat, RenderRequest, StreamMode};
+use lightcast_protocol::{Codec, GiMethod, ImageFormat, RenderRequest, StreamMode};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -84,6 +84,13 @@ struct RenderCmd {
     /// Render this many times and report timing statistics (the last image is written).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=1000))]
     repeat: u32,
+    /// Also render the same view with the path-traced reference and print the errors against
+    /// it (MAE, RMSE, relative MAE and bias of the indirect light; PSNR of the final image).
+    #[arg(long, value_enum)]
+    compare_to: Option<GiMethod>,
+    /// Samples per pixel of the comparison's reference (server default 256).
+    #[arg(long)]
+    compare_spp: Option<u32>,
     #[command(flatten)]
     render: RenderFlags,
 }
@@ -256,6 +263,8 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
         render: cmd.render.params(camera.as_ref(), light.as_ref()),
         format: cmd.format,
         quality: cmd.quality,
+        compare_to: cmd.compare_to,
+        compare_spp: cmd.compare_spp,
     };
     let mut reports = Vec::new();
     let mut walls = Vec::new();
@@ -292,6 +301,29 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
         "queue {:.1} ms, encode {:.1} ms",
         last.queue_ms, last.encode_ms
     );
+    if let Some(n) = last.samples {
+        println!("{n} samples per pixel");
+    }
+    if let Some(c) = &last.comparison {
+        println!(
+            "against {} ({} spp, its own relative error {:.2} %):",
+            c.against,
+            c.reference_samples,
+            c.reference_relative_error * 100.0
+        );
+        println!(
+            "  indirect MAE {:.4e}, RMSE {:.4e}, relative MAE {:.2} %, 8×8-block {:.2} %, bias {:+.2} %",
+            c.indirect_mae,
+            c.indirect_rmse,
+            c.indirect_mae_relative * 100.0,
+            c.indirect_block_mae_relative * 100.0,
+            c.indirect_bias_relative * 100.0
+        );
+        match c.final_psnr_db {
+            Some(p) => println!("  final image PSNR {p:.2} dB"),
+            None => println!("  final image identical"),
+        }
+    }
     if cmd.repeat > 1 {
         println!(
             "{} renders: GPU median {gpu_median:.3} ms, request median {wall_median:.1} ms",

@@ -149,6 +149,31 @@ async fn render_writes_the_image_and_a_report() {
         text.contains("cache_lighting") && text.contains("wrote"),
         "{text}"
     );
+    // Compared with the path-traced reference: the errors are printed.
+    let compared = lightcast(
+        &server.base,
+        &with(
+            &[
+                "render",
+                "--out",
+                out.to_str().unwrap(),
+                "--compare-to",
+                "reference",
+                "--compare-spp",
+                "8",
+            ],
+            SMALL,
+        ),
+    )
+    .await;
+    let text = String::from_utf8_lossy(&compared.stdout);
+    assert!(
+        compared.status.success()
+            && text.contains("against reference (8 spp")
+            && text.contains("relative MAE")
+            && text.contains("PSNR"),
+        "{text}"
+    );
     // A parameter the server refuses: exit 1 and the server's reason with the field.
     let bad = lightcast(
         &server.base,

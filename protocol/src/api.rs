@@ -472,6 +472,38 @@ pub struct RenderRequest {
     pub format: ImageFormat,
     /// JPEG quality 1–100 (default 90).
     pub quality: Option<u8>,
+    /// Also render the same view with this method (`reference`: the path-traced truth) and
+    /// report the errors of this render against it in the report's `comparison`. The
+    /// comparison render is cached by its parameters, so repeating it costs one render.
+    pub compare_to: Option<GiMethod>,
+    /// Samples per pixel of a `reference` comparison render (default 256; at most the
+    /// server's `max_spp`). Its bounces are `render.gi.bounces`.
+    pub compare_spp: Option<u32>,
+}
+
+/// A render's errors against another method's render of the same view (see
+/// `RenderRequest::compare_to`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Comparison {
+    pub against: GiMethod,
+    /// Samples per pixel of the reference (0 when `against` is not progressive).
+    pub reference_samples: u32,
+    /// The reference's own convergence: RMS standard error of pixel luminance over the mean.
+    pub reference_relative_error: f32,
+    /// Mean absolute error of the indirect buffer (linear radiance, per channel).
+    pub indirect_mae: f64,
+    /// Root-mean-square error of the indirect buffer.
+    pub indirect_rmse: f64,
+    /// `indirect_mae` over the reference's mean indirect radiance.
+    pub indirect_mae_relative: f64,
+    /// MAE of 8×8-pixel block means over the reference's mean (the reference's noise
+    /// averages out; errors in where the light lands remain).
+    pub indirect_block_mae_relative: f64,
+    /// Signed difference of the means over the reference's mean (> 0: too bright).
+    pub indirect_bias_relative: f64,
+    /// PSNR in dB of the final images, both tone-mapped with the reference's exposure;
+    /// `null` when they are identical.
+    pub final_psnr_db: Option<f64>,
 }
 
 /// The timing report of a one-shot render; sent in the `x-lightcast-report` header of the
@@ -498,6 +530,12 @@ pub struct RenderReport {
     /// The camera and light actually used (after scene defaults).
     pub camera: Camera,
     pub light: Light,
+    /// Samples per pixel of a progressive method (`reference`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub samples: Option<u32>,
+    /// Errors against `compare_to`'s render, when the request asked for one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub comparison: Option<Comparison>,
 }
 
 /// The server's limits; requests beyond them are refused with `invalid_field`.

@@ -13,6 +13,7 @@ use crate::gi::reference::luminance;
 use crate::gi::{lightskin::LightSkin, GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
+use crate::quality::{errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
@@ -117,25 +118,6 @@ pub struct BenchRow {
     pub difference_image: Option<Vec<u8>>,
 }
 
-/// Errors of an indirect buffer against the reference's, per channel over all pixels.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
-pub struct ErrorStats {
-    /// Mean absolute error.
-    pub mae: f64,
-    /// Root-mean-square error.
-    pub rmse: f64,
-    /// `mae` divided by the reference's mean.
-    pub mae_relative: f64,
-    /// MAE of the means of 8×8-pixel blocks over the reference's mean: the reference's noise
-    /// averages out over a block while errors in the light's distribution remain.
-    pub block_mae_relative: f64,
-    /// Signed difference of the image means over the reference's mean (too bright > 0).
-    pub bias_relative: f64,
-}
-
-/// Side of the pixel blocks of [`ErrorStats::block_mae_relative`].
-const BLOCK: usize = 8;
-
 /// The reference the rows were compared with.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ReferenceSummary {
@@ -220,37 +202,6 @@ fn mad(reference: &[[f32; 4]], other: &[[f32; 4]]) -> (f64, f64) {
     }
     let n = (reference.len() * 3).max(1) as f64;
     (diff / n, sum / n)
-}
-
-/// Errors of `other` against `truth`, both `width` pixels wide (RGB channels).
-fn errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> ErrorStats {
-    let (mut abs, mut sq, mut sum, mut other_sum) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    let height = truth.len() / width.max(1);
-    let (bw, bh) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
-    let mut blocks = vec![[0.0f64; 3]; bw * bh];
-    for (i, (a, b)) in truth.iter().zip(other).enumerate() {
-        let block = &mut blocks[(i / width / BLOCK) * bw + (i % width) / BLOCK];
-        for k in 0..3 {
-            let d = f64::from(a[k] - b[k]);
-            abs += d.abs();
-            sq += d * d;
-            sum += f64::from(a[k]);
-            other_sum += f64::from(b[k]);
-            block[k] += d;
-        }
-    }
-    let n = (truth.len() * 3).max(1) as f64;
-    let relative = |v: f64| if sum > 0.0 { v / sum } else { 0.0 };
-    // Block sums of differences; their absolute values summed over the image's sum is the
-    // MAE of block means over the mean.
-    let block_abs: f64 = blocks.iter().flatten().map(|d| d.abs()).sum();
-    ErrorStats {
-        mae: abs / n,
-        rmse: (sq / n).sqrt(),
-        mae_relative: relative(abs),
-        block_mae_relative: relative(block_abs),
-        bias_relative: relative(other_sum - sum),
-    }
 }
 
 /// sRGB-ish 8-bit value of a linear one (display gamma 2.2; the pictures are diagnostics).
@@ -679,26 +630,6 @@ mod tests {
         let s = stats(vec![5.0, 1.0, 3.0, 2.0, 4.0]);
         assert_eq!(s.median_ms, 3.0);
         assert_eq!(s.p95_ms, 5.0);
-    }
-
-    #[test]
-    fn errors_against_the_reference() {
-        // Two pixels in one block: +1 in red on the first, −1 in blue on the second... and a
-        // third pixel in the next block exactly right.
-        let truth = [[1.0, 2.0, 3.0], [0.0, 0.0, 2.0], [1.0; 3], [1.0; 3]];
-        let other = [
-            [2.0, 2.0, 3.0, 1.0],
-            [0.0, 0.0, 1.0, 1.0],
-            [1.0, 1.0, 1.0, 1.0],
-            [1.0, 1.0, 1.0, 1.0],
-        ];
-        let e = errors(&truth, &other, 2);
-        assert!((e.mae - 2.0 / 12.0).abs() < 1e-12);
-        assert!((e.rmse - (2.0f64 / 12.0).sqrt()).abs() < 1e-12);
-        assert!((e.mae_relative - 2.0 / 14.0).abs() < 1e-12);
-        // All four pixels share one 8×8 block: red +1 and blue −1 do not cancel (per channel).
-        assert!((e.block_mae_relative - 2.0 / 14.0).abs() < 1e-12);
-        assert!(e.bias_relative.abs() < 1e-12);
     }
 
     #[test]

@@ -228,7 +228,7 @@ mod tests {
             mad,
             mad_relative: mad,
             speedup_vs_lightskin: 1.0,
-            vs_reference: Some(crate::bench::ErrorStats {
+            vs_reference: Some(crate::quality::ErrorStats {
                 mae: mad,
                 rmse: mad,
                 mae_relative: mad,

@@ -11,6 +11,7 @@ pub mod gi;
 pub mod gpu;
 pub mod offline;
 pub mod passes;
+pub mod quality;
 pub mod renderer;
 pub mod scene;
 pub mod service;

@@ -13,7 +13,7 @@ use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::renderer::{Frame, FrameProgress, PendingFrame, Renderer};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_MOVING, FLAG_STILL};
-use lightcast_protocol::{FrameHeader, StageMs, View};
+use lightcast_protocol::{Comparison, FrameHeader, GiMethod, StageMs, View};
 use std::collections::{HashMap, VecDeque};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
@@ -28,6 +28,9 @@ const MAX_RENDERERS: usize = 16;
 const RENDERER_IDLE: Duration = Duration::from_secs(60);
 /// Longest sleep when nothing is due, so new work is noticed even without a wake-up.
 const IDLE_WAIT: Duration = Duration::from_millis(50);
+/// Comparison renders (see `RenderRequest::compare_to`) kept for repeated comparisons; each
+/// holds a frame's HDR and indirect buffers (32 bytes per pixel).
+const MAX_COMPARISONS: usize = 4;
 
 /// A one-shot render: the frame, read back and handed over unencoded.
 pub struct OneShot {
@@ -35,6 +38,8 @@ pub struct OneShot {
     pub resolved: Resolved,
     pub reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
     pub queued: Instant,
+    /// Render the same view with this method and `spp` samples too, and compare.
+    pub compare: Option<(GiMethod, u32)>,
 }
 
 /// A rendered frame: the image of the requested view plus what was measured.
@@ -74,6 +79,7 @@ impl Rendered {
 pub struct OneShotResult {
     pub rendered: Rendered,
     pub queue_ms: f64,
+    pub comparison: Option<Comparison>,
 }
 
 pub enum Command {
@@ -125,6 +131,8 @@ struct Loop {
     one_shot_turn: bool,
     /// Session frames waiting for the GPU, to the readback thread.
     readback: mpsc::SyncSender<ReadbackJob>,
+    /// Comparison renders by a hash of what they rendered, most recent first.
+    comparisons: Vec<(u64, Arc<Frame>)>,
 }
 
 /// Starts the render loop thread.
@@ -157,6 +165,7 @@ pub fn spawn(
                 one_shots: VecDeque::new(),
                 next_session: 0,
                 one_shot_turn: false,
+                comparisons: Vec::new(),
             };
             l.run(&rx);
             // Closing the channel lets the readback thread finish the frames in flight.
@@ -308,11 +317,22 @@ impl Loop {
         scene: &Arc<SceneEntry>,
         resolved: &Resolved,
     ) -> Result<Rendered, ApiError> {
+        self.render_inspected(scene, resolved, |_| Ok(()))
+    }
+
+    /// [`Self::render`], showing the read-back frame to `inspect` before it is taken apart.
+    fn render_inspected(
+        &mut self,
+        scene: &Arc<SceneEntry>,
+        resolved: &Resolved,
+        inspect: impl FnOnce(&Frame) -> Result<(), ApiError>,
+    ) -> Result<Rendered, ApiError> {
         let submitted = self.submit(scene, resolved)?;
         let frame = submitted
             .pending
             .wait()
             .map_err(|e| ApiError::internal(e.to_string()))?;
+        inspect(&frame)?;
         let Some(slot) = self.renderers.get(&submitted.key) else {
             return Err(ApiError::internal("the renderer vanished mid-frame"));
         };
@@ -338,10 +358,78 @@ impl Loop {
             return;
         }
         metrics::counter!(super::metrics::RENDERS).increment(1);
-        let result = self
-            .render(&job.scene, &job.resolved)
-            .map(|rendered| OneShotResult { rendered, queue_ms });
+        let result = match job.compare {
+            None => self
+                .render(&job.scene, &job.resolved)
+                .map(|rendered| OneShotResult {
+                    rendered,
+                    queue_ms,
+                    comparison: None,
+                }),
+            Some((method, spp)) => {
+                self.compared(&job, method, spp)
+                    .map(|(rendered, c)| OneShotResult {
+                        rendered,
+                        queue_ms,
+                        comparison: Some(c),
+                    })
+            }
+        };
         let _ = job.reply.send(result);
+    }
+
+    /// A one-shot render and its comparison with `method`'s render (`spp` samples) of the
+    /// same view, which is rendered once per distinct view and parameters.
+    fn compared(
+        &mut self,
+        job: &OneShot,
+        method: GiMethod,
+        spp: u32,
+    ) -> Result<(Rendered, Comparison), ApiError> {
+        let mut truth = job.resolved.clone();
+        truth.settings.gi.method = method;
+        truth.settings.gi.spp = spp;
+        truth.settings.capture_hdr = true;
+        truth.settings.history = None;
+        truth.view = View::Final;
+        truth.caches = None;
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            (&job.scene.id, format!("{:?}", truth.settings)).hash(&mut h);
+            h.finish()
+        };
+        let reference = match self.comparisons.iter().position(|(k, _)| *k == key) {
+            Some(i) => {
+                let hit = self.comparisons.remove(i);
+                self.comparisons.insert(0, hit.clone());
+                hit.1
+            }
+            None => {
+                let submitted = self.submit(&job.scene, &truth)?;
+                let frame = Arc::new(
+                    submitted
+                        .pending
+                        .wait()
+                        .map_err(|e| ApiError::internal(e.to_string()))?,
+                );
+                self.comparisons.truncate(MAX_COMPARISONS - 1);
+                self.comparisons.insert(0, (key, Arc::clone(&frame)));
+                frame
+            }
+        };
+        let mut resolved = job.resolved.clone();
+        resolved.settings.capture_hdr = true;
+        let mut comparison = None;
+        let rendered = self.render_inspected(&job.scene, &resolved, |frame| {
+            let c = crate::quality::compare(frame, &reference, method)
+                .map_err(|e| ApiError::internal(e.to_string()))?;
+            comparison = Some(c);
+            Ok(())
+        })?;
+        let comparison =
+            comparison.ok_or_else(|| ApiError::internal("the comparison was not made"))?;
+        Ok((rendered, comparison))
     }
 
     fn session_frame(&mut self, session: &Arc<Session>, mut plan: FramePlan) {

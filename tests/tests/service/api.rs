@@ -102,6 +102,38 @@ async fn one_shot_renders_are_reproducible_and_report_what_ran() {
     server.stop().await;
 }
 
+/// `compare_to: reference` reports a method's errors against the path-traced reference; the
+/// reference itself compared with an equal reference has none (same seed, same pixels), and a
+/// repeated comparison (served from the cache) reports the same numbers.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn renders_compare_with_the_reference() {
+    let server = TestServer::start(&[]).await;
+    let brsm = json!({
+        "render": {"width": 40, "height": 30, "shadow_map_size": 256,
+                   "gi": {"rsm_size": 32, "val_count": 256, "view_samples": 64}},
+        "compare_to": "reference", "compare_spp": 16
+    });
+    let (a, _) = render(&server, &brsm).await;
+    let c = a.comparison.expect("a comparison");
+    assert_eq!(c.reference_samples, 16);
+    assert!(c.reference_relative_error > 0.0);
+    assert!(c.indirect_mae > 0.0 && c.indirect_mae.is_finite());
+    assert!(c.indirect_mae_relative > 0.0 && c.indirect_mae_relative < 10.0);
+    assert!(c.final_psnr_db.is_some_and(|p| p > 5.0 && p < 100.0));
+    let (again, _) = render(&server, &brsm).await;
+    assert_eq!(again.comparison.expect("comparison"), c);
+
+    let mut reference = brsm.clone();
+    reference["render"]["gi"] = json!({"method": "reference", "spp": 16});
+    let (r, _) = render(&server, &reference).await;
+    assert_eq!(r.samples, Some(16));
+    let same = r.comparison.expect("comparison");
+    assert_eq!(same.indirect_mae, 0.0, "the reference equals itself");
+    assert_eq!(same.final_psnr_db, None);
+    assert!(r.stages.iter().any(|s| s.stage == "path_trace"));
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn scenes_upload_inspect_use_and_delete() {
     let server = TestServer::start(&[]).await;
@@ -606,6 +638,30 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             400,
             "invalid_field",
             Some("format"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"compare_to":"brsm"}"#,
+            400,
+            "invalid_field",
+            Some("compare_to"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"compare_to":"reference","compare_spp":0}"#,
+            400,
+            "invalid_field",
+            Some("compare_spp"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"reference","spp":100000}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.spp"),
         ),
         case(
             "POST",

@@ -15,6 +15,9 @@ use sha2::{Digest, Sha256};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+/// Samples per pixel of a `compare_to: reference` render when the request names none.
+const DEFAULT_COMPARE_SPP: u32 = 256;
+
 /// Header carrying the JSON [`RenderReport`].
 pub const REPORT_HEADER: &str = "x-lightcast-report";
 
@@ -169,6 +172,37 @@ pub async fn render(
             "raw_indirect needs GI; set render.gi.method to anything but none",
         ));
     }
+    let compare = match req.compare_to {
+        None => None,
+        Some(lightcast_protocol::GiMethod::Reference) => {
+            let spp = req.compare_spp.unwrap_or(DEFAULT_COMPARE_SPP);
+            if !(1..=state.limits.max_spp).contains(&spp) {
+                return Err(ApiError::field(
+                    "compare_spp",
+                    format!(
+                        "{spp} is outside this server's range 1..={}",
+                        state.limits.max_spp
+                    ),
+                ));
+            }
+            if !(1..=state.limits.max_bounces).contains(&req.render.gi.bounces) {
+                return Err(ApiError::field(
+                    "render.gi.bounces",
+                    format!(
+                        "{} is outside this server's range 1..={}",
+                        req.render.gi.bounces, state.limits.max_bounces
+                    ),
+                ));
+            }
+            Some((lightcast_protocol::GiMethod::Reference, spp))
+        }
+        Some(other) => {
+            return Err(ApiError::field(
+                "compare_to",
+                format!("renders compare with 'reference' only, not '{other}'"),
+            ))
+        }
+    };
     let mut resolved = resolve(&req.render, &entry, &state.limits, state.max_texture)
         .map_err(|e| e.within("render"))?;
     resolved.settings.capture_hdr |= raw;
@@ -188,6 +222,7 @@ pub async fn render(
             resolved: resolved.clone(),
             reply: tx,
             queued: Instant::now(),
+            compare,
         })))
         .map_err(|_| ApiError::unavailable("the render loop has stopped"))?;
     let result = rx
@@ -231,6 +266,8 @@ pub async fn render(
         exposure_scale: rendered.exposure_scale,
         camera: resolved.settings.camera,
         light: resolved.settings.light,
+        samples: rendered.progress.map(|p| p.samples),
+        comparison: result.comparison,
     };
     let report_json =
         ascii_json(&serde_json::to_string(&report).map_err(|e| ApiError::internal(e.to_string()))?);

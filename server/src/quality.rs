@@ -1,0 +1,162 @@
+//! Quality of an image against the truth: error statistics of a GI method's indirect buffer
+//! against the path-traced reference's (`bench`, `render --compare-to`, `POST /v1/render`
+//! with `compare_to`) and PSNR of tone-mapped frames.
+
+use crate::passes::tonemap::tonemap_cpu;
+use crate::renderer::Frame;
+use lightcast_protocol::{Comparison, GiMethod};
+
+/// Errors of an indirect buffer against the reference's, per channel over all pixels.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct ErrorStats {
+    /// Mean absolute error.
+    pub mae: f64,
+    /// Root-mean-square error.
+    pub rmse: f64,
+    /// `mae` divided by the reference's mean.
+    pub mae_relative: f64,
+    /// MAE of the means of 8×8-pixel blocks over the reference's mean: the reference's noise
+    /// averages out over a block while errors in the light's distribution remain.
+    pub block_mae_relative: f64,
+    /// Signed difference of the image means over the reference's mean (too bright > 0).
+    pub bias_relative: f64,
+}
+
+/// Side of the pixel blocks of [`ErrorStats::block_mae_relative`].
+const BLOCK: usize = 8;
+
+/// Errors of `other` against `truth`, both `width` pixels wide (RGB channels).
+pub fn errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> ErrorStats {
+    let (mut abs, mut sq, mut sum, mut other_sum) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let height = truth.len() / width.max(1);
+    let (bw, bh) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
+    let mut blocks = vec![[0.0f64; 3]; bw * bh];
+    for (i, (a, b)) in truth.iter().zip(other).enumerate() {
+        let block = &mut blocks[(i / width / BLOCK) * bw + (i % width) / BLOCK];
+        for k in 0..3 {
+            let d = f64::from(a[k] - b[k]);
+            abs += d.abs();
+            sq += d * d;
+            sum += f64::from(a[k]);
+            other_sum += f64::from(b[k]);
+            block[k] += d;
+        }
+    }
+    let n = (truth.len() * 3).max(1) as f64;
+    let relative = |v: f64| if sum > 0.0 { v / sum } else { 0.0 };
+    // Block sums of differences; their absolute values summed over the image's sum is the
+    // MAE of block means over the mean.
+    let block_abs: f64 = blocks.iter().flatten().map(|d| d.abs()).sum();
+    ErrorStats {
+        mae: abs / n,
+        rmse: (sq / n).sqrt(),
+        mae_relative: relative(abs),
+        block_mae_relative: relative(block_abs),
+        bias_relative: relative(other_sum - sum),
+    }
+}
+
+/// Peak signal-to-noise ratio in dB of two RGB8 images (infinite when equal).
+pub fn psnr(a: &[[u8; 3]], b: &[[u8; 3]]) -> f64 {
+    let n = (a.len() * 3).max(1) as f64;
+    let sq: f64 = a
+        .iter()
+        .zip(b)
+        .flat_map(|(x, y)| (0..3).map(move |k| f64::from(x[k]) - f64::from(y[k])))
+        .map(|d| d * d)
+        .sum();
+    if sq == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0 * 255.0 / (sq / n)).log10()
+    }
+}
+
+/// Why two frames cannot be compared.
+#[derive(Debug, thiserror::Error)]
+pub enum CompareError {
+    #[error("the frames differ in size ({0}×{1} vs {2}×{3})")]
+    Size(u32, u32, u32, u32),
+    #[error("frames to compare must be rendered with capture_hdr")]
+    NotCaptured,
+}
+
+/// `frame` (of any GI method) against `reference` (the same view rendered by `against`):
+/// errors of the indirect buffers, and PSNR of the final images tone-mapped alike (with the
+/// reference's exposure, so automatic exposure does not count as error).
+pub fn compare(
+    frame: &Frame,
+    reference: &Frame,
+    against: GiMethod,
+) -> Result<Comparison, CompareError> {
+    if (frame.width, frame.height) != (reference.width, reference.height) {
+        return Err(CompareError::Size(
+            frame.width,
+            frame.height,
+            reference.width,
+            reference.height,
+        ));
+    }
+    let (Some(indirect), Some(truth_indirect), Some(hdr), Some(truth_hdr)) = (
+        &frame.indirect,
+        &reference.indirect,
+        &frame.hdr,
+        &reference.hdr,
+    ) else {
+        return Err(CompareError::NotCaptured);
+    };
+    let truth: Vec<[f32; 3]> = truth_indirect.iter().map(|p| [p[0], p[1], p[2]]).collect();
+    let e = errors(&truth, indirect, frame.width as usize);
+    let exposure = reference.exposure_scale;
+    let tonemap = |hdr: &[[f32; 4]]| -> Vec<[u8; 3]> {
+        hdr.iter()
+            .map(|p| tonemap_cpu([p[0], p[1], p[2]], exposure))
+            .collect()
+    };
+    let progress = reference.progress;
+    Ok(Comparison {
+        against,
+        reference_samples: progress.map_or(0, |p| p.samples),
+        reference_relative_error: progress.map_or(0.0, |p| p.relative_standard_error),
+        indirect_mae: e.mae,
+        indirect_rmse: e.rmse,
+        indirect_mae_relative: e.mae_relative,
+        indirect_block_mae_relative: e.block_mae_relative,
+        indirect_bias_relative: e.bias_relative,
+        final_psnr_db: Some(psnr(&tonemap(hdr), &tonemap(truth_hdr))).filter(|p| p.is_finite()),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_against_the_reference() {
+        // Two pixels in one block: +1 in red on the first, −1 in blue on the second... and a
+        // third pixel in the next block exactly right.
+        let truth = [[1.0, 2.0, 3.0], [0.0, 0.0, 2.0], [1.0; 3], [1.0; 3]];
+        let other = [
+            [2.0, 2.0, 3.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0],
+            [1.0, 1.0, 1.0, 1.0],
+            [1.0, 1.0, 1.0, 1.0],
+        ];
+        let e = errors(&truth, &other, 2);
+        assert!((e.mae - 2.0 / 12.0).abs() < 1e-12);
+        assert!((e.rmse - (2.0f64 / 12.0).sqrt()).abs() < 1e-12);
+        assert!((e.mae_relative - 2.0 / 14.0).abs() < 1e-12);
+        // All four pixels share one 8×8 block: red +1 and blue −1 do not cancel (per channel).
+        assert!((e.block_mae_relative - 2.0 / 14.0).abs() < 1e-12);
+        assert!(e.bias_relative.abs() < 1e-12);
+    }
+
+    #[test]
+    fn psnr_of_a_known_difference() {
+        let a = [[10u8, 20, 30], [0, 0, 0]];
+        assert!(psnr(&a, &a).is_infinite());
+        // One channel off by 255 out of six: MSE = 255²/6, PSNR = 10·log10(6).
+        let b = [[10u8, 20, 30], [255, 0, 0]];
+        assert!((psnr(&a, &b) - 10.0 * 6f64.log10()).abs() < 1e-9);
+    }
+}

@@ -170,6 +170,7 @@ fn main() -> anyhow::Result<()> {
                 exposure: Exposure::Auto,
                 shadow_map_size: 256,
                 capture_hdr: false,
+                debug_view: lightcast_protocol::View::Final,
                 gi: GiSettings {
                     method,
                     rsm_size: 32,

@@ -375,6 +375,7 @@ pub fn run(
         exposure: args.exposure.0,
         shadow_map_size: 2048,
         capture_hdr: false,
+        debug_view: lightcast_protocol::View::Final,
         gi: GiSettings::default(),
         history: None,
     };

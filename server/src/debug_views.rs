@@ -3,12 +3,12 @@
 //! They are built on the CPU from buffers read back after a frame.
 
 use crate::gi::lightskin::{
-    cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback, LightSkin,
+    cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback,
 };
 use crate::gi::{lightskin::uses_light_caches, GiMethod};
 use crate::gpu::GpuError;
 use crate::passes::{exposure::KEY, frame_uniforms::camera_view_proj, tonemap::tonemap_cpu};
-use crate::renderer::{Frame, Renderer};
+use crate::renderer::Frame;
 use crate::scene::Aabb;
 use glam::{Vec3, Vec4Swizzles};
 use lightcast_protocol::Camera;
@@ -42,17 +42,18 @@ pub fn check(view: View, method: GiMethod) -> Result<(), ViewError> {
     Ok(())
 }
 
-/// The image of `view` for a frame `renderer` just rendered (`frame` must have been rendered
-/// with `capture_hdr` for the indirect view; `caches` are the scene's light caches).
+/// The image of `view` for `frame`, rendered with `capture_hdr` for the indirect view and
+/// with `debug_view` = `view` for the others; `bounds` are the scene's and `caches` its light
+/// caches.
 pub fn compose(
     view: View,
-    renderer: &Renderer,
     frame: Frame,
     camera: &Camera,
+    bounds: &Aabb,
     caches: Option<&[LightCache]>,
 ) -> Result<Image, ViewError> {
     let needs_gi = ViewError::NeedsGi { view };
-    let lightskin = renderer.gi_if_created::<LightSkin>();
+    let debug = frame.debug.clone();
     Ok(match view {
         View::Final => Image {
             width: frame.width,
@@ -61,26 +62,24 @@ pub fn compose(
         },
         View::Indirect => indirect(&frame).ok_or(needs_gi)?,
         View::RsmFlux | View::Importance | View::SelectedVals => {
-            let sampling = match lightskin {
-                Some(l) => l.read_sampling()?,
-                None => None,
-            }
-            .ok_or(needs_gi)?;
+            let sampling = debug
+                .as_ref()
+                .and_then(|d| d.0.downcast_ref::<SamplingReadback>())
+                .ok_or(needs_gi)?;
             match view {
-                View::RsmFlux => rsm_flux(&sampling),
-                View::Importance => importance(&sampling),
-                _ => selected_vals(&sampling),
+                View::RsmFlux => rsm_flux(sampling),
+                View::Importance => importance(sampling),
+                _ => selected_vals(sampling),
             }
         }
         View::Caches => {
-            let lighting = match lightskin {
-                Some(l) => l.read_cache_lighting()?,
-                None => None,
-            };
+            let lighting = debug
+                .as_ref()
+                .and_then(|d| d.0.downcast_ref::<Vec<CacheLighting>>());
             let (Some(lighting), Some(caches)) = (lighting, caches) else {
                 return Err(needs_gi);
             };
-            self::caches(&frame, camera, &renderer.scene().bounds, caches, &lighting)
+            self::caches(&frame, camera, bounds, caches, lighting)
         }
     })
 }

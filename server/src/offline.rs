@@ -345,6 +345,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
+        debug_view: View::Final,
         gi: GiSettings {
             method: args.gi,
             rsm_size: args.rsm_size,
@@ -400,15 +401,16 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     debug_views::check(args.view, args.gi)?;
     let mut settings = settings;
     settings.capture_hdr = args.view == View::Indirect;
+    settings.debug_view = args.view;
     let frame = renderer.render(&settings)?;
     let exposure_scale = frame.exposure_scale;
     let timing_source = frame.timing_source;
     let stages = frame.timings.clone();
     let image = debug_views::compose(
         args.view,
-        &renderer,
         frame,
         &settings.camera,
+        &renderer.scene().bounds,
         caches.as_ref().map(|set| set.caches.as_slice()),
     )?;
     write_png(&image, &args.out)?;

@@ -4,7 +4,8 @@
 //! No async runtime is involved; the offline `render` command and tests drive it directly.
 
 use crate::gi::{
-    self, FrameInputs, GiError, GiSettings, Method, ProgressBuffer, ProgressSums, SceneResources,
+    self, DebugCapture, DebugData, FrameInputs, GiError, GiSettings, Method, ProgressBuffer,
+    ProgressSums, SceneResources,
 };
 use crate::gpu::{
     readback::{PendingMap, TextureReadback},
@@ -23,7 +24,7 @@ use crate::passes::{
 };
 use crate::scene::Scene;
 use glam::Vec3;
-use lightcast_protocol::{Camera, Light, Stage};
+use lightcast_protocol::{Camera, Light, Stage, View};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -57,6 +58,8 @@ pub struct RenderSettings {
     pub shadow_map_size: u32,
     /// Also read back the linear HDR radiance (before exposure).
     pub capture_hdr: bool,
+    /// Also read back what this debug view shows (see [`Frame::debug`]); `Final`: nothing.
+    pub debug_view: View,
     /// Indirect light: method and parameters.
     pub gi: GiSettings,
     /// The image history a progressive GI method may continue (a session's id); `None`
@@ -84,6 +87,8 @@ pub struct Frame {
     pub readback_ms: f64,
     /// How far a progressive GI method (`reference`) has converged.
     pub progress: Option<FrameProgress>,
+    /// The GI method's data for [`RenderSettings::debug_view`], when it has any.
+    pub debug: Option<DebugData>,
 }
 
 /// Convergence of a progressive method's image.
@@ -299,6 +304,8 @@ pub struct PendingFrame {
     exposure: wgpu::Buffer,
     /// Samples accumulated and the staging buffer of the [`ProgressSums`].
     progress: Option<(u32, wgpu::Buffer)>,
+    /// The GI method's staged copies for the debug view.
+    debug: Option<Box<dyn DebugCapture>>,
     timings: PendingTimings,
     timing_source: TimingSource,
     submission: Option<wgpu::SubmissionIndex>,
@@ -343,6 +350,10 @@ impl PendingFrame {
             }
             None => None,
         };
+        let debug = match self.debug {
+            Some(capture) => Some(capture.read(&self.ctx)?),
+            None => None,
+        };
         Ok(Frame {
             width: self.width,
             height: self.height,
@@ -354,6 +365,7 @@ impl PendingFrame {
             exposure_scale: exposure.scale,
             readback_ms: started.elapsed().as_secs_f64() * 1e3,
             progress,
+            debug,
         })
     }
 }
@@ -669,7 +681,9 @@ impl Renderer {
         stages.stage(Stage::Tonemap, |e| {
             self.tonemap_pass.encode(e, &sized.tonemap, width, height)
         })?;
+        let mut debug = None;
         stages.stage(Stage::ReadbackCopy, |e| {
+            debug = method.capture_debug(settings.debug_view, &self.ctx.device, e);
             set.ldr.encode_copy(e, &sized.ldr.texture);
             if settings.capture_hdr {
                 set.hdr.encode_copy(e, &sized.hdr.texture);
@@ -691,6 +705,7 @@ impl Renderer {
                 .then(|| (set.hdr.clone(), set.indirect.clone())),
             exposure: set.exposure.clone(),
             progress: progress.map(|p| (p.samples, set.progress.clone())),
+            debug,
             timings,
             timing_source: self.timer.source(),
             submission,

@@ -19,7 +19,7 @@ pub mod reference;
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{gbuffer::GBuffer, scene_buffers::SceneBuffers, Target};
 use crate::scene::Scene;
-use lightcast_protocol::{Camera, GiMethodInfo, Light, Limits};
+use lightcast_protocol::{Camera, GiMethodInfo, Light, Limits, View};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
@@ -167,6 +167,18 @@ pub trait Method: Any {
         stages: &mut FrameStages,
     ) -> Result<Option<ProgressBuffer>, GiError>;
 
+    /// Encodes copies of what debug view `view` shows of this frame (after its stages), to
+    /// be read with the frame on the readback side; `None` if the method has nothing for it.
+    fn capture_debug(
+        &self,
+        view: View,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Option<Box<dyn DebugCapture>> {
+        let _ = (view, device, encoder);
+        None
+    }
+
     /// The renderer dropped the targets of output sizes other than `live`: release anything
     /// made for them.
     fn retain_targets(&mut self, live: &[&GBuffer]) {
@@ -204,6 +216,22 @@ impl ProgressSums {
         } else {
             0.0
         }
+    }
+}
+
+/// A method's staged copies for a debug view, read once the frame's submission is done.
+pub trait DebugCapture: Send {
+    /// Maps the copies (the frame's submission must have been submitted) and decodes them.
+    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError>;
+}
+
+/// What a debug view shows of a frame, in the method's own types (`debug_views` knows them).
+#[derive(Clone)]
+pub struct DebugData(pub Arc<dyn Any + Send + Sync>);
+
+impl std::fmt::Debug for DebugData {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("DebugData")
     }
 }
 

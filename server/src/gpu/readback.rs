@@ -149,6 +149,23 @@ impl PendingMap {
     }
 }
 
+/// Encodes a copy of a whole `COPY_SRC` buffer into a new `MAP_READ` buffer, returned for
+/// reading once the encoder's submission has finished.
+pub fn stage_buffer(
+    device: &wgpu::Device,
+    encoder: &mut wgpu::CommandEncoder,
+    buffer: &wgpu::Buffer,
+) -> wgpu::Buffer {
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: buffer.size(),
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, None);
+    staging
+}
+
 /// Copies a whole `COPY_SRC` buffer into a new staging buffer and reads it (blocking: for
 /// tests and debugging, not the frame loop).
 pub fn read_buffer(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {

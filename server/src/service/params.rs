@@ -107,6 +107,7 @@ pub fn resolve(
         exposure,
         shadow_map_size: params.shadow_map_size,
         capture_hdr: params.view == View::Indirect,
+        debug_view: params.view,
         gi: GiSettings::from(g),
         history: None,
     };

@@ -122,7 +122,6 @@ struct Loop {
     ctx: GpuContext,
     scenes: Arc<SceneRegistry>,
     sessions: Arc<SessionRegistry>,
-    encoder: Arc<EncodePool>,
     renderers: HashMap<RendererKey, Slot>,
     one_shots: VecDeque<Box<OneShot>>,
     /// Index into the session list where the next round-robin search starts.
@@ -147,10 +146,9 @@ pub fn spawn(
     // which it hands over once the readback thread is free. Deeper queues only made the
     // frames wait longer on lavapipe (where the "GPU" shares the CPU).
     let (readback, readback_rx) = mpsc::sync_channel(0);
-    let readback_encoder = Arc::clone(&encoder);
     let readback_thread = std::thread::Builder::new()
         .name("readback".into())
-        .spawn(move || readback_thread(readback_rx, readback_encoder))
+        .spawn(move || readback_thread(readback_rx, encoder))
         .expect("spawning the readback thread");
     let handle = std::thread::Builder::new()
         .name("render-loop".into())
@@ -160,7 +158,6 @@ pub fn spawn(
                 ctx,
                 scenes,
                 sessions,
-                encoder,
                 renderers: HashMap::new(),
                 one_shots: VecDeque::new(),
                 next_session: 0,
@@ -306,7 +303,7 @@ impl Loop {
             view,
             gi_pending,
             camera: settings.camera,
-            key,
+            caches: slot.caches.clone(),
         })
     }
 
@@ -333,9 +330,6 @@ impl Loop {
             .wait()
             .map_err(|e| ApiError::internal(e.to_string()))?;
         inspect(&frame)?;
-        let Some(slot) = self.renderers.get(&submitted.key) else {
-            return Err(ApiError::internal("the renderer vanished mid-frame"));
-        };
         finish(
             frame,
             submitted.view,
@@ -343,10 +337,10 @@ impl Loop {
             |view, frame| {
                 debug_views::compose(
                     view,
-                    &slot.renderer,
                     frame,
                     &submitted.camera,
-                    slot.caches.as_ref().map(|c| c.caches.as_slice()),
+                    &scene.scene.bounds,
+                    submitted.caches.as_ref().map(|c| c.caches.as_slice()),
                 )
             },
         )
@@ -436,19 +430,15 @@ impl Loop {
         let render_start_us = unix_us();
         // A progressive method keeps refining this session's image while nothing changes.
         plan.resolved.settings.history = Some(history_id(&session.id));
-        if plan.resolved.view != View::Final {
-            match self.render(&plan.lease_scene, &plan.resolved) {
-                Ok(rendered) => deliver(session, &plan, rendered, render_start_us, &self.encoder),
-                Err(e) => session.frame_failed(e.body),
-            }
-            return;
-        }
         match self.submit(&plan.lease_scene, &plan.resolved) {
             // The wait for the GPU happens on the readback thread while this one encodes the
             // next frame.
             Ok(submitted) => {
                 let job = ReadbackJob {
                     pending: submitted.pending,
+                    view: submitted.view,
+                    camera: submitted.camera,
+                    caches: submitted.caches,
                     gi_pending: submitted.gi_pending,
                     session: Arc::clone(session),
                     plan,
@@ -467,6 +457,10 @@ impl Loop {
 /// A session frame on its way from the GPU to the encoder.
 struct ReadbackJob {
     pending: PendingFrame,
+    /// The view to compose (debug views from the data read back with the frame).
+    view: View,
+    camera: lightcast_protocol::Camera,
+    caches: Option<Arc<CacheSet>>,
     gi_pending: bool,
     session: Arc<Session>,
     plan: FramePlan,
@@ -481,12 +475,14 @@ fn readback_thread(jobs: mpsc::Receiver<ReadbackJob>, encoder: Arc<EncodePool>) 
             .wait()
             .map_err(|e| ApiError::internal(e.to_string()))
             .and_then(|frame| {
-                finish(frame, View::Final, job.gi_pending, |_, frame| {
-                    Ok(Image {
-                        width: frame.width,
-                        height: frame.height,
-                        rgba8: frame.rgba8,
-                    })
+                finish(frame, job.view, job.gi_pending, |view, frame| {
+                    debug_views::compose(
+                        view,
+                        frame,
+                        &job.camera,
+                        &job.plan.lease_scene.scene.bounds,
+                        job.caches.as_ref().map(|c| c.caches.as_slice()),
+                    )
                 })
             });
         match rendered {
@@ -609,7 +605,8 @@ struct Submitted {
     view: View,
     gi_pending: bool,
     camera: lightcast_protocol::Camera,
-    key: RendererKey,
+    /// The light caches the frame used, for the `caches` view.
+    caches: Option<Arc<CacheSet>>,
 }
 
 fn cache_key(p: &CacheParams) -> (u32, u32) {

@@ -18,19 +18,21 @@ pub mod sampling;
 pub mod val_select;
 
 use super::{
-    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
-    SceneResources,
+    DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
+    ProgressBuffer, SceneResources,
 };
-use crate::gpu::{readback::read_buffer, timing::FrameStages, GpuContext, GpuError};
+use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap};
+use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{frame_uniforms::light_faces, gbuffer::GBuffer};
 use cache_buffers::CacheBuffers;
 use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
 use caches::CacheSet;
 use indirect_light::{CacheInputs, IndirectLightPass};
-use lightcast_protocol::{GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage};
+use lightcast_protocol::{GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage, View};
 use proxy_occlusion::ProxyOcclusionPass;
 use sampling::{SamplingReadback, ValSampling};
 use std::any::{Any, TypeId};
+use std::sync::Arc;
 
 /// Whether frames of `method` need the scene's light caches (precomputed per model).
 pub fn uses_light_caches(method: GiMethod) -> bool {
@@ -181,6 +183,28 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
     ]
 }
 
+impl DebugCapture for sampling::SamplingCapture {
+    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError> {
+        Ok(DebugData(Arc::new((*self).read(ctx)?)))
+    }
+}
+
+/// The proxy lights of every cache, staged for the `caches` view.
+struct LightingCapture {
+    staged: wgpu::Buffer,
+    count: usize,
+}
+
+impl DebugCapture for LightingCapture {
+    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError> {
+        let map = PendingMap::new(&self.staged);
+        ctx.wait_idle()?;
+        let mut lighting: Vec<CacheLighting> = bytemuck::pod_collect_to_vec(&map.finish()?);
+        lighting.truncate(self.count);
+        Ok(DebugData(Arc::new(lighting)))
+    }
+}
+
 /// Per-scene state of the `lightskin` and `brsm` methods.
 pub struct LightSkin {
     ctx: GpuContext,
@@ -328,6 +352,27 @@ impl Method for LightSkin {
                 .encode(e, &indirect_group, frame.width, frame.height)
         })?;
         Ok(None)
+    }
+
+    fn capture_debug(
+        &self,
+        view: View,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Option<Box<dyn DebugCapture>> {
+        match view {
+            View::RsmFlux | View::Importance | View::SelectedVals => {
+                Some(Box::new(self.sampling.capture(device, encoder)))
+            }
+            View::Caches => {
+                let caches = self.caches.as_ref()?;
+                Some(Box::new(LightingCapture {
+                    staged: stage_buffer(device, encoder, &caches.lighting),
+                    count: caches.count as usize,
+                }))
+            }
+            View::Final | View::Indirect => None,
+        }
     }
 
     fn retain_targets(&mut self, live: &[&GBuffer]) {

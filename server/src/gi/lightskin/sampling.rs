@@ -8,6 +8,7 @@ use super::{
     val_select::{SelectionBuffers, Val, ValSelectPass},
 };
 use crate::gi::GiSettings;
+use crate::gpu::readback::{stage_buffer, PendingMap, TextureReadback};
 use crate::gpu::{GpuContext, GpuError};
 use crate::passes::{
     frame_uniforms::LightFace,
@@ -251,57 +252,111 @@ impl ValSampling {
     }
 
     /// Reads back every intermediate result (blocking; for tests and debug views).
-    pub fn read_back(&self, ctx: &GpuContext) -> Result<SamplingReadback, GpuError> {
+    /// Encodes copies of every sampling buffer of the last prepared frame into staging
+    /// buffers, to be read once the encoder's submission is done (see [`SamplingCapture`]).
+    pub fn capture(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> SamplingCapture {
         let res = self.res();
         let rsm = &res.rsm;
-        let read_buffer = |buffer: &wgpu::Buffer| crate::gpu::readback::read_buffer(ctx, buffer);
         // RGBA textures of 32-bit (16 bytes per texel) or 16-bit (8 bytes) floats.
-        let read_texture = |texture: &wgpu::Texture, bytes_per_texel: u32| {
-            let readback = crate::gpu::readback::TextureReadback::new(
-                &ctx.device,
-                "rsm readback",
-                rsm.width(),
-                rsm.height(),
-                bytes_per_texel,
-            );
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-            readback.encode_copy(&mut encoder, texture);
-            ctx.queue.submit([encoder.finish()]);
-            let bytes = readback.read(ctx)?;
-            let texels: Vec<[f32; 4]> = if bytes_per_texel == 8 {
+        let texture = |encoder: &mut wgpu::CommandEncoder, t: &wgpu::Texture, bytes: u32| {
+            let readback =
+                TextureReadback::new(device, "rsm readback", rsm.width(), rsm.height(), bytes);
+            readback.encode_copy(encoder, t);
+            (readback, bytes)
+        };
+        SamplingCapture {
+            rsm_width: rsm.width(),
+            rsm_height: rsm.height(),
+            view_samples: res.key.view_samples,
+            val_count: res.key.val_count,
+            rsm: [
+                texture(encoder, &rsm.position.texture, 16),
+                texture(encoder, &rsm.normal.texture, 8),
+                texture(encoder, &rsm.flux_area.texture, 16),
+            ],
+            buffers: [
+                &res.samples,
+                &res.importance,
+                &res.column_sums,
+                &res.row_sums,
+                &res.vals,
+            ]
+            .map(|b| stage_buffer(device, encoder, b)),
+        }
+    }
+
+    /// The sampling stages' results of the last frame (blocking readback).
+    pub fn read_back(&self, ctx: &GpuContext) -> Result<SamplingReadback, GpuError> {
+        let mut encoder = ctx
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        let capture = self.capture(&ctx.device, &mut encoder);
+        ctx.queue.submit([encoder.finish()]);
+        capture.read(ctx)
+    }
+}
+
+/// Staged copies of the sampling buffers of one frame.
+pub struct SamplingCapture {
+    rsm_width: u32,
+    rsm_height: u32,
+    view_samples: u32,
+    val_count: u32,
+    /// RSM position, normal and flux/area, with their bytes per texel.
+    rsm: [(TextureReadback, u32); 3],
+    /// View samples, importance, column sums, row sums, VALs.
+    buffers: [wgpu::Buffer; 5],
+}
+
+impl SamplingCapture {
+    /// Maps the copies (waiting for the GPU if it has not finished them) and decodes them.
+    pub fn read(self, ctx: &GpuContext) -> Result<SamplingReadback, GpuError> {
+        let rsm = self.rsm.map(|(r, bytes)| (r.begin_read(), bytes));
+        let maps = self.buffers.each_ref().map(PendingMap::new);
+        ctx.wait_idle()?;
+        let texels = (self.rsm_width * self.rsm_height) as usize;
+        let mut decoded = Vec::with_capacity(3);
+        for (rows, bytes_per_texel) in rsm {
+            let bytes = rows.finish()?;
+            decoded.push(if bytes_per_texel == 8 {
                 bytemuck::pod_collect_to_vec::<u8, half::f16>(&bytes)
                     .chunks_exact(4)
                     .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
                     .collect()
             } else {
                 bytemuck::pod_collect_to_vec(&bytes)
-            };
-            Ok::<_, GpuError>(texels)
-        };
-        let floats = |bytes: Vec<u8>, n: usize| -> Vec<f32> {
-            let mut v: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
+            });
+        }
+        let [samples, importance, column_sums, row_sums, vals] = maps;
+        let floats = |map: PendingMap, n: usize| -> Result<Vec<f32>, GpuError> {
+            let mut v: Vec<f32> = bytemuck::pod_collect_to_vec(&map.finish()?);
             v.truncate(n);
-            v
+            Ok(v)
         };
-        let texels = rsm.texels() as usize;
-        let (view_samples, val_count) = (res.key.view_samples, res.key.val_count);
-        let mut samples: Vec<ViewSample> =
-            bytemuck::pod_collect_to_vec(&read_buffer(&res.samples)?);
-        samples.truncate(view_samples as usize);
-        let mut vals: Vec<Val> = bytemuck::pod_collect_to_vec(&read_buffer(&res.vals)?);
-        vals.truncate(val_count as usize);
+        let mut view_samples: Vec<ViewSample> = bytemuck::pod_collect_to_vec(&samples.finish()?);
+        view_samples.truncate(self.view_samples as usize);
+        let importance = floats(importance, texels)?;
+        let column_sums = floats(column_sums, texels)?;
+        let row_sums = floats(row_sums, self.rsm_width as usize)?;
+        let mut vals: Vec<Val> = bytemuck::pod_collect_to_vec(&vals.finish()?);
+        vals.truncate(self.val_count as usize);
+        let [rsm_position, rsm_normal, rsm_flux_area]: [Vec<[f32; 4]>; 3] = decoded
+            .try_into()
+            .map_err(|_| GpuError::Map("three RSM textures were staged".into()))?;
         Ok(SamplingReadback {
-            rsm_width: rsm.width(),
-            rsm_height: rsm.height(),
-            rsm_position: read_texture(&rsm.position.texture, 16)?,
-            rsm_normal: read_texture(&rsm.normal.texture, 8)?,
-            rsm_flux_area: read_texture(&rsm.flux_area.texture, 16)?,
-            view_samples: samples,
-            importance: floats(read_buffer(&res.importance)?, texels),
-            column_sums: floats(read_buffer(&res.column_sums)?, texels),
-            row_sums: floats(read_buffer(&res.row_sums)?, rsm.width() as usize),
+            rsm_width: self.rsm_width,
+            rsm_height: self.rsm_height,
+            rsm_position,
+            rsm_normal,
+            rsm_flux_area,
+            view_samples,
+            importance,
+            column_sums,
+            row_sums,
             vals,
         })
     }

@@ -9,8 +9,11 @@
 //!   paper 004), the `lightskin` and `brsm` methods.
 //! - [`reference`]: a progressive path tracer, the truth the others are measured against.
 //!
-//! Adding a method: a module implementing [`Method`], an entry in [`REGISTRY`], a
-//! [`GiMethod`] variant and its parameters in the protocol's `GiParams`.
+//! Adding a method: a module implementing [`Method`], an entry in [`REGISTRY`] (whose
+//! `describe` lists its parameters with their ranges: `/v1/server` publishes them, the service
+//! enforces them and the viewer builds its controls from them), a [`GiMethod`] variant and its
+//! parameters in the protocol's `GiParams`. The renderer, the service and the clients need no
+//! other change.
 
 pub mod lightskin;
 pub mod none;

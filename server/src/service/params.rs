@@ -8,7 +8,7 @@ use crate::gi::lightskin::{caches::CacheParams, uses_light_caches};
 use crate::gi::GiSettings;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
-use lightcast_protocol::{Encoding, GiMethod, Limits, RenderParams, SessionParams, View};
+use lightcast_protocol::{Encoding, GiParams, Limits, RenderParams, SessionParams, View};
 
 /// Settings of one frame, ready for the render loop.
 #[derive(Clone, Debug)]
@@ -59,24 +59,7 @@ pub fn resolve(
         limits.max_shadow_map_size,
     )?;
     let g = &params.gi;
-    match g.method {
-        GiMethod::None => {}
-        GiMethod::Lightskin => within("gi.rsm_size", g.rsm_size, 16, limits.max_rsm_size)?,
-        GiMethod::Brsm => {
-            within("gi.rsm_size", g.rsm_size, 16, limits.max_rsm_size)?;
-            within("gi.val_count", g.val_count, 1, limits.max_val_count)?;
-            within(
-                "gi.view_samples",
-                g.view_samples,
-                1,
-                limits.max_view_samples,
-            )?;
-        }
-        GiMethod::Reference => {
-            within("gi.bounces", g.bounces, 1, limits.max_bounces)?;
-            within("gi.spp", g.spp, 1, limits.max_spp)?;
-        }
-    }
+    check_gi_ranges(g, limits)?;
     let exposure = match params.exposure {
         None => Exposure::Auto,
         Some(s) if s.is_finite() && s > 0.0 => Exposure::Manual(s),
@@ -119,6 +102,38 @@ pub fn resolve(
         view: params.view,
         caches,
     })
+}
+
+/// Checks the numbers the frame's GI method reads against the ranges `/v1/server` describes
+/// for it (this server's limits), so every method's limits are enforced from its own
+/// description.
+fn check_gi_ranges(g: &GiParams, limits: &Limits) -> Result<(), ApiError> {
+    let Some(method) = crate::gi::describe_all(limits)
+        .into_iter()
+        .find(|d| d.method == g.method)
+    else {
+        return Err(ApiError::internal(format!("GI method {} is not described", g.method)));
+    };
+    let values = serde_json::to_value(g).map_err(|e| ApiError::internal(e.to_string()))?;
+    for p in &method.parameters {
+        let Some(v) = values.get(&p.name).and_then(serde_json::Value::as_f64) else {
+            continue;
+        };
+        let (min, max) = (p.min.unwrap_or(f64::MIN), p.max.unwrap_or(f64::MAX));
+        if !(min..=max).contains(&v) {
+            let range = match (p.min, p.max) {
+                (Some(a), Some(b)) => format!("{a}..={b}"),
+                (Some(a), None) => format!("≥ {a}"),
+                (None, Some(b)) => format!("≤ {b}"),
+                (None, None) => unreachable!("an unbounded range contains every number"),
+            };
+            return Err(ApiError::field(
+                format!("gi.{}", p.name),
+                format!("{v} is outside this server's range {range}"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A renderer error as the API reports it.

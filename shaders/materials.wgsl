@@ -1,38 +1,15 @@
 // Scene materials, bound as group 1 by every pass that rasterises the scene with materials
-// (one bind group per material: its base colour texture, a sampler and the material table).
-
-// Mirrored by `MaterialGpu` in server/src/passes/scene_buffers.rs.
-struct MaterialGpu {
-    base_color: vec4<f32>,
-    emissive: vec3<f32>,
-    metallic: f32,
-    roughness: f32,
-    // Alpha below this is discarded; 0 for opaque materials.
-    alpha_cutoff: f32,
-    pad0: f32,
-    pad1: f32,
-}
+// (one bind group per material: its base colour texture, a sampler and the material table),
+// shaded by material_model.wgsl.
 
 @group(1) @binding(0) var base_color_texture: texture_2d<f32>;
 @group(1) @binding(1) var base_color_sampler: sampler;
 @group(1) @binding(2) var<storage, read> materials: array<MaterialGpu>;
 
-struct MaterialSample {
-    brdf: SurfaceBrdf,
-    emissive: vec3<f32>,
-    // False where an alpha mask cuts the surface away.
-    covered: bool,
-}
-
 fn sample_material(index: u32, uv: vec2<f32>) -> MaterialSample {
-    let m = materials[index];
     // Untextured materials are bound to a 1×1 white texture, so sampling stays uniform.
-    let base = m.base_color * textureSample(base_color_texture, base_color_sampler, uv);
-    return MaterialSample(
-        split_material(base.rgb, m.metallic, m.roughness),
-        m.emissive,
-        base.a >= m.alpha_cutoff,
-    );
+    let texel = textureSample(base_color_texture, base_color_sampler, uv);
+    return shade_material(materials[index], texel);
 }
 
 // Mirrors `scene::Vertex`.

@@ -1,5 +1,8 @@
 // The scene's BVH (group 1), built on the CPU by `gi::reference::bvh`, and ray traversal.
-// `SceneBvh::intersect` in server/src/gi/reference/bvh.rs is the CPU port of `trace`.
+// `SceneBvh::intersect` in server/src/gi/reference/bvh.rs is the CPU port of `trace`, without
+// the alpha test: hits `hit_masked(triangle, barycentrics)` rejects are skipped, and the module
+// that includes this file defines it (the path tracer's alpha masks in surfaces.wgsl; false in
+// the geometry-only traversal test).
 
 // Mirrored by `BvhNode` in server/src/gi/reference/bvh.rs. An inner node (`prim_count` 0) has
 // its children at `first_index` and `first_index + 1`; a leaf's triangles are
@@ -14,10 +17,14 @@ struct BvhNode {
 // Deepest stack the traversal keeps (`bvh::MAX_STACK`; deeper trees are refused on the CPU).
 const BVH_STACK: u32 = 48u;
 const NO_HIT: u32 = 0xffffffffu;
+// Whether any triangle of the scene is alpha-tested, set per scene when the pipeline is
+// created: without masks the test compiles away, which matters where divergent branches run
+// masked rather than skipped (lavapipe runs the untaken test and is then ~2× slower).
+override ALPHA_TESTED: bool = true;
 
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
 // Three vec4 per triangle in leaf order: vertices in xyz; the first w holds the bits of the
-// triangle's index in the scene.
+// triangle's index in the scene, the second's 1 when its material has an alpha mask.
 @group(1) @binding(1) var<storage, read> bvh_triangles: array<vec4<f32>>;
 
 struct RayHit {
@@ -38,11 +45,14 @@ fn bvh_slab(node: BvhNode, origin: vec3<f32>, inv_dir: vec3<f32>, t_max: f32) ->
     return select(3.4e38, t_enter, t_enter <= t_exit);
 }
 
-// Möller–Trumbore, two-sided. Writes `best` when the hit is nearer.
+// Möller–Trumbore, two-sided. Writes `best` when the hit is nearer and not masked away; the
+// mask is tested last, only for hits that would be the nearest so far on triangles flagged as
+// alpha-tested.
 fn bvh_triangle(i: u32, origin: vec3<f32>, dir: vec3<f32>, best: ptr<function, RayHit>) {
     let a = bvh_triangles[3u * i];
+    let b = bvh_triangles[3u * i + 1u];
     let v0 = a.xyz;
-    let e1 = bvh_triangles[3u * i + 1u].xyz - v0;
+    let e1 = b.xyz - v0;
     let e2 = bvh_triangles[3u * i + 2u].xyz - v0;
     let p = cross(dir, e2);
     let det = dot(e1, p);
@@ -62,11 +72,14 @@ fn bvh_triangle(i: u32, origin: vec3<f32>, dir: vec3<f32>, best: ptr<function, R
     }
     let t = dot(e2, q) * inv_det;
     if t > 0.0 && t < (*best).t {
-        *best = RayHit(t, bitcast<u32>(a.w), vec2<f32>(u, v));
+        let triangle = bitcast<u32>(a.w);
+        if !ALPHA_TESTED || bitcast<u32>(b.w) == 0u || !hit_masked(triangle, vec2<f32>(u, v)) {
+            *best = RayHit(t, triangle, vec2<f32>(u, v));
+        }
     }
 }
 
-// The nearest hit with t in (0, t_max): nearer child first, the other on a stack.
+// The nearest unmasked hit with t in (0, t_max): nearer child first, the other on a stack.
 fn trace(origin: vec3<f32>, dir: vec3<f32>, t_max: f32) -> RayHit {
     var best = RayHit(t_max, NO_HIT, vec2<f32>(0.0));
     if arrayLength(&bvh_nodes) == 0u {

@@ -15,3 +15,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let hit = trace(o.xyz, d.xyz, o.w);
     hits[i] = vec4<f32>(hit.t, bitcast<f32>(hit.triangle), hit.uv);
 }
+
+// Geometry only, like the CPU traversal it is checked against (`SceneBvh::intersect`).
+fn hit_masked(triangle: u32, b: vec2<f32>) -> bool {
+    return false;
+}

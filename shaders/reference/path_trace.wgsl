@@ -1,6 +1,7 @@
 // The reference: progressive path tracing of the indirect light leaving each pixel's surface
-// point towards the camera, with the same BRDF (eq. 3–4), punctual light and emitters as the
-// other methods but exact visibility (BVH rays instead of shadow maps or caches).
+// point towards the camera, with the same materials (BRDF of eq. 3–4 split from the textured
+// base colour, alpha masks; surfaces.wgsl), punctual light and emitters as the other methods
+// but exact visibility (BVH rays instead of shadow maps or caches).
 //
 // A path starts at the surface the pixel centre sees (the point the G-buffer rasterises) and
 // reflects `bounces` times. At each vertex y it reached it adds y's emission and, by next-event
@@ -25,25 +26,10 @@ struct TraceParams {
     pad1: u32,
 }
 
-// Mirrored by `SurfaceGpu` in server/src/gi/reference/mod.rs: a material's BRDF split.
-struct SurfaceGpu {
-    diffuse: vec3<f32>,
-    exponent: f32,
-    glossy: vec3<f32>,
-    pad0: f32,
-    emissive: vec3<f32>,
-    pad1: f32,
-}
-
 @group(0) @binding(0) var<storage, read> params: TraceParams;
 @group(0) @binding(1) var<storage, read> light: LightUniform;
 // Per pixel: the sum of the samples' indirect radiance (rgb) and of their squared luminance (w).
 @group(0) @binding(2) var<storage, read_write> accum: array<vec4<f32>>;
-
-// Nine floats per vertex (`scene::Vertex`): position, normal, uv, material bits.
-@group(1) @binding(2) var<storage, read> vertices: array<f32>;
-@group(1) @binding(3) var<storage, read> indices: array<u32>;
-@group(1) @binding(4) var<storage, read> surfaces: array<SurfaceGpu>;
 
 // PCG hash (Jarzynski & Olano 2020): the random stream of a path is a pure function of the
 // pixel, the sample index and the seed, so the same request gives the same pixels.
@@ -68,14 +54,6 @@ struct SurfaceHit {
     emissive: vec3<f32>,
 }
 
-fn vertex_position(i: u32) -> vec3<f32> {
-    return vec3<f32>(vertices[9u * i], vertices[9u * i + 1u], vertices[9u * i + 2u]);
-}
-
-fn vertex_normal(i: u32) -> vec3<f32> {
-    return vec3<f32>(vertices[9u * i + 3u], vertices[9u * i + 4u], vertices[9u * i + 5u]);
-}
-
 fn surface_at(hit: RayHit, origin: vec3<f32>, dir: vec3<f32>) -> SurfaceHit {
     let i0 = indices[3u * hit.triangle];
     let i1 = indices[3u * hit.triangle + 1u];
@@ -90,18 +68,12 @@ fn surface_at(hit: RayHit, origin: vec3<f32>, dir: vec3<f32>) -> SurfaceHit {
     var normal = select(-interpolated, interpolated, front);
     let len = length(normal);
     normal = select(geometric, normal / len, len > 1e-12);
-    let s = surfaces[bitcast<u32>(vertices[9u * i0 + 8u])];
-    var exponent = s.exponent;
+    let m = material_at(hit.triangle, hit.uv);
+    var brdf = m.brdf;
     if params.glossy_exponent > 0.0 {
-        exponent = params.glossy_exponent;
+        brdf.exponent = params.glossy_exponent;
     }
-    return SurfaceHit(
-        origin + dir * hit.t,
-        normal,
-        geometric,
-        SurfaceBrdf(s.diffuse, s.glossy, exponent),
-        s.emissive,
-    );
+    return SurfaceHit(origin + dir * hit.t, normal, geometric, brdf, m.emissive);
 }
 
 // An orthonormal basis around unit `n` (Duff et al. 2017).

@@ -19,6 +19,7 @@ pub const GBUFFER: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),
         wgsl!("gbuffer.wgsl"),
         wgsl!("gbuffer_vertex_ids.wgsl"),
@@ -32,6 +33,7 @@ pub const GBUFFER_TRIANGLE_IDS: ShaderSource = ShaderSource {
         wgsl!("enable_primitive_index.wgsl"),
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),
         wgsl!("gbuffer.wgsl"),
         wgsl!("gbuffer_triangle_ids.wgsl"),
@@ -69,6 +71,7 @@ pub const RSM: ShaderSource = ShaderSource {
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
         wgsl!("lights.wgsl"),
+        wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),
         wgsl!("rsm.wgsl"),
     ],
@@ -123,7 +126,6 @@ pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
     ],
 };
 
-/// Every pass module; tests validate each with naga.
 /// The reference path tracer (`gi::reference`).
 pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
     name: "reference_path_trace",
@@ -131,7 +133,9 @@ pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
         wgsl!("lights.wgsl"),
+        wgsl!("material_model.wgsl"),
         wgsl!("reference/bvh.wgsl"),
+        wgsl!("reference/surfaces.wgsl"),
         wgsl!("reference/path_trace.wgsl"),
     ],
 };
@@ -151,6 +155,7 @@ pub const REFERENCE_BVH_TEST: ShaderSource = ShaderSource {
     ],
 };
 
+/// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
     &GBUFFER_TRIANGLE_IDS,

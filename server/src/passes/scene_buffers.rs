@@ -5,7 +5,7 @@ use crate::scene::{Material, MaterialRange, Scene, Vertex};
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
-/// Mirrors `MaterialGpu` in `shaders/materials.wgsl`.
+/// Mirrors `MaterialGpu` in `shaders/material_model.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct MaterialGpu {

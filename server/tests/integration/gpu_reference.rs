@@ -1,7 +1,7 @@
 //! The reference path tracer (`gi::reference`) on lavapipe against answers known without it:
 //! the BVH traversal against brute-force intersection, one bounce between two plates against
-//! a numerically integrated CPU value, and a closed emitting box against the geometric series
-//! of its albedo.
+//! a numerically integrated CPU value, a closed emitting box against the geometric series
+//! of its albedo, textured and alpha-masked surfaces against untextured and absent ones.
 
 use super::support::{self, brdf, floor_corners, hit_plane, plain_material, quad};
 use glam::Vec3;
@@ -11,7 +11,7 @@ use lightcast_server::gi::reference::{
     luminance, PathTracer, ReferenceImage, ReferenceSettings, SurfaceGpu,
 };
 use lightcast_server::gpu::{readback::map_read, shaders, GpuContext};
-use lightcast_server::scene::{material, Scene};
+use lightcast_server::scene::{material, Material, Scene, Texture, Vertex};
 use wgpu::util::DeviceExt;
 
 /// Renders `spp` samples per pixel in calls of at most 64.
@@ -334,7 +334,7 @@ fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
         [emitted; 3],
     );
     let mut tracer =
-        PathTracer::with_surfaces(support::gpu(), &scene, &[lambertian]).expect("tracer");
+        PathTracer::with_surfaces(support::gpu(), &scene, |_| vec![lambertian]).expect("tracer");
     let camera = Camera {
         position: [0.1, 0.2, 0.3],
         target: [0.6, -0.4, 0.2],
@@ -463,5 +463,204 @@ fn reference_frames_accumulate_per_history_and_match_the_tracer() {
     assert!(
         reported < after_8,
         "error falls with samples: {after_8} at 8 spp, {reported} at 16"
+    );
+}
+
+/// Linear value of an sRGB-encoded byte (what sampling an `Rgba8UnormSrgb` texel returns).
+fn srgb_to_linear(c: u8) -> f32 {
+    let c = f32::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn linear_rgb(c: [u8; 4]) -> [f32; 3] {
+    [c[0], c[1], c[2]].map(srgb_to_linear)
+}
+
+/// An RGBA8 texture whose left half of columns is `left` and right half `right`.
+fn halves(width: u32, height: u32, left: [u8; 4], right: [u8; 4]) -> Texture {
+    Texture {
+        name: "halves".into(),
+        width,
+        height,
+        rgba8: (0..width * height)
+            .flat_map(|i| if i % width < width / 2 { left } else { right })
+            .collect(),
+    }
+}
+
+/// The plates with other materials and textures (material 2 is free for extra geometry).
+fn plates_with(
+    extra: impl FnOnce(&mut Vec<Vertex>, &mut Vec<u32>),
+    materials: Vec<Material>,
+    textures: Vec<Texture>,
+) -> Scene {
+    let p = plates();
+    let (mut vertices, mut indices) = (p.scene.vertices, p.scene.indices);
+    extra(&mut vertices, &mut indices);
+    Scene::new(
+        "plates",
+        vertices,
+        indices,
+        materials,
+        textures,
+        vec![],
+        vec![],
+    )
+    .expect("scene")
+}
+
+/// The floor of the plates carries an 8×2 texture, red in its left half of columns and blue in
+/// its right, and the ceiling a uniform one. Where bilinear filtering reads only one half
+/// (u in [1/16, 7/16] or [9/16, 15/16]), the textured receiver's indirect light must be that of
+/// the untextured scene whose floor base colour is factor × the texel's linear colour; with
+/// the same seed the paths are the same, so the images agree up to float rounding.
+#[test]
+fn a_textured_receiver_reflects_as_the_untextured_colour_of_its_texel() {
+    let (red, blue, sky) = ([230, 60, 40, 255], [40, 90, 220, 255], [150, 200, 240, 255]);
+    let factor = [0.9, 0.8, 1.0];
+    let textured_floor = Material {
+        base_color_texture: Some(0),
+        ..plain_material(factor, 0.0, 1.0)
+    };
+    let textured_ceiling = Material {
+        base_color_texture: Some(1),
+        ..plain_material([1.0; 3], 0.0, 0.5)
+    };
+    let textured = plates_with(
+        |_, _| {},
+        vec![textured_floor, textured_ceiling],
+        vec![halves(8, 2, red, blue), halves(2, 2, sky, sky)],
+    );
+    let untextured = |texel: [u8; 4]| {
+        let c = linear_rgb(texel);
+        plates_with(
+            |_, _| {},
+            vec![
+                plain_material(std::array::from_fn(|i| factor[i] * c[i]), 0.0, 1.0),
+                plain_material(linear_rgb(sky), 0.0, 0.5),
+            ],
+            vec![],
+        )
+    };
+    let p = plates();
+    let (w, h) = (16, 16);
+    let render = |scene: &Scene| {
+        let mut tracer = PathTracer::new(support::gpu(), scene).expect("tracer");
+        let settings = ReferenceSettings::default();
+        converge(&mut tracer, (w, h), &p.camera, &p.light, &settings, 64)
+    };
+    let got = render(&textured);
+    let (as_red, as_blue) = (render(&untextured(red)), render(&untextured(blue)));
+    // u = (x + 1) / 2 on the floor; a margin keeps pixels off the filter's blend zones.
+    let margin = 0.01;
+    let (mut red_pixels, mut blue_pixels) = (0, 0);
+    let (mut red_mean, mut blue_mean) = (Vec3::ZERO, Vec3::ZERO);
+    let mut worst = 0f32;
+    for y in 0..h {
+        for x in 0..w {
+            let hit = hit_plane(&p.camera, &p.scene, w, h, x, y, 0.0).expect("sees the floor");
+            let u = (hit.x + 1.0) / 2.0;
+            let expected = if (1.0 / 16.0 + margin..7.0 / 16.0 - margin).contains(&u) {
+                red_pixels += 1;
+                &as_red
+            } else if (9.0 / 16.0 + margin..15.0 / 16.0 - margin).contains(&u) {
+                blue_pixels += 1;
+                &as_blue
+            } else {
+                continue;
+            };
+            let i = (y * w + x) as usize;
+            let (g, e) = (
+                Vec3::from(got.indirect[i]),
+                Vec3::from(expected.indirect[i]),
+            );
+            let relative = ((g - e).abs() / e).max_element();
+            worst = worst.max(relative);
+            assert!(
+                relative < 1e-4,
+                "pixel ({x}, {y}) at u {u}: textured {g} vs untextured {e}"
+            );
+            if std::ptr::eq(expected, &as_red) {
+                red_mean += g;
+            } else {
+                blue_mean += g;
+            }
+        }
+    }
+    eprintln!(
+        "{red_pixels} red and {blue_pixels} blue pixels; worst relative difference {worst:e}"
+    );
+    assert!(
+        red_pixels >= 20 && blue_pixels >= 20,
+        "{red_pixels} red, {blue_pixels} blue"
+    );
+    // The halves differ as their texels do: red over the red texels, blue over the blue ones.
+    let (red_mean, blue_mean) = (red_mean / red_pixels as f32, blue_mean / blue_pixels as f32);
+    eprintln!("mean over red texels {red_mean}, over blue texels {blue_mean}");
+    assert!(red_mean.x > 2.0 * red_mean.z, "{red_mean}");
+    assert!(blue_mean.z > 2.0 * blue_mean.x, "{blue_mean}");
+}
+
+/// A black square just above the light of the plates hides the ceiling's lit centre from it.
+/// Fully alpha-masked, every ray passes through it: the image is the one without the blocker
+/// (same seed, same paths). The same texture on an opaque material (glTF `OPAQUE` or `BLEND`)
+/// blocks and darkens; masked on one half only, it darkens less. (Black, so that an opaque
+/// blocker does not reflect the light it catches back down.)
+#[test]
+fn rays_pass_through_alpha_masked_texels() {
+    let p = plates();
+    let blocker = |vertices: &mut Vec<Vertex>, indices: &mut Vec<u32>| {
+        quad(vertices, indices, floor_corners(0.2, -0.1, 0.6, 0.15), 2);
+    };
+    let (clear, solid) = ([0, 0, 0, 0], [0, 0, 0, 255]);
+    let render = |texture: Texture, alpha_cutoff: Option<f32>| {
+        let cover = Material {
+            base_color_texture: Some(0),
+            alpha_cutoff,
+            ..plain_material([1.0; 3], 0.0, 1.0)
+        };
+        let mut materials = p.scene.materials.clone();
+        materials.push(cover);
+        let scene = plates_with(blocker, materials, vec![texture]);
+        let mut tracer = PathTracer::new(support::gpu(), &scene).expect("tracer");
+        let settings = ReferenceSettings::default();
+        converge(&mut tracer, (16, 16), &p.camera, &p.light, &settings, 64)
+    };
+    let mut tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
+    let settings = ReferenceSettings::default();
+    let open = converge(&mut tracer, (16, 16), &p.camera, &p.light, &settings, 64);
+    let masked = render(halves(2, 2, clear, clear), Some(0.5));
+    let opaque = render(halves(2, 2, clear, clear), None);
+    let half_masked = render(halves(4, 2, clear, solid), Some(0.5));
+    // Camera rays cross the blocker too, not only bounce and shadow rays.
+    let seen = (0..16 * 16)
+        .filter_map(|i| hit_plane(&p.camera, &p.scene, 16, 16, i % 16, i / 16, 0.6))
+        .filter(|q| (q.x - 0.2).abs() < 0.15 && (q.z + 0.1).abs() < 0.15)
+        .count();
+    assert!(seen >= 10, "the camera sees the blocker in {seen} pixels");
+    let mut worst = 0f32;
+    for (m, o) in masked.indirect.iter().zip(&open.indirect) {
+        let (m, o) = (Vec3::from(*m), Vec3::from(*o));
+        let difference = (m - o).abs().max_element() / o.max_element().max(1e-12);
+        worst = worst.max(difference);
+        assert!(difference < 1e-5, "masked {m} vs no blocker {o}");
+    }
+    let mean = |image: &ReferenceImage| {
+        image.indirect.iter().map(|c| luminance(*c)).sum::<f32>() / image.indirect.len() as f32
+    };
+    let (open, opaque, half) = (mean(&open), mean(&opaque), mean(&half_masked));
+    eprintln!(
+        "blocker in {seen} pixels; masked vs open: worst relative difference {worst:e}; \
+         mean luminance open {open}, \
+         half-masked {half}, opaque {opaque}"
+    );
+    assert!(opaque < 0.5 * open, "opaque {opaque} vs open {open}");
+    assert!(
+        opaque * 1.1 < half && half < 0.9 * open,
+        "half-masked {half} between opaque {opaque} and open {open}"
     );
 }

@@ -4,7 +4,9 @@
 //! traversal, and faster than a hand-written binned SAH), then flattened into 32-byte nodes the
 //! WGSL traversal (`shaders/reference/bvh.wgsl`) reads. Triangles are stored in leaf order so a
 //! leaf's triangles are contiguous. [`SceneBvh::intersect`] is the CPU port of that traversal
-//! and [`SceneBvh::intersect_brute_force`] the independent check it is tested against.
+//! and [`SceneBvh::intersect_brute_force`] the independent check it is tested against. Both
+//! are geometry only: the WGSL traversal also skips hits on alpha-masked texels, which needs
+//! the materials and textures (`shaders/reference/surfaces.wgsl`).
 
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
@@ -22,14 +24,17 @@ pub struct BvhNode {
     pub first_index: u32,
 }
 
-/// One triangle as the GPU reads it: three `vec4`s, the vertices in `xyz`, and in the first
-/// one's `w` the bits of its index into the scene's triangles (for shading data).
+/// One triangle as the GPU reads it: three `vec4`s, the vertices in `xyz`, in the first one's
+/// `w` the bits of its index into the scene's triangles (for shading data) and in the second
+/// one's whether its material has an alpha mask.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct BvhTriangle {
     pub v0: [f32; 3],
     pub scene_triangle: u32,
-    pub v1: [f32; 4],
+    pub v1: [f32; 3],
+    /// 1 when the material has an alpha cutoff: only these hits need the (costly) alpha test.
+    pub alpha_tested: u32,
     pub v2: [f32; 4],
 }
 
@@ -64,6 +69,14 @@ impl SceneBvh {
     pub fn build(scene: &Scene) -> Result<Self, BvhError> {
         // obvhs's triangle is three 16-byte glam `Vec3A`s; built from plain floats so this crate
         // does not need obvhs's glam version by name.
+        let alpha_tested: Vec<u32> = scene
+            .indices
+            .chunks_exact(3)
+            .map(|t| {
+                let material = scene.vertices[t[0] as usize].material;
+                u32::from(scene.materials[material as usize].alpha_cutoff.is_some())
+            })
+            .collect();
         let input: Vec<obvhs::triangle::Triangle> = scene
             .indices
             .chunks_exact(3)
@@ -92,7 +105,8 @@ impl SceneBvh {
                 BvhTriangle {
                     v0: [f[0], f[1], f[2]],
                     scene_triangle: i,
-                    v1: [f[4], f[5], f[6], 0.0],
+                    v1: [f[4], f[5], f[6]],
+                    alpha_tested: alpha_tested[i as usize],
                     v2: [f[8], f[9], f[10], 0.0],
                 }
             })
@@ -202,7 +216,7 @@ fn slab(node: &BvhNode, origin: Vec3, inv_dir: Vec3, t_max: f32) -> f32 {
 /// Möller–Trumbore, two-sided; hits at t ≤ 0 are ignored.
 fn intersect_triangle(tri: &BvhTriangle, origin: Vec3, dir: Vec3) -> Option<Hit> {
     let v0 = Vec3::from(tri.v0);
-    let e1 = Vec3::from_slice(&tri.v1[..3]) - v0;
+    let e1 = Vec3::from(tri.v1) - v0;
     let e2 = Vec3::from_slice(&tri.v2[..3]) - v0;
     let p = dir.cross(e2);
     let det = e1.dot(p);
@@ -308,6 +322,21 @@ mod tests {
         })
         .expect("street");
         check_against_brute_force(&street);
+    }
+
+    #[test]
+    fn triangles_of_masked_materials_are_flagged_for_the_alpha_test() {
+        let mut scene = procedural::cornell_box();
+        scene.materials[0].alpha_cutoff = Some(0.5);
+        let bvh = SceneBvh::build(&scene).expect("bvh");
+        let mut flagged = 0;
+        for t in &bvh.triangles {
+            let first = scene.indices[3 * t.scene_triangle as usize];
+            let masked = scene.vertices[first as usize].material == 0;
+            assert_eq!(t.alpha_tested, u32::from(masked), "{t:?}");
+            flagged += usize::from(masked);
+        }
+        assert!(flagged > 0 && flagged < bvh.triangles.len());
     }
 
     #[test]

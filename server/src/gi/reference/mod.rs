@@ -8,6 +8,18 @@
 //! BRDF (diffuse + normalised Phong lobe, eq. 3–4 of seed 004), punctual light and emitters, but
 //! with exact visibility. `bounces` = 1 is the single-bounce light seed 004 approximates.
 //!
+//! Materials are the raster passes' (`shaders/material_model.wgsl` is shared): at every hit the
+//! base colour factor times the base-colour texture at the hit's interpolated uv (filtered like
+//! the raster sampler: bilinear, repeat, sRGB decoded) is split into diffuse and glossy. All
+//! texels of the scene lie in one storage buffer ([`PackedTextures`]), so its size is bounded by
+//! the device's storage binding size ([`check_device`]). Where an alpha mask cuts a surface away
+//! (glTF `MASK`, the texels the G-buffer and the RSM discard) the traversal skips the hit, so
+//! camera, bounce and shadow rays pass through; `BLEND` is opaque, as in the raster passes. Only
+//! triangles of masked materials are tested (a flag in the BVH), and in scenes without masks
+//! the test is compiled away (on lavapipe it would otherwise double the cost of a sample). The
+//! shadow map does not alpha-test (it draws depth only), so the direct light of masked
+//! surfaces can differ from this reference's light through them.
+//!
 //! Samples accumulate while the camera, light, size and settings stay the same; each sample
 //! is one dispatch (short enough for lavapipe's silent dispatch limit at small sizes). Random
 //! numbers are a hash of pixel, sample index and seed, so the same request gives the same
@@ -15,8 +27,6 @@
 //! keeps its own accumulation, so sessions on one scene do not restart each other; one-shot
 //! renders start afresh. As a frame's method it adds `spp` samples, then [`resolve`] writes
 //! the mean into the indirect buffer with the convergence sums the frame header reports.
-//!
-//! Not yet modelled: base-colour textures (materials use their factors) and alpha masks.
 
 pub mod bvh;
 pub mod resolve;
@@ -26,8 +36,9 @@ use super::{
 };
 use crate::gpu::{readback::read_buffer, shaders, timing::FrameStages, GpuContext, GpuError};
 use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
+use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::{self, ParamSlots};
-use crate::scene::{material, Material, Scene};
+use crate::scene::{material, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
 use lightcast_protocol::{
     Camera, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Light, Limits, Stage,
@@ -123,34 +134,150 @@ pub struct TraceParams {
     pub pad1: u32,
 }
 
-/// Mirrors `SurfaceGpu` in `shaders/reference/path_trace.wgsl`: a material's BRDF split.
+/// Mirrors `SurfaceGpu` in `shaders/reference/surfaces.wgsl`: a material as the reference
+/// shades it.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct SurfaceGpu {
-    pub diffuse: [f32; 3],
-    pub exponent: f32,
-    pub glossy: [f32; 3],
+    /// The material's factors, as the raster passes read them.
+    pub material: MaterialGpu,
+    /// The base-colour texture's first texel in [`PackedTextures::texels`] and its size.
+    pub texture_offset: u32,
+    pub texture_width: u32,
+    pub texture_height: u32,
+    /// Non-zero: the `fixed_*` BRDF replaces the textured split.
+    pub fixed_brdf: u32,
+    pub fixed_diffuse: [f32; 3],
+    pub fixed_exponent: f32,
+    pub fixed_glossy: [f32; 3],
     pub pad0: f32,
-    pub emissive: [f32; 3],
-    pub pad1: f32,
 }
 
 impl SurfaceGpu {
-    /// The material's untextured diffuse/glossy split and emission (see [`material::split`]).
-    pub fn from_material(m: &Material) -> Self {
-        let s = m.diffuse_glossy();
-        Self::new(s, m.emissive)
-    }
-
-    pub fn new(split: material::DiffuseGlossy, emissive: [f32; 3]) -> Self {
+    /// The material with its base-colour texture (if any) among `textures`; the shader splits
+    /// the textured base colour per hit, as the G-buffer does per pixel.
+    pub fn from_material(m: &Material, textures: &PackedTextures) -> Self {
+        let texture = textures.span(m.base_color_texture);
         Self {
-            diffuse: split.diffuse.to_array(),
-            exponent: split.exponent,
-            glossy: split.glossy.to_array(),
-            emissive,
-            ..Self::default()
+            material: MaterialGpu::from(m),
+            texture_offset: texture.offset,
+            texture_width: texture.width,
+            texture_height: texture.height,
+            ..Self::zeroed()
         }
     }
+
+    /// An untextured, opaque surface with this BRDF: for BRDFs the metallic/roughness split
+    /// cannot express, such as a Lambertian without the 4 % glossy lobe.
+    pub fn new(split: material::DiffuseGlossy, emissive: [f32; 3]) -> Self {
+        Self {
+            material: MaterialGpu::from(&Material {
+                emissive,
+                ..Material::default()
+            }),
+            texture_offset: WHITE.offset,
+            texture_width: WHITE.width,
+            texture_height: WHITE.height,
+            fixed_brdf: 1,
+            fixed_diffuse: split.diffuse.to_array(),
+            fixed_exponent: split.exponent,
+            fixed_glossy: split.glossy.to_array(),
+            pad0: 0.0,
+        }
+    }
+}
+
+/// Where one texture's texels lie in [`PackedTextures::texels`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureSpan {
+    pub offset: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// The white texel untextured materials sample, as the raster passes bind a 1×1 white texture.
+const WHITE: TextureSpan = TextureSpan {
+    offset: 0,
+    width: 1,
+    height: 1,
+};
+
+/// Every base-colour texture of a scene in one buffer, as `shaders/reference/surfaces.wgsl`
+/// samples them by hand (a compute shader cannot index a varying number of textures portably).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PackedTextures {
+    /// The [`WHITE`] texel, then each texture's texels, rows top to bottom: RGBA8 in sRGB with
+    /// red in the low byte (`unpack4x8unorm`).
+    pub texels: Vec<u32>,
+    /// Where each of the scene's textures starts, by index.
+    pub spans: Vec<TextureSpan>,
+}
+
+impl PackedTextures {
+    /// Packs `textures` in order after the white texel.
+    pub fn pack(textures: &[Texture]) -> Self {
+        let mut texels = vec![u32::from_le_bytes([255; 4])];
+        let spans = textures
+            .iter()
+            .map(|t| {
+                let span = TextureSpan {
+                    // `check_device` bounds the whole buffer to u32 indices.
+                    offset: texels.len() as u32,
+                    width: t.width,
+                    height: t.height,
+                };
+                texels.extend(
+                    t.rgba8
+                        .chunks_exact(4)
+                        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+                );
+                span
+            })
+            .collect();
+        Self { texels, spans }
+    }
+
+    /// The span of texture `index`, white for untextured materials (as the raster passes bind
+    /// it for them).
+    pub fn span(&self, index: Option<usize>) -> TextureSpan {
+        index
+            .and_then(|i| self.spans.get(i))
+            .copied()
+            .unwrap_or(WHITE)
+    }
+}
+
+/// Bytes [`PackedTextures::pack`] makes of `textures` (the white texel included), computed
+/// before packing so that a scene too large for the device is refused without the copy.
+pub fn packed_texture_bytes(textures: &[Texture]) -> u64 {
+    4 + textures.iter().map(|t| t.rgba8.len() as u64).sum::<u64>()
+}
+
+/// Storage buffers the path-tracing shader binds: params, light and accumulation (group 0),
+/// BVH nodes and triangles, vertices, indices, surfaces and texels (group 1).
+const STORAGE_BUFFERS: u32 = 9;
+
+/// Refuses a device that cannot bind the tracer's buffers: the packed textures
+/// (`texture_bytes`, from [`packed_texture_bytes`]) must fit one storage binding and be
+/// addressable by the shader's u32 texel indices.
+pub fn check_device(limits: &wgpu::Limits, texture_bytes: u64) -> Result<(), ReferenceError> {
+    if limits.max_storage_buffers_per_shader_stage < STORAGE_BUFFERS {
+        return Err(ReferenceError::TooFewStorageBuffers {
+            needed: STORAGE_BUFFERS,
+            limit: limits.max_storage_buffers_per_shader_stage,
+        });
+    }
+    let limit = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size)
+        .min(u64::from(u32::MAX));
+    if texture_bytes > limit {
+        return Err(ReferenceError::TexturesTooLarge {
+            bytes: texture_bytes,
+            limit,
+        });
+    }
+    Ok(())
 }
 
 /// What the reference renders.
@@ -180,6 +307,13 @@ pub enum ReferenceError {
     Bvh(#[from] bvh::BvhError),
     #[error("invalid {field}: {reason}")]
     InvalidSetting { field: &'static str, reason: String },
+    #[error(
+        "the scene's base-colour textures take {bytes} bytes packed for the reference, more \
+         than the {limit} bytes this GPU binds as one storage buffer"
+    )]
+    TexturesTooLarge { bytes: u64, limit: u64 },
+    #[error("the reference binds {needed} storage buffers per shader; this GPU allows {limit}")]
+    TooFewStorageBuffers { needed: u32, limit: u32 },
     #[error(transparent)]
     Gpu(#[from] GpuError),
 }
@@ -187,7 +321,9 @@ pub enum ReferenceError {
 impl From<ReferenceError> for GiError {
     fn from(e: ReferenceError) -> Self {
         match e {
-            ReferenceError::Bvh(b) => GiError::Scene(b.to_string()),
+            ReferenceError::Bvh(_)
+            | ReferenceError::TexturesTooLarge { .. }
+            | ReferenceError::TooFewStorageBuffers { .. } => GiError::Scene(e.to_string()),
             ReferenceError::InvalidSetting { field, reason } => {
                 GiError::Invalid(InvalidSetting { field, reason })
             }
@@ -243,11 +379,11 @@ struct Accumulation {
     samples: u32,
 }
 
-/// Layout of group 1: the BVH and the scene data shading reads (`bvh.wgsl`, `path_trace.wgsl`).
+/// Layout of group 1: the BVH and the scene data shading reads (`bvh.wgsl`, `surfaces.wgsl`).
 fn scene_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
     device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("reference scene"),
-        entries: &(0..5)
+        entries: &(0..6)
             .map(|b| passes::storage_entry(b, true))
             .collect::<Vec<_>>(),
     })
@@ -261,13 +397,14 @@ fn storage_init(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Bu
     })
 }
 
-/// The scene's BVH, vertices, indices and surfaces on the GPU, bound as group 1.
+/// The scene's BVH, vertices, indices, surfaces and texels on the GPU, bound as group 1.
 fn scene_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     scene: &Scene,
     bvh: &bvh::SceneBvh,
     surfaces: &[SurfaceGpu],
+    texels: &[u32],
 ) -> wgpu::BindGroup {
     let buffers = [
         storage_init(device, "bvh nodes", bytemuck::cast_slice(&bvh.nodes)),
@@ -279,6 +416,7 @@ fn scene_group(
         storage_init(device, "vertices", bytemuck::cast_slice(&scene.vertices)),
         storage_init(device, "indices", bytemuck::cast_slice(&scene.indices)),
         storage_init(device, "surfaces", bytemuck::cast_slice(surfaces)),
+        storage_init(device, "texels", bytemuck::cast_slice(texels)),
     ];
     device.create_bind_group(&wgpu::BindGroupDescriptor {
         label: Some("reference scene"),
@@ -292,26 +430,38 @@ fn scene_group(
 }
 
 impl PathTracer {
-    /// A tracer for `scene` with its materials' untextured BRDF.
+    /// A tracer for `scene` with its materials and textures.
     pub fn new(ctx: GpuContext, scene: &Scene) -> Result<Self, ReferenceError> {
-        let surfaces: Vec<SurfaceGpu> = scene
-            .materials
-            .iter()
-            .map(SurfaceGpu::from_material)
-            .collect();
-        Self::with_surfaces(ctx, scene, &surfaces)
+        Self::with_surfaces(ctx, scene, |textures| {
+            scene
+                .materials
+                .iter()
+                .map(|m| SurfaceGpu::from_material(m, textures))
+                .collect()
+        })
     }
 
-    /// A tracer for `scene` whose material `i` reflects and emits as `surfaces[i]`.
+    /// A tracer for `scene` whose material `i` reflects and emits as the `i`th surface
+    /// `surfaces` makes of the scene's packed textures.
     pub fn with_surfaces(
         ctx: GpuContext,
         scene: &Scene,
-        surfaces: &[SurfaceGpu],
+        surfaces: impl FnOnce(&PackedTextures) -> Vec<SurfaceGpu>,
     ) -> Result<Self, ReferenceError> {
+        check_device(&ctx.device.limits(), packed_texture_bytes(&scene.textures))?;
+        let textures = PackedTextures::pack(&scene.textures);
+        let surfaces = surfaces(&textures);
         let bvh = bvh::SceneBvh::build(scene)?;
         let device = &ctx.device;
         let scene_layout = scene_layout(device);
-        let scene_group = scene_group(device, &scene_layout, scene, &bvh, surfaces);
+        let scene_group = scene_group(
+            device,
+            &scene_layout,
+            scene,
+            &bvh,
+            &surfaces,
+            &textures.texels,
+        );
         let params = ParamSlots::new(
             device,
             "reference params",
@@ -326,12 +476,14 @@ impl PathTracer {
                 passes::storage_entry(2, false),
             ],
         });
-        let pipeline = passes::compute_pipeline_with_groups(
+        let alpha_tested = bvh.triangles.iter().any(|t| t.alpha_tested != 0);
+        let pipeline = passes::compute_pipeline_with_constants(
             device,
             "reference path trace",
             &[&pass_layout, &scene_layout],
             &shaders::REFERENCE_PATH_TRACE.create_module(device),
             "main",
+            &[("ALPHA_TESTED", f64::from(u8::from(alpha_tested)))],
         );
         let light = passes::params_buffer(
             device,
@@ -619,4 +771,148 @@ fn resolve(width: u32, height: u32, samples: u32, sums: &[[f32; 4]]) -> Referenc
 /// Rec. 709 luminance, as `luminance` in `path_trace.wgsl`.
 pub fn luminance(c: [f32; 3]) -> f32 {
     0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, REFERENCE_PATH_TRACE};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn trace_structs_match_wgsl() {
+        assert_struct(
+            &REFERENCE_PATH_TRACE,
+            "TraceParams",
+            size_of::<TraceParams>(),
+            &[
+                ("inv_view_proj", offset_of!(TraceParams, inv_view_proj)),
+                ("camera_position", offset_of!(TraceParams, camera_position)),
+                ("width", offset_of!(TraceParams, width)),
+                ("height", offset_of!(TraceParams, height)),
+                ("sample_index", offset_of!(TraceParams, sample_index)),
+                ("bounces", offset_of!(TraceParams, bounces)),
+                ("seed", offset_of!(TraceParams, seed)),
+                ("ray_epsilon", offset_of!(TraceParams, ray_epsilon)),
+                ("glossy_exponent", offset_of!(TraceParams, glossy_exponent)),
+                ("pad0", offset_of!(TraceParams, pad0)),
+                ("pad1", offset_of!(TraceParams, pad1)),
+            ],
+        );
+        assert_struct(
+            &REFERENCE_PATH_TRACE,
+            "SurfaceGpu",
+            size_of::<SurfaceGpu>(),
+            &[
+                ("material", offset_of!(SurfaceGpu, material)),
+                ("texture_offset", offset_of!(SurfaceGpu, texture_offset)),
+                ("texture_width", offset_of!(SurfaceGpu, texture_width)),
+                ("texture_height", offset_of!(SurfaceGpu, texture_height)),
+                ("fixed_brdf", offset_of!(SurfaceGpu, fixed_brdf)),
+                ("fixed_diffuse", offset_of!(SurfaceGpu, fixed_diffuse)),
+                ("fixed_exponent", offset_of!(SurfaceGpu, fixed_exponent)),
+                ("fixed_glossy", offset_of!(SurfaceGpu, fixed_glossy)),
+                ("pad0", offset_of!(SurfaceGpu, pad0)),
+            ],
+        );
+        // The nested material is the raster passes' struct from the shared file; its own
+        // members are checked against the G-buffer's module in `passes::scene_buffers`.
+        assert_struct(
+            &REFERENCE_PATH_TRACE,
+            "MaterialGpu",
+            size_of::<MaterialGpu>(),
+            &[
+                ("base_color", offset_of!(MaterialGpu, base_color)),
+                ("emissive", offset_of!(MaterialGpu, emissive)),
+                ("metallic", offset_of!(MaterialGpu, metallic)),
+                ("roughness", offset_of!(MaterialGpu, roughness)),
+                ("alpha_cutoff", offset_of!(MaterialGpu, alpha_cutoff)),
+                ("pad0", offset_of!(MaterialGpu, pad0)),
+                ("pad1", offset_of!(MaterialGpu, pad1)),
+            ],
+        );
+    }
+
+    fn texture(width: u32, height: u32) -> Texture {
+        Texture {
+            name: "t".into(),
+            width,
+            height,
+            rgba8: (0..width * height * 4).map(|i| i as u8).collect(),
+        }
+    }
+
+    #[test]
+    fn textures_pack_after_the_white_texel_with_red_in_the_low_byte() {
+        let textures = [texture(2, 1), texture(1, 3)];
+        let packed = PackedTextures::pack(&textures);
+        assert_eq!(
+            packed.texels.len() as u64 * 4,
+            packed_texture_bytes(&textures)
+        );
+        assert_eq!(packed.texels[0], u32::MAX, "white, opaque");
+        assert_eq!(packed.texels[1], u32::from_le_bytes([0, 1, 2, 3]));
+        assert_eq!(
+            packed.spans,
+            vec![
+                TextureSpan {
+                    offset: 1,
+                    width: 2,
+                    height: 1
+                },
+                TextureSpan {
+                    offset: 3,
+                    width: 1,
+                    height: 3
+                },
+            ]
+        );
+        assert_eq!(packed.texels[3], u32::from_le_bytes([0, 1, 2, 3]));
+        assert_eq!(packed.span(None), WHITE);
+        assert_eq!(packed.span(Some(1)), packed.spans[1]);
+        let textured = Material {
+            base_color_texture: Some(1),
+            alpha_cutoff: Some(0.5),
+            ..Material::default()
+        };
+        let surface = SurfaceGpu::from_material(&textured, &packed);
+        assert_eq!(
+            (
+                surface.texture_offset,
+                surface.texture_width,
+                surface.texture_height
+            ),
+            (3, 1, 3)
+        );
+        assert_eq!(surface.material.alpha_cutoff, 0.5);
+        assert_eq!(surface.fixed_brdf, 0);
+    }
+
+    #[test]
+    fn textures_larger_than_a_storage_binding_are_refused_with_their_sizes() {
+        let textures = [texture(8, 8)];
+        let bytes = packed_texture_bytes(&textures);
+        assert_eq!(bytes, 4 + 8 * 8 * 4);
+        // wgpu's default limits are WebGPU's, with one storage buffer too few for the tracer.
+        let device = |binding_size| wgpu::Limits {
+            max_storage_buffers_per_shader_stage: STORAGE_BUFFERS,
+            max_storage_buffer_binding_size: binding_size,
+            ..wgpu::Limits::default()
+        };
+        check_device(&device(bytes), bytes).expect("exactly at the limit");
+        let err = check_device(&device(bytes - 4), bytes).expect_err("over the limit");
+        assert!(
+            matches!(err, ReferenceError::TexturesTooLarge { bytes: b, limit } if b == bytes && limit == bytes - 4),
+            "{err:?}"
+        );
+        let message = err.to_string();
+        assert!(
+            message.contains("260 bytes") && message.contains("256 bytes"),
+            "{message}"
+        );
+        assert!(matches!(
+            check_device(&wgpu::Limits::default(), bytes),
+            Err(ReferenceError::TooFewStorageBuffers { .. })
+        ));
+    }
 }

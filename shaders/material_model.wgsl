@@ -1,0 +1,34 @@
+// The material model every pass shades with: a material's factors times its base-colour
+// texel, cut by its alpha mask and split into the paper's BRDF. The rasterising passes sample
+// the texel with a sampler (materials.wgsl); the reference path tracer filters it by hand
+// (reference/surfaces.wgsl), so both share this function and cannot drift apart.
+
+// Mirrored by `MaterialGpu` in server/src/passes/scene_buffers.rs.
+struct MaterialGpu {
+    base_color: vec4<f32>,
+    emissive: vec3<f32>,
+    metallic: f32,
+    roughness: f32,
+    // Alpha below this is discarded; 0 for opaque materials (glTF BLEND is loaded as opaque).
+    alpha_cutoff: f32,
+    pad0: f32,
+    pad1: f32,
+}
+
+struct MaterialSample {
+    brdf: SurfaceBrdf,
+    emissive: vec3<f32>,
+    // False where an alpha mask cuts the surface away.
+    covered: bool,
+}
+
+// Material `m` where its base-colour texture reads `texel` (linear colour and alpha; white for
+// untextured materials).
+fn shade_material(m: MaterialGpu, texel: vec4<f32>) -> MaterialSample {
+    let base = m.base_color * texel;
+    return MaterialSample(
+        split_material(base.rgb, m.metallic, m.roughness),
+        m.emissive,
+        base.a >= m.alpha_cutoff,
+    );
+}

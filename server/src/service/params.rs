@@ -112,7 +112,10 @@ fn check_gi_ranges(g: &GiParams, limits: &Limits) -> Result<(), ApiError> {
         .into_iter()
         .find(|d| d.method == g.method)
     else {
-        return Err(ApiError::internal(format!("GI method {} is not described", g.method)));
+        return Err(ApiError::internal(format!(
+            "GI method {} is not described",
+            g.method
+        )));
     };
     let values = serde_json::to_value(g).map_err(|e| ApiError::internal(e.to_string()))?;
     for p in &method.parameters {

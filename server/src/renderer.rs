@@ -17,7 +17,7 @@ use crate::passes::{
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
     frame_uniforms::{CameraUniform, LightUniform},
     gbuffer::{GBuffer, GBufferPass},
-    scene_buffers::{material_layout, SceneBuffers},
+    scene_buffers::{SceneBuffers, MATERIAL_GROUP},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},
     Target, INDIRECT_FORMAT,
@@ -412,7 +412,7 @@ impl Renderer {
             "light",
             bytemuck::bytes_of(&bytemuck::Zeroable::zeroed() as &LightUniform),
         );
-        let material_layout = material_layout(device);
+        let material_layout = MATERIAL_GROUP.layout(device);
         Self {
             timer: FrameTimer::new(&ctx),
             gbuffer_pass: GBufferPass::new(

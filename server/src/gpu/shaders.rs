@@ -282,6 +282,62 @@ mod tests {
     }
 
     #[test]
+    fn every_pass_binds_what_its_wgsl_declares() {
+        // Test-only imports upwards: the passes own their bind-group descriptions.
+        use crate::gi::lightskin::{
+            cache_lighting, cumulative_sums, importance, indirect_light, proxy_occlusion,
+            val_select,
+        };
+        use crate::passes::bind::{wgsl_mismatches, BindGroupDesc};
+        use crate::passes::{
+            direct_light, exposure, gbuffer, rsm, scene_buffers, shadow_map, tonemap,
+        };
+        // Each module with its pipeline's bind groups, group i at index i.
+        let passes: &[(&ShaderSource, &[&BindGroupDesc])] = &[
+            (
+                &GBUFFER,
+                &[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP],
+            ),
+            (
+                &GBUFFER_TRIANGLE_IDS,
+                &[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP],
+            ),
+            (&SHADOW_MAP, &[&shadow_map::GROUP]),
+            (&DIRECT_LIGHT, &[&direct_light::GROUP]),
+            (&EXPOSURE, &[&exposure::GROUP]),
+            (&TONEMAP, &[&tonemap::GROUP]),
+            (&RSM, &[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP]),
+            (&IMPORTANCE, &[&importance::GROUP]),
+            (&CUMULATIVE_SUMS, &[&cumulative_sums::GROUP]),
+            (&VAL_SELECT, &[&val_select::GROUP]),
+            (&CACHE_LIGHTING, &[&cache_lighting::GROUP]),
+            (&INDIRECT_LIGHT, &[&indirect_light::GROUP]),
+            (&PROXY_OCCLUSION, &[&proxy_occlusion::GROUP]),
+        ];
+        let errors: Vec<String> = passes
+            .iter()
+            .flat_map(|(source, groups)| {
+                wgsl_mismatches(source, groups)
+                    .into_iter()
+                    .map(|e| format!("{}: {e}", source.name))
+            })
+            .collect();
+        assert!(errors.is_empty(), "{}", errors.join("\n"));
+        // Every module a pass runs is checked; the BVH test module's pipeline (an
+        // integration-test harness) takes its layout from the WGSL itself.
+        let checked: BTreeSet<&str> = passes.iter().map(|(s, _)| s.name).collect();
+        let all: BTreeSet<&str> = ALL
+            .iter()
+            .map(|s| s.name)
+            .filter(|&n| n != REFERENCE_BVH_TEST.name && !n.starts_with("reference"))
+            .collect();
+        assert_eq!(
+            checked, all,
+            "a pass module without bind-group descriptions"
+        );
+    }
+
+    #[test]
     fn every_file_in_shaders_dir_belongs_to_a_pass() {
         let root = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shaders"));
         // shaders/ and one level of method folders (shaders/<method>/).

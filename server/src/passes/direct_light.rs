@@ -1,6 +1,7 @@
 //! Deferred lighting (`shaders/direct_light.wgsl`): emission, one punctual light with the
 //! paper's BRDF (eq. 3–4) and PCF shadows, plus the indirect target, into HDR.
 
+use super::bind::{self, bind_group, BindKind};
 use super::{gbuffer::GBuffer, shadow_map::ShadowMap, Target};
 use crate::gpu::shaders;
 
@@ -16,6 +17,26 @@ pub struct DirectLightInputs<'a> {
     pub hdr: &'a Target,
 }
 
+bind_group! {
+    /// Group 0 of `shaders/direct_light.wgsl`.
+    pub struct Resources as GROUP("direct light", wgpu::ShaderStages::COMPUTE) {
+        camera: bind::PARAMS,
+        light: bind::PARAMS,
+        g_position: bind::TEXTURE,
+        g_normal_exponent: bind::TEXTURE,
+        g_diffuse: bind::TEXTURE,
+        g_glossy: bind::TEXTURE,
+        g_emissive: bind::TEXTURE,
+        shadow_map: BindKind::Texture {
+            sample_type: wgpu::TextureSampleType::Depth,
+            dimension: wgpu::TextureViewDimension::D2Array,
+        },
+        shadow_sampler: BindKind::Sampler(wgpu::SamplerBindingType::Comparison),
+        hdr_out: bind::storage_texture(HDR_FORMAT),
+        indirect: bind::TEXTURE,
+    }
+}
+
 pub struct DirectLightPass {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
@@ -24,36 +45,7 @@ pub struct DirectLightPass {
 
 impl DirectLightPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("direct light"),
-            entries: &[
-                super::params_entry(0),
-                super::params_entry(1),
-                super::compute_texture_entry(2, false),
-                super::compute_texture_entry(3, false),
-                super::compute_texture_entry(4, false),
-                super::compute_texture_entry(5, false),
-                super::compute_texture_entry(6, false),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 7,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 8,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Comparison),
-                    count: None,
-                },
-                super::storage_texture_entry(9, HDR_FORMAT),
-                super::compute_texture_entry(10, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::DIRECT_LIGHT.create_module(device);
         let pipeline = super::compute_pipeline(device, "direct light", &layout, &module, "main");
         let shadow_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
@@ -71,32 +63,20 @@ impl DirectLightPass {
     }
 
     pub fn bind(&self, device: &wgpu::Device, inputs: &DirectLightInputs) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("direct light"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: inputs.camera.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: inputs.light.as_entire_binding(),
-                },
-                super::view_binding(2, &inputs.gbuffer.position.view),
-                super::view_binding(3, &inputs.gbuffer.normal_exponent.view),
-                super::view_binding(4, &inputs.gbuffer.diffuse.view),
-                super::view_binding(5, &inputs.gbuffer.glossy.view),
-                super::view_binding(6, &inputs.gbuffer.emissive.view),
-                super::view_binding(7, &inputs.shadow.array_view),
-                wgpu::BindGroupEntry {
-                    binding: 8,
-                    resource: wgpu::BindingResource::Sampler(&self.shadow_sampler),
-                },
-                super::view_binding(9, &inputs.hdr.view),
-                super::view_binding(10, &inputs.indirect.view),
-            ],
-        })
+        Resources {
+            camera: inputs.camera,
+            light: inputs.light,
+            g_position: &inputs.gbuffer.position,
+            g_normal_exponent: &inputs.gbuffer.normal_exponent,
+            g_diffuse: &inputs.gbuffer.diffuse,
+            g_glossy: &inputs.gbuffer.glossy,
+            g_emissive: &inputs.gbuffer.emissive,
+            shadow_map: &inputs.shadow.array_view,
+            shadow_sampler: &self.shadow_sampler,
+            hdr_out: inputs.hdr,
+            indirect: inputs.indirect,
+        }
+        .bind(device, &self.layout)
     }
 
     pub fn encode(

@@ -1,6 +1,7 @@
 //! Automatic exposure (`shaders/exposure.wgsl`): the log-average luminance of lit pixels is
 //! mapped to middle grey, computed on the GPU in two reduction stages.
 
+use super::bind::{self, bind_group};
 use super::Target;
 use crate::gpu::shaders;
 use bytemuck::{Pod, Zeroable};
@@ -42,6 +43,16 @@ pub enum Exposure {
     Manual(f32),
 }
 
+bind_group! {
+    /// Group 0 of `shaders/exposure.wgsl`.
+    pub struct Resources as GROUP("exposure", wgpu::ShaderStages::COMPUTE) {
+        params: bind::PARAMS,
+        hdr: bind::TEXTURE,
+        tiles: bind::STORAGE_RW,
+        result: bind::STORAGE_RW,
+    }
+}
+
 pub struct ExposurePass {
     reduce: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
@@ -59,15 +70,7 @@ pub struct ExposureBindings {
 
 impl ExposurePass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("exposure"),
-            entries: &[
-                super::params_entry(0),
-                super::compute_texture_entry(1, false),
-                super::storage_entry(2, false),
-                super::storage_entry(3, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::EXPOSURE.create_module(device);
         let reduce =
             super::compute_pipeline(device, "exposure tiles", &layout, &module, "reduce_tiles");
@@ -108,28 +111,13 @@ impl ExposurePass {
             usage: wgpu::BufferUsages::STORAGE,
             mapped_at_creation: false,
         });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("exposure"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: self.params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&hdr.view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: tile_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: self.result.as_entire_binding(),
-                },
-            ],
-        });
+        let bind_group = Resources {
+            params: &self.params,
+            hdr,
+            tiles: &tile_buffer,
+            result: &self.result,
+        }
+        .bind(device, &self.layout);
         ExposureBindings { bind_group, tiles }
     }
 

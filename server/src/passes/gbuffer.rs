@@ -1,5 +1,6 @@
 //! G-buffer pass: rasterises the scene from the camera (`shaders/gbuffer.wgsl`).
 
+use super::bind::{self, bind_group};
 use super::{scene_buffers::SceneBuffers, Target};
 use crate::gpu::shaders;
 
@@ -60,6 +61,16 @@ impl GBuffer {
     }
 }
 
+bind_group! {
+    /// Group 0 of `shaders/gbuffer.wgsl` (group 1 is [`super::scene_buffers::MATERIAL_GROUP`]).
+    pub struct CameraResources as CAMERA_GROUP(
+        "gbuffer camera",
+        wgpu::ShaderStages::VERTEX_FRAGMENT
+    ) {
+        camera: bind::PARAMS,
+    }
+}
+
 pub struct GBufferPass {
     pipeline: wgpu::RenderPipeline,
     camera_bind_group: wgpu::BindGroup,
@@ -73,22 +84,8 @@ impl GBufferPass {
         material_layout: &wgpu::BindGroupLayout,
         triangle_ids: bool,
     ) -> Self {
-        let camera_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gbuffer camera"),
-            entries: &[super::buffer_entry(
-                0,
-                wgpu::ShaderStages::VERTEX_FRAGMENT,
-                super::PARAMS_BINDING,
-            )],
-        });
-        let camera_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gbuffer camera"),
-            layout: &camera_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: camera.as_entire_binding(),
-            }],
-        });
+        let camera_layout = CAMERA_GROUP.layout(device);
+        let camera_bind_group = CameraResources { camera }.bind(device, &camera_layout);
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gbuffer"),
             bind_group_layouts: &[Some(&camera_layout), Some(material_layout)],

@@ -16,6 +16,7 @@
 //! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry
 //! and materials.
 
+pub mod bind;
 pub mod direct_light;
 pub mod exposure;
 pub mod frame_uniforms;
@@ -374,6 +375,44 @@ pub fn dispatch_chunked(
 #[cfg(test)]
 mod tests {
     use super::{chunk_ranges, MAX_CHUNKS};
+
+    #[test]
+    fn passes_do_not_import_gi() {
+        // gi/ builds on passes/, never the other way round (issue 10): a shared pass that needs
+        // something of a GI method takes it as an argument.
+        let root = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/src/passes"));
+        let mut dirs = vec![root.to_path_buf()];
+        while let Some(dir) = dirs.pop() {
+            for entry in std::fs::read_dir(&dir).expect("src/passes exists") {
+                let path = entry.expect("dir entry").path();
+                if path.is_dir() {
+                    dirs.push(path);
+                    continue;
+                }
+                // Code only (not comments), without whitespace; the needle is split so that
+                // this test does not find itself.
+                let text: String = std::fs::read_to_string(&path)
+                    .expect("readable source")
+                    .lines()
+                    .filter(|line| !line.trim_start().starts_with("//"))
+                    .flat_map(str::split_whitespace)
+                    .collect();
+                let gi = ["crate", "gi"].join("::");
+                // `crate::gi…`, and `gi` inside a grouped `crate::{…}` import.
+                let grouped = text.split("crate::{").skip(1).any(|rest| {
+                    let group = rest.split('}').next().unwrap_or_default();
+                    group
+                        .split(',')
+                        .any(|item| item == "gi" || item.starts_with("gi::"))
+                });
+                assert!(
+                    !text.contains(&gi) && !grouped,
+                    "{} imports the gi module",
+                    path.display()
+                );
+            }
+        }
+    }
 
     #[test]
     fn chunks_respect_budget_granule_and_count() {

@@ -1,9 +1,10 @@
 //! Reflective shadow map (`shaders/rsm.wgsl`): VAL position, normal, flux and disk area per
 //! texel, the faces of a light side by side in one atlas.
 
+use super::bind::{self, bind_group};
 use super::frame_uniforms::LightFace;
 use super::scene_buffers::SceneBuffers;
-use super::Target;
+use super::{ParamSlots, Target};
 use crate::gpu::shaders;
 use bytemuck::{Pod, Zeroable};
 
@@ -12,9 +13,7 @@ pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 /// Flux of a small texel far from a dim light can be far below f16's normal range.
 pub const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
-/// Faces are 256 bytes apart in the uniform buffer (the dynamic-offset alignment).
-const FACE_STRIDE: u64 = 256;
-const MAX_FACES: usize = 6;
+const MAX_FACES: u32 = 6;
 
 /// Mirrors `RsmFace` in `shaders/rsm.wgsl`.
 #[repr(C)]
@@ -93,9 +92,17 @@ impl Rsm {
     }
 }
 
+bind_group! {
+    /// Group 0 of `shaders/rsm.wgsl` (group 1 is [`super::scene_buffers::MATERIAL_GROUP`]).
+    pub struct Resources as GROUP("rsm", wgpu::ShaderStages::VERTEX_FRAGMENT) {
+        face: bind::param_slot::<RsmFace>(),
+        light: bind::PARAMS,
+    }
+}
+
 pub struct RsmPass {
     pipeline: wgpu::RenderPipeline,
-    faces: wgpu::Buffer,
+    faces: ParamSlots,
     bind_group: wgpu::BindGroup,
 }
 
@@ -105,48 +112,18 @@ impl RsmPass {
         light: &wgpu::Buffer,
         material_layout: &wgpu::BindGroupLayout,
     ) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("rsm"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: super::PARAMS_BINDING,
-                        has_dynamic_offset: true,
-                        min_binding_size: wgpu::BufferSize::new(
-                            std::mem::size_of::<RsmFace>() as u64
-                        ),
-                    },
-                    count: None,
-                },
-                super::buffer_entry(1, wgpu::ShaderStages::FRAGMENT, super::PARAMS_BINDING),
-            ],
-        });
-        let faces = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("rsm faces"),
-            size: FACE_STRIDE * MAX_FACES as u64,
-            usage: super::PARAMS_USAGE,
-            mapped_at_creation: false,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("rsm"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: &faces,
-                        offset: 0,
-                        size: wgpu::BufferSize::new(std::mem::size_of::<RsmFace>() as u64),
-                    }),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: light.as_entire_binding(),
-                },
-            ],
-        });
+        let layout = GROUP.layout(device);
+        let faces = ParamSlots::new(
+            device,
+            "rsm faces",
+            std::mem::size_of::<RsmFace>() as u64,
+            MAX_FACES,
+        );
+        let bind_group = Resources {
+            face: &faces,
+            light,
+        }
+        .bind(device, &layout);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("rsm"),
             bind_group_layouts: &[Some(&layout), Some(material_layout)],
@@ -169,13 +146,7 @@ impl RsmPass {
     }
 
     pub fn set_faces(&self, queue: &wgpu::Queue, faces: &[RsmFace]) {
-        for (i, face) in faces.iter().enumerate().take(MAX_FACES) {
-            queue.write_buffer(
-                &self.faces,
-                i as u64 * FACE_STRIDE,
-                bytemuck::bytes_of(face),
-            );
-        }
+        self.faces.write(queue, faces);
     }
 
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm, scene: &SceneBuffers) {
@@ -189,7 +160,7 @@ impl RsmPass {
         for face in 0..rsm.faces {
             let size = rsm.size as f32;
             pass.set_viewport(face as f32 * size, 0.0, size, size, 0.0, 1.0);
-            pass.set_bind_group(0, &self.bind_group, &[face * FACE_STRIDE as u32]);
+            pass.set_bind_group(0, &self.bind_group, &[ParamSlots::offset(face)]);
             scene.draw_with_materials(&mut pass, &scene.shadow_casting);
         }
     }

@@ -1,6 +1,7 @@
 //! The scene on the GPU, shared by every rasterising pass: geometry, the material table and one
 //! bind group per material (`shaders/materials.wgsl`, group 1).
 
+use super::bind::{self, bind_group, BindKind};
 use crate::scene::{Material, MaterialRange, Scene, Vertex};
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
@@ -44,34 +45,16 @@ pub struct SceneBuffers {
     pub materials: Vec<wgpu::BindGroup>,
 }
 
-/// Layout of group 1 in `shaders/materials.wgsl`.
-pub fn material_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("material"),
-        entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
-                },
-                count: None,
-            },
-            wgpu::BindGroupLayoutEntry {
-                binding: 1,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                count: None,
-            },
-            super::buffer_entry(
-                2,
-                wgpu::ShaderStages::FRAGMENT,
-                wgpu::BufferBindingType::Storage { read_only: true },
-            ),
-        ],
-    })
+bind_group! {
+    /// Group 1 of `shaders/materials.wgsl`.
+    pub struct MaterialResources as MATERIAL_GROUP("material", wgpu::ShaderStages::FRAGMENT) {
+        base_color_texture: BindKind::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: true },
+            dimension: wgpu::TextureViewDimension::D2,
+        },
+        base_color_sampler: BindKind::Sampler(wgpu::SamplerBindingType::Filtering),
+        materials: bind::STORAGE,
+    }
 }
 
 impl SceneBuffers {
@@ -255,24 +238,12 @@ fn material_bind_groups(
                 .base_color_texture
                 .and_then(|i| textures.get(i))
                 .unwrap_or(&white);
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(&m.name),
-                layout,
-                entries: &[
-                    wgpu::BindGroupEntry {
-                        binding: 0,
-                        resource: wgpu::BindingResource::TextureView(view),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 1,
-                        resource: wgpu::BindingResource::Sampler(&sampler),
-                    },
-                    wgpu::BindGroupEntry {
-                        binding: 2,
-                        resource: table.as_entire_binding(),
-                    },
-                ],
-            })
+            MaterialResources {
+                base_color_texture: view,
+                base_color_sampler: &sampler,
+                materials: &table,
+            }
+            .bind(device, layout)
         })
         .collect()
 }

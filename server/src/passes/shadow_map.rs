@@ -1,11 +1,11 @@
 //! Shadow-map pass: depth of the scene from each light face (`shaders/shadow_map.wgsl`).
 
+use super::bind::{self, bind_group};
 use super::scene_buffers::SceneBuffers;
+use super::ParamSlots;
 use crate::gpu::shaders;
 
 pub const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
-/// Faces are 256 bytes apart in the uniform buffer (the dynamic-offset alignment).
-const FACE_STRIDE: u64 = 256;
 const MAX_FACES: u32 = 6;
 
 /// The depth array for one light and resolution.
@@ -62,45 +62,32 @@ impl ShadowMap {
     }
 }
 
+bind_group! {
+    /// Group 0 of `shaders/shadow_map.wgsl`.
+    pub struct Resources as GROUP("shadow map", wgpu::ShaderStages::VERTEX) {
+        face_view_proj: bind::param_slot::<[[f32; 4]; 4]>(),
+    }
+}
+
 pub struct ShadowMapPass {
     pipeline: wgpu::RenderPipeline,
-    face_matrices: wgpu::Buffer,
+    face_matrices: ParamSlots,
     bind_group: wgpu::BindGroup,
 }
 
 impl ShadowMapPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("shadow map"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: super::PARAMS_BINDING,
-                    has_dynamic_offset: true,
-                    min_binding_size: wgpu::BufferSize::new(64),
-                },
-                count: None,
-            }],
-        });
-        let face_matrices = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("shadow face matrices"),
-            size: FACE_STRIDE * u64::from(MAX_FACES),
-            usage: super::PARAMS_USAGE,
-            mapped_at_creation: false,
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("shadow map"),
-            layout: &layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &face_matrices,
-                    offset: 0,
-                    size: wgpu::BufferSize::new(64),
-                }),
-            }],
-        });
+        let layout = GROUP.layout(device);
+        let face_matrices = ParamSlots::new(
+            device,
+            "shadow face matrices",
+            std::mem::size_of::<[[f32; 4]; 4]>() as u64,
+            MAX_FACES,
+        );
+        let bind_group = Resources {
+            face_view_proj: &face_matrices,
+        }
+        .bind(device, &layout);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("shadow map"),
             bind_group_layouts: &[Some(&layout)],
@@ -150,13 +137,7 @@ impl ShadowMapPass {
 
     /// Uploads the face matrices (`LightUniform::face_view_proj`) for the next encode.
     pub fn set_faces(&self, queue: &wgpu::Queue, faces: &[[[f32; 4]; 4]]) {
-        for (i, m) in faces.iter().enumerate().take(MAX_FACES as usize) {
-            queue.write_buffer(
-                &self.face_matrices,
-                i as u64 * FACE_STRIDE,
-                bytemuck::bytes_of(m),
-            );
-        }
+        self.face_matrices.write(queue, faces);
     }
 
     pub fn encode(
@@ -182,7 +163,7 @@ impl ShadowMapPass {
                 multiview_mask: None,
             });
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[face as u32 * FACE_STRIDE as u32]);
+            pass.set_bind_group(0, &self.bind_group, &[ParamSlots::offset(face as u32)]);
             pass.set_vertex_buffer(0, scene.vertices.slice(..));
             pass.set_index_buffer(scene.indices.slice(..), wgpu::IndexFormat::Uint32);
             for range in &scene.shadow_casting {

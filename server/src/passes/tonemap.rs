@@ -1,9 +1,19 @@
 //! Tone mapping (`shaders/tonemap.wgsl`): exposure, ACES-fitted curve, sRGB, 8-bit output.
 
+use super::bind::{self, bind_group};
 use super::Target;
 use crate::gpu::shaders;
 
 pub const LDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+
+bind_group! {
+    /// Group 0 of `shaders/tonemap.wgsl`.
+    pub struct Resources as GROUP("tonemap", wgpu::ShaderStages::COMPUTE) {
+        hdr: bind::TEXTURE,
+        exposure: bind::STORAGE,
+        ldr_out: bind::storage_texture(LDR_FORMAT),
+    }
+}
 
 pub struct TonemapPass {
     pipeline: wgpu::ComputePipeline,
@@ -12,14 +22,7 @@ pub struct TonemapPass {
 
 impl TonemapPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("tonemap"),
-            entries: &[
-                super::compute_texture_entry(0, false),
-                super::storage_entry(1, true),
-                super::storage_texture_entry(2, LDR_FORMAT),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::TONEMAP.create_module(device);
         let pipeline = super::compute_pipeline(device, "tonemap", &layout, &module, "main");
         Self { pipeline, layout }
@@ -32,24 +35,12 @@ impl TonemapPass {
         exposure: &wgpu::Buffer,
         ldr: &Target,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("tonemap"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&hdr.view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: exposure.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(&ldr.view),
-                },
-            ],
-        })
+        Resources {
+            hdr,
+            exposure,
+            ldr_out: ldr,
+        }
+        .bind(device, &self.layout)
     }
 
     pub fn encode(

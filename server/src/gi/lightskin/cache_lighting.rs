@@ -2,6 +2,7 @@
 //! light cache from the VALs (eq. 3–7 for LightSkin, eq. 13–15 for the BRSM subset).
 
 use crate::gpu::shaders;
+use crate::passes::bind::{self, bind_group};
 use crate::passes::rsm::Rsm;
 use bytemuck::{Pod, Zeroable};
 
@@ -66,6 +67,20 @@ pub enum ValSource {
 
 const WORKGROUP: u32 = 64;
 
+bind_group! {
+    /// Group 0 of `shaders/lightskin/cache_lighting.wgsl`.
+    pub struct Resources as GROUP("cache lighting", wgpu::ShaderStages::COMPUTE) {
+        params: bind::param_slot::<CacheLightingParams>(),
+        caches: bind::STORAGE,
+        vals: bind::STORAGE,
+        rsm_position: bind::TEXTURE,
+        rsm_normal: bind::TEXTURE,
+        rsm_flux_area: bind::TEXTURE,
+        lighting: bind::STORAGE_RW,
+        accum: bind::STORAGE_RW,
+    }
+}
+
 pub struct CacheLightingPass {
     accumulate: wgpu::ComputePipeline,
     finish: wgpu::ComputePipeline,
@@ -81,19 +96,7 @@ impl CacheLightingPass {
             std::mem::size_of::<CacheLightingParams>() as u64,
             crate::passes::MAX_CHUNKS,
         );
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cache lighting"),
-            entries: &[
-                params.layout_entry(0),
-                crate::passes::storage_entry(1, true),
-                crate::passes::storage_entry(2, true),
-                crate::passes::compute_texture_entry(3, false),
-                crate::passes::compute_texture_entry(4, false),
-                crate::passes::compute_texture_entry(5, false),
-                crate::passes::storage_entry(6, false),
-                crate::passes::storage_entry(7, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::CACHE_LIGHTING.create_module(device);
         Self {
             accumulate: crate::passes::compute_pipeline(
@@ -124,20 +127,17 @@ impl CacheLightingPass {
         lighting: &wgpu::Buffer,
         accum: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("cache lighting"),
-            layout: &self.layout,
-            entries: &[
-                self.params.binding(0),
-                crate::passes::buffer_binding(1, caches),
-                crate::passes::buffer_binding(2, vals),
-                crate::passes::view_binding(3, &rsm.position.view),
-                crate::passes::view_binding(4, &rsm.normal.view),
-                crate::passes::view_binding(5, &rsm.flux_area.view),
-                crate::passes::buffer_binding(6, lighting),
-                crate::passes::buffer_binding(7, accum),
-            ],
-        })
+        Resources {
+            params: &self.params,
+            caches,
+            vals,
+            rsm_position: &rsm.position,
+            rsm_normal: &rsm.normal,
+            rsm_flux_area: &rsm.flux_area,
+            lighting,
+            accum,
+        }
+        .bind(device, &self.layout)
     }
 
     /// Writes one parameter slot per chunk of VALs; returns the number of chunks to encode.

@@ -2,6 +2,7 @@
 //! then across the column totals.
 
 use crate::gpu::shaders;
+use crate::passes::bind::{self, bind_group};
 use bytemuck::{Pod, Zeroable};
 
 /// Mirrors `ScanParams` in `shaders/cumulative_sums.wgsl`.
@@ -14,6 +15,16 @@ pub struct ScanParams {
     pub pad1: u32,
 }
 
+bind_group! {
+    /// Group 0 of `shaders/lightskin/cumulative_sums.wgsl`.
+    pub struct Resources as GROUP("cumulative sums", wgpu::ShaderStages::COMPUTE) {
+        params: bind::PARAMS,
+        importance: bind::STORAGE,
+        column_sums: bind::STORAGE_RW,
+        row_sums: bind::STORAGE_RW,
+    }
+}
+
 pub struct CumulativeSumsPass {
     columns: wgpu::ComputePipeline,
     rows: wgpu::ComputePipeline,
@@ -23,15 +34,7 @@ pub struct CumulativeSumsPass {
 
 impl CumulativeSumsPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("cumulative sums"),
-            entries: &[
-                crate::passes::params_entry(0),
-                crate::passes::storage_entry(1, true),
-                crate::passes::storage_entry(2, false),
-                crate::passes::storage_entry(3, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::CUMULATIVE_SUMS.create_module(device);
         Self {
             columns: crate::passes::compute_pipeline(
@@ -64,16 +67,13 @@ impl CumulativeSumsPass {
         column_sums: &wgpu::Buffer,
         row_sums: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("cumulative sums"),
-            layout: &self.layout,
-            entries: &[
-                crate::passes::buffer_binding(0, &self.params),
-                crate::passes::buffer_binding(1, importance),
-                crate::passes::buffer_binding(2, column_sums),
-                crate::passes::buffer_binding(3, row_sums),
-            ],
-        })
+        Resources {
+            params: &self.params,
+            importance,
+            column_sums,
+            row_sums,
+        }
+        .bind(device, &self.layout)
     }
 
     pub fn prepare(&self, queue: &wgpu::Queue, width: u32, height: u32) {

@@ -2,6 +2,7 @@
 //! G-buffer at Halton positions, then one importance value per RSM texel.
 
 use crate::gpu::shaders;
+use crate::passes::bind::{self, bind_group};
 use crate::passes::{gbuffer::GBuffer, rsm::Rsm};
 use bytemuck::{Pod, Zeroable};
 
@@ -29,6 +30,20 @@ pub struct ImportanceParams {
     pub pad2: u32,
 }
 
+bind_group! {
+    /// Group 0 of `shaders/lightskin/importance.wgsl`.
+    pub struct Resources as GROUP("importance", wgpu::ShaderStages::COMPUTE) {
+        params: bind::param_slot::<ImportanceParams>(),
+        g_position: bind::TEXTURE,
+        g_normal_exponent: bind::TEXTURE,
+        samples: bind::STORAGE_RW,
+        rsm_position: bind::TEXTURE,
+        rsm_normal: bind::TEXTURE,
+        rsm_flux_area: bind::TEXTURE,
+        importance: bind::STORAGE_RW,
+    }
+}
+
 pub struct ImportancePass {
     gather: wgpu::ComputePipeline,
     estimate: wgpu::ComputePipeline,
@@ -44,19 +59,7 @@ impl ImportancePass {
             std::mem::size_of::<ImportanceParams>() as u64,
             crate::passes::MAX_CHUNKS,
         );
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("importance"),
-            entries: &[
-                params.layout_entry(0),
-                crate::passes::compute_texture_entry(1, false),
-                crate::passes::compute_texture_entry(2, false),
-                crate::passes::storage_entry(3, false),
-                crate::passes::compute_texture_entry(4, false),
-                crate::passes::compute_texture_entry(5, false),
-                crate::passes::compute_texture_entry(6, false),
-                crate::passes::storage_entry(7, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::IMPORTANCE.create_module(device);
         Self {
             gather: crate::passes::compute_pipeline(
@@ -86,26 +89,17 @@ impl ImportancePass {
         samples: &wgpu::Buffer,
         importance: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("importance"),
-            layout: &self.layout,
-            entries: &[
-                self.params.binding(0),
-                crate::passes::view_binding(1, &gbuffer.position.view),
-                crate::passes::view_binding(2, &gbuffer.normal_exponent.view),
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: samples.as_entire_binding(),
-                },
-                crate::passes::view_binding(4, &rsm.position.view),
-                crate::passes::view_binding(5, &rsm.normal.view),
-                crate::passes::view_binding(6, &rsm.flux_area.view),
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: importance.as_entire_binding(),
-                },
-            ],
-        })
+        Resources {
+            params: &self.params,
+            g_position: &gbuffer.position,
+            g_normal_exponent: &gbuffer.normal_exponent,
+            samples,
+            rsm_position: &rsm.position,
+            rsm_normal: &rsm.normal,
+            rsm_flux_area: &rsm.flux_area,
+            importance,
+        }
+        .bind(device, &self.layout)
     }
 
     /// Writes one parameter slot per band of RSM rows; returns the bands.

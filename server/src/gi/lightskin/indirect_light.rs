@@ -2,10 +2,9 @@
 //! lights of the pixel's 16 light caches (eq. 8–9), into the indirect target.
 
 use crate::gpu::shaders;
-use crate::passes::{gbuffer::GBuffer, Target};
+use crate::passes::bind::{self, bind_group, BindKind};
+use crate::passes::{gbuffer::GBuffer, Target, INDIRECT_FORMAT};
 use bytemuck::{Pod, Zeroable};
-
-use crate::passes::INDIRECT_FORMAT;
 
 /// Mirrors `IndirectParams` in `shaders/indirect_light.wgsl`.
 #[repr(C)]
@@ -25,6 +24,28 @@ pub struct CacheInputs<'a> {
     pub scene: &'a crate::passes::scene_buffers::SceneBuffers,
 }
 
+bind_group! {
+    /// Group 0 of `shaders/lightskin/indirect_light.wgsl`.
+    pub struct Resources as GROUP("indirect light", wgpu::ShaderStages::COMPUTE) {
+        camera: bind::PARAMS,
+        params: bind::PARAMS,
+        g_position: bind::TEXTURE,
+        g_normal_exponent: bind::TEXTURE,
+        g_diffuse: bind::TEXTURE,
+        g_glossy: bind::TEXTURE,
+        g_id: BindKind::Texture {
+            sample_type: wgpu::TextureSampleType::Uint,
+            dimension: wgpu::TextureViewDimension::D2,
+        },
+        caches: bind::STORAGE,
+        lighting: bind::STORAGE,
+        vertex_caches: bind::STORAGE,
+        indirect_out: bind::storage_texture(INDIRECT_FORMAT),
+        indices: bind::STORAGE,
+        vertices: bind::STORAGE,
+    }
+}
+
 pub struct IndirectLightPass {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
@@ -33,33 +54,7 @@ pub struct IndirectLightPass {
 
 impl IndirectLightPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("indirect light"),
-            entries: &[
-                crate::passes::params_entry(0),
-                crate::passes::params_entry(1),
-                crate::passes::compute_texture_entry(2, false),
-                crate::passes::compute_texture_entry(3, false),
-                crate::passes::compute_texture_entry(4, false),
-                crate::passes::compute_texture_entry(5, false),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 6,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                crate::passes::storage_entry(7, true),
-                crate::passes::storage_entry(8, true),
-                crate::passes::storage_entry(9, true),
-                crate::passes::storage_texture_entry(10, INDIRECT_FORMAT),
-                crate::passes::storage_entry(11, true),
-                crate::passes::storage_entry(12, true),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::INDIRECT_LIGHT.create_module(device);
         let params = crate::passes::params_buffer(
             device,
@@ -87,25 +82,22 @@ impl IndirectLightPass {
         caches: &CacheInputs,
         indirect: &Target,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("indirect light"),
-            layout: &self.layout,
-            entries: &[
-                crate::passes::buffer_binding(0, camera),
-                crate::passes::buffer_binding(1, &self.params),
-                crate::passes::view_binding(2, &gbuffer.position.view),
-                crate::passes::view_binding(3, &gbuffer.normal_exponent.view),
-                crate::passes::view_binding(4, &gbuffer.diffuse.view),
-                crate::passes::view_binding(5, &gbuffer.glossy.view),
-                crate::passes::view_binding(6, &gbuffer.id.view),
-                crate::passes::buffer_binding(7, caches.caches),
-                crate::passes::buffer_binding(8, caches.lighting),
-                crate::passes::buffer_binding(9, caches.vertex_caches),
-                crate::passes::view_binding(10, &indirect.view),
-                crate::passes::buffer_binding(11, &caches.scene.indices),
-                crate::passes::buffer_binding(12, &caches.scene.vertices),
-            ],
-        })
+        Resources {
+            camera,
+            params: &self.params,
+            g_position: &gbuffer.position,
+            g_normal_exponent: &gbuffer.normal_exponent,
+            g_diffuse: &gbuffer.diffuse,
+            g_glossy: &gbuffer.glossy,
+            g_id: &gbuffer.id,
+            caches: caches.caches,
+            lighting: caches.lighting,
+            vertex_caches: caches.vertex_caches,
+            indirect_out: indirect,
+            indices: &caches.scene.indices,
+            vertices: &caches.scene.vertices,
+        }
+        .bind(device, &self.layout)
     }
 
     /// `triangle_ids` says what the G-buffer's id target holds.

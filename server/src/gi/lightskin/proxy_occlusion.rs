@@ -3,6 +3,7 @@
 //! the covered fraction dims the proxy.
 
 use crate::gpu::shaders;
+use crate::passes::bind::{self, bind_group};
 use bytemuck::{Pod, Zeroable};
 
 /// Mirrors `OcclusionParams` in `shaders/proxy_occlusion.wgsl`.
@@ -16,6 +17,16 @@ pub struct OcclusionParams {
 }
 
 const WORKGROUP: u32 = 64;
+
+bind_group! {
+    /// Group 0 of `shaders/lightskin/proxy_occlusion.wgsl`.
+    pub struct Resources as GROUP("proxy occlusion", wgpu::ShaderStages::COMPUTE) {
+        params: bind::param_slot::<OcclusionParams>(),
+        caches: bind::STORAGE,
+        lighting: bind::STORAGE_RW,
+        coverage: bind::STORAGE_RW,
+    }
+}
 
 pub struct ProxyOcclusionPass {
     accumulate: wgpu::ComputePipeline,
@@ -32,15 +43,7 @@ impl ProxyOcclusionPass {
             std::mem::size_of::<OcclusionParams>() as u64,
             crate::passes::MAX_CHUNKS,
         );
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("proxy occlusion"),
-            entries: &[
-                params.layout_entry(0),
-                crate::passes::storage_entry(1, true),
-                crate::passes::storage_entry(2, false),
-                crate::passes::storage_entry(3, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::PROXY_OCCLUSION.create_module(device);
         Self {
             accumulate: crate::passes::compute_pipeline(
@@ -69,16 +72,13 @@ impl ProxyOcclusionPass {
         lighting: &wgpu::Buffer,
         coverage: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("proxy occlusion"),
-            layout: &self.layout,
-            entries: &[
-                self.params.binding(0),
-                crate::passes::buffer_binding(1, caches),
-                crate::passes::buffer_binding(2, lighting),
-                crate::passes::buffer_binding(3, coverage),
-            ],
-        })
+        Resources {
+            params: &self.params,
+            caches,
+            lighting,
+            coverage,
+        }
+        .bind(device, &self.layout)
     }
 
     /// Writes one parameter slot per chunk of occluders; returns the number of chunks.

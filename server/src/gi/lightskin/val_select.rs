@@ -2,6 +2,7 @@
 //! distribution by binary search on the cumulative sums, each with its Monte Carlo weight.
 
 use crate::gpu::shaders;
+use crate::passes::bind::{self, bind_group};
 use crate::passes::rsm::Rsm;
 use bytemuck::{Pod, Zeroable};
 
@@ -35,6 +36,20 @@ const WORKGROUP: u32 = 64;
 /// Workgroups per dispatch row (wgpu's per-dimension limit).
 const MAX_GROUPS_X: u32 = 65_535;
 
+bind_group! {
+    /// Group 0 of `shaders/lightskin/val_select.wgsl`.
+    pub struct Resources as GROUP("val select", wgpu::ShaderStages::COMPUTE) {
+        params: bind::PARAMS,
+        importance_map: bind::STORAGE,
+        column_sums: bind::STORAGE,
+        row_sums: bind::STORAGE,
+        rsm_position: bind::TEXTURE,
+        rsm_normal: bind::TEXTURE,
+        rsm_flux_area: bind::TEXTURE,
+        vals: bind::STORAGE_RW,
+    }
+}
+
 pub struct ValSelectPass {
     pipeline: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
@@ -51,19 +66,7 @@ pub struct SelectionBuffers<'a> {
 
 impl ValSelectPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("val select"),
-            entries: &[
-                crate::passes::params_entry(0),
-                crate::passes::storage_entry(1, true),
-                crate::passes::storage_entry(2, true),
-                crate::passes::storage_entry(3, true),
-                crate::passes::compute_texture_entry(4, false),
-                crate::passes::compute_texture_entry(5, false),
-                crate::passes::compute_texture_entry(6, false),
-                crate::passes::storage_entry(7, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::VAL_SELECT.create_module(device);
         Self {
             pipeline: crate::passes::compute_pipeline(
@@ -88,20 +91,17 @@ impl ValSelectPass {
         rsm: &Rsm,
         buffers: &SelectionBuffers,
     ) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("val select"),
-            layout: &self.layout,
-            entries: &[
-                crate::passes::buffer_binding(0, &self.params),
-                crate::passes::buffer_binding(1, buffers.importance),
-                crate::passes::buffer_binding(2, buffers.column_sums),
-                crate::passes::buffer_binding(3, buffers.row_sums),
-                crate::passes::view_binding(4, &rsm.position.view),
-                crate::passes::view_binding(5, &rsm.normal.view),
-                crate::passes::view_binding(6, &rsm.flux_area.view),
-                crate::passes::buffer_binding(7, buffers.vals),
-            ],
-        })
+        Resources {
+            params: &self.params,
+            importance_map: buffers.importance,
+            column_sums: buffers.column_sums,
+            row_sums: buffers.row_sums,
+            rsm_position: &rsm.position,
+            rsm_normal: &rsm.normal,
+            rsm_flux_area: &rsm.flux_area,
+            vals: buffers.vals,
+        }
+        .bind(device, &self.layout)
     }
 
     /// Dispatch grid for `count` VALs: (groups per row, rows).

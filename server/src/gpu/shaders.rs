@@ -288,6 +288,7 @@ mod tests {
             cache_lighting, cumulative_sums, importance, indirect_light, proxy_occlusion,
             val_select,
         };
+        use crate::gi::reference::{self, resolve};
         use crate::passes::bind::{wgsl_mismatches, BindGroupDesc};
         use crate::passes::{
             direct_light, exposure, gbuffer, rsm, scene_buffers, shadow_map, tonemap,
@@ -313,6 +314,11 @@ mod tests {
             (&CACHE_LIGHTING, &[&cache_lighting::GROUP]),
             (&INDIRECT_LIGHT, &[&indirect_light::GROUP]),
             (&PROXY_OCCLUSION, &[&proxy_occlusion::GROUP]),
+            (
+                &REFERENCE_PATH_TRACE,
+                &[&reference::PASS_GROUP, &reference::SCENE_GROUP],
+            ),
+            (&REFERENCE_RESOLVE, &[&resolve::GROUP]),
         ];
         let errors: Vec<String> = passes
             .iter()
@@ -329,7 +335,7 @@ mod tests {
         let all: BTreeSet<&str> = ALL
             .iter()
             .map(|s| s.name)
-            .filter(|&n| n != REFERENCE_BVH_TEST.name && !n.starts_with("reference"))
+            .filter(|&n| n != REFERENCE_BVH_TEST.name)
             .collect();
         assert_eq!(
             checked, all,

@@ -1,9 +1,9 @@
-//! Bind groups declared once. [`bind_group!`] declares a group's bindings in binding order
+//! Bind groups declared once. `bind_group!` declares a group's bindings in binding order
 //! under their WGSL variable names and produces both halves from that one list: a
 //! [`BindGroupDesc`] constant, which makes the layout, and a struct with one field per
 //! binding, whose `bind` makes the bind group. Binding numbers are never written in Rust, and a
 //! missing, extra or misnamed resource does not compile. `gpu::shaders`' tests check every
-//! pass's descriptions against naga's reflection of its WGSL ([`wgsl_mismatches`]).
+//! pass's descriptions against naga's reflection of its WGSL (`wgsl_mismatches`).
 //!
 //! ```ignore
 //! bind_group! {
@@ -150,7 +150,7 @@ impl BindGroupDesc {
     }
 
     /// A bind group of `layout` (made by [`Self::layout`]) with `resources` in binding order.
-    /// Called by the structs [`bind_group!`] declares, which get the order right.
+    /// Called by the structs `bind_group!` declares, which get the order right.
     pub fn bind(
         &self,
         device: &wgpu::Device,

@@ -14,7 +14,8 @@
 //! 12. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
 //!
 //! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry
-//! and materials.
+//! and materials. Every pass, here and in `gi/`, declares each bind group once with
+//! `bind_group!` ([`bind`]). `gi/` builds on this module, never the other way round.
 
 pub mod bind;
 pub mod direct_light;
@@ -76,55 +77,6 @@ pub fn cleared_attachment(view: &wgpu::TextureView) -> wgpu::RenderPassColorAtta
             load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
             store: wgpu::StoreOp::Store,
         },
-    }
-}
-
-/// Layout entry for a texture read with `textureLoad` in a compute shader.
-pub fn compute_texture_entry(binding: u32, filterable: bool) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
-/// Layout entry for a write-only storage texture in a compute shader.
-pub fn storage_texture_entry(
-    binding: u32,
-    format: wgpu::TextureFormat,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format,
-            view_dimension: wgpu::TextureViewDimension::D2,
-        },
-        count: None,
-    }
-}
-
-/// Layout entry for a buffer binding.
-pub fn buffer_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-    ty: wgpu::BufferBindingType,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
     }
 }
 
@@ -193,22 +145,6 @@ pub fn dispatch_2d(
     pass.dispatch_workgroups(width.div_ceil(TILE), height.div_ceil(TILE), 1);
 }
 
-/// A bind group entry for a whole buffer.
-pub fn buffer_binding(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: buffer.as_entire_binding(),
-    }
-}
-
-/// A bind group entry for a texture view.
-pub fn view_binding(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: wgpu::BindingResource::TextureView(view),
-    }
-}
-
 /// How per-frame parameters (camera, light, pass parameters) are bound: as read-only storage
 /// buffers, not uniform buffers. lavapipe (Mesa 22.3, the driver of CI and GPU-less machines)
 /// inlines uniform-buffer values that steer branches or loops into the shader and JIT-compiles
@@ -236,7 +172,8 @@ pub struct ParamSlots {
 }
 
 impl ParamSlots {
-    pub fn new(device: &wgpu::Device, label: &str, slot_size: u64, slots: u32) -> Self {
+    /// `slots` slots (at least one) of one `T` each.
+    pub fn new<T>(device: &wgpu::Device, label: &str, slots: u32) -> Self {
         Self {
             buffer: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -245,38 +182,12 @@ impl ParamSlots {
                 mapped_at_creation: false,
             }),
             slots: slots.max(1),
-            slot_size,
+            slot_size: std::mem::size_of::<T>() as u64,
         }
     }
 
     pub fn slots(&self) -> u32 {
         self.slots
-    }
-
-    /// Layout entry for binding `binding` with a dynamic offset.
-    pub fn layout_entry(&self, binding: u32) -> wgpu::BindGroupLayoutEntry {
-        wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: PARAMS_BINDING,
-                has_dynamic_offset: true,
-                min_binding_size: wgpu::BufferSize::new(self.slot_size),
-            },
-            count: None,
-        }
-    }
-
-    /// Bind group entry covering one slot (the dynamic offset picks which).
-    pub fn binding(&self, binding: u32) -> wgpu::BindGroupEntry<'_> {
-        wgpu::BindGroupEntry {
-            binding,
-            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                buffer: &self.buffer,
-                offset: 0,
-                size: wgpu::BufferSize::new(self.slot_size),
-            }),
-        }
     }
 
     /// Writes `values` into consecutive slots from slot 0 (at most [`Self::slots`]).
@@ -312,20 +223,6 @@ pub fn chunk_ranges(total: u32, cost_per_item: u64, granule: u32) -> Vec<std::op
     (0..count)
         .map(|k| k * size..((k + 1) * size).min(total))
         .collect()
-}
-
-/// Layout entry for a parameter buffer read by a compute shader.
-pub fn params_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
-    buffer_entry(binding, wgpu::ShaderStages::COMPUTE, PARAMS_BINDING)
-}
-
-/// Layout entry for a storage buffer used by a compute shader.
-pub fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    buffer_entry(
-        binding,
-        wgpu::ShaderStages::COMPUTE,
-        wgpu::BufferBindingType::Storage { read_only },
-    )
 }
 
 /// A parameter buffer of `size` bytes written with `queue.write_buffer`.

@@ -113,12 +113,7 @@ impl RsmPass {
         material_layout: &wgpu::BindGroupLayout,
     ) -> Self {
         let layout = GROUP.layout(device);
-        let faces = ParamSlots::new(
-            device,
-            "rsm faces",
-            std::mem::size_of::<RsmFace>() as u64,
-            MAX_FACES,
-        );
+        let faces = ParamSlots::new::<RsmFace>(device, "rsm faces", MAX_FACES);
         let bind_group = Resources {
             face: &faces,
             light,

@@ -78,12 +78,8 @@ pub struct ShadowMapPass {
 impl ShadowMapPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let layout = GROUP.layout(device);
-        let face_matrices = ParamSlots::new(
-            device,
-            "shadow face matrices",
-            std::mem::size_of::<[[f32; 4]; 4]>() as u64,
-            MAX_FACES,
-        );
+        let face_matrices =
+            ParamSlots::new::<[[f32; 4]; 4]>(device, "shadow face matrices", MAX_FACES);
         let bind_group = Resources {
             face_view_proj: &face_matrices,
         }

@@ -90,10 +90,9 @@ pub struct CacheLightingPass {
 
 impl CacheLightingPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = crate::passes::ParamSlots::new(
+        let params = crate::passes::ParamSlots::new::<CacheLightingParams>(
             device,
             "cache lighting params",
-            std::mem::size_of::<CacheLightingParams>() as u64,
             crate::passes::MAX_CHUNKS,
         );
         let layout = GROUP.layout(device);

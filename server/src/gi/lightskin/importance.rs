@@ -53,10 +53,9 @@ pub struct ImportancePass {
 
 impl ImportancePass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = crate::passes::ParamSlots::new(
+        let params = crate::passes::ParamSlots::new::<ImportanceParams>(
             device,
             "importance params",
-            std::mem::size_of::<ImportanceParams>() as u64,
             crate::passes::MAX_CHUNKS,
         );
         let layout = GROUP.layout(device);

@@ -37,10 +37,9 @@ pub struct ProxyOcclusionPass {
 
 impl ProxyOcclusionPass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let params = crate::passes::ParamSlots::new(
+        let params = crate::passes::ParamSlots::new::<OcclusionParams>(
             device,
             "occlusion params",
-            std::mem::size_of::<OcclusionParams>() as u64,
             crate::passes::MAX_CHUNKS,
         );
         let layout = GROUP.layout(device);

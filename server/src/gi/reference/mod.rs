@@ -35,6 +35,7 @@ use super::{
     FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
 };
 use crate::gpu::{readback::read_buffer, shaders, timing::FrameStages, GpuContext, GpuError};
+use crate::passes::bind::{self, bind_group};
 use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
 use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::{self, ParamSlots};
@@ -379,14 +380,26 @@ struct Accumulation {
     samples: u32,
 }
 
-/// Layout of group 1: the BVH and the scene data shading reads (`bvh.wgsl`, `surfaces.wgsl`).
-fn scene_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("reference scene"),
-        entries: &(0..6)
-            .map(|b| passes::storage_entry(b, true))
-            .collect::<Vec<_>>(),
-    })
+bind_group! {
+    /// Group 0 of `shaders/reference/path_trace.wgsl`.
+    pub struct PassResources as PASS_GROUP("reference", wgpu::ShaderStages::COMPUTE) {
+        params: bind::param_slot::<TraceParams>(),
+        light: bind::PARAMS,
+        accum: bind::STORAGE_RW,
+    }
+}
+
+bind_group! {
+    /// Group 1 of `shaders/reference/path_trace.wgsl`: the BVH (`bvh.wgsl`) and the scene data
+    /// shading reads (`surfaces.wgsl`).
+    pub struct SceneResources as SCENE_GROUP("reference scene", wgpu::ShaderStages::COMPUTE) {
+        bvh_nodes: bind::STORAGE,
+        bvh_triangles: bind::STORAGE,
+        vertices: bind::STORAGE,
+        indices: bind::STORAGE,
+        surfaces: bind::STORAGE,
+        texels: bind::STORAGE,
+    }
 }
 
 fn storage_init(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Buffer {
@@ -406,27 +419,19 @@ fn scene_group(
     surfaces: &[SurfaceGpu],
     texels: &[u32],
 ) -> wgpu::BindGroup {
-    let buffers = [
-        storage_init(device, "bvh nodes", bytemuck::cast_slice(&bvh.nodes)),
-        storage_init(
+    SceneResources {
+        bvh_nodes: &storage_init(device, "bvh nodes", bytemuck::cast_slice(&bvh.nodes)),
+        bvh_triangles: &storage_init(
             device,
             "bvh triangles",
             bytemuck::cast_slice(&bvh.triangles),
         ),
-        storage_init(device, "vertices", bytemuck::cast_slice(&scene.vertices)),
-        storage_init(device, "indices", bytemuck::cast_slice(&scene.indices)),
-        storage_init(device, "surfaces", bytemuck::cast_slice(surfaces)),
-        storage_init(device, "texels", bytemuck::cast_slice(texels)),
-    ];
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("reference scene"),
-        layout,
-        entries: &buffers
-            .iter()
-            .enumerate()
-            .map(|(i, b)| passes::buffer_binding(i as u32, b))
-            .collect::<Vec<_>>(),
-    })
+        vertices: &storage_init(device, "vertices", bytemuck::cast_slice(&scene.vertices)),
+        indices: &storage_init(device, "indices", bytemuck::cast_slice(&scene.indices)),
+        surfaces: &storage_init(device, "surfaces", bytemuck::cast_slice(surfaces)),
+        texels: &storage_init(device, "texels", bytemuck::cast_slice(texels)),
+    }
+    .bind(device, layout)
 }
 
 impl PathTracer {
@@ -453,7 +458,7 @@ impl PathTracer {
         let surfaces = surfaces(&textures);
         let bvh = bvh::SceneBvh::build(scene)?;
         let device = &ctx.device;
-        let scene_layout = scene_layout(device);
+        let scene_layout = SCENE_GROUP.layout(device);
         let scene_group = scene_group(
             device,
             &scene_layout,
@@ -462,20 +467,9 @@ impl PathTracer {
             &surfaces,
             &textures.texels,
         );
-        let params = ParamSlots::new(
-            device,
-            "reference params",
-            std::mem::size_of::<TraceParams>() as u64,
-            MAX_SAMPLES_PER_CALL,
-        );
-        let pass_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("reference"),
-            entries: &[
-                params.layout_entry(0),
-                passes::params_entry(1),
-                passes::storage_entry(2, false),
-            ],
-        });
+        let params =
+            ParamSlots::new::<TraceParams>(device, "reference params", MAX_SAMPLES_PER_CALL);
+        let pass_layout = PASS_GROUP.layout(device);
         let alpha_tested = bvh.triangles.iter().any(|t| t.alpha_tested != 0);
         let pipeline = passes::compute_pipeline_with_constants(
             device,
@@ -646,15 +640,12 @@ impl PathTracer {
         self.ctx
             .queue
             .write_buffer(&self.light, 0, bytemuck::bytes_of(&light_uniform));
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("reference"),
-            layout: &self.pass_layout,
-            entries: &[
-                self.params.binding(0),
-                passes::buffer_binding(1, &self.light),
-                passes::buffer_binding(2, accum),
-            ],
-        });
+        let group = PassResources {
+            params: &self.params,
+            light: &self.light,
+            accum,
+        }
+        .bind(device, &self.pass_layout);
         let mut pass = passes::begin_compute(encoder, "reference path trace");
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(1, &self.scene_group, &[]);

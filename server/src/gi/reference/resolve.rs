@@ -5,6 +5,7 @@
 
 use crate::gi::ProgressSums;
 use crate::gpu::shaders;
+use crate::passes::bind::{self, bind_group};
 use crate::passes::{self, gbuffer::GBuffer, Target, INDIRECT_FORMAT, TILE};
 use bytemuck::{Pod, Zeroable};
 
@@ -16,6 +17,18 @@ pub struct ResolveParams {
     pub height: u32,
     pub samples: u32,
     pub partial_count: u32,
+}
+
+bind_group! {
+    /// Group 0 of `shaders/reference/resolve.wgsl`.
+    pub struct Resources as GROUP("reference resolve", wgpu::ShaderStages::COMPUTE) {
+        params: bind::PARAMS,
+        accum: bind::STORAGE,
+        g_position: bind::TEXTURE,
+        indirect_out: bind::storage_texture(INDIRECT_FORMAT),
+        partials: bind::STORAGE_RW,
+        progress: bind::STORAGE_RW,
+    }
 }
 
 pub struct ResolvePass {
@@ -40,17 +53,7 @@ fn partials_buffer(device: &wgpu::Device, groups: u64) -> wgpu::Buffer {
 
 impl ResolvePass {
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("reference resolve"),
-            entries: &[
-                passes::params_entry(0),
-                passes::storage_entry(1, true),
-                passes::compute_texture_entry(2, false),
-                passes::storage_texture_entry(3, INDIRECT_FORMAT),
-                passes::storage_entry(4, false),
-                passes::storage_entry(5, false),
-            ],
-        });
+        let layout = GROUP.layout(device);
         let module = shaders::REFERENCE_RESOLVE.create_module(device);
         Self {
             resolve: passes::compute_pipeline(
@@ -105,18 +108,15 @@ impl ResolvePass {
             partial_count: groups,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("reference resolve"),
-            layout: &self.layout,
-            entries: &[
-                passes::buffer_binding(0, &self.params),
-                passes::buffer_binding(1, accum),
-                passes::view_binding(2, &gbuffer.position.view),
-                passes::view_binding(3, &indirect.view),
-                passes::buffer_binding(4, &self.partials),
-                passes::buffer_binding(5, &self.progress),
-            ],
-        })
+        Resources {
+            params: &self.params,
+            accum,
+            g_position: &gbuffer.position,
+            indirect_out: indirect,
+            partials: &self.partials,
+            progress: &self.progress,
+        }
+        .bind(device, &self.layout)
     }
 
     pub fn encode(

@@ -130,8 +130,8 @@ struct Loop {
     one_shot_turn: bool,
     /// Session frames waiting for the GPU, to the readback thread.
     readback: mpsc::SyncSender<ReadbackJob>,
-    /// Comparison renders by a hash of what they rendered, most recent first.
-    comparisons: Vec<(u64, Arc<Frame>)>,
+    /// Comparison renders by a hash of what they rendered (filled by the readback thread).
+    comparisons: Arc<ComparisonCache>,
 }
 
 /// Starts the render loop thread.
@@ -162,7 +162,7 @@ pub fn spawn(
                 one_shots: VecDeque::new(),
                 next_session: 0,
                 one_shot_turn: false,
-                comparisons: Vec::new(),
+                comparisons: Arc::new(ComparisonCache::default()),
             };
             l.run(&rx);
             // Closing the channel lets the readback thread finish the frames in flight.
@@ -307,84 +307,55 @@ impl Loop {
         })
     }
 
-    /// Renders and reads back at once (one-shots and debug views, which read more of the
-    /// renderer's buffers after the frame).
-    fn render(
-        &mut self,
-        scene: &Arc<SceneEntry>,
-        resolved: &Resolved,
-    ) -> Result<Rendered, ApiError> {
-        self.render_inspected(scene, resolved, |_| Ok(()))
-    }
-
-    /// [`Self::render`], showing the read-back frame to `inspect` before it is taken apart.
-    fn render_inspected(
-        &mut self,
-        scene: &Arc<SceneEntry>,
-        resolved: &Resolved,
-        inspect: impl FnOnce(&Frame) -> Result<(), ApiError>,
-    ) -> Result<Rendered, ApiError> {
-        let submitted = self.submit(scene, resolved)?;
-        let frame = submitted
-            .pending
-            .wait()
-            .map_err(|e| ApiError::internal(e.to_string()))?;
-        inspect(&frame)?;
-        finish(
-            frame,
-            submitted.view,
-            submitted.gi_pending,
-            |view, frame| {
-                debug_views::compose(
-                    view,
-                    frame,
-                    &submitted.camera,
-                    &scene.scene.bounds,
-                    submitted.caches.as_ref().map(|c| c.caches.as_slice()),
-                )
-            },
-        )
-    }
-
+    /// Submits a one-shot render (and the render it is compared with, unless cached); the
+    /// readback thread waits for them and replies.
     fn one_shot(&mut self, job: OneShot) {
         let queue_ms = job.queued.elapsed().as_secs_f64() * 1e3;
         if job.reply.is_closed() {
             return;
         }
         metrics::counter!(super::metrics::RENDERS).increment(1);
-        let result = match job.compare {
-            None => self
-                .render(&job.scene, &job.resolved)
-                .map(|rendered| OneShotResult {
-                    rendered,
-                    queue_ms,
-                    comparison: None,
-                }),
-            Some((method, spp)) => {
-                self.compared(&job, method, spp)
-                    .map(|(rendered, c)| OneShotResult {
-                        rendered,
-                        queue_ms,
-                        comparison: Some(c),
-                    })
+        let compare = match job.compare {
+            None => Ok(None),
+            Some((method, spp)) => self.comparison(&job, method, spp).map(Some),
+        };
+        let mut resolved = job.resolved.clone();
+        resolved.settings.capture_hdr |= compare.as_ref().is_ok_and(Option::is_some);
+        let submitted = compare.and_then(|c| Ok((c, self.submit(&job.scene, &resolved)?)));
+        let (compare, submitted) = match submitted {
+            Ok(s) => s,
+            Err(e) => {
+                let _ = job.reply.send(Err(e));
+                return;
             }
         };
-        let _ = job.reply.send(result);
+        let readback = ReadbackJob {
+            frame: FrameJob::from_submitted(submitted, Arc::clone(&job.scene)),
+            target: Destination::OneShot {
+                reply: job.reply,
+                queue_ms,
+                compare,
+            },
+        };
+        if let Err(mpsc::SendError(job)) = self.readback.send(readback) {
+            job.fail(ApiError::internal("the readback thread has stopped"));
+        }
     }
 
-    /// A one-shot render and its comparison with `method`'s render (`spp` samples) of the
-    /// same view, which is rendered once per distinct view and parameters.
-    fn compared(
+    /// The frame a one-shot render is compared with: `method` with `spp` samples at the same
+    /// view, from the cache or submitted now.
+    fn comparison(
         &mut self,
         job: &OneShot,
         method: GiMethod,
         spp: u32,
-    ) -> Result<(Rendered, Comparison), ApiError> {
+    ) -> Result<Comparand, ApiError> {
         let mut truth = job.resolved.clone();
         truth.settings.gi.method = method;
         truth.settings.gi.spp = spp;
         truth.settings.capture_hdr = true;
         truth.settings.history = None;
+        truth.settings.debug_view = View::Final;
         truth.view = View::Final;
         truth.caches = None;
         let key = {
@@ -393,37 +364,17 @@ impl Loop {
             (&job.scene.id, format!("{:?}", truth.settings)).hash(&mut h);
             h.finish()
         };
-        let reference = match self.comparisons.iter().position(|(k, _)| *k == key) {
-            Some(i) => {
-                let hit = self.comparisons.remove(i);
-                self.comparisons.insert(0, hit.clone());
-                hit.1
-            }
-            None => {
-                let submitted = self.submit(&job.scene, &truth)?;
-                let frame = Arc::new(
-                    submitted
-                        .pending
-                        .wait()
-                        .map_err(|e| ApiError::internal(e.to_string()))?,
-                );
-                self.comparisons.truncate(MAX_COMPARISONS - 1);
-                self.comparisons.insert(0, (key, Arc::clone(&frame)));
-                frame
-            }
+        let cached = self.comparisons.lookup(key);
+        let frame = match cached {
+            Some(frame) => ComparandFrame::Cached(frame),
+            None => ComparandFrame::Pending(Box::new(self.submit(&job.scene, &truth)?.pending)),
         };
-        let mut resolved = job.resolved.clone();
-        resolved.settings.capture_hdr = true;
-        let mut comparison = None;
-        let rendered = self.render_inspected(&job.scene, &resolved, |frame| {
-            let c = crate::quality::compare(frame, &reference, method)
-                .map_err(|e| ApiError::internal(e.to_string()))?;
-            comparison = Some(c);
-            Ok(())
-        })?;
-        let comparison =
-            comparison.ok_or_else(|| ApiError::internal("the comparison was not made"))?;
-        Ok((rendered, comparison))
+        Ok(Comparand {
+            method,
+            key,
+            frame,
+            cache: Arc::clone(&self.comparisons),
+        })
     }
 
     fn session_frame(&mut self, session: &Arc<Session>, mut plan: FramePlan) {
@@ -435,18 +386,15 @@ impl Loop {
             // next frame.
             Ok(submitted) => {
                 let job = ReadbackJob {
-                    pending: submitted.pending,
-                    view: submitted.view,
-                    camera: submitted.camera,
-                    caches: submitted.caches,
-                    gi_pending: submitted.gi_pending,
-                    session: Arc::clone(session),
-                    plan,
-                    render_start_us,
+                    frame: FrameJob::from_submitted(submitted, Arc::clone(&plan.lease_scene)),
+                    target: Destination::Session {
+                        session: Arc::clone(session),
+                        plan: Box::new(plan),
+                        render_start_us,
+                    },
                 };
                 if let Err(mpsc::SendError(job)) = self.readback.send(job) {
-                    job.session
-                        .frame_failed(ApiError::internal("the readback thread has stopped").body);
+                    job.fail(ApiError::internal("the readback thread has stopped"));
                 }
             }
             Err(e) => session.frame_failed(e.body),
@@ -454,42 +402,196 @@ impl Loop {
     }
 }
 
-/// A session frame on its way from the GPU to the encoder.
-struct ReadbackJob {
+/// A submitted frame and what composing its view needs, on its way to the readback thread.
+struct FrameJob {
     pending: PendingFrame,
     /// The view to compose (debug views from the data read back with the frame).
     view: View,
     camera: lightcast_protocol::Camera,
+    scene: Arc<SceneEntry>,
     caches: Option<Arc<CacheSet>>,
     gi_pending: bool,
-    session: Arc<Session>,
-    plan: FramePlan,
-    render_start_us: u64,
 }
 
-/// Waits for session frames and hands them to the encoder pool, in submission order.
-fn readback_thread(jobs: mpsc::Receiver<ReadbackJob>, encoder: Arc<EncodePool>) {
-    for job in jobs {
-        let rendered = job
-            .pending
-            .wait()
-            .map_err(|e| ApiError::internal(e.to_string()))
-            .and_then(|frame| {
-                finish(frame, job.view, job.gi_pending, |view, frame| {
-                    debug_views::compose(
-                        view,
-                        frame,
-                        &job.camera,
-                        &job.plan.lease_scene.scene.bounds,
-                        job.caches.as_ref().map(|c| c.caches.as_slice()),
-                    )
-                })
-            });
-        match rendered {
-            Ok(r) => deliver(&job.session, &job.plan, r, job.render_start_us, &encoder),
-            Err(e) => job.session.frame_failed(e.body),
+impl FrameJob {
+    fn from_submitted(s: Submitted, scene: Arc<SceneEntry>) -> Self {
+        Self {
+            pending: s.pending,
+            view: s.view,
+            camera: s.camera,
+            scene,
+            caches: s.caches,
+            gi_pending: s.gi_pending,
         }
     }
+
+    /// Waits for the frame and composes its view; `inspect` sees the frame first.
+    fn wait(
+        self,
+        inspect: impl FnOnce(&Frame) -> Result<(), ApiError>,
+    ) -> Result<Rendered, ApiError> {
+        let frame = self
+            .pending
+            .wait()
+            .map_err(|e| ApiError::internal(e.to_string()))?;
+        inspect(&frame)?;
+        let (camera, scene, caches) = (self.camera, self.scene, self.caches);
+        finish(frame, self.view, self.gi_pending, |view, frame| {
+            debug_views::compose(
+                view,
+                frame,
+                &camera,
+                &scene.scene.bounds,
+                caches.as_ref().map(|c| c.caches.as_slice()),
+            )
+        })
+    }
+}
+
+/// Where a read-back frame goes.
+enum Destination {
+    /// Encoded into the session's latest-frame slot.
+    Session {
+        session: Arc<Session>,
+        plan: Box<FramePlan>,
+        render_start_us: u64,
+    },
+    /// Handed to the waiting `POST /v1/render`, compared first if it asked.
+    OneShot {
+        reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
+        queue_ms: f64,
+        compare: Option<Comparand>,
+    },
+}
+
+/// A frame on its way from the GPU to its session or one-shot request.
+struct ReadbackJob {
+    frame: FrameJob,
+    target: Destination,
+}
+
+impl ReadbackJob {
+    fn fail(self, e: ApiError) {
+        match self.target {
+            Destination::Session { session, .. } => session.frame_failed(e.body),
+            Destination::OneShot { reply, .. } => {
+                let _ = reply.send(Err(e));
+            }
+        }
+    }
+}
+
+/// The render a one-shot is compared with.
+struct Comparand {
+    method: GiMethod,
+    /// Its key in the cache.
+    key: u64,
+    frame: ComparandFrame,
+    cache: Arc<ComparisonCache>,
+}
+
+enum ComparandFrame {
+    Cached(Arc<Frame>),
+    /// Submitted before the one-shot's own frame.
+    Pending(Box<PendingFrame>),
+}
+
+impl Comparand {
+    /// The read-back frame, added to the cache when it was rendered for this request.
+    fn wait(self) -> Result<(GiMethod, Arc<Frame>), ApiError> {
+        let frame = match self.frame {
+            ComparandFrame::Cached(frame) => frame,
+            ComparandFrame::Pending(pending) => {
+                let frame = Arc::new(
+                    pending
+                        .wait()
+                        .map_err(|e| ApiError::internal(e.to_string()))?,
+                );
+                self.cache.insert(self.key, Arc::clone(&frame));
+                frame
+            }
+        };
+        Ok((self.method, frame))
+    }
+}
+
+/// Comparison renders kept for repeated comparisons, most recent first (the render loop looks
+/// them up, the readback thread adds them).
+#[derive(Default)]
+struct ComparisonCache(std::sync::Mutex<Vec<(u64, Arc<Frame>)>>);
+
+impl ComparisonCache {
+    fn lookup(&self, key: u64) -> Option<Arc<Frame>> {
+        let mut entries = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let i = entries.iter().position(|(k, _)| *k == key)?;
+        let hit = entries.remove(i);
+        let frame = Arc::clone(&hit.1);
+        entries.insert(0, hit);
+        Some(frame)
+    }
+
+    fn insert(&self, key: u64, frame: Arc<Frame>) {
+        let mut entries = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        entries.retain(|(k, _)| *k != key);
+        entries.truncate(MAX_COMPARISONS - 1);
+        entries.insert(0, (key, frame));
+    }
+}
+
+/// Waits for frames in submission order: session frames go to the encoder pool, one-shot
+/// renders (compared first if asked) to their requests.
+fn readback_thread(jobs: mpsc::Receiver<ReadbackJob>, encoder: Arc<EncodePool>) {
+    for job in jobs {
+        match job.target {
+            Destination::Session {
+                session,
+                plan,
+                render_start_us,
+            } => match job.frame.wait(|_| Ok(())) {
+                Ok(r) => deliver(&session, &plan, r, render_start_us, &encoder),
+                Err(e) => session.frame_failed(e.body),
+            },
+            Destination::OneShot {
+                reply,
+                queue_ms,
+                compare,
+            } => {
+                let result = one_shot_result(job.frame, compare).map(|(rendered, comparison)| {
+                    OneShotResult {
+                        rendered,
+                        queue_ms,
+                        comparison,
+                    }
+                });
+                let _ = reply.send(result);
+            }
+        }
+    }
+}
+
+/// A one-shot frame read back, with its comparison when one was asked for.
+fn one_shot_result(
+    frame: FrameJob,
+    compare: Option<Comparand>,
+) -> Result<(Rendered, Option<Comparison>), ApiError> {
+    let Some(compare) = compare else {
+        return Ok((frame.wait(|_| Ok(()))?, None));
+    };
+    let (method, reference) = compare.wait()?;
+    let mut comparison = None;
+    let rendered = frame.wait(|frame| {
+        let c = crate::quality::compare(frame, &reference, method)
+            .map_err(|e| ApiError::internal(e.to_string()))?;
+        comparison = Some(c);
+        Ok(())
+    })?;
+    Ok((rendered, comparison))
 }
 
 /// A read-back frame as the service hands it on: the image of `view` (made by `image`) plus

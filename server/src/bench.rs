@@ -13,7 +13,7 @@ use crate::gi::reference::luminance;
 use crate::gi::{lightskin::LightSkin, GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
-use crate::quality::{errors, ErrorStats};
+use crate::quality::{errors, final_psnr_with_indirect, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
@@ -112,6 +112,9 @@ pub struct BenchRow {
     pub speedup_vs_lightskin: f64,
     /// Errors of the indirect buffer against the path-traced reference, when one was rendered.
     pub vs_reference: Option<ErrorStats>,
+    /// PSNR in dB of the final image against the same frame with the reference's indirect
+    /// light (see [`crate::quality::final_psnr_with_indirect`]).
+    pub final_psnr_db: Option<f64>,
     /// RGB8 difference image against the reference (red: too bright, blue: too dark), when
     /// plots were asked for (written by `bench_plots`, not serialized).
     #[serde(skip)]
@@ -282,6 +285,9 @@ struct Timed {
     gi: StageStats,
     frame: StageStats,
     indirect: Vec<[f32; 4]>,
+    /// The last frame's HDR image and exposure scale.
+    hdr: Vec<[f32; 4]>,
+    exposure: f32,
 }
 
 /// Renders `warmup + frames` frames; the last one also captures the indirect buffer.
@@ -294,7 +300,7 @@ fn time_config(
 ) -> Result<Timed, BenchError> {
     let mut per_stage: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let (mut gi, mut total) = (Vec::new(), Vec::new());
-    let mut indirect = Vec::new();
+    let (mut indirect, mut hdr, mut exposure) = (Vec::new(), Vec::new(), 1.0);
     for i in 0..warmup + frames {
         let mut s = settings.clone();
         s.capture_hdr = i + 1 == warmup + frames;
@@ -322,8 +328,8 @@ fn time_config(
                 .map(|t| t.ms)
                 .sum(),
         );
-        if let Some(buffer) = frame.indirect {
-            indirect = buffer;
+        if let (Some(i), Some(h)) = (frame.indirect, frame.hdr) {
+            (indirect, hdr, exposure) = (i, h, frame.exposure_scale);
         }
     }
     Ok(Timed {
@@ -331,6 +337,8 @@ fn time_config(
         gi: stats(gi),
         frame: stats(total),
         indirect,
+        hdr,
+        exposure,
     })
 }
 
@@ -480,6 +488,14 @@ pub fn run(
                 vs_reference: truth
                     .as_ref()
                     .map(|r| errors(&r.indirect, &timed.indirect, args.width as usize)),
+                final_psnr_db: truth.as_ref().and_then(|r| {
+                    final_psnr_with_indirect(
+                        &timed.hdr,
+                        &timed.indirect,
+                        &r.indirect,
+                        timed.exposure,
+                    )
+                }),
                 difference_image: truth
                     .as_ref()
                     .filter(|_| pictures)
@@ -554,12 +570,12 @@ impl BenchReport {
                 ),
             );
         }
-        s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD vs LightSkin | MAD / mean | MAE vs reference | RMSE vs reference | MAE / mean vs reference | 8×8-block MAE / mean vs reference | bias vs reference |\n";
-        s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+        s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD vs LightSkin | MAD / mean | MAE vs reference | RMSE vs reference | MAE / mean vs reference | 8×8-block MAE / mean vs reference | bias vs reference | final PSNR vs reference |\n";
+        s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
         for r in &self.rows {
             let opt = |v: Option<u32>| v.map_or("all".to_string(), |v| v.to_string());
             s += &format!(
-                "| {:?} | {}² | {} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.1} | {:.2}× | {:.3e} | {:.2} % | {} |\n",
+                "| {:?} | {}² | {} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.1} | {:.2}× | {:.3e} | {:.2} % | {} | {} |\n",
                 r.method,
                 r.rsm_size,
                 opt(r.val_count),
@@ -579,7 +595,12 @@ impl BenchReport {
                     e.mae_relative * 100.0,
                     e.block_mae_relative * 100.0,
                     e.bias_relative * 100.0
-                ))
+                )),
+                match (r.final_psnr_db, r.vs_reference) {
+                    (Some(p), _) => format!("{p:.2} dB"),
+                    (None, Some(_)) => "identical".to_string(),
+                    (None, None) => "-".to_string(),
+                }
             );
         }
         s += "\nPer-stage medians (ms):\n\n| method | RSM | VALs | view samples |";

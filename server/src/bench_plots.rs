@@ -235,6 +235,7 @@ mod tests {
                 block_mae_relative: mad,
                 bias_relative: 0.0,
             }),
+            final_psnr_db: Some(30.0),
             difference_image: Some(vec![0; 3]),
         }
     }

@@ -72,6 +72,24 @@ pub fn psnr(a: &[[u8; 3]], b: &[[u8; 3]]) -> f64 {
     }
 }
 
+/// PSNR of a frame's final image against the same frame with the reference's indirect light
+/// in place of its own, both tone-mapped with `exposure`: exact, because direct light and
+/// emission come from stages every method shares. `None` when the two are identical.
+pub fn final_psnr_with_indirect(
+    hdr: &[[f32; 4]],
+    indirect: &[[f32; 4]],
+    truth_indirect: &[[f32; 3]],
+    exposure: f32,
+) -> Option<f64> {
+    let (mut own, mut truth) = (Vec::with_capacity(hdr.len()), Vec::with_capacity(hdr.len()));
+    for ((h, i), t) in hdr.iter().zip(indirect).zip(truth_indirect) {
+        own.push(tonemap_cpu([h[0], h[1], h[2]], exposure));
+        let swapped = [0, 1, 2].map(|k| (h[k] - i[k] + t[k]).max(0.0));
+        truth.push(tonemap_cpu(swapped, exposure));
+    }
+    Some(psnr(&own, &truth)).filter(|p| p.is_finite())
+}
+
 /// Why two frames cannot be compared.
 #[derive(Debug, thiserror::Error)]
 pub enum CompareError {
@@ -149,6 +167,33 @@ mod tests {
         // All four pixels share one 8×8 block: red +1 and blue −1 do not cancel (per channel).
         assert!((e.block_mae_relative - 2.0 / 14.0).abs() < 1e-12);
         assert!(e.bias_relative.abs() < 1e-12);
+    }
+
+    #[test]
+    fn final_psnr_swaps_in_the_reference_indirect_light() {
+        let hdr = [[0.3, 0.2, 0.1, 1.0], [0.5, 0.5, 0.5, 1.0]];
+        let indirect = [[0.1, 0.1, 0.0, 1.0], [0.2, 0.2, 0.2, 1.0]];
+        let same = indirect.map(|p| [p[0], p[1], p[2]]);
+        assert_eq!(final_psnr_with_indirect(&hdr, &indirect, &same, 1.0), None);
+        let close = same.map(|p| p.map(|c| c * 1.1));
+        let far = same.map(|p| p.map(|c| c * 2.0));
+        let (near, away) = (
+            final_psnr_with_indirect(&hdr, &indirect, &close, 1.0).expect("differs"),
+            final_psnr_with_indirect(&hdr, &indirect, &far, 1.0).expect("differs"),
+        );
+        assert!(near > away && away > 0.0, "{near} vs {away}");
+        // The swapped image itself: hdr − indirect + truth, tone-mapped alike.
+        let own: Vec<[u8; 3]> = hdr
+            .iter()
+            .map(|h| tonemap_cpu([h[0], h[1], h[2]], 1.0))
+            .collect();
+        let truth: Vec<[u8; 3]> = hdr
+            .iter()
+            .zip(&indirect)
+            .zip(&far)
+            .map(|((h, i), t)| tonemap_cpu([0, 1, 2].map(|k| h[k] - i[k] + t[k]), 1.0))
+            .collect();
+        assert_eq!(Some(psnr(&own, &truth)), Some(away));
     }
 
     #[test]

@@ -77,10 +77,26 @@ fn series(
     report: &BenchReport,
     value: impl Fn(&BenchRow) -> f64,
 ) -> Vec<(String, Vec<(f64, f64)>)> {
+    lines_by(
+        report,
+        |r| Some(label(r)),
+        |r| f64::from(r.rsm_size).log2(),
+        value,
+    )
+}
+
+/// One line per name `line` gives a row (rows it gives none are left out), with points
+/// (`x`, `value`) in row order.
+fn lines_by(
+    report: &BenchReport,
+    line: impl Fn(&BenchRow) -> Option<String>,
+    x: impl Fn(&BenchRow) -> f64,
+    value: impl Fn(&BenchRow) -> f64,
+) -> Vec<(String, Vec<(f64, f64)>)> {
     let mut out: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for row in &report.rows {
-        let name = label(row);
-        let point = (f64::from(row.rsm_size).log2(), value(row));
+        let Some(name) = line(row) else { continue };
+        let point = (x(row), value(row));
         match out.iter_mut().find(|(n, _)| *n == name) {
             Some((_, points)) => points.push(point),
             None => out.push((name, vec![point])),
@@ -89,9 +105,24 @@ fn series(
     out
 }
 
+/// The x axis of a plot: log2 of what it names.
+struct Axis(&'static str);
+
+const RSM_AXIS: Axis = Axis("RSM side (texels)");
+
 fn draw(
     path: &Path,
     title: &str,
+    y_label: &str,
+    lines: &[(String, Vec<(f64, f64)>)],
+) -> Result<(), PlotError> {
+    draw_over(path, title, &RSM_AXIS, y_label, lines)
+}
+
+fn draw_over(
+    path: &Path,
+    title: &str,
+    axis: &Axis,
     y_label: &str,
     lines: &[(String, Vec<(f64, f64)>)],
 ) -> Result<(), PlotError> {
@@ -114,7 +145,7 @@ fn draw(
         .map_err(|e| err(&e))?;
     chart
         .configure_mesh()
-        .x_desc("RSM side (texels)")
+        .x_desc(axis.0)
         .x_labels(((x_max - x_min) as usize + 1).max(2))
         .x_label_formatter(&|v| format!("{}", v.exp2().round()))
         .y_desc(y_label)
@@ -187,6 +218,29 @@ pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, 
             "Indirect light: error against the path-traced reference",
             "8×8-block MAE / reference mean (%)",
             &series(report, |r| block_error(r) * 100.0),
+        )?;
+        paths.push(path);
+        // The same error over the number of VALs BRSM draws, one line per RSM size.
+        let path = with_suffix("-error-vs-reference-by-vals.png");
+        draw_over(
+            &path,
+            "BRSM indirect light: error against the reference by VAL count",
+            &Axis("VALs drawn per frame"),
+            "8×8-block MAE / reference mean (%)",
+            &lines_by(
+                report,
+                |r| {
+                    (r.method == GiMethod::Brsm).then(|| {
+                        format!(
+                            "RSM {}², {} view samples",
+                            r.rsm_size,
+                            r.view_samples.unwrap_or(0)
+                        )
+                    })
+                },
+                |r| f64::from(r.val_count.unwrap_or(1)).log2(),
+                |r| block_error(r) * 100.0,
+            ),
         )?;
         paths.push(path);
     }
@@ -276,12 +330,23 @@ mod tests {
         };
         // Two configurations of BRSM plus LightSkin: three lines in the fps plot.
         assert_eq!(series(&report, |r| r.fps).len(), 3);
+        // By VAL count: one BRSM line per RSM size, two points each.
+        let by_vals = lines_by(
+            &report,
+            |r| (r.method == GiMethod::Brsm).then(|| r.rsm_size.to_string()),
+            |r| f64::from(r.val_count.unwrap_or(1)).log2(),
+            |r| r.fps,
+        );
+        assert_eq!(by_vals.len(), 3);
+        assert!(by_vals
+            .iter()
+            .all(|(_, p)| p.iter().map(|q| q.0).eq([11.0, 13.0])));
         let dir = std::env::temp_dir().join(format!("lightcast-plots-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
         let paths = write_plots(&report, &dir.join("bench")).expect("plots");
-        // Three plots, the reference picture and one difference picture per row.
-        assert_eq!(paths.len(), 4 + 9);
-        let (plots, pictures) = paths.split_at(3);
+        // Four plots, the reference picture and one difference picture per row.
+        assert_eq!(paths.len(), 5 + 9);
+        let (plots, pictures) = paths.split_at(4);
         for path in pictures {
             let image = image::open(path).expect("a PNG");
             assert_eq!(

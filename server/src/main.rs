@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 use lightcast_server::bench::{self, BenchArgs};
 use lightcast_server::offline::{self, RenderArgs};
-use lightcast_server::service::{self, ServeArgs};
+use lightcast_server::service::{self, config::LogFormat, ServeArgs};
 
 #[derive(Parser)]
 #[command(
@@ -62,13 +62,21 @@ fn main() -> anyhow::Result<()> {
         None | Some(Command::Serve(_)) => "info",
         Some(_) => "warn",
     };
-    tracing_subscriber::fmt()
+    let format = match &cli.command {
+        None => cli.serve.log_format,
+        Some(Command::Serve(args)) => args.log_format,
+        Some(_) => LogFormat::Text,
+    };
+    let log = tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default_filter)),
         )
-        .with_writer(std::io::stderr)
-        .init();
+        .with_writer(std::io::stderr);
+    match format {
+        LogFormat::Text => log.init(),
+        LogFormat::Json => log.json().init(),
+    }
     let Some(command) = cli.command else {
         return serve(&cli.serve);
     };

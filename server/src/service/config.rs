@@ -39,8 +39,18 @@ pub struct ServeArgs {
     /// Threads encoding frames (JPEG/PNG) off the render loop. Default: half the CPUs.
     #[arg(long, env = "LIGHTCAST_ENCODE_THREADS")]
     pub encode_threads: Option<usize>,
+    /// Log lines for people (`text`) or one JSON object per line for log collectors (`json`).
+    #[arg(long, value_enum, env = "LIGHTCAST_LOG_FORMAT", default_value = "text")]
+    pub log_format: LogFormat,
     #[command(flatten)]
     pub limits: LimitArgs,
+}
+
+/// How the service writes its log.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum LogFormat {
+    Text,
+    Json,
 }
 
 /// Configurable maxima; requests beyond them get a 400 naming the field.

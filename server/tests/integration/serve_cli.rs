@@ -83,6 +83,44 @@ fn serves_by_default_and_stops_on_sigterm() {
     assert!(exit.success(), "exit {exit:?}; log:\n{}", seen.join("\n"));
 }
 
+/// `--log-format json`: every line the service logs is one JSON object with a level and the
+/// message. (The Vulkan driver may print plain lines of its own to stderr; they are not ours.)
+#[test]
+fn logs_json_lines_for_collectors() {
+    let (mut child, lines) = server(
+        &["--log-format", "json"],
+        &[("LIGHTCAST_LISTEN", "127.0.0.1:0")],
+    );
+    let mut seen = Vec::new();
+    wait_for(&lines, "listening on http://", &mut seen);
+    child.kill().expect("kill");
+    let _ = child.wait();
+    let messages: Vec<String> = seen
+        .iter()
+        .filter(|line| line.starts_with('{'))
+        .map(|line| {
+            let v: serde_json::Value = serde_json::from_str(line)
+                .unwrap_or_else(|e| panic!("not a JSON log line ({e}): {line}"));
+            assert!(v["level"].is_string(), "{line}");
+            v["fields"]["message"]
+                .as_str()
+                .unwrap_or_else(|| panic!("{line}"))
+                .to_string()
+        })
+        .collect();
+    for expected in ["adapter:", "listening on http://"] {
+        assert!(
+            messages.iter().any(|m| m.starts_with(expected)),
+            "no JSON line '{expected}…' in:\n{}",
+            seen.join("\n")
+        );
+    }
+    assert!(
+        !seen.iter().any(|l| l.contains(" INFO ")),
+        "text-format lines: {seen:?}"
+    );
+}
+
 #[test]
 fn refuses_bad_options_with_a_reason() {
     let cases: &[(&[&str], &str)] = &[

@@ -113,6 +113,7 @@ impl Service {
             .map_err(|e| ServeError::Task(e.body.message))?;
 
         let sessions = Arc::new(sessions::SessionRegistry::new(limits.max_sessions as usize));
+        ::metrics::gauge!(metrics::SESSION_CAPACITY).set(f64::from(limits.max_sessions));
         let encoder = Arc::new(encode::EncodePool::new(
             args.encode_threads
                 .unwrap_or_else(encode::EncodePool::default_threads),

@@ -91,10 +91,13 @@ pub enum Command {
 
 fn record_metrics(frame: &Frame) {
     for t in &frame.timings {
-        metrics::histogram!(super::metrics::STAGE_MS, "stage" => t.stage.name()).record(t.ms);
+        super::metrics::record_stage(t.stage.name(), t.ms);
     }
-    metrics::histogram!(super::metrics::GPU_FRAME_MS).record(frame.total_ms());
-    metrics::histogram!(super::metrics::READBACK_MS).record(frame.readback_ms);
+    use super::metrics::{
+        record_duration, GPU_FRAME_MS, GPU_FRAME_SECONDS, READBACK_MS, READBACK_SECONDS,
+    };
+    record_duration(GPU_FRAME_SECONDS, GPU_FRAME_MS, frame.total_ms());
+    record_duration(READBACK_SECONDS, READBACK_MS, frame.readback_ms);
 }
 
 type RendererKey = (String, Option<(u32, u32)>);
@@ -689,7 +692,11 @@ fn deliver(
         match encode::encode(&image, codec, quality) {
             Ok(payload) => {
                 let encode_ms = started.elapsed().as_secs_f64() * 1e3;
-                metrics::histogram!(super::metrics::ENCODE_MS).record(encode_ms);
+                super::metrics::record_duration(
+                    super::metrics::ENCODE_SECONDS,
+                    super::metrics::ENCODE_MS,
+                    encode_ms,
+                );
                 let header = FrameHeader {
                     encode_ms: encode_ms as f32,
                     ..header

@@ -1022,7 +1022,12 @@ async fn metrics_openapi_and_readiness_describe_the_service() {
         "lightcast_frames_rendered_total",
         "lightcast_frames_sent_total",
         "lightcast_bytes_sent_total",
-        "lightcast_stage_ms_bucket{stage=\"gbuffer\"",
+        "lightcast_session_capacity",
+        "lightcast_stage_seconds_bucket{stage=\"gbuffer\",le=\"0.004\"}",
+        "lightcast_encode_seconds_bucket",
+        "lightcast_gpu_frame_seconds_count",
+        "lightcast_readback_seconds_sum",
+        "lightcast_stage_ms_bucket{stage=\"gbuffer\",le=\"4\"}",
         "lightcast_encode_ms_bucket",
         "lightcast_gpu_frame_ms_count",
     ] {

@@ -372,18 +372,15 @@ impl PendingFrame {
 
 /// Renders one scene; keeps GPU resources between frames.
 pub struct Renderer {
-    ctx: GpuContext,
+    /// The context, scene, its buffers and the camera and light parameters every pass and
+    /// GI method reads.
+    shared: SceneResources,
     timer: FrameTimer,
-    scene: Arc<Scene>,
-    scene_buffers: SceneBuffers,
-    material_layout: wgpu::BindGroupLayout,
     gbuffer_pass: GBufferPass,
     shadow_pass: ShadowMapPass,
     direct_pass: DirectLightPass,
     exposure_pass: ExposurePass,
     tonemap_pass: TonemapPass,
-    camera_buffer: wgpu::Buffer,
-    light_buffer: wgpu::Buffer,
     /// Targets of the most recently used output sizes, most recent first (sessions of
     /// different sizes share one renderer).
     sized: Vec<SizedTargets>,
@@ -421,34 +418,36 @@ impl Renderer {
                 &material_layout,
                 ctx.primitive_index,
             ),
-            scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
             shadow_pass: ShadowMapPass::new(device),
             direct_pass: DirectLightPass::new(device),
             exposure_pass: ExposurePass::new(device),
             tonemap_pass: TonemapPass::new(device),
-            camera_buffer,
-            light_buffer,
-            material_layout,
             sized: Vec::new(),
             shadow_maps: Vec::new(),
             methods: gi::REGISTRY.iter().map(|_| None).collect(),
-            scene,
-            ctx,
+            shared: SceneResources {
+                scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
+                camera: camera_buffer,
+                light: light_buffer,
+                material_layout,
+                scene,
+                ctx,
+            },
         }
     }
 
     pub fn context(&self) -> &GpuContext {
-        &self.ctx
+        &self.shared.ctx
     }
 
     pub fn scene(&self) -> &Scene {
-        &self.scene
+        &self.shared.scene
     }
 
     /// Whether indirect light blends the light caches of each triangle's three vertices
     /// (primitive indices available) rather than using the provoking vertex's.
     pub fn triangle_ids(&self) -> bool {
-        self.ctx.primitive_index
+        self.shared.ctx.primitive_index
     }
 
     pub fn timing_source(&self) -> TimingSource {
@@ -460,15 +459,7 @@ impl Renderer {
     fn method_at(&mut self, index: usize) -> Result<&mut Box<dyn Method>, RenderError> {
         let slot = &mut self.methods[index];
         if slot.is_none() {
-            let resources = SceneResources {
-                ctx: &self.ctx,
-                scene: &self.scene,
-                scene_buffers: &self.scene_buffers,
-                material_layout: &self.material_layout,
-                camera: &self.camera_buffer,
-                light: &self.light_buffer,
-            };
-            *slot = Some((gi::REGISTRY[index].create)(&resources)?);
+            *slot = Some((gi::REGISTRY[index].create)(&self.shared)?);
         }
         Ok(slot.as_mut().expect("the method was just created"))
     }
@@ -513,7 +504,7 @@ impl Renderer {
         for method in self.methods.iter_mut().flatten() {
             method.retain_targets(&live);
         }
-        let device = &self.ctx.device;
+        let device = &self.shared.ctx.device;
         let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let hdr = Target::new(
             device,
@@ -579,10 +570,11 @@ impl Renderer {
         }
         self.shadow_maps.truncate(MAX_SHADOW_MAPS - 1);
         let scope = self
+            .shared
             .ctx
             .device
             .push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let map = ShadowMap::new(&self.ctx.device, size, faces);
+        let map = ShadowMap::new(&self.shared.ctx.device, size, faces);
         check_allocation(scope, format!("{faces}×{size}² shadow map"))?;
         self.shadow_maps.insert(0, map);
         Ok(())
@@ -596,7 +588,7 @@ impl Renderer {
     /// Encodes and submits one frame without waiting for it. Up to [`READBACK_RING`] frames
     /// of one size may be pending; beyond that this waits for the oldest to be read.
     pub fn submit(&mut self, settings: &RenderSettings) -> Result<PendingFrame, RenderError> {
-        settings.validate(&self.ctx)?;
+        settings.validate(&self.shared.ctx)?;
         let (width, height) = (settings.width, settings.height);
         self.ensure_targets(width, height)?;
         let faces = LightUniform::face_count(settings.light.kind);
@@ -608,7 +600,7 @@ impl Renderer {
             unreachable!("targets were just ensured");
         };
 
-        let bounds = &self.scene.bounds;
+        let bounds = &self.shared.scene.bounds;
         let camera = CameraUniform::new(
             &settings.camera,
             width as f32 / height as f32,
@@ -616,18 +608,18 @@ impl Renderer {
             settings.gi.glossy_exponent,
         );
         let light = LightUniform::new(&settings.light, bounds, settings.shadow_map_size);
-        let queue = &self.ctx.queue;
-        queue.write_buffer(&self.camera_buffer, 0, bytemuck::bytes_of(&camera));
-        queue.write_buffer(&self.light_buffer, 0, bytemuck::bytes_of(&light));
+        let queue = &self.shared.ctx.queue;
+        queue.write_buffer(&self.shared.camera, 0, bytemuck::bytes_of(&camera));
+        queue.write_buffer(&self.shared.light, 0, bytemuck::bytes_of(&light));
         self.shadow_pass
             .set_faces(queue, &light.face_view_proj[..faces as usize]);
         self.exposure_pass
             .prepare(queue, &sized.exposure, settings.exposure);
         let direct_bind_group = self.direct_pass.bind(
-            &self.ctx.device,
+            &self.shared.ctx.device,
             &DirectLightInputs {
-                camera: &self.camera_buffer,
-                light: &self.light_buffer,
+                camera: &self.shared.camera,
+                light: &self.shared.light,
                 gbuffer: &sized.gbuffer,
                 shadow: shadow_map,
                 indirect: &sized.indirect,
@@ -635,26 +627,19 @@ impl Renderer {
             },
         );
 
-        let set = free_set(&self.ctx, &sized.readbacks)?;
+        let set = free_set(&self.shared.ctx, &sized.readbacks)?;
         let lease = SetLease(Arc::clone(&set.busy));
-        let mut stages = self.timer.begin(&self.ctx);
+        let mut stages = self.timer.begin(&self.shared.ctx);
         stages.stage(Stage::ShadowMap, |e| {
-            self.shadow_pass.encode(e, shadow_map, &self.scene_buffers)
+            self.shadow_pass
+                .encode(e, shadow_map, &self.shared.scene_buffers)
         })?;
         stages.stage(Stage::Gbuffer, |e| {
             self.gbuffer_pass
-                .encode(e, &sized.gbuffer, &self.scene_buffers)
+                .encode(e, &sized.gbuffer, &self.shared.scene_buffers)
         })?;
-        let resources = SceneResources {
-            ctx: &self.ctx,
-            scene: &self.scene,
-            scene_buffers: &self.scene_buffers,
-            material_layout: &self.material_layout,
-            camera: &self.camera_buffer,
-            light: &self.light_buffer,
-        };
         let frame = FrameInputs {
-            resources: &resources,
+            resources: &self.shared,
             width,
             height,
             camera: &settings.camera,
@@ -683,7 +668,7 @@ impl Renderer {
         })?;
         let mut debug = None;
         stages.stage(Stage::ReadbackCopy, |e| {
-            debug = method.capture_debug(settings.debug_view, &self.ctx.device, e);
+            debug = method.capture_debug(settings.debug_view, &self.shared.ctx.device, e);
             set.ldr.encode_copy(e, &sized.ldr.texture);
             if settings.capture_hdr {
                 set.hdr.encode_copy(e, &sized.hdr.texture);
@@ -696,7 +681,7 @@ impl Renderer {
         })?;
         let (timings, submission) = stages.submit_frame(&set.timestamps);
         Ok(PendingFrame {
-            ctx: self.ctx.clone(),
+            ctx: self.shared.ctx.clone(),
             width,
             height,
             ldr: set.ldr.clone(),

@@ -132,21 +132,21 @@ pub enum GiError {
     Gpu(#[from] GpuError),
 }
 
-/// Per-scene resources the renderer shares with every method it creates.
-pub struct SceneResources<'a> {
-    pub ctx: &'a GpuContext,
-    pub scene: &'a Arc<Scene>,
-    pub scene_buffers: &'a SceneBuffers,
-    pub material_layout: &'a wgpu::BindGroupLayout,
+/// Per-scene resources the renderer owns and shares with every method it creates.
+pub struct SceneResources {
+    pub ctx: GpuContext,
+    pub scene: Arc<Scene>,
+    pub scene_buffers: SceneBuffers,
+    pub material_layout: wgpu::BindGroupLayout,
     /// `CameraUniform` (see `passes::frame_uniforms`), written every frame.
-    pub camera: &'a wgpu::Buffer,
+    pub camera: wgpu::Buffer,
     /// `LightUniform`, written every frame.
-    pub light: &'a wgpu::Buffer,
+    pub light: wgpu::Buffer,
 }
 
 /// What a method reads of the frame being encoded, and the buffer it fills.
 pub struct FrameInputs<'a> {
-    pub resources: &'a SceneResources<'a>,
+    pub resources: &'a SceneResources,
     pub width: u32,
     pub height: u32,
     pub camera: &'a Camera,

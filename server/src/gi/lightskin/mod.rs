@@ -223,7 +223,7 @@ impl LightSkin {
         let device = &r.ctx.device;
         Self {
             ctx: r.ctx.clone(),
-            sampling: ValSampling::new(device, r.light, r.material_layout),
+            sampling: ValSampling::new(device, &r.light, &r.material_layout),
             cache_pass: CacheLightingPass::new(device),
             occlusion_pass: ProxyOcclusionPass::new(device),
             indirect_pass: IndirectLightPass::new(device),
@@ -282,7 +282,7 @@ impl Method for LightSkin {
         let queue = &r.ctx.queue;
         let device = &r.ctx.device;
         self.sampling.prepare(
-            r.ctx,
+            &r.ctx,
             frame.gbuffer,
             &light_faces(frame.light, &r.scene.bounds),
             gi,
@@ -317,19 +317,19 @@ impl Method for LightSkin {
                 .bind(device, &caches.caches, &caches.lighting, &caches.coverage);
         let indirect_group = self.indirect_pass.bind(
             device,
-            r.camera,
+            &r.camera,
             frame.gbuffer,
             &CacheInputs {
                 caches: &caches.caches,
                 lighting: &caches.lighting,
                 vertex_caches: &caches.vertex_caches,
-                scene: r.scene_buffers,
+                scene: &r.scene_buffers,
             },
             frame.indirect,
         );
         self.sampled = true;
         let sampling = &self.sampling;
-        stages.stage(Stage::Rsm, |e| sampling.encode_rsm(e, r.scene_buffers))?;
+        stages.stage(Stage::Rsm, |e| sampling.encode_rsm(e, &r.scene_buffers))?;
         if gi.method == GiMethod::Brsm {
             stages.stage(Stage::Importance, |e| sampling.encode_importance(e, gi))?;
             stages.stage(Stage::CumulativeSums, |e| {

@@ -61,7 +61,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     methods: &[GiMethod::Reference],
     type_id: TypeId::of::<PathTracer>,
     validate,
-    create: |r| Ok(Box::new(PathTracer::new(r.ctx.clone(), r.scene)?)),
+    create: |r| Ok(Box::new(PathTracer::new(r.ctx.clone(), &r.scene)?)),
     describe,
 };
 

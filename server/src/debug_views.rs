@@ -5,7 +5,7 @@
 use crate::gi::lightskin::{
     cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback,
 };
-use crate::gi::{lightskin::uses_light_caches, GiMethod};
+use crate::gi::{lightskin::uses_light_caches, reference::luminance, GiMethod};
 use crate::gpu::GpuError;
 use crate::passes::{exposure::KEY, frame_uniforms::camera_view_proj, tonemap::tonemap_cpu};
 use crate::renderer::Frame;
@@ -108,10 +108,6 @@ impl Image {
         let i = ((y as usize) * self.width as usize + x as usize) * 4;
         self.rgba8[i..i + 3].copy_from_slice(&rgb);
     }
-}
-
-fn luminance(c: [f32; 3]) -> f32 {
-    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
 }
 
 /// Exposure that maps the log-average luminance of the positive entries to middle grey.

@@ -354,8 +354,16 @@ impl Loop {
         spp: u32,
     ) -> Result<Comparand, ApiError> {
         let mut truth = job.resolved.clone();
-        truth.settings.gi.method = method;
-        truth.settings.gi.spp = spp;
+        let asked = truth.settings.gi;
+        // Only what the comparison method reads, so that comparisons of one view at several
+        // BRSM settings share one cached reference render (the key hashes these settings).
+        truth.settings.gi = crate::gi::GiSettings {
+            method,
+            spp,
+            bounces: asked.bounces,
+            glossy_exponent: asked.glossy_exponent,
+            ..crate::gi::GiSettings::default()
+        };
         truth.settings.capture_hdr = true;
         truth.settings.history = None;
         truth.settings.debug_view = View::Final;

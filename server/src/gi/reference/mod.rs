@@ -523,9 +523,17 @@ impl PathTracer {
             .iter()
             .position(|a| a.key.history == key.history);
         let bytes = u64::from(key.width) * u64::from(key.height) * 16;
+        // Else, with every slot taken, the least recently used history gives its buffer up
+        // (sessions beyond the limit then restart each other rather than allocate per frame).
         let reused = same_history
             .map(|i| self.accumulations.remove(i))
-            .filter(|a| a.buffer.size() == bytes);
+            .filter(|a| a.buffer.size() == bytes)
+            .or_else(|| {
+                (self.accumulations.len() >= MAX_HISTORIES)
+                    .then(|| self.accumulations.pop())
+                    .flatten()
+                    .filter(|a| a.buffer.size() == bytes)
+            });
         let buffer = match reused {
             Some(a) => {
                 encoder.clear_buffer(&a.buffer, 0, None);

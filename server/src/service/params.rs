@@ -107,7 +107,7 @@ pub fn resolve(
 /// Checks the numbers the frame's GI method reads against the ranges `/v1/server` describes
 /// for it (this server's limits), so every method's limits are enforced from its own
 /// description.
-fn check_gi_ranges(g: &GiParams, limits: &Limits) -> Result<(), ApiError> {
+pub fn check_gi_ranges(g: &GiParams, limits: &Limits) -> Result<(), ApiError> {
     let Some(method) = crate::gi::describe_all(limits)
         .into_iter()
         .find(|d| d.method == g.method)

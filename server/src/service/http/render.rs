@@ -4,7 +4,7 @@ use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_
 use super::AppState;
 use crate::service::encode;
 use crate::service::error::{parse_json, ApiError};
-use crate::service::params::{check_quality, resolve};
+use crate::service::params::{check_gi_ranges, check_quality, resolve};
 use crate::service::render_loop::{Command, OneShot};
 use crate::service::scenes::{CachesNow, SceneEntry};
 use axum::extract::{FromRequest, Multipart, Request, State};
@@ -176,24 +176,22 @@ pub async fn render(
         None => None,
         Some(lightcast_protocol::GiMethod::Reference) => {
             let spp = req.compare_spp.unwrap_or(DEFAULT_COMPARE_SPP);
-            if !(1..=state.limits.max_spp).contains(&spp) {
-                return Err(ApiError::field(
-                    "compare_spp",
-                    format!(
-                        "{spp} is outside this server's range 1..={}",
-                        state.limits.max_spp
-                    ),
-                ));
-            }
-            if !(1..=state.limits.max_bounces).contains(&req.render.gi.bounces) {
-                return Err(ApiError::field(
-                    "render.gi.bounces",
-                    format!(
-                        "{} is outside this server's range 1..={}",
-                        req.render.gi.bounces, state.limits.max_bounces
-                    ),
-                ));
-            }
+            // The comparison render's parameters, checked like any reference render's; its
+            // sample count is the request's `compare_spp`.
+            let truth = lightcast_protocol::GiParams {
+                method: lightcast_protocol::GiMethod::Reference,
+                spp,
+                ..req.render.gi.clone()
+            };
+            check_gi_ranges(&truth, &state.limits).map_err(|mut e| {
+                if e.body.field.as_deref() == Some("gi.spp") {
+                    e.body.field = Some("compare_spp".into());
+                    e.body.message = e.body.message.replacen("gi.spp", "compare_spp", 1);
+                    e
+                } else {
+                    e.within("render")
+                }
+            })?;
             Some((lightcast_protocol::GiMethod::Reference, spp))
         }
         Some(other) => {

@@ -3,7 +3,7 @@
 //! with `compare_to`) and PSNR of tone-mapped frames.
 
 use crate::passes::tonemap::tonemap_cpu;
-use crate::renderer::Frame;
+use crate::renderer::{Frame, FrameProgress};
 use lightcast_protocol::{Comparison, GiMethod};
 
 /// Errors of an indirect buffer against the reference's, per channel over all pixels.
@@ -99,39 +99,58 @@ pub enum CompareError {
     NotCaptured,
 }
 
-/// `frame` (of any GI method) against `reference` (the same view rendered by `against`):
-/// errors of the indirect buffers, and PSNR of the final images tone-mapped alike (with the
-/// reference's exposure, so automatic exposure does not count as error).
+/// What a comparison keeps of the frame it compares with: its indirect light, exposure and
+/// convergence (16 bytes per pixel; the rest of the frame is the same shared stages).
+#[derive(Clone, Debug)]
+pub struct Truth {
+    pub width: u32,
+    pub height: u32,
+    pub indirect: Vec<[f32; 3]>,
+    pub exposure_scale: f32,
+    pub progress: Option<FrameProgress>,
+}
+
+impl Truth {
+    /// Keeps what comparisons need of `frame` (rendered with `capture_hdr`).
+    pub fn from_frame(frame: Frame) -> Result<Self, CompareError> {
+        let indirect = frame.indirect.ok_or(CompareError::NotCaptured)?;
+        Ok(Self {
+            width: frame.width,
+            height: frame.height,
+            indirect: indirect.iter().map(|p| [p[0], p[1], p[2]]).collect(),
+            exposure_scale: frame.exposure_scale,
+            progress: frame.progress,
+        })
+    }
+
+    /// Bytes held (for cache budgets).
+    pub fn bytes(&self) -> usize {
+        self.indirect.len() * std::mem::size_of::<[f32; 3]>()
+    }
+}
+
+/// `frame` (of any GI method) against `truth` (the same view rendered by `against`): errors
+/// of the indirect buffers, and PSNR of the final image against the same frame with the
+/// truth's indirect light, tone-mapped with the truth's exposure (so automatic exposure does
+/// not count as error).
 pub fn compare(
     frame: &Frame,
-    reference: &Frame,
+    truth: &Truth,
     against: GiMethod,
 ) -> Result<Comparison, CompareError> {
-    if (frame.width, frame.height) != (reference.width, reference.height) {
+    if (frame.width, frame.height) != (truth.width, truth.height) {
         return Err(CompareError::Size(
             frame.width,
             frame.height,
-            reference.width,
-            reference.height,
+            truth.width,
+            truth.height,
         ));
     }
-    let (Some(indirect), Some(truth_indirect), Some(hdr), Some(truth_hdr)) = (
-        &frame.indirect,
-        &reference.indirect,
-        &frame.hdr,
-        &reference.hdr,
-    ) else {
+    let (Some(indirect), Some(hdr)) = (&frame.indirect, &frame.hdr) else {
         return Err(CompareError::NotCaptured);
     };
-    let truth: Vec<[f32; 3]> = truth_indirect.iter().map(|p| [p[0], p[1], p[2]]).collect();
-    let e = errors(&truth, indirect, frame.width as usize);
-    let exposure = reference.exposure_scale;
-    let tonemap = |hdr: &[[f32; 4]]| -> Vec<[u8; 3]> {
-        hdr.iter()
-            .map(|p| tonemap_cpu([p[0], p[1], p[2]], exposure))
-            .collect()
-    };
-    let progress = reference.progress;
+    let e = errors(&truth.indirect, indirect, frame.width as usize);
+    let progress = truth.progress;
     Ok(Comparison {
         against,
         reference_samples: progress.map_or(0, |p| p.samples),
@@ -141,7 +160,12 @@ pub fn compare(
         indirect_mae_relative: e.mae_relative,
         indirect_block_mae_relative: e.block_mae_relative,
         indirect_bias_relative: e.bias_relative,
-        final_psnr_db: Some(psnr(&tonemap(hdr), &tonemap(truth_hdr))).filter(|p| p.is_finite()),
+        final_psnr_db: final_psnr_with_indirect(
+            hdr,
+            indirect,
+            &truth.indirect,
+            truth.exposure_scale,
+        ),
     })
 }
 

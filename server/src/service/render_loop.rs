@@ -11,6 +11,7 @@ use crate::debug_views::{self, Image};
 use crate::gi::lightskin::caches::{CacheParams, CacheSet};
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
+use crate::quality::Truth;
 use crate::renderer::{Frame, FrameProgress, PendingFrame, Renderer};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_MOVING, FLAG_STILL};
 use lightcast_protocol::{Comparison, FrameHeader, GiMethod, StageMs, View};
@@ -28,9 +29,10 @@ const MAX_RENDERERS: usize = 16;
 const RENDERER_IDLE: Duration = Duration::from_secs(60);
 /// Longest sleep when nothing is due, so new work is noticed even without a wake-up.
 const IDLE_WAIT: Duration = Duration::from_millis(50);
-/// Comparison renders (see `RenderRequest::compare_to`) kept for repeated comparisons; each
-/// holds a frame's HDR and indirect buffers (32 bytes per pixel).
-const MAX_COMPARISONS: usize = 4;
+/// Comparison renders (see `RenderRequest::compare_to`) kept for repeated comparisons: at most
+/// this many bytes of their indirect light (12 bytes per pixel: 100 MB for the largest default
+/// frame, 3840×2160, so two of those fit), the newest always kept.
+const COMPARISON_CACHE_BYTES: usize = 256 << 20;
 
 /// A one-shot render: the frame, read back and handed over unencoded.
 pub struct OneShot {
@@ -502,21 +504,22 @@ struct Comparand {
 }
 
 enum ComparandFrame {
-    Cached(Arc<Frame>),
+    Cached(Arc<Truth>),
     /// Submitted before the one-shot's own frame.
     Pending(Box<PendingFrame>),
 }
 
 impl Comparand {
     /// The read-back frame, added to the cache when it was rendered for this request.
-    fn wait(self) -> Result<(GiMethod, Arc<Frame>), ApiError> {
+    fn wait(self) -> Result<(GiMethod, Arc<Truth>), ApiError> {
         let frame = match self.frame {
             ComparandFrame::Cached(frame) => frame,
             ComparandFrame::Pending(pending) => {
+                let frame = pending
+                    .wait()
+                    .map_err(|e| ApiError::internal(e.to_string()))?;
                 let frame = Arc::new(
-                    pending
-                        .wait()
-                        .map_err(|e| ApiError::internal(e.to_string()))?,
+                    Truth::from_frame(frame).map_err(|e| ApiError::internal(e.to_string()))?,
                 );
                 self.cache.insert(self.key, Arc::clone(&frame));
                 frame
@@ -529,10 +532,10 @@ impl Comparand {
 /// Comparison renders kept for repeated comparisons, most recent first (the render loop looks
 /// them up, the readback thread adds them).
 #[derive(Default)]
-struct ComparisonCache(std::sync::Mutex<Vec<(u64, Arc<Frame>)>>);
+struct ComparisonCache(std::sync::Mutex<Vec<(u64, Arc<Truth>)>>);
 
 impl ComparisonCache {
-    fn lookup(&self, key: u64) -> Option<Arc<Frame>> {
+    fn lookup(&self, key: u64) -> Option<Arc<Truth>> {
         let mut entries = self
             .0
             .lock()
@@ -544,14 +547,23 @@ impl ComparisonCache {
         Some(frame)
     }
 
-    fn insert(&self, key: u64, frame: Arc<Frame>) {
+    fn insert(&self, key: u64, frame: Arc<Truth>) {
         let mut entries = self
             .0
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         entries.retain(|(k, _)| *k != key);
-        entries.truncate(MAX_COMPARISONS - 1);
         entries.insert(0, (key, frame));
+        let mut bytes = 0;
+        let keep = entries
+            .iter()
+            .take_while(|(_, t)| {
+                bytes += t.bytes();
+                bytes <= COMPARISON_CACHE_BYTES
+            })
+            .count()
+            .max(1);
+        entries.truncate(keep);
     }
 }
 

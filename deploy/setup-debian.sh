@@ -8,6 +8,7 @@
 # - mesa-vulkan-drivers (lavapipe, a CPU Vulkan driver) only when no Vulkan driver is installed,
 #   so machines without a GPU can still render (slowly) and run the tests.
 # - fonts-dejavu-core: the font of the benchmark's PNG plots.
+# - gcc and g++ where missing: cargo links with cc, and the FLIP metric builds C++.
 # - with --tests: chromium, and nodejs + npm where Node.js is missing, for the browser viewer's
 #   test (Debian's Chromium driven by playwright-core, which never downloads a browser), then
 #   `npm ci` in client/web for playwright-core at the version its package-lock.json pins.
@@ -34,6 +35,9 @@ if [ "$icds" -eq 0 ] && ! dpkg -s mesa-vulkan-drivers >/dev/null 2>&1; then
 fi
 
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || packages+=(fonts-dejavu-core)
+# cargo links with cc, and nv-flip (the FLIP metric of comparisons) compiles C++.
+command -v cc >/dev/null 2>&1 || packages+=(gcc libc6-dev)
+command -v c++ >/dev/null 2>&1 || packages+=(g++)
 
 if $tests; then
   command -v chromium >/dev/null 2>&1 || packages+=(chromium)

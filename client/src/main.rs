@@ -320,7 +320,7 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
             c.indirect_bias_relative * 100.0
         );
         match c.final_psnr_db {
-            Some(p) => println!("  final image PSNR {p:.2} dB"),
+            Some(p) => println!("  final image PSNR {p:.2} dB, FLIP {:.4}", c.final_flip),
             None => println!("  final image identical"),
         }
     }

@@ -504,6 +504,9 @@ pub struct Comparison {
     /// PSNR in dB of the final images, both tone-mapped with the reference's exposure;
     /// `null` when they are identical.
     pub final_psnr_db: Option<f64>,
+    /// Mean LDR-FLIP error of the same two final images (0: indistinguishable, 1: the
+    /// largest perceived difference), at 67 pixels per degree.
+    pub final_flip: f64,
 }
 
 /// The timing report of a one-shot render; sent in the `x-lightcast-report` header of the

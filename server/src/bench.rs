@@ -13,7 +13,7 @@ use crate::gi::reference::luminance;
 use crate::gi::{lightskin::LightSkin, GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
-use crate::quality::{errors, final_psnr_with_indirect, ErrorStats};
+use crate::quality::{errors, final_errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
@@ -113,8 +113,10 @@ pub struct BenchRow {
     /// Errors of the indirect buffer against the path-traced reference, when one was rendered.
     pub vs_reference: Option<ErrorStats>,
     /// PSNR in dB of the final image against the same frame with the reference's indirect
-    /// light (see [`crate::quality::final_psnr_with_indirect`]).
+    /// light (see [`crate::quality::final_errors`]).
     pub final_psnr_db: Option<f64>,
+    /// Mean LDR-FLIP error of the same two images.
+    pub final_flip: Option<f64>,
     /// RGB8 difference image against the reference (red: too bright, blue: too dark), when
     /// plots were asked for (written by `bench_plots`, not serialized).
     #[serde(skip)]
@@ -472,6 +474,15 @@ pub fn run(
             });
             let (difference, _) = mad(reference, &timed.indirect);
             let brsm = gi.method == GiMethod::Brsm;
+            let finals = truth.as_ref().map(|r| {
+                final_errors(
+                    &timed.hdr,
+                    &timed.indirect,
+                    &r.indirect,
+                    timed.exposure,
+                    args.width,
+                )
+            });
             rows.push(BenchRow {
                 method: gi.method,
                 rsm_size,
@@ -488,14 +499,8 @@ pub fn run(
                 vs_reference: truth
                     .as_ref()
                     .map(|r| errors(&r.indirect, &timed.indirect, args.width as usize)),
-                final_psnr_db: truth.as_ref().and_then(|r| {
-                    final_psnr_with_indirect(
-                        &timed.hdr,
-                        &timed.indirect,
-                        &r.indirect,
-                        timed.exposure,
-                    )
-                }),
+                final_psnr_db: finals.and_then(|f| f.psnr_db),
+                final_flip: finals.map(|f| f.flip_mean),
                 difference_image: truth
                     .as_ref()
                     .filter(|_| pictures)
@@ -570,12 +575,12 @@ impl BenchReport {
                 ),
             );
         }
-        s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD vs LightSkin | MAD / mean | MAE vs reference | RMSE vs reference | MAE / mean vs reference | 8×8-block MAE / mean vs reference | bias vs reference | final PSNR vs reference |\n";
-        s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+        s += "| method | RSM | VALs | view samples | GI ms (median / p95) | frame ms (median / p95) | fps | speed-up vs LightSkin | MAD vs LightSkin | MAD / mean | MAE vs reference | RMSE vs reference | MAE / mean vs reference | 8×8-block MAE / mean vs reference | bias vs reference | final PSNR vs reference | final FLIP vs reference |\n";
+        s += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
         for r in &self.rows {
             let opt = |v: Option<u32>| v.map_or("all".to_string(), |v| v.to_string());
             s += &format!(
-                "| {:?} | {}² | {} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.1} | {:.2}× | {:.3e} | {:.2} % | {} | {} |\n",
+                "| {:?} | {}² | {} | {} | {:.3} / {:.3} | {:.3} / {:.3} | {:.1} | {:.2}× | {:.3e} | {:.2} % | {} | {} | {} |\n",
                 r.method,
                 r.rsm_size,
                 opt(r.val_count),
@@ -600,7 +605,8 @@ impl BenchReport {
                     (Some(p), _) => format!("{p:.2} dB"),
                     (None, Some(_)) => "identical".to_string(),
                     (None, None) => "-".to_string(),
-                }
+                },
+                r.final_flip.map_or("-".to_string(), |f| format!("{f:.4}"))
             );
         }
         s += "\nPer-stage medians (ms):\n\n| method | RSM | VALs | view samples |";

@@ -290,6 +290,7 @@ mod tests {
                 bias_relative: 0.0,
             }),
             final_psnr_db: Some(30.0),
+            final_flip: Some(0.1),
             difference_image: Some(vec![0; 3]),
         }
     }

@@ -1,6 +1,6 @@
 //! Quality of an image against the truth: error statistics of a GI method's indirect buffer
 //! against the path-traced reference's (`bench`, `render --compare-to`, `POST /v1/render`
-//! with `compare_to`) and PSNR of tone-mapped frames.
+//! with `compare_to`) and PSNR and FLIP of tone-mapped frames.
 
 use crate::passes::tonemap::tonemap_cpu;
 use crate::renderer::{Frame, FrameProgress};
@@ -72,22 +72,56 @@ pub fn psnr(a: &[[u8; 3]], b: &[[u8; 3]]) -> f64 {
     }
 }
 
-/// PSNR of a frame's final image against the same frame with the reference's indirect light
-/// in place of its own, both tone-mapped with `exposure`: exact, because direct light and
-/// emission come from stages every method shares. `None` when the two are identical.
-pub fn final_psnr_with_indirect(
+/// Errors of a frame's tone-mapped final image against the truth.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FinalErrors {
+    /// PSNR in dB; `None` when the images are identical.
+    pub psnr_db: Option<f64>,
+    /// Mean of the LDR-FLIP error map (0: indistinguishable, 1: the largest perceived
+    /// difference), at FLIP's default 67 pixels per degree (a 0.7 m distant 24" monitor).
+    pub flip_mean: f64,
+}
+
+/// A frame's final image against the same frame with the reference's indirect light in place
+/// of its own, both tone-mapped with `exposure`: exact, because direct light and emission come
+/// from stages every method shares. `width` is the frame's width in pixels.
+pub fn final_errors(
     hdr: &[[f32; 4]],
     indirect: &[[f32; 4]],
     truth_indirect: &[[f32; 3]],
     exposure: f32,
-) -> Option<f64> {
+    width: u32,
+) -> FinalErrors {
     let (mut own, mut truth) = (Vec::with_capacity(hdr.len()), Vec::with_capacity(hdr.len()));
     for ((h, i), t) in hdr.iter().zip(indirect).zip(truth_indirect) {
         own.push(tonemap_cpu([h[0], h[1], h[2]], exposure));
         let swapped = [0, 1, 2].map(|k| (h[k] - i[k] + t[k]).max(0.0));
         truth.push(tonemap_cpu(swapped, exposure));
     }
-    Some(psnr(&own, &truth)).filter(|p| p.is_finite())
+    FinalErrors {
+        psnr_db: Some(psnr(&own, &truth)).filter(|p| p.is_finite()),
+        flip_mean: flip_mean(&truth, &own, width),
+    }
+}
+
+/// Mean LDR-FLIP error of `test` against `reference`, sRGB images `width` pixels wide.
+/// FLIP (Andersson et al. 2020) models what a viewer notices (contrast sensitivity, edges,
+/// colour), which PSNR does not; NVIDIA's implementation is used through `nv-flip` rather
+/// than a port, so the numbers match the published tool.
+pub fn flip_mean(reference: &[[u8; 3]], test: &[[u8; 3]], width: u32) -> f64 {
+    let height = reference.len() / width.max(1) as usize;
+    if width == 0 || height == 0 || reference.len() != test.len() {
+        return 0.0;
+    }
+    let image = |pixels: &[[u8; 3]]| {
+        nv_flip::FlipImageRgb8::with_data(width, height as u32, pixels.as_flattened())
+    };
+    let map = nv_flip::flip(
+        image(reference),
+        image(test),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    f64::from(nv_flip::FlipPool::from_image(&map).mean())
 }
 
 /// Why two frames cannot be compared.
@@ -131,7 +165,7 @@ impl Truth {
 
 /// `frame` (of any GI method) against `truth` (the same view rendered by `against`): errors
 /// of the indirect buffers, and PSNR of the final image against the same frame with the
-/// truth's indirect light, tone-mapped with the truth's exposure (so automatic exposure does
+/// truth's indirect light (PSNR and FLIP), tone-mapped with the truth's exposure (so automatic exposure does
 /// not count as error).
 pub fn compare(
     frame: &Frame,
@@ -150,6 +184,13 @@ pub fn compare(
         return Err(CompareError::NotCaptured);
     };
     let e = errors(&truth.indirect, indirect, frame.width as usize);
+    let finals = final_errors(
+        hdr,
+        indirect,
+        &truth.indirect,
+        truth.exposure_scale,
+        frame.width,
+    );
     let progress = truth.progress;
     Ok(Comparison {
         against,
@@ -160,12 +201,8 @@ pub fn compare(
         indirect_mae_relative: e.mae_relative,
         indirect_block_mae_relative: e.block_mae_relative,
         indirect_bias_relative: e.bias_relative,
-        final_psnr_db: final_psnr_with_indirect(
-            hdr,
-            indirect,
-            &truth.indirect,
-            truth.exposure_scale,
-        ),
+        final_psnr_db: finals.psnr_db,
+        final_flip: finals.flip_mean,
     })
 }
 
@@ -194,18 +231,28 @@ mod tests {
     }
 
     #[test]
-    fn final_psnr_swaps_in_the_reference_indirect_light() {
+    fn final_errors_swap_in_the_reference_indirect_light() {
         let hdr = [[0.3, 0.2, 0.1, 1.0], [0.5, 0.5, 0.5, 1.0]];
         let indirect = [[0.1, 0.1, 0.0, 1.0], [0.2, 0.2, 0.2, 1.0]];
         let same = indirect.map(|p| [p[0], p[1], p[2]]);
-        assert_eq!(final_psnr_with_indirect(&hdr, &indirect, &same, 1.0), None);
+        let identical = final_errors(&hdr, &indirect, &same, 1.0, 2);
+        assert_eq!(identical.psnr_db, None);
+        assert_eq!(identical.flip_mean, 0.0);
         let close = same.map(|p| p.map(|c| c * 1.1));
         let far = same.map(|p| p.map(|c| c * 2.0));
         let (near, away) = (
-            final_psnr_with_indirect(&hdr, &indirect, &close, 1.0).expect("differs"),
-            final_psnr_with_indirect(&hdr, &indirect, &far, 1.0).expect("differs"),
+            final_errors(&hdr, &indirect, &close, 1.0, 2),
+            final_errors(&hdr, &indirect, &far, 1.0, 2),
         );
-        assert!(near > away && away > 0.0, "{near} vs {away}");
+        let (near_db, away_db) = (
+            near.psnr_db.expect("differs"),
+            away.psnr_db.expect("differs"),
+        );
+        assert!(near_db > away_db && away_db > 0.0, "{near_db} vs {away_db}");
+        assert!(
+            0.0 < near.flip_mean && near.flip_mean < away.flip_mean && away.flip_mean < 1.0,
+            "{near:?} vs {away:?}"
+        );
         // The swapped image itself: hdr − indirect + truth, tone-mapped alike.
         let own: Vec<[u8; 3]> = hdr
             .iter()
@@ -217,7 +264,36 @@ mod tests {
             .zip(&far)
             .map(|((h, i), t)| tonemap_cpu([0, 1, 2].map(|k| h[k] - i[k] + t[k]), 1.0))
             .collect();
-        assert_eq!(Some(psnr(&own, &truth)), Some(away));
+        assert_eq!(Some(psnr(&own, &truth)), away.psnr_db);
+        assert_eq!(flip_mean(&truth, &own, 2), away.flip_mean);
+    }
+
+    /// FLIP is perceptual where PSNR is not: a one-pixel checkerboard of ±12 is masked by
+    /// the eye's falloff in contrast sensitivity at high frequencies, while the same ±12 as
+    /// two halves (one edge across a 64-pixel image) is plainly visible. Both have the same
+    /// squared error, so the same PSNR.
+    #[test]
+    fn flip_sees_what_a_viewer_sees() {
+        let (w, h) = (64usize, 64usize);
+        let grey = vec![[128u8; 3]; w * h];
+        let shade = |up: bool| [if up { 140u8 } else { 116 }; 3];
+        let checker: Vec<[u8; 3]> = (0..w * h)
+            .map(|i| shade((i % w + i / w) % 2 == 0))
+            .collect();
+        let halves: Vec<[u8; 3]> = (0..w * h).map(|i| shade(i % w < w / 2)).collect();
+        assert_eq!(psnr(&grey, &checker), psnr(&grey, &halves));
+        let (flip_checker, flip_halves) = (
+            flip_mean(&grey, &checker, w as u32),
+            flip_mean(&grey, &halves, w as u32),
+        );
+        assert!(
+            flip_checker < 0.5 * flip_halves,
+            "checker {flip_checker} vs halves {flip_halves}"
+        );
+        // The extremes: identical images and black against white.
+        assert_eq!(flip_mean(&grey, &grey, w as u32), 0.0);
+        let (black, white) = (vec![[0u8; 3]; w * h], vec![[255u8; 3]; w * h]);
+        assert!(flip_mean(&black, &white, w as u32) > 0.9);
     }
 
     #[test]

@@ -120,6 +120,7 @@ async fn renders_compare_with_the_reference() {
     assert!(c.indirect_mae > 0.0 && c.indirect_mae.is_finite());
     assert!(c.indirect_mae_relative > 0.0 && c.indirect_mae_relative < 10.0);
     assert!(c.final_psnr_db.is_some_and(|p| p > 5.0 && p < 100.0));
+    assert!(c.final_flip > 0.0 && c.final_flip < 1.0, "{}", c.final_flip);
     let (again, _) = render(&server, &brsm).await;
     assert_eq!(again.comparison.expect("comparison"), c);
 
@@ -130,6 +131,7 @@ async fn renders_compare_with_the_reference() {
     let same = r.comparison.expect("comparison");
     assert_eq!(same.indirect_mae, 0.0, "the reference equals itself");
     assert_eq!(same.final_psnr_db, None);
+    assert_eq!(same.final_flip, 0.0);
     assert!(r.stages.iter().any(|s| s.stage == "path_trace"));
     server.stop().await;
 }

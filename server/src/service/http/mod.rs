@@ -264,7 +264,13 @@ async fn method_not_allowed() -> ApiError {
         viewer::index,
         viewer::file,
     ),
-    components(schemas(lightcast_protocol::ClientMessage, lightcast_protocol::ServerEvent,))
+    // RenderReport travels in a header, so no path names it: listed so its schema (with the
+    // comparison's metrics) is documented.
+    components(schemas(
+        lightcast_protocol::ClientMessage,
+        lightcast_protocol::ServerEvent,
+        lightcast_protocol::RenderReport,
+    ))
 )]
 pub struct ApiDoc;
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs what lightcast needs on a Debian machine, then returns. Idempotent.
+# Installs what lightcast needs on a Debian or Ubuntu machine, then returns. Idempotent.
 #
 #   deploy/setup-debian.sh           what the server needs
 #   deploy/setup-debian.sh --tests   also what the tests need
@@ -12,7 +12,9 @@
 # - with --tests: chromium, and nodejs + npm where Node.js is missing, for the browser viewer's
 #   test (Debian's Chromium driven by playwright-core, which never downloads a browser), then
 #   `npm ci` in client/web for playwright-core at the version its package-lock.json pins.
-# - Rust itself is not installed here: cargo ≥ 1.87 must be on PATH (https://rustup.rs).
+# Checked, not installed: Rust (cargo at least the workspace's `rust-version` in Cargo.toml, from
+# https://rustup.rs) and, with --tests, Node.js at least what the pinned playwright-core needs.
+# Packages are installed as root, or through sudo for other users.
 set -euo pipefail
 
 tests=false
@@ -22,10 +24,13 @@ case "${1:-}" in
   *) echo "usage: $0 [--tests]" >&2; exit 2 ;;
 esac
 
-sudo=""
-if [ "$(id -u)" -ne 0 ]; then
-  sudo="sudo"
-fi
+root="$(cd "$(dirname "$0")/.." && pwd)"
+web="$root/client/web"
+
+# True when version $1 ≥ version $2 (dotted numbers).
+version_at_least() {
+  [ "$(printf '%s\n%s\n' "$2" "$1" | sort -V | head -n1)" = "$2" ]
+}
 
 packages=()
 dpkg -s libvulkan1 >/dev/null 2>&1 || packages+=(libvulkan1)
@@ -35,7 +40,6 @@ if [ "$icds" -eq 0 ] && ! dpkg -s mesa-vulkan-drivers >/dev/null 2>&1; then
 fi
 
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || packages+=(fonts-dejavu-core)
-# cargo links with cc, and nv-flip (the FLIP metric of comparisons) compiles C++.
 command -v cc >/dev/null 2>&1 || packages+=(gcc libc6-dev)
 command -v c++ >/dev/null 2>&1 || packages+=(g++)
 
@@ -46,18 +50,39 @@ if $tests; then
 fi
 
 if [ ${#packages[@]} -gt 0 ]; then
+  if [ "$(id -u)" -eq 0 ]; then
+    sudo=()
+  elif command -v sudo >/dev/null 2>&1; then
+    sudo=(sudo)
+  else
+    echo "setup: ${packages[*]} must be installed, which needs root: run this script as root or install sudo" >&2
+    exit 1
+  fi
   echo "setup: installing ${packages[*]}" >&2
-  $sudo apt-get update -qq
-  $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${packages[@]}" >/dev/null
+  "${sudo[@]}" apt-get update -qq
+  "${sudo[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${packages[@]}" >/dev/null
 fi
 
+rust_version=$(sed -n 's/^rust-version = "\(.*\)"$/\1/p' "$root/Cargo.toml")
 if ! command -v cargo >/dev/null 2>&1; then
-  echo "setup: cargo not found; install Rust 1.87 or newer (https://rustup.rs) and run again" >&2
+  echo "setup: cargo not found; install Rust $rust_version or newer (https://rustup.rs) and run again" >&2
+  exit 1
+fi
+cargo_version=$(cargo --version | awk '{print $2}')
+if ! version_at_least "${cargo_version%%-*}" "$rust_version"; then
+  echo "setup: cargo $cargo_version is older than the workspace's rust-version $rust_version; run \`rustup update\` (or install a newer Rust from https://rustup.rs) and run again" >&2
   exit 1
 fi
 
 if $tests; then
-  web="$(cd "$(dirname "$0")/.." && pwd)/client/web"
+  # The lowest Node.js the pinned playwright-core declares (its engines field, ">=20").
+  node_needs=$(node -e 'const p = require(process.argv[1]).packages["node_modules/playwright-core"];
+    console.log(((p && p.engines && p.engines.node) || "").replace(/^>=\s*/, ""))' "$web/package-lock.json")
+  node_version=$(node --version | sed 's/^v//')
+  if [ -n "$node_needs" ] && ! version_at_least "$node_version" "$node_needs"; then
+    echo "setup: Node.js $node_version is older than the $node_needs the viewer test's playwright-core needs; install a newer Node.js (https://nodejs.org, or Debian's backports) and run again" >&2
+    exit 1
+  fi
   stamp="$web/node_modules/.installed-package-lock.json"
   if ! cmp -s "$web/package-lock.json" "$stamp"; then
     echo "setup: npm ci in client/web (playwright-core for the viewer test)" >&2

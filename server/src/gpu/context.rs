@@ -2,25 +2,48 @@
 
 use std::fmt;
 
-/// Which wgpu backend to open. `Auto` lets wgpu choose (Vulkan where present).
+/// Which wgpu backend to open. `Auto` lets wgpu choose among the primary backends (Vulkan,
+/// Metal, DX12).
+///
+/// `Gl` is accepted only to refuse it with a reason: on wgpu's GL backend every frame failed
+/// ("Tried to wait using a submission index … that has not been returned by a successful
+/// submission"), and the pipeline relies on compute shaders and storage buffers that GL
+/// drivers often lack. It is hidden from `--help` and the docs.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum BackendChoice {
     #[default]
     Auto,
     Vulkan,
+    #[value(hide = true)]
     Gl,
 }
 
 impl BackendChoice {
-    /// Backends to try, in order. `Auto` tries Vulkan before GL: probing GL first only adds
-    /// EGL noise on headless machines, and GL on some drivers lacks compute.
-    fn attempts(self) -> &'static [wgpu::Backends] {
+    fn backends(self) -> wgpu::Backends {
         match self {
-            Self::Auto => &[wgpu::Backends::VULKAN, wgpu::Backends::GL],
-            Self::Vulkan => &[wgpu::Backends::VULKAN],
-            Self::Gl => &[wgpu::Backends::GL],
+            Self::Auto => wgpu::Backends::PRIMARY,
+            Self::Vulkan => wgpu::Backends::VULKAN,
+            Self::Gl => wgpu::Backends::GL,
         }
     }
+}
+
+/// Where Debian and Ubuntu install lavapipe's ICD file (one per architecture).
+const LAVAPIPE_ICD_DIRS: &[&str] = &["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"];
+
+/// Lavapipe's ICD file, when it is installed.
+fn lavapipe_icd() -> Option<std::path::PathBuf> {
+    LAVAPIPE_ICD_DIRS
+        .iter()
+        .filter_map(|dir| std::fs::read_dir(dir).ok())
+        .flatten()
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("lvp_icd") && n.ends_with(".json"))
+        })
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -30,6 +53,8 @@ pub enum GpuError {
         backend: BackendChoice,
         error: wgpu::RequestAdapterError,
     },
+    #[error("the OpenGL backend is not supported: wgpu's GL backend fails every frame and lacks what the GI passes need; use `--backend vulkan` (or `auto`), with Mesa's lavapipe (`apt-get install mesa-vulkan-drivers`) on machines without a Vulkan GPU")]
+    GlUnsupported,
     #[error("adapter {adapter} refused to open a device: {error}")]
     RequestDevice {
         adapter: String,
@@ -91,35 +116,35 @@ impl GpuContext {
     }
 
     async fn new_async(backend: BackendChoice) -> Result<Self, GpuError> {
-        let options = wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: None,
-            apply_limit_buckets: false,
-        };
-        // WGPU_BACKEND, when set, overrides `Auto`'s order (wgpu's own convention).
-        let env_backends = wgpu::Backends::from_env().filter(|_| backend == BackendChoice::Auto);
-        let attempts = match &env_backends {
-            Some(b) => std::slice::from_ref(b),
-            None => backend.attempts(),
-        };
-        let mut last_error = None;
-        let mut found = None;
-        for &backends in attempts {
-            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-            desc.backends = backends;
-            match wgpu::Instance::new(desc).request_adapter(&options).await {
-                Ok(adapter) => {
-                    found = Some(adapter);
-                    break;
-                }
-                Err(e) => last_error = Some(e),
-            }
+        // WGPU_BACKEND, when set, overrides `Auto` (wgpu's own convention).
+        let backends = wgpu::Backends::from_env()
+            .filter(|_| backend == BackendChoice::Auto)
+            .unwrap_or(backend.backends());
+        if backends.contains(wgpu::Backends::GL) {
+            return Err(GpuError::GlUnsupported);
         }
-        let adapter = match (found, last_error) {
-            (Some(adapter), _) => adapter,
-            (None, Some(error)) => return Err(GpuError::NoAdapter { backend, error }),
-            (None, None) => unreachable!("every backend choice has at least one attempt"),
+        let adapter = match request_adapter(backends).await {
+            Ok(adapter) => adapter,
+            Err(error) => {
+                match lavapipe_icd().filter(|_| backends.contains(wgpu::Backends::VULKAN)) {
+                    // A Vulkan ICD is installed but opens no adapter (a driver without its GPU,
+                    // a broken install): the CPU driver still renders, slowly, which beats not
+                    // starting. Only the Vulkan loader reads these variables, when the instance
+                    // is created below; nothing else in the process is running yet.
+                    Some(icd) => {
+                        tracing::warn!(
+                        "no adapter opened with the installed drivers ({error}); falling back to lavapipe ({})",
+                        icd.display()
+                    );
+                        std::env::set_var("VK_DRIVER_FILES", &icd);
+                        std::env::set_var("VK_ICD_FILENAMES", &icd);
+                        request_adapter(wgpu::Backends::VULKAN)
+                            .await
+                            .map_err(|error| GpuError::NoAdapter { backend, error })?
+                    }
+                    None => return Err(GpuError::NoAdapter { backend, error }),
+                }
+            }
         };
         let info = adapter.get_info();
         let name = AdapterSummary(&info).to_string();
@@ -170,4 +195,20 @@ impl GpuContext {
         self.device.poll(wgpu::PollType::wait_indefinitely())?;
         Ok(())
     }
+}
+
+/// The preferred (high-performance) adapter among `backends`.
+async fn request_adapter(
+    backends: wgpu::Backends,
+) -> Result<wgpu::Adapter, wgpu::RequestAdapterError> {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+    desc.backends = backends;
+    wgpu::Instance::new(desc)
+        .request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            apply_limit_buckets: false,
+        })
+        .await
 }

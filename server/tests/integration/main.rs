@@ -12,4 +12,5 @@ mod gpu_scenes;
 mod render_cli;
 mod scale_invariance;
 mod serve_cli;
+mod setup_script;
 mod support;

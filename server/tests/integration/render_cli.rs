@@ -318,3 +318,41 @@ fn gi_methods_and_debug_views_write_images() {
         assert!(mean_level(&img) > 1.0, "{view} is black");
     }
 }
+
+/// A Vulkan driver that is installed but opens no adapter (here an ICD file naming a library
+/// that does not exist, as after a half-removed GPU driver) falls back to lavapipe instead of
+/// failing. Needs lavapipe installed (as `deploy/setup-debian.sh` does without a GPU).
+#[test]
+fn a_broken_vulkan_driver_falls_back_to_lavapipe() {
+    let installed = ["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"]
+        .iter()
+        .filter_map(|d| std::fs::read_dir(d).ok())
+        .flatten()
+        .filter_map(Result::ok)
+        .any(|e| e.file_name().to_string_lossy().starts_with("lvp_icd"));
+    if !installed {
+        eprintln!("lavapipe is not installed here: the fallback cannot be exercised");
+        return;
+    }
+    let broken = out_dir().join("broken_icd.json");
+    std::fs::write(
+        &broken,
+        r#"{"file_format_version": "1.0.0", "ICD": {"library_path": "/nonexistent/libvulkan_broken.so", "api_version": "1.3.0"}}"#,
+    )
+    .expect("write ICD file");
+    let out = out_dir().join("fallback.png");
+    let output = Command::new(env!("CARGO_BIN_EXE_lightcast-server"))
+        .args([
+            "render", "--width", "32", "--height", "32", "--gi", "none", "--out",
+        ])
+        .arg(&out)
+        .env("LIGHTCAST_CACHE_DIR", out_dir().join("light-caches"))
+        .env("VK_DRIVER_FILES", &broken)
+        .env("VK_ICD_FILENAMES", &broken)
+        .output()
+        .expect("run lightcast-server");
+    let stderr = text(&output.stderr);
+    assert!(output.status.success(), "render failed: {stderr}");
+    assert!(stderr.contains("falling back to lavapipe"), "{stderr}");
+    image::open(&out).expect("the fallback rendered an image");
+}

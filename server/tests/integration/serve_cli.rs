@@ -128,6 +128,10 @@ fn refuses_bad_options_with_a_reason() {
         (&["serve", "--max-width", "0"], "--max-width"),
         (&["serve", "--token", "short"], "too easy to guess"),
         (&["serve", "--default-scene", "procedural:teapot"], "teapot"),
+        (
+            &["serve", "--backend", "gl"],
+            "OpenGL backend is not supported",
+        ),
     ];
     for (args, needle) in cases {
         let mut all = args.to_vec();

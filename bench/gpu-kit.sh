@@ -13,7 +13,7 @@ kit="${1:-$root/.gpu-kit}"
 mkdir -p "$kit/gl"
 
 echo "gpu-kit: building release binaries (a few minutes on a clean tree)" >&2
-(cd "$root" && cargo build --release -q -p lightcast-server -p lightcast-client)
+(cd "$root" && cargo build --release -q -p lightcast-server --features plots -p lightcast-client)
 strip -o "$kit/lightcast-server" "$root/target/release/lightcast-server"
 strip -o "$kit/lightcast" "$root/target/release/lightcast"
 git -C "$root" rev-parse --short HEAD > "$kit/revision"

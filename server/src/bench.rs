@@ -75,7 +75,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub markdown: Option<PathBuf>,
     /// Write PNG plots to PREFIX-error.png (error vs RSM size) and PREFIX-fps.png (fps vs RSM
-    /// size, per configuration).
+    /// size, per configuration). Needs a build with `--features plots`.
     #[arg(long)]
     pub plots: Option<PathBuf>,
     /// Exposure for the frames (only the indirect buffer is compared, so this does not matter

@@ -26,21 +26,19 @@ pub enum PlotError {
     },
 }
 
-/// Writes an RGB8 picture of the report's frame size.
-fn write_rgb(report: &BenchReport, path: PathBuf, rgb: &[u8]) -> Result<PathBuf, PlotError> {
-    image::save_buffer(
-        &path,
-        rgb,
-        report.width,
-        report.height,
-        image::ExtendedColorType::Rgb8,
-    )
-    .map_err(|error| PlotError::Image {
-        path: path.clone(),
-        error,
-    })?;
+/// Writes an RGB8 picture `width` × `height` as PNG.
+fn write_rgb(path: PathBuf, rgb: &[u8], width: u32, height: u32) -> Result<PathBuf, PlotError> {
+    image::save_buffer(&path, rgb, width, height, image::ExtendedColorType::Rgb8).map_err(
+        |error| PlotError::Image {
+            path: path.clone(),
+            error,
+        },
+    )?;
     Ok(path)
 }
+
+/// Size of the plots in pixels.
+const PLOT_SIZE: (u32, u32) = (960, 600);
 
 /// Registers the plot font once per process.
 fn ensure_font() -> Result<(), PlotError> {
@@ -134,7 +132,10 @@ fn draw_over(
     let x_max = points.clone().map(|p| p.0).fold(0.0, f64::max);
     let x_min = points.clone().map(|p| p.0).fold(x_max, f64::min);
     let y_max = points.map(|p| p.1).fold(0.0, f64::max).max(1e-9) * 1.1;
-    let root = BitMapBackend::new(path, (960, 600)).into_drawing_area();
+    // Drawn into memory and encoded with the `image` the server already uses: plotters' own
+    // encoder would pull in a second, older `image`.
+    let mut rgb = vec![0u8; (PLOT_SIZE.0 * PLOT_SIZE.1 * 3) as usize];
+    let root = BitMapBackend::with_buffer(&mut rgb, PLOT_SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 24))
@@ -176,6 +177,9 @@ fn draw_over(
         .draw()
         .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
+    drop(chart);
+    drop(root);
+    write_rgb(path.to_path_buf(), &rgb, PLOT_SIZE.0, PLOT_SIZE.1)?;
     Ok(())
 }
 
@@ -245,7 +249,12 @@ pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, 
         paths.push(path);
     }
     if let Some(rgb) = &report.reference_image {
-        paths.push(write_rgb(report, with_suffix("-reference.png"), rgb)?);
+        paths.push(write_rgb(
+            with_suffix("-reference.png"),
+            rgb,
+            report.width,
+            report.height,
+        )?);
     }
     for row in &report.rows {
         if let Some(rgb) = &row.difference_image {
@@ -253,7 +262,12 @@ pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, 
             if let (Some(v), Some(s)) = (row.val_count, row.view_samples) {
                 name += &format!("-{v}-{s}");
             }
-            paths.push(write_rgb(report, with_suffix(&format!("{name}.png")), rgb)?);
+            paths.push(write_rgb(
+                with_suffix(&format!("{name}.png")),
+                rgb,
+                report.width,
+                report.height,
+            )?);
         }
     }
     Ok(paths)

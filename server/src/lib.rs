@@ -5,6 +5,7 @@
 //! it behind HTTP and WebSocket.
 
 pub mod bench;
+#[cfg(feature = "plots")]
 pub mod bench_plots;
 pub mod debug_views;
 pub mod gi;

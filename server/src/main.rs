@@ -100,6 +100,13 @@ fn main() -> anyhow::Result<()> {
             }
         }
         Command::Bench(args) => {
+            // Said before the run, not after it: a bench takes minutes.
+            #[cfg(not(feature = "plots"))]
+            if args.plots.is_some() {
+                anyhow::bail!(
+                    "--plots needs a build with plots: `cargo build --release -p lightcast-server --features plots`"
+                );
+            }
             let bar = indicatif::ProgressBar::new(0);
             bar.set_style(
                 indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
@@ -123,6 +130,7 @@ fn main() -> anyhow::Result<()> {
                 std::fs::write(path, &markdown)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
+            #[cfg(feature = "plots")]
             if let Some(prefix) = &args.plots {
                 for path in lightcast_server::bench_plots::write_plots(&report, prefix)? {
                     eprintln!("wrote {}", path.display());

@@ -30,6 +30,8 @@ enum Command {
     Serve(ServeArgs),
     /// Print the OpenAPI document of the HTTP API (the same as GET /openapi.json).
     Openapi,
+    /// Print the AsyncAPI document of the session WebSocket (the same as GET /asyncapi.json).
+    Asyncapi,
     /// Render one frame of a scene to a PNG file (no network) and print per-pass GPU times.
     Render(RenderArgs),
     /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
@@ -83,6 +85,7 @@ fn main() -> anyhow::Result<()> {
     match command {
         Command::Serve(args) => serve(&args)?,
         Command::Openapi => println!("{}", service::http::openapi_document()?),
+        Command::Asyncapi => println!("{}", service::http::asyncapi::asyncapi_document()?),
         Command::Render(args) => {
             let mut log = |line: &str| eprintln!("{line}");
             let report = offline::render(&args, &mut log).context("render failed")?;

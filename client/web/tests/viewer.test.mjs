@@ -151,6 +151,33 @@ async function withAuth(browser, authBase, goodToken) {
   }
 }
 
+/** The offline API page renders this server's own OpenAPI and AsyncAPI documents. */
+async function apiPage(browser) {
+  const context = await browser.newContext({ viewport: { width: 1000, height: 800 } });
+  const page = await context.newPage();
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(e.message));
+  page.on('requestfailed', (r) => errors.push(`${r.url()} failed`));
+  try {
+    await step('the API page lists every endpoint, the WebSocket messages and the types', async () => {
+      await page.goto(`${base}/api`);
+      await page.waitForSelector('body[data-loaded="true"]', { timeout: PATIENCE_MS });
+      const openapi = await api('GET', '/openapi.json');
+      const operations = Object.values(openapi.paths).reduce((n, item) => n + Object.keys(item).length, 0);
+      assert.equal(await page.locator('#endpoints details').count(), operations);
+      await page.click('summary:has-text("/v1/render")');
+      assert.ok(await page.isVisible('a[href="#schema-RenderRequest"]'), 'the render body links its type');
+      for (const id of ['#message-control', '#message-event', '#message-frame', '#schema-ClientMessage', '#schema-GiParams']) {
+        assert.equal(await page.locator(id).count(), 1, `${id} is on the page`);
+      }
+      assert.deepEqual(errors, [], 'the page loaded nothing from elsewhere and raised nothing');
+      await page.screenshot({ path: path.join(artifacts, 'api.png'), fullPage: false });
+    });
+  } finally {
+    await context.close();
+  }
+}
+
 async function main() {
   await mkdir(artifacts, { recursive: true });
   const browser = await chromium.launch({ executablePath, args: CHROMIUM_ARGS, headless: true });
@@ -411,6 +438,7 @@ async function main() {
       } while (Date.now() < deadline);
       throw new Error(`session ${id} is left after the page closed`);
     });
+    await apiPage(browser);
     if (process.env.LIGHTCAST_AUTH_URL) await withAuth(browser, process.env.LIGHTCAST_AUTH_URL, process.env.LIGHTCAST_AUTH_TOKEN);
   } catch (e) {
     if (!page.isClosed()) await page.screenshot({ path: path.join(artifacts, 'viewer-failure.png') }).catch(() => {});

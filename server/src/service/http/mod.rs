@@ -5,6 +5,7 @@
 //! `/v1/render`, `/healthz`, `/readyz`, `/metrics`, `/openapi.json`; the browser viewer at `/`
 //! (its files under `/viewer/`).
 
+pub mod asyncapi;
 pub mod health;
 pub mod render;
 pub mod scenes;
@@ -261,7 +262,9 @@ async fn method_not_allowed() -> ApiError {
         sessions::ticket,
         stream::stream,
         render::render,
+        asyncapi::asyncapi_json,
         viewer::index,
+        viewer::api_page,
         viewer::file,
     ),
     // RenderReport travels in a header, so no path names it: listed so its schema (with the
@@ -310,6 +313,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/sessions/{id}/ticket", post(sessions::ticket))
         .route("/metrics", get(health::metrics))
         .route("/openapi.json", get(openapi_json))
+        .route("/asyncapi.json", get(asyncapi::asyncapi_json))
         .layer(axum::extract::DefaultBodyLimit::max(json_limit))
         .merge(uploads)
         .layer(axum::middleware::from_fn_with_state(
@@ -326,6 +330,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/healthz", get(health::healthz))
         .route("/readyz", get(health::readyz))
         .route("/", get(viewer::index))
+        .route("/api", get(viewer::api_page))
         .route("/viewer/{*path}", get(viewer::file))
         .merge(api)
         .fallback(not_found)

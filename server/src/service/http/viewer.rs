@@ -30,6 +30,9 @@ macro_rules! asset {
 
 const ASSETS: &[Asset] = &[
     asset!("index.html", "text/html; charset=utf-8"),
+    asset!("api.html", "text/html; charset=utf-8"),
+    asset!("api.css", "text/css; charset=utf-8"),
+    asset!("js/apidoc.js", "text/javascript; charset=utf-8"),
     asset!("viewer.css", "text/css; charset=utf-8"),
     asset!("js/main.js", "text/javascript; charset=utf-8"),
     asset!("js/api.js", "text/javascript; charset=utf-8"),
@@ -67,6 +70,14 @@ pub async fn index() -> Response {
     serve_or_404("index.html").await
 }
 
+/// The API's documentation as a page, rendered in the browser from this server's
+/// `/openapi.json` and `/asyncapi.json` (nothing fetched from elsewhere).
+#[utoipa::path(get, path = "/api", tag = "viewer",
+    responses((status = 200, description = "The API page", content_type = "text/html")))]
+pub async fn api_page() -> Response {
+    serve_or_404("api.html").await
+}
+
 /// The viewer's scripts and style sheet.
 #[utoipa::path(get, path = "/viewer/{path}", tag = "viewer",
     params(("path" = String, Path, description = "File of client/web, e.g. js/main.js")),
@@ -75,8 +86,10 @@ pub async fn index() -> Response {
         (status = 404, body = lightcast_protocol::ErrorBody)))]
 pub async fn file(Path(path): Path<String>) -> Response {
     // The page's relative links only work from `/`.
-    if path == "index.html" {
-        return Redirect::permanent("../").into_response();
+    match path.as_str() {
+        "index.html" => return Redirect::permanent("../").into_response(),
+        "api.html" => return Redirect::permanent("../api").into_response(),
+        _ => {}
     }
     serve_or_404(&path).await
 }

@@ -4,6 +4,7 @@
 
 mod caches;
 mod frame_memory;
+mod fuzz;
 mod gpu_brsm_sampling;
 mod gpu_cache_lighting;
 mod gpu_direct_light;

@@ -18,13 +18,17 @@ echo "fuzz: building the test binary" >&2
 binary=$(cargo test -p lightcast-server --test integration --no-run --message-format=json 2>/dev/null \
   | grep '"name":"integration"' | sed -n 's/.*"executable":"\([^"]*\)".*/\1/p' | tail -n1)
 [ -x "$binary" ] || { echo "fuzz: no test binary found" >&2; exit 1; }
+# A copy, so that builds during the run do not change what is being fuzzed.
+copy=$(mktemp)
+cp "$binary" "$copy"
+binary=$copy
 
 start=$(date +%s)
 deadline=$((start + minutes * 60))
 round=0
 declare -A total
 log=$(mktemp)
-trap 'rm -f "$log"' EXIT
+trap 'rm -f "$log" "$copy"' EXIT
 status=passed
 while [ "$(date +%s)" -lt "$deadline" ]; do
   round=$((round + 1))

@@ -21,6 +21,7 @@ binary=$(cargo test -p lightcast-server --test integration --no-run --message-fo
 # A copy, so that builds during the run do not change what is being fuzzed.
 copy=$(mktemp)
 cp "$binary" "$copy"
+chmod +x "$copy"
 binary=$copy
 
 start=$(date +%s)

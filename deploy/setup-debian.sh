@@ -12,6 +12,7 @@
 # - with --tests: chromium, and nodejs + npm where Node.js is missing, for the browser viewer's
 #   test (Debian's Chromium driven by playwright-core, which never downloads a browser), then
 #   `npm ci` in client/web for playwright-core at the version its package-lock.json pins.
+#   Also python3-venv where `python3 -m venv` cannot work, for deploy/ci/check.sh's tools.
 # Checked, not installed: Rust (cargo at least the workspace's `rust-version` in Cargo.toml, from
 # https://rustup.rs) and, with --tests, Node.js at least what the pinned playwright-core needs.
 # Packages are installed as root, or through sudo for other users.
@@ -47,6 +48,7 @@ if $tests; then
   command -v chromium >/dev/null 2>&1 || packages+=(chromium)
   command -v node >/dev/null 2>&1 || packages+=(nodejs)
   command -v npm >/dev/null 2>&1 || packages+=(npm)
+  python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || packages+=(python3-venv)
 fi
 
 if [ ${#packages[@]} -gt 0 ]; then

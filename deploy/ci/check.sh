@@ -47,11 +47,11 @@ fi
 # -B: no __pycache__ beside the scripts in the source tree.
 "$tools/venv/bin/python" -B deploy/ci/check_deploy.py \
   --helm "$tools/npm/node_modules/.bin/helm" --hadolint "$tools/venv/bin/hadolint" \
-  --chart-env-out "$tools/chart-env.json"
+  --chart-run-out "$tools/chart-run.json"
 
 if [ -n "$runtime_binary" ]; then
   sudo=()
   [ "$(id -u)" -eq 0 ] || sudo=(sudo)
   "${sudo[@]}" "$tools/venv/bin/python" -B deploy/ci/runtime_layout.py "$runtime_binary" \
-    "$tools/chart-env.json"
+    "$tools/chart-run.json"
 fi

@@ -234,6 +234,17 @@ def check_default_render(objects, image, env_names):
         fail("chart: no PodDisruptionBudget by default")
 
 
+def write_chart_run(objects, path):
+    """What runtime_layout.py runs the server with: the container's env and the tokens file the
+    chart's Secret holds, as rendered."""
+    (statefulset,) = by_kind(objects, "StatefulSet")
+    env = statefulset["spec"]["template"]["spec"]["containers"][0]["env"]
+    (secret,) = by_kind(objects, "Secret")
+    (tokens,) = secret["stringData"].values()
+    path.write_text(json.dumps({"env": {e["name"]: e["value"] for e in env},
+                                "tokens_file": tokens, "token": EVERYTHING_ON["auth"]["tokens"][0]}))
+
+
 def check_autoscaling(objects):
     (hpa,) = by_kind(objects, "HorizontalPodAutoscaler")
     metric = hpa["spec"]["metrics"][0]["pods"]["metric"]["name"]
@@ -289,9 +300,9 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--helm", required=True)
     parser.add_argument("--hadolint", required=True)
-    parser.add_argument("--chart-env-out", type=Path,
-                        help="write the server container's env of the default render here "
-                             "(JSON), for runtime_layout.py")
+    parser.add_argument("--chart-run-out", type=Path,
+                        help="write the server container's env and tokens file of the "
+                             "every-option render here (JSON), for runtime_layout.py")
     args = parser.parse_args()
 
     env_names = server_env_names()
@@ -320,10 +331,8 @@ def main():
 
     if image and "default values" in renders:
         check_default_render(renders["default values"], image, env_names)
-        if args.chart_env_out:
-            (statefulset,) = by_kind(renders["default values"], "StatefulSet")
-            env = statefulset["spec"]["template"]["spec"]["containers"][0]["env"]
-            args.chart_env_out.write_text(json.dumps({e["name"]: e["value"] for e in env}))
+    if args.chart_run_out and "every option on" in renders:
+        write_chart_run(renders["every option on"], args.chart_run_out)
     if "values-scaled-out.yaml" in renders:
         check_autoscaling(renders["values-scaled-out.yaml"])
     check_bad_values(args.helm)

@@ -11,12 +11,13 @@ entrypoint, volume and health check are read from the Dockerfile itself, so the 
 3. The HEALTHCHECK command, run as that user, passes; /readyz answers 200, or 503 naming the
    software adapter on machines without a GPU; a render leaves a light cache in the volume,
    written by the user; SIGTERM ends the server with status 0.
-4. Again with the environment the Helm chart's default values give the container on top
-   (CHART_ENV, written by check_deploy.py) and a tokens file where the chart mounts its Secret:
-   the server accepts every value, /metrics refuses a request without the token and, with it,
-   reports the session capacity the chart set; SIGTERM ends it with status 0.
+4. Again with the environment the Helm chart gives the container on top, and the tokens file
+   its Secret holds where the chart mounts it, both as rendered with every option on
+   (CHART_RUN, written by check_deploy.py): the server accepts every value, /metrics refuses a
+   request without a token and, with one of the Secret's, reports the session capacity the
+   chart set; SIGTERM ends it with status 0.
 
-Usage (root): runtime_layout.py BINARY CHART_ENV
+Usage (root): runtime_layout.py BINARY CHART_RUN
 """
 
 import json
@@ -104,8 +105,9 @@ def check_packages(binary, layout):
     say(f"packages {layout['packages']} present; the binary links only those and the C runtime")
 
 
-def get(url, timeout=10, data=None):
-    request = urllib.request.Request(url, data=data, method="POST" if data else "GET")
+def get(url, timeout=10, data=None, headers=None):
+    request = urllib.request.Request(url, data=data, method="POST" if data else "GET",
+                                     headers=headers or {})
     try:
         with urllib.request.urlopen(request, timeout=timeout) as response:
             return response.status, response.read()
@@ -118,7 +120,7 @@ def as_image_user(layout, env):
             "env": {**env, "PATH": IMAGE_PATH}, "cwd": "/"}
 
 
-def inside(binary, layout, chart_env):
+def inside(binary, layout, chart_run):
     """Runs in the private namespaces: nothing done here is seen outside."""
     subprocess.run(["ip", "link", "set", "lo", "up"], check=True)
     entrypoint = Path(layout["entrypoint"][0])
@@ -141,16 +143,16 @@ def inside(binary, layout, chart_env):
         if server.poll() is None:
             server.kill()
 
+    chart_env = chart_run["env"]
     tokens = Path(chart_env["LIGHTCAST_TOKENS_FILE"])
     subprocess.run(["mount", "-t", "tmpfs", "-o", "mode=0755", "tmpfs", "/run"], check=True)
     tokens.parent.mkdir(parents=True)
-    token = "runtime-layout-" + os.urandom(16).hex()
-    tokens.write_text(f"# as the chart's Secret holds them\n{token}\n")
+    tokens.write_text(chart_run["tokens_file"])
     user = as_image_user(layout, {**layout["env"], **chart_env})
     server = subprocess.Popen([*layout["entrypoint"], *layout["cmd"]], **user)
     try:
         wait_healthy(server, layout, user)
-        check_chart_run(layout, chart_env, token)
+        check_chart_run(layout, chart_env, chart_run["token"])
         stop(server)
     finally:
         if server.poll() is None:
@@ -208,10 +210,10 @@ def check_chart_run(layout, chart_env, token):
     status, _ = get(base + "/metrics")
     if status != 401:
         die(f"with the chart's tokens file, /metrics without a token answered {status}, not 401")
-    request = urllib.request.Request(base + "/metrics",
-                                     headers={"Authorization": f"Bearer {token}"})
-    with urllib.request.urlopen(request, timeout=10) as response:
-        metrics = response.read().decode()
+    status, body = get(base + "/metrics", headers={"Authorization": f"Bearer {token}"})
+    if status != 200:
+        die(f"/metrics with a token of the chart's Secret answered {status}: {body[:300]!r}")
+    metrics = body.decode()
     capacity = re.search(r"^lightcast_session_capacity (\S+)$", metrics, re.M)
     expected = float(chart_env["LIGHTCAST_MAX_SESSIONS"])
     if not capacity or float(capacity.group(1)) != expected:
@@ -243,12 +245,12 @@ def main():
     binary = Path(sys.argv[1]).resolve()
     if not binary.is_file():
         die(f"no binary at {binary}")
-    chart_env = json.loads(Path(sys.argv[2]).read_text())
+    chart_run = json.loads(Path(sys.argv[2]).read_text())
     layout = image_layout()
     check_packages(binary, layout)
     run = subprocess.run(["unshare", "--net", "--mount", "--propagation", "private", "--fork",
                           sys.executable, "-B", __file__, "--inside", str(binary), json.dumps(layout),
-                          json.dumps(chart_env)])
+                          json.dumps(chart_run)])
     if run.returncode != 0:
         sys.exit(run.returncode)
     say("the binary runs with deploy/Dockerfile's runtime layout and the chart's environment")

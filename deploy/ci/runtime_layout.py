@@ -2,9 +2,9 @@
 Debian machine, where no container engine runs: the stage's packages, user, environment,
 entrypoint, volume and health check are read from the Dockerfile itself, so the two cannot drift.
 
-1. This machine runs the image's Debian release; the stage's packages are installed here
-   (installed when missing), and every shared library the binary links comes from one of them or
-   from libc6/libgcc-s1, which every Debian image has.
+1. This machine runs the image's Debian release and has the stage's packages (they are
+   installed where missing), and every shared library the binary links comes from one of them
+   or from libc6/libgcc-s1, which every Debian image has.
 2. In private network and mount namespaces (so port and paths are the image's without touching
    the machine): the binary at the entrypoint's path, the volume as an empty directory owned by
    the image's user, the process started as that uid/gid with exactly the image's environment.
@@ -32,10 +32,8 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
-
 from dockerfile_stages import Dockerfile
 
-ROOT = Path(__file__).resolve().parents[2]
 # Libraries of the C runtime, in every Debian image (dependencies of the essential packages).
 BASE_PACKAGES = {"libc6", "libgcc-s1"}
 # The PATH Debian's images set.

@@ -82,6 +82,8 @@ impl From<wgpu::PollError> for GpuError {
 /// same device.
 #[derive(Clone)]
 pub struct GpuContext {
+    /// Kept for [`GpuContext::resource_counts`]: wgpu's report of live objects is per instance.
+    pub instance: wgpu::Instance,
     pub adapter: wgpu::Adapter,
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
@@ -123,8 +125,8 @@ impl GpuContext {
         if backends.contains(wgpu::Backends::GL) {
             return Err(GpuError::GlUnsupported);
         }
-        let adapter = match request_adapter(backends).await {
-            Ok(adapter) => adapter,
+        let (instance, adapter) = match request_adapter(backends).await {
+            Ok(found) => found,
             Err(error) => {
                 match lavapipe_icd().filter(|_| backends.contains(wgpu::Backends::VULKAN)) {
                     // A Vulkan ICD is installed but opens no adapter (a driver without its GPU,
@@ -181,6 +183,7 @@ impl GpuContext {
                 error,
             })?;
         Ok(Self {
+            instance,
             adapter,
             device,
             queue,
@@ -197,18 +200,39 @@ impl GpuContext {
     }
 }
 
-/// The preferred (high-performance) adapter among `backends`.
+/// The preferred (high-performance) adapter among `backends`, with its instance.
 async fn request_adapter(
     backends: wgpu::Backends,
-) -> Result<wgpu::Adapter, wgpu::RequestAdapterError> {
+) -> Result<(wgpu::Instance, wgpu::Adapter), wgpu::RequestAdapterError> {
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
     desc.backends = backends;
-    wgpu::Instance::new(desc)
+    let instance = wgpu::Instance::new(desc);
+    let adapter = instance
         .request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
             force_fallback_adapter: false,
             compatible_surface: None,
             apply_limit_buckets: false,
         })
-        .await
+        .await?;
+    Ok((instance, adapter))
+}
+
+/// Live GPU objects, from wgpu's own registry (what a leak of GPU resources would grow).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ResourceCounts {
+    pub buffers: usize,
+    pub textures: usize,
+    pub bind_groups: usize,
+}
+
+/// Counts of `instance`'s live objects; `None` where wgpu keeps no report (web backends).
+pub fn resource_counts(instance: &wgpu::Instance) -> Option<ResourceCounts> {
+    let report = instance.generate_report()?;
+    let hub = report.hub_report();
+    Some(ResourceCounts {
+        buffers: hub.buffers.num_allocated,
+        textures: hub.textures.num_allocated,
+        bind_groups: hub.bind_groups.num_allocated,
+    })
 }

@@ -25,6 +25,20 @@ pub const GPU_FRAME_MS: &str = "lightcast_gpu_frame_ms";
 pub const READBACK_MS: &str = "lightcast_readback_ms";
 pub const ENCODE_MS: &str = "lightcast_encode_ms";
 pub const RENDERS: &str = "lightcast_oneshot_renders_total";
+/// Live GPU objects by kind (wgpu's registry, read at each scrape): a soak watches these for
+/// leaks of GPU resources.
+pub const GPU_BUFFERS: &str = "lightcast_gpu_buffers";
+pub const GPU_TEXTURES: &str = "lightcast_gpu_textures";
+pub const GPU_BIND_GROUPS: &str = "lightcast_gpu_bind_groups";
+
+/// Sets the GPU object gauges from `instance`'s report.
+pub fn record_gpu_resources(instance: &wgpu::Instance) {
+    if let Some(c) = crate::gpu::context::resource_counts(instance) {
+        metrics::gauge!(GPU_BUFFERS).set(c.buffers as f64);
+        metrics::gauge!(GPU_TEXTURES).set(c.textures as f64);
+        metrics::gauge!(GPU_BIND_GROUPS).set(c.bind_groups as f64);
+    }
+}
 
 /// Histogram buckets in milliseconds, from sub-millisecond GPU stages to slow software renders.
 const MS_BUCKETS: &[f64] = &[
@@ -74,6 +88,9 @@ fn describe() {
     describe_gauge!(SESSIONS, "Open sessions");
     describe_gauge!(SESSION_CAPACITY, "Sessions the server accepts at once");
     describe_gauge!(SCENES, "Scenes held");
+    describe_gauge!(GPU_BUFFERS, "Live GPU buffers");
+    describe_gauge!(GPU_TEXTURES, "Live GPU textures");
+    describe_gauge!(GPU_BIND_GROUPS, "Live GPU bind groups");
     describe_counter!(FRAMES_RENDERED, "Frames rendered for sessions");
     describe_counter!(FRAMES_SENT, "Frames written to WebSockets");
     describe_counter!(

@@ -1035,6 +1035,19 @@ async fn metrics_openapi_and_readiness_describe_the_service() {
     ] {
         assert!(metrics.contains(name), "/metrics lacks {name}:\n{metrics}");
     }
+    // Live GPU objects: a rendering server holds buffers, textures and bind groups.
+    for gauge in [
+        "lightcast_gpu_buffers",
+        "lightcast_gpu_textures",
+        "lightcast_gpu_bind_groups",
+    ] {
+        let value: f64 = metrics
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("{gauge} ")))
+            .and_then(|v| v.trim().parse().ok())
+            .unwrap_or_else(|| panic!("/metrics lacks {gauge}:\n{metrics}"));
+        assert!(value >= 1.0, "{gauge} = {value}");
+    }
     let doc = server.get_json("/openapi.json").await;
     assert!(doc["openapi"].as_str().is_some_and(|v| v.starts_with("3.")));
     for path in [

@@ -54,7 +54,8 @@ pub async fn readyz(State(state): State<Arc<AppState>>) -> Response {
 /// bytes and errors by kind.
 #[utoipa::path(get, path = "/metrics", tag = "meta",
     responses((status = 200, description = "Prometheus text format", content_type = "text/plain")))]
-pub async fn metrics() -> Response {
+pub async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    crate::service::metrics::record_gpu_resources(&state.gpu_instance);
     (
         [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
         crate::service::metrics::handle().render(),

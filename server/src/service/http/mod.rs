@@ -53,6 +53,8 @@ pub struct AppState {
     pub allow_cpu_adapter: bool,
     pub timing_source: String,
     pub max_texture: u32,
+    /// The GPU's wgpu instance, for the live-object gauges of `/metrics`.
+    pub gpu_instance: wgpu::Instance,
     pub build: String,
     pub shutdown: tokio::sync::watch::Receiver<bool>,
     /// Permits for glTF loads running at once; see [`scenes::load_upload`].
@@ -87,6 +89,7 @@ impl AppState {
             allow_cpu_adapter,
             timing_source,
             max_texture: gpu.device.limits().max_texture_dimension_2d,
+            gpu_instance: gpu.instance.clone(),
             build: build_id(),
             shutdown,
             loads: Arc::new(tokio::sync::Semaphore::new(CONCURRENT_LOADS)),

@@ -1,7 +1,9 @@
 //! Camera, light and GI flags shared by `render`, `stream` and `loadtest`; the same names as the
 //! offline `lightcast-server render`.
 
-use lightcast_protocol::{parse_vec3, Camera, GiMethod, Light, LightKind, RenderParams, View};
+use lightcast_protocol::{
+    parse_vec3, Camera, ClusteredFlags, GiMethod, Light, LightKind, RenderParams, View,
+};
 
 /// What to render. Unset options keep the server's defaults (the scene's camera and light).
 #[derive(Clone, Debug, clap::Args)]
@@ -73,6 +75,8 @@ pub struct RenderFlags {
     /// `--gi reference`: samples per pixel per frame (a render takes exactly this many).
     #[arg(long, default_value_t = 4)]
     pub spp: u32,
+    #[command(flatten)]
+    pub clustered: ClusteredFlags,
     /// The final frame or a debug view.
     #[arg(long, value_enum, default_value = "final")]
     pub view: View,
@@ -113,6 +117,21 @@ impl RenderFlags {
         } else {
             None
         };
+        let mut gi = lightcast_protocol::GiParams {
+            method: self.gi,
+            rsm_size: self.rsm_size,
+            view_samples: self.view_samples,
+            val_count: self.vals,
+            defensive: self.defensive,
+            occlusion: !self.no_occlusion,
+            glossy_exponent: self.glossy_exponent,
+            cache_distance: self.cache_distance,
+            cache_angle: self.cache_angle,
+            bounces: self.bounces,
+            spp: self.spp,
+            ..Default::default()
+        };
+        self.clustered.apply(&mut gi);
         RenderParams {
             scene: self.scene.clone(),
             width: self.width,
@@ -121,19 +140,7 @@ impl RenderFlags {
             light,
             exposure: self.exposure,
             shadow_map_size: self.shadow_map_size,
-            gi: lightcast_protocol::GiParams {
-                method: self.gi,
-                rsm_size: self.rsm_size,
-                view_samples: self.view_samples,
-                val_count: self.vals,
-                defensive: self.defensive,
-                occlusion: !self.no_occlusion,
-                glossy_exponent: self.glossy_exponent,
-                cache_distance: self.cache_distance,
-                cache_angle: self.cache_angle,
-                bounces: self.bounces,
-                spp: self.spp,
-            },
+            gi,
             view: self.view,
         }
     }

@@ -38,12 +38,19 @@ pub enum GiMethod {
     Brsm,
     /// A progressive path tracer: the converged indirect light the other methods approximate.
     Reference,
+    /// VPLs from the RSM clustered into virtual area lights (seed paper 003, §4–6).
+    Clustered,
 }
 
 impl GiMethod {
     /// Every method, in the order `/v1/server` describes them.
-    pub const ALL: &'static [GiMethod] =
-        &[Self::None, Self::Lightskin, Self::Brsm, Self::Reference];
+    pub const ALL: &'static [GiMethod] = &[
+        Self::None,
+        Self::Lightskin,
+        Self::Brsm,
+        Self::Reference,
+        Self::Clustered,
+    ];
 
     /// The name requests use.
     pub fn name(self) -> &'static str {
@@ -52,6 +59,7 @@ impl GiMethod {
             Self::Lightskin => "lightskin",
             Self::Brsm => "brsm",
             Self::Reference => "reference",
+            Self::Clustered => "clustered",
         }
     }
 }
@@ -71,6 +79,8 @@ pub enum GiParamKind {
     Boolean,
     /// A number or `null` (the default named in the description).
     OptionalNumber,
+    /// One of the strings in `choices`.
+    Choice,
 }
 
 /// One parameter of a GI method: a field of `render.gi`.
@@ -88,7 +98,32 @@ pub struct GiParamInfo {
     /// Largest accepted value on this server (numbers).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max: Option<f64>,
+    /// The accepted values of a `choice`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub choices: Vec<String>,
     pub description: String,
+}
+
+/// `clustered`: how each VPL's visibility is found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum ClusteredVisibility {
+    /// Every VPL sees every point (the paper's "without visibility" baseline, Figure 10).
+    #[default]
+    Off,
+}
+
+impl ClusteredVisibility {
+    /// Every choice, as `/v1/server` lists them.
+    pub const ALL: &'static [ClusteredVisibility] = &[Self::Off];
+
+    /// The name requests use.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+        }
+    }
 }
 
 /// A GI method as `/v1/server` describes it.
@@ -182,6 +217,27 @@ pub struct GiParams {
     /// `reference`: samples per pixel added each frame. Sessions keep accumulating while the
     /// camera, light and parameters stay the same; a one-shot render takes exactly this many.
     pub spp: u32,
+    /// `clustered`: N, virtual point lights fetched from the RSM at Halton positions.
+    pub vpl_count: u32,
+    /// `clustered`: M, virtual area lights (k-means clusters of the VPLs).
+    pub cluster_count: u32,
+    /// `clustered`: k-means iterations per frame, each restarted from the same seeds (§5.2).
+    pub kmeans_iterations: u32,
+    /// `clustered`: w_x, weight of the VPL–centre distance (in units of the scene's extent)
+    /// in the clustering distance of §5.1.
+    pub cluster_position_weight: f32,
+    /// `clustered`: w_α, weight of the angle (radians) between VPL and centre normals.
+    pub cluster_normal_weight: f32,
+    /// `clustered`: side of the interleaved-sampling block; each pixel is lit by
+    /// N / interleave² VPLs before the geometry-aware blur.
+    pub interleave: u32,
+    /// `clustered`: the blur's largest distance between a pixel's and a neighbour's surface
+    /// points, as a fraction of the scene's extent.
+    pub blur_distance: f32,
+    /// `clustered`: the blur's smallest cosine between a pixel's and a neighbour's normals.
+    pub blur_normal: f32,
+    /// `clustered`: how each VPL's visibility is found.
+    pub visibility: ClusteredVisibility,
 }
 
 impl Default for GiParams {
@@ -198,6 +254,15 @@ impl Default for GiParams {
             cache_angle: None,
             bounces: 1,
             spp: 4,
+            vpl_count: 1024,
+            cluster_count: 30,
+            kmeans_iterations: 4,
+            cluster_position_weight: 0.7,
+            cluster_normal_weight: 0.3,
+            interleave: 8,
+            blur_distance: 0.1,
+            blur_normal: 0.8,
+            visibility: ClusteredVisibility::Off,
         }
     }
 }
@@ -589,4 +654,54 @@ pub struct ServerInfo {
     /// The GI methods this server runs, with their parameters and limits.
     #[serde(default)]
     pub gi_methods: Vec<GiMethodInfo>,
+}
+
+/// The `clustered` parameters as command-line flags, shared by `lightcast-server render` and
+/// the `lightcast` client so both spell them alike.
+#[cfg(feature = "clap")]
+#[derive(Clone, Debug, PartialEq, clap::Args)]
+pub struct ClusteredFlags {
+    /// `--gi clustered`: N, VPLs fetched from the RSM at Halton positions (256 … 65536).
+    #[arg(long, default_value_t = GiParams::default().vpl_count)]
+    pub vpls: u32,
+    /// `--gi clustered`: M, virtual area lights (k-means clusters of the VPLs; 1 … 256).
+    #[arg(long, default_value_t = GiParams::default().cluster_count)]
+    pub clusters: u32,
+    /// `--gi clustered`: k-means iterations per frame (0 … 64).
+    #[arg(long, default_value_t = GiParams::default().kmeans_iterations)]
+    pub kmeans_iterations: u32,
+    /// `--gi clustered`: w_x, weight of the distance (per scene extent) in the clustering.
+    #[arg(long, default_value_t = GiParams::default().cluster_position_weight)]
+    pub cluster_position_weight: f32,
+    /// `--gi clustered`: w_α, weight of the angle between normals (per radian).
+    #[arg(long, default_value_t = GiParams::default().cluster_normal_weight)]
+    pub cluster_normal_weight: f32,
+    /// `--gi clustered`: interleaved-sampling block side B (N/B² VPLs per pixel; 1 … 16).
+    #[arg(long, default_value_t = GiParams::default().interleave)]
+    pub interleave: u32,
+    /// `--gi clustered`: blur distance threshold, a fraction of the scene extent.
+    #[arg(long, default_value_t = GiParams::default().blur_distance)]
+    pub blur_distance: f32,
+    /// `--gi clustered`: blur normal threshold (smallest cosine).
+    #[arg(long, default_value_t = GiParams::default().blur_normal, allow_negative_numbers = true)]
+    pub blur_normal: f32,
+    /// `--gi clustered`: VPL visibility (`off`: none, the paper's baseline).
+    #[arg(long, value_enum, default_value = "off")]
+    pub visibility: ClusteredVisibility,
+}
+
+#[cfg(feature = "clap")]
+impl ClusteredFlags {
+    /// Sets the `clustered` fields of `gi`.
+    pub fn apply(&self, gi: &mut GiParams) {
+        gi.vpl_count = self.vpls;
+        gi.cluster_count = self.clusters;
+        gi.kmeans_iterations = self.kmeans_iterations;
+        gi.cluster_position_weight = self.cluster_position_weight;
+        gi.cluster_normal_weight = self.cluster_normal_weight;
+        gi.interleave = self.interleave;
+        gi.blur_distance = self.blur_distance;
+        gi.blur_normal = self.blur_normal;
+        gi.visibility = self.visibility;
+    }
 }

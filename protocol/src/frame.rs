@@ -69,7 +69,7 @@ stages! {
     ShadowMap => "shadow_map",
     /// Position, normal, material and triangle id from the camera.
     Gbuffer => "gbuffer",
-    /// The reflective shadow map (`lightskin`, `brsm`).
+    /// The reflective shadow map (`lightskin`, `brsm`, `clustered`).
     Rsm => "rsm",
     /// Importance of every RSM texel from the view samples (`brsm`).
     Importance => "importance",
@@ -97,6 +97,14 @@ stages! {
     PathTrace => "path_trace",
     /// The accumulated mean written to the indirect buffer (`reference`).
     ReferenceResolve => "reference_resolve",
+    /// N VPLs fetched from the RSM at Halton positions (`clustered`).
+    VplGeneration => "vpl_generation",
+    /// k-means of the VPLs into M VALs, the final mapping and each VAL's area (`clustered`).
+    Clustering => "clustering",
+    /// Interleaved shading of every pixel by its share of the VPLs (`clustered`).
+    ClusteredIndirect => "clustered_indirect",
+    /// Geometry-aware blur of the interleaved shading (`clustered`).
+    GeometryBlur => "geometry_blur",
 }
 
 impl Stage {

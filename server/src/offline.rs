@@ -180,8 +180,9 @@ pub struct RenderArgs {
     /// Shadow map side in texels (per cube face for point lights).
     #[arg(long, default_value_t = 2048)]
     pub shadow_map_size: u32,
-    /// Indirect light: `none`, `lightskin` (every RSM texel is a VAL) or `brsm`
-    /// (importance-sampled VALs).
+    /// Indirect light: `none`, `lightskin` (every RSM texel is a VAL), `brsm`
+    /// (importance-sampled VALs), `reference` (path traced) or `clustered` (VPLs clustered
+    /// into virtual area lights).
     #[arg(long, value_enum, default_value = "brsm")]
     pub gi: GiMethod,
     /// RSM side per light face in texels (16 … 4096; a point light's six faces share 4096²).
@@ -206,6 +207,8 @@ pub struct RenderArgs {
     /// `reference`: samples per pixel (1 … 1024).
     #[arg(long, default_value_t = 256)]
     pub spp: u32,
+    #[command(flatten)]
+    pub clustered: lightcast_protocol::ClusteredFlags,
     /// Phong exponent k for every material (direct and indirect shading); default: each
     /// material's own.
     #[arg(long)]
@@ -337,6 +340,19 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
     if let Some(a) = args.light_outer_cone {
         light.outer_cone = a.to_radians();
     }
+    let mut gi = lightcast_protocol::GiParams {
+        method: args.gi,
+        rsm_size: args.rsm_size,
+        view_samples: args.view_samples,
+        val_count: args.vals,
+        occlusion: !args.no_occlusion,
+        defensive: args.defensive,
+        glossy_exponent: args.glossy_exponent,
+        bounces: args.bounces,
+        spp: args.spp,
+        ..Default::default()
+    };
+    args.clustered.apply(&mut gi);
     RenderSettings {
         width: args.width,
         height: args.height,
@@ -346,18 +362,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
         debug_view: View::Final,
-        gi: GiSettings {
-            method: args.gi,
-            rsm_size: args.rsm_size,
-            view_samples: args.view_samples,
-            val_count: args.vals,
-            occlusion: !args.no_occlusion,
-            defensive: args.defensive,
-            glossy_exponent: args.glossy_exponent,
-            bounces: args.bounces,
-            spp: args.spp,
-            ..GiSettings::default()
-        },
+        gi: GiSettings::from(&gi),
         history: None,
     }
 }

@@ -88,10 +88,13 @@ export class Panel {
         const label = document.createElement('label');
         label.dataset.giParam = p.name;
         label.title = p.description;
-        const control = document.createElement('input');
+        const control = document.createElement(p.kind === 'choice' ? 'select' : 'input');
         control.dataset.field = `render.gi.${p.name}`;
         control.dataset.kind = KINDS[p.kind] || 'string';
-        if (p.kind === 'boolean') {
+        if (p.kind === 'choice') {
+          control.append(...(p.choices || []).map((c) => new Option(c, c)));
+          label.append(`${p.name} `, control);
+        } else if (p.kind === 'boolean') {
           control.type = 'checkbox';
           label.className = 'inline';
           label.append(control, ` ${p.name}`);

@@ -323,6 +323,17 @@ async function main() {
       await page.waitForSelector('[data-field="render.gi.view_samples"]', { state: 'visible', timeout: PATIENCE_MS });
     });
 
+    await step('clustered shows its parameters, its visibility choice and its stages', async () => {
+      await page.selectOption('[data-field="render.gi.method"]', 'clustered');
+      await page.waitForSelector('[data-field="render.gi.vpl_count"]', { state: 'visible', timeout: PATIENCE_MS });
+      const choices = await page.locator('[data-field="render.gi.visibility"] option').allTextContents();
+      assert.deepEqual(choices, ['off'], 'the visibility choices come from /v1/server');
+      assert.ok(!(await page.locator('[data-field="render.gi.view_samples"]').isVisible()), 'clustered hides BRSM parameters');
+      await page.waitForSelector('#stage-rows tr[data-stage="clustering"]', { timeout: PATIENCE_MS });
+      await page.selectOption('[data-field="render.gi.method"]', 'brsm');
+      await page.waitForSelector('[data-field="render.gi.view_samples"]', { state: 'visible', timeout: PATIENCE_MS });
+    });
+
     await step('a debug view shows', async () => {
       const diff = await changeAfter(page, () => page.selectOption('[data-field="render.view"]', 'rsm-flux'), 'the RSM flux view');
       assert.ok(diff > 4, `the RSM flux view looks like the frame: ${diff.toFixed(2)}`);

@@ -8,6 +8,7 @@
 //! - [`lightskin`]: LightSkin light caches fed by Bidirectional Reflective Shadow Maps (seed
 //!   paper 004), the `lightskin` and `brsm` methods.
 //! - [`reference`]: a progressive path tracer, the truth the others are measured against.
+//! - [`clustered`]: VPLs from the RSM clustered into virtual area lights (seed paper 003).
 //!
 //! Adding a method: a module implementing [`Method`], an entry in [`REGISTRY`] (whose
 //! `describe` lists its parameters with their ranges: `/v1/server` publishes them, the service
@@ -15,6 +16,7 @@
 //! parameters in the protocol's `GiParams`. The renderer, the service and the clients need no
 //! other change.
 
+pub mod clustered;
 pub mod lightskin;
 pub mod none;
 pub mod reference;
@@ -22,7 +24,7 @@ pub mod reference;
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{gbuffer::GBuffer, scene_buffers::SceneBuffers, Target};
 use crate::scene::Scene;
-use lightcast_protocol::{Camera, GiMethodInfo, Light, Limits, View};
+use lightcast_protocol::{Camera, ClusteredVisibility, GiMethodInfo, Light, Limits, View};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
@@ -63,6 +65,24 @@ pub struct GiSettings {
     pub bounces: u32,
     /// `reference`: samples per pixel added per frame.
     pub spp: u32,
+    /// `clustered`: N VPLs.
+    pub vpl_count: u32,
+    /// `clustered`: M VALs (k-means clusters).
+    pub cluster_count: u32,
+    /// `clustered`: k-means iterations per frame.
+    pub kmeans_iterations: u32,
+    /// `clustered`: w_x of the clustering distance (§5.1), per unit of the scene's extent.
+    pub cluster_position_weight: f32,
+    /// `clustered`: w_α of the clustering distance (§5.1), per radian.
+    pub cluster_normal_weight: f32,
+    /// `clustered`: interleaved-sampling block side.
+    pub interleave: u32,
+    /// `clustered`: the blur's distance threshold as a fraction of the scene's extent.
+    pub blur_distance: f32,
+    /// `clustered`: the blur's normal (cosine) threshold.
+    pub blur_normal: f32,
+    /// `clustered`: how VPL visibility is found.
+    pub visibility: ClusteredVisibility,
 }
 
 impl From<&lightcast_protocol::GiParams> for GiSettings {
@@ -81,6 +101,15 @@ impl From<&lightcast_protocol::GiParams> for GiSettings {
             glossy_exponent: p.glossy_exponent,
             bounces: p.bounces,
             spp: p.spp,
+            vpl_count: p.vpl_count,
+            cluster_count: p.cluster_count,
+            kmeans_iterations: p.kmeans_iterations,
+            cluster_position_weight: p.cluster_position_weight,
+            cluster_normal_weight: p.cluster_normal_weight,
+            interleave: p.interleave,
+            blur_distance: p.blur_distance,
+            blur_normal: p.blur_normal,
+            visibility: p.visibility,
         }
     }
 }
@@ -116,6 +145,15 @@ impl InvalidSetting {
         Self {
             field,
             reason: reason.into(),
+        }
+    }
+
+    /// `value` of `field` within `lo..=hi`.
+    pub fn check_range(field: &'static str, value: u32, lo: u32, hi: u32) -> Result<(), Self> {
+        if (lo..=hi).contains(&value) {
+            Ok(())
+        } else {
+            Err(Self::new(field, format!("{value} is outside {lo}..={hi}")))
         }
     }
 }
@@ -254,7 +292,12 @@ pub struct MethodEntry {
 }
 
 /// Every method the renderer can run.
-pub const REGISTRY: &[MethodEntry] = &[none::ENTRY, lightskin::ENTRY, reference::ENTRY];
+pub const REGISTRY: &[MethodEntry] = &[
+    none::ENTRY,
+    lightskin::ENTRY,
+    reference::ENTRY,
+    clustered::ENTRY,
+];
 
 /// The registry entry serving `method` and its index.
 pub fn entry(method: GiMethod) -> (usize, &'static MethodEntry) {

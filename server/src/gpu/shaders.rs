@@ -80,6 +80,7 @@ pub const RSM: ShaderSource = ShaderSource {
 pub const IMPORTANCE: ShaderSource = ShaderSource {
     name: "importance",
     files: &[
+        wgsl!("halton.wgsl"),
         wgsl!("lightskin/view_samples.wgsl"),
         wgsl!("lightskin/importance.wgsl"),
     ],
@@ -155,6 +156,33 @@ pub const REFERENCE_BVH_TEST: ShaderSource = ShaderSource {
     ],
 };
 
+/// VPL generation and k-means clustering of `clustered` (`gi::clustered`).
+pub const CLUSTERING: ShaderSource = ShaderSource {
+    name: "clustering",
+    files: &[
+        wgsl!("halton.wgsl"),
+        wgsl!("clustered/vpls.wgsl"),
+        wgsl!("clustered/kmeans.wgsl"),
+    ],
+};
+
+/// Interleaved shading from the VPLs of `clustered`.
+pub const CLUSTERED_INDIRECT: ShaderSource = ShaderSource {
+    name: "clustered_indirect",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("clustered/vpls.wgsl"),
+        wgsl!("clustered/indirect.wgsl"),
+    ],
+};
+
+/// The geometry-aware blur of `clustered`.
+pub const GEOMETRY_BLUR: ShaderSource = ShaderSource {
+    name: "geometry_blur",
+    files: &[wgsl!("clustered/vpls.wgsl"), wgsl!("clustered/blur.wgsl")],
+};
+
 /// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
@@ -173,6 +201,9 @@ pub const ALL: &[&ShaderSource] = &[
     &REFERENCE_PATH_TRACE,
     &REFERENCE_RESOLVE,
     &REFERENCE_BVH_TEST,
+    &CLUSTERING,
+    &CLUSTERED_INDIRECT,
+    &GEOMETRY_BLUR,
 ];
 
 impl ShaderSource {
@@ -284,6 +315,7 @@ mod tests {
     #[test]
     fn every_pass_binds_what_its_wgsl_declares() {
         // Test-only imports upwards: the passes own their bind-group descriptions.
+        use crate::gi::clustered::passes as clustered;
         use crate::gi::lightskin::{
             cache_lighting, cumulative_sums, importance, indirect_light, proxy_occlusion,
             val_select,
@@ -319,6 +351,9 @@ mod tests {
                 &[&reference::PASS_GROUP, &reference::SCENE_GROUP],
             ),
             (&REFERENCE_RESOLVE, &[&resolve::GROUP]),
+            (&CLUSTERING, &[&clustered::CLUSTERING_GROUP]),
+            (&CLUSTERED_INDIRECT, &[&clustered::INDIRECT_GROUP]),
+            (&GEOMETRY_BLUR, &[&clustered::BLUR_GROUP]),
         ];
         let errors: Vec<String> = passes
             .iter()

@@ -14,6 +14,15 @@ pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 pub const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 const MAX_FACES: u32 = 6;
+/// Largest RSM side per light face.
+pub const MAX_RSM_SIZE: u32 = 4096;
+/// Most RSM texels over all faces (each costs ~50 bytes across the sampling stages).
+pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
+
+/// Largest RSM side per face for a light of `faces` faces (6 for point lights).
+pub fn max_rsm_size(faces: u32) -> u32 {
+    MAX_RSM_SIZE.min(((MAX_RSM_TEXELS / u64::from(faces.max(1))) as f64).sqrt() as u32)
+}
 
 /// Mirrors `RsmFace` in `shaders/rsm.wgsl`.
 #[repr(C)]

@@ -22,8 +22,22 @@ pub struct Resolved {
 /// The renderer's own field names, as paths of the request's `render` object.
 fn request_field(renderer_field: &str) -> String {
     match renderer_field {
-        "rsm_size" | "view_samples" | "val_count" | "jitter" | "defensive" | "glossy_exponent"
-        | "bounces" | "spp" => {
+        "rsm_size"
+        | "view_samples"
+        | "val_count"
+        | "jitter"
+        | "defensive"
+        | "glossy_exponent"
+        | "bounces"
+        | "spp"
+        | "vpl_count"
+        | "cluster_count"
+        | "kmeans_iterations"
+        | "cluster_position_weight"
+        | "cluster_normal_weight"
+        | "interleave"
+        | "blur_distance"
+        | "blur_normal" => {
             format!("gi.{renderer_field}")
         }
         "light.cone" => "light.outer_cone".to_string(),

@@ -7,6 +7,7 @@ mod frame_memory;
 mod fuzz;
 mod gpu_brsm_sampling;
 mod gpu_cache_lighting;
+mod gpu_clustered;
 mod gpu_direct_light;
 mod gpu_reference;
 mod gpu_scenes;

@@ -234,6 +234,24 @@ fn bad_input_is_reported_precisely_without_panicking() {
         (
             vec![
                 "--gi".into(),
+                "clustered".into(),
+                "--vpls".into(),
+                "100".into(),
+            ],
+            "vpl_count",
+        ),
+        (
+            vec![
+                "--gi".into(),
+                "clustered".into(),
+                "--visibility".into(),
+                "soft".into(),
+            ],
+            "soft",
+        ),
+        (
+            vec![
+                "--gi".into(),
                 "lightskin".into(),
                 "--view".into(),
                 "importance".into(),
@@ -261,6 +279,59 @@ fn bad_input_is_reported_precisely_without_panicking() {
     assert!(
         !Path::new(&out).exists(),
         "a failed render must not leave an output file"
+    );
+}
+
+/// `--gi clustered` with its flags: they reach the renderer (the JSON report's settings),
+/// its stages run and indirect light brightens the image.
+#[test]
+fn clustered_renders_with_its_flags() {
+    let common = ["--rsm-size", "32", "--exposure", "1"];
+    let (none, _, _) = render_ok(
+        "clustered-none.png",
+        &[&common[..], &["--gi", "none"]].concat(),
+    );
+    let flags = [
+        "--gi",
+        "clustered",
+        "--vpls",
+        "512",
+        "--clusters",
+        "8",
+        "--kmeans-iterations",
+        "2",
+        "--interleave",
+        "4",
+        "--json",
+    ];
+    let (lit, stdout, _) = render_ok("clustered.png", &[&common[..], &flags[..]].concat());
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("stdout is JSON");
+    let gi = &report["gi"];
+    assert_eq!(gi["method"], "clustered");
+    assert_eq!(
+        (
+            &gi["vpl_count"],
+            &gi["cluster_count"],
+            &gi["kmeans_iterations"],
+            &gi["interleave"]
+        ),
+        (&512.into(), &8.into(), &2.into(), &4.into())
+    );
+    assert_eq!(gi["visibility"], "off");
+    for stage in [
+        "rsm",
+        "vpl_generation",
+        "clustering",
+        "clustered_indirect",
+        "geometry_blur",
+    ] {
+        assert!(stdout.contains(stage), "missing {stage}: {stdout}");
+    }
+    assert!(
+        mean_level(&lit) > mean_level(&none) + 1.0,
+        "{} vs {}",
+        mean_level(&lit),
+        mean_level(&none)
     );
 }
 

@@ -133,6 +133,37 @@ async fn renders_compare_with_the_reference() {
     assert_eq!(same.final_psnr_db, None);
     assert_eq!(same.final_flip, 0.0);
     assert!(r.stages.iter().any(|s| s.stage == "path_trace"));
+
+    // `clustered` through the API: its stages, the same pixels for the same request (k-means
+    // restarts from the same seeds) and a comparison closer to the truth than no indirect
+    // light (block error 1).
+    let clustered = json!({
+        "render": {"width": 40, "height": 30, "shadow_map_size": 256,
+                   "gi": {"method": "clustered", "rsm_size": 32, "vpl_count": 256,
+                          "cluster_count": 8}},
+        "compare_to": "reference", "compare_spp": 16
+    });
+    let (k, png_k) = render(&server, &clustered).await;
+    let (_, png_again) = render(&server, &clustered).await;
+    assert_eq!(png_k, png_again, "same request, same pixels");
+    for stage in [
+        "rsm",
+        "vpl_generation",
+        "clustering",
+        "clustered_indirect",
+        "geometry_blur",
+    ] {
+        assert!(
+            k.stages.iter().any(|s| s.stage == stage),
+            "{stage}: {:?}",
+            k.stages
+        );
+    }
+    let kc = k.comparison.expect("comparison");
+    assert!(
+        kc.indirect_mae.is_finite() && kc.indirect_block_mae_relative < 0.8,
+        "{kc:?}"
+    );
     server.stop().await;
 }
 
@@ -664,6 +695,46 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             400,
             "invalid_field",
             Some("render.gi.spp"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"clustered","vpl_count":100}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.vpl_count"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"clustered","cluster_count":0}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.cluster_count"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"clustered","blur_normal":1.5}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.blur_normal"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"clustered","cluster_position_weight":0,"cluster_normal_weight":0}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.cluster_position_weight"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"clustered","visibility":"sometimes"}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.visibility"),
         ),
         case(
             "POST",

@@ -39,10 +39,8 @@ pub fn uses_light_caches(method: GiMethod) -> bool {
     ENTRY.methods.contains(&method)
 }
 
-/// Largest RSM side per light face.
-pub const MAX_RSM_SIZE: u32 = 4096;
-/// Most RSM texels over all faces (each costs ~50 bytes across the sampling stages).
-pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
+use crate::passes::rsm::max_rsm_size;
+pub use crate::passes::rsm::MAX_RSM_SIZE;
 /// Most view samples for the importance estimate.
 pub const MAX_VIEW_SAMPLES: u32 = 4096;
 /// Most VALs drawn per frame.
@@ -58,17 +56,8 @@ pub const ENTRY: MethodEntry = MethodEntry {
 
 /// Checks the parameters the two methods read.
 fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
-    let max_rsm = MAX_RSM_SIZE.min(((MAX_RSM_TEXELS / u64::from(faces)) as f64).sqrt() as u32);
-    let range = |field, v: u32, lo: u32, hi: u32| {
-        if (lo..=hi).contains(&v) {
-            Ok(())
-        } else {
-            Err(InvalidSetting::new(
-                field,
-                format!("{v} is outside {lo}..={hi}"),
-            ))
-        }
-    };
+    let max_rsm = max_rsm_size(faces);
+    let range = InvalidSetting::check_range;
     range("rsm_size", g.rsm_size, 16, max_rsm)?;
     if g.method == GiMethod::Brsm {
         range("view_samples", g.view_samples, 1, MAX_VIEW_SAMPLES)?;
@@ -98,6 +87,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
         default: default.into(),
         min: Some(min.into()),
         max: Some(max.into()),
+        choices: Vec::new(),
         description: description.into(),
     };
     let shared = [
@@ -114,6 +104,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
             default: d.occlusion.into(),
             min: None,
             max: None,
+            choices: Vec::new(),
             description: "Dim proxy lights hidden behind other caches (double projection)".into(),
         },
         GiParamInfo {
@@ -122,6 +113,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
             default: serde_json::Value::Null,
             min: Some(0.0),
             max: None,
+            choices: Vec::new(),
             description: "Light caches: largest distance d_eps from a surface point to its \
                           cache, in scene units (null: from the scene's surface area)"
                 .into(),
@@ -132,6 +124,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
             default: serde_json::Value::Null,
             min: Some(0.0),
             max: Some(90.0),
+            choices: Vec::new(),
             description: "Light caches: largest angle theta_eps between surface and cache \
                           normals in degrees (null: 30)"
                 .into(),
@@ -158,6 +151,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
             default: f64::from(d.defensive).into(),
             min: Some(0.0),
             max: Some(1.0),
+            choices: Vec::new(),
             description: "Weight alpha of a uniform pdf mixed into the selection pdf (0: the \
                           paper's plain importance sampling)"
                 .into(),

@@ -100,6 +100,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
                 default: d.bounces.into(),
                 min: Some(1.0),
                 max: Some(limits.max_bounces.into()),
+                choices: Vec::new(),
                 description: "Reflections after the visible surface (1: the single bounce \
                               seed 004 approximates)"
                     .into(),
@@ -110,6 +111,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
                 default: d.spp.into(),
                 min: Some(1.0),
                 max: Some(limits.max_spp.into()),
+                choices: Vec::new(),
                 description: "Samples per pixel added each frame (a one-shot render takes \
                               exactly this many)"
                     .into(),

@@ -97,10 +97,23 @@ pub fn pixel_ray(
     x: u32,
     y: u32,
 ) -> (Vec3, Vec3) {
+    subpixel_ray(camera, scene, width, height, x as f32 + 0.5, y as f32 + 0.5)
+}
+
+/// The camera ray through the point (`fx`, `fy`) of the image, in pixels from its top left
+/// corner.
+pub fn subpixel_ray(
+    camera: &Camera,
+    scene: &Scene,
+    width: u32,
+    height: u32,
+    fx: f32,
+    fy: f32,
+) -> (Vec3, Vec3) {
     let view_proj = camera_view_proj(camera, width as f32 / height as f32, &scene.bounds);
     let inv = view_proj.inverse();
-    let ndc_x = (x as f32 + 0.5) / width as f32 * 2.0 - 1.0;
-    let ndc_y = 1.0 - (y as f32 + 0.5) / height as f32 * 2.0;
+    let ndc_x = fx / width as f32 * 2.0 - 1.0;
+    let ndc_y = 1.0 - fy / height as f32 * 2.0;
     let unproject = |z: f32| {
         let p = inv * glam::Vec4::new(ndc_x, ndc_y, z, 1.0);
         p.xyz() / p.w

@@ -1,0 +1,517 @@
+//! CPU reference of `clustered` (seed paper 003), used by tests to check the GPU passes. It
+//! evaluates in plain `f32` the same reading of the paper as `shaders/clustered/`:
+//!
+//! * §6 "VPL Generation": N VPLs fetched from the RSM at Halton positions ([`generate_vpls`]);
+//! * §5.1–5.2: k-means with d = w_x·Δx + w_α·Δα from the same seeds every frame ([`seed`],
+//!   [`assign`], [`update`]), then the mapping C and the VALs with their areas ([`finalize`]);
+//! * §4, §6 "Indirect Lighting": the light of a set of VPLs at a surface point ([`shade`]),
+//!   interleaved sampling ([`interleave_class`]) and the geometry-aware blur ([`blur`]).
+//!
+//! Nothing here depends on the GPU.
+
+use crate::scene::material::DiffuseGlossy;
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// Radical inverse of `i` in `base`: the i-th element of the Halton sequence.
+pub fn halton(mut i: u32, base: u32) -> f32 {
+    let inv = 1.0 / base as f32;
+    let (mut f, mut r) = (1.0, 0.0);
+    while i > 0 {
+        f *= inv;
+        r += f * (i % base) as f32;
+        i /= base;
+    }
+    r
+}
+
+/// An RSM atlas as read back: per texel RGBA position (w = 1 where a surface is), normal and
+/// flux with disk area.
+pub struct RsmTexels<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub position: &'a [[f32; 4]],
+    pub normal: &'a [[f32; 4]],
+    pub flux_area: &'a [[f32; 4]],
+}
+
+/// A virtual point light.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RefVpl {
+    pub position: Vec3,
+    /// Unit normal.
+    pub normal: Vec3,
+    /// Φ_i (rgb).
+    pub flux: Vec3,
+    /// Disk area of the texels it stands for.
+    pub area: f32,
+    /// Whether it reflects light (a surface with flux under its texel).
+    pub lit: bool,
+    /// Row-major RSM texel.
+    pub texel: u32,
+}
+
+/// The texel VPL `i` of `n` is fetched from in a `width`×`height` atlas (Halton index i + 1:
+/// index 0 is the origin).
+pub fn vpl_texel(i: u32, width: u32, height: u32) -> u32 {
+    let x = ((halton(i + 1, 2) * width as f32) as u32).min(width - 1);
+    let y = ((halton(i + 1, 3) * height as f32) as u32).min(height - 1);
+    y * width + x
+}
+
+/// §6 "VPL Generation": each of the `n` VPLs carries the flux and disk area of W·H/n texels,
+/// so that their sum estimates the whole RSM's.
+pub fn generate_vpls(rsm: &RsmTexels, n: u32) -> Vec<RefVpl> {
+    let share = (rsm.width * rsm.height) as f32 / n as f32;
+    (0..n)
+        .map(|i| {
+            let texel = vpl_texel(i, rsm.width, rsm.height);
+            let t = texel as usize;
+            let [px, py, pz, pw] = rsm.position[t];
+            let [fr, fg, fb, area] = rsm.flux_area[t];
+            let flux = Vec3::new(fr, fg, fb);
+            if pw > 0.0 && flux.max_element() > 0.0 {
+                let [nx, ny, nz, _] = rsm.normal[t];
+                RefVpl {
+                    position: Vec3::new(px, py, pz),
+                    normal: Vec3::new(nx, ny, nz).normalize(),
+                    flux: flux * share,
+                    area: area * share,
+                    lit: true,
+                    texel,
+                }
+            } else {
+                RefVpl {
+                    texel,
+                    ..RefVpl::default()
+                }
+            }
+        })
+        .collect()
+}
+
+/// A cluster: its centre during k-means, the VAL after [`finalize`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RefCluster {
+    pub position: Vec3,
+    pub normal: Vec3,
+    /// VPLs mapped to it.
+    pub count: u32,
+    /// Seeded (§5.2); without a centre it takes no VPL.
+    pub centred: bool,
+    /// Bounding rectangle of its VPLs in the plane of its normal (after [`finalize`]).
+    pub area: f32,
+}
+
+/// The weights of the clustering distance: w_x per unit of the scene's extent, w_α per radian.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Weights {
+    pub position: f32,
+    pub normal: f32,
+}
+
+/// d = w_x·Δx + w_α·Δα (§5.1).
+pub fn distance(w: Weights, vpl: &RefVpl, c: &RefCluster) -> f32 {
+    let angle = vpl.normal.dot(c.normal).clamp(-1.0, 1.0).acos();
+    w.position * vpl.position.distance(c.position) + w.normal * angle
+}
+
+/// §5.2: cluster k starts at VPL k·N/M (or the next lit one before (k+1)·N/M), every frame.
+pub fn seed(vpls: &[RefVpl], m: u32) -> Vec<RefCluster> {
+    let n = vpls.len() as u32;
+    (0..m)
+        .map(|k| {
+            (k * n / m..(k + 1) * n / m)
+                .map(|i| vpls[i as usize])
+                .find(|v| v.lit)
+                .map_or_else(RefCluster::default, |v| RefCluster {
+                    position: v.position,
+                    normal: v.normal,
+                    centred: true,
+                    ..RefCluster::default()
+                })
+        })
+        .collect()
+}
+
+/// Each lit VPL's nearest centre (ties to the lower index), with its distance.
+pub fn assign_with_distances(
+    vpls: &[RefVpl],
+    clusters: &[RefCluster],
+    w: Weights,
+) -> Vec<Option<(u32, f32)>> {
+    vpls.iter()
+        .map(|v| {
+            if !v.lit {
+                return None;
+            }
+            let mut best: Option<(u32, f32)> = None;
+            for (k, c) in clusters.iter().enumerate().filter(|(_, c)| c.centred) {
+                let d = distance(w, v, c);
+                if best.is_none_or(|(_, b)| d < b) {
+                    best = Some((k as u32, d));
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+/// The mapping C: each lit VPL's nearest centre.
+pub fn assign(vpls: &[RefVpl], clusters: &[RefCluster], w: Weights) -> Vec<Option<u32>> {
+    assign_with_distances(vpls, clusters, w)
+        .into_iter()
+        .map(|a| a.map(|(k, _)| k))
+        .collect()
+}
+
+/// The k-means update: every non-empty centre moves to the mean of its VPLs.
+pub fn update(
+    vpls: &[RefVpl],
+    mapping: &[Option<u32>],
+    clusters: &[RefCluster],
+) -> Vec<RefCluster> {
+    clusters
+        .iter()
+        .enumerate()
+        .map(|(k, c)| {
+            let members: Vec<&RefVpl> = members(vpls, mapping, k as u32).collect();
+            let mut next = RefCluster {
+                count: members.len() as u32,
+                ..*c
+            };
+            if !members.is_empty() {
+                next.position =
+                    members.iter().map(|v| v.position).sum::<Vec3>() / members.len() as f32;
+                let n: Vec3 = members.iter().map(|v| v.normal).sum();
+                if n.length_squared() > 1e-12 {
+                    next.normal = n.normalize();
+                }
+            }
+            next
+        })
+        .collect()
+}
+
+fn members<'a>(
+    vpls: &'a [RefVpl],
+    mapping: &'a [Option<u32>],
+    k: u32,
+) -> impl Iterator<Item = &'a RefVpl> {
+    vpls.iter()
+        .zip(mapping)
+        .filter(move |(_, c)| **c == Some(k))
+        .map(|(v, _)| v)
+}
+
+/// An orthonormal tangent basis of unit `n` (Duff et al. 2017, listing 3), as the shader
+/// builds it.
+pub fn tangent_basis(n: Vec3) -> (Vec3, Vec3) {
+    let s = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3::new(1.0 + s * n.x * n.x * a, s * b, -s * n.x),
+        Vec3::new(b, s + n.y * n.y * a, -n.y),
+    )
+}
+
+/// The VALs for the mapping C (§5, §6): the mean position and normal of their VPLs and the
+/// area of the 2D bounding rectangle of the VPLs projected onto the plane of that normal.
+pub fn finalize(
+    vpls: &[RefVpl],
+    mapping: &[Option<u32>],
+    clusters: &[RefCluster],
+) -> Vec<RefCluster> {
+    update(vpls, mapping, clusters)
+        .into_iter()
+        .enumerate()
+        .map(|(k, c)| {
+            let (t, b) = tangent_basis(c.normal);
+            let (lo, hi) = members(vpls, mapping, k as u32).fold(
+                (Vec2::splat(f32::MAX), Vec2::splat(f32::MIN)),
+                |(lo, hi), v| {
+                    let d = v.position - c.position;
+                    let st = Vec2::new(d.dot(t), d.dot(b));
+                    (lo.min(st), hi.max(st))
+                },
+            );
+            let area = if c.count > 0 {
+                (hi - lo).x * (hi - lo).y
+            } else {
+                0.0
+            };
+            RefCluster { area, ..c }
+        })
+        .collect()
+}
+
+/// The whole clustering of a frame: seeds, `iterations` k-means steps, the mapping C and
+/// the VALs.
+pub fn cluster(
+    vpls: &[RefVpl],
+    m: u32,
+    iterations: u32,
+    w: Weights,
+) -> (Vec<Option<u32>>, Vec<RefCluster>) {
+    let mut clusters = seed(vpls, m);
+    for _ in 0..iterations {
+        let mapping = assign(vpls, &clusters, w);
+        clusters = update(vpls, &mapping, &clusters);
+    }
+    let mapping = assign(vpls, &clusters, w);
+    let vals = finalize(vpls, &mapping, &clusters);
+    (mapping, vals)
+}
+
+/// A surface point seen from `viewer`.
+#[derive(Clone, Copy, Debug)]
+pub struct RefSurface {
+    pub position: Vec3,
+    /// Unit normal.
+    pub normal: Vec3,
+    pub brdf: DiffuseGlossy,
+}
+
+/// f_r of `shaders/brdf.wgsl`: Lambert plus the normalised Phong lobe around the mirror
+/// direction.
+pub fn brdf(s: &DiffuseGlossy, n: Vec3, to_light: Vec3, to_viewer: Vec3) -> Vec3 {
+    let mirrored = 2.0 * n.dot(to_light) * n - to_light;
+    let cos_e = mirrored.dot(to_viewer).max(0.0);
+    s.diffuse / PI + s.glossy * (s.exponent + 2.0) / (2.0 * PI) * cos_e.powf(s.exponent)
+}
+
+/// §4's sum Σ L_i(x, ω_o) over `vpls` without visibility: f_r·Φ_i·cosθ_i·cosθ_x over
+/// A_i + π d² (the irradiance of the VPL's disk on its axis, finite at d = 0).
+pub fn shade<'a>(s: &RefSurface, viewer: Vec3, vpls: impl IntoIterator<Item = &'a RefVpl>) -> Vec3 {
+    let v = (viewer - s.position).normalize();
+    vpls.into_iter()
+        .filter(|vpl| vpl.lit)
+        .map(|vpl| {
+            let to_vpl = vpl.position - s.position;
+            let d2 = to_vpl.length_squared();
+            if d2 <= 0.0 {
+                return Vec3::ZERO;
+            }
+            let w = to_vpl / d2.sqrt();
+            let cos_x = s.normal.dot(w).max(0.0);
+            let cos_i = vpl.normal.dot(-w).max(0.0);
+            brdf(&s.brdf, s.normal, w, v) * vpl.flux * (cos_i * cos_x / (vpl.area + PI * d2))
+        })
+        .sum()
+}
+
+/// The interleave class of pixel (x, y) with `b`×`b` blocks: it is lit by the VPLs whose
+/// index is this modulo b².
+pub fn interleave_class(x: u32, y: u32, b: u32) -> u32 {
+    (y % b) * b + x % b
+}
+
+/// The interleaved shading of a pixel: its class's VPLs, times b².
+pub fn shade_interleaved(
+    s: &RefSurface,
+    viewer: Vec3,
+    vpls: &[RefVpl],
+    class: u32,
+    b: u32,
+) -> Vec3 {
+    let stride = (b * b) as usize;
+    let own = vpls.iter().skip(class as usize).step_by(stride);
+    shade(s, viewer, own) * stride as f32
+}
+
+/// A G-buffer texel as the blur reads it: position (w = 1 where covered) and normal.
+#[derive(Clone, Copy, Debug)]
+pub struct BlurTexel {
+    pub position: [f32; 4],
+    pub normal: Vec3,
+}
+
+/// The geometry-aware blur of pixel (x, y): the mean of the b×b block around it over the
+/// neighbours within `max_distance` and `min_cos`, the pixel itself always included.
+#[allow(clippy::too_many_arguments)]
+pub fn blur(
+    gbuffer: &[BlurTexel],
+    interleaved: &[[f32; 4]],
+    width: u32,
+    height: u32,
+    x: u32,
+    y: u32,
+    b: u32,
+    max_distance: f32,
+    min_cos: f32,
+) -> Vec3 {
+    let at = |x: i64, y: i64| (y * i64::from(width) + x) as usize;
+    let (x, y) = (i64::from(x), i64::from(y));
+    let own = gbuffer[at(x, y)];
+    if own.position[3] == 0.0 {
+        return Vec3::ZERO;
+    }
+    let centre = Vec3::from_slice(&own.position[..3]);
+    let half = i64::from(b / 2);
+    let (mut sum, mut count) = (Vec3::ZERO, 0.0);
+    for qy in y - half..y - half + i64::from(b) {
+        for qx in x - half..x - half + i64::from(b) {
+            if qx < 0 || qy < 0 || qx >= i64::from(width) || qy >= i64::from(height) {
+                continue;
+            }
+            let q = gbuffer[at(qx, qy)];
+            let apart = q.position[3] == 0.0
+                || Vec3::from_slice(&q.position[..3]).distance(centre) > max_distance
+                || q.normal.dot(own.normal) < min_cos;
+            if apart && (qx, qy) != (x, y) {
+                continue;
+            }
+            sum += Vec3::from_slice(&interleaved[at(qx, qy)][..3]);
+            count += 1.0;
+        }
+    }
+    sum / count
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn vpl(position: Vec3, normal: Vec3) -> RefVpl {
+        RefVpl {
+            position,
+            normal,
+            flux: Vec3::ONE,
+            area: 0.01,
+            lit: true,
+            texel: 0,
+        }
+    }
+
+    #[test]
+    fn halton_is_the_radical_inverse() {
+        assert_eq!(halton(1, 2), 0.5);
+        assert_eq!(halton(3, 2), 0.75);
+        assert_eq!(halton(1, 3), 1.0 / 3.0);
+        assert!((halton(5, 3) - (2.0 / 3.0 + 1.0 / 9.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn seeds_are_vpl_k_n_over_m_or_the_next_lit_one_in_their_range() {
+        let mut vpls: Vec<RefVpl> = (0..8)
+            .map(|i| vpl(Vec3::new(i as f32, 0.0, 0.0), Vec3::Y))
+            .collect();
+        vpls[2].lit = false;
+        vpls[6].lit = false;
+        vpls[7].lit = false;
+        let seeds = seed(&vpls, 4);
+        assert_eq!(seeds[0].position.x, 0.0);
+        assert_eq!(seeds[1].position.x, 3.0, "VPL 2 is unlit: the next in 2..4");
+        assert_eq!(seeds[2].position.x, 4.0);
+        assert!(!seeds[3].centred, "no lit VPL in 6..8");
+        assert!(seeds[..3].iter().all(|s| s.centred));
+    }
+
+    /// A long row of VPLs on the floor and a short one up the wall from its end: by position
+    /// alone the floor's corner VPL is nearer the wall's centre and joins it; with the angle
+    /// term the clusters follow the surfaces (Figure 6's point).
+    #[test]
+    fn the_angle_term_separates_surfaces_of_different_orientation() {
+        let floor: Vec<RefVpl> = (0..4)
+            .map(|i| vpl(Vec3::new(0.3 * i as f32, 0.0, 0.0), Vec3::Y))
+            .collect();
+        let wall: Vec<RefVpl> = (1..5)
+            .map(|i| vpl(Vec3::new(0.0, 0.02 * i as f32, 0.0), Vec3::X))
+            .collect();
+        let vpls: Vec<RefVpl> = floor.iter().chain(&wall).copied().collect();
+        let w = Weights {
+            position: 0.7,
+            normal: 0.3,
+        };
+        let (mapping, vals) = cluster(&vpls, 2, 4, w);
+        assert!(mapping[..4].iter().all(|&c| c == mapping[0]));
+        assert!(mapping[4..].iter().all(|&c| c == mapping[4]));
+        assert_ne!(mapping[0], mapping[4]);
+        let positions_only = Weights {
+            position: 1.0,
+            normal: 0.0,
+        };
+        let (plain, _) = cluster(&vpls, 2, 4, positions_only);
+        assert_ne!(plain, mapping, "without normals the corner VPLs mix");
+        for v in &vals {
+            assert_eq!(v.count, 4);
+            assert!((v.normal.length() - 1.0).abs() < 1e-6);
+        }
+    }
+
+    /// The area is the bounding rectangle of the VPLs in the plane of the mean normal: a
+    /// 0.3 × 0.2 grid on the floor, whatever the tangent basis' orientation in that plane.
+    #[test]
+    fn val_area_is_the_bounding_rectangle_in_the_plane_of_the_normal() {
+        let vpls: Vec<RefVpl> = (0..4)
+            .flat_map(|i| (0..3).map(move |j| (i, j)))
+            .map(|(i, j)| vpl(Vec3::new(0.1 * i as f32, 2.0, 0.1 * j as f32), Vec3::Y))
+            .collect();
+        let mapping = vec![Some(0); vpls.len()];
+        let vals = finalize(&vpls, &mapping, &seed(&vpls, 1));
+        assert!((vals[0].area - 0.3 * 0.2).abs() < 1e-6, "{}", vals[0].area);
+        assert!((vals[0].position - Vec3::new(0.15, 2.0, 0.1)).length() < 1e-6);
+        let (t, b) = tangent_basis(Vec3::new(0.3, -0.5, 0.8).normalize());
+        assert!(t.dot(b).abs() < 1e-6 && (t.length() - 1.0).abs() < 1e-6);
+        let lone = finalize(&vpls[..1], &[Some(0)], &seed(&vpls[..1], 1));
+        assert_eq!(lone[0].area, 0.0, "one VPL spans no rectangle");
+    }
+
+    /// A VPL straight above a floor point lights it with Φ·f_r/(A + π d²) (both cosines 1).
+    #[test]
+    fn one_vpl_overhead_gives_the_disk_irradiance_times_the_brdf() {
+        let s = RefSurface {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            brdf: DiffuseGlossy {
+                diffuse: Vec3::splat(0.5),
+                glossy: Vec3::ZERO,
+                exponent: 1.0,
+            },
+        };
+        let light = vpl(Vec3::new(0.0, 2.0, 0.0), -Vec3::Y);
+        let got = shade(&s, Vec3::new(1.0, 1.0, 0.0), [&light]);
+        let want = 0.5 / PI / (0.01 + PI * 4.0);
+        assert!(
+            (got - Vec3::splat(want)).abs().max_element() < 1e-7,
+            "{got}"
+        );
+    }
+
+    /// Summed over the b² interleave classes, the interleaved shading is b² times the full
+    /// sum: the blur's average over a block estimates all N VPLs.
+    #[test]
+    fn interleave_classes_partition_the_vpls() {
+        let vpls: Vec<RefVpl> = (0..37)
+            .map(|i| vpl(Vec3::new(i as f32 * 0.1, 1.0, 0.0), -Vec3::Y))
+            .collect();
+        let s = RefSurface {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            brdf: DiffuseGlossy {
+                diffuse: Vec3::splat(0.8),
+                glossy: Vec3::splat(0.04),
+                exponent: 20.0,
+            },
+        };
+        let viewer = Vec3::new(0.5, 3.0, 1.0);
+        let b = 3;
+        let classes: Vec<u32> = (0..b)
+            .flat_map(|y| (0..b).map(move |x| interleave_class(x, y, b)))
+            .collect();
+        let mut sorted = classes.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..b * b).collect::<Vec<_>>());
+        let mean: Vec3 = classes
+            .iter()
+            .map(|&c| shade_interleaved(&s, viewer, &vpls, c, b))
+            .sum::<Vec3>()
+            / (b * b) as f32;
+        let full = shade(&s, viewer, &vpls);
+        assert!(
+            (mean - full).abs().max_element() < 1e-5 * full.max_element(),
+            "{mean} vs {full}"
+        );
+    }
+}

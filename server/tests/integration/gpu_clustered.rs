@@ -1,0 +1,374 @@
+//! `clustered` (seed paper 003) on the GPU (lavapipe in CI) against its CPU reference
+//! (`gi::clustered::cpu`): VPL generation from the frame's RSM, one k-means iteration and the
+//! final mapping C, the VALs with their areas, the interleaved shading of pixels whose surface
+//! the CPU finds by ray casting, and the geometry-aware blur; then its error against the
+//! path-traced reference.
+
+use crate::support::*;
+use glam::Vec3;
+use lightcast_server::gi::clustered::cpu::{self, RefCluster, RefVpl, Weights};
+use lightcast_server::gi::clustered::passes::{Vpl, NO_VAL};
+use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
+use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::quality::errors;
+use lightcast_server::renderer::{RenderSettings, Renderer};
+use lightcast_server::scene::default_light::{default_camera, default_light};
+use lightcast_server::scene::material::DiffuseGlossy;
+use lightcast_server::scene::{procedural, Scene};
+
+const W: u32 = 48;
+const H: u32 = 36;
+
+fn clustered(vpl_count: u32, cluster_count: u32, iterations: u32, interleave: u32) -> GiSettings {
+    GiSettings {
+        method: GiMethod::Clustered,
+        rsm_size: 64,
+        vpl_count,
+        cluster_count,
+        kmeans_iterations: iterations,
+        interleave,
+        ..GiSettings::default()
+    }
+}
+
+fn run(scene: &Scene, gi: GiSettings) -> (RenderSettings, ClusteredReadback, Vec<[f32; 4]>) {
+    let mut s = settings(W, H, default_camera(scene), default_light(scene));
+    s.gi = gi;
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    let frame = renderer.render(&s).expect("render");
+    let readback = renderer
+        .gi_if_created::<Clustered>()
+        .expect("a clustered frame ran")
+        .read_back()
+        .expect("readback")
+        .expect("the frame ran the clustering");
+    (s, readback, frame.indirect.expect("captured"))
+}
+
+fn ref_vpl(v: &Vpl) -> RefVpl {
+    RefVpl {
+        position: Vec3::from(v.position),
+        normal: Vec3::from(v.normal),
+        flux: Vec3::from(v.flux),
+        area: v.area,
+        lit: v.lit != 0,
+        texel: v.texel,
+    }
+}
+
+fn close(a: Vec3, b: Vec3, relative: f32) -> bool {
+    (a - b).abs().max_element() <= relative * a.abs().max_element().max(b.abs().max_element())
+}
+
+/// The VPLs are the RSM texels at Halton positions with W·H/N of their flux and area, and
+/// the clustering of the GPU is the CPU's: the same seeds, one k-means iteration, the same
+/// final mapping C (where the two nearest centres are not tied within float rounding) and
+/// the same VALs — mean position, normal, count and bounding-rectangle area.
+#[test]
+fn vpls_and_one_kmeans_iteration_match_the_cpu() {
+    let scene = procedural::cornell_box();
+    let (n, m) = (512, 16);
+    let (s, rb, _) = run(&scene, clustered(n, m, 1, 4));
+    let rsm = cpu::RsmTexels {
+        width: rb.rsm_width,
+        height: rb.rsm_height,
+        position: &rb.rsm_position,
+        normal: &rb.rsm_normal,
+        flux_area: &rb.rsm_flux_area,
+    };
+    let want = cpu::generate_vpls(&rsm, n);
+    let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
+    assert_eq!(vpls.len(), n as usize);
+    for (i, (got, want)) in vpls.iter().zip(&want).enumerate() {
+        assert_eq!(got.texel, want.texel, "VPL {i}");
+        assert_eq!(got.lit, want.lit, "VPL {i}");
+        if want.lit {
+            assert!(
+                close(got.position, want.position, 1e-6),
+                "VPL {i}: {got:?} vs {want:?}"
+            );
+            assert!(
+                close(got.normal, want.normal, 1e-6),
+                "VPL {i}: {got:?} vs {want:?}"
+            );
+            assert!(
+                close(got.flux, want.flux, 1e-6),
+                "VPL {i}: {got:?} vs {want:?}"
+            );
+            assert!((got.area - want.area).abs() <= 1e-6 * want.area, "VPL {i}");
+        }
+    }
+    let lit = vpls.iter().filter(|v| v.lit).count();
+    assert!(
+        lit > n as usize / 2,
+        "the spot light lights most of its RSM: {lit} of {n}"
+    );
+
+    let w = Weights {
+        position: s.gi.cluster_position_weight / rb.extent,
+        normal: s.gi.cluster_normal_weight,
+    };
+    let seeds = cpu::seed(&vpls, m);
+    let first = cpu::assign(&vpls, &seeds, w);
+    let centres = cpu::update(&vpls, &first, &seeds);
+    let mapping: Vec<Option<u32>> = rb
+        .mapping
+        .iter()
+        .map(|&c| (c != NO_VAL).then_some(c))
+        .collect();
+    let mut ties = 0;
+    for (i, v) in vpls.iter().enumerate() {
+        let mut d: Vec<(f32, u32)> = centres
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.centred)
+            .map(|(k, c)| (cpu::distance(w, v, c), k as u32))
+            .collect();
+        d.sort_by(|a, b| a.0.total_cmp(&b.0));
+        if !v.lit {
+            assert_eq!(mapping[i], None, "unlit VPL {i} has no VAL");
+        } else if d[1].0 - d[0].0 <= 1e-5 * d[0].0.max(1e-3) {
+            ties += 1;
+        } else {
+            assert_eq!(mapping[i], Some(d[0].1), "VPL {i}: distances {:?}", &d[..2]);
+        }
+    }
+    assert!(ties <= 2, "{ties} near-ties");
+    // The VALs of the GPU's mapping (so a tie decided either way cannot spread).
+    let vals = cpu::finalize(&vpls, &mapping, &centres);
+    let mut non_empty = 0;
+    for (k, (got, want)) in rb.vals.iter().zip(&vals).enumerate() {
+        let got = RefCluster {
+            position: Vec3::from(got.position),
+            normal: Vec3::from(got.normal),
+            count: got.count,
+            centred: got.centred != 0,
+            area: got.area,
+        };
+        assert_eq!(got.count, want.count, "VAL {k}");
+        assert_eq!(got.centred, want.centred, "VAL {k}");
+        assert!(
+            close(got.position, want.position, 1e-5),
+            "VAL {k}: {got:?} vs {want:?}"
+        );
+        assert!(
+            close(got.normal, want.normal, 1e-5),
+            "VAL {k}: {got:?} vs {want:?}"
+        );
+        assert!(
+            (got.area - want.area).abs() <= 1e-4 * want.area.max(1e-6),
+            "VAL {k}: area {} vs {}",
+            got.area,
+            want.area
+        );
+        non_empty += usize::from(want.count > 0);
+    }
+    assert_eq!(
+        rb.vals.iter().map(|v| v.count as usize).sum::<usize>(),
+        lit,
+        "every lit VPL has one VAL"
+    );
+    assert!(
+        non_empty >= m as usize / 2,
+        "{non_empty} of {m} VALs in use"
+    );
+    assert!(
+        vals.iter().any(|v| v.area > 0.0),
+        "VALs of several VPLs span an area"
+    );
+}
+
+/// The G-buffer texel the CPU expects at pixel (x, y): the nearest surface along the pixel's
+/// ray, with its material as the G-buffer stores it (8-bit colours, f16 exponent); `None`
+/// where rays a tenth of a pixel away meet another plane (near an edge the rasteriser may
+/// pick either).
+fn surface_at(scene: &Scene, s: &RenderSettings, x: u32, y: u32) -> Option<cpu::RefSurface> {
+    let hit = |fx: f32, fy: f32| {
+        let (o, d) = subpixel_ray(&s.camera, scene, W, H, fx, fy);
+        let (t, tri) = trace(scene, o, d, 100.0)?;
+        let corner =
+            |k: usize| Vec3::from(scene.vertices[scene.indices[tri * 3 + k] as usize].position);
+        let mut n = (corner(1) - corner(0))
+            .cross(corner(2) - corner(0))
+            .normalize();
+        if n.dot(d) > 0.0 {
+            n = -n;
+        }
+        Some((o + d * t, n, tri, n.dot(corner(0))))
+    };
+    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+    let (position, n, tri, plane) = hit(cx, cy)?;
+    for (dx, dy) in [(-0.1, 0.0), (0.1, 0.0), (0.0, -0.1), (0.0, 0.1)] {
+        let (_, other_n, _, other_plane) = hit(cx + dx, cy + dy)?;
+        if other_n.dot(n) < 0.9999 || (other_plane - plane).abs() > 1e-4 {
+            return None;
+        }
+    }
+    let m = scene.materials[triangle_material(scene, tri) as usize].diffuse_glossy();
+    let unorm8 = |v: Vec3| (v * 255.0).round() / 255.0;
+    Some(cpu::RefSurface {
+        position,
+        normal: n,
+        brdf: DiffuseGlossy {
+            diffuse: unorm8(m.diffuse),
+            glossy: unorm8(m.glossy),
+            exponent: half::f16::from_f32(m.exponent).to_f32(),
+        },
+    })
+}
+
+/// Pixels shaded by the CPU from their interleave class of the GPU's VPLs match the
+/// interleaved buffer, and the blur of that buffer over the CPU's G-buffer matches the
+/// indirect buffer.
+#[test]
+fn interleaved_shading_and_blur_match_the_cpu() {
+    let scene = procedural::cornell_box();
+    let b = 4;
+    let (s, rb, indirect) = run(&scene, clustered(1024, 8, 2, b));
+    let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
+    let viewer = Vec3::from(s.camera.position);
+    let mut checked = 0;
+    let mut worst = 0.0f32;
+    for (x, y) in [
+        (8, 8),
+        (24, 18),
+        (30, 6),
+        (12, 28),
+        (40, 30),
+        (20, 12),
+        (36, 20),
+    ] {
+        let Some(surface) = surface_at(&scene, &s, x, y) else {
+            continue;
+        };
+        let want =
+            cpu::shade_interleaved(&surface, viewer, &vpls, cpu::interleave_class(x, y, b), b);
+        let got = Vec3::from_slice(&rb.interleaved[(y * W + x) as usize][..3]);
+        assert!(
+            want.max_element() > 0.0,
+            "pixel ({x}, {y}) sees indirect light"
+        );
+        let error = (got - want).abs().max_element() / want.max_element();
+        worst = worst.max(error);
+        assert!(error < 2e-3, "pixel ({x}, {y}): GPU {got} vs CPU {want}");
+        checked += 1;
+    }
+    assert!(
+        checked >= 5,
+        "only {checked} pixels with an unambiguous surface"
+    );
+
+    // The blur of pixels whose whole b×b window the CPU can ray cast.
+    let texels: Vec<Option<cpu::BlurTexel>> = (0..W * H)
+        .map(|i| {
+            surface_at(&scene, &s, i % W, i / W).map(|t| cpu::BlurTexel {
+                position: [t.position.x, t.position.y, t.position.z, 1.0],
+                normal: t.normal,
+            })
+        })
+        .collect();
+    let (mut blurred, mut with_rejects) = (0, 0);
+    for y in b..H - b {
+        for x in b..W - b {
+            let window = (y - b / 2..y - b / 2 + b)
+                .flat_map(|qy| (x - b / 2..x - b / 2 + b).map(move |qx| qy * W + qx));
+            if window.clone().any(|q| texels[q as usize].is_none()) {
+                continue;
+            }
+            // Windows with a neighbour near a threshold, where the difference between the
+            // rasterised and the ray-cast position (up to ~1e-3 at grazing angles) decides,
+            // are left out.
+            let centre = texels[(y * W + x) as usize].expect("in the window");
+            let max_distance = s.gi.blur_distance * rb.extent;
+            let borderline = window.clone().any(|q| {
+                let t = texels[q as usize].expect("checked");
+                let d = Vec3::from_slice(&t.position[..3])
+                    .distance(Vec3::from_slice(&centre.position[..3]));
+                (d - max_distance).abs() < 1e-2 * max_distance
+                    || (t.normal.dot(centre.normal) - s.gi.blur_normal).abs() < 1e-3
+            });
+            let rejects = window.clone().any(|q| {
+                let t = texels[q as usize].expect("checked");
+                Vec3::from_slice(&t.position[..3]).distance(Vec3::from_slice(&centre.position[..3]))
+                    > max_distance
+                    || t.normal.dot(centre.normal) < s.gi.blur_normal
+            });
+            if borderline {
+                continue;
+            }
+            let gbuffer: Vec<cpu::BlurTexel> = texels
+                .iter()
+                .map(|t| {
+                    t.unwrap_or(cpu::BlurTexel {
+                        position: [0.0; 4],
+                        normal: Vec3::Y,
+                    })
+                })
+                .collect();
+            let want = cpu::blur(
+                &gbuffer,
+                &rb.interleaved,
+                W,
+                H,
+                x,
+                y,
+                b,
+                max_distance,
+                s.gi.blur_normal,
+            );
+            let got = Vec3::from_slice(&indirect[(y * W + x) as usize][..3]);
+            // The indirect buffer is f16: 2⁻¹¹ relative, steps of 2⁻²⁴ below 2⁻¹⁴.
+            assert!(
+                (got - want).abs().max_element() <= 2e-3 * want.max_element() + 1e-7,
+                "blurred pixel ({x}, {y}): GPU {got} vs CPU {want}"
+            );
+            blurred += 1;
+            with_rejects += usize::from(rejects);
+        }
+    }
+    assert!(
+        blurred > 100,
+        "only {blurred} pixels with a fully ray-cast window"
+    );
+    assert!(
+        with_rejects > 20,
+        "only {with_rejects} windows where the blur leaves neighbours out"
+    );
+    eprintln!("interleaved shading: worst relative error {worst:e} over {checked} pixels");
+}
+
+/// The indirect light of `clustered` against the path-traced reference is finite and well
+/// below that of `none` (no indirect light at all).
+#[test]
+fn clustered_error_against_the_reference_is_finite_and_below_none() {
+    let scene = procedural::cornell_box();
+    let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    let mut indirect = |gi: GiSettings| {
+        s.gi = gi;
+        renderer
+            .render(&s)
+            .expect("render")
+            .indirect
+            .expect("captured")
+    };
+    let reference = indirect(GiSettings {
+        method: GiMethod::Reference,
+        spp: 64,
+        ..GiSettings::default()
+    });
+    let truth: Vec<[f32; 3]> = reference.iter().map(|p| [p[0], p[1], p[2]]).collect();
+    let ours = errors(&truth, &indirect(clustered(1024, 30, 4, 8)), W as usize);
+    let none = errors(&truth, &indirect(GiSettings::off()), W as usize);
+    eprintln!("clustered vs reference: {ours:?}\nnone vs reference: {none:?}");
+    assert!(ours.mae.is_finite() && ours.rmse.is_finite());
+    assert!(
+        none.mae_relative > 0.9,
+        "none misses all indirect light: {none:?}"
+    );
+    assert!(
+        ours.mae_relative < 0.5 * none.mae_relative,
+        "clustered {ours:?} vs none {none:?}"
+    );
+    assert!(ours.bias_relative.abs() < 0.5, "clustered {ours:?}");
+}

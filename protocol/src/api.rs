@@ -156,6 +156,8 @@ pub enum View {
     SelectedVals,
     /// The frame darkened, with every light cache drawn in the colour of its diffuse proxy light.
     Caches,
+    /// The RSM's VPLs, each in the colour of the VAL it is clustered into; needs `clustered`.
+    Clusters,
 }
 
 impl std::fmt::Display for View {
@@ -167,6 +169,7 @@ impl std::fmt::Display for View {
             Self::Importance => "importance",
             Self::SelectedVals => "selected-vals",
             Self::Caches => "caches",
+            Self::Clusters => "clusters",
         })
     }
 }
@@ -175,6 +178,11 @@ impl View {
     /// Whether the view shows a stage only BRSM runs (importance, selection).
     pub fn needs_brsm(self) -> bool {
         matches!(self, Self::Importance | Self::SelectedVals)
+    }
+
+    /// Whether the view shows the VPL clusters only `clustered` makes.
+    pub fn needs_clustered(self) -> bool {
+        self == Self::Clusters
     }
 
     /// Whether the view shows GI data (any method but `none`).

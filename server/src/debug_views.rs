@@ -1,7 +1,9 @@
 //! Debug images a researcher expects next to the final frame (the paper's Figures 2 and 6
-//! views): indirect light alone, RSM flux, importance map, selected VALs and the light caches.
+//! views): indirect light alone, RSM flux, importance map, selected VALs, the light caches
+//! and, for `clustered`, the VPLs coloured by VAL (seed 003's Figure 9, centre).
 //! They are built on the CPU from buffers read back after a frame.
 
+use crate::gi::clustered::ClusterView;
 use crate::gi::lightskin::{
     cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback,
 };
@@ -24,6 +26,8 @@ pub enum ViewError {
     NeedsLightCaches { view: View },
     #[error("view {view} shows a BRSM stage; use GI method brsm")]
     NeedsBrsm { view: View },
+    #[error("view {view} shows the VPL clusters; use GI method clustered")]
+    NeedsClustered { view: View },
     #[error(transparent)]
     Gpu(#[from] GpuError),
 }
@@ -32,6 +36,13 @@ pub enum ViewError {
 pub fn check(view: View, method: GiMethod) -> Result<(), ViewError> {
     if view.needs_gi() && method == GiMethod::None {
         return Err(ViewError::NeedsGi { view });
+    }
+    if view.needs_clustered() {
+        return if method == GiMethod::Clustered {
+            Ok(())
+        } else {
+            Err(ViewError::NeedsClustered { view })
+        };
     }
     if view.needs_gi() && view != View::Indirect && !uses_light_caches(method) {
         return Err(ViewError::NeedsLightCaches { view });
@@ -81,6 +92,12 @@ pub fn compose(
             };
             self::caches(&frame, camera, bounds, caches, lighting)
         }
+        View::Clusters => clusters(
+            debug
+                .as_ref()
+                .and_then(|d| d.0.downcast_ref::<ClusterView>())
+                .ok_or(needs_gi)?,
+        ),
     })
 }
 
@@ -179,6 +196,42 @@ pub fn selected_vals(s: &SamplingReadback) -> Image {
     image
 }
 
+/// A distinct colour for index `k`: hues a golden-ratio turn apart, so neighbouring indices
+/// differ strongly.
+pub fn index_colour(k: u32) -> [u8; 3] {
+    let hue = (f64::from(k) * 0.618_033_988_749_895).fract() * 6.0;
+    let x = (1.0 - (hue % 2.0 - 1.0).abs()) * 255.0;
+    let (c, x) = (255u8, x as u8);
+    match hue as u32 {
+        0 => [c, x, 0],
+        1 => [x, c, 0],
+        2 => [0, c, x],
+        3 => [0, x, c],
+        4 => [x, 0, c],
+        _ => [c, 0, x],
+    }
+}
+
+/// The RSM atlas in black with every lit VPL drawn at its texel in the colour of its VAL:
+/// square dots about half the spacing of N VPLs in the atlas, so the clusters read as
+/// patches on the surfaces the light sees.
+pub fn clusters(v: &ClusterView) -> Image {
+    let (w, h) = (v.rsm_width, v.rsm_height);
+    let mut image = Image::from_rgb(w, h, std::iter::repeat_n([0; 3], (w * h) as usize));
+    let spacing = (f64::from(w) * f64::from(h) / v.texels.len().max(1) as f64).sqrt();
+    let side = ((spacing / 2.0) as i64).clamp(1, 8);
+    for (&texel, &val) in v.texels.iter().zip(&v.mapping) {
+        let Some(val) = val else { continue };
+        let (x, y) = (i64::from(texel % w), i64::from(texel / w));
+        for dy in 0..side {
+            for dx in 0..side {
+                image.put(x + dx - side / 2, y + dy - side / 2, index_colour(val));
+            }
+        }
+    }
+    image
+}
+
 /// The frame at a third of its brightness with every light cache facing the camera drawn as a
 /// dot in the colour of its diffuse proxy light (caches behind geometry are drawn too). Dots
 /// are 3×3 pixels unless that would cover more than a quarter of the image.
@@ -228,6 +281,44 @@ pub fn caches(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each lit VPL is a dot of its VAL's colour at its texel; unlit ones are not drawn; the
+    /// first 64 VALs have distinct colours.
+    #[test]
+    fn clusters_view_colours_vpls_by_their_val() {
+        let view = ClusterView {
+            rsm_width: 16,
+            rsm_height: 8,
+            texels: vec![3, 7 * 16 + 2, 5 * 16 + 12, 7 * 16 + 15],
+            mapping: vec![Some(0), Some(5), None, Some(5)],
+        };
+        let image = clusters(&view);
+        assert_eq!((image.width, image.height), (16, 8));
+        let at = |texel: u32| {
+            let i = texel as usize * 4;
+            [image.rgba8[i], image.rgba8[i + 1], image.rgba8[i + 2]]
+        };
+        assert_eq!(at(3), index_colour(0));
+        assert_eq!(at(7 * 16 + 2), index_colour(5));
+        assert_eq!(at(7 * 16 + 15), index_colour(5));
+        assert_eq!(at(5 * 16 + 12), [0; 3], "an unlit VPL is not drawn");
+        let colours: std::collections::BTreeSet<[u8; 3]> = (0..64).map(index_colour).collect();
+        assert_eq!(colours.len(), 64);
+    }
+
+    #[test]
+    fn the_clusters_view_needs_clustered_and_clustered_has_no_light_caches() {
+        assert!(check(View::Clusters, GiMethod::Clustered).is_ok());
+        assert!(check(View::Indirect, GiMethod::Clustered).is_ok());
+        assert!(matches!(
+            check(View::Clusters, GiMethod::Brsm),
+            Err(ViewError::NeedsClustered { .. })
+        ));
+        assert!(matches!(
+            check(View::Caches, GiMethod::Clustered),
+            Err(ViewError::NeedsLightCaches { .. })
+        ));
+    }
 
     #[test]
     fn auto_exposure_maps_the_log_average_to_middle_grey() {

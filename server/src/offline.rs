@@ -216,7 +216,7 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub caches: CacheArgs,
     /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
-    /// importance map, selected VALs, light caches).
+    /// importance map, selected VALs, light caches, VPL clusters).
     #[arg(long, value_enum, default_value = "final")]
     pub view: View,
     /// wgpu backend.
@@ -269,6 +269,8 @@ pub enum OfflineError {
     ViewNeedsLightCaches { view: View },
     #[error("--view {view} shows a BRSM stage; use --gi brsm")]
     ViewNeedsBrsm { view: View },
+    #[error("--view {view} shows the VPL clusters; use --gi clustered")]
+    ViewNeedsClustered { view: View },
     #[error("writing {path}: {error}")]
     Write {
         path: PathBuf,
@@ -285,6 +287,7 @@ impl From<debug_views::ViewError> for OfflineError {
                 Self::ViewNeedsLightCaches { view }
             }
             debug_views::ViewError::NeedsBrsm { view } => Self::ViewNeedsBrsm { view },
+            debug_views::ViewError::NeedsClustered { view } => Self::ViewNeedsClustered { view },
             debug_views::ViewError::Gpu(g) => Self::Gpu(g),
         }
     }

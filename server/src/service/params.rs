@@ -82,7 +82,8 @@ pub fn resolve(
     debug_views::check(params.view, g.method).map_err(|e| match e {
         ViewError::NeedsGi { .. }
         | ViewError::NeedsLightCaches { .. }
-        | ViewError::NeedsBrsm { .. } => ApiError::field("view", e.to_string()),
+        | ViewError::NeedsBrsm { .. }
+        | ViewError::NeedsClustered { .. } => ApiError::field("view", e.to_string()),
         ViewError::Gpu(g) => ApiError::internal(g.to_string()),
     })?;
     let caches = if uses_light_caches(g.method) {

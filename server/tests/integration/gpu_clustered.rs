@@ -178,6 +178,44 @@ fn vpls_and_one_kmeans_iteration_match_the_cpu() {
     );
 }
 
+/// The `clusters` debug view carries the frame's VPL texels and mapping C.
+#[test]
+fn the_clusters_view_shows_the_frames_mapping() {
+    use lightcast_server::gi::clustered::ClusterView;
+    let scene = procedural::cornell_box();
+    let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
+    s.gi = clustered(256, 8, 2, 8);
+    s.debug_view = lightcast_protocol::View::Clusters;
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    let frame = renderer.render(&s).expect("render");
+    let debug = frame.debug.expect("debug data");
+    let view = debug
+        .0
+        .downcast_ref::<ClusterView>()
+        .expect("a ClusterView");
+    let rb = renderer
+        .gi_if_created::<Clustered>()
+        .expect("clustered ran")
+        .read_back()
+        .expect("readback")
+        .expect("a frame");
+    assert_eq!((view.rsm_width, view.rsm_height), (64, 64));
+    assert_eq!(
+        view.texels,
+        rb.vpls.iter().map(|v| v.texel).collect::<Vec<_>>()
+    );
+    let mapping: Vec<Option<u32>> = rb
+        .mapping
+        .iter()
+        .map(|&c| (c != NO_VAL).then_some(c))
+        .collect();
+    assert_eq!(view.mapping, mapping);
+    assert!(
+        view.mapping.iter().flatten().any(|&k| k > 0),
+        "more than one VAL in use"
+    );
+}
+
 /// The G-buffer texel the CPU expects at pixel (x, y): the nearest surface along the pixel's
 /// ray, with its material as the G-buffer stores it (8-bit colours, f16 exponent); `None`
 /// where rays a tenth of a pixel away meet another plane (near an edge the rasteriser may

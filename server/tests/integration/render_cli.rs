@@ -252,6 +252,15 @@ fn bad_input_is_reported_precisely_without_panicking() {
         (
             vec![
                 "--gi".into(),
+                "brsm".into(),
+                "--view".into(),
+                "clusters".into(),
+            ],
+            "--gi clustered",
+        ),
+        (
+            vec![
+                "--gi".into(),
                 "lightskin".into(),
                 "--view".into(),
                 "importance".into(),
@@ -333,6 +342,12 @@ fn clustered_renders_with_its_flags() {
         mean_level(&lit),
         mean_level(&none)
     );
+    let (clusters, _, _) = render_ok(
+        "clustered-view.png",
+        &[&common[..], &flags[..10], &["--view", "clusters"]].concat(),
+    );
+    assert_eq!(clusters.dimensions(), (32, 32), "the RSM's size");
+    assert!(mean_level(&clusters) > 1.0, "the clusters view is black");
 }
 
 #[test]

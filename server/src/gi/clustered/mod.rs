@@ -13,10 +13,10 @@ pub mod cpu;
 pub mod passes;
 
 use super::{
-    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
-    SceneResources,
+    DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
+    ProgressBuffer, SceneResources,
 };
-use crate::gpu::readback::{read_buffer, TextureReadback};
+use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap, TextureReadback};
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{
     frame_uniforms::light_faces,
@@ -25,13 +25,14 @@ use crate::passes::{
     Target,
 };
 use lightcast_protocol::{
-    ClusteredVisibility, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage,
+    ClusteredVisibility, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage, View,
 };
 use passes::{
     BlurResources, ClusterBuffers, ClusteredParams, ClusteringPass, ImagePass, IndirectResources,
     Val, Vpl, BLUR_GROUP, INDIRECT_GROUP,
 };
 use std::any::{Any, TypeId};
+use std::sync::Arc;
 
 /// Fewest VPLs (the lower bound: at least four per pixel with 8×8 interleaving).
 pub const MIN_VPL_COUNT: u32 = 256;
@@ -192,6 +193,43 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
             },
         ],
     }]
+}
+
+/// What the `clusters` debug view shows of a frame: the RSM texel of every VPL and its VAL.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClusterView {
+    pub rsm_width: u32,
+    pub rsm_height: u32,
+    /// Row-major RSM texel of each VPL.
+    pub texels: Vec<u32>,
+    /// C: each VPL's VAL, `None` for unlit VPLs.
+    pub mapping: Vec<Option<u32>>,
+}
+
+/// Staged copies of the VPLs and the mapping for [`ClusterView`].
+struct ClusterCapture {
+    rsm_width: u32,
+    rsm_height: u32,
+    vpls: wgpu::Buffer,
+    mapping: wgpu::Buffer,
+}
+
+impl DebugCapture for ClusterCapture {
+    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError> {
+        let (vpls, mapping) = (PendingMap::new(&self.vpls), PendingMap::new(&self.mapping));
+        ctx.wait_idle()?;
+        let vpls: Vec<Vpl> = bytemuck::pod_collect_to_vec(&vpls.finish()?);
+        let mapping: Vec<u32> = bytemuck::pod_collect_to_vec(&mapping.finish()?);
+        Ok(DebugData(Arc::new(ClusterView {
+            rsm_width: self.rsm_width,
+            rsm_height: self.rsm_height,
+            texels: vpls.iter().map(|v| v.texel).collect(),
+            mapping: mapping
+                .iter()
+                .map(|&c| (c != passes::NO_VAL).then_some(c))
+                .collect(),
+        })))
+    }
 }
 
 /// The interleaved-shading texture of one output size, with the G-buffer it was made for.
@@ -432,6 +470,23 @@ impl Method for Clustered {
             self.blur.encode(e, &blur_group, frame.width, frame.height)
         })?;
         Ok(None)
+    }
+
+    fn capture_debug(
+        &self,
+        view: View,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Option<Box<dyn DebugCapture>> {
+        let (View::Clusters, Some(rsm), Some(buffers)) = (view, &self.rsm, &self.buffers) else {
+            return None;
+        };
+        Some(Box::new(ClusterCapture {
+            rsm_width: rsm.width(),
+            rsm_height: rsm.height(),
+            vpls: stage_buffer(device, encoder, &buffers.vpls),
+            mapping: stage_buffer(device, encoder, &buffers.mapping),
+        }))
     }
 
     fn retain_targets(&mut self, live: &[&GBuffer]) {

@@ -365,7 +365,7 @@ impl Method for LightSkin {
                     count: caches.count as usize,
                 }))
             }
-            View::Final | View::Indirect => None,
+            View::Final | View::Indirect | View::Clusters => None,
         }
     }
 

@@ -43,20 +43,22 @@ fn generate_vpls(@builtin(global_invocation_id) id: vec3<u32>) {
     vpls[i] = vpl;
 }
 
-// §5.2 and §6 "Clustering": every frame restarts from the same seeds, VPL k·N/M for cluster
-// k, never from the last frame's centres (which lose clusters as the light moves). A seed
-// without light (an empty or unlit RSM texel) is replaced by the next lit VPL before
-// (k+1)·N/M, so seeds stay distinct and as stable as the VPLs themselves.
+// §5.2 and §6 "Clustering": every frame restarts from the same initial assignment, never
+// from the last frame's centres (which lose clusters as the light moves). The paper seeds
+// cluster k with VPL k·N/M; with our Halton-ordered VPLs that stride is a poor pick: for N/M
+// a power of two, Halton index k·N/M + 1 has the same low base-2 digits for every k, so all
+// seeds fall in one column of the RSM (in the Cornell box 10 of 16 clusters stayed empty).
+// Cluster k is seeded with VPL k instead: the first M Halton points are themselves spread
+// over the whole RSM, and they are the same VPLs every frame. A seed without light (an empty
+// or unlit RSM texel) is replaced by the next lit VPL k + j·M, so seeds stay distinct.
 @compute @workgroup_size(64)
 fn seed_clusters(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
     if k >= params.cluster_count {
         return;
     }
-    let n = params.vpl_count;
-    let m = params.cluster_count;
     var val = Val(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, 0u, 0u, 0u, 0u);
-    for (var i = k * n / m; i < (k + 1u) * n / m; i++) {
+    for (var i = k; i < params.vpl_count; i += params.cluster_count) {
         let vpl = vpls[i];
         if vpl.lit != 0u {
             val.position = vpl.position;

@@ -15,6 +15,7 @@ use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::material::DiffuseGlossy;
 use lightcast_server::scene::{procedural, Scene};
+use std::f32::consts::FRAC_PI_2;
 
 const W: u32 = 48;
 const H: u32 = 36;
@@ -175,6 +176,92 @@ fn vpls_and_one_kmeans_iteration_match_the_cpu() {
     assert!(
         vals.iter().any(|v| v.area > 0.0),
         "VALs of several VPLs span an area"
+    );
+}
+
+/// §5.2 and Figure 8: a spot light in the middle of the room turns from the left wall up to
+/// the ceiling. Restarting k-means from the same seeds every frame (the GPU) keeps the
+/// clusters in use; starting every frame from the last frame's VALs (the CPU reference, on the
+/// same VPLs) strands centres on the wall, whose VPLs are gone, and loses clusters. For a
+/// small turn of the light the restarted centres barely move.
+#[test]
+fn restarting_from_the_same_seeds_loses_no_clusters_over_a_light_sweep() {
+    use lightcast_protocol::{Light, LightKind};
+    let scene = procedural::cornell_box();
+    let (n, m, iterations) = (1024, 16, 4);
+    let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
+    s.gi = clustered(n, m, iterations, 8);
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    // A frame with the light turned `angle` from -X towards +Y: the GPU's VALs, and the CPU's
+    // from `start` (the seeds when `None`) on the same VPLs.
+    let mut frame = |angle: f32, start: Option<Vec<RefCluster>>| {
+        s.light = Light {
+            kind: LightKind::Spot,
+            position: [0.0, 1.0, 0.0],
+            direction: [-angle.cos(), angle.sin(), 0.0],
+            color: [1.0; 3],
+            intensity: 10.0,
+            inner_cone: 0.4,
+            outer_cone: 0.6,
+        };
+        renderer.render(&s).expect("render");
+        let rb = renderer
+            .gi_if_created::<Clustered>()
+            .expect("clustered ran")
+            .read_back()
+            .expect("readback")
+            .expect("a frame");
+        let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
+        let w = Weights {
+            position: s.gi.cluster_position_weight / rb.extent,
+            normal: s.gi.cluster_normal_weight,
+        };
+        let start = start.unwrap_or_else(|| cpu::seed(&vpls, m));
+        let (_, cpu_vals) = cpu::cluster_from(&vpls, start, iterations, w);
+        (rb.vals, cpu_vals, rb.extent)
+    };
+    let in_use = |counts: &mut dyn Iterator<Item = u32>| counts.filter(|&c| c > 0).count();
+    let mut last = None;
+    let mut counts = Vec::new();
+    for step in 0..=10 {
+        let (restarted, reused, _) = frame(step as f32 / 10.0 * FRAC_PI_2, last.take());
+        counts.push((
+            in_use(&mut restarted.iter().map(|v| v.count)),
+            in_use(&mut reused.iter().map(|v| v.count)),
+        ));
+        last = Some(reused);
+    }
+    eprintln!("VALs in use per 9° step (restart, reuse): {counts:?}");
+    let fewest = |pick: fn(&(usize, usize)) -> usize| counts.iter().map(pick).min().unwrap_or(0);
+    let (restart, reuse) = (fewest(|c| c.0), fewest(|c| c.1));
+    assert!(
+        restart >= m as usize - 2,
+        "restarting lost clusters: {counts:?}"
+    );
+    assert!(
+        reuse + m as usize / 4 <= restart,
+        "reusing last frame's VALs lost fewer than a quarter: {counts:?}"
+    );
+
+    // Mean movement of the VAL centres, in scene extents, for a 0.1° turn of the light.
+    let (before, first, extent) = frame(0.3, None);
+    let (after, _, _) = frame(0.3 + 0.1f32.to_radians(), None);
+    let (_, reused, _) = frame(0.3 + 0.1f32.to_radians(), Some(first.clone()));
+    let moved = |a: &mut dyn Iterator<Item = Vec3>, b: &mut dyn Iterator<Item = Vec3>| {
+        a.zip(b).map(|(p, q)| p.distance(q)).sum::<f32>() / m as f32 / extent
+    };
+    let restart_moved = moved(
+        &mut before.iter().map(|v| Vec3::from(v.position)),
+        &mut after.iter().map(|v| Vec3::from(v.position)),
+    );
+    let reuse_moved = moved(
+        &mut first.iter().map(|v| v.position),
+        &mut reused.iter().map(|v| v.position),
+    );
+    eprintln!("centre displacement for a 0.1° turn: restart {restart_moved:e}, reuse {reuse_moved:e} extents");
+    assert!(
+        restart_moved < 0.01,
+        "clusters jump: {restart_moved} extents"
     );
 }
 

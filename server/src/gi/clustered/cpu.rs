@@ -116,13 +116,14 @@ pub fn distance(w: Weights, vpl: &RefVpl, c: &RefCluster) -> f32 {
     w.position * vpl.position.distance(c.position) + w.normal * angle
 }
 
-/// §5.2: cluster k starts at VPL k·N/M (or the next lit one before (k+1)·N/M), every frame.
+/// §5.2: cluster k starts at VPL k (or the next lit one of k + j·M), every frame; see
+/// `seed_clusters` in `shaders/clustered/kmeans.wgsl` for why not the paper's VPL k·N/M.
 pub fn seed(vpls: &[RefVpl], m: u32) -> Vec<RefCluster> {
-    let n = vpls.len() as u32;
-    (0..m)
+    (0..m as usize)
         .map(|k| {
-            (k * n / m..(k + 1) * n / m)
-                .map(|i| vpls[i as usize])
+            vpls.iter()
+                .skip(k)
+                .step_by(m as usize)
                 .find(|v| v.lit)
                 .map_or_else(RefCluster::default, |v| RefCluster {
                     position: v.position,
@@ -254,7 +255,18 @@ pub fn cluster(
     iterations: u32,
     w: Weights,
 ) -> (Vec<Option<u32>>, Vec<RefCluster>) {
-    let mut clusters = seed(vpls, m);
+    cluster_from(vpls, seed(vpls, m), iterations, w)
+}
+
+/// [`cluster`] from the centres `start` instead of the seeds: with the last frame's VALs it
+/// is the strategy §5.2 rejects, kept to show why.
+pub fn cluster_from(
+    vpls: &[RefVpl],
+    start: Vec<RefCluster>,
+    iterations: u32,
+    w: Weights,
+) -> (Vec<Option<u32>>, Vec<RefCluster>) {
+    let mut clusters = start;
     for _ in 0..iterations {
         let mapping = assign(vpls, &clusters, w);
         clusters = update(vpls, &mapping, &clusters);
@@ -393,18 +405,18 @@ mod tests {
     }
 
     #[test]
-    fn seeds_are_vpl_k_n_over_m_or_the_next_lit_one_in_their_range() {
+    fn seeds_are_vpl_k_or_the_next_lit_one_of_its_residue() {
         let mut vpls: Vec<RefVpl> = (0..8)
             .map(|i| vpl(Vec3::new(i as f32, 0.0, 0.0), Vec3::Y))
             .collect();
-        vpls[2].lit = false;
-        vpls[6].lit = false;
+        vpls[1].lit = false;
+        vpls[3].lit = false;
         vpls[7].lit = false;
         let seeds = seed(&vpls, 4);
         assert_eq!(seeds[0].position.x, 0.0);
-        assert_eq!(seeds[1].position.x, 3.0, "VPL 2 is unlit: the next in 2..4");
-        assert_eq!(seeds[2].position.x, 4.0);
-        assert!(!seeds[3].centred, "no lit VPL in 6..8");
+        assert_eq!(seeds[1].position.x, 5.0, "VPL 1 is unlit: the next of 1, 5");
+        assert_eq!(seeds[2].position.x, 2.0);
+        assert!(!seeds[3].centred, "no lit VPL among 3, 7");
         assert!(seeds[..3].iter().all(|s| s.centred));
     }
 

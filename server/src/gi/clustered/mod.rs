@@ -137,8 +137,8 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
                 int,
                 d.kmeans_iterations.into(),
                 (0.0, MAX_KMEANS_ITERATIONS.into()),
-                "k-means iterations per frame, restarted every frame from VPL k*N/M for \
-                 cluster k (§5.2)",
+                "k-means iterations per frame, restarted every frame from the same seeds, VPL k \
+                 for cluster k (§5.2)",
             ),
             param(
                 "cluster_position_weight",

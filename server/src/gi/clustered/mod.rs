@@ -241,18 +241,76 @@ struct Interleaved {
 /// Interleaved textures kept at once (one per output size in use).
 const MAX_INTERLEAVED: usize = 4;
 
+/// The RSM, the cluster buffers and the interleaved textures, made for the frames' sizes
+/// and parameters.
+#[derive(Default)]
+struct FrameTargets {
+    rsm: Option<Rsm>,
+    buffers: Option<ClusterBuffers>,
+    /// Most recently used first.
+    interleaved: Vec<Interleaved>,
+}
+
+impl FrameTargets {
+    /// The RSM, cluster buffers and interleaved texture of this frame, made or reused.
+    fn prepare(
+        &mut self,
+        device: &wgpu::Device,
+        frame: &FrameInputs,
+        faces: u32,
+    ) -> (&Rsm, &ClusterBuffers, &Target) {
+        let g = frame.settings;
+        if !self
+            .rsm
+            .as_ref()
+            .is_some_and(|r| r.size == g.rsm_size && r.faces == faces)
+        {
+            // Release the old RSM before allocating the new one.
+            self.rsm = None;
+        }
+        let rsm = self
+            .rsm
+            .get_or_insert_with(|| Rsm::new(device, g.rsm_size, faces));
+        if !self
+            .buffers
+            .as_ref()
+            .is_some_and(|b| b.vpl_count == g.vpl_count && b.cluster_count == g.cluster_count)
+        {
+            self.buffers = None;
+        }
+        let buffers = self
+            .buffers
+            .get_or_insert_with(|| ClusterBuffers::new(device, g.vpl_count, g.cluster_count));
+        let gbuffer = &frame.gbuffer.position.texture;
+        match self.interleaved.iter().position(|i| &i.gbuffer == gbuffer) {
+            Some(i) => {
+                let hit = self.interleaved.remove(i);
+                self.interleaved.insert(0, hit);
+            }
+            None => {
+                self.interleaved.truncate(MAX_INTERLEAVED - 1);
+                self.interleaved.insert(
+                    0,
+                    Interleaved {
+                        gbuffer: gbuffer.clone(),
+                        target: passes::interleaved_target(device, frame.width, frame.height),
+                    },
+                );
+            }
+        }
+        (rsm, buffers, &self.interleaved[0].target)
+    }
+}
+
 /// Per-scene state of `clustered`.
 pub struct Clustered {
     ctx: GpuContext,
     rsm_pass: RsmPass,
-    rsm: Option<Rsm>,
     params: wgpu::Buffer,
     clustering: ClusteringPass,
     indirect: ImagePass,
     blur: ImagePass,
-    buffers: Option<ClusterBuffers>,
-    /// Most recently used first.
-    interleaved: Vec<Interleaved>,
+    targets: FrameTargets,
     /// The scene's extent (bounding-box diagonal): the unit of Δx and of the blur distance.
     extent: f32,
     /// Whether the last frame ran (the buffers hold its results).
@@ -284,7 +342,6 @@ impl Clustered {
         Self {
             ctx: r.ctx.clone(),
             rsm_pass: RsmPass::new(device, &r.light, &r.material_layout),
-            rsm: None,
             params: crate::passes::params_buffer(
                 device,
                 "clustered params",
@@ -303,8 +360,7 @@ impl Clustered {
                 &crate::gpu::shaders::GEOMETRY_BLUR,
                 "blur",
             ),
-            buffers: None,
-            interleaved: Vec::new(),
+            targets: FrameTargets::default(),
             extent: (r.scene.bounds.radius() * 2.0).max(f32::MIN_POSITIVE),
             encoded: false,
         }
@@ -313,12 +369,10 @@ impl Clustered {
     /// The last frame's RSM, VPLs, VALs, mapping and interleaved shading (blocking readback;
     /// for tests), or `None` before the first frame.
     pub fn read_back(&self) -> Result<Option<ClusteredReadback>, GpuError> {
-        let (Some(rsm), Some(buffers), Some(interleaved), true) = (
-            &self.rsm,
-            &self.buffers,
-            self.interleaved.first(),
-            self.encoded,
-        ) else {
+        let t = &self.targets;
+        let (Some(rsm), Some(buffers), Some(interleaved), true) =
+            (&t.rsm, &t.buffers, t.interleaved.first(), self.encoded)
+        else {
             return Ok(None);
         };
         let ctx = &self.ctx;
@@ -354,45 +408,6 @@ impl Clustered {
             extent: self.extent,
         }))
     }
-
-    /// Makes the RSM, cluster buffers and interleaved texture fit this frame.
-    fn prepare(&mut self, frame: &FrameInputs, faces: u32) {
-        let device = &self.ctx.device;
-        let g = frame.settings;
-        if !self
-            .rsm
-            .as_ref()
-            .is_some_and(|r| r.size == g.rsm_size && r.faces == faces)
-        {
-            self.rsm = None;
-            self.rsm = Some(Rsm::new(device, g.rsm_size, faces));
-        }
-        if !self
-            .buffers
-            .as_ref()
-            .is_some_and(|b| b.vpl_count == g.vpl_count && b.cluster_count == g.cluster_count)
-        {
-            self.buffers = None;
-            self.buffers = Some(ClusterBuffers::new(device, g.vpl_count, g.cluster_count));
-        }
-        let gbuffer = &frame.gbuffer.position.texture;
-        match self.interleaved.iter().position(|i| &i.gbuffer == gbuffer) {
-            Some(i) => {
-                let hit = self.interleaved.remove(i);
-                self.interleaved.insert(0, hit);
-            }
-            None => {
-                self.interleaved.truncate(MAX_INTERLEAVED - 1);
-                self.interleaved.insert(
-                    0,
-                    Interleaved {
-                        gbuffer: gbuffer.clone(),
-                        target: passes::interleaved_target(device, frame.width, frame.height),
-                    },
-                );
-            }
-        }
-    }
 }
 
 impl Method for Clustered {
@@ -404,13 +419,8 @@ impl Method for Clustered {
         let r = frame.resources;
         let g = frame.settings;
         let faces = light_faces(frame.light, &r.scene.bounds);
-        self.prepare(frame, faces.len() as u32);
-        let (Some(rsm), Some(buffers), Some(interleaved)) =
-            (&self.rsm, &self.buffers, self.interleaved.first())
-        else {
-            unreachable!("prepare made the RSM, the buffers and the interleaved texture");
-        };
         let device = &r.ctx.device;
+        let (rsm, buffers, interleaved) = self.targets.prepare(device, frame, faces.len() as u32);
         let queue = &r.ctx.queue;
         let rsm_faces: Vec<RsmFace> = faces.iter().map(|f| RsmFace::new(f, g.rsm_size)).collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
@@ -439,14 +449,14 @@ impl Method for Clustered {
             g_diffuse: &gb.diffuse,
             g_glossy: &gb.glossy,
             vpls: &buffers.vpls,
-            interleaved_out: &interleaved.target,
+            interleaved_out: interleaved,
         }
         .bind(device, &self.indirect.layout);
         let blur_group = BlurResources {
             params: &self.params,
             g_position: &gb.position,
             g_normal_exponent: &gb.normal_exponent,
-            interleaved: &interleaved.target,
+            interleaved,
             indirect_out: frame.indirect,
         }
         .bind(device, &self.blur.layout);
@@ -478,7 +488,8 @@ impl Method for Clustered {
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Option<Box<dyn DebugCapture>> {
-        let (View::Clusters, Some(rsm), Some(buffers)) = (view, &self.rsm, &self.buffers) else {
+        let t = &self.targets;
+        let (View::Clusters, Some(rsm), Some(buffers)) = (view, &t.rsm, &t.buffers) else {
             return None;
         };
         Some(Box::new(ClusterCapture {
@@ -490,7 +501,8 @@ impl Method for Clustered {
     }
 
     fn retain_targets(&mut self, live: &[&GBuffer]) {
-        self.interleaved
+        self.targets
+            .interleaved
             .retain(|i| live.iter().any(|g| g.position.texture == i.gbuffer));
     }
 

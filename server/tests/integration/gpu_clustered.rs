@@ -6,6 +6,7 @@
 
 use crate::support::*;
 use glam::Vec3;
+use lightcast_protocol::{Light, LightKind};
 use lightcast_server::gi::clustered::cpu::{self, RefCluster, RefVpl, Weights};
 use lightcast_server::gi::clustered::passes::{Vpl, NO_VAL};
 use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
@@ -33,7 +34,15 @@ fn clustered(vpl_count: u32, cluster_count: u32, iterations: u32, interleave: u3
 }
 
 fn run(scene: &Scene, gi: GiSettings) -> (RenderSettings, ClusteredReadback, Vec<[f32; 4]>) {
-    let mut s = settings(W, H, default_camera(scene), default_light(scene));
+    run_lit(scene, default_light(scene), gi)
+}
+
+fn run_lit(
+    scene: &Scene,
+    light: Light,
+    gi: GiSettings,
+) -> (RenderSettings, ClusteredReadback, Vec<[f32; 4]>) {
+    let mut s = settings(W, H, default_camera(scene), light);
     s.gi = gi;
     let mut renderer = Renderer::new(gpu(), scene.clone());
     let frame = renderer.render(&s).expect("render");
@@ -61,15 +70,9 @@ fn close(a: Vec3, b: Vec3, relative: f32) -> bool {
     (a - b).abs().max_element() <= relative * a.abs().max_element().max(b.abs().max_element())
 }
 
-/// The VPLs are the RSM texels at Halton positions with W·H/N of their flux and area, and
-/// the clustering of the GPU is the CPU's: the same seeds, one k-means iteration, the same
-/// final mapping C (where the two nearest centres are not tied within float rounding) and
-/// the same VALs — mean position, normal, count and bounding-rectangle area.
-#[test]
-fn vpls_and_one_kmeans_iteration_match_the_cpu() {
-    let scene = procedural::cornell_box();
-    let (n, m) = (512, 16);
-    let (s, rb, _) = run(&scene, clustered(n, m, 1, 4));
+/// The GPU's VPLs against the CPU's from the same RSM: the texels at Halton positions with
+/// W·H/N of their flux and disk area.
+fn check_vpls(rb: &ClusteredReadback, n: u32) -> Vec<RefVpl> {
     let rsm = cpu::RsmTexels {
         width: rb.rsm_width,
         height: rb.rsm_height,
@@ -99,6 +102,54 @@ fn vpls_and_one_kmeans_iteration_match_the_cpu() {
             assert!((got.area - want.area).abs() <= 1e-6 * want.area, "VPL {i}");
         }
     }
+    vpls
+}
+
+/// A point light's six RSM faces side by side and a directional light's one orthographic face
+/// give the CPU's VPLs too, spread over every face.
+#[test]
+fn vpls_of_point_and_directional_lights_match_the_cpu() {
+    let cornell = procedural::cornell_box();
+    let point = Light {
+        kind: LightKind::Point,
+        position: [0.1, 1.2, 0.2],
+        direction: [0.0, -1.0, 0.0],
+        color: [1.0, 0.9, 0.8],
+        intensity: 20.0,
+        inner_cone: 0.0,
+        outer_cone: 0.0,
+    };
+    let (_, rb, indirect) = run_lit(&cornell, point, clustered(1024, 30, 2, 8));
+    assert_eq!((rb.rsm_width, rb.rsm_height), (6 * 64, 64));
+    let vpls = check_vpls(&rb, 1024);
+    // Every face but +Z (the room's open side) holds lit VPLs.
+    for face in [0, 1, 2, 3, 5] {
+        let on_face = |v: &&RefVpl| v.lit && (v.texel % rb.rsm_width) / 64 == face;
+        assert!(vpls.iter().filter(on_face).count() > 50, "face {face}");
+    }
+    assert!(indirect.iter().all(|p| p.iter().all(|c| c.is_finite())));
+
+    let street = procedural::build("street?blocks=2").expect("street");
+    let sun = default_light(&street);
+    assert_eq!(sun.kind, LightKind::Directional);
+    let (_, rb, _) = run_lit(&street, sun, clustered(512, 16, 2, 8));
+    let vpls = check_vpls(&rb, 512);
+    // The orthographic face covers the scene's bounding sphere; on this flat street about a
+    // quarter of it sees geometry (139 of 512 VPLs on lavapipe).
+    let lit = vpls.iter().filter(|v| v.lit).count();
+    assert!(lit > 100, "the sun's RSM holds lit VPLs: {lit} of 512");
+}
+
+/// The VPLs are the RSM texels at Halton positions with W·H/N of their flux and area, and
+/// the clustering of the GPU is the CPU's: the same seeds, one k-means iteration, the same
+/// final mapping C (where the two nearest centres are not tied within float rounding) and
+/// the same VALs — mean position, normal, count and bounding-rectangle area.
+#[test]
+fn vpls_and_one_kmeans_iteration_match_the_cpu() {
+    let scene = procedural::cornell_box();
+    let (n, m) = (512, 16);
+    let (s, rb, _) = run(&scene, clustered(n, m, 1, 4));
+    let vpls = check_vpls(&rb, n);
     let lit = vpls.iter().filter(|v| v.lit).count();
     assert!(
         lit > n as usize / 2,
@@ -186,7 +237,6 @@ fn vpls_and_one_kmeans_iteration_match_the_cpu() {
 /// small turn of the light the restarted centres barely move.
 #[test]
 fn restarting_from_the_same_seeds_loses_no_clusters_over_a_light_sweep() {
-    use lightcast_protocol::{Light, LightKind};
     let scene = procedural::cornell_box();
     let (n, m, iterations) = (1024, 16, 4);
     let mut s = settings(W, H, default_camera(&scene), default_light(&scene));

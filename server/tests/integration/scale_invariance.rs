@@ -80,7 +80,7 @@ fn scaled(scene: &Scene, s: f32) -> Scene {
 /// depends on the unit: with eq. 11's importance the BRSM buffers differed by 1.4 % (×0.01) and
 /// 1.6 % (×1000), and by 0.02 % with the clamp removed. Uniform importance still runs the
 /// whole BRSM path (cumulative sums, selection, weighted cache lighting) scale for scale.
-fn methods() -> [GiSettings; 4] {
+fn methods() -> [GiSettings; 5] {
     let gi = |method| GiSettings {
         method,
         rsm_size: 64,
@@ -104,6 +104,14 @@ fn methods() -> [GiSettings; 4] {
             method: GiMethod::Reference,
             bounces: 2,
             spp: 8,
+            ..GiSettings::default()
+        },
+        // Δx and the blur distance are in units of the scene's extent, and a VPL's disk area
+        // bounds its form factor: no length constant.
+        GiSettings {
+            method: GiMethod::Clustered,
+            rsm_size: 64,
+            vpl_count: 1024,
             ..GiSettings::default()
         },
     ]
@@ -198,11 +206,11 @@ fn cornell_box_scaled_by_a_hundredth_and_a_thousand_renders_the_same_for_every_m
 }
 
 /// Scaling by a power of two is exact in floating point, so a method free of length
-/// constants renders the very same pixels. `none` and the reference do; LightSkin's caches
+/// constants renders the very same pixels. `none`, the reference and `clustered` do; LightSkin's caches
 /// come from a d_eps derived (and rounded) from the surface area, so it is held to the test
 /// above instead.
 #[test]
-fn power_of_two_scales_give_identical_pixels_without_gi_and_with_the_reference() {
+fn power_of_two_scales_give_identical_pixels_without_gi_with_the_reference_and_clustered() {
     let base = procedural::cornell_box();
     let (camera, light) = (base.cameras[0].clone(), base.lights[0].clone());
     let (_, unscaled) = render_methods(&base, &camera, &light);
@@ -211,7 +219,10 @@ fn power_of_two_scales_give_identical_pixels_without_gi_and_with_the_reference()
         let (_, frames) =
             render_methods(&scene, &scaled_camera(&camera, s), &scaled_light(&light, s));
         for ((gi, frame), want) in methods().iter().zip(&frames).zip(&unscaled) {
-            if !matches!(gi.method, GiMethod::None | GiMethod::Reference) {
+            if !matches!(
+                gi.method,
+                GiMethod::None | GiMethod::Reference | GiMethod::Clustered
+            ) {
                 continue;
             }
             for (name, got, want) in [

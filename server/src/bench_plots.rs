@@ -356,9 +356,8 @@ mod tests {
         assert!(by_vals
             .iter()
             .all(|(_, p)| p.iter().map(|q| q.0).eq([11.0, 13.0])));
-        let dir = std::env::temp_dir().join(format!("lightcast-plots-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
-        let paths = write_plots(&report, &dir.join("bench")).expect("plots");
+        let dir = tempfile::tempdir().expect("temp dir");
+        let paths = write_plots(&report, &dir.path().join("bench")).expect("plots");
         // Four plots, the reference picture and one difference picture per row.
         assert_eq!(paths.len(), 5 + 9);
         let (plots, pictures) = paths.split_at(4);

@@ -8,7 +8,8 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 fn server(args: &[&str], env: &[(&str, &str)]) -> (Child, mpsc::Receiver<String>) {
-    let cache = std::env::temp_dir().join(format!("lightcast-serve-cli-{}", std::process::id()));
+    let cache = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("lightcast-serve-cli-{}", std::process::id()));
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_lightcast-server"));
     cmd.args(args)
         .env("LIGHTCAST_CACHE_DIR", &cache)

@@ -646,6 +646,20 @@ pub struct Limits {
     /// pings (sent every third of it), is closed.
     #[serde(default)]
     pub stream_silence_secs: u64,
+    /// Connections one client address (IPv6: one /64) may hold open; beyond, 429.
+    #[serde(default)]
+    pub max_connections_per_address: u32,
+    /// A connection must send a whole request head within this of opening or of its previous
+    /// response, or it is closed (idle connections included).
+    #[serde(default)]
+    pub header_timeout_ms: u64,
+    /// Largest request head (request line and headers); beyond, 431 (414 for a URI longer
+    /// than 8 KiB).
+    #[serde(default)]
+    pub max_header_bytes: u64,
+    /// Longest name or procedural spec a scene may have, in bytes; beyond, 400.
+    #[serde(default)]
+    pub max_name_bytes: u32,
 }
 
 /// `GET /v1/server`: who is serving and under which limits.

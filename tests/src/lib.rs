@@ -3,7 +3,7 @@
 
 use clap::Parser;
 use futures_util::{SinkExt, StreamExt};
-use lightcast_protocol::{FrameHeader, ServerEvent, SessionCreated};
+use lightcast_protocol::{ErrorBody, FrameHeader, ServerEvent, SessionCreated};
 use lightcast_server::service::{ServeArgs, Service};
 use serde_json::{json, Value};
 use std::time::Duration;
@@ -222,6 +222,17 @@ impl Stream {
                 Incoming::Frame(_) => {}
                 Incoming::Event(e) => return e,
                 Incoming::Closed => panic!("stream closed while waiting for an event"),
+            }
+        }
+    }
+
+    /// The next `error` event, skipping frames, `hello` and `updated`; panics on any other.
+    pub async fn next_error(&mut self) -> ErrorBody {
+        loop {
+            match self.next_event().await {
+                ServerEvent::Error { error } => return error,
+                ServerEvent::Hello { .. } | ServerEvent::Updated { .. } => {}
+                other => panic!("unexpected event {other:?}"),
             }
         }
     }

@@ -124,10 +124,11 @@ fn invalid(part: impl Into<String>, message: impl Into<String>) -> LoadError {
     }
 }
 
-/// "mesh 3 ('Suzanne')", or "mesh 3" for unnamed parts.
+/// "mesh 3 ('Suzanne')", or "mesh 3" for unnamed parts. Names are cut to 64 characters: a
+/// file's name can be megabytes long, and errors repeat it.
 fn named(kind: &str, index: usize, name: Option<&str>) -> String {
     match name {
-        Some(name) if !name.is_empty() => format!("{kind} {index} ('{name}')"),
+        Some(name) if !name.is_empty() => format!("{kind} {index} ('{name:.64}')"),
         _ => format!("{kind} {index}"),
     }
 }

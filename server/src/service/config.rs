@@ -110,6 +110,25 @@ pub struct LimitArgs {
     /// closing their connection would otherwise hold their session forever.
     #[arg(long, env = "LIGHTCAST_STREAM_SILENCE_SECS", default_value_t = 45)]
     pub stream_silence_secs: u64,
+    /// Most connections open at once; beyond, new ones get 503 and are closed. Keep it below
+    /// the process's file-descriptor limit (`ulimit -n`).
+    #[arg(long, env = "LIGHTCAST_MAX_CONNECTIONS", default_value_t = 1024)]
+    pub max_connections: u32,
+    /// Most connections one client address (IPv6: one /64) holds at once; beyond, 429. Behind
+    /// a proxy every client has the proxy's address: raise it to `--max-connections` there.
+    #[arg(
+        long,
+        env = "LIGHTCAST_MAX_CONNECTIONS_PER_ADDRESS",
+        default_value_t = 256
+    )]
+    pub max_connections_per_address: u32,
+    /// Milliseconds a connection may take to send a whole request head, counted from when it
+    /// opened or its previous response ended; then it is closed, idle or not.
+    #[arg(long, env = "LIGHTCAST_HEADER_TIMEOUT_MS", default_value_t = 15_000)]
+    pub header_timeout_ms: u64,
+    /// Largest request head (request line and headers) in bytes; beyond, 431.
+    #[arg(long, env = "LIGHTCAST_MAX_HEADER_BYTES", default_value_t = 16 << 10)]
+    pub max_header_bytes: u64,
 }
 
 /// Why the options cannot be used.
@@ -192,6 +211,15 @@ impl LimitArgs {
         )?;
         within("session-idle-secs", self.session_idle_secs, 0, 7 * 86_400)?;
         within("stream-silence-secs", self.stream_silence_secs, 1, 3_600)?;
+        within("max-connections", self.max_connections.into(), 1, 1 << 20)?;
+        within(
+            "max-connections-per-address",
+            self.max_connections_per_address.into(),
+            1,
+            self.max_connections.into(),
+        )?;
+        within("header-timeout-ms", self.header_timeout_ms, 100, 600_000)?;
+        within("max-header-bytes", self.max_header_bytes, 1024, 1 << 20)?;
         Ok(Limits {
             max_width: self.max_width,
             max_height: self.max_height,
@@ -211,7 +239,21 @@ impl LimitArgs {
             request_timeout_ms: self.request_timeout_ms,
             session_idle_secs: self.session_idle_secs,
             stream_silence_secs: self.stream_silence_secs,
+            max_connections_per_address: self.max_connections_per_address,
+            header_timeout_ms: self.header_timeout_ms,
+            max_header_bytes: self.max_header_bytes,
+            max_name_bytes: crate::service::http::MAX_NAME_BYTES,
         })
+    }
+
+    /// What the accept loop enforces.
+    pub fn connections(&self) -> crate::service::listen::ConnectionLimits {
+        crate::service::listen::ConnectionLimits {
+            max_connections: self.max_connections as usize,
+            max_per_address: self.max_connections_per_address as usize,
+            header_timeout: std::time::Duration::from_millis(self.header_timeout_ms),
+            max_header_bytes: self.max_header_bytes as usize,
+        }
     }
 }
 

@@ -11,6 +11,27 @@ pub struct ApiError {
     pub body: ErrorBody,
 }
 
+/// Most characters of a client's own value (an id, a name) repeated in an error message:
+/// enough to recognise it, while a 100 KB id cannot make its error 100 KB.
+pub const ECHO_CHARS: usize = 64;
+
+/// Most characters of an error message or field path. Messages repeat parts of the request
+/// (serde names an unknown variant or field verbatim); this bounds what any of them costs.
+const MESSAGE_CHARS: usize = 1024;
+
+/// `value` shortened to `max` characters, saying how long it was when it was cut.
+fn shorten(value: String, max: usize) -> String {
+    match value.char_indices().nth(max) {
+        Some((cut, _)) => format!("{}… ({} bytes)", &value[..cut], value.len()),
+        None => value,
+    }
+}
+
+/// A client's value as an error message repeats it: at most [`ECHO_CHARS`] characters.
+pub fn echo(value: &str) -> String {
+    shorten(value.to_string(), ECHO_CHARS)
+}
+
 impl ApiError {
     pub fn new(status: StatusCode, kind: &str, message: impl Into<String>) -> Self {
         Self {
@@ -18,14 +39,14 @@ impl ApiError {
             body: ErrorBody {
                 error: kind.to_string(),
                 field: None,
-                message: message.into(),
+                message: shorten(message.into(), MESSAGE_CHARS),
             },
         }
     }
 
     /// 400 `invalid_field`: the value of `field` is unusable.
     pub fn field(field: impl Into<String>, message: impl Into<String>) -> Self {
-        let field = field.into();
+        let field = shorten(field.into(), ECHO_CHARS * 4);
         let message = format!("{field}: {}", message.into());
         let mut e = Self::new(StatusCode::BAD_REQUEST, "invalid_field", message);
         e.body.field = Some(field);
@@ -40,7 +61,7 @@ impl ApiError {
         Self::new(
             StatusCode::NOT_FOUND,
             "not_found",
-            format!("no {what} with id '{id}'"),
+            format!("no {what} with id '{}'", echo(id)),
         )
     }
 
@@ -92,14 +113,102 @@ impl IntoResponse for ApiError {
     }
 }
 
-/// Parses JSON into `T`, naming the field at fault (`render.gi.rsm_size`) in the error.
-/// Unknown fields are refused (the protocol types themselves tolerate them, for clients).
+/// Parses a request body: a JSON object, into `T`, naming the field at fault
+/// (`render.gi.rsm_size`) in the error. Unknown fields are refused (the protocol types
+/// themselves tolerate them, for clients).
 pub fn parse_json<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    parse_object(bytes, "the request body")
+}
+
+/// As [`parse_json`] for a document `what` names in its error ("a control message").
+/// Anything but an object is refused: serde would otherwise fill a struct from an array by
+/// position, and `[]` would pass as every field's default.
+pub fn parse_object<T: serde::de::DeserializeOwned>(
+    bytes: &[u8],
+    what: &str,
+) -> Result<T, ApiError> {
+    if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
+        let found = match serde_json::from_slice::<serde_json::Value>(bytes) {
+            Err(e) => return Err(ApiError::bad_request("malformed_json", e.to_string())),
+            Ok(serde_json::Value::Array(_)) => "an array",
+            Ok(serde_json::Value::String(_)) => "a string",
+            Ok(serde_json::Value::Number(_)) => "a number",
+            Ok(serde_json::Value::Bool(_)) => "a boolean",
+            Ok(_) => "null",
+        };
+        return Err(ApiError::bad_request(
+            "malformed_json",
+            format!("{what} must be a JSON object, not {found}"),
+        ));
+    }
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    serde_path_to_error::deserialize::<_, UniqueKeys>(&mut de).map_err(json_error)?;
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let value = strict(&mut de)?;
     de.end()
         .map_err(|e| ApiError::bad_request("malformed_json", e.to_string()))?;
     Ok(value)
+}
+
+/// A JSON document in which no object repeats a key. serde_json keeps the last of repeated
+/// keys where a document is parsed into a `Value` first (merge patches, WebSocket messages),
+/// and a struct refuses them at its parent's path; checking before either names the key and
+/// treats every endpoint alike.
+struct UniqueKeys;
+
+impl<'de> serde::Deserialize<'de> for UniqueKeys {
+    fn deserialize<D: serde::Deserializer<'de>>(de: D) -> Result<Self, D::Error> {
+        de.deserialize_any(UniqueKeys)
+    }
+}
+
+impl<'de> serde::de::Visitor<'de> for UniqueKeys {
+    type Value = UniqueKeys;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str("JSON")
+    }
+
+    fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Self, A::Error> {
+        let mut seen = std::collections::HashSet::new();
+        while let Some(key) = map.next_key::<String>()? {
+            if seen.contains(&key) {
+                return Err(serde::de::Error::custom(format!("duplicate field `{key}`")));
+            }
+            map.next_value::<UniqueKeys>()?;
+            seen.insert(key);
+        }
+        Ok(self)
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Self, A::Error> {
+        while seq.next_element::<UniqueKeys>()?.is_some() {}
+        Ok(self)
+    }
+
+    fn visit_bool<E>(self, _: bool) -> Result<Self, E> {
+        Ok(self)
+    }
+
+    fn visit_i64<E>(self, _: i64) -> Result<Self, E> {
+        Ok(self)
+    }
+
+    fn visit_u64<E>(self, _: u64) -> Result<Self, E> {
+        Ok(self)
+    }
+
+    fn visit_f64<E>(self, _: f64) -> Result<Self, E> {
+        Ok(self)
+    }
+
+    fn visit_str<E>(self, _: &str) -> Result<Self, E> {
+        Ok(self)
+    }
+
+    fn visit_unit<E>(self) -> Result<Self, E> {
+        Ok(self)
+    }
 }
 
 /// Converts an already-parsed JSON value into `T`, as strictly as [`parse_json`].
@@ -134,14 +243,19 @@ where
 fn json_error<E: std::fmt::Display>(e: serde_path_to_error::Error<E>) -> ApiError {
     let mut path = e.path().to_string();
     let inner = e.inner().to_string();
-    // Tagged enums report an unknown field without a path; the message names it.
-    if path == "." {
-        if let Some(name) = inner
-            .strip_prefix("unknown field `")
-            .and_then(|rest| rest.split('`').next())
-        {
-            path = name.to_string();
-        }
+    // Tagged enums report an unknown field without a path, and a repeated key is found before
+    // its value is entered, at its parent's path; the message names the key.
+    let named = ["unknown field `", "duplicate field `"]
+        .iter()
+        .find_map(|prefix| {
+            inner
+                .strip_prefix(prefix)
+                .and_then(|rest| rest.split('`').next())
+        });
+    match named {
+        Some(name) if path == "." => path = name.to_string(),
+        Some(name) if inner.starts_with("duplicate") => path = format!("{path}.{name}"),
+        _ => {}
     }
     // "." is the document itself; "?" a place the parser never reached (a syntax error).
     if path == "." || path.contains('?') {
@@ -163,4 +277,56 @@ pub fn body(
             ApiError::bad_request("unreadable_body", e.body_text())
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::Value;
+
+    #[test]
+    fn only_objects_are_bodies() {
+        for (body, found) in [
+            ("[]", "an array"),
+            (" [1, 2]", "an array"),
+            ("null", "null"),
+            ("\"{}\"", "a string"),
+            ("7", "a number"),
+        ] {
+            let e = parse_json::<Value>(body.as_bytes()).expect_err(body);
+            assert_eq!(e.body.error, "malformed_json", "{body}");
+            assert_eq!(e.body.field, None, "{body}");
+            assert!(e.body.message.contains(found), "{body}: {}", e.body.message);
+        }
+        let e = parse_json::<Value>(b"[oops").expect_err("not JSON");
+        assert_eq!(e.body.error, "malformed_json");
+        assert!(parse_json::<Value>(b" {\"a\": [1, {\"b\": 2}]} ").is_ok());
+    }
+
+    #[test]
+    fn repeated_keys_are_named_by_their_full_path() {
+        for (body, path) in [
+            (r#"{"a": 1, "a": 2}"#, "a"),
+            (r#"{"a": {"b": 1, "c": 2, "b": 3}}"#, "a.b"),
+            (r#"{"a": [{"x": 1}, {"y": 1, "y": 2}]}"#, "a[1].y"),
+        ] {
+            let e = parse_json::<Value>(body.as_bytes()).expect_err(body);
+            assert_eq!(e.body.field.as_deref(), Some(path), "{body}: {e:?}");
+        }
+    }
+
+    #[test]
+    fn what_a_client_sent_is_echoed_shortened() {
+        let long = "é".repeat(10_000);
+        let shown = echo(&long);
+        assert!(shown.chars().count() < ECHO_CHARS + 20, "{shown}");
+        assert!(shown.ends_with("(20000 bytes)"), "{shown}");
+        assert_eq!(echo("short"), "short");
+        let e = ApiError::field(long.clone(), long);
+        assert!(e.body.message.len() < 4 * MESSAGE_CHARS);
+        assert!(e
+            .body
+            .field
+            .is_some_and(|f| f.chars().count() < 4 * ECHO_CHARS + 20));
+    }
 }

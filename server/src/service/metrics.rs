@@ -25,6 +25,9 @@ pub const GPU_FRAME_MS: &str = "lightcast_gpu_frame_ms";
 pub const READBACK_MS: &str = "lightcast_readback_ms";
 pub const ENCODE_MS: &str = "lightcast_encode_ms";
 pub const RENDERS: &str = "lightcast_oneshot_renders_total";
+/// Open HTTP/WebSocket connections, and those refused by `reason` (`too_many_connections`).
+pub const CONNECTIONS: &str = "lightcast_connections";
+pub const CONNECTIONS_REFUSED: &str = "lightcast_connections_refused_total";
 /// Live GPU objects by kind (wgpu's registry, read at each scrape): a soak watches these for
 /// leaks of GPU resources.
 pub const GPU_BUFFERS: &str = "lightcast_gpu_buffers";

@@ -11,6 +11,7 @@ pub mod encode;
 pub mod error;
 pub mod http;
 pub mod ids;
+pub mod listen;
 pub mod metrics;
 pub mod params;
 pub mod render_loop;
@@ -55,7 +56,7 @@ pub struct Service {
     pub addr: SocketAddr,
     pub adapter: String,
     shutdown: tokio::sync::watch::Sender<bool>,
-    server: tokio::task::JoinHandle<std::io::Result<()>>,
+    server: tokio::task::JoinHandle<()>,
     render_tx: mpsc::Sender<render_loop::Command>,
     render_thread: std::thread::JoinHandle<()>,
     sessions: Arc<sessions::SessionRegistry>,
@@ -66,6 +67,7 @@ impl Service {
     /// `log` receives progress lines meant for people.
     pub async fn start(args: &ServeArgs, log: &(dyn Fn(&str) + Sync)) -> Result<Self, ServeError> {
         let limits = args.limits.limits()?;
+        let connections = args.limits.connections();
         let tokens = args.tokens()?;
         let backend = args.backend;
         let ctx = tokio::task::spawn_blocking(move || GpuContext::new(backend))
@@ -162,14 +164,7 @@ impl Service {
             ));
         }
         let app = http::router(state);
-        let mut stop = shutdown_rx;
-        let server = tokio::spawn(async move {
-            axum::serve(listener, app)
-                .with_graceful_shutdown(async move {
-                    let _ = stop.wait_for(|s| *s).await;
-                })
-                .await
-        });
+        let server = tokio::spawn(listen::serve(listener, app, connections, shutdown_rx));
         log(&format!("listening on http://{addr}"));
         Ok(Self {
             addr,
@@ -197,9 +192,7 @@ impl Service {
             .await
             .map_err(|e| ServeError::Task(e.to_string()))?
             .map_err(|_| ServeError::Task("the render loop panicked".into()))?;
-        served
-            .map_err(|e| ServeError::Task(e.to_string()))?
-            .map_err(|e| ServeError::Task(e.to_string()))
+        served.map_err(|e| ServeError::Task(e.to_string()))
     }
 }
 

@@ -820,13 +820,7 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         ("invalid_field", Some("extra")),
     ];
     for (kind, field) in expected {
-        let error = loop {
-            match stream.next_event().await {
-                ServerEvent::Error { error } => break error,
-                ServerEvent::Hello { .. } | ServerEvent::Updated { .. } => {}
-                other => panic!("unexpected event {other:?}"),
-            }
-        };
+        let error = stream.next_error().await;
         assert_eq!(error.error, kind, "{error:?}");
         assert_eq!(error.field.as_deref(), field, "{error:?}");
     }

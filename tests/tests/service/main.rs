@@ -2,5 +2,6 @@
 //! over HTTP and WebSocket, and the browser viewer driven in headless Chromium.
 
 mod api;
+mod hardening;
 mod streaming;
 mod viewer;

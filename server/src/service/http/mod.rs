@@ -33,6 +33,14 @@ use utoipa::OpenApi;
 /// How long a WebSocket ticket stays valid.
 pub const TICKET_TTL: Duration = Duration::from_secs(60);
 
+/// Longest request URI (path and query); beyond, 414. Every path and query of the API is far
+/// shorter; a long one only costs parsing and echoing.
+pub const MAX_URI_BYTES: usize = 8 << 10;
+/// Most request headers; beyond, 431.
+pub const MAX_HEADERS: usize = 100;
+/// Longest name or procedural spec a scene keeps (every `GET /v1/scenes` returns them all).
+pub const MAX_NAME_BYTES: u32 = 256;
+
 /// A WebSocket ticket: opens one session's stream once, for the token that asked for it.
 struct Ticket {
     session: String,
@@ -222,6 +230,122 @@ fn caller(state: &AppState, request: &Request) -> Result<Caller, ApiError> {
     ))
 }
 
+/// Refuses a request head over this server's limits with 414/431 and the JSON error body (hyper
+/// itself answers only heads over twice as large, bare, as it cannot parse them; see
+/// [`crate::service::listen::ConnectionLimits::max_header_bytes`]).
+pub async fn check_head(
+    State(state): State<Arc<AppState>>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let uri = request.uri().to_string().len();
+    if uri > MAX_URI_BYTES {
+        return ApiError::new(
+            StatusCode::URI_TOO_LONG,
+            "uri_too_long",
+            format!("the URI has {uri} bytes; this server's limit is {MAX_URI_BYTES}"),
+        )
+        .into_response();
+    }
+    let headers = request.headers();
+    // As sent: "name: value\r\n" per header, after the request line.
+    let head = uri
+        + request.method().as_str().len()
+        + headers
+            .iter()
+            .map(|(name, value)| name.as_str().len() + value.len() + 4)
+            .sum::<usize>();
+    let limit = state.limits.max_header_bytes;
+    if headers.len() > MAX_HEADERS || head as u64 > limit {
+        return ApiError::new(
+            StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+            "headers_too_large",
+            format!(
+                "the request head has {} headers, {head} bytes; this server's limits are \
+                 {MAX_HEADERS} headers, {limit} bytes",
+                headers.len()
+            ),
+        )
+        .into_response();
+    }
+    next.run(request).await
+}
+
+/// The most bytes a request's body may have, and the option that sets it: scene uploads (a
+/// `.glb` or multipart body to `POST /v1/scenes`, a multipart one-shot render) take
+/// `--max-upload-bytes`, every other body (JSON) `--max-message-bytes`.
+pub fn body_limit(limits: &Limits, request: &Request) -> (u64, &'static str) {
+    let path = request.uri().path();
+    let upload = request.method() == axum::http::Method::POST
+        && ((path == "/v1/scenes" && !scenes::is_json(request))
+            || (path == "/v1/render" && scenes::is_multipart(request)));
+    if upload {
+        (limits.max_upload_bytes, "--max-upload-bytes")
+    } else {
+        (limits.max_message_bytes, "--max-message-bytes")
+    }
+}
+
+/// 413 for a body over `limit` bytes.
+pub fn too_large(limit: u64, flag: &str) -> ApiError {
+    ApiError::new(
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "too_large",
+        format!("the body exceeds this server's limit of {limit} bytes ({flag})"),
+    )
+}
+
+/// Refuses a body whose declared length is over its limit before reading any of it, so an
+/// `Expect: 100-continue` client gets 413 at once instead of `100 Continue` (hyper sends that
+/// only when a handler starts reading the body).
+async fn check_declared_length(
+    State(state): State<Arc<AppState>>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let declared = request
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    let (limit, flag) = body_limit(&state.limits, &request);
+    match declared {
+        Some(length) if length > limit => too_large(limit, flag).into_response(),
+        _ => next.run(request).await,
+    }
+}
+
+/// Gives every error the JSON body `{"error", "field", "message"}`, also those axum and its
+/// extractors answer with plain text (a path that is not UTF-8, a rejected extractor).
+async fn json_errors(request: Request, next: Next) -> Response {
+    let response = next.run(request).await;
+    let status = response.status();
+    let is_json = response
+        .headers()
+        .get(header::CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return response;
+    }
+    // What axum says is one short line; more than a few KiB is not one of its rejections.
+    let text = axum::body::to_bytes(response.into_body(), 4096)
+        .await
+        .map(|b| String::from_utf8_lossy(&b).trim().to_string())
+        .unwrap_or_default();
+    let reason = status.canonical_reason().unwrap_or("error");
+    let kind = match status {
+        StatusCode::PAYLOAD_TOO_LARGE => "too_large".to_string(),
+        StatusCode::INTERNAL_SERVER_ERROR => "internal".to_string(),
+        _ => reason.to_ascii_lowercase().replace([' ', '-'], "_"),
+    };
+    let message = if text.is_empty() {
+        reason.to_string()
+    } else {
+        text
+    };
+    ApiError::new(status, &kind, message).into_response()
+}
+
 async fn not_found() -> ApiError {
     ApiError::new(
         StatusCode::NOT_FOUND,
@@ -338,6 +462,15 @@ pub fn router(state: Arc<AppState>) -> Router {
         .merge(api)
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
+        .layer(axum::middleware::from_fn_with_state(
+            Arc::clone(&state),
+            check_declared_length,
+        ))
+        .layer(axum::middleware::from_fn_with_state(
+            Arc::clone(&state),
+            check_head,
+        ))
+        .layer(axum::middleware::from_fn(json_errors))
         .layer(tower_http::trace::TraceLayer::new_for_http())
         .with_state(state)
 }

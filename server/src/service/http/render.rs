@@ -27,7 +27,7 @@ async fn read_request(
     request: Request,
 ) -> Result<(RenderRequest, Option<Arc<SceneEntry>>), ApiError> {
     if !is_multipart(&request) {
-        let body = read_body(request, state).await?;
+        let body = read_body(request, &state.limits).await?;
         let req = if body.iter().all(u8::is_ascii_whitespace) {
             RenderRequest::default()
         } else {
@@ -42,6 +42,17 @@ async fn read_request(
     let mut files = Vec::new();
     for (part, file) in read_multipart(multipart).await? {
         if part == "request" {
+            let limit = state.limits.max_message_bytes;
+            if file.bytes.len() as u64 > limit {
+                return Err(ApiError::new(
+                    axum::http::StatusCode::PAYLOAD_TOO_LARGE,
+                    "too_large",
+                    format!(
+                        "the 'request' part exceeds this server's limit of {limit} bytes for \
+                         JSON (--max-message-bytes)"
+                    ),
+                ));
+            }
             req = Some(parse_json::<RenderRequest>(&file.bytes)?);
         } else {
             files.push(file);

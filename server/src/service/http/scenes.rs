@@ -4,13 +4,14 @@ use super::{AppState, Caller};
 use crate::scene::gltf_loader::{load_gltf_slice, LoadLimits};
 use crate::scene::procedural::Spec;
 use crate::scene::Scene;
-use crate::service::error::{parse_json, ApiError};
+use crate::service::error::{echo, parse_json, ApiError};
 use crate::service::scenes::SceneEntry;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
 use axum::http::{header, StatusCode};
 use axum::{Extension, Json};
-use lightcast_protocol::{ProceduralScene, SceneInfo};
+use http_body_util::BodyExt;
+use lightcast_protocol::{Limits, ProceduralScene, SceneInfo};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -43,9 +44,32 @@ fn multipart_error(e: axum::extract::multipart::MultipartError) -> ApiError {
     }
 }
 
-/// Reads the whole body, answering an oversized one with 413.
-pub async fn read_body(request: Request, state: &Arc<AppState>) -> Result<Bytes, ApiError> {
-    crate::service::error::body(Bytes::from_request(request, state).await)
+/// Reads the whole body, answering one over its [`super::body_limit`] with 413 (a JSON body
+/// to an endpoint that also takes uploads is held to the JSON limit, not the upload's).
+pub async fn read_body(request: Request, limits: &Limits) -> Result<Bytes, ApiError> {
+    let (limit, flag) = super::body_limit(limits, &request);
+    let limited = http_body_util::Limited::new(
+        request.into_body(),
+        usize::try_from(limit).unwrap_or(usize::MAX),
+    );
+    match limited.collect().await {
+        Ok(collected) => Ok(collected.to_bytes()),
+        Err(e) if e.is::<http_body_util::LengthLimitError>() => Err(super::too_large(limit, flag)),
+        Err(e) => Err(ApiError::bad_request("unreadable_body", e.to_string())),
+    }
+}
+
+/// Refuses a name or spec the server would keep (and list) longer than
+/// [`super::MAX_NAME_BYTES`].
+pub fn bounded_name(field: &str, value: &str) -> Result<(), ApiError> {
+    let max = super::MAX_NAME_BYTES as usize;
+    if value.len() > max {
+        return Err(ApiError::field(
+            field,
+            format!("{} bytes exceed this server's limit of {max}", value.len()),
+        ));
+    }
+    Ok(())
 }
 
 fn content_type_is(request: &Request, mime: &str) -> bool {
@@ -60,7 +84,7 @@ pub fn is_multipart(request: &Request) -> bool {
     content_type_is(request, "multipart/form-data")
 }
 
-fn is_json(request: &Request) -> bool {
+pub fn is_json(request: &Request) -> bool {
     content_type_is(request, "application/json")
 }
 
@@ -162,6 +186,7 @@ pub fn split_scene_files(
     let mut mains = mains.into_iter();
     match (mains.next(), mains.next()) {
         (Some(main), None) => {
+            bounded_name("files", &main.name)?;
             if let Some(bad) = resources.iter().find(|r| !safe_file_name(&r.name)) {
                 return Err(ApiError::field(
                     "files",
@@ -217,6 +242,9 @@ pub async fn create(
     request: Request,
 ) -> Result<(StatusCode, Json<SceneInfo>), ApiError> {
     let Query(query) = query.map_err(|e| ApiError::bad_request("invalid_query", e.body_text()))?;
+    if let Some(name) = &query.name {
+        bounded_name("name", name)?;
+    }
     let started = Instant::now();
     let max_triangles = state.limits.max_triangles;
     let (mut scene, source) = if is_multipart(&request) {
@@ -234,8 +262,12 @@ pub async fn create(
             "upload".to_string(),
         )
     } else if is_json(&request) {
-        let body = read_body(request, &state).await?;
+        let body = read_body(request, &state.limits).await?;
         let spec: ProceduralScene = parse_json(&body)?;
+        bounded_name("procedural", &spec.procedural)?;
+        if let Some(name) = &spec.name {
+            bounded_name("name", name)?;
+        }
         let parsed = Spec::parse(&spec.procedural)
             .map_err(|e| ApiError::field("procedural", e.to_string()))?;
         let triangles = parsed.triangle_count();
@@ -254,7 +286,7 @@ pub async fn create(
         }
         (scene, format!("procedural:{}", spec.procedural))
     } else {
-        let body = read_body(request, &state).await?;
+        let body = read_body(request, &state.limits).await?;
         if body.is_empty() {
             return Err(ApiError::bad_request(
                 "empty_body",
@@ -315,5 +347,5 @@ pub fn scene(state: &AppState, id: &str) -> Result<Arc<SceneEntry>, ApiError> {
     state
         .scenes
         .get(id)
-        .map_err(|_| ApiError::field("render.scene", format!("no scene with id '{id}'")))
+        .map_err(|_| ApiError::field("render.scene", format!("no scene with id '{}'", echo(id))))
 }

@@ -1,7 +1,7 @@
 //! `/v1/sessions`: create, read, steer and delete streaming sessions.
 
 use super::{AppState, Caller, TICKET_TTL};
-use crate::service::error::{from_value, parse_json, ApiError};
+use crate::service::error::{echo, from_value, parse_json, ApiError};
 use crate::service::params::resolve_session;
 use crate::service::sessions::Session;
 use axum::body::Bytes;
@@ -53,7 +53,7 @@ pub fn apply_patch(
     let entry = state.scenes.get(&params.render.scene).map_err(|_| {
         ApiError::field(
             "render.scene",
-            format!("no scene with id '{}'", params.render.scene),
+            format!("no scene with id '{}'", echo(&params.render.scene)),
         )
     })?;
     let resolved = resolve_session(&params, &entry, &state.limits, state.max_texture)?;

@@ -3,7 +3,7 @@
 
 use super::sessions::apply_patch;
 use super::{AppState, Caller};
-use crate::service::error::{from_value, parse_json, ApiError};
+use crate::service::error::{from_value, parse_object, ApiError};
 use crate::service::sessions::{unix_us, Session};
 use axum::extract::ws::rejection::WebSocketUpgradeRejection;
 use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
@@ -226,7 +226,7 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
 
 /// Handles one control message; returns the event to answer with, if any.
 fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEvent> {
-    let raw: serde_json::Value = match parse_json(text) {
+    let raw: serde_json::Value = match parse_object(text, "a control message") {
         Ok(v) => v,
         Err(e) => return Some(error_event(e)),
     };
@@ -234,6 +234,16 @@ fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEven
         Ok(m) => m,
         Err(e) => return Some(error_event(e)),
     };
+    // serde lets a message without fields of its own (`pause`) carry any others; refuse those
+    // as every other message's are, so `{"type": "pause", "session": …}` cannot look as if it
+    // acted on another session.
+    if let (Some(sent), Ok(serde_json::Value::Object(known))) =
+        (raw.as_object(), serde_json::to_value(&message))
+    {
+        if let Some(extra) = sent.keys().find(|k| !known.contains_key(*k)) {
+            return Some(error_event(ApiError::field(extra.clone(), "unknown field")));
+        }
+    }
     // Camera and light go through the session's strict parameter path as they were sent, so
     // a misspelt field inside them is named (`render.camera.zoom`) rather than dropped.
     let result = match message {

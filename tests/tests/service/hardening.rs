@@ -209,6 +209,24 @@ async fn the_connection_total_is_capped_and_oversized_bodies_are_refused_before_
         assert_error(status, &body, 413, "too_large", path);
     }
 
+    // A body refused unread closes its connection, and the answer says so, so a client does not
+    // send its next request on a connection about to close.
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes"))
+        .header("content-type", "model/gltf-binary")
+        .body(vec![0u8; 300_000])
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(resp.status(), 413);
+    assert_eq!(
+        resp.headers()
+            .get("connection")
+            .and_then(|v| v.to_str().ok()),
+        Some("close")
+    );
+
     // Four idle connections from one address, two from another: the total is reached.
     let mut held = Vec::new();
     for _ in 0..4 {

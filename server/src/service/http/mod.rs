@@ -316,9 +316,22 @@ async fn check_declared_length(
 }
 
 /// Gives every error the JSON body `{"error", "field", "message"}`, also those axum and its
-/// extractors answer with plain text (a path that is not UTF-8, a rejected extractor).
+/// extractors answer with plain text (a path that is not UTF-8, a rejected extractor), and
+/// closes the connection after a 413.
 async fn json_errors(request: Request, next: Next) -> Response {
-    let response = next.run(request).await;
+    let mut response = as_json_error(next.run(request).await).await;
+    if response.status() == StatusCode::PAYLOAD_TOO_LARGE {
+        // The rest of the body is never read, so hyper closes the connection after answering;
+        // saying so keeps the client from sending its next request on it (which would fail).
+        response.headers_mut().insert(
+            header::CONNECTION,
+            header::HeaderValue::from_static("close"),
+        );
+    }
+    response
+}
+
+async fn as_json_error(response: Response) -> Response {
     let status = response.status();
     let is_json = response
         .headers()

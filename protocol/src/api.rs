@@ -660,6 +660,45 @@ pub struct Limits {
     /// Longest name or procedural spec a scene may have, in bytes; beyond, 400.
     #[serde(default)]
     pub max_name_bytes: u32,
+    /// Largest texture side kept; larger images of an upload are downscaled to it.
+    #[serde(default)]
+    pub max_texture_size: u32,
+    /// Decoded texture bytes (RGBA8, after downscaling) of one scene (413 beyond).
+    #[serde(default)]
+    pub max_scene_texture_bytes: u64,
+    /// Decoded texture bytes over every scene held (413 beyond).
+    #[serde(default)]
+    pub max_total_texture_bytes: u64,
+    /// Triangles over every scene held, degenerate ones not counted (413 beyond).
+    #[serde(default)]
+    pub max_total_triangles: u64,
+    /// Light caches of one parameter set, estimated from `cache_distance` and the scene's
+    /// surface area before they are built (400 naming `render.gi.cache_distance` beyond).
+    #[serde(default)]
+    pub max_caches_per_set: u64,
+    /// Light caches over every parameter set of every scene (400 beyond).
+    #[serde(default)]
+    pub max_total_caches: u64,
+    /// Scene uploads (`.glb`/multipart bodies of `/v1/scenes` and `/v1/render`) received or
+    /// loading at once (429 beyond).
+    #[serde(default)]
+    pub max_uploads: u32,
+    /// One-shot renders queued or running at once (429 beyond).
+    #[serde(default)]
+    pub max_queued_renders: u32,
+    /// Per-token quotas (auth on only; `null` without auth): sessions one token holds (429
+    /// `session_quota` beyond).
+    #[serde(default)]
+    pub token_max_sessions: Option<u32>,
+    /// Scenes one token has uploaded and not deleted (429 `scene_quota`).
+    #[serde(default)]
+    pub token_max_scenes: Option<u32>,
+    /// Scene uploads of one token in flight (429 `upload_quota`).
+    #[serde(default)]
+    pub token_max_uploads: Option<u32>,
+    /// One-shot renders of one token queued or running (429 `render_quota`).
+    #[serde(default)]
+    pub token_max_renders: Option<u32>,
 }
 
 /// `GET /v1/server`: who is serving and under which limits.

@@ -109,6 +109,15 @@ impl TestServer {
         self.http.get(self.url(path)).send().await.expect("request")
     }
 
+    /// DELETE without a token; panics only when the request cannot be made.
+    pub async fn delete(&self, path: &str) -> reqwest::Response {
+        self.http
+            .delete(self.url(path))
+            .send()
+            .await
+            .expect("request")
+    }
+
     /// GET a JSON document; panics unless 200.
     pub async fn get_json(&self, path: &str) -> Value {
         let resp = self.get(path).await;
@@ -292,4 +301,23 @@ pub fn glb_to_gltf(glb: &[u8], bin_name: &str) -> (Vec<u8>, Vec<u8>) {
     let mut doc: Value = serde_json::from_slice(json).expect("glTF JSON");
     doc["buffers"][0]["uri"] = Value::String(bin_name.to_string());
     (serde_json::to_vec(&doc).expect("JSON"), bin)
+}
+
+/// A `.glb` of the glTF JSON `doc` and the binary chunk `bin` (both padded to 4 bytes).
+pub fn glb(doc: &Value, bin: &[u8]) -> Vec<u8> {
+    let mut json = serde_json::to_vec(doc).expect("serialise");
+    json.resize(json.len().next_multiple_of(4), b' ');
+    let mut bin = bin.to_vec();
+    bin.resize(bin.len().next_multiple_of(4), 0);
+    let chunk =
+        |kind: &[u8; 4], data: &[u8]| [&(data.len() as u32).to_le_bytes()[..], kind, data].concat();
+    let body = [chunk(b"JSON", &json), chunk(b"BIN\0", &bin)].concat();
+    let length = 12 + body.len() as u32;
+    [
+        &b"glTF"[..],
+        &2u32.to_le_bytes(),
+        &length.to_le_bytes(),
+        &body,
+    ]
+    .concat()
 }

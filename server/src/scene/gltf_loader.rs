@@ -38,8 +38,11 @@ const SUPPORTED_EXTENSIONS: &[&str] = &["KHR_lights_punctual", "KHR_materials_em
 pub const MAX_TEXTURE_SIZE: u32 = 8192;
 
 /// Accessors without a buffer view are zero-filled, so their size is not bounded by any data in
-/// the file; without a cap on their total a few bytes of JSON could ask for terabytes.
-const MAX_UNBACKED_ELEMENTS: u64 = 1 << 24;
+/// the file; without a cap on their total a few bytes of JSON could ask for terabytes. Only
+/// their sparse substitutions can make geometry (zeros make zero-area triangles, which are
+/// dropped), so real files need few: the cap bounds the loader's transient memory to tens of
+/// MiB (positions, normals, texture coordinates and vertices of each element).
+const MAX_UNBACKED_ELEMENTS: u64 = 1 << 20;
 
 /// What one load may build. A few bytes of JSON can reuse one accessor in thousands of
 /// primitives, or one small but highly compressible image in many textures, so sizes are
@@ -49,8 +52,10 @@ pub struct LoadLimits {
     pub max_triangles: u64,
     /// Vertices over all primitives.
     pub max_vertices: u64,
-    /// Decoded RGBA8 bytes over all textures.
+    /// Decoded RGBA8 bytes over all textures, after downscaling to `max_texture_size`.
     pub max_texture_bytes: u64,
+    /// Largest texture side kept; larger images are downscaled to it after decoding.
+    pub max_texture_size: u32,
 }
 
 impl LoadLimits {
@@ -59,6 +64,7 @@ impl LoadLimits {
         max_triangles: u64::MAX,
         max_vertices: u64::MAX,
         max_texture_bytes: u64::MAX,
+        max_texture_size: MAX_TEXTURE_SIZE,
     };
 
     /// Decoded texture memory an upload may take: four textures at the largest size.
@@ -71,6 +77,7 @@ impl LoadLimits {
             max_triangles,
             max_vertices: max_triangles.saturating_mul(3),
             max_texture_bytes: Self::UPLOAD_TEXTURE_BYTES,
+            max_texture_size: MAX_TEXTURE_SIZE,
         }
     }
 }
@@ -105,6 +112,23 @@ pub enum LoadError {
     },
     #[error("{part}: {message}")]
     Invalid { part: String, message: String },
+    /// Decoding an image would take the scene past `LoadLimits::max_texture_bytes`; found
+    /// from the image's declared dimensions, before any pixel is decoded.
+    #[error(
+        "{part}: decoding this {width}×{height} image (kept at {kept_width}×{kept_height}) takes \
+         {} MiB, more than the {} MiB left of the scene's texture memory limit",
+        needed.div_ceil(1 << 20),
+        available >> 20
+    )]
+    TextureBudget {
+        part: String,
+        width: u32,
+        height: u32,
+        kept_width: u32,
+        kept_height: u32,
+        needed: u64,
+        available: u64,
+    },
     #[error("assembled scene is invalid: {0}")]
     Scene(SceneError),
 }
@@ -587,6 +611,33 @@ fn triangle_list(mode: Mode, indices: &[u32]) -> Result<Vec<[u32; 3]>, String> {
 }
 
 /// Area-weighted vertex normals (the cross product's length is twice the triangle area).
+/// Whether a triangle covers any area (distinct corners that are not collinear).
+fn has_area(positions: &[Vec3], t: &[u32; 3]) -> bool {
+    let [a, b, c] = t.map(|i| positions[i as usize].as_dvec3());
+    (b - a).cross(c - a).length_squared() > 0.0
+}
+
+/// The vertices of `count` that `triangles` use, in their order (a file without unused
+/// vertices keeps its numbering), and the triangles renumbered to index that list.
+fn compact(count: usize, triangles: &[[u32; 3]]) -> (Vec<u32>, Vec<[u32; 3]>) {
+    let mut new_index = vec![u32::MAX; count];
+    for &i in triangles.iter().flatten() {
+        new_index[i as usize] = 0;
+    }
+    let mut kept = Vec::new();
+    for (old, slot) in new_index.iter_mut().enumerate() {
+        if *slot == 0 {
+            *slot = kept.len() as u32;
+            kept.push(old as u32);
+        }
+    }
+    let renumbered = triangles
+        .iter()
+        .map(|t| t.map(|i| new_index[i as usize]))
+        .collect();
+    (kept, renumbered)
+}
+
 fn generated_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
     let mut sums = vec![Vec3::ZERO; positions.len()];
     for triangle in triangles {
@@ -847,6 +898,10 @@ impl Loader<'_> {
             .iter()
             .map(|&p| world.transform_point3(p))
             .collect();
+        // Zero-area triangles light nothing and cover no pixel, but cost memory in every
+        // buffer and light-cache step: a few hundred bytes of zero-filled accessors would
+        // otherwise hold millions of them. Only the vertices the rest use are kept.
+        triangles.retain(|t| has_area(&positions, t));
         let normals: Vec<Vec3> = match normals {
             Some(normals) => {
                 let normal_matrix = linear.inverse().transpose();
@@ -857,26 +912,23 @@ impl Loader<'_> {
             }
             None => generated_normals(&positions, &triangles),
         };
+        let (kept, triangles) = compact(count, &triangles);
 
         let material = self.material_index(primitive.material.map(|m| m.value()))?;
         let base = self.vertices.len();
-        if u32::try_from(base + count).is_err() {
+        if u32::try_from(base + kept.len()).is_err() {
             return Err(invalid(part, "scene would exceed 2^32 vertices"));
         }
         let base = base as u32;
-        self.vertices
-            .extend(
-                positions
-                    .iter()
-                    .zip(&normals)
-                    .zip(uvs.chunks_exact(2))
-                    .map(|((p, n), uv)| Vertex {
-                        position: p.to_array(),
-                        normal: n.to_array(),
-                        uv: <[f32; 2]>::try_from(uv).unwrap_or_default(),
-                        material,
-                    }),
-            );
+        self.vertices.extend(kept.iter().map(|&i| {
+            let i = i as usize;
+            Vertex {
+                position: positions[i].to_array(),
+                normal: normals[i].to_array(),
+                uv: [uvs[2 * i], uvs[2 * i + 1]],
+                material,
+            }
+        }));
         self.indices
             .extend(triangles.iter().flatten().map(|&i| base + i));
         Ok(())
@@ -1242,7 +1294,7 @@ impl Loader<'_> {
             .or_else(|| image.uri.clone().filter(|u| !u.starts_with("data:")))
             .unwrap_or_else(|| format!("image {image_index}"));
         let remaining = self.limits.max_texture_bytes - self.texture_bytes;
-        let decoded = decode_image(&bytes, name, &part, remaining)?;
+        let decoded = decode_image(&bytes, name, &part, remaining, self.limits.max_texture_size)?;
         self.texture_bytes += decoded.rgba8.len() as u64;
         let mapped = self.textures.len();
         self.textures.push(decoded);
@@ -1380,13 +1432,28 @@ fn check_count(actual: usize, expected: usize, part: &str, usage: &str) -> Resul
     }
 }
 
-/// Decodes a PNG or JPEG to RGBA8, keeping the sRGB-encoded bytes as they are, if its pixels
-/// fit in `max_bytes`.
+/// The size an image of `width`×`height` is kept at: within `max_side` on both axes, the
+/// aspect ratio kept (each side at least 1).
+pub fn kept_size(width: u32, height: u32, max_side: u32) -> (u32, u32) {
+    let longest = width.max(height);
+    if longest <= max_side {
+        return (width, height);
+    }
+    let scale = |side: u32| {
+        let scaled = u64::from(side) * u64::from(max_side) / u64::from(longest);
+        (scaled as u32).max(1)
+    };
+    (scale(width), scale(height))
+}
+
+/// Decodes a PNG or JPEG to RGBA8, keeping the sRGB-encoded bytes as they are, downscaled to
+/// at most `max_side` texels a side, if its kept pixels fit in `max_bytes`.
 fn decode_image(
     bytes: &[u8],
     name: String,
     part: &str,
     max_bytes: u64,
+    max_side: u32,
 ) -> Result<Texture, LoadError> {
     let decode_error = |error| LoadError::ImageDecode {
         part: part.to_owned(),
@@ -1413,21 +1480,32 @@ fn decode_image(
             ),
         ));
     }
-    let decoded_bytes = 4 * u64::from(width) * u64::from(height);
-    if decoded_bytes > max_bytes {
-        return Err(invalid(
-            part,
-            format!(
-                "decoding this {width}×{height} image takes {} MiB, more than the {} MiB \
-                 left of the scene's texture memory limit",
-                decoded_bytes.div_ceil(1 << 20),
-                max_bytes >> 20
-            ),
-        ));
+    let (kept_width, kept_height) = kept_size(width, height, max_side);
+    let kept_bytes = 4 * u64::from(kept_width) * u64::from(kept_height);
+    if kept_bytes > max_bytes {
+        return Err(LoadError::TextureBudget {
+            part: part.to_owned(),
+            width,
+            height,
+            kept_width,
+            kept_height,
+            needed: kept_bytes,
+            available: max_bytes,
+        });
     }
-    let rgba = image::load_from_memory_with_format(bytes, format)
+    let mut rgba = image::load_from_memory_with_format(bytes, format)
         .map_err(decode_error)?
         .into_rgba8();
+    if (kept_width, kept_height) != (width, height) {
+        // Filtered in the sRGB encoding the bytes are in: a slight darkening of high-contrast
+        // detail, invisible at the frame sizes that made the full size unnecessary.
+        rgba = image::imageops::resize(
+            &rgba,
+            kept_width,
+            kept_height,
+            image::imageops::FilterType::Triangle,
+        );
+    }
     Ok(Texture {
         name,
         width: rgba.width(),
@@ -2211,25 +2289,34 @@ mod tests {
         );
     }
 
-    /// A GLB whose one primitive reuses a zero-filled POSITION accessor (3 vertices) and a
-    /// zero-filled index accessor (`corners` indices), `primitives` times. glTF only allows
-    /// an accessor without a buffer view when it is sparse, so each has one substitution of 0.
+    /// A GLB whose one primitive reuses a POSITION accessor (one real triangle) and a
+    /// zero-filled index accessor (`corners` indices), `primitives` times. glTF only allows an
+    /// accessor without a buffer view when it is sparse: the substitutions make the first 100
+    /// triangles (fewer when `corners` is smaller) the real one; the rest are [0, 0, 0], of zero
+    /// area.
     fn reused_unbacked_accessors(corners: u64, primitives: usize) -> Vec<u8> {
-        let mut bin = Bin {
-            bytes: vec![0; 16],
-            views: vec![json!({"buffer": 0, "byteOffset": 0, "byteLength": 16})],
-            ..Bin::default()
+        let mut bin = Bin::default();
+        let positions = bin.vec3(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+        let real = (corners / 3).min(100) as u32;
+        let targets: Vec<u32> = (0..real).flat_map(|t| [3 * t + 1, 3 * t + 2]).collect();
+        let values: Vec<u32> = (0..real).flat_map(|_| [1, 2]).collect();
+        let u32_view = |bin: &mut Bin, data: &[u32]| {
+            let view = bin.views.len();
+            let bytes: Vec<u8> = data.iter().flat_map(|v| v.to_le_bytes()).collect();
+            bin.push(&bytes, json!({}));
+            bin.accessors.pop();
+            view
         };
-        let sparse = json!({
-            "count": 1,
-            "indices": {"bufferView": 0, "componentType": 5125},
-            "values": {"bufferView": 0},
-        });
-        bin.accessors = vec![
-            json!({"componentType": 5126, "type": "VEC3", "count": 3, "sparse": sparse}),
-            json!({"componentType": 5125, "type": "SCALAR", "count": corners, "sparse": sparse}),
-        ];
-        let primitive = json!({"attributes": {"POSITION": 0}, "indices": 1});
+        let (targets, values) = (u32_view(&mut bin, &targets), u32_view(&mut bin, &values));
+        bin.accessors.push(json!({
+            "componentType": 5125, "type": "SCALAR", "count": corners,
+            "sparse": {
+                "count": 2 * real,
+                "indices": {"bufferView": targets, "componentType": 5125},
+                "values": {"bufferView": values},
+            },
+        }));
+        let primitive = json!({"attributes": {"POSITION": positions}, "indices": 1});
         let doc = bin.document(None, single_mesh(json!(vec![primitive; primitives])));
         glb(&doc, &bin.bytes)
     }
@@ -2241,16 +2328,16 @@ mod tests {
         let scene = load_gltf_slice(&small, None, "t", limits).expect("300 triangles fit");
         assert_eq!(scene.triangle_count(), 300);
 
-        // ~50 KB asking for a billion triangles through one reused accessor: refused at the
+        // ~50 KB asking for 200 million triangles through one reused accessor: refused at the
         // primitive that would cross the limit, before its data is read.
-        let bomb = reused_unbacked_accessors(3_000_000, 1_000);
+        let bomb = reused_unbacked_accessors(600_000, 1_000);
         assert!(bomb.len() < 64 << 10);
-        let err = load_gltf_slice(&bomb, None, "t", LoadLimits::upload(1_000_000))
+        let err = load_gltf_slice(&bomb, None, "t", LoadLimits::upload(150_000))
             .expect_err("bomb")
             .to_string();
         assert!(
-            err.contains("mesh 0 ('quad') primitive 1:")
-                && err.contains("at most 1000000 are allowed"),
+            err.contains("mesh 0 ('quad') primitive 0:")
+                && err.contains("at most 150000 are allowed"),
             "{err}"
         );
         let err = load_gltf_slice(&small, None, "t", LoadLimits::upload(250))
@@ -2276,8 +2363,8 @@ mod tests {
     #[test]
     fn caps_zero_filled_elements_over_the_whole_file() {
         // One such accessor is allowed, but its reuse adds up.
-        // Whole triangles, and twice them plus the two 3-vertex POSITION reads cross the cap.
-        let corners = (MAX_UNBACKED_ELEMENTS / 2 - 1) / 3 * 3;
+        // Whole triangles, more than half the cap: twice them cross it.
+        let corners = (MAX_UNBACKED_ELEMENTS / 2 / 3 + 1) * 3;
         let once = reused_unbacked_accessors(corners, 1);
         assert!(load_gltf_slice(&once, None, "t", LoadLimits::NONE).is_ok());
         let twice = reused_unbacked_accessors(corners, 2);
@@ -2329,6 +2416,198 @@ mod tests {
             .to_string();
         assert!(
             err.contains("texture 2 (image 2)") && err.contains("texture memory limit"),
+            "{err}"
+        );
+    }
+
+    /// A PNG of its signature, a header declaring `width`×`height` and an empty data chunk:
+    /// its dimensions can be read, but any attempt to decode its pixels fails.
+    fn png_header_only(width: u32, height: u32) -> Vec<u8> {
+        let chunk = |kind: &[u8; 4], data: &[u8]| {
+            let body = [&kind[..], data].concat();
+            let crc = crc32(&body);
+            [
+                &(data.len() as u32).to_be_bytes()[..],
+                &body,
+                &crc.to_be_bytes(),
+            ]
+            .concat()
+        };
+        let header = [
+            &width.to_be_bytes()[..],
+            &height.to_be_bytes(),
+            &[8, 6, 0, 0, 0],
+        ]
+        .concat();
+        [
+            &b"\x89PNG\r\n\x1a\n"[..],
+            &chunk(b"IHDR", &header),
+            &chunk(b"IDAT", &[]),
+            &chunk(b"IEND", &[]),
+        ]
+        .concat()
+    }
+
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+
+    /// A GLB of one textured quad whose base colour is `image` (PNG bytes).
+    fn textured_quad(image: &[u8]) -> Vec<u8> {
+        let mut bin = Bin::default();
+        let mut primitive = quad_primitive(&mut bin, true);
+        primitive["material"] = json!(0);
+        let view = bin.views.len();
+        bin.views
+            .push(json!({"buffer": 0, "byteOffset": bin.bytes.len(), "byteLength": image.len()}));
+        bin.bytes.extend_from_slice(image);
+        let mut fields = single_mesh(json!([primitive]));
+        fields["images"] = json!([{"bufferView": view, "mimeType": "image/png"}]);
+        fields["textures"] = json!([{"source": 0}]);
+        fields["materials"] = json!([{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}]);
+        glb(&bin.document(None, fields), &bin.bytes)
+    }
+
+    #[test]
+    fn refuses_textures_beyond_the_budget_from_their_declared_size_before_decoding() {
+        // 8192² declared in a few bytes: kept at 2048² (16 MiB), more than 8 MiB allowed. The
+        // error is the budget's, not a decode failure: no pixel was decoded.
+        let file = textured_quad(&png_header_only(8192, 8192));
+        assert!(file.len() < 2048);
+        let limits = LoadLimits {
+            max_texture_bytes: 8 << 20,
+            max_texture_size: 2048,
+            ..LoadLimits::NONE
+        };
+        match load_gltf_slice(&file, None, "t", limits) {
+            Err(LoadError::TextureBudget {
+                part,
+                kept_width,
+                kept_height,
+                needed,
+                available,
+                ..
+            }) => {
+                assert_eq!(part, "texture 0 (image 0)");
+                assert_eq!((kept_width, kept_height), (2048, 2048));
+                assert_eq!((needed, available), (16 << 20, 8 << 20));
+            }
+            other => panic!("expected the texture budget's refusal, got {other:?}"),
+        }
+        // Within the budget the same file is decoded, and fails as a truncated image.
+        let roomy = LoadLimits {
+            max_texture_bytes: 16 << 20,
+            ..limits
+        };
+        assert!(matches!(
+            load_gltf_slice(&file, None, "t", roomy),
+            Err(LoadError::ImageDecode { .. })
+        ));
+    }
+
+    #[test]
+    fn downscales_textures_beyond_the_largest_kept_side() {
+        // 64×32: left half red, right half blue; kept at 16×8 it keeps both halves.
+        let pixels: Vec<u8> = (0..32)
+            .flat_map(|_| {
+                (0..64).flat_map(|x| {
+                    if x < 32 {
+                        [255, 0, 0, 255]
+                    } else {
+                        [0, 0, 255, 255]
+                    }
+                })
+            })
+            .collect();
+        let file = textured_quad(&png(64, 32, &pixels));
+        let limits = LoadLimits {
+            max_texture_size: 16,
+            ..LoadLimits::NONE
+        };
+        let scene = load_gltf_slice(&file, None, "t", limits).expect("loads");
+        let t = &scene.textures[0];
+        assert_eq!((t.width, t.height), (16, 8));
+        assert_eq!(t.rgba8.len(), 16 * 8 * 4);
+        assert_eq!(&t.rgba8[4 * (16 + 1)..][..4], &[255, 0, 0, 255]);
+        assert_eq!(&t.rgba8[4 * (16 + 14)..][..4], &[0, 0, 255, 255]);
+        let full = load_gltf_slice(&file, None, "t", LoadLimits::NONE).expect("loads");
+        assert_eq!((full.textures[0].width, full.textures[0].height), (64, 32));
+        assert_eq!(kept_size(8192, 1, 2048), (2048, 1));
+        assert_eq!(kept_size(100, 8192, 2048), (25, 2048));
+    }
+
+    #[test]
+    fn drops_zero_area_triangles_and_the_vertices_only_they_use() {
+        // A few hundred bytes: 600,000 zero-filled positions (200,000 triangles) of which a
+        // sparse substitution makes three a real triangle.
+        let mut bin = Bin {
+            bytes: [[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0]]
+                .iter()
+                .flatten()
+                .flat_map(|f| f.to_le_bytes())
+                .chain([1u32, 2].iter().flat_map(|i| i.to_le_bytes()))
+                .collect(),
+            ..Bin::default()
+        };
+        bin.views = vec![
+            json!({"buffer": 0, "byteOffset": 0, "byteLength": 24}),
+            json!({"buffer": 0, "byteOffset": 24, "byteLength": 8}),
+        ];
+        bin.accessors = vec![json!({
+            "componentType": 5126, "type": "VEC3", "count": 600_000,
+            "sparse": {
+                "count": 2,
+                "indices": {"bufferView": 1, "componentType": 5125},
+                "values": {"bufferView": 0},
+            },
+        })];
+        let doc = bin.document(None, single_mesh(json!([{"attributes": {"POSITION": 0}}])));
+        let file = glb(&doc, &bin.bytes);
+        assert!(file.len() < 1024);
+        let scene = load_gltf_slice(&file, None, "t", LoadLimits::upload(1_000_000))
+            .expect("one real triangle");
+        assert_eq!(scene.triangle_count(), 1);
+        assert_eq!(scene.vertices.len(), 3);
+        let corners: Vec<[f32; 3]> = scene.vertices.iter().map(|v| v.position).collect();
+        assert_eq!(corners, [[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]);
+
+        // Nothing but zeros is no scene at all.
+        let mut zeros = doc.clone();
+        zeros["accessors"][0]["sparse"]["count"] = json!(1);
+        let err = load_gltf_slice(&glb(&zeros, &bin.bytes), None, "t", LoadLimits::NONE)
+            .expect_err("no area")
+            .to_string();
+        assert!(err.contains("no triangles"), "{err}");
+    }
+
+    #[test]
+    fn refuses_millions_of_zero_filled_positions_before_allocating_them() {
+        let (mut doc, bin) = quad_document(None);
+        doc["accessors"][0] = json!({
+            "componentType": 5126, "type": "VEC3", "count": 3_000_000,
+            "sparse": {
+                "count": 1,
+                "indices": {"bufferView": 2, "componentType": 5123},
+                "values": {"bufferView": 0},
+            },
+        });
+        let err = load_gltf_slice(&glb(&doc, &bin.bytes), None, "t", LoadLimits::NONE)
+            .expect_err("3 million zero-filled positions")
+            .to_string();
+        assert!(
+            err.contains("POSITION accessor 0: has no buffer view")
+                && err.contains("at most 1048576 are allowed"),
             "{err}"
         );
     }

@@ -1,9 +1,12 @@
 //! `lightcast-server serve` options: where to listen, limits and auth.
 
+use super::budget::fair_share;
+use crate::gi::lightskin::caches::MAX_CACHES;
 use crate::gi::lightskin::{MAX_RSM_SIZE, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};
 use crate::gi::reference::{MAX_BOUNCES, MAX_SAMPLES_PER_CALL};
 use crate::gpu::BackendChoice;
 use crate::renderer::MAX_SHADOW_MAP_SIZE;
+use crate::scene::gltf_loader::MAX_TEXTURE_SIZE;
 use lightcast_protocol::Limits;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -129,6 +132,53 @@ pub struct LimitArgs {
     /// Largest request head (request line and headers) in bytes; beyond, 431.
     #[arg(long, env = "LIGHTCAST_MAX_HEADER_BYTES", default_value_t = 16 << 10)]
     pub max_header_bytes: u64,
+    /// Largest texture side kept: the renderer samples base colour at frame resolution, so
+    /// larger images of an upload are downscaled to this (at most 8192).
+    #[arg(long, env = "LIGHTCAST_MAX_TEXTURE_SIZE", default_value_t = 2048)]
+    pub max_texture_size: u32,
+    /// Decoded texture bytes (RGBA8, after downscaling) one scene may hold, counted from the
+    /// images' declared dimensions before they are decoded.
+    #[arg(long, env = "LIGHTCAST_MAX_SCENE_TEXTURE_BYTES", default_value_t = 256 << 20)]
+    pub max_scene_texture_bytes: u64,
+    /// Decoded texture bytes over every scene held.
+    #[arg(long, env = "LIGHTCAST_MAX_TOTAL_TEXTURE_BYTES", default_value_t = 1 << 30)]
+    pub max_total_texture_bytes: u64,
+    /// Triangles over every scene held (degenerate ones are dropped and not counted).
+    #[arg(
+        long,
+        env = "LIGHTCAST_MAX_TOTAL_TRIANGLES",
+        default_value_t = 20_000_000
+    )]
+    pub max_total_triangles: u64,
+    /// Light caches of one parameter set, estimated from the cache distance and the scene's
+    /// surface area before they are built.
+    #[arg(long, env = "LIGHTCAST_MAX_CACHES_PER_SET", default_value_t = 250_000)]
+    pub max_caches_per_set: u64,
+    /// Light caches over every parameter set of every scene held.
+    #[arg(long, env = "LIGHTCAST_MAX_TOTAL_CACHES", default_value_t = 1_000_000)]
+    pub max_total_caches: u64,
+    /// Scene uploads received or loading at once (each body may take --max-upload-bytes).
+    #[arg(long, env = "LIGHTCAST_MAX_UPLOADS", default_value_t = 4)]
+    pub max_uploads: u32,
+    /// One-shot renders queued or running at once.
+    #[arg(long, env = "LIGHTCAST_MAX_QUEUED_RENDERS", default_value_t = 16)]
+    pub max_queued_renders: u32,
+    /// With auth on: sessions one token may hold (default: its fair share of
+    /// --max-sessions, the limit divided by the number of tokens, rounded up).
+    #[arg(long, env = "LIGHTCAST_TOKEN_MAX_SESSIONS")]
+    pub token_max_sessions: Option<u32>,
+    /// With auth on: scenes one token may have uploaded (default: its fair share of the
+    /// --max-scenes slots besides the default scene).
+    #[arg(long, env = "LIGHTCAST_TOKEN_MAX_SCENES")]
+    pub token_max_scenes: Option<u32>,
+    /// With auth on: scene uploads of one token in flight (default: fair share of
+    /// --max-uploads).
+    #[arg(long, env = "LIGHTCAST_TOKEN_MAX_UPLOADS")]
+    pub token_max_uploads: Option<u32>,
+    /// With auth on: one-shot renders of one token queued or running (default: fair share of
+    /// --max-queued-renders).
+    #[arg(long, env = "LIGHTCAST_TOKEN_MAX_RENDERS")]
+    pub token_max_renders: Option<u32>,
 }
 
 /// Why the options cannot be used.
@@ -144,8 +194,9 @@ pub enum ConfigError {
 }
 
 impl LimitArgs {
-    /// The limits, refusing values beyond what the renderer itself supports.
-    pub fn limits(&self) -> Result<Limits, ConfigError> {
+    /// The limits for a server with `tokens` bearer tokens (0: auth off), refusing values
+    /// beyond what the renderer itself supports.
+    pub fn limits(&self, tokens: usize) -> Result<Limits, ConfigError> {
         let within = |flag: &'static str, v: u64, lo: u64, hi: u64| {
             if (lo..=hi).contains(&v) {
                 Ok(())
@@ -220,7 +271,69 @@ impl LimitArgs {
         )?;
         within("header-timeout-ms", self.header_timeout_ms, 100, 600_000)?;
         within("max-header-bytes", self.max_header_bytes, 1024, 1 << 20)?;
+        within(
+            "max-texture-size",
+            self.max_texture_size.into(),
+            16,
+            MAX_TEXTURE_SIZE.into(),
+        )?;
+        within(
+            "max-scene-texture-bytes",
+            self.max_scene_texture_bytes,
+            0,
+            self.max_total_texture_bytes,
+        )?;
+        within("max-total-triangles", self.max_total_triangles, 1, u64::MAX)?;
+        within("max-caches-per-set", self.max_caches_per_set, 1, MAX_CACHES)?;
+        within(
+            "max-total-caches",
+            self.max_total_caches,
+            self.max_caches_per_set,
+            u64::MAX,
+        )?;
+        within("max-uploads", self.max_uploads.into(), 1, 1024)?;
+        within(
+            "max-queued-renders",
+            self.max_queued_renders.into(),
+            1,
+            4096,
+        )?;
+        // Quotas only mean something when callers are told apart by their token.
+        let quota = |flag: &'static str, given: Option<u32>, global: u32| {
+            if tokens == 0 {
+                return Ok(None);
+            }
+            let quota = given.unwrap_or_else(|| fair_share(global, tokens));
+            within(flag, quota.into(), 1, global.into())?;
+            Ok::<_, ConfigError>(Some(quota))
+        };
+        // The default scene takes one of --max-scenes and belongs to no token.
+        let uploadable_scenes = self.max_scenes.saturating_sub(1).max(1);
         Ok(Limits {
+            token_max_sessions: quota(
+                "token-max-sessions",
+                self.token_max_sessions,
+                self.max_sessions,
+            )?,
+            token_max_scenes: quota("token-max-scenes", self.token_max_scenes, uploadable_scenes)?,
+            token_max_uploads: quota(
+                "token-max-uploads",
+                self.token_max_uploads,
+                self.max_uploads,
+            )?,
+            token_max_renders: quota(
+                "token-max-renders",
+                self.token_max_renders,
+                self.max_queued_renders,
+            )?,
+            max_texture_size: self.max_texture_size,
+            max_scene_texture_bytes: self.max_scene_texture_bytes,
+            max_total_texture_bytes: self.max_total_texture_bytes,
+            max_total_triangles: self.max_total_triangles,
+            max_caches_per_set: self.max_caches_per_set,
+            max_total_caches: self.max_total_caches,
+            max_uploads: self.max_uploads,
+            max_queued_renders: self.max_queued_renders,
             max_width: self.max_width,
             max_height: self.max_height,
             max_rsm_size: self.max_rsm_size,
@@ -292,13 +405,43 @@ impl ServeArgs {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use clap::Parser;
 
     #[derive(clap::Parser)]
     struct Args {
         #[command(flatten)]
         limits: super::LimitArgs,
+    }
+
+    /// The limits of a server started without options (auth off).
+    pub(crate) fn default_limits() -> lightcast_protocol::Limits {
+        Args::parse_from(["test"])
+            .limits
+            .limits(0)
+            .expect("default limits are valid")
+    }
+
+    #[test]
+    fn token_quotas_default_to_a_fair_share_only_with_auth() {
+        let args = Args::parse_from(["test", "--max-sessions", "10", "--max-scenes", "7"]).limits;
+        let off = args.limits(0).expect("valid");
+        assert_eq!(off.token_max_sessions, None);
+        let one = args.limits(1).expect("valid");
+        assert_eq!(one.token_max_sessions, Some(10));
+        let three = args.limits(3).expect("valid");
+        assert_eq!(three.token_max_sessions, Some(4));
+        assert_eq!(three.token_max_scenes, Some(2), "6 uploadable slots / 3");
+        assert_eq!(
+            three.token_max_uploads,
+            Some(2),
+            "4 uploads / 3, rounded up"
+        );
+        let given = Args::parse_from(["test", "--token-max-renders", "3"]).limits;
+        assert_eq!(given.limits(5).expect("valid").token_max_renders, Some(3));
+        let too_many = Args::parse_from(["test", "--token-max-sessions", "65"]).limits;
+        let e = too_many.limits(2).expect_err("beyond the global limit");
+        assert!(e.to_string().contains("--token-max-sessions"), "{e}");
     }
 
     /// Every protocol method has exactly one implementation and one description, whose
@@ -308,7 +451,7 @@ mod tests {
         use lightcast_protocol::GiMethod;
         let limits = Args::parse_from(["test", "--max-spp", "64"])
             .limits
-            .limits()
+            .limits(0)
             .expect("default limits are valid");
         for &m in GiMethod::ALL {
             let serving = crate::gi::REGISTRY

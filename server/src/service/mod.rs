@@ -6,6 +6,7 @@
 //!                                                   ─▶ latest-frame slot ─▶ WebSocket
 //! ```
 
+pub mod budget;
 pub mod config;
 pub mod encode;
 pub mod error;
@@ -66,9 +67,9 @@ impl Service {
     /// Opens the GPU, loads the default scene, starts the render loop and listens.
     /// `log` receives progress lines meant for people.
     pub async fn start(args: &ServeArgs, log: &(dyn Fn(&str) + Sync)) -> Result<Self, ServeError> {
-        let limits = args.limits.limits()?;
         let connections = args.limits.connections();
         let tokens = args.tokens()?;
+        let limits = args.limits.limits(tokens.len())?;
         let backend = args.backend;
         let ctx = tokio::task::spawn_blocking(move || GpuContext::new(backend))
             .await
@@ -89,7 +90,7 @@ impl Service {
                 .unwrap_or_else(CacheStore::default_dir),
         )
         .with_max_bytes(args.cache_max_bytes);
-        let scenes = scenes::SceneRegistry::new(store, limits.max_scenes as usize);
+        let scenes = scenes::SceneRegistry::new(store, &limits);
         let spec = args.default_scene.clone();
         let started = Instant::now();
         let scene = tokio::task::spawn_blocking(move || Scene::open(&spec))
@@ -114,7 +115,7 @@ impl Service {
             .insert(scene, source, Some(DEFAULT_SCENE_ID), load_ms, None)
             .map_err(|e| ServeError::Task(e.body.message))?;
 
-        let sessions = Arc::new(sessions::SessionRegistry::new(limits.max_sessions as usize));
+        let sessions = Arc::new(sessions::SessionRegistry::new(&limits));
         ::metrics::gauge!(metrics::SESSION_CAPACITY).set(f64::from(limits.max_sessions));
         let encoder = Arc::new(encode::EncodePool::new(
             args.encode_threads

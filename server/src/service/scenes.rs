@@ -1,14 +1,15 @@
 //! Scenes the server holds: loaded once, shared by every session, light caches precomputed in
 //! the background (one set per distinct cache parameters in use).
 
+use super::budget::{over_budget, Held, MemoryBudget, Quota, TokenQuotas};
 use super::error::ApiError;
 use super::ids;
 use crate::gi::lightskin::cache_store::CacheStore;
-use crate::gi::lightskin::caches::{CacheParams, CacheSet};
+use crate::gi::lightskin::caches::{min_distance_for, CacheParams, CacheSet};
 use crate::scene::default_light::{default_camera, default_light};
 use crate::scene::Scene;
 use lightcast_protocol::{
-    Bounds, CacheVariant, Camera, Light, PrecomputeState, SceneInfo, DEFAULT_SCENE_ID,
+    Bounds, CacheVariant, Camera, Light, Limits, PrecomputeState, SceneInfo, DEFAULT_SCENE_ID,
 };
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -33,6 +34,9 @@ struct Variant {
     from_store: Option<bool>,
     error: Option<String>,
     caches: Option<Arc<CacheSet>>,
+    /// This set's share of the total light-cache budget: the estimate until it is built,
+    /// then the real count.
+    held: Held,
 }
 
 impl Variant {
@@ -77,6 +81,10 @@ pub struct SceneEntry {
     variants: Mutex<Vec<Variant>>,
     sessions: AtomicU64,
     removed: AtomicBool,
+    budget: Arc<MemoryBudget>,
+    /// The scene's texture bytes and triangles, taken from the server's budgets while it is
+    /// held.
+    _held: [Held; 2],
 }
 
 fn same_params(a: &CacheParams, b: &CacheParams) -> bool {
@@ -84,9 +92,52 @@ fn same_params(a: &CacheParams, b: &CacheParams) -> bool {
         && a.theta_eps_degrees.to_bits() == b.theta_eps_degrees.to_bits()
 }
 
+/// Decoded texture bytes of a scene, as the budgets count them.
+pub fn texture_bytes(scene: &Scene) -> u64 {
+    scene.textures.iter().map(|t| t.rgba8.len() as u64).sum()
+}
+
 impl SceneEntry {
-    fn new(scene: Scene, source: String, id: String, load_ms: f64, owner: Option<String>) -> Self {
-        Self {
+    /// A scene with its texture bytes and triangles taken from `budget`, or 413 naming the
+    /// budget it would overrun.
+    fn new(
+        scene: Scene,
+        source: String,
+        id: String,
+        load_ms: f64,
+        owner: Option<String>,
+        budget: &Arc<MemoryBudget>,
+    ) -> Result<Self, ApiError> {
+        let textures = texture_bytes(&scene);
+        let texture_held = budget.texture_bytes.try_take(textures).ok_or_else(|| {
+            let pool = &budget.texture_bytes;
+            over_budget(
+                "texture_budget",
+                format!(
+                    "the scene's textures take {} MiB decoded; this server holds at most {} MiB \
+                     of textures over all scenes (--max-total-texture-bytes) and has {} MiB \
+                     left; delete a scene first",
+                    textures.div_ceil(1 << 20),
+                    pool.limit() >> 20,
+                    pool.available() >> 20
+                ),
+            )
+        })?;
+        let triangles = scene.triangle_count() as u64;
+        let triangles_held = budget.triangles.try_take(triangles).ok_or_else(|| {
+            let pool = &budget.triangles;
+            over_budget(
+                "triangle_budget",
+                format!(
+                    "the scene has {triangles} triangles (zero-area ones not counted); this \
+                     server holds at most {} over all scenes (--max-total-triangles) and has {} \
+                     left; delete a scene first",
+                    pool.limit(),
+                    pool.available()
+                ),
+            )
+        })?;
+        Ok(Self {
             id,
             source,
             owner,
@@ -99,7 +150,9 @@ impl SceneEntry {
             variants: Mutex::new(Vec::new()),
             sessions: AtomicU64::new(0),
             removed: AtomicBool::new(false),
-        }
+            budget: Arc::clone(budget),
+            _held: [texture_held, triangles_held],
+        })
     }
 
     pub fn info(&self) -> SceneInfo {
@@ -146,9 +199,11 @@ impl SceneEntry {
             return Err(ApiError::field(field, e.to_string()));
         }
         let variants = lock(&self.variants);
-        if variants.len() >= MAX_CACHE_VARIANTS
-            && !variants.iter().any(|v| same_params(&v.params, &params))
-        {
+        let exists = variants.iter().any(|v| same_params(&v.params, &params));
+        if !exists {
+            self.check_cache_budget(&params)?;
+        }
+        if variants.len() >= MAX_CACHE_VARIANTS && !exists {
             return Err(ApiError::field(
                 "gi.cache_distance",
                 format!(
@@ -159,6 +214,71 @@ impl SceneEntry {
             ));
         }
         Ok(params)
+    }
+
+    /// Refuses a new set of light caches whose estimated count exceeds the per-set limit or
+    /// what is left of the total, before anything is queued or built.
+    fn check_cache_budget(&self, params: &CacheParams) -> Result<(), ApiError> {
+        let estimated = params.estimated_caches(self.surface_area);
+        let per_set = self.budget.caches_per_set;
+        if estimated > per_set {
+            return Err(ApiError::field(
+                "gi.cache_distance",
+                format!(
+                    "{} would make about {estimated} light caches for this scene's {:.6} square \
+                     units of surface, more than this server's limit of {per_set} per set \
+                     (--max-caches-per-set); use cache_distance >= {}",
+                    params.d_eps,
+                    self.surface_area,
+                    min_distance_for(self.surface_area, per_set)
+                ),
+            ));
+        }
+        self.reserve_caches(params).map(drop)
+    }
+
+    /// Takes a new set's estimated light caches from the total budget.
+    fn reserve_caches(&self, params: &CacheParams) -> Result<Held, ApiError> {
+        let estimated = params.estimated_caches(self.surface_area);
+        let pool = &self.budget.caches;
+        pool.try_take(estimated).ok_or_else(|| {
+            ApiError::field(
+                "gi.cache_distance",
+                format!(
+                    "{} would make about {estimated} light caches, but only {} of this \
+                     server's {} (--max-total-caches) are left; use a larger cache_distance \
+                     or the parameters of a set that exists",
+                    params.d_eps,
+                    pool.available(),
+                    pool.limit()
+                ),
+            )
+        })
+    }
+
+    /// Makes a built set's share of the total budget its real count. The estimate is of flat
+    /// geometry; curved or folded surfaces (or a small cache angle) can make more, and a set
+    /// beyond the per-set limit or what is left of the total is refused, its memory freed.
+    fn hold_built_caches(&self, params: &CacheParams, count: u64) -> Result<(), String> {
+        let per_set = self.budget.caches_per_set;
+        if count > per_set {
+            return Err(format!(
+                "{count} light caches were made, more than this server's limit of {per_set} \
+                 per set (--max-caches-per-set); use a larger cache_distance or cache_angle"
+            ));
+        }
+        let mut held = true;
+        self.update_variant(params, &mut |v| held = v.held.resize(count));
+        if held {
+            Ok(())
+        } else {
+            Err(format!(
+                "{count} light caches were made, more than the {} left of this server's {} \
+                 (--max-total-caches); use a larger cache_distance",
+                self.budget.caches.available(),
+                self.budget.caches.limit()
+            ))
+        }
     }
 
     fn update_variant(&self, params: &CacheParams, f: &mut dyn FnMut(&mut Variant)) {
@@ -203,19 +323,21 @@ pub struct SceneRegistry {
     scenes: Mutex<BTreeMap<String, Arc<SceneEntry>>>,
     jobs: Mutex<mpsc::SyncSender<Job>>,
     max_scenes: usize,
+    budget: Arc<MemoryBudget>,
+    quotas: TokenQuotas,
 }
 
 impl SceneRegistry {
     /// Starts the precompute worker (one thread; the precomputation itself uses rayon).
-    pub fn new(store: CacheStore, max_scenes: usize) -> Arc<Self> {
-        Self::with_worker(max_scenes, move |entry, params| {
+    pub fn new(store: CacheStore, limits: &Limits) -> Arc<Self> {
+        Self::with_worker(limits, move |entry, params| {
             precompute(&store, entry, params)
         })
     }
 
     /// [`SceneRegistry::new`] with `work` run on the worker thread for each queued job.
     fn with_worker(
-        max_scenes: usize,
+        limits: &Limits,
         mut work: impl FnMut(&SceneEntry, CacheParams) + Send + 'static,
     ) -> Arc<Self> {
         let (tx, rx) = mpsc::sync_channel::<Job>(MAX_QUEUED_JOBS);
@@ -245,8 +367,15 @@ impl SceneRegistry {
         Arc::new(Self {
             scenes: Mutex::new(BTreeMap::new()),
             jobs: Mutex::new(tx),
-            max_scenes,
+            max_scenes: limits.max_scenes as usize,
+            budget: Arc::new(MemoryBudget::new(limits)),
+            quotas: TokenQuotas::new(limits),
         })
+    }
+
+    /// The memory budgets every scene is taken from.
+    pub fn budget(&self) -> &MemoryBudget {
+        &self.budget
     }
 
     /// Adds a loaded scene under `id` (a new random id when `None`), deletable only with the
@@ -266,9 +395,16 @@ impl SceneRegistry {
             id.map_or_else(|| ids::new_id("sc"), str::to_string),
             load_ms,
             owner,
-        ));
+            &self.budget,
+        )?);
         {
             let mut scenes = lock(&self.scenes);
+            let owner = entry.owner.as_deref();
+            let owned = scenes
+                .values()
+                .filter(|e| owner.is_some() && e.owner.as_deref() == owner)
+                .count();
+            self.quotas.check_count(owner, Quota::Scenes, owned)?;
             if scenes.len() >= self.max_scenes {
                 return Err(ApiError::too_many(
                     "too_many_scenes",
@@ -286,15 +422,18 @@ impl SceneRegistry {
     }
 
     /// A scene outside the registry (a one-shot render's upload): nothing else can see it,
-    /// and it is gone when the last holder drops it.
-    pub fn detached(scene: Scene, load_ms: f64) -> Arc<SceneEntry> {
-        Arc::new(SceneEntry::new(
+    /// and it is gone when the last holder drops it. It counts against the memory budgets
+    /// while it lives.
+    pub fn detached(&self, scene: Scene, load_ms: f64) -> Result<Arc<SceneEntry>, ApiError> {
+        SceneEntry::new(
             scene,
             "upload".to_string(),
             ids::new_id("upload"),
             load_ms,
             None,
-        ))
+            &self.budget,
+        )
+        .map(Arc::new)
     }
 
     pub fn get(&self, id: &str) -> Result<Arc<SceneEntry>, ApiError> {
@@ -349,6 +488,10 @@ impl SceneRegistry {
                 (None, None) => CachesNow::Pending,
             };
         }
+        let held = match entry.reserve_caches(&params) {
+            Ok(held) => held,
+            Err(e) => return CachesNow::Failed(e.body.message),
+        };
         match lock(&self.jobs).try_send((Arc::downgrade(entry), params)) {
             Ok(()) => {}
             Err(mpsc::TrySendError::Full(_)) => return CachesNow::Busy,
@@ -366,6 +509,7 @@ impl SceneRegistry {
             from_store: None,
             error: None,
             caches: None,
+            held,
         });
         CachesNow::Pending
     }
@@ -389,7 +533,13 @@ fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
             });
         })
     };
-    let result = store.load_or_compute(&entry.scene, &params, &mut progress);
+    let result = store
+        .load_or_compute(&entry.scene, &params, &mut progress)
+        .map_err(|e| e.to_string())
+        .and_then(|(set, from_store)| {
+            entry.hold_built_caches(&params, set.caches.len() as u64)?;
+            Ok((set, from_store))
+        });
     let seconds = started.elapsed().as_secs_f64();
     match result {
         Ok((set, from_store)) => {
@@ -415,7 +565,7 @@ fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
             update(&mut |v| {
                 v.state = PrecomputeState::Failed;
                 v.seconds = Some(seconds);
-                v.error = Some(e.to_string());
+                v.error = Some(e.clone());
             });
         }
     }
@@ -426,6 +576,13 @@ mod tests {
     use super::*;
     use crate::scene::procedural;
     use std::time::Duration;
+
+    fn limits(max_scenes: u32) -> Limits {
+        Limits {
+            max_scenes,
+            ..crate::service::config::tests::default_limits()
+        }
+    }
 
     fn params(d_eps: f32) -> CacheParams {
         CacheParams {
@@ -445,7 +602,7 @@ mod tests {
     fn gated() -> (Arc<SceneRegistry>, mpsc::Receiver<String>, mpsc::Sender<()>) {
         let (seen_tx, seen) = mpsc::channel();
         let (go, go_rx) = mpsc::channel::<()>();
-        let registry = SceneRegistry::with_worker(4, move |entry, _| {
+        let registry = SceneRegistry::with_worker(&limits(4), move |entry, _| {
             let _ = seen_tx.send(entry.id.clone());
             let _ = go_rx.recv();
         });
@@ -454,10 +611,153 @@ mod tests {
 
     const WAIT: Duration = Duration::from_secs(10);
 
+    /// A registry under `limits` whose worker does nothing.
+    fn idle(limits: &Limits) -> Arc<SceneRegistry> {
+        SceneRegistry::with_worker(limits, |_, _| {})
+    }
+
+    #[test]
+    fn cache_sets_beyond_the_budgets_are_refused_before_anything_is_built() {
+        let registry = idle(&limits(4));
+        let entry = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
+        let area = entry.surface_area;
+        // The smallest distance the format's own cap allows, which the server used to
+        // suggest: about two million caches, far beyond one set's budget.
+        let suggested = min_distance_for(area, crate::gi::lightskin::caches::MAX_CACHES) * 1.01;
+        let e = entry
+            .cache_params(Some(suggested), None)
+            .expect_err("beyond --max-caches-per-set");
+        assert_eq!(e.body.field.as_deref(), Some("gi.cache_distance"));
+        assert!(
+            e.body
+                .message
+                .contains("limit of 250000 per set (--max-caches-per-set)"),
+            "{}",
+            e.body.message
+        );
+        assert_eq!(registry.budget().caches.used(), 0, "nothing taken");
+
+        let tight = Limits {
+            max_caches_per_set: 10_000,
+            max_total_caches: 15_000,
+            ..limits(4)
+        };
+        let registry = idle(&tight);
+        let entry = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
+        let smallest = min_distance_for(area, 10_000);
+        let p = entry
+            .cache_params(Some(smallest), None)
+            .expect("10,000 fit");
+        assert!(entry.cache_params(Some(smallest * 0.95), None).is_err());
+        assert!(matches!(registry.caches(&entry, p), CachesNow::Pending));
+        let taken = registry.budget().caches.used();
+        assert!((9_000..=10_000).contains(&taken), "{taken}");
+        let e = entry
+            .cache_params(Some(smallest * 1.1), None)
+            .expect_err("the total is spent");
+        assert_eq!(e.body.field.as_deref(), Some("gi.cache_distance"));
+        assert!(
+            e.body.message.contains("(--max-total-caches)"),
+            "{}",
+            e.body.message
+        );
+        assert!(
+            entry.cache_params(Some(smallest), None).is_ok(),
+            "the set that exists is not counted twice"
+        );
+        drop(entry);
+        assert_eq!(
+            registry.budget().caches.used(),
+            0,
+            "given back with the scene"
+        );
+    }
+
+    #[test]
+    fn built_sets_hold_their_real_count_and_are_refused_beyond_the_per_set_limit() {
+        let registry = idle(&Limits {
+            max_caches_per_set: 10_000,
+            ..limits(4)
+        });
+        let entry = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
+        let p = params(1.0);
+        assert!(matches!(registry.caches(&entry, p), CachesNow::Pending));
+        assert_eq!(entry.hold_built_caches(&p, 7), Ok(()));
+        assert_eq!(registry.budget().caches.used(), 7);
+        let e = entry.hold_built_caches(&p, 10_001).expect_err("over");
+        assert!(e.contains("--max-caches-per-set"), "{e}");
+    }
+
+    #[test]
+    fn scenes_take_their_triangles_and_textures_from_the_budgets_while_held() {
+        let cornell = procedural::cornell_box();
+        let triangles = cornell.triangle_count() as u64;
+        let registry = idle(&Limits {
+            max_total_triangles: triangles * 3 / 2,
+            ..limits(4)
+        });
+        let first = registry
+            .insert(cornell.clone(), "t".into(), None, 0.0, None)
+            .expect("fits");
+        let Err(e) = registry.insert(cornell.clone(), "t".into(), None, 0.0, None) else {
+            panic!("over the total");
+        };
+        assert_eq!(e.status, axum::http::StatusCode::PAYLOAD_TOO_LARGE);
+        assert_eq!(e.body.error, "triangle_budget");
+        assert!(
+            e.body.message.contains("--max-total-triangles"),
+            "{}",
+            e.body.message
+        );
+        assert!(
+            registry.detached(cornell.clone(), 0.0).is_err(),
+            "uploads count too"
+        );
+        let id = first.id.clone();
+        drop(first);
+        registry.remove(&id, None).expect("removed");
+        assert!(registry
+            .insert(cornell, "t".into(), None, 0.0, None)
+            .is_ok());
+
+        let mut textured = procedural::cornell_box();
+        textured.textures.push(crate::scene::Texture {
+            name: "t".into(),
+            width: 64,
+            height: 64,
+            rgba8: vec![255; 64 * 64 * 4],
+        });
+        let registry = idle(&Limits {
+            max_scene_texture_bytes: 64 * 64 * 4,
+            max_total_texture_bytes: 64 * 64 * 4,
+            ..limits(4)
+        });
+        let held = registry.detached(textured.clone(), 0.0).expect("fits");
+        let Err(e) = registry.detached(textured.clone(), 0.0) else {
+            panic!("the total is held");
+        };
+        assert_eq!(e.body.error, "texture_budget");
+        assert!(
+            e.body.message.contains("--max-total-texture-bytes"),
+            "{}",
+            e.body.message
+        );
+        drop(held);
+        assert!(registry.detached(textured, 0.0).is_ok());
+    }
+
     #[test]
     fn a_full_queue_refuses_new_work_until_it_drains() {
         let (registry, seen, go) = gated();
-        let entry = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        let entry = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
         assert!(matches!(
             registry.caches(&entry, params(1.0)),
             CachesNow::Pending
@@ -490,10 +790,14 @@ mod tests {
     #[test]
     fn jobs_of_scenes_gone_from_every_holder_are_skipped() {
         let (registry, seen, go) = gated();
-        let kept = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        let kept = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
         registry.caches(&kept, params(1.0));
         assert_eq!(seen.recv_timeout(WAIT).as_deref(), Ok(kept.id.as_str()));
-        let dropped = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        let dropped = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
         registry.caches(&dropped, params(1.0));
         registry.caches(&kept, params(2.0));
         drop(dropped);
@@ -507,11 +811,13 @@ mod tests {
     #[test]
     fn a_panicking_precomputation_fails_its_variant_and_the_worker_goes_on() {
         let (done_tx, done) = mpsc::channel();
-        let registry = SceneRegistry::with_worker(4, move |entry, p| {
+        let registry = SceneRegistry::with_worker(&limits(4), move |entry, p| {
             assert!(p.d_eps != 1.0, "a bug in the precomputation");
             let _ = done_tx.send(entry.id.clone());
         });
-        let entry = SceneRegistry::detached(procedural::cornell_box(), 0.0);
+        let entry = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
         registry.caches(&entry, params(1.0));
         registry.caches(&entry, params(2.0));
         assert_eq!(done.recv_timeout(WAIT).as_deref(), Ok(entry.id.as_str()));

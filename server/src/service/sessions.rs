@@ -1,12 +1,13 @@
 //! Sessions: the state a client steers, the latest-frame slot the render loop fills and the
 //! WebSocket drains, and the registry the render loop walks round robin.
 
+use super::budget::{Quota, TokenQuotas};
 use super::error::ApiError;
 use super::ids;
 use super::params::Resolved;
 use super::scenes::{lock, SceneLease};
 use lightcast_protocol::{
-    ErrorBody, ServerEvent, SessionInfo, SessionParams, SessionStats, StageMs, StreamMode,
+    ErrorBody, Limits, ServerEvent, SessionInfo, SessionParams, SessionStats, StageMs, StreamMode,
 };
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
@@ -373,18 +374,27 @@ impl Session {
 pub struct SessionRegistry {
     sessions: Mutex<BTreeMap<String, Arc<Session>>>,
     max: usize,
+    quotas: TokenQuotas,
 }
 
 impl SessionRegistry {
-    pub fn new(max: usize) -> Self {
+    pub fn new(limits: &Limits) -> Self {
         Self {
             sessions: Mutex::new(BTreeMap::new()),
-            max,
+            max: limits.max_sessions as usize,
+            quotas: TokenQuotas::new(limits),
         }
     }
 
+    /// Adds a session within the server's limit and its token's quota.
     pub fn insert(&self, session: Arc<Session>) -> Result<(), ApiError> {
         let mut all = lock(&self.sessions);
+        let owner = session.owner.as_deref();
+        let owned = all
+            .values()
+            .filter(|s| owner.is_some() && s.owner.as_deref() == owner)
+            .count();
+        self.quotas.check_count(owner, Quota::Sessions, owned)?;
         if all.len() >= self.max {
             return Err(ApiError::too_many(
                 "too_many_sessions",

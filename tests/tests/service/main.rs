@@ -2,6 +2,7 @@
 //! over HTTP and WebSocket, and the browser viewer driven in headless Chromium.
 
 mod api;
+mod budgets;
 mod hardening;
 mod streaming;
 mod viewer;

@@ -103,24 +103,31 @@ impl CacheParams {
     /// area ([`surface_area`]), so absurd parameters fail before any work is done.
     pub fn validate_for_area(&self, area: f64) -> Result<(), CacheError> {
         self.validate()?;
-        let estimated = estimated_caches(area, self.d_eps);
-        if estimated > MAX_CACHES as f64 {
-            let min_d_eps = (2.0 * (area / MAX_CACHES as f64).sqrt()) as f32;
+        let estimated = self.estimated_caches(area);
+        if estimated > MAX_CACHES {
             return Err(CacheError::TooManyCaches {
                 d_eps: self.d_eps,
-                estimated: estimated.min(u64::MAX as f64) as u64,
+                estimated,
                 surface_area: area,
-                min_d_eps: round_up_significant(f64::from(min_d_eps), 3) as f32,
+                min_d_eps: min_distance_for(area, MAX_CACHES),
             });
         }
         Ok(())
     }
+
+    /// Flat-geometry cache count for `surface_area`: one cache per (d_eps/2)² of surface
+    /// (step 1's voxel faces), known before any work is done.
+    pub fn estimated_caches(&self, surface_area: f64) -> u64 {
+        let h = f64::from(self.d_eps) * f64::from(VOXEL_EDGE);
+        (surface_area / (h * h)).ceil().min(u64::MAX as f64) as u64
+    }
 }
 
-/// Flat-geometry cache count: one cache per (d_eps/2)² of surface (step 1's voxel faces).
-fn estimated_caches(surface_area: f64, d_eps: f32) -> f64 {
-    let h = f64::from(d_eps) * f64::from(VOXEL_EDGE);
-    surface_area / (h * h)
+/// The smallest d_eps whose [`CacheParams::estimated_caches`] for `surface_area` stays within
+/// `max_caches`, rounded up to 3 significant digits.
+pub fn min_distance_for(surface_area: f64, max_caches: u64) -> f32 {
+    let min_d_eps = 2.0 * (surface_area / max_caches.max(1) as f64).sqrt();
+    round_up_significant(min_d_eps, 3) as f32
 }
 
 /// Why the caches could not be computed.

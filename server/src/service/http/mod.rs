@@ -67,6 +67,8 @@ pub struct AppState {
     pub shutdown: tokio::sync::watch::Receiver<bool>,
     /// Permits for glTF loads running at once; see [`scenes::load_upload`].
     pub loads: Arc<tokio::sync::Semaphore>,
+    /// Places for uploads in flight and queued one-shot renders, globally and per token.
+    pub admission: crate::service::budget::Admission,
     tickets: Mutex<HashMap<String, Ticket>>,
 }
 
@@ -86,6 +88,7 @@ impl AppState {
         timing_source: String,
         shutdown: tokio::sync::watch::Receiver<bool>,
     ) -> Self {
+        let admission = crate::service::budget::Admission::new(&limits);
         Self {
             scenes,
             sessions,
@@ -101,6 +104,7 @@ impl AppState {
             build: build_id(),
             shutdown,
             loads: Arc::new(tokio::sync::Semaphore::new(CONCURRENT_LOADS)),
+            admission,
             tickets: Mutex::new(HashMap::new()),
         }
     }

@@ -1,7 +1,7 @@
 //! `POST /v1/render`: one frame, returned as an image with its timing report.
 
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
-use super::AppState;
+use super::{AppState, Caller};
 use crate::service::encode;
 use crate::service::error::{parse_json, ApiError};
 use crate::service::params::{check_gi_ranges, check_quality, resolve};
@@ -10,6 +10,7 @@ use crate::service::scenes::{CachesNow, SceneEntry};
 use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{header, HeaderValue};
 use axum::response::{IntoResponse, Response};
+use axum::Extension;
 use lightcast_protocol::{Codec, ImageFormat, RenderReport, RenderRequest};
 use sha2::{Digest, Sha256};
 use std::sync::Arc;
@@ -24,6 +25,7 @@ pub const REPORT_HEADER: &str = "x-lightcast-report";
 /// The request and, for a multipart body, an uploaded scene to render instead of a stored one.
 async fn read_request(
     state: &Arc<AppState>,
+    caller: &Caller,
     request: Request,
 ) -> Result<(RenderRequest, Option<Arc<SceneEntry>>), ApiError> {
     if !is_multipart(&request) {
@@ -35,6 +37,7 @@ async fn read_request(
         };
         return Ok((req, None));
     }
+    let _upload = state.admission.upload(caller.0.as_deref())?;
     let multipart = Multipart::from_request(request, state)
         .await
         .map_err(|e| ApiError::bad_request("malformed_multipart", e.body_text()))?;
@@ -69,10 +72,9 @@ async fn read_request(
     let scene = load_upload(state, main, resources).await?;
     // Not registered: the scene lives for this request only (its light caches stay in the
     // cache store, so the same file renders faster next time).
-    let entry = crate::service::scenes::SceneRegistry::detached(
-        scene,
-        started.elapsed().as_secs_f64() * 1e3,
-    );
+    let entry = state
+        .scenes
+        .detached(scene, started.elapsed().as_secs_f64() * 1e3)?;
     Ok((req, Some(entry)))
 }
 
@@ -154,15 +156,20 @@ fn floats_le(data: &[[f32; 4]]) -> Vec<u8> {
                 (Vec<u8> = "image/jpeg"),
                 (Vec<u8> = "application/octet-stream"))),
         (status = 400, description = "A parameter is invalid; `field` names it", body = lightcast_protocol::ErrorBody),
+        (status = 413, description = "The uploaded scene exceeds a memory budget", body = lightcast_protocol::ErrorBody),
+        (status = 429, description = "Too many renders or uploads at once, for the server or the token", body = lightcast_protocol::ErrorBody),
         (status = 503, description = "Light caches still computing, or shutting down", body = lightcast_protocol::ErrorBody)))]
 pub async fn render(
     State(state): State<Arc<AppState>>,
+    Extension(caller): Extension<Caller>,
     request: Request,
 ) -> Result<Response, ApiError> {
     let deadline = Instant::now()
         + Duration::from_millis(state.limits.request_timeout_ms)
             .saturating_sub(Duration::from_millis(50));
-    let (mut req, uploaded) = read_request(&state, request).await?;
+    // Held until the answer is made: the queue of renders and their frames stay bounded.
+    let _render = state.admission.render(caller.0.as_deref())?;
+    let (mut req, uploaded) = read_request(&state, &caller, request).await?;
     let entry = match uploaded {
         Some(e) => e,
         None => super::scenes::scene(&state, &req.render.scene)?,

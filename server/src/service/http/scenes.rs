@@ -1,9 +1,10 @@
 //! `/v1/scenes`: upload, list, inspect and delete scenes.
 
 use super::{AppState, Caller};
-use crate::scene::gltf_loader::{load_gltf_slice, LoadLimits};
+use crate::scene::gltf_loader::{load_gltf_slice, LoadError, LoadLimits};
 use crate::scene::procedural::Spec;
 use crate::scene::Scene;
+use crate::service::budget::over_budget;
 use crate::service::error::{echo, parse_json, ApiError};
 use crate::service::scenes::SceneEntry;
 use axum::body::Bytes;
@@ -114,6 +115,17 @@ fn external_uris(json: &[u8]) -> Result<Vec<String>, ApiError> {
     Ok(uris)
 }
 
+/// What an upload may build: the server's triangle limit, and the texture memory left of the
+/// per-scene and total budgets.
+fn load_limits(state: &AppState) -> LoadLimits {
+    let left = state.scenes.budget().texture_bytes.available();
+    LoadLimits {
+        max_texture_bytes: state.limits.max_scene_texture_bytes.min(left),
+        max_texture_size: state.limits.max_texture_size,
+        ..LoadLimits::upload(state.limits.max_triangles)
+    }
+}
+
 /// Loads an uploaded `.glb`/`.gltf` (`main`) with the files it references (`resources`).
 /// Runs the loader on a blocking thread, at most [`AppState::loads`] at once: a load goes on
 /// after its request times out, so unbounded, retries could pile up loads. External URIs must
@@ -123,11 +135,14 @@ pub async fn load_upload(
     main: UploadedFile,
     resources: Vec<UploadedFile>,
 ) -> Result<Scene, ApiError> {
-    let limits = LoadLimits::upload(state.limits.max_triangles);
+    let limits = load_limits(state);
     let permit = Arc::clone(&state.loads)
         .acquire_owned()
         .await
         .map_err(|_| ApiError::unavailable("the server is shutting down"))?;
+    let max_side = state.limits.max_texture_size;
+    let scene_texture_bytes = state.limits.max_scene_texture_bytes;
+    let total_texture_bytes = state.limits.max_total_texture_bytes;
     let name = main
         .name
         .rsplit_once('.')
@@ -135,8 +150,19 @@ pub async fn load_upload(
         .to_string();
     let task = tokio::task::spawn_blocking(move || -> Result<Scene, ApiError> {
         let _permit = permit;
-        let invalid = |e: crate::scene::gltf_loader::LoadError| {
-            ApiError::bad_request("invalid_scene", format!("{}: {e}", main.name))
+        let invalid = |e: LoadError| match e {
+            LoadError::TextureBudget { .. } => over_budget(
+                "texture_budget",
+                format!(
+                    "{}: {e} (at most {} MiB per scene, --max-scene-texture-bytes, and {} MiB \
+                     over all scenes, --max-total-texture-bytes; textures are kept at most \
+                     {max_side} texels a side, --max-texture-size)",
+                    main.name,
+                    scene_texture_bytes >> 20,
+                    total_texture_bytes >> 20,
+                ),
+            ),
+            e => ApiError::bad_request("invalid_scene", format!("{}: {e}", main.name)),
         };
         let scene = if main.bytes.starts_with(b"glTF") || resources.is_empty() {
             load_gltf_slice(&main.bytes, None, &name, limits).map_err(invalid)?
@@ -233,8 +259,8 @@ pub async fn list(State(state): State<Arc<AppState>>) -> Json<Vec<SceneInfo>> {
     responses(
         (status = 201, body = SceneInfo),
         (status = 400, description = "Invalid or hostile glTF, or bad parameters", body = lightcast_protocol::ErrorBody),
-        (status = 413, description = "Upload too large", body = lightcast_protocol::ErrorBody),
-        (status = 429, description = "Too many scenes", body = lightcast_protocol::ErrorBody)))]
+        (status = 413, description = "Upload too large, or its textures or triangles exceed a memory budget", body = lightcast_protocol::ErrorBody),
+        (status = 429, description = "Too many scenes or uploads, for the server or the token", body = lightcast_protocol::ErrorBody)))]
 pub async fn create(
     State(state): State<Arc<AppState>>,
     Extension(caller): Extension<Caller>,
@@ -245,6 +271,12 @@ pub async fn create(
     if let Some(name) = &query.name {
         bounded_name("name", name)?;
     }
+    // An upload's body may take --max-upload-bytes: its place is taken before it is read.
+    let _upload = if is_json(&request) {
+        None
+    } else {
+        Some(state.admission.upload(caller.0.as_deref())?)
+    };
     let started = Instant::now();
     let max_triangles = state.limits.max_triangles;
     let (mut scene, source) = if is_multipart(&request) {

@@ -86,7 +86,7 @@ pub async fn list(
     responses(
         (status = 201, body = SessionCreated),
         (status = 400, description = "A parameter is invalid; `field` names it", body = lightcast_protocol::ErrorBody),
-        (status = 429, description = "Too many sessions", body = lightcast_protocol::ErrorBody)))]
+        (status = 429, description = "Too many sessions, for the server or the token", body = lightcast_protocol::ErrorBody)))]
 pub async fn create(
     State(state): State<Arc<AppState>>,
     Extension(caller): Extension<Caller>,

@@ -112,6 +112,16 @@ pub enum LoadError {
     },
     #[error("{part}: {message}")]
     Invalid { part: String, message: String },
+    /// The declared triangle counts take the scene past `LoadLimits::max_triangles`; found
+    /// before the primitive that crosses it is read.
+    #[error(
+        "{part}: the scene would have {triangles} triangles or more; at most {limit} are allowed"
+    )]
+    TriangleBudget {
+        part: String,
+        triangles: u64,
+        limit: u64,
+    },
     /// Decoding an image would take the scene past `LoadLimits::max_texture_bytes`; found
     /// from the image's declared dimensions, before any pixel is decoded.
     #[error(
@@ -963,14 +973,11 @@ impl Loader<'_> {
         }
         let total_triangles = (self.indices.len() as u64 / 3).saturating_add(triangles);
         if total_triangles > self.limits.max_triangles {
-            return Err(invalid(
-                part,
-                format!(
-                    "the scene would have {total_triangles} triangles or more; at most {} are \
-                     allowed",
-                    self.limits.max_triangles
-                ),
-            ));
+            return Err(LoadError::TriangleBudget {
+                part: part.to_owned(),
+                triangles: total_triangles,
+                limit: self.limits.max_triangles,
+            });
         }
         Ok(())
     }

@@ -113,16 +113,6 @@ impl MemoryBudget {
             caches_per_set: limits.max_caches_per_set,
         }
     }
-
-    /// No limits beyond the format's own (the offline tools and tests).
-    pub fn unlimited() -> Self {
-        Self {
-            texture_bytes: Pool::new(u64::MAX),
-            triangles: Pool::new(u64::MAX),
-            caches: Pool::new(u64::MAX),
-            caches_per_set: u64::MAX,
-        }
-    }
 }
 
 /// What one token may hold at once.

@@ -1,7 +1,7 @@
 //! Scenes the server holds: loaded once, shared by every session, light caches precomputed in
 //! the background (one set per distinct cache parameters in use).
 
-use super::budget::{over_budget, Held, MemoryBudget, Quota, TokenQuotas};
+use super::budget::{over_budget, Held, MemoryBudget, Pool, Quota, TokenQuotas};
 use super::error::ApiError;
 use super::ids;
 use crate::gi::lightskin::cache_store::CacheStore;
@@ -92,6 +92,20 @@ fn same_params(a: &CacheParams, b: &CacheParams) -> bool {
         && a.theta_eps_degrees.to_bits() == b.theta_eps_degrees.to_bits()
 }
 
+/// 413 `triangle_budget`: a scene of `triangles` does not fit in what is left of `pool`.
+pub fn triangles_over_budget(triangles: u64, pool: &Pool) -> ApiError {
+    over_budget(
+        "triangle_budget",
+        format!(
+            "the scene has {triangles} triangles (zero-area ones not counted); this server \
+             holds at most {} over all scenes (--max-total-triangles) and has {} left; delete \
+             a scene first",
+            pool.limit(),
+            pool.available()
+        ),
+    )
+}
+
 /// Decoded texture bytes of a scene, as the budgets count them.
 pub fn texture_bytes(scene: &Scene) -> u64 {
     scene.textures.iter().map(|t| t.rgba8.len() as u64).sum()
@@ -124,19 +138,10 @@ impl SceneEntry {
             )
         })?;
         let triangles = scene.triangle_count() as u64;
-        let triangles_held = budget.triangles.try_take(triangles).ok_or_else(|| {
-            let pool = &budget.triangles;
-            over_budget(
-                "triangle_budget",
-                format!(
-                    "the scene has {triangles} triangles (zero-area ones not counted); this \
-                     server holds at most {} over all scenes (--max-total-triangles) and has {} \
-                     left; delete a scene first",
-                    pool.limit(),
-                    pool.available()
-                ),
-            )
-        })?;
+        let triangles_held = budget
+            .triangles
+            .try_take(triangles)
+            .ok_or_else(|| triangles_over_budget(triangles, &budget.triangles))?;
         Ok(Self {
             id,
             source,
@@ -190,7 +195,9 @@ impl SceneEntry {
             d_eps: distance.unwrap_or(self.default_params.d_eps),
             theta_eps_degrees: angle.unwrap_or(self.default_params.theta_eps_degrees),
         };
-        if let Err(e) = params.validate_for_area(self.surface_area) {
+        // The count is checked against the budgets below, which are within the format's own
+        // cap (`validate_for_area`, which the precomputation applies too).
+        if let Err(e) = params.validate() {
             let field = if matches!(e, crate::gi::lightskin::caches::CacheError::InvalidAngle(_)) {
                 "gi.cache_angle"
             } else {

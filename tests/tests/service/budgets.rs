@@ -175,36 +175,25 @@ async fn hostile_uploads_and_cache_distances_are_refused_before_they_take_memory
         (Some(1), Some(3))
     );
 
-    // The smallest cache distance the format's cap allows (what the server suggests for a
-    // far too small one) still makes ~2 million caches: refused by the per-set budget before
-    // anything is queued.
-    let (status, body) = post_json(
-        &server,
-        "/v1/render",
-        tiny_render("lightskin", Some(1e-6)),
-        "",
-    )
-    .await;
-    assert_eq!(status, 400, "{body}");
-    let suggested: f64 = body["message"]
-        .as_str()
-        .and_then(|m| m.rsplit(">= ").next())
-        .and_then(|d| d.trim().parse().ok())
-        .unwrap_or_else(|| panic!("a suggested distance in {body}"));
-    let (status, body) = post_json(
-        &server,
-        "/v1/render",
-        tiny_render("lightskin", Some(suggested * 1.01)),
-        "",
-    )
-    .await;
-    assert_eq!(status, 400, "{body}");
-    assert_eq!(body["field"], "render.gi.cache_distance");
-    assert!(
-        message_is(&body, |m| m
-            .contains("limit of 250000 per set (--max-caches-per-set)")),
-        "{body}"
-    );
+    // A distance just above the smallest the format's own cap allows (what the server used
+    // to suggest for a far too small one) makes ~2 million caches: refused by the per-set
+    // budget before anything is queued, with a distance that fits.
+    use lightcast_server::gi::lightskin::caches::{min_distance_for, surface_area, MAX_CACHES};
+    let area = surface_area(&lightcast_server::scene::procedural::cornell_box());
+    let old_minimum = f64::from(min_distance_for(area, MAX_CACHES));
+    for distance in [1e-6, old_minimum * 1.01] {
+        let render = tiny_render("lightskin", Some(distance));
+        let (status, body) = post_json(&server, "/v1/render", render, "").await;
+        assert_eq!(status, 400, "{body}");
+        assert_eq!(body["field"], "render.gi.cache_distance");
+        let fits = min_distance_for(area, 250_000);
+        assert!(
+            message_is(&body, |m| m
+                .contains("limit of 250000 per set (--max-caches-per-set)")
+                && m.ends_with(&format!("use cache_distance >= {fits}"))),
+            "{body}"
+        );
+    }
     let scene = server.get_json("/v1/scenes/default").await;
     assert_eq!(
         scene["caches"].as_array().map(Vec::len),
@@ -259,6 +248,18 @@ async fn memory_budgets_are_shared_by_every_scene_shown_and_given_back() {
     assert_eq!(
         (status, body["error"].as_str()),
         (413, Some("triangle_budget")),
+        "{body}"
+    );
+    // Six quads, 12 triangles: refused at the fifth, before it is read.
+    let (status, body) = upload(&server, textured_quads(&solid_png(4), 6), None).await;
+    assert_eq!(
+        (status, body["error"].as_str()),
+        (413, Some("triangle_budget")),
+        "{body}"
+    );
+    assert!(
+        message_is(&body, |m| m.contains("primitive 4:")
+            && m.contains("--max-total-triangles")),
         "{body}"
     );
 

@@ -6,7 +6,7 @@ use crate::scene::procedural::Spec;
 use crate::scene::Scene;
 use crate::service::budget::over_budget;
 use crate::service::error::{echo, parse_json, ApiError};
-use crate::service::scenes::SceneEntry;
+use crate::service::scenes::{triangles_over_budget, SceneEntry};
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
 use axum::http::{header, StatusCode};
@@ -115,14 +115,16 @@ fn external_uris(json: &[u8]) -> Result<Vec<String>, ApiError> {
     Ok(uris)
 }
 
-/// What an upload may build: the server's triangle limit, and the texture memory left of the
-/// per-scene and total budgets.
+/// What an upload may build: what is left of the per-scene and total budgets of triangles
+/// and texture memory. Declared triangle counts are checked against it before each primitive
+/// is read, so a scene that cannot be held costs no loading.
 fn load_limits(state: &AppState) -> LoadLimits {
-    let left = state.scenes.budget().texture_bytes.available();
+    let budget = state.scenes.budget();
+    let left = budget.texture_bytes.available();
     LoadLimits {
         max_texture_bytes: state.limits.max_scene_texture_bytes.min(left),
         max_texture_size: state.limits.max_texture_size,
-        ..LoadLimits::upload(state.limits.max_triangles)
+        ..LoadLimits::upload(state.limits.max_triangles.min(budget.triangles.available()))
     }
 }
 
@@ -141,6 +143,8 @@ pub async fn load_upload(
         .await
         .map_err(|_| ApiError::unavailable("the server is shutting down"))?;
     let max_side = state.limits.max_texture_size;
+    let (max_triangles, total_triangles) =
+        (state.limits.max_triangles, state.limits.max_total_triangles);
     let scene_texture_bytes = state.limits.max_scene_texture_bytes;
     let total_texture_bytes = state.limits.max_total_texture_bytes;
     let name = main
@@ -160,6 +164,14 @@ pub async fn load_upload(
                     main.name,
                     scene_texture_bytes >> 20,
                     total_texture_bytes >> 20,
+                ),
+            ),
+            LoadError::TriangleBudget { limit, .. } if limit < max_triangles => over_budget(
+                "triangle_budget",
+                format!(
+                    "{}: {e}: the rest of the {total_triangles} this server holds over all \
+                     scenes (--max-total-triangles); delete a scene first",
+                    main.name
                 ),
             ),
             e => ApiError::bad_request("invalid_scene", format!("{}: {e}", main.name)),
@@ -308,6 +320,10 @@ pub async fn create(
                 "procedural",
                 format!("{triangles} triangles exceed this server's limit of {max_triangles}"),
             ));
+        }
+        let left = &state.scenes.budget().triangles;
+        if triangles > left.available() {
+            return Err(triangles_over_budget(triangles, left));
         }
         let mut scene = tokio::task::spawn_blocking(move || parsed.build())
             .await

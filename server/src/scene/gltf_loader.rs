@@ -960,6 +960,16 @@ impl Loader<'_> {
             Mode::Triangles => corners / 3,
             _ => corners.saturating_sub(2),
         };
+        // Triangles first: the vertex limit follows from theirs, and a scene too large for
+        // the triangle budget is told so.
+        let total_triangles = (self.indices.len() as u64 / 3).saturating_add(triangles);
+        if total_triangles > self.limits.max_triangles {
+            return Err(LoadError::TriangleBudget {
+                part: part.to_owned(),
+                triangles: total_triangles,
+                limit: self.limits.max_triangles,
+            });
+        }
         let total_vertices = (self.vertices.len() as u64).saturating_add(vertices);
         if total_vertices > self.limits.max_vertices {
             return Err(invalid(
@@ -970,14 +980,6 @@ impl Loader<'_> {
                     self.limits.max_vertices
                 ),
             ));
-        }
-        let total_triangles = (self.indices.len() as u64 / 3).saturating_add(triangles);
-        if total_triangles > self.limits.max_triangles {
-            return Err(LoadError::TriangleBudget {
-                part: part.to_owned(),
-                triangles: total_triangles,
-                limit: self.limits.max_triangles,
-            });
         }
         Ok(())
     }

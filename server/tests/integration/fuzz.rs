@@ -9,6 +9,7 @@
 //! the seed come from the environment and the cases run are counted and printed.
 
 use lightcast_protocol::{ClientMessage, FrameHeader, RenderRequest, SessionParams, Stage};
+use lightcast_server::gi::lightskin::cache_store::CacheStore;
 use lightcast_server::scene::gltf_loader::{load_gltf_slice, LoadLimits};
 use lightcast_server::scene::Scene;
 use lightcast_server::service::error::{from_value, parse_json};
@@ -223,7 +224,11 @@ fn json_value() -> impl Strategy<Value = Value> {
 fn cornell_entry() -> std::sync::Arc<lightcast_server::service::scenes::SceneEntry> {
     let scene: Scene = load_gltf_slice(CORNELL_GLB, None, "cornell", LoadLimits::NONE)
         .expect("the Cornell box loads");
-    SceneRegistry::detached(scene, 0.0)
+    // No light caches are queued for a detached scene: the store is never written.
+    let store = CacheStore::new(std::env::temp_dir().join("lightcast-fuzz-unused"));
+    SceneRegistry::new(store, &default_limits())
+        .detached(scene, 0.0)
+        .expect("the Cornell box is within the default budgets")
 }
 
 fn default_limits() -> lightcast_protocol::Limits {
@@ -236,7 +241,7 @@ fn default_limits() -> lightcast_protocol::Limits {
     Cli::try_parse_from(["lightcast-server"])
         .expect("defaults parse")
         .limits
-        .limits()
+        .limits(0)
         .expect("default limits are valid")
 }
 

@@ -278,13 +278,19 @@ async fn memory_budgets_are_shared_by_every_scene_shown_and_given_back() {
 }
 
 /// Sends the headers of a POST with a `Content-Length` body and only its first bytes, and
-/// keeps the connection open: the request stays in flight until the stream is dropped.
+/// keeps the connection open: the request stays in flight until the stream is dropped. The
+/// body is a scene upload's (`/v1/scenes`) or JSON within the message limit (`/v1/render`).
 async fn stalled_post(server: &TestServer, path: &str, token: &str) -> tokio::net::TcpStream {
+    let (content_type, length) = if path == "/v1/render" {
+        ("application/json", 1000)
+    } else {
+        ("model/gltf-binary", 100_000)
+    };
     let addr = server.base.trim_start_matches("http://");
     let mut stream = tokio::net::TcpStream::connect(addr).await.expect("connect");
     let head = format!(
         "POST {path} HTTP/1.1\r\nHost: {addr}\r\nAuthorization: Bearer {token}\r\n\
-         Content-Type: model/gltf-binary\r\nContent-Length: 100000\r\n\r\nglTF"
+         Content-Type: {content_type}\r\nContent-Length: {length}\r\n\r\n{{"
     );
     stream.write_all(head.as_bytes()).await.expect("send");
     stream

@@ -16,6 +16,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 minutes=${1:-30}
 prefix=${2:-bench/results/soak-lavapipe}
+commit=$(git rev-parse --short HEAD)
 port=18181
 base="http://127.0.0.1:$port"
 work=$(mktemp -d)
@@ -70,9 +71,9 @@ vanishing() { timeout -s KILL 3 "$cli" stream --duration 30 "${small[@]}" --gi n
 upload_cycle() {
   local id
   id=$("$cli" --json scenes upload tests/data/cornell-box/cornell-box.glb \
-    | python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])')
+    | python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])') || return 1
   curl -fs -o /dev/null -X POST "$base/v1/render" \
-    -d "{\"render\":{\"scene\":\"$id\",\"width\":32,\"height\":32,\"gi\":{\"method\":\"none\"}}}"
+    -d "{\"render\":{\"scene\":\"$id\",\"width\":32,\"height\":32,\"gi\":{\"method\":\"none\"}}}" || return 1
   "$cli" scenes rm "$id"
 }
 one_shots() {
@@ -80,19 +81,24 @@ one_shots() {
   for gi in '{"method":"none"}' '{"method":"brsm","rsm_size":64,"val_count":256,"view_samples":32}' \
     '{"method":"reference","spp":2}'; do
     curl -fs -o /dev/null -X POST "$base/v1/render" \
-      -d "{\"render\":{\"width\":32,\"height\":24,\"shadow_map_size\":256,\"gi\":$gi},\"compare_to\":\"reference\",\"compare_spp\":4}"
+      -d "{\"render\":{\"width\":32,\"height\":24,\"shadow_map_size\":256,\"gi\":$gi},\"compare_to\":\"reference\",\"compare_spp\":4}" \
+      || return 1
   done
 }
 # A WebSocket opened and never read (the server must drop frames, not buffer them), then a
 # request whose headers trickle in and stop.
 stalled() {
-  local id
-  id=$(curl -fs -X POST "$base/v1/sessions" -d '{"render":{"width":32,"height":32,"gi":{"method":"none"},"fps_cap":30}}' \
-    | python3 -c 'import json,sys; print(json.load(sys.stdin)["id"])')
+  local id status
+  id=$(curl -fs -X POST "$base/v1/sessions" \
+    -d '{"render":{"width":32,"height":32,"gi":{"method":"none"}},"fps_cap":30}' \
+    | python3 -c 'import json,sys; print(json.load(sys.stdin)["session"]["id"])') || return 1
   exec 3<>"/dev/tcp/127.0.0.1/$port"
   printf 'GET /v1/sessions/%s/stream HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n\r\n' "$id" >&3
+  # The upgrade must be accepted; after that line nothing more is read for 15 s.
+  read -r -t 10 status <&3 || status=""
   sleep 15
   exec 3>&-
+  case "$status" in *" 101 "*) ;; *) echo "stalled: upgrade answered '$status'"; return 1 ;; esac
   curl -fs -o /dev/null -X DELETE "$base/v1/sessions/$id" || true
   exec 4<>"/dev/tcp/127.0.0.1/$port"
   printf 'GET /healthz HTTP/1.1\r\n' >&4
@@ -136,7 +142,7 @@ cat "$work"/*.count >"$work/workloads.txt"
 cp "$csv" "$prefix.csv"
 py=python3
 [ -x target/soak-venv/bin/python ] && py=target/soak-venv/bin/python
-"$py" - "$prefix" "$minutes" "$work/workloads.txt" "$(git rev-parse --short HEAD)" <<'EOF'
+"$py" - "$prefix" "$minutes" "$work/workloads.txt" "$commit" <<'EOF'
 import csv, statistics, sys
 prefix, minutes, workloads, commit = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
 rows = list(csv.DictReader(open(prefix + ".csv")))

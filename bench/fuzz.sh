@@ -13,6 +13,7 @@ cd "$(dirname "$0")/.."
 minutes=${1:-60}
 cases=${2:-20000}
 report=${3:-bench/results/fuzz-$(date -u +%Y-%m-%d).md}
+commit=$(git rev-parse --short HEAD)
 
 echo "fuzz: building the test binary" >&2
 binary=$(cargo test -p lightcast-server --test integration --no-run --message-format=json 2>/dev/null \
@@ -52,7 +53,7 @@ elapsed=$(( $(date +%s) - start ))
 {
   echo "# Fuzzing run, $(date -u +%Y-%m-%d)"
   echo
-  echo "Command: \`bench/fuzz.sh $minutes $cases\` on $(nproc) cores ($(uname -m)), commit $(git rev-parse --short HEAD)."
+  echo "Command: \`bench/fuzz.sh $minutes $cases\` on $(nproc) cores ($(uname -m)), commit $commit (the fuzzed code)."
   echo "Result: **$status** after $round round(s), $((elapsed / 60)) min $((elapsed % 60)) s."
   echo
   echo "| target | cases run | crashes or panics |"

@@ -32,7 +32,7 @@ impl BackendChoice {
 const LAVAPIPE_ICD_DIRS: &[&str] = &["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"];
 
 /// Lavapipe's ICD file, when it is installed.
-fn lavapipe_icd() -> Option<std::path::PathBuf> {
+pub fn lavapipe_icd() -> Option<std::path::PathBuf> {
     LAVAPIPE_ICD_DIRS
         .iter()
         .filter_map(|dir| std::fs::read_dir(dir).ok())

@@ -39,8 +39,15 @@ fi
 
 server="$kit/lightcast-server"
 client="$kit/lightcast"
-cache=$(mktemp -d)
-export LIGHTCAST_CACHE_DIR="$cache"
+# A light-cache store the caller already filled (LIGHTCAST_CACHE_DIR) is reused; otherwise a
+# temporary one, removed at the end.
+if [ -n "${LIGHTCAST_CACHE_DIR:-}" ]; then
+  cache=""
+  mkdir -p "$LIGHTCAST_CACHE_DIR"
+else
+  cache=$(mktemp -d)
+  export LIGHTCAST_CACHE_DIR="$cache"
+fi
 cpu_flag=()
 if $quick; then
   cpu_flag=(--allow-cpu-adapter)
@@ -79,7 +86,7 @@ if [ "$what" = service ] || [ "$what" = all ]; then
   port=8090
   "$server" --listen "127.0.0.1:$port" "${cpu_flag[@]}" > "$out/server.log" 2>&1 &
   server_pid=$!
-  trap 'kill $server_pid 2>/dev/null || true; rm -rf "$cache"' EXIT
+  trap 'kill $server_pid 2>/dev/null || true; [ -z "$cache" ] || rm -rf "$cache"' EXIT
   for _ in $(seq 1 300); do
     curl -fs "http://127.0.0.1:$port/readyz" >/dev/null 2>&1 && break
     kill -0 $server_pid 2>/dev/null || { echo "gpu-run: the server exited" >&2; cat "$out/server.log" >&2; exit 1; }
@@ -117,5 +124,5 @@ if [ "$what" = service ] || [ "$what" = all ]; then
   trap - EXIT
   rm "$out/server.log"
 fi
-rm -rf "$cache"
+[ -z "$cache" ] || rm -rf "$cache"
 echo "gpu-run: done; results in $out" >&2

@@ -98,7 +98,8 @@ pub struct LimitArgs {
     /// Largest JSON body or WebSocket message in bytes.
     #[arg(long, env = "LIGHTCAST_MAX_MESSAGE_BYTES", default_value_t = 64 << 10)]
     pub max_message_bytes: u64,
-    /// WebSocket control messages accepted per second per session (a burst of twice as many).
+    /// WebSocket control messages accepted per second per session (a burst of twice as many;
+    /// acks of frames sent and not yet acknowledged do not count).
     #[arg(long, env = "LIGHTCAST_MAX_MESSAGES_PER_SECOND", default_value_t = 120)]
     pub max_messages_per_second: u32,
     /// Time limit of an HTTP request in milliseconds (WebSockets are not limited).

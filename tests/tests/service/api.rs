@@ -897,6 +897,42 @@ async fn rate_limited_messages_are_refused_not_fatal() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn acks_of_sent_frames_spend_no_rate_tokens_but_extra_acks_do() {
+    // The bucket holds 2 × 2 tokens; 16 acked frames would empty it five times over.
+    let server = TestServer::start(&["--max-messages-per-second", "2"]).await;
+    let created = server.create_session(direct_session(32, 32), None).await;
+    let mut stream = server.connect(&created).await;
+    let mut seen = Vec::new();
+    for _ in 0..16 {
+        stream.next_frame(&mut seen).await;
+    }
+    let limited = |events: &[ServerEvent]| {
+        events
+            .iter()
+            .filter(|e| matches!(e, ServerEvent::Error { error } if error.error == "rate_limited"))
+            .count()
+    };
+    assert_eq!(limited(&seen), 0, "acks were rate limited: {seen:?}");
+
+    // Acks for frames never sent are ordinary messages: 12 at once exceed the bucket.
+    stream.send(json!({"type": "pause"})).await;
+    for seq in 0..12 {
+        stream
+            .send(json!({"type": "ack", "seq": 1_000_000 + seq}))
+            .await;
+    }
+    let mut refused = 0;
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(5);
+    while refused == 0 && tokio::time::Instant::now() < deadline {
+        if let Incoming::Event(e) = stream.next().await {
+            refused += limited(std::slice::from_ref(&e));
+        }
+    }
+    assert!(refused > 0, "unsolicited acks were never rate limited");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn auth_guards_everything_but_health_and_sessions_belong_to_their_token() {
     let alice = "alice-token-0123456789";
     let bob = "bob-token-9876543210xx";

@@ -125,6 +125,10 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
         shutdown.mark_changed();
     }
     let mut limit = RateLimit::new(state.limits.max_messages_per_second);
+    // Frames sent and not yet acknowledged: an `ack` for one of them is flow control the server
+    // asked for, so it spends no token (at 240 fps the acks alone would exceed the default
+    // 120 messages per second); acks beyond the frames sent are ordinary messages.
+    let mut unacked: u64 = 0;
     // Browsers and WebSocket libraries answer pings by themselves, so a client that is still
     // there is heard from at least every `silence / 3` even when it sends nothing of its own.
     let silence = Duration::from_secs(state.limits.stream_silence_secs);
@@ -147,13 +151,18 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
                     return;
                 }
                 session.record_sent(len);
+                unacked += 1;
             }
             incoming = socket.recv() => {
                 last_heard = Instant::now();
                 let reply = match incoming {
                     None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
                     Some(Ok(Message::Text(text))) => {
-                        if limit.allow() {
+                        let owed_ack = unacked > 0 && is_ack(text.as_bytes());
+                        if owed_ack {
+                            unacked -= 1;
+                        }
+                        if owed_ack || limit.allow() {
                             handle(state, session, text.as_bytes())
                         } else {
                             Some(error_event(ApiError::too_many(
@@ -222,6 +231,17 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
         })),
     )
     .await;
+}
+
+/// Whether a control message is an `ack` (a cheap look at its `type` only; `handle` still
+/// validates the whole message).
+fn is_ack(text: &[u8]) -> bool {
+    #[derive(serde::Deserialize)]
+    struct Tag<'a> {
+        #[serde(borrow, rename = "type")]
+        kind: Option<&'a str>,
+    }
+    serde_json::from_slice::<Tag>(text).is_ok_and(|t| t.kind == Some("ack"))
 }
 
 /// Handles one control message; returns the event to answer with, if any.

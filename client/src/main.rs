@@ -233,16 +233,25 @@ async fn scenes(client: &Client, cmd: ScenesCommand, json: bool) -> anyhow::Resu
                 info.cameras.len(),
                 info.sessions
             );
-            for c in &info.caches {
+            for p in &info.precomputed {
+                let params: Vec<String> = p
+                    .params
+                    .iter()
+                    .map(|(name, value)| format!(" {name} {value}"))
+                    .collect();
                 println!(
-                    "  light caches d_eps {} theta_eps {}°: {:?}{}{}",
-                    c.cache_distance,
-                    c.cache_angle,
-                    c.state,
-                    c.caches
-                        .map(|n| format!(", {n} caches"))
+                    "  {}{}: {}{}{}{}",
+                    p.label,
+                    params.join(","),
+                    format!("{:?}", p.state).to_lowercase(),
+                    p.step
+                        .as_ref()
+                        .map(|s| format!(" ({s} {:.0} %)", p.progress.unwrap_or(0.0) * 100.0))
                         .unwrap_or_default(),
-                    c.seconds.map(|s| format!(", {s:.2} s")).unwrap_or_default()
+                    p.units
+                        .map(|n| format!(", {n} {}", p.unit.as_deref().unwrap_or("units")))
+                        .unwrap_or_default(),
+                    p.seconds.map(|s| format!(", {s:.2} s")).unwrap_or_default()
                 );
             }
         }

@@ -443,7 +443,7 @@ pub struct SessionCreated {
     pub ticket: StreamTicket,
 }
 
-/// State of a scene's light-cache precomputation.
+/// State of one of a scene's precomputations.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum PrecomputeState {
@@ -453,7 +453,59 @@ pub enum PrecomputeState {
     Failed,
 }
 
-/// One set of light caches of a scene (one per distinct cache parameters in use).
+/// One per-scene precomputation of a GI method, one per distinct parameters in use: the
+/// light caches of `lightskin`/`brsm` (kind `light_caches`), the BVH of `reference` (kind
+/// `bvh`). Frames of a method whose precomputation is not ready show direct light.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Precomputed {
+    /// `light_caches` or `bvh`.
+    pub kind: String,
+    /// What people call it (`light caches`, `BVH`).
+    pub label: String,
+    /// Its parameters by their names in the render's `gi` object (e.g. `cache_distance`),
+    /// the scene's defaults filled in.
+    pub params: std::collections::BTreeMap<String, f64>,
+    pub state: PrecomputeState,
+    /// Its size in the units the server budgets it in, once ready; absent for kinds whose
+    /// size follows from the scene's triangles.
+    pub units: Option<u64>,
+    /// What `units` counts (`light caches`).
+    pub unit: Option<String>,
+    /// Current step while running (e.g. `clustering`), with progress in [0, 1].
+    pub step: Option<String>,
+    pub progress: Option<f32>,
+    /// Time the precomputation (or loading it from the store) took.
+    pub seconds: Option<f64>,
+    pub from_store: Option<bool>,
+    pub error: Option<String>,
+}
+
+/// Kind of [`Precomputed`] for the light caches.
+pub const LIGHT_CACHES: &str = "light_caches";
+
+impl CacheVariant {
+    /// The light-cache view of a [`Precomputed`] of kind [`LIGHT_CACHES`].
+    pub fn from_precomputed(p: &Precomputed) -> Option<Self> {
+        if p.kind != LIGHT_CACHES {
+            return None;
+        }
+        let param = |name: &str| p.params.get(name).copied().unwrap_or(f64::NAN) as f32;
+        Some(Self {
+            state: p.state,
+            cache_distance: param("cache_distance"),
+            cache_angle: param("cache_angle"),
+            caches: p.units,
+            step: p.step.clone(),
+            progress: p.progress,
+            seconds: p.seconds,
+            from_store: p.from_store,
+            error: p.error.clone(),
+        })
+    }
+}
+
+/// One set of light caches of a scene (one per distinct cache parameters in use): the
+/// `light_caches` entries of [`SceneInfo::precomputed`], as older clients read them.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct CacheVariant {
     pub state: PrecomputeState,
@@ -506,8 +558,11 @@ pub struct SceneInfo {
     /// What a render uses when it names no camera or light.
     pub default_camera: Camera,
     pub default_light: Light,
-    /// Light caches: the default set first.
+    /// Light caches: the default set first (the `light_caches` entries of `precomputed`).
     pub caches: Vec<CacheVariant>,
+    /// Every precomputation of the scene (light caches, BVH) with its state, oldest first.
+    #[serde(default)]
+    pub precomputed: Vec<Precomputed>,
     /// Sessions using the scene (it cannot be deleted while any do).
     pub sessions: u64,
     pub load_ms: f64,

@@ -69,12 +69,17 @@ pub enum ServerEvent {
     RenderError {
         error: ErrorBody,
     },
-    /// The scene's light caches are being computed; frames show direct light until then.
+    /// What the session's GI method precomputes per scene (`what`: `light caches`, `BVH`)
+    /// is being computed; frames show direct light until then.
     CachesPending {
         scene: String,
+        #[serde(default = "light_caches")]
+        what: String,
     },
     CachesReady {
         scene: String,
+        #[serde(default = "light_caches")]
+        what: String,
     },
     Pong {
         nonce: u64,
@@ -83,4 +88,9 @@ pub enum ServerEvent {
     Closing {
         reason: String,
     },
+}
+
+/// What older servers' `caches_pending` and `caches_ready` events were about.
+fn light_caches() -> String {
+    "light caches".into()
 }

@@ -168,8 +168,8 @@ pub enum BenchError {
         scene: String,
         error: crate::scene::OpenError,
     },
-    #[error("light caches: {0}")]
-    Caches(crate::gi::lightskin::caches::CacheError),
+    #[error(transparent)]
+    Precompute(#[from] crate::offline::PrecomputeError),
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
@@ -640,12 +640,6 @@ impl BenchReport {
             s += "\n";
         }
         s
-    }
-}
-
-impl From<crate::gi::lightskin::caches::CacheError> for BenchError {
-    fn from(error: crate::gi::lightskin::caches::CacheError) -> Self {
-        Self::Caches(error)
     }
 }
 

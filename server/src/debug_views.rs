@@ -5,8 +5,11 @@
 
 use crate::gi::clustered::ClusterView;
 use crate::gi::lightskin::{
-    cache_lighting::CacheLighting, caches::LightCache, sampling::SamplingReadback,
+    cache_lighting::CacheLighting,
+    caches::{CacheSet, LightCache},
+    sampling::SamplingReadback,
 };
+use crate::gi::precompute::SceneData;
 use crate::gi::{lightskin::uses_light_caches, reference::luminance, GiMethod};
 use crate::gpu::GpuError;
 use crate::passes::{exposure::KEY, frame_uniforms::camera_view_proj, tonemap::tonemap_cpu};
@@ -61,7 +64,7 @@ pub fn compose(
     frame: Frame,
     camera: &Camera,
     bounds: &Aabb,
-    caches: Option<&[LightCache]>,
+    scene_data: Option<&SceneData>,
 ) -> Result<Image, ViewError> {
     let needs_gi = ViewError::NeedsGi { view };
     let debug = frame.debug.clone();
@@ -87,10 +90,11 @@ pub fn compose(
             let lighting = debug
                 .as_ref()
                 .and_then(|d| d.0.downcast_ref::<Vec<CacheLighting>>());
+            let caches = scene_data.and_then(|d| d.downcast_ref::<CacheSet>());
             let (Some(lighting), Some(caches)) = (lighting, caches) else {
                 return Err(needs_gi);
             };
-            self::caches(&frame, camera, bounds, caches, lighting)
+            self::caches(&frame, camera, bounds, &caches.caches, lighting)
         }
         View::Clusters => clusters(
             debug

@@ -1,15 +1,12 @@
 //! The offline `render` command: one frame of a scene to an image file, no network.
 
 use crate::debug_views::{self, View};
-use crate::gi::lightskin::{
-    cache_store::CacheStore,
-    caches::{CacheParams, CacheSet, Progress},
-};
-use crate::gi::lightskin::{uses_light_caches, LightSkin};
+use crate::gi::lightskin::caches::CacheSet;
+use crate::gi::precompute::{self, BuildEnv, Built, Progress, SceneFacts, Store};
 use crate::gi::{GiMethod, GiSettings};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
-use crate::renderer::{RenderError, RenderSettings, Renderer};
+use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
     Scene,
@@ -18,6 +15,7 @@ use glam::Vec3;
 use lightcast_protocol::{Camera, LightKind};
 use std::path::PathBuf;
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The default scene when none is named: the built-in Cornell box.
@@ -87,44 +85,99 @@ pub struct CacheArgs {
 }
 
 impl CacheArgs {
-    /// Loads the scene's light caches from the store, or computes and stores them, logging
-    /// progress and how long it took.
-    pub fn load(
+    /// Builds what frames of `method` precompute per scene (loading it from the store where
+    /// it is there), logging progress and how long it took; `None` for methods without.
+    pub fn precompute(
         &self,
+        method: GiMethod,
         scene: &Scene,
         log: &mut dyn FnMut(&str),
-    ) -> Result<CacheSet, crate::gi::lightskin::caches::CacheError> {
-        let mut params = CacheParams::for_scene(scene);
-        if let Some(d) = self.cache_distance {
-            params.d_eps = d;
-        }
-        if let Some(a) = self.cache_angle {
-            params.theta_eps_degrees = a;
-        }
-        let store = CacheStore::new(
-            self.cache_dir
-                .clone()
-                .unwrap_or_else(CacheStore::default_dir),
-        );
+    ) -> Result<Option<Built>, PrecomputeError> {
+        let Some(entry) = precompute::entry_for(method) else {
+            return Ok(None);
+        };
+        let gi = lightcast_protocol::GiParams {
+            method,
+            cache_distance: self.cache_distance,
+            cache_angle: self.cache_angle,
+            ..Default::default()
+        };
+        let key = (entry.key)(&gi, &SceneFacts::of(scene)).map_err(|e| PrecomputeError {
+            what: entry.label,
+            message: format!("--{}: {}", e.field.replace('_', "-"), e.reason),
+        })?;
+        let store = Store::new(self.cache_dir.clone().unwrap_or_else(Store::default_dir));
         let started = Instant::now();
         let mut last_step = "";
         let mut progress = |p: Progress| {
             if p.step != last_step || p.done == p.total {
-                log(&format!("light caches: {} {}/{}", p.step, p.done, p.total));
+                log(&format!(
+                    "{}: {} {}/{}",
+                    entry.label, p.step, p.done, p.total
+                ));
                 last_step = p.step;
             }
         };
-        let (set, from_disk) = store.load_or_compute(scene, &params, &mut progress)?;
+        let mut env = BuildEnv {
+            store: &store,
+            progress: &mut progress,
+            cancelled: &|| false,
+        };
+        let built = (entry.build)(scene, &key, &mut env).map_err(|message| PrecomputeError {
+            what: entry.label,
+            message,
+        })?;
+        let params: Vec<String> = key
+            .params
+            .iter()
+            .map(|(name, value)| format!("{name} {value}"))
+            .collect();
         log(&format!(
-            "light caches: {} caches (d_eps {}, theta_eps {}°), {} in {:.1} ms",
-            set.caches.len(),
-            params.d_eps,
-            params.theta_eps_degrees,
-            if from_disk { "loaded" } else { "computed" },
+            "{}: {}{}{}, {} in {:.1} ms",
+            entry.label,
+            entry.kind,
+            entry
+                .budget
+                .as_ref()
+                .map(|b| format!(", {} {}", built.units, b.unit))
+                .unwrap_or_default(),
+            if params.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", params.join(", "))
+            },
+            if built.from_store {
+                "loaded"
+            } else {
+                "computed"
+            },
             started.elapsed().as_secs_f64() * 1e3
         ));
-        Ok(set)
+        Ok(Some(built))
     }
+
+    /// The scene's light caches (see [`Self::precompute`]).
+    pub fn load(
+        &self,
+        scene: &Scene,
+        log: &mut dyn FnMut(&str),
+    ) -> Result<Arc<CacheSet>, PrecomputeError> {
+        let built = self.precompute(GiMethod::Lightskin, scene, log)?;
+        built
+            .and_then(|b| b.data.downcast::<CacheSet>().ok())
+            .ok_or_else(|| PrecomputeError {
+                what: "light caches",
+                message: "the light-cache precomputation made no light caches".into(),
+            })
+    }
+}
+
+/// A per-scene precomputation failed.
+#[derive(Debug, thiserror::Error)]
+#[error("{what}: {message}")]
+pub struct PrecomputeError {
+    pub what: &'static str,
+    pub message: String,
 }
 
 /// Options of `lightcast-server render`.
@@ -257,8 +310,8 @@ pub enum OfflineError {
         scene: String,
         error: crate::scene::OpenError,
     },
-    #[error("light caches: {0}")]
-    Caches(crate::gi::lightskin::caches::CacheError),
+    #[error(transparent)]
+    Precompute(#[from] PrecomputeError),
     #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
@@ -393,17 +446,13 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let settings = settings_from_args(args, &scene);
     settings.validate(&ctx)?;
     let setup_start = Instant::now();
-    let caches = if uses_light_caches(args.gi) {
-        Some(args.caches.load(&scene, log)?)
-    } else {
-        None
-    };
+    let data = args
+        .caches
+        .precompute(args.gi, &scene, log)?
+        .map(|b| b.data);
     let mut renderer = Renderer::new(ctx, scene);
-    if let Some(set) = &caches {
-        renderer
-            .gi::<LightSkin>()?
-            .set_caches(set)
-            .map_err(RenderError::from)?;
+    if let Some(data) = &data {
+        renderer.set_scene_data(args.gi, data)?;
     }
     let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
     debug_views::check(args.view, args.gi)?;
@@ -419,7 +468,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         frame,
         &settings.camera,
         &renderer.scene().bounds,
-        caches.as_ref().map(|set| set.caches.as_slice()),
+        data.as_ref(),
     )?;
     write_png(&image, &args.out)?;
     let scene = renderer.scene();
@@ -472,12 +521,6 @@ impl RenderReport {
         }
         s += &format!("{:<14} {:>8.3}\n", "total", self.gpu_total_ms);
         s
-    }
-}
-
-impl From<crate::gi::lightskin::caches::CacheError> for OfflineError {
-    fn from(error: crate::gi::lightskin::caches::CacheError) -> Self {
-        Self::Caches(error)
     }
 }
 

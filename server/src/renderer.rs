@@ -418,7 +418,7 @@ impl Renderer {
                 &material_layout,
                 ctx.primitive_index,
             ),
-            shadow_pass: ShadowMapPass::new(device),
+            shadow_pass: ShadowMapPass::new(device, &material_layout),
             direct_pass: DirectLightPass::new(device),
             exposure_pass: ExposurePass::new(device),
             tonemap_pass: TonemapPass::new(device),
@@ -464,8 +464,18 @@ impl Renderer {
         Ok(slot.as_mut().expect("the method was just created"))
     }
 
-    /// The scene's instance of GI method type `M` (e.g. to hand it per-scene data such as
-    /// light caches), created on first use.
+    /// Hands `method` the scene data its precomputation built (see [`gi::precompute`]).
+    pub fn set_scene_data(
+        &mut self,
+        method: gi::GiMethod,
+        data: &gi::precompute::SceneData,
+    ) -> Result<(), RenderError> {
+        self.method_at(gi::entry(method).0)?.set_scene_data(data)?;
+        Ok(())
+    }
+
+    /// The scene's instance of GI method type `M` (e.g. to read its state in tests), created
+    /// on first use.
     pub fn gi<M: Method>(&mut self) -> Result<&mut M, RenderError> {
         let index = gi::REGISTRY
             .iter()

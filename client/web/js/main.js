@@ -38,6 +38,8 @@ const state = {
   lastAck: 0,
   light: null,
   sessionId: null,
+  /** The scene whose precomputations `watchScene` is polling, if any. */
+  watching: null,
 };
 
 const stats = new Stats({
@@ -203,25 +205,38 @@ async function useScene(id, render) {
   watchScene(id);
 }
 
-/** Shows the scene's light-cache state until it is ready. */
+/** One of the scene's precomputations (light caches, BVH) as the scene line shows it. */
+function describePrecomputed(p) {
+  if (p.state === 'ready') {
+    const what = p.units !== null && p.units !== undefined ? `${p.units.toLocaleString()} ${p.unit}` : p.label;
+    return `${what} (${(p.seconds ?? 0).toFixed(1)} s${p.from_store ? ', from the store' : ''})`;
+  }
+  if (p.state === 'failed') return `${p.label} failed: ${p.error}`;
+  const progress = p.progress !== null && p.progress !== undefined ? ` ${(p.progress * 100).toFixed(0)} %` : '';
+  return `${p.label} ${p.state}${p.step ? `: ${p.step}` : ''}${progress}`;
+}
+
+/** Shows the scene's precomputations until every one is ready or failed. */
 async function watchScene(id) {
-  for (;;) {
-    let scene;
-    try {
-      scene = await getJson(`v1/scenes/${encodeURIComponent(id)}`);
-    } catch {
-      return;
+  if (state.watching === id) return;
+  state.watching = id;
+  try {
+    for (;;) {
+      let scene;
+      try {
+        scene = await getJson(`v1/scenes/${encodeURIComponent(id)}`);
+      } catch {
+        return;
+      }
+      if (state.params && state.params.render.scene !== id) return;
+      const all = scene.precomputed || [];
+      const parts = [`${scene.triangles.toLocaleString()} triangles`, ...all.map(describePrecomputed)];
+      $('scene-state').textContent = parts.join(' · ');
+      if (all.every((p) => p.state === 'ready' || p.state === 'failed')) return;
+      await new Promise((r) => setTimeout(r, SCENE_POLL_MS));
     }
-    if (state.params && state.params.render.scene !== id) return;
-    // The default cache set: the viewer does not change cache_distance or cache_angle.
-    const caches = scene.caches[0];
-    const text = !caches ? 'no light caches'
-      : caches.state === 'ready' ? `${scene.triangles.toLocaleString()} triangles · ${(caches.caches ?? 0).toLocaleString()} light caches (${(caches.seconds ?? 0).toFixed(1)} s${caches.from_store ? ', from the store' : ''})`
-      : caches.state === 'failed' ? `light caches failed: ${caches.error}`
-      : `light caches ${caches.state}${caches.step ? `: ${caches.step}` : ''}${caches.progress !== null && caches.progress !== undefined ? ` ${(caches.progress * 100).toFixed(0)} %` : ''}`;
-    $('scene-state').textContent = text;
-    if (!caches || caches.state === 'ready' || caches.state === 'failed') return;
-    await new Promise((r) => setTimeout(r, SCENE_POLL_MS));
+  } finally {
+    if (state.watching === id) state.watching = null;
   }
 }
 
@@ -357,8 +372,10 @@ async function boot() {
     onEvent: (event) => {
       if (event.type === 'error') showError(event.error, 'refused');
       else if (event.type === 'render_error') showError(event.error, 'render failed');
-      else if (event.type === 'caches_pending') message(`computing light caches of ${event.scene}: direct light until they are ready`, 'info');
-      else if (event.type === 'caches_ready') message(`light caches of ${event.scene} ready`, 'info', 4000);
+      else if (event.type === 'caches_pending') {
+        message(`computing the ${event.what} of ${event.scene}: direct light until ready`, 'info');
+        watchScene(event.scene);
+      } else if (event.type === 'caches_ready') message(`${event.what} of ${event.scene} ready`, 'info', 4000);
       else if (event.type === 'closing') message(`session ended: ${event.reason}`, 'error');
     },
   });

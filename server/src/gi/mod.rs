@@ -12,13 +12,15 @@
 //!
 //! Adding a method: a module implementing [`Method`], an entry in [`REGISTRY`] (whose
 //! `describe` lists its parameters with their ranges: `/v1/server` publishes them, the service
-//! enforces them and the viewer builds its controls from them), a [`GiMethod`] variant and its
-//! parameters in the protocol's `GiParams`. The renderer, the service and the clients need no
-//! other change.
+//! enforces them and the viewer builds its controls from them; whose `precompute`, if the
+//! method needs per-scene data, is built off the render loop with progress, see
+//! [`precompute`]), a [`GiMethod`] variant and its parameters in the protocol's `GiParams`.
+//! The renderer, the service and the clients need no other change.
 
 pub mod clustered;
 pub mod lightskin;
 pub mod none;
+pub mod precompute;
 pub mod reference;
 
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
@@ -220,6 +222,15 @@ pub trait Method: Any {
         None
     }
 
+    /// Takes the scene's data its [`MethodEntry::precompute`] built; frames before it fail
+    /// with [`GiError::Scene`].
+    fn set_scene_data(&mut self, data: &precompute::SceneData) -> Result<(), GiError> {
+        let _ = data;
+        Err(GiError::Scene(
+            "this GI method takes no precomputed scene data".into(),
+        ))
+    }
+
     /// The renderer dropped the targets of output sizes other than `live`: release anything
     /// made for them.
     fn retain_targets(&mut self, live: &[&GBuffer]) {
@@ -289,6 +300,8 @@ pub struct MethodEntry {
     pub create: fn(&SceneResources) -> Result<Box<dyn Method>, GiError>,
     /// Parameter descriptions and limits for `/v1/server`, one per name in `methods`.
     pub describe: fn(&Limits) -> Vec<GiMethodInfo>,
+    /// The per-scene data frames of `methods` need before their first frame, if any.
+    pub precompute: Option<&'static precompute::PrecomputeEntry>,
 }
 
 /// Every method the renderer can run.

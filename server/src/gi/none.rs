@@ -23,6 +23,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
             parameters: Vec::new(),
         }]
     },
+    precompute: None,
 };
 
 fn validate(_: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {

@@ -42,7 +42,13 @@ pub const GBUFFER_TRIANGLE_IDS: ShaderSource = ShaderSource {
 
 pub const SHADOW_MAP: ShaderSource = ShaderSource {
     name: "shadow_map",
-    files: &[wgsl!("shadow_map.wgsl")],
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("material_model.wgsl"),
+        wgsl!("materials.wgsl"),
+        wgsl!("shadow_map.wgsl"),
+    ],
 };
 
 pub const DIRECT_LIGHT: ShaderSource = ShaderSource {
@@ -335,7 +341,10 @@ mod tests {
                 &GBUFFER_TRIANGLE_IDS,
                 &[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP],
             ),
-            (&SHADOW_MAP, &[&shadow_map::GROUP]),
+            (
+                &SHADOW_MAP,
+                &[&shadow_map::GROUP, &scene_buffers::MATERIAL_GROUP],
+            ),
             (&DIRECT_LIGHT, &[&direct_light::GROUP]),
             (&EXPOSURE, &[&exposure::GROUP]),
             (&TONEMAP, &[&tonemap::GROUP]),

@@ -41,6 +41,11 @@ pub struct SceneBuffers {
     /// not drawn into the shadow map or the RSM (a lamp's bulb must neither shadow nor reflect
     /// its own light).
     pub shadow_casting: Vec<MaterialRange>,
+    /// The ranges of [`Self::shadow_casting`] whose material has an alpha mask, which the
+    /// shadow map draws with their materials to cut the masked texels away, and the others,
+    /// which it draws depth-only.
+    pub shadow_masked: Vec<MaterialRange>,
+    pub shadow_opaque: Vec<MaterialRange>,
     /// Group 1 of `shaders/materials.wgsl`, indexed by material.
     pub materials: Vec<wgpu::BindGroup>,
 }
@@ -75,17 +80,22 @@ impl SceneBuffers {
             contents: bytemuck::cast_slice(&scene.indices),
             usage: wgpu::BufferUsages::INDEX | wgpu::BufferUsages::STORAGE,
         });
-        let shadow_casting = scene
+        let shadow_casting: Vec<MaterialRange> = scene
             .material_ranges
             .iter()
             .filter(|r| !scene.materials[r.material as usize].is_emissive())
             .copied()
             .collect();
+        let (shadow_masked, shadow_opaque) = shadow_casting
+            .iter()
+            .partition(|r| scene.materials[r.material as usize].alpha_cutoff.is_some());
         Self {
             vertices,
             indices,
             ranges: scene.material_ranges.clone(),
             shadow_casting,
+            shadow_masked,
+            shadow_opaque,
             materials: material_bind_groups(device, queue, scene, material_layout),
         }
     }

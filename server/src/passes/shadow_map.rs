@@ -1,7 +1,7 @@
 //! Shadow-map pass: depth of the scene from each light face (`shaders/shadow_map.wgsl`).
 
 use super::bind::{self, bind_group};
-use super::scene_buffers::SceneBuffers;
+use super::scene_buffers::{SceneBuffers, VERTEX_ATTRIBUTES};
 use super::ParamSlots;
 use crate::gpu::shaders;
 
@@ -70,13 +70,16 @@ bind_group! {
 }
 
 pub struct ShadowMapPass {
+    /// Depth-only, for opaque materials.
     pipeline: wgpu::RenderPipeline,
+    /// With the materials bound as group 1, for alpha-masked ones.
+    masked: wgpu::RenderPipeline,
     face_matrices: ParamSlots,
     bind_group: wgpu::BindGroup,
 }
 
 impl ShadowMapPass {
-    pub fn new(device: &wgpu::Device) -> Self {
+    pub fn new(device: &wgpu::Device, material_layout: &wgpu::BindGroupLayout) -> Self {
         let layout = GROUP.layout(device);
         let face_matrices =
             ParamSlots::new::<[[f32; 4]; 4]>(device, "shadow face matrices", MAX_FACES);
@@ -84,48 +87,66 @@ impl ShadowMapPass {
             face_view_proj: &face_matrices,
         }
         .bind(device, &layout);
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("shadow map"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
         let module = shaders::SHADOW_MAP.create_module(device);
-        let attributes = wgpu::vertex_attr_array![0 => Float32x3];
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("shadow map"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(SceneBuffers::vertex_layout(&attributes))],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::LessEqual),
-                stencil: Default::default(),
-                // Only a tiny constant bias: acne is handled by the normal offset in the lookup.
-                // A slope-scaled bias pushes grazing occluder faces so far back that light
-                // leaks past box edges (measured by the Cornell ray-caster test).
-                bias: wgpu::DepthBiasState {
-                    constant: 2,
-                    slope_scale: 0.0,
-                    clamp: 0.0,
+        let pipeline = |label, groups: &[Option<&wgpu::BindGroupLayout>], masked: bool| {
+            let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: groups,
+                immediate_size: 0,
+            });
+            let position = wgpu::vertex_attr_array![0 => Float32x3];
+            let attributes: &[wgpu::VertexAttribute] = if masked {
+                &VERTEX_ATTRIBUTES
+            } else {
+                &position
+            };
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some(if masked { "vs_masked" } else { "vs_main" }),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(SceneBuffers::vertex_layout(attributes))],
                 },
-            }),
-            multisample: Default::default(),
-            fragment: None,
-            multiview_mask: None,
-            cache: None,
-        });
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::LessEqual),
+                    stencil: Default::default(),
+                    // Only a tiny constant bias: acne is handled by the normal offset in the
+                    // lookup. A slope-scaled bias pushes grazing occluder faces so far back
+                    // that light leaks past box edges (measured by the Cornell ray-caster
+                    // test).
+                    bias: wgpu::DepthBiasState {
+                        constant: 2,
+                        slope_scale: 0.0,
+                        clamp: 0.0,
+                    },
+                }),
+                multisample: Default::default(),
+                fragment: masked.then(|| wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("fs_masked"),
+                    compilation_options: Default::default(),
+                    targets: &[],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
         Self {
-            pipeline,
+            pipeline: pipeline("shadow map", &[Some(&layout)], false),
+            masked: pipeline(
+                "shadow map (alpha-masked)",
+                &[Some(&layout), Some(material_layout)],
+                true,
+            ),
             face_matrices,
             bind_group,
         }
@@ -158,16 +179,22 @@ impl ShadowMapPass {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
+            let offset = [ParamSlots::offset(face as u32)];
             pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[ParamSlots::offset(face as u32)]);
+            pass.set_bind_group(0, &self.bind_group, &offset);
             pass.set_vertex_buffer(0, scene.vertices.slice(..));
             pass.set_index_buffer(scene.indices.slice(..), wgpu::IndexFormat::Uint32);
-            for range in &scene.shadow_casting {
+            for range in &scene.shadow_opaque {
                 pass.draw_indexed(
                     range.first_index..range.first_index + range.index_count,
                     0,
                     0..1,
                 );
+            }
+            if !scene.shadow_masked.is_empty() {
+                pass.set_pipeline(&self.masked);
+                pass.set_bind_group(0, &self.bind_group, &offset);
+                scene.draw_with_materials(&mut pass, &scene.shadow_masked);
             }
         }
     }

@@ -19,7 +19,7 @@ pub mod render_loop;
 pub mod scenes;
 pub mod sessions;
 
-use crate::gi::lightskin::cache_store::CacheStore;
+use crate::gi::precompute::Store;
 use crate::gpu::{GpuContext, GpuError};
 use crate::scene::Scene;
 pub use config::ServeArgs;
@@ -84,12 +84,10 @@ impl Service {
         }));
         metrics::handle();
 
-        let store = CacheStore::new(
-            args.cache_dir
-                .clone()
-                .unwrap_or_else(CacheStore::default_dir),
-        )
-        .with_max_bytes(args.cache_max_bytes);
+        let store = Store {
+            dir: args.cache_dir.clone().unwrap_or_else(Store::default_dir),
+            max_bytes: Some(args.cache_max_bytes),
+        };
         let scenes = scenes::SceneRegistry::new(store, &limits);
         let spec = args.default_scene.clone();
         let started = Instant::now();

@@ -4,7 +4,7 @@
 use super::error::ApiError;
 use super::scenes::SceneEntry;
 use crate::debug_views::{self, ViewError};
-use crate::gi::lightskin::{caches::CacheParams, uses_light_caches};
+use crate::gi::precompute::PrecomputeKey;
 use crate::gi::GiSettings;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
@@ -15,8 +15,8 @@ use lightcast_protocol::{Encoding, GiParams, Limits, RenderParams, SessionParams
 pub struct Resolved {
     pub settings: RenderSettings,
     pub view: View,
-    /// Light caches the frame needs (`None` without GI).
-    pub caches: Option<CacheParams>,
+    /// The per-scene precomputation the frame's GI method needs (`None`: none).
+    pub precompute: Option<PrecomputeKey>,
 }
 
 /// The renderer's own field names, as paths of the request's `render` object.
@@ -86,11 +86,7 @@ pub fn resolve(
         | ViewError::NeedsClustered { .. } => ApiError::field("view", e.to_string()),
         ViewError::Gpu(g) => ApiError::internal(g.to_string()),
     })?;
-    let caches = if uses_light_caches(g.method) {
-        Some(entry.cache_params(g.cache_distance, g.cache_angle)?)
-    } else {
-        None
-    };
+    let precompute = entry.precompute_key(g)?;
     let settings = RenderSettings {
         width: params.width,
         height: params.height,
@@ -115,7 +111,7 @@ pub fn resolve(
     Ok(Resolved {
         settings,
         view: params.view,
-        caches,
+        precompute,
     })
 }
 

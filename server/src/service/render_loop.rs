@@ -5,10 +5,10 @@
 use super::encode::{self, EncodePool};
 use super::error::ApiError;
 use super::params::{render_error, Resolved};
-use super::scenes::{CachesNow, SceneEntry, SceneRegistry};
+use super::scenes::{precompute_failed, precompute_label, Now, SceneEntry, SceneRegistry};
 use super::sessions::{unix_us, FramePlan, Session, SessionRegistry};
 use crate::debug_views::{self, Image};
-use crate::gi::lightskin::caches::{CacheParams, CacheSet};
+use crate::gi::precompute::{PrecomputeKey, SceneData};
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::quality::Truth;
@@ -102,7 +102,9 @@ fn record_metrics(frame: &Frame) {
     record_duration(READBACK_SECONDS, READBACK_MS, frame.readback_ms);
 }
 
-type RendererKey = (String, Option<(u32, u32)>);
+/// A scene's renderer, one more for each parameter set of a precomputation that has them
+/// (see `PrecomputeKey::has_variants`).
+type RendererKey = (String, Option<PrecomputeKey>);
 
 /// The renderers to drop, given when each was last used: those idle for [`RENDERER_IDLE`],
 /// then the least recently used beyond [`MAX_RENDERERS`].
@@ -119,7 +121,8 @@ fn evictions<K>(mut used: Vec<(K, Instant)>, now: Instant) -> Vec<K> {
 
 struct Slot {
     renderer: Renderer,
-    caches: Option<Arc<CacheSet>>,
+    /// The precomputations whose data the renderer's methods hold.
+    applied: Vec<PrecomputeKey>,
     last_used: Instant,
 }
 
@@ -257,17 +260,12 @@ impl Loop {
         resolved: &Resolved,
     ) -> Result<Submitted, ApiError> {
         let mut settings = resolved.settings.clone();
-        let (caches, gi_pending) = match resolved.caches {
+        let (data, gi_pending) = match &resolved.precompute {
             None => (None, false),
-            Some(params) => match self.scenes.caches(scene, params) {
-                CachesNow::Ready(set) => (Some(set), false),
-                CachesNow::Pending | CachesNow::Busy => (None, true),
-                CachesNow::Failed(e) => {
-                    return Err(ApiError::field(
-                        "render.gi.cache_distance",
-                        format!("the light caches of scene '{}' failed: {e}", scene.id),
-                    ))
-                }
+            Some(key) => match self.scenes.precomputed(scene, key) {
+                Now::Ready(data) => (Some((key, data)), false),
+                Now::Pending | Now::Busy => (None, true),
+                Now::Failed(e) => return Err(precompute_failed(scene, key, &e).within("render")),
             },
         };
         if gi_pending {
@@ -278,26 +276,26 @@ impl Loop {
         } else {
             resolved.view
         };
-        let key = (
+        let renderer_key = (
             scene.id.clone(),
-            caches.as_ref().map(|c| cache_key(&c.params)),
+            data.as_ref()
+                .map(|(key, _)| *key)
+                .filter(|key| key.has_variants())
+                .cloned(),
         );
-        let slot = match self.renderers.entry(key.clone()) {
-            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
-            std::collections::hash_map::Entry::Vacant(e) => e.insert(Slot {
-                renderer: Renderer::new(self.ctx.clone(), Arc::clone(&scene.scene)),
-                caches: None,
-                last_used: Instant::now(),
-            }),
-        };
+        let slot = self.renderers.entry(renderer_key).or_insert_with(|| Slot {
+            renderer: Renderer::new(self.ctx.clone(), Arc::clone(&scene.scene)),
+            applied: Vec::new(),
+            last_used: Instant::now(),
+        });
         slot.last_used = Instant::now();
-        if let (Some(set), None) = (&caches, &slot.caches) {
-            slot.renderer
-                .gi::<crate::gi::lightskin::LightSkin>()
-                .map_err(|e| render_error(&e))?
-                .set_caches(set)
-                .map_err(|e| ApiError::internal(e.to_string()))?;
-            slot.caches = Some(Arc::clone(set));
+        if let Some((key, data)) = &data {
+            if !slot.applied.contains(key) {
+                slot.renderer
+                    .set_scene_data(settings.gi.method, data)
+                    .map_err(|e| render_error(&e).within("render"))?;
+                slot.applied.push((*key).clone());
+            }
         }
         let pending = slot
             .renderer
@@ -308,7 +306,7 @@ impl Loop {
             view,
             gi_pending,
             camera: settings.camera,
-            caches: slot.caches.clone(),
+            data: data.map(|(_, data)| data),
         })
     }
 
@@ -370,7 +368,14 @@ impl Loop {
         truth.settings.history = None;
         truth.settings.debug_view = View::Final;
         truth.view = View::Final;
-        truth.caches = None;
+        truth.precompute = Some(
+            job.scene
+                .precompute_key(&lightcast_protocol::GiParams {
+                    method,
+                    ..Default::default()
+                })?
+                .ok_or_else(|| ApiError::internal(format!("{method} precomputes nothing")))?,
+        );
         let key = {
             use std::hash::{Hash, Hasher};
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -380,7 +385,15 @@ impl Loop {
         let cached = self.comparisons.lookup(key);
         let frame = match cached {
             Some(frame) => ComparandFrame::Cached(frame),
-            None => ComparandFrame::Pending(Box::new(self.submit(&job.scene, &truth)?.pending)),
+            None => {
+                let submitted = self.submit(&job.scene, &truth)?;
+                if submitted.gi_pending {
+                    return Err(ApiError::unavailable(
+                        "the reference's BVH of this scene is being rebuilt; try again shortly",
+                    ));
+                }
+                ComparandFrame::Pending(Box::new(submitted.pending))
+            }
         };
         Ok(Comparand {
             method,
@@ -422,7 +435,8 @@ struct FrameJob {
     view: View,
     camera: lightcast_protocol::Camera,
     scene: Arc<SceneEntry>,
-    caches: Option<Arc<CacheSet>>,
+    /// The GI method's precomputed scene data (the `caches` view draws the light caches).
+    data: Option<SceneData>,
     gi_pending: bool,
 }
 
@@ -433,7 +447,7 @@ impl FrameJob {
             view: s.view,
             camera: s.camera,
             scene,
-            caches: s.caches,
+            data: s.data,
             gi_pending: s.gi_pending,
         }
     }
@@ -448,15 +462,9 @@ impl FrameJob {
             .wait()
             .map_err(|e| ApiError::internal(e.to_string()))?;
         inspect(&frame)?;
-        let (camera, scene, caches) = (self.camera, self.scene, self.caches);
+        let (camera, scene, data) = (self.camera, self.scene, self.data);
         finish(frame, self.view, self.gi_pending, |view, frame| {
-            debug_views::compose(
-                view,
-                frame,
-                &camera,
-                &scene.scene.bounds,
-                caches.as_ref().map(|c| c.caches.as_slice()),
-            )
+            debug_views::compose(view, frame, &camera, &scene.scene.bounds, data.as_ref())
         })
     }
 }
@@ -662,8 +670,12 @@ fn deliver(
     render_start_us: u64,
     encoder: &EncodePool,
 ) {
-    if plan.resolved.caches.is_some() {
-        session.note_caches(&plan.lease_scene.id, rendered.gi_pending);
+    if let Some(key) = &plan.resolved.precompute {
+        session.note_precomputed(
+            &plan.lease_scene.id,
+            precompute_label(key),
+            rendered.gi_pending,
+        );
     }
     metrics::counter!(super::metrics::FRAMES_RENDERED).increment(1);
     session.record_render(&rendered.stages());
@@ -734,12 +746,8 @@ struct Submitted {
     view: View,
     gi_pending: bool,
     camera: lightcast_protocol::Camera,
-    /// The light caches the frame used, for the `caches` view.
-    caches: Option<Arc<CacheSet>>,
-}
-
-fn cache_key(p: &CacheParams) -> (u32, u32) {
-    (p.d_eps.to_bits(), p.theta_eps_degrees.to_bits())
+    /// The precomputed scene data the frame used, for debug views.
+    data: Option<SceneData>,
 }
 
 /// The image history of a session (see `RenderSettings::history`): a hash of its id.

@@ -1,23 +1,27 @@
-//! Scenes the server holds: loaded once, shared by every session, light caches precomputed in
-//! the background (one set per distinct cache parameters in use).
+//! Scenes the server holds: loaded once, shared by every session, with their GI methods'
+//! precomputations (light caches, BVH; see `gi::precompute`) built in the background, one
+//! set per kind and distinct parameters in use.
 
 use super::budget::{over_budget, Held, MemoryBudget, Pool, Quota, TokenQuotas};
 use super::error::ApiError;
 use super::ids;
-use crate::gi::lightskin::cache_store::CacheStore;
-use crate::gi::lightskin::caches::{min_distance_for, CacheParams, CacheSet};
+use crate::gi::precompute::{
+    self, BuildEnv, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts, Store,
+    UnitBudget,
+};
 use crate::scene::default_light::{default_camera, default_light};
 use crate::scene::Scene;
 use lightcast_protocol::{
-    Bounds, CacheVariant, Camera, Light, Limits, PrecomputeState, SceneInfo, DEFAULT_SCENE_ID,
+    Bounds, CacheVariant, Camera, GiParams, Light, Limits, PrecomputeState, Precomputed, SceneInfo,
+    DEFAULT_SCENE_ID,
 };
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{mpsc, Arc, Mutex, MutexGuard, Weak};
 use std::time::Instant;
 
-/// Most cache parameter sets kept per scene.
-pub const MAX_CACHE_VARIANTS: usize = 8;
+/// Most parameter sets of one precomputation kept per scene.
+pub const MAX_VARIANTS: usize = 8;
 
 /// Locks a mutex, recovering the data if a panicking thread poisoned it (every critical
 /// section here leaves the data consistent).
@@ -25,27 +29,37 @@ pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
+/// One precomputation of the scene (one per kind and distinct parameters in use).
 struct Variant {
-    params: CacheParams,
+    key: PrecomputeKey,
+    entry: &'static PrecomputeEntry,
     state: PrecomputeState,
     step: Option<String>,
     progress: Option<f32>,
     seconds: Option<f64>,
     from_store: Option<bool>,
     error: Option<String>,
-    caches: Option<Arc<CacheSet>>,
-    /// This set's share of the total light-cache budget: the estimate until it is built,
-    /// then the real count.
-    held: Held,
+    units: Option<u64>,
+    data: Option<SceneData>,
+    /// This set's share of its kind's unit budget: the estimate until it is built, then the
+    /// real count (nothing for unbudgeted kinds).
+    held: Option<Held>,
 }
 
 impl Variant {
-    fn info(&self) -> CacheVariant {
-        CacheVariant {
+    fn info(&self) -> Precomputed {
+        Precomputed {
+            kind: self.key.kind.to_string(),
+            label: self.entry.label.to_string(),
+            params: self
+                .key
+                .params
+                .iter()
+                .map(|(name, value)| (name.to_string(), f64::from(*value)))
+                .collect(),
             state: self.state,
-            cache_distance: self.params.d_eps,
-            cache_angle: self.params.theta_eps_degrees,
-            caches: self.caches.as_ref().map(|c| c.caches.len() as u64),
+            units: self.entry.budget.as_ref().and(self.units),
+            unit: self.entry.budget.as_ref().map(|b| b.unit.to_string()),
             step: self.step.clone(),
             progress: self.progress,
             seconds: self.seconds,
@@ -55,11 +69,11 @@ impl Variant {
     }
 }
 
-/// What a frame can use of a scene's light caches right now.
-pub enum CachesNow {
-    Ready(Arc<CacheSet>),
+/// What a frame can use of a scene's precomputation right now.
+pub enum Now {
+    Ready(SceneData),
     Pending,
-    /// Not queued: the precompute queue is full; asking again later queues them.
+    /// Not queued: the precompute queue is full; asking again later queues it.
     Busy,
     Failed(String),
 }
@@ -71,9 +85,9 @@ pub struct SceneEntry {
     pub scene: Arc<Scene>,
     pub default_camera: Camera,
     pub default_light: Light,
-    pub default_params: CacheParams,
-    /// Summed once: checking a request's cache parameters against it happens per message.
-    surface_area: f64,
+    /// Summed once: checking a request's precomputation parameters against them happens per
+    /// message.
+    facts: SceneFacts,
     pub load_ms: f64,
     /// The token that uploaded the scene, the only one that may delete it (`None`: the
     /// server's own scenes, or auth off).
@@ -85,11 +99,6 @@ pub struct SceneEntry {
     /// The scene's texture bytes and triangles, taken from the server's budgets while it is
     /// held.
     _held: [Held; 2],
-}
-
-fn same_params(a: &CacheParams, b: &CacheParams) -> bool {
-    a.d_eps.to_bits() == b.d_eps.to_bits()
-        && a.theta_eps_degrees.to_bits() == b.theta_eps_degrees.to_bits()
 }
 
 /// 413 `triangle_budget`: a scene of `triangles` does not fit in what is left of `pool`.
@@ -148,8 +157,7 @@ impl SceneEntry {
             owner,
             default_camera: default_camera(&scene),
             default_light: default_light(&scene),
-            default_params: CacheParams::for_scene(&scene),
-            surface_area: crate::gi::lightskin::caches::surface_area(&scene),
+            facts: SceneFacts::of(&scene),
             scene: Arc::new(scene),
             load_ms,
             variants: Mutex::new(Vec::new()),
@@ -162,6 +170,8 @@ impl SceneEntry {
 
     pub fn info(&self) -> SceneInfo {
         let s = &self.scene;
+        let precomputed: Vec<Precomputed> =
+            lock(&self.variants).iter().map(Variant::info).collect();
         SceneInfo {
             id: self.id.clone(),
             name: s.name.clone(),
@@ -178,121 +188,141 @@ impl SceneEntry {
             cameras: s.cameras.clone(),
             default_camera: self.default_camera.clone(),
             default_light: self.default_light.clone(),
-            caches: lock(&self.variants).iter().map(Variant::info).collect(),
+            caches: precomputed
+                .iter()
+                .filter_map(CacheVariant::from_precomputed)
+                .collect(),
+            precomputed,
             sessions: self.sessions.load(Ordering::Relaxed),
             load_ms: self.load_ms,
         }
     }
 
-    /// Cache parameters of a request: the scene's defaults where a value is not given.
-    /// Refuses parameters that would give absurd cache counts, naming the field.
-    pub fn cache_params(
-        &self,
-        distance: Option<f32>,
-        angle: Option<f32>,
-    ) -> Result<CacheParams, ApiError> {
-        let params = CacheParams {
-            d_eps: distance.unwrap_or(self.default_params.d_eps),
-            theta_eps_degrees: angle.unwrap_or(self.default_params.theta_eps_degrees),
+    /// The precomputation a frame with GI parameters `gi` needs on this scene, if any: its
+    /// parameters are the scene's defaults where `gi` gives none. Refuses parameters beyond
+    /// the budgets before anything is queued or built, naming the field (under `gi`).
+    pub fn precompute_key(&self, gi: &GiParams) -> Result<Option<PrecomputeKey>, ApiError> {
+        let Some(entry) = precompute::entry_for(gi.method) else {
+            return Ok(None);
         };
-        // The count is checked against the budgets below, which are within the format's own
-        // cap (`validate_for_area`, which the precomputation applies too).
-        if let Err(e) = params.validate() {
-            let field = if matches!(e, crate::gi::lightskin::caches::CacheError::InvalidAngle(_)) {
-                "gi.cache_angle"
-            } else {
-                "gi.cache_distance"
-            };
-            return Err(ApiError::field(field, e.to_string()));
-        }
+        let key = (entry.key)(gi, &self.facts)
+            .map_err(|e| ApiError::field(format!("gi.{}", e.field), e.reason))?;
         let variants = lock(&self.variants);
-        let exists = variants.iter().any(|v| same_params(&v.params, &params));
-        if !exists {
-            self.check_cache_budget(&params)?;
+        if variants.iter().any(|v| v.key == key) {
+            return Ok(Some(key));
         }
-        if variants.len() >= MAX_CACHE_VARIANTS && !exists {
+        if let Some(budget) = &entry.budget {
+            self.check_budget(entry, budget, &key)?;
+        }
+        let kept = variants.iter().filter(|v| v.key.kind == key.kind).count();
+        if kept >= MAX_VARIANTS {
+            let field = entry.budget.as_ref().map_or("method", |b| b.field);
             return Err(ApiError::field(
-                "gi.cache_distance",
+                format!("gi.{field}"),
                 format!(
-                    "scene '{}' already has {MAX_CACHE_VARIANTS} sets of light caches; \
-                     use the parameters of one of them",
-                    self.id
+                    "scene '{}' already has {MAX_VARIANTS} sets of {}; use the parameters \
+                     of one of them",
+                    self.id, entry.label
                 ),
             ));
         }
-        Ok(params)
+        Ok(Some(key))
     }
 
-    /// Refuses a new set of light caches whose estimated count exceeds the per-set limit or
-    /// what is left of the total, before anything is queued or built.
-    fn check_cache_budget(&self, params: &CacheParams) -> Result<(), ApiError> {
-        let estimated = params.estimated_caches(self.surface_area);
+    /// Refuses a new set whose estimated size exceeds the per-set limit or what is left of
+    /// the total.
+    fn check_budget(
+        &self,
+        entry: &PrecomputeEntry,
+        budget: &UnitBudget,
+        key: &PrecomputeKey,
+    ) -> Result<(), ApiError> {
+        let estimated = (entry.estimate)(key, &self.facts);
         let per_set = self.budget.caches_per_set;
         if estimated > per_set {
             return Err(ApiError::field(
-                "gi.cache_distance",
+                format!("gi.{}", budget.field),
                 format!(
-                    "{} would make about {estimated} light caches for this scene's {:.6} square \
-                     units of surface, more than this server's limit of {per_set} per set \
-                     (--max-caches-per-set); use cache_distance >= {}",
-                    params.d_eps,
-                    self.surface_area,
-                    min_distance_for(self.surface_area, per_set)
+                    "{} would make about {estimated} {} for this scene's {:.6} square units \
+                     of surface, more than this server's limit of {per_set} per set \
+                     (--max-caches-per-set); {}",
+                    describe_params(key),
+                    budget.unit,
+                    self.facts.surface_area,
+                    (budget.advice)(&self.facts, per_set)
                 ),
             ));
         }
-        self.reserve_caches(params).map(drop)
+        self.reserve(entry, key).map(drop)
     }
 
-    /// Takes a new set's estimated light caches from the total budget.
-    fn reserve_caches(&self, params: &CacheParams) -> Result<Held, ApiError> {
-        let estimated = params.estimated_caches(self.surface_area);
+    /// Takes a new set's estimated units from the total budget (nothing for unbudgeted
+    /// kinds).
+    fn reserve(
+        &self,
+        entry: &PrecomputeEntry,
+        key: &PrecomputeKey,
+    ) -> Result<Option<Held>, ApiError> {
+        let Some(budget) = &entry.budget else {
+            return Ok(None);
+        };
+        let estimated = (entry.estimate)(key, &self.facts);
         let pool = &self.budget.caches;
-        pool.try_take(estimated).ok_or_else(|| {
+        pool.try_take(estimated).map(Some).ok_or_else(|| {
             ApiError::field(
-                "gi.cache_distance",
+                format!("gi.{}", budget.field),
                 format!(
-                    "{} would make about {estimated} light caches, but only {} of this \
-                     server's {} (--max-total-caches) are left; use a larger cache_distance \
-                     or the parameters of a set that exists",
-                    params.d_eps,
+                    "{} would make about {estimated} {}, but only {} of this server's {} \
+                     (--max-total-caches) are left; {} or use the parameters of a set that \
+                     exists",
+                    describe_params(key),
+                    budget.unit,
                     pool.available(),
-                    pool.limit()
+                    pool.limit(),
+                    (budget.advice)(&self.facts, pool.available())
                 ),
             )
         })
     }
 
-    /// Makes a built set's share of the total budget its real count. The estimate is of flat
+    /// Makes a built set's share of the total budget its real size. The estimate is of flat
     /// geometry; curved or folded surfaces (or a small cache angle) can make more, and a set
     /// beyond the per-set limit or what is left of the total is refused, its memory freed.
-    fn hold_built_caches(&self, params: &CacheParams, count: u64) -> Result<(), String> {
+    fn hold_built(&self, key: &PrecomputeKey, units: u64) -> Result<(), String> {
+        let Some(budget) = precompute::entries()
+            .find(|e| e.kind == key.kind)
+            .and_then(|e| e.budget.as_ref())
+        else {
+            return Ok(());
+        };
         let per_set = self.budget.caches_per_set;
-        if count > per_set {
+        let advice = (budget.advice)(&self.facts, per_set);
+        if units > per_set {
             return Err(format!(
-                "{count} light caches were made, more than this server's limit of {per_set} \
-                 per set (--max-caches-per-set); use a larger cache_distance or cache_angle"
+                "{units} {} were made, more than this server's limit of {per_set} per set \
+                 (--max-caches-per-set); {advice}",
+                budget.unit
             ));
         }
         let mut held = true;
-        self.update_variant(params, &mut |v| held = v.held.resize(count));
+        self.update_variant(key, &mut |v| {
+            held = v.held.as_mut().is_none_or(|h| h.resize(units));
+        });
         if held {
             Ok(())
         } else {
             Err(format!(
-                "{count} light caches were made, more than the {} left of this server's {} \
-                 (--max-total-caches); use a larger cache_distance",
+                "{units} {} were made, more than the {} left of this server's {} \
+                 (--max-total-caches); {advice}",
+                budget.unit,
                 self.budget.caches.available(),
                 self.budget.caches.limit()
             ))
         }
     }
 
-    fn update_variant(&self, params: &CacheParams, f: &mut dyn FnMut(&mut Variant)) {
-        if let Some(v) = lock(&self.variants)
-            .iter_mut()
-            .find(|v| same_params(&v.params, params))
-        {
+    fn update_variant(&self, key: &PrecomputeKey, f: &mut dyn FnMut(&mut Variant)) {
+        if let Some(v) = lock(&self.variants).iter_mut().find(|v| v.key == *key) {
             f(v);
         }
     }
@@ -317,15 +347,51 @@ impl Drop for SceneLease {
     }
 }
 
+/// What people call precomputation `key` (`light caches`).
+pub fn precompute_label(key: &PrecomputeKey) -> &'static str {
+    precompute::entries()
+        .find(|e| e.kind == key.kind)
+        .map_or(key.kind, |e| e.label)
+}
+
+/// A frame's precomputation failed: the error names the request field that chose it (the
+/// field sizing it, or the method), relative to the render object.
+pub fn precompute_failed(scene: &SceneEntry, key: &PrecomputeKey, error: &str) -> ApiError {
+    let field = precompute::entries()
+        .find(|e| e.kind == key.kind)
+        .and_then(|e| e.budget.as_ref())
+        .map_or("method", |b| b.field);
+    ApiError::field(
+        format!("gi.{field}"),
+        format!(
+            "the {} of scene '{}' failed: {error}",
+            precompute_label(key),
+            scene.id
+        ),
+    )
+}
+
+/// `cache_distance 0.5, cache_angle 30` (or the kind, for one without parameters).
+fn describe_params(key: &PrecomputeKey) -> String {
+    if key.params.is_empty() {
+        return key.kind.to_string();
+    }
+    key.params
+        .iter()
+        .map(|(name, value)| format!("{name} {value}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// A queued precomputation. The queue holds its scene weakly: a scene deleted, or a one-shot
 /// render's upload whose request has ended, is skipped and its memory freed at once instead
 /// of waiting in the queue.
-type Job = (Weak<SceneEntry>, CacheParams);
+type Job = (Weak<SceneEntry>, PrecomputeKey);
 
 /// Precomputations waiting at most; beyond them a request is refused for now.
 const MAX_QUEUED_JOBS: usize = 32;
 
-/// All scenes, plus the worker thread that precomputes their light caches.
+/// All scenes, plus the worker thread that runs their GI methods' precomputations.
 pub struct SceneRegistry {
     scenes: Mutex<BTreeMap<String, Arc<SceneEntry>>>,
     jobs: Mutex<mpsc::SyncSender<Job>>,
@@ -335,31 +401,29 @@ pub struct SceneRegistry {
 }
 
 impl SceneRegistry {
-    /// Starts the precompute worker (one thread; the precomputation itself uses rayon).
-    pub fn new(store: CacheStore, limits: &Limits) -> Arc<Self> {
-        Self::with_worker(limits, move |entry, params| {
-            precompute(&store, entry, params)
-        })
+    /// Starts the precompute worker (one thread; a precomputation may use rayon).
+    pub fn new(store: Store, limits: &Limits) -> Arc<Self> {
+        Self::with_worker(limits, move |entry, key| precompute(&store, entry, key))
     }
 
     /// [`SceneRegistry::new`] with `work` run on the worker thread for each queued job.
     fn with_worker(
         limits: &Limits,
-        mut work: impl FnMut(&SceneEntry, CacheParams) + Send + 'static,
+        mut work: impl FnMut(&Arc<SceneEntry>, &PrecomputeKey) + Send + 'static,
     ) -> Arc<Self> {
         let (tx, rx) = mpsc::sync_channel::<Job>(MAX_QUEUED_JOBS);
         std::thread::Builder::new()
             .name("precompute".into())
             .spawn(move || {
-                for (entry, params) in rx {
+                for (entry, key) in rx {
                     let Some(entry) = entry.upgrade() else {
                         continue;
                     };
                     // A bug in one scene's precomputation must not stop every later scene's.
-                    let run = || work(&entry, params);
+                    let run = || work(&entry, &key);
                     if std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).is_err() {
-                        tracing::error!(scene = %entry.id, "the light-cache precomputation panicked");
-                        entry.update_variant(&params, &mut |v| {
+                        tracing::error!(scene = %entry.id, kind = key.kind, "a precomputation panicked");
+                        entry.update_variant(&key, &mut |v| {
                             v.state = PrecomputeState::Failed;
                             v.error = Some(
                                 "the precomputation failed on an internal error (see the \
@@ -424,7 +488,13 @@ impl SceneRegistry {
             scenes.insert(entry.id.clone(), Arc::clone(&entry));
             metrics::gauge!(super::metrics::SCENES).set(scenes.len() as f64);
         }
-        self.caches(&entry, entry.default_params);
+        // The default method's precomputation starts at once, so its first frame need not
+        // wait for it.
+        for kind in precompute::entries().filter(|e| e.eager) {
+            if let Ok(key) = (kind.key)(&GiParams::default(), &entry.facts) {
+                self.precomputed(&entry, &key);
+            }
+        }
         Ok(entry)
     }
 
@@ -485,52 +555,61 @@ impl SceneRegistry {
         Ok(())
     }
 
-    /// The light caches of `entry` for `params`, queueing their precomputation on first use.
-    pub fn caches(&self, entry: &Arc<SceneEntry>, params: CacheParams) -> CachesNow {
-        let mut variants = lock(&entry.variants);
-        if let Some(v) = variants.iter().find(|v| same_params(&v.params, &params)) {
-            return match (&v.caches, &v.error) {
-                (Some(set), _) => CachesNow::Ready(Arc::clone(set)),
-                (None, Some(e)) => CachesNow::Failed(e.clone()),
-                (None, None) => CachesNow::Pending,
+    /// The data of `scene`'s precomputation `key`, queueing it on first use.
+    pub fn precomputed(&self, scene: &Arc<SceneEntry>, key: &PrecomputeKey) -> Now {
+        let mut variants = lock(&scene.variants);
+        if let Some(v) = variants.iter().find(|v| v.key == *key) {
+            return match (&v.data, &v.error) {
+                (Some(data), _) => Now::Ready(Arc::clone(data)),
+                (None, Some(e)) => Now::Failed(e.clone()),
+                (None, None) => Now::Pending,
             };
         }
-        let held = match entry.reserve_caches(&params) {
-            Ok(held) => held,
-            Err(e) => return CachesNow::Failed(e.body.message),
+        let Some(entry) = precompute::entries().find(|e| e.kind == key.kind) else {
+            return Now::Failed(format!("no GI method precomputes '{}'", key.kind));
         };
-        match lock(&self.jobs).try_send((Arc::downgrade(entry), params)) {
+        let held = match scene.reserve(entry, key) {
+            Ok(held) => held,
+            Err(e) => return Now::Failed(e.body.message),
+        };
+        match lock(&self.jobs).try_send((Arc::downgrade(scene), key.clone())) {
             Ok(()) => {}
-            Err(mpsc::TrySendError::Full(_)) => return CachesNow::Busy,
+            Err(mpsc::TrySendError::Full(_)) => return Now::Busy,
             Err(mpsc::TrySendError::Disconnected(_)) => {
                 tracing::error!("the precompute thread has stopped");
-                return CachesNow::Failed("the precompute thread has stopped".into());
+                return Now::Failed("the precompute thread has stopped".into());
             }
         }
         variants.push(Variant {
-            params,
+            key: key.clone(),
+            entry,
             state: PrecomputeState::Queued,
             step: None,
             progress: None,
             seconds: None,
             from_store: None,
             error: None,
-            caches: None,
+            units: None,
+            data: None,
             held,
         });
-        CachesNow::Pending
+        Now::Pending
     }
 }
 
-/// Runs on the precompute thread: loads or computes one set of caches and records the outcome.
-fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
-    let update = |f: &mut dyn FnMut(&mut Variant)| entry.update_variant(&params, f);
-    if entry.removed.load(Ordering::Relaxed) {
+/// Runs on the precompute worker: loads or computes one precomputation and records the
+/// outcome.
+fn precompute(store: &Store, scene: &Arc<SceneEntry>, key: &PrecomputeKey) {
+    let update = |f: &mut dyn FnMut(&mut Variant)| scene.update_variant(key, f);
+    if scene.removed.load(Ordering::Relaxed) {
         return;
     }
+    let Some(entry) = precompute::entries().find(|e| e.kind == key.kind) else {
+        return;
+    };
     update(&mut |v| v.state = PrecomputeState::Running);
     let started = Instant::now();
-    let mut progress = |p: crate::gi::lightskin::caches::Progress| {
+    let mut progress = |p: Progress| {
         update(&mut |v| {
             v.step = Some(p.step.to_string());
             v.progress = Some(if p.total == 0 {
@@ -540,35 +619,43 @@ fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
             });
         })
     };
-    let result = store
-        .load_or_compute(&entry.scene, &params, &mut progress)
-        .map_err(|e| e.to_string())
-        .and_then(|(set, from_store)| {
-            entry.hold_built_caches(&params, set.caches.len() as u64)?;
-            Ok((set, from_store))
-        });
+    // Deleted, or held by nobody but this worker (a one-shot render's upload whose request
+    // has ended).
+    let cancelled = || scene.removed.load(Ordering::Relaxed) || Arc::strong_count(scene) == 1;
+    let mut env = BuildEnv {
+        store,
+        progress: &mut progress,
+        cancelled: &cancelled,
+    };
+    let result = (entry.build)(&scene.scene, key, &mut env).and_then(|built| {
+        scene.hold_built(key, built.units)?;
+        Ok(built)
+    });
     let seconds = started.elapsed().as_secs_f64();
     match result {
-        Ok((set, from_store)) => {
+        Ok(built) => {
             tracing::info!(
-                scene = %entry.id,
-                caches = set.caches.len(),
+                scene = %scene.id,
+                kind = key.kind,
+                units = built.units,
                 seconds,
-                from_store,
-                "light caches ready"
+                from_store = built.from_store,
+                "{} ready",
+                entry.label
             );
-            let mut set = Some(set);
+            let mut data = Some(built.data);
             update(&mut |v| {
                 v.state = PrecomputeState::Ready;
                 v.step = None;
                 v.progress = Some(1.0);
                 v.seconds = Some(seconds);
-                v.from_store = Some(from_store);
-                v.caches = set.take().map(Arc::new);
+                v.from_store = Some(built.from_store);
+                v.units = Some(built.units);
+                v.data = data.take();
             });
         }
         Err(e) => {
-            tracing::warn!(scene = %entry.id, "light caches failed: {e}");
+            tracing::warn!(scene = %scene.id, kind = key.kind, "{} failed: {e}", entry.label);
             update(&mut |v| {
                 v.state = PrecomputeState::Failed;
                 v.seconds = Some(seconds);
@@ -581,6 +668,8 @@ fn precompute(store: &CacheStore, entry: &SceneEntry, params: CacheParams) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gi::lightskin::cache_key;
+    use crate::gi::lightskin::caches::{min_distance_for, CacheParams};
     use crate::scene::procedural;
     use std::time::Duration;
 
@@ -591,17 +680,25 @@ mod tests {
         }
     }
 
-    fn params(d_eps: f32) -> CacheParams {
-        CacheParams {
+    fn params(d_eps: f32) -> PrecomputeKey {
+        cache_key(&CacheParams {
             d_eps,
             theta_eps_degrees: 30.0,
-        }
+        })
     }
 
-    fn state(entry: &SceneEntry, p: &CacheParams) -> Option<PrecomputeState> {
+    /// The light caches a brsm frame asks for with `cache_distance`.
+    fn key_for(entry: &SceneEntry, d_eps: f32) -> Result<Option<PrecomputeKey>, ApiError> {
+        entry.precompute_key(&GiParams {
+            cache_distance: Some(d_eps),
+            ..GiParams::default()
+        })
+    }
+
+    fn state(entry: &SceneEntry, p: &PrecomputeKey) -> Option<PrecomputeState> {
         lock(&entry.variants)
             .iter()
-            .find(|v| same_params(&v.params, p))
+            .find(|v| v.key == *p)
             .map(|v| v.state)
     }
 
@@ -629,13 +726,11 @@ mod tests {
         let entry = registry
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
-        let area = entry.surface_area;
+        let area = entry.facts.surface_area;
         // The smallest distance the format's own cap allows, which the server used to
         // suggest: about two million caches, far beyond one set's budget.
         let suggested = min_distance_for(area, crate::gi::lightskin::caches::MAX_CACHES) * 1.01;
-        let e = entry
-            .cache_params(Some(suggested), None)
-            .expect_err("beyond --max-caches-per-set");
+        let e = key_for(&entry, suggested).expect_err("beyond --max-caches-per-set");
         assert_eq!(e.body.field.as_deref(), Some("gi.cache_distance"));
         assert!(
             e.body
@@ -656,16 +751,14 @@ mod tests {
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
         let smallest = min_distance_for(area, 10_000);
-        let p = entry
-            .cache_params(Some(smallest), None)
-            .expect("10,000 fit");
-        assert!(entry.cache_params(Some(smallest * 0.95), None).is_err());
-        assert!(matches!(registry.caches(&entry, p), CachesNow::Pending));
+        let p = key_for(&entry, smallest)
+            .expect("10,000 fit")
+            .expect("brsm needs light caches");
+        assert!(key_for(&entry, smallest * 0.95).is_err());
+        assert!(matches!(registry.precomputed(&entry, &p), Now::Pending));
         let taken = registry.budget().caches.used();
         assert!((9_000..=10_000).contains(&taken), "{taken}");
-        let e = entry
-            .cache_params(Some(smallest * 1.1), None)
-            .expect_err("the total is spent");
+        let e = key_for(&entry, smallest * 1.1).expect_err("the total is spent");
         assert_eq!(e.body.field.as_deref(), Some("gi.cache_distance"));
         assert!(
             e.body.message.contains("(--max-total-caches)"),
@@ -673,7 +766,7 @@ mod tests {
             e.body.message
         );
         assert!(
-            entry.cache_params(Some(smallest), None).is_ok(),
+            key_for(&entry, smallest).is_ok(),
             "the set that exists is not counted twice"
         );
         drop(entry);
@@ -694,10 +787,10 @@ mod tests {
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
         let p = params(1.0);
-        assert!(matches!(registry.caches(&entry, p), CachesNow::Pending));
-        assert_eq!(entry.hold_built_caches(&p, 7), Ok(()));
+        assert!(matches!(registry.precomputed(&entry, &p), Now::Pending));
+        assert_eq!(entry.hold_built(&p, 7), Ok(()));
         assert_eq!(registry.budget().caches.used(), 7);
-        let e = entry.hold_built_caches(&p, 10_001).expect_err("over");
+        let e = entry.hold_built(&p, 10_001).expect_err("over");
         assert!(e.contains("--max-caches-per-set"), "{e}");
     }
 
@@ -766,20 +859,20 @@ mod tests {
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
         assert!(matches!(
-            registry.caches(&entry, params(1.0)),
-            CachesNow::Pending
+            registry.precomputed(&entry, &params(1.0)),
+            Now::Pending
         ));
         assert_eq!(seen.recv_timeout(WAIT).as_deref(), Ok(entry.id.as_str()));
         // The worker holds the first job; the queue takes MAX_QUEUED_JOBS more.
         for k in 0..MAX_QUEUED_JOBS {
             let p = params(2.0 + k as f32);
             assert!(
-                matches!(registry.caches(&entry, p), CachesNow::Pending),
+                matches!(registry.precomputed(&entry, &p), Now::Pending),
                 "job {k}"
             );
         }
         let refused = params(100.0);
-        assert!(matches!(registry.caches(&entry, refused), CachesNow::Busy));
+        assert!(matches!(registry.precomputed(&entry, &refused), Now::Busy));
         assert_eq!(
             state(&entry, &refused),
             None,
@@ -788,8 +881,8 @@ mod tests {
         go.send(()).expect("worker alive");
         assert!(seen.recv_timeout(WAIT).is_ok());
         assert!(matches!(
-            registry.caches(&entry, refused),
-            CachesNow::Pending
+            registry.precomputed(&entry, &refused),
+            Now::Pending
         ));
         drop(go);
     }
@@ -800,13 +893,13 @@ mod tests {
         let kept = registry
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
-        registry.caches(&kept, params(1.0));
+        registry.precomputed(&kept, &params(1.0));
         assert_eq!(seen.recv_timeout(WAIT).as_deref(), Ok(kept.id.as_str()));
         let dropped = registry
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
-        registry.caches(&dropped, params(1.0));
-        registry.caches(&kept, params(2.0));
+        registry.precomputed(&dropped, &params(1.0));
+        registry.precomputed(&kept, &params(2.0));
         drop(dropped);
         go.send(()).expect("worker alive");
         go.send(()).expect("worker alive");
@@ -819,19 +912,84 @@ mod tests {
     fn a_panicking_precomputation_fails_its_variant_and_the_worker_goes_on() {
         let (done_tx, done) = mpsc::channel();
         let registry = SceneRegistry::with_worker(&limits(4), move |entry, p| {
-            assert!(p.d_eps != 1.0, "a bug in the precomputation");
+            assert!(p != &params(1.0), "a bug in the precomputation");
             let _ = done_tx.send(entry.id.clone());
         });
         let entry = registry
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
-        registry.caches(&entry, params(1.0));
-        registry.caches(&entry, params(2.0));
+        registry.precomputed(&entry, &params(1.0));
+        registry.precomputed(&entry, &params(2.0));
         assert_eq!(done.recv_timeout(WAIT).as_deref(), Ok(entry.id.as_str()));
         assert_eq!(state(&entry, &params(1.0)), Some(PrecomputeState::Failed));
-        match registry.caches(&entry, params(1.0)) {
-            CachesNow::Failed(e) => assert!(e.contains("internal error"), "{e}"),
+        match registry.precomputed(&entry, &params(1.0)) {
+            Now::Failed(e) => assert!(e.contains("internal error"), "{e}"),
             _ => panic!("the panicked variant must read as failed"),
         }
+    }
+
+    /// Waits until `key` of `entry` is ready or failed.
+    fn settled(registry: &SceneRegistry, entry: &Arc<SceneEntry>, key: &PrecomputeKey) -> Now {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            match registry.precomputed(entry, key) {
+                Now::Pending | Now::Busy if Instant::now() < deadline => {
+                    std::thread::sleep(Duration::from_millis(10))
+                }
+                now => return now,
+            }
+        }
+    }
+
+    #[test]
+    fn the_bvh_is_built_on_the_worker_and_listed_with_the_light_caches() {
+        let store = tempfile::tempdir().expect("temp dir");
+        let registry = SceneRegistry::new(Store::new(store.path()), &limits(4));
+        let entry = registry
+            .insert(procedural::cornell_box(), "t".into(), None, 0.0, None)
+            .expect("fits");
+        let reference = GiParams {
+            method: lightcast_protocol::GiMethod::Reference,
+            ..GiParams::default()
+        };
+        let bvh = entry
+            .precompute_key(&reference)
+            .expect("valid")
+            .expect("the reference needs its BVH");
+        assert_eq!(bvh.kind, "bvh");
+        let none = GiParams {
+            method: lightcast_protocol::GiMethod::None,
+            ..GiParams::default()
+        };
+        assert_eq!(entry.precompute_key(&none).expect("valid"), None);
+        let Now::Ready(data) = settled(&registry, &entry, &bvh) else {
+            panic!("the BVH must build");
+        };
+        let built = data
+            .downcast_ref::<crate::gi::reference::bvh::SceneBvh>()
+            .expect("a BVH");
+        assert_eq!(
+            built.triangles.len(),
+            entry.scene.triangle_count(),
+            "every triangle in the BVH"
+        );
+        let caches = key_for(&entry, 0.37).expect("fits").expect("brsm");
+        assert!(matches!(settled(&registry, &entry, &caches), Now::Ready(_)));
+        let info = entry.info();
+        let kinds: Vec<_> = info.precomputed.iter().map(|p| p.kind.as_str()).collect();
+        // The default light caches are queued when the scene is added, before anything asks.
+        assert_eq!(kinds, ["light_caches", "bvh", "light_caches"], "{kinds:?}");
+        let bvh_info = &info.precomputed[1];
+        assert_eq!(bvh_info.state, PrecomputeState::Ready);
+        assert_eq!(bvh_info.progress, Some(1.0));
+        assert!(bvh_info.params.is_empty());
+        assert_eq!(
+            bvh_info.units, None,
+            "the BVH is not counted in light caches"
+        );
+        assert_eq!(info.caches.len(), 2, "only light caches in the old list");
+        assert_eq!(info.caches[1].cache_distance, 0.37);
+        assert_eq!(info.caches[1].caches, info.precomputed[2].units);
+        assert!(info.caches[1].caches.is_some_and(|n| n > 0));
     }
 }

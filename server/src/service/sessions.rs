@@ -286,8 +286,9 @@ impl Session {
         self.seq.fetch_add(1, Ordering::Relaxed) + 1
     }
 
-    /// Tells the client once per scene that frames lack GI until the caches are ready.
-    pub fn note_caches(&self, scene: &str, pending: bool) {
+    /// Tells the client once per scene that frames lack GI until `what` (the method's
+    /// per-scene precomputation) is ready.
+    pub fn note_precomputed(&self, scene: &str, what: &str, pending: bool) {
         let mut s = lock(&self.state);
         let told = s.caches_pending_told.as_deref() == Some(scene);
         let event = match (pending, told) {
@@ -295,12 +296,14 @@ impl Session {
                 s.caches_pending_told = Some(scene.to_string());
                 ServerEvent::CachesPending {
                     scene: scene.to_string(),
+                    what: what.to_string(),
                 }
             }
             (false, true) => {
                 s.caches_pending_told = None;
                 ServerEvent::CachesReady {
                     scene: scene.to_string(),
+                    what: what.to_string(),
                 }
             }
             _ => return,

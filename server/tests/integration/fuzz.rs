@@ -9,7 +9,7 @@
 //! the seed come from the environment and the cases run are counted and printed.
 
 use lightcast_protocol::{ClientMessage, FrameHeader, RenderRequest, SessionParams, Stage};
-use lightcast_server::gi::lightskin::cache_store::CacheStore;
+use lightcast_server::gi::precompute::Store;
 use lightcast_server::scene::gltf_loader::{load_gltf_slice, LoadLimits};
 use lightcast_server::scene::Scene;
 use lightcast_server::service::error::{from_value, parse_json};
@@ -225,7 +225,7 @@ fn cornell_entry() -> std::sync::Arc<lightcast_server::service::scenes::SceneEnt
     let scene: Scene = load_gltf_slice(CORNELL_GLB, None, "cornell", LoadLimits::NONE)
         .expect("the Cornell box loads");
     // No light caches are queued for a detached scene: the store is never written.
-    let store = CacheStore::new(std::env::temp_dir().join("lightcast-fuzz-unused"));
+    let store = Store::new(std::env::temp_dir().join("lightcast-fuzz-unused"));
     SceneRegistry::new(store, &default_limits())
         .detached(scene, 0.0)
         .expect("the Cornell box is within the default budgets")

@@ -519,6 +519,7 @@ fn clustered_error_against_the_reference_is_finite_and_below_none() {
     let scene = procedural::cornell_box();
     let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
     let mut renderer = Renderer::new(gpu(), scene.clone());
+    set_bvh(&mut renderer);
     let mut indirect = |gi: GiSettings| {
         s.gi = gi;
         renderer

@@ -217,3 +217,111 @@ fn point_light_shadows_work_on_side_faces_of_the_cube() {
         "behind the wall {behind_wall} vs open {mirror_side}"
     );
 }
+
+/// A square hovering over the floor under a sun straight above: drawn opaque it shadows the
+/// floor beneath it; with a texture whose alpha mask cuts it away entirely, the shadow map
+/// skips it as the G-buffer does and the floor is lit exactly as without it; masked on its
+/// left half only, only the right half's shadow remains.
+#[test]
+fn alpha_masked_texels_cast_no_shadow() {
+    use lightcast_server::scene::{Scene, Texture};
+    let light = directional(Vec3::new(0.0, -1.0, 0.0), 3.0);
+    let floor = plain_material([0.6, 0.6, 0.6], 0.0, 1.0);
+    let camera = oblique_camera();
+    let (clear, solid) = ([0, 0, 0, 0], [0, 0, 0, 255]);
+    let halves = |left: [u8; 4], right: [u8; 4]| Texture {
+        name: "halves".into(),
+        width: 4,
+        height: 2,
+        rgba8: (0..8)
+            .flat_map(|i| if i % 4 < 2 { left } else { right })
+            .collect(),
+    };
+    let with_blocker = |texture: Texture, alpha_cutoff: Option<f32>| {
+        let (mut v, mut i) = (Vec::new(), Vec::new());
+        quad(&mut v, &mut i, floor_corners(0.0, 0.0, 0.0, 2.0), 0);
+        quad(&mut v, &mut i, floor_corners(0.0, -0.2, 0.5, 0.5), 1);
+        let cover = lightcast_server::scene::Material {
+            base_color_texture: Some(0),
+            alpha_cutoff,
+            ..plain_material([1.0; 3], 0.0, 1.0)
+        };
+        Scene::new(
+            "blocker",
+            v,
+            i,
+            vec![floor.clone(), cover],
+            vec![texture],
+            vec![],
+            vec![],
+        )
+        .expect("scene")
+    };
+    let s = settings(W, H, camera.clone(), light.clone());
+    let open_scene = floor_scene(floor.clone());
+    let open = render(open_scene.clone(), &s);
+    let masked = render(with_blocker(halves(clear, clear), Some(0.5)), &s);
+    let opaque_scene = with_blocker(halves(clear, clear), None);
+    let opaque = render(opaque_scene.clone(), &s);
+    let half = render(with_blocker(halves(clear, solid), Some(0.5)), &s);
+
+    // Masked away entirely: the camera sees the floor through it, lit as without it.
+    let mut floor_pixels = 0;
+    for y in 0..H {
+        for x in 0..W {
+            if hit_plane(&camera, &open_scene, W, H, x, y, 0.0).is_none() {
+                continue;
+            }
+            floor_pixels += 1;
+            let (m, o) = (hdr_at(&masked, x, y), hdr_at(&open, x, y));
+            assert!(
+                (m - o).abs().max_element() <= 1e-6 * o.max_element().max(1e-6),
+                "pixel ({x}, {y}): masked {m} vs no blocker {o}"
+            );
+        }
+    }
+    assert!(floor_pixels > (W * H / 3) as usize, "{floor_pixels}");
+
+    // Drawn opaque, or masked on its left half: floor points beneath it that the camera sees
+    // past its edge.
+    let lit = direct_radiance(&floor, &light, &camera, Vec3::ZERO, Vec3::Y);
+    let (mut shadowed, mut left_lit, mut right_dark) = (0, 0, 0);
+    for y in 0..H {
+        for x in 0..W {
+            let Some(p) = hit_plane(&camera, &open_scene, W, H, x, y, 0.0) else {
+                continue;
+            };
+            let origin = Vec3::from(camera.position);
+            let sees_floor = trace(&opaque_scene, origin, (p - origin).normalize(), 100.0)
+                .is_some_and(|(_, triangle)| triangle < 2);
+            let margin = 0.1;
+            let beneath = p.x.abs() < 0.5 - margin && (p.z + 0.2).abs() < 0.5 - margin;
+            if !sees_floor || !beneath {
+                continue;
+            }
+            let o = luminance(hdr_at(&opaque, x, y));
+            assert!(
+                o < 0.02 * luminance(lit),
+                "({x}, {y}) at {p}: opaque shadow {o}"
+            );
+            shadowed += 1;
+            let h = luminance(hdr_at(&half, x, y));
+            if p.x < -margin {
+                assert!(
+                    (h - luminance(lit)).abs() < 0.01 * luminance(lit),
+                    "({x}, {y}) at {p}: under the masked half {h} vs lit {}",
+                    luminance(lit)
+                );
+                left_lit += 1;
+            } else if p.x > margin {
+                assert!(h < 0.02 * luminance(lit), "({x}, {y}) at {p}: {h}");
+                right_dark += 1;
+            }
+        }
+    }
+    eprintln!("{shadowed} shadowed floor pixels seen: {left_lit} under the masked half, {right_dark} under the solid one");
+    assert!(
+        left_lit >= 10 && right_dark >= 10,
+        "{left_lit} lit, {right_dark} dark"
+    );
+}

@@ -409,6 +409,7 @@ fn reference_frames_accumulate_per_history_and_match_the_tracer() {
     let p = plates();
     let (w, h) = (16, 12);
     let mut renderer = Renderer::new(support::gpu(), p.scene.clone());
+    support::set_bvh(&mut renderer);
     let mut settings = support::settings(w, h, p.camera.clone(), p.light.clone());
     settings.gi = GiSettings {
         method: GiMethod::Reference,

@@ -128,6 +128,7 @@ fn render_methods(scene: &Scene, camera: &Camera, light: &Light) -> (f32, Vec<Fr
         .expect("LightSkin is registered")
         .set_caches(&caches)
         .expect("caches fit the scene");
+    set_bvh(&mut renderer);
     let frames = methods()
         .into_iter()
         .map(|gi| {

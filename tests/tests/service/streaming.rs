@@ -361,3 +361,82 @@ async fn streams_of_clients_that_stop_answering_pings_close() {
     drop(stream);
     server.stop().await;
 }
+
+/// The reference's BVH is built off the render loop, like the light caches: a `reference`
+/// session's first frames on a scene without one show direct light with the GI-pending flag and
+/// a `caches_pending` event naming the BVH; once it is built the frames carry path-traced
+/// samples, `caches_ready` follows, and the scene lists the BVH as a ready precomputation.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_reference_session_waits_for_the_bvh_built_in_the_background() {
+    let server = TestServer::start(&[]).await;
+    let info = server.get_json("/v1/scenes/default").await;
+    let kinds: Vec<&str> = info["precomputed"]
+        .as_array()
+        .expect("precomputed list")
+        .iter()
+        .filter_map(|p| p["kind"].as_str())
+        .collect();
+    assert!(
+        !kinds.contains(&"bvh"),
+        "nothing asked for a BVH yet: {kinds:?}"
+    );
+    let mut params = small_session(48, 32);
+    params["render"]["gi"] = json!({"method": "reference", "spp": 2});
+    let created = server.create_session(params, None).await;
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    let first = stream.next_frame(&mut events).await;
+    assert_ne!(
+        first.header.flags & FLAG_GI_PENDING,
+        0,
+        "the first frame cannot have the BVH it asked for"
+    );
+    assert!(
+        first.stage("path_trace").is_none(),
+        "direct light only while pending"
+    );
+    let traced = loop {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.flags & FLAG_GI_PENDING == 0 {
+            break f;
+        }
+    };
+    assert!(
+        traced.stage("path_trace").is_some(),
+        "path-traced once the BVH is there"
+    );
+    // The readiness event is queued with the first traced frame; read until it arrives.
+    while !events
+        .iter()
+        .any(|e| matches!(e, ServerEvent::CachesReady { .. }))
+    {
+        stream.next_frame(&mut events).await;
+    }
+    let pending = events.iter().find_map(|e| match e {
+        ServerEvent::CachesPending { scene, what } => Some((scene.clone(), what.clone())),
+        _ => None,
+    });
+    assert_eq!(
+        pending,
+        Some(("default".to_string(), "BVH".to_string())),
+        "{events:?}"
+    );
+    let info = server.get_json("/v1/scenes/default").await;
+    let bvh = info["precomputed"]
+        .as_array()
+        .expect("precomputed list")
+        .iter()
+        .find(|p| p["kind"] == "bvh")
+        .expect("the BVH is listed")
+        .clone();
+    assert_eq!(bvh["state"], "ready", "{bvh}");
+    assert_eq!(bvh["label"], "BVH");
+    assert_eq!(bvh["progress"], 1.0);
+    assert!(bvh["seconds"].as_f64().is_some_and(|s| s >= 0.0), "{bvh}");
+    // The old list holds light caches only.
+    assert!(info["caches"]
+        .as_array()
+        .expect("caches list")
+        .iter()
+        .all(|c| c.get("cache_distance").is_some()));
+}

@@ -51,6 +51,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     validate,
     create: |r| Ok(Box::new(Clustered::new(r))),
     describe,
+    precompute: None,
 };
 
 fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {

@@ -85,27 +85,6 @@ impl CacheStore {
         self
     }
 
-    /// `$LIGHTCAST_CACHE_DIR`, else `$XDG_CACHE_HOME/lightcast`, else `~/.cache/lightcast`,
-    /// else `./.lightcast-cache`.
-    pub fn default_dir() -> PathBuf {
-        let var = |name: &str| {
-            std::env::var_os(name)
-                .filter(|v| !v.is_empty())
-                .map(PathBuf::from)
-        };
-        if let Some(dir) = var("LIGHTCAST_CACHE_DIR") {
-            return dir;
-        }
-        // The XDG spec says relative paths in XDG_CACHE_HOME are invalid and to be ignored.
-        if let Some(dir) = var("XDG_CACHE_HOME").filter(|d| d.is_absolute()) {
-            return dir.join("lightcast");
-        }
-        if let Some(home) = var("HOME") {
-            return home.join(".cache").join("lightcast");
-        }
-        PathBuf::from(".lightcast-cache")
-    }
-
     pub fn dir(&self) -> &Path {
         &self.dir
     }

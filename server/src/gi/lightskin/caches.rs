@@ -70,12 +70,16 @@ impl CacheParams {
     /// On flat geometry each voxel face of area (d_eps/2)² holds one cache, so A / (d_eps/2)²
     /// caches cover area A.
     pub fn for_scene(scene: &Scene) -> Self {
-        let area = surface_area(scene);
+        Self::for_area(surface_area(scene), scene.bounds.radius())
+    }
+
+    /// [`Self::for_scene`] for a scene of `area` square units within a sphere of `radius`.
+    pub fn for_area(area: f64, radius: f32) -> Self {
         let d_eps = if area > 0.0 && area.is_finite() {
             2.0 * (area / DEFAULT_CACHE_TARGET).sqrt()
         } else {
             // Degenerate scene without area: any positive distance works; keep it in scale.
-            let radius = f64::from(scene.bounds.radius());
+            let radius = f64::from(radius);
             if radius > 0.0 && radius.is_finite() {
                 radius * 0.05
             } else {
@@ -240,12 +244,7 @@ pub struct CacheSet {
 }
 
 /// Progress of [`precompute`]: `done` of `total` items of the named step.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Progress {
-    pub step: &'static str,
-    pub done: u64,
-    pub total: u64,
-}
+pub use crate::gi::precompute::Progress;
 
 /// A point sample of the surface (step 1).
 #[derive(Clone, Copy, Debug)]

@@ -17,6 +17,7 @@ pub mod proxy_occlusion;
 pub mod sampling;
 pub mod val_select;
 
+use super::precompute::{Built, PrecomputeEntry, PrecomputeKey, SceneData, UnitBudget};
 use super::{
     DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
@@ -26,7 +27,8 @@ use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{frame_uniforms::light_faces, gbuffer::GBuffer};
 use cache_buffers::CacheBuffers;
 use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
-use caches::CacheSet;
+use cache_store::CacheStore;
+use caches::{CacheParams, CacheSet};
 use indirect_light::{CacheInputs, IndirectLightPass};
 use lightcast_protocol::{GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage, View};
 use proxy_occlusion::ProxyOcclusionPass;
@@ -52,7 +54,76 @@ pub const ENTRY: MethodEntry = MethodEntry {
     validate,
     create: |r| Ok(Box::new(LightSkin::new(r))),
     describe,
+    precompute: Some(&PRECOMPUTE),
 };
+
+/// The light caches (paper §3), one set per scene and (d_eps, θ_eps), kept in the store.
+pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
+    kind: "light_caches",
+    label: "light caches",
+    eager: true,
+    key: |gi, facts| {
+        let defaults = CacheParams::for_area(facts.surface_area, facts.radius);
+        let params = CacheParams {
+            d_eps: gi.cache_distance.unwrap_or(defaults.d_eps),
+            theta_eps_degrees: gi.cache_angle.unwrap_or(defaults.theta_eps_degrees),
+        };
+        // The count is checked against the service's budgets, which are within the format's
+        // own cap (`validate_for_area`, which the precomputation applies too).
+        params.validate().map_err(|e| {
+            let field = match e {
+                caches::CacheError::InvalidAngle(_) => "cache_angle",
+                _ => "cache_distance",
+            };
+            InvalidSetting::new(field, e.to_string())
+        })?;
+        Ok(cache_key(&params))
+    },
+    budget: Some(UnitBudget {
+        unit: "light caches",
+        field: "cache_distance",
+        advice: |facts, allowed| {
+            format!(
+                "use cache_distance >= {}",
+                caches::min_distance_for(facts.surface_area, allowed)
+            )
+        },
+    }),
+    estimate: |key, facts| cache_params(key).estimated_caches(facts.surface_area),
+    build: |scene, key, env| {
+        let mut caches = CacheStore::new(&env.store.dir);
+        if let Some(max) = env.store.max_bytes {
+            caches = caches.with_max_bytes(max);
+        }
+        let (set, from_store) = caches
+            .load_or_compute(scene, &cache_params(key), env.progress)
+            .map_err(|e| e.to_string())?;
+        Ok(Built {
+            units: set.caches.len() as u64,
+            data: Arc::new(set),
+            from_store,
+        })
+    },
+};
+
+/// The key of the light caches for `params`.
+pub fn cache_key(params: &CacheParams) -> PrecomputeKey {
+    PrecomputeKey {
+        kind: PRECOMPUTE.kind,
+        params: vec![
+            ("cache_distance", params.d_eps),
+            ("cache_angle", params.theta_eps_degrees),
+        ],
+    }
+}
+
+/// The cache parameters of a [`PRECOMPUTE`] key (NaN, which no set is built for, if not).
+pub fn cache_params(key: &PrecomputeKey) -> CacheParams {
+    CacheParams {
+        d_eps: key.param("cache_distance").unwrap_or(f32::NAN),
+        theta_eps_degrees: key.param("cache_angle").unwrap_or(f32::NAN),
+    }
+}
 
 /// Checks the parameters the two methods read.
 fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
@@ -261,6 +332,13 @@ impl LightSkin {
 }
 
 impl Method for LightSkin {
+    fn set_scene_data(&mut self, data: &SceneData) -> Result<(), GiError> {
+        let set = data.downcast_ref::<CacheSet>().ok_or_else(|| {
+            GiError::Scene("LightSkin's scene data must be its light caches".into())
+        })?;
+        self.set_caches(set)
+    }
+
     fn encode(
         &mut self,
         frame: &FrameInputs,

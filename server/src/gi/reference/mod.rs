@@ -17,8 +17,7 @@
 //! camera, bounce and shadow rays pass through; `BLEND` is opaque, as in the raster passes. Only
 //! triangles of masked materials are tested (a flag in the BVH), and in scenes without masks
 //! the test is compiled away (on lavapipe it would otherwise double the cost of a sample). The
-//! shadow map does not alpha-test (it draws depth only), so the direct light of masked
-//! surfaces can differ from this reference's light through them.
+//! shadow map cuts masked texels away too, so direct light passes the same holes.
 //!
 //! Samples accumulate while the camera, light, size and settings stay the same; each sample
 //! is one dispatch (short enough for lavapipe's silent dispatch limit at small sizes). Random
@@ -31,6 +30,7 @@
 pub mod bvh;
 pub mod resolve;
 
+use super::precompute::{Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData};
 use super::{
     FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
 };
@@ -45,6 +45,7 @@ use lightcast_protocol::{
     Camera, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Light, Limits, Stage,
 };
 use std::any::{Any, TypeId};
+use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
 /// Most bounces a path may take.
@@ -59,11 +60,52 @@ const DIRECT_HISTORY: u64 = u64::MAX;
 
 pub const ENTRY: MethodEntry = MethodEntry {
     methods: &[GiMethod::Reference],
-    type_id: TypeId::of::<PathTracer>,
+    type_id: TypeId::of::<Reference>,
     validate,
-    create: |r| Ok(Box::new(PathTracer::new(r.ctx.clone(), &r.scene)?)),
+    create: |r| Ok(Box::new(Reference::new(r)?)),
     describe,
+    precompute: Some(&PRECOMPUTE),
 };
+
+/// The scene's BVH, built on the service's precompute worker so that a large scene's build
+/// (about 2 s for 1.2 M triangles) stalls no session. Not kept in the store: reading a
+/// stored BVH would cost about what building it does. Its size follows the scene's
+/// triangles, which are budgeted already.
+pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
+    kind: "bvh",
+    label: "BVH",
+    eager: false,
+    key: |_, _| Ok(bvh_key()),
+    budget: None,
+    estimate: |_, _| 0,
+    build: |scene, _, env| {
+        let total = scene.triangle_count() as u64;
+        (env.progress)(Progress {
+            step: "bvh",
+            done: 0,
+            total,
+        });
+        let bvh = bvh::SceneBvh::build(scene).map_err(|e| e.to_string())?;
+        (env.progress)(Progress {
+            step: "bvh",
+            done: total,
+            total,
+        });
+        Ok(Built {
+            data: Arc::new(bvh),
+            units: 0,
+            from_store: false,
+        })
+    },
+};
+
+/// The key of the scene's BVH (one per scene: it has no parameters).
+pub fn bvh_key() -> PrecomputeKey {
+    PrecomputeKey {
+        kind: "bvh",
+        params: Vec::new(),
+    }
+}
 
 fn validate(g: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {
     check_counts(g.bounces, g.spp)
@@ -196,6 +238,15 @@ pub struct TextureSpan {
     pub offset: u32,
     pub width: u32,
     pub height: u32,
+}
+
+/// The surfaces of the scene's own materials, with their textures among `textures`.
+fn material_surfaces(scene: &Scene, textures: &PackedTextures) -> Vec<SurfaceGpu> {
+    scene
+        .materials
+        .iter()
+        .map(|m| SurfaceGpu::from_material(m, textures))
+        .collect()
 }
 
 /// The white texel untextured materials sample, as the raster passes bind a 1×1 white texture.
@@ -439,13 +490,7 @@ fn scene_group(
 impl PathTracer {
     /// A tracer for `scene` with its materials and textures.
     pub fn new(ctx: GpuContext, scene: &Scene) -> Result<Self, ReferenceError> {
-        Self::with_surfaces(ctx, scene, |textures| {
-            scene
-                .materials
-                .iter()
-                .map(|m| SurfaceGpu::from_material(m, textures))
-                .collect()
-        })
+        Self::with_surfaces(ctx, scene, |textures| material_surfaces(scene, textures))
     }
 
     /// A tracer for `scene` whose material `i` reflects and emits as the `i`th surface
@@ -456,16 +501,27 @@ impl PathTracer {
         surfaces: impl FnOnce(&PackedTextures) -> Vec<SurfaceGpu>,
     ) -> Result<Self, ReferenceError> {
         check_device(&ctx.device.limits(), packed_texture_bytes(&scene.textures))?;
+        let bvh = bvh::SceneBvh::build(scene)?;
+        Self::with_bvh(ctx, scene, &bvh, surfaces)
+    }
+
+    /// [`Self::with_surfaces`] with the scene's BVH built already.
+    pub fn with_bvh(
+        ctx: GpuContext,
+        scene: &Scene,
+        bvh: &bvh::SceneBvh,
+        surfaces: impl FnOnce(&PackedTextures) -> Vec<SurfaceGpu>,
+    ) -> Result<Self, ReferenceError> {
+        check_device(&ctx.device.limits(), packed_texture_bytes(&scene.textures))?;
         let textures = PackedTextures::pack(&scene.textures);
         let surfaces = surfaces(&textures);
-        let bvh = bvh::SceneBvh::build(scene)?;
         let device = &ctx.device;
         let scene_layout = SCENE_GROUP.layout(device);
         let scene_group = scene_group(
             device,
             &scene_layout,
             scene,
-            &bvh,
+            bvh,
             &surfaces,
             &textures.texels,
         );
@@ -682,8 +738,10 @@ impl PathTracer {
     }
 }
 
-impl Method for PathTracer {
-    fn encode(
+impl PathTracer {
+    /// Adds the frame's samples to its history's accumulation and resolves the mean into
+    /// the frame's indirect buffer.
+    fn encode_frame(
         &mut self,
         frame: &FrameInputs,
         stages: &mut FrameStages,
@@ -725,6 +783,60 @@ impl Method for PathTracer {
             samples,
             buffer: self.resolve.progress.clone(),
         }))
+    }
+}
+
+/// The `reference` method of a scene: its [`PathTracer`] once the scene's BVH ([`PRECOMPUTE`])
+/// is there.
+pub struct Reference {
+    ctx: GpuContext,
+    scene: Arc<Scene>,
+    tracer: Option<PathTracer>,
+}
+
+impl Reference {
+    /// Refuses a device that cannot bind the tracer's buffers before any BVH is built.
+    fn new(r: &super::SceneResources) -> Result<Self, ReferenceError> {
+        check_device(
+            &r.ctx.device.limits(),
+            packed_texture_bytes(&r.scene.textures),
+        )?;
+        Ok(Self {
+            ctx: r.ctx.clone(),
+            scene: Arc::clone(&r.scene),
+            tracer: None,
+        })
+    }
+
+    /// The tracer, once the BVH has been set.
+    pub fn tracer(&self) -> Option<&PathTracer> {
+        self.tracer.as_ref()
+    }
+}
+
+impl Method for Reference {
+    fn encode(
+        &mut self,
+        frame: &FrameInputs,
+        stages: &mut FrameStages,
+    ) -> Result<Option<ProgressBuffer>, GiError> {
+        let tracer = self.tracer.as_mut().ok_or_else(|| {
+            GiError::Scene("the reference needs the scene's BVH; set its scene data first".into())
+        })?;
+        tracer.encode_frame(frame, stages)
+    }
+
+    fn set_scene_data(&mut self, data: &SceneData) -> Result<(), GiError> {
+        let bvh = data
+            .downcast_ref::<bvh::SceneBvh>()
+            .ok_or_else(|| GiError::Scene("the reference's scene data must be a BVH".into()))?;
+        self.tracer = Some(PathTracer::with_bvh(
+            self.ctx.clone(),
+            &self.scene,
+            bvh,
+            |textures| material_surfaces(&self.scene, textures),
+        )?);
+        Ok(())
     }
 
     fn as_any_mut(&mut self) -> &mut dyn Any {

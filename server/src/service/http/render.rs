@@ -2,11 +2,12 @@
 
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
 use super::{AppState, Caller};
+use crate::gi::precompute::PrecomputeKey;
 use crate::service::encode;
 use crate::service::error::{parse_json, ApiError};
 use crate::service::params::{check_gi_ranges, check_quality, resolve};
 use crate::service::render_loop::{Command, OneShot};
-use crate::service::scenes::{CachesNow, SceneEntry};
+use crate::service::scenes::{precompute_failed, precompute_label, Now, SceneEntry};
 use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{header, HeaderValue};
 use axum::response::{IntoResponse, Response};
@@ -78,33 +79,31 @@ async fn read_request(
     Ok((req, Some(entry)))
 }
 
-/// Waits until the light caches the frame needs are ready (or failed), within the deadline.
-async fn wait_for_caches(
+/// Waits until the precomputation `key` a frame needs is ready (or failed), within the
+/// deadline.
+async fn wait_for_precomputed(
     state: &AppState,
     entry: &Arc<SceneEntry>,
-    params: crate::gi::lightskin::caches::CacheParams,
+    key: &PrecomputeKey,
     deadline: Instant,
 ) -> Result<(), ApiError> {
+    let what = precompute_label(key);
     loop {
-        match state.scenes.caches(entry, params) {
-            CachesNow::Ready(_) => return Ok(()),
-            CachesNow::Failed(e) => {
-                return Err(ApiError::field(
-                    "render.gi.cache_distance",
-                    format!("the light caches failed: {e}"),
-                ))
+        match state.scenes.precomputed(entry, key) {
+            Now::Ready(_) => return Ok(()),
+            Now::Failed(e) => return Err(precompute_failed(entry, key, &e).within("render")),
+            Now::Busy => {
+                return Err(ApiError::unavailable(format!(
+                    "the server is busy precomputing other scenes and has not queued the \
+                     {what} of this scene yet; try again shortly"
+                )))
             }
-            CachesNow::Busy => {
-                return Err(ApiError::unavailable(
-                    "the server is computing the light caches of other scenes; try again shortly",
-                ))
+            Now::Pending if Instant::now() >= deadline => {
+                return Err(ApiError::unavailable(format!(
+                    "still computing the {what} of this scene; try again shortly"
+                )))
             }
-            CachesNow::Pending if Instant::now() >= deadline => {
-                return Err(ApiError::unavailable(
-                    "the scene's light caches are still being computed; try again shortly",
-                ))
-            }
-            CachesNow::Pending => tokio::time::sleep(Duration::from_millis(20)).await,
+            Now::Pending => tokio::time::sleep(Duration::from_millis(20)).await,
         }
     }
 }
@@ -222,8 +221,17 @@ pub async fn render(
     let mut resolved = resolve(&req.render, &entry, &state.limits, state.max_texture)
         .map_err(|e| e.within("render"))?;
     resolved.settings.capture_hdr |= raw;
-    if let Some(params) = resolved.caches {
-        wait_for_caches(&state, &entry, params, deadline).await?;
+    if let Some(key) = &resolved.precompute {
+        wait_for_precomputed(&state, &entry, key, deadline).await?;
+    }
+    if let Some((method, _)) = compare {
+        let truth = lightcast_protocol::GiParams {
+            method,
+            ..Default::default()
+        };
+        if let Some(key) = entry.precompute_key(&truth)? {
+            wait_for_precomputed(&state, &entry, &key, deadline).await?;
+        }
     }
     // The report and hash name what was actually rendered, defaults included.
     req.render.camera = Some(resolved.settings.camera.clone());

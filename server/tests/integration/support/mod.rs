@@ -14,6 +14,16 @@ pub fn gpu() -> GpuContext {
     GpuContext::new(BackendChoice::Auto).expect("a GPU adapter (lavapipe in CI)")
 }
 
+/// Hands the renderer the scene's BVH for `reference` frames, as the service's precompute
+/// worker does.
+pub fn set_bvh(renderer: &mut Renderer) {
+    let bvh = lightcast_server::gi::reference::bvh::SceneBvh::build(renderer.scene()).expect("bvh");
+    let data: lightcast_server::gi::precompute::SceneData = std::sync::Arc::new(bvh);
+    renderer
+        .set_scene_data(lightcast_server::gi::GiMethod::Reference, &data)
+        .expect("the BVH fits the scene");
+}
+
 /// Appends a quad with corners `a, b, c, d` (counter-clockwise seen from its normal side).
 pub fn quad(vertices: &mut Vec<Vertex>, indices: &mut Vec<u32>, corners: [Vec3; 4], material: u32) {
     let n = (corners[1] - corners[0])

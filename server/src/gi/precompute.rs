@@ -1,0 +1,241 @@
+//! Per-scene precomputation of GI methods: data a method builds once per scene and parameter
+//! set (LightSkin's light caches, the reference's BVH, later the surfels' links) and every
+//! frame of that scene then reads.
+//!
+//! A method that needs one registers a [`PrecomputeEntry`] with its [`super::MethodEntry`]:
+//! how a request's GI parameters name the set it needs ([`PrecomputeKey`]), how large a set
+//! will be before it is built (for the service's budgets), and how to build it (or load it
+//! from the content-hashed [`Store`]) with progress. The service builds sets on its
+//! precompute worker, off the render loop, shows their progress in scene info and renders
+//! direct light until a frame's set is ready; offline renders build them inline. The renderer
+//! hands the finished [`SceneData`] to the method ([`super::Method::set_scene_data`]).
+
+use super::InvalidSetting;
+use crate::scene::Scene;
+use lightcast_protocol::GiParams;
+use std::any::Any;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// Data a method precomputed for one scene, shared read-only by every renderer of the scene.
+pub type SceneData = Arc<dyn Any + Send + Sync>;
+
+/// Progress of a precomputation: `done` of `total` items of the named step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Progress {
+    pub step: &'static str,
+    pub done: u64,
+    pub total: u64,
+}
+
+/// Which precomputation, with which parameters (resolved against the scene's defaults). Keys
+/// are equal when their kinds and the bits of every parameter are, so a set asked for twice
+/// is built once.
+#[derive(Clone, Debug)]
+pub struct PrecomputeKey {
+    /// [`PrecomputeEntry::kind`].
+    pub kind: &'static str,
+    /// Parameters by their names in the request's `gi` object, e.g. `cache_distance`.
+    pub params: Vec<(&'static str, f32)>,
+}
+
+impl PartialEq for PrecomputeKey {
+    fn eq(&self, other: &Self) -> bool {
+        self.kind == other.kind
+            && self.params.len() == other.params.len()
+            && self
+                .params
+                .iter()
+                .zip(&other.params)
+                .all(|((a, x), (b, y))| a == b && x.to_bits() == y.to_bits())
+    }
+}
+
+impl Eq for PrecomputeKey {}
+
+impl std::hash::Hash for PrecomputeKey {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.kind.hash(state);
+        for (name, value) in &self.params {
+            name.hash(state);
+            value.to_bits().hash(state);
+        }
+    }
+}
+
+impl PrecomputeKey {
+    /// The value of parameter `name`, if the key has it.
+    pub fn param(&self, name: &str) -> Option<f32> {
+        self.params
+            .iter()
+            .find_map(|(n, v)| (*n == name).then_some(*v))
+    }
+
+    /// Whether a scene may hold several sets of this kind at once. A method instance holds
+    /// one set, so frames of each such set need a renderer of their own; a set without
+    /// parameters is the scene's only one and shares the scene's renderer.
+    pub fn has_variants(&self) -> bool {
+        !self.params.is_empty()
+    }
+}
+
+/// What the keys and size estimates of every precomputation read of a scene, summed once
+/// when the scene is added (requests are checked against them per message).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneFacts {
+    /// Total area of the scene's triangles, in square scene units.
+    pub surface_area: f64,
+    /// Radius of the scene's bounding sphere.
+    pub radius: f32,
+    pub triangles: u64,
+}
+
+impl SceneFacts {
+    pub fn of(scene: &Scene) -> Self {
+        Self {
+            surface_area: super::lightskin::caches::surface_area(scene),
+            radius: scene.bounds.radius(),
+            triangles: scene.triangle_count() as u64,
+        }
+    }
+}
+
+/// Where precomputed sets are kept between runs: files named by a hash of everything their
+/// computation reads, so each model is precomputed once.
+#[derive(Clone, Debug)]
+pub struct Store {
+    pub dir: PathBuf,
+    /// Bytes of stored files kept at most; beyond them the least recently used go first.
+    pub max_bytes: Option<u64>,
+}
+
+impl Store {
+    /// A store in `dir` without a size limit.
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self {
+            dir: dir.into(),
+            max_bytes: None,
+        }
+    }
+
+    /// `$LIGHTCAST_CACHE_DIR`, else `$XDG_CACHE_HOME/lightcast`, else `~/.cache/lightcast`,
+    /// else `./.lightcast-cache`.
+    pub fn default_dir() -> PathBuf {
+        let var = |name: &str| {
+            std::env::var_os(name)
+                .filter(|v| !v.is_empty())
+                .map(PathBuf::from)
+        };
+        if let Some(dir) = var("LIGHTCAST_CACHE_DIR") {
+            return dir;
+        }
+        // The XDG spec says relative paths in XDG_CACHE_HOME are invalid and to be ignored.
+        if let Some(dir) = var("XDG_CACHE_HOME").filter(|d| d.is_absolute()) {
+            return dir.join("lightcast");
+        }
+        if let Some(home) = var("HOME") {
+            return home.join(".cache").join("lightcast");
+        }
+        PathBuf::from(".lightcast-cache")
+    }
+}
+
+/// A finished precomputation.
+pub struct Built {
+    pub data: SceneData,
+    /// What the set holds in [`UnitBudget`] units (0 for unbudgeted kinds).
+    pub units: u64,
+    /// Whether it was loaded from the [`Store`] instead of computed.
+    pub from_store: bool,
+}
+
+/// The service's per-set and total budgets apply to a kind whose size a request steers; its
+/// sets are counted in these units before they are built (estimated) and after (exact).
+pub struct UnitBudget {
+    /// What a unit is, in messages (`light caches`).
+    pub unit: &'static str,
+    /// The request field under `gi` that sizes a set; refusals name it.
+    pub field: &'static str,
+    /// What to ask for instead when a set of the scene must stay within `allowed` units.
+    pub advice: fn(&SceneFacts, allowed: u64) -> String,
+}
+
+/// One method family's per-scene precomputation.
+pub struct PrecomputeEntry {
+    /// Its name in scene info and logs (`light_caches`, `bvh`).
+    pub kind: &'static str,
+    /// What it is called in messages to people (`light caches`).
+    pub label: &'static str,
+    /// Whether the scene's default set is queued as soon as a scene is added, because the
+    /// default GI method needs it.
+    pub eager: bool,
+    /// The set a frame with GI parameters `gi` needs on a scene; errors name the `gi` field.
+    pub key: fn(gi: &GiParams, facts: &SceneFacts) -> Result<PrecomputeKey, InvalidSetting>,
+    /// `None`: the set's size follows from what is budgeted already (triangles, parameter
+    /// ranges).
+    pub budget: Option<UnitBudget>,
+    /// The set's size in [`UnitBudget`] units, estimated before it is built.
+    pub estimate: fn(&PrecomputeKey, &SceneFacts) -> u64,
+    /// Loads the set from the store or computes (and stores) it; errors are messages for the
+    /// scene's info.
+    pub build: BuildFn,
+}
+
+/// [`PrecomputeEntry::build`].
+pub type BuildFn = fn(&Scene, &PrecomputeKey, &mut BuildEnv) -> Result<Built, String>;
+
+/// What a build reads besides its scene and key.
+pub struct BuildEnv<'a> {
+    pub store: &'a Store,
+    /// Called from the building thread as steps advance.
+    pub progress: &'a mut dyn FnMut(Progress),
+    /// True once nobody can use the result (its scene was deleted): a long build checks it
+    /// between chunks of work and gives up.
+    pub cancelled: &'a dyn Fn() -> bool,
+}
+
+/// The precomputation frames of `method` need, if any.
+pub fn entry_for(method: lightcast_protocol::GiMethod) -> Option<&'static PrecomputeEntry> {
+    super::entry(method).1.precompute
+}
+
+/// Every registered precomputation.
+pub fn entries() -> impl Iterator<Item = &'static PrecomputeEntry> {
+    super::REGISTRY.iter().filter_map(|e| e.precompute)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_compare_by_kind_and_parameter_bits() {
+        let key = |kind, d: f32| PrecomputeKey {
+            kind,
+            params: vec![("cache_distance", d)],
+        };
+        assert_eq!(key("a", 1.0), key("a", 1.0));
+        assert_ne!(key("a", 1.0), key("b", 1.0));
+        assert_ne!(key("a", 1.0), key("a", 1.0 + f32::EPSILON));
+        assert_ne!(key("a", 0.0), key("a", -0.0), "bits, not numeric equality");
+        assert_eq!(key("a", f32::NAN), key("a", f32::NAN));
+        assert!(key("a", 1.0).has_variants());
+        assert!(!PrecomputeKey {
+            kind: "bvh",
+            params: Vec::new()
+        }
+        .has_variants());
+        assert_eq!(key("a", 2.5).param("cache_distance"), Some(2.5));
+        assert_eq!(key("a", 2.5).param("cache_angle"), None);
+    }
+
+    #[test]
+    fn every_kind_is_registered_once() {
+        let kinds: Vec<_> = entries().map(|e| e.kind).collect();
+        let mut unique = kinds.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        assert_eq!(unique.len(), kinds.len(), "{kinds:?}");
+        assert!(kinds.contains(&"light_caches") && kinds.contains(&"bvh"));
+    }
+}

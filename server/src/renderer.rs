@@ -327,10 +327,7 @@ impl PendingFrame {
             .as_ref()
             .map(|(samples, buffer)| (*samples, PendingMap::new(buffer)));
         let timings = self.timings.begin();
-        self.ctx.device.poll(wgpu::PollType::Wait {
-            submission_index: self.submission,
-            timeout: None,
-        })?;
+        self.ctx.wait_for(self.submission.as_ref())?;
         let rgba8 = ldr.finish()?;
         let (hdr, indirect) = match hdr {
             Some((h, i)) => (
@@ -351,7 +348,7 @@ impl PendingFrame {
             None => None,
         };
         let debug = match self.debug {
-            Some(capture) => Some(capture.read(&self.ctx)?),
+            Some(capture) => Some(capture.read(&self.ctx, self.submission.as_ref())?),
             None => None,
         };
         Ok(Frame {

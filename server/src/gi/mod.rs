@@ -273,8 +273,13 @@ impl ProgressSums {
 
 /// A method's staged copies for a debug view, read once the frame's submission is done.
 pub trait DebugCapture: Send {
-    /// Maps the copies (the frame's submission must have been submitted) and decodes them.
-    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError>;
+    /// Maps the copies encoded into the frame's `submission` and decodes them, waiting for
+    /// that submission only: frames submitted after it may still be on the GPU.
+    fn read(
+        self: Box<Self>,
+        ctx: &GpuContext,
+        submission: Option<&wgpu::SubmissionIndex>,
+    ) -> Result<DebugData, GpuError>;
 }
 
 /// What a debug view shows of a frame, in the method's own types (`debug_views` knows them).

@@ -193,6 +193,16 @@ impl GpuContext {
         })
     }
 
+    /// Blocks until `submission` has finished (every submission when `None`), and runs the
+    /// callbacks of buffers mapped for it.
+    pub fn wait_for(&self, submission: Option<&wgpu::SubmissionIndex>) -> Result<(), GpuError> {
+        self.device.poll(wgpu::PollType::Wait {
+            submission_index: submission.cloned(),
+            timeout: None,
+        })?;
+        Ok(())
+    }
+
     /// Blocks until all submitted work has finished.
     pub fn wait_idle(&self) -> Result<(), GpuError> {
         self.device.poll(wgpu::PollType::wait_indefinitely())?;

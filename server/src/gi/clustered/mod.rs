@@ -216,9 +216,13 @@ struct ClusterCapture {
 }
 
 impl DebugCapture for ClusterCapture {
-    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError> {
+    fn read(
+        self: Box<Self>,
+        ctx: &GpuContext,
+        submission: Option<&wgpu::SubmissionIndex>,
+    ) -> Result<DebugData, GpuError> {
         let (vpls, mapping) = (PendingMap::new(&self.vpls), PendingMap::new(&self.mapping));
-        ctx.wait_idle()?;
+        ctx.wait_for(submission)?;
         let vpls: Vec<Vpl> = bytemuck::pod_collect_to_vec(&vpls.finish()?);
         let mapping: Vec<u32> = bytemuck::pod_collect_to_vec(&mapping.finish()?);
         Ok(DebugData(Arc::new(ClusterView {

@@ -249,8 +249,12 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
 }
 
 impl DebugCapture for sampling::SamplingCapture {
-    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError> {
-        Ok(DebugData(Arc::new((*self).read(ctx)?)))
+    fn read(
+        self: Box<Self>,
+        ctx: &GpuContext,
+        submission: Option<&wgpu::SubmissionIndex>,
+    ) -> Result<DebugData, GpuError> {
+        Ok(DebugData(Arc::new((*self).read(ctx, submission)?)))
     }
 }
 
@@ -261,9 +265,13 @@ struct LightingCapture {
 }
 
 impl DebugCapture for LightingCapture {
-    fn read(self: Box<Self>, ctx: &GpuContext) -> Result<DebugData, GpuError> {
+    fn read(
+        self: Box<Self>,
+        ctx: &GpuContext,
+        submission: Option<&wgpu::SubmissionIndex>,
+    ) -> Result<DebugData, GpuError> {
         let map = PendingMap::new(&self.staged);
-        ctx.wait_idle()?;
+        ctx.wait_for(submission)?;
         let mut lighting: Vec<CacheLighting> = bytemuck::pod_collect_to_vec(&map.finish()?);
         lighting.truncate(self.count);
         Ok(DebugData(Arc::new(lighting)))

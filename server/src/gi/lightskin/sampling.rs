@@ -295,8 +295,8 @@ impl ValSampling {
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
         let capture = self.capture(&ctx.device, &mut encoder);
-        ctx.queue.submit([encoder.finish()]);
-        capture.read(ctx)
+        let submission = ctx.queue.submit([encoder.finish()]);
+        capture.read(ctx, Some(&submission))
     }
 }
 
@@ -313,11 +313,16 @@ pub struct SamplingCapture {
 }
 
 impl SamplingCapture {
-    /// Maps the copies (waiting for the GPU if it has not finished them) and decodes them.
-    pub fn read(self, ctx: &GpuContext) -> Result<SamplingReadback, GpuError> {
+    /// Maps the copies encoded into `submission` (waiting for it if the GPU has not finished
+    /// it) and decodes them.
+    pub fn read(
+        self,
+        ctx: &GpuContext,
+        submission: Option<&wgpu::SubmissionIndex>,
+    ) -> Result<SamplingReadback, GpuError> {
         let rsm = self.rsm.map(|(r, bytes)| (r.begin_read(), bytes));
         let maps = self.buffers.each_ref().map(PendingMap::new);
-        ctx.wait_idle()?;
+        ctx.wait_for(submission)?;
         let texels = (self.rsm_width * self.rsm_height) as usize;
         let mut decoded = Vec::with_capacity(3);
         for (rows, bytes_per_texel) in rsm {

@@ -22,6 +22,7 @@ pub mod lightskin;
 pub mod none;
 pub mod precompute;
 pub mod reference;
+pub mod surfels;
 
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{gbuffer::GBuffer, scene_buffers::SceneBuffers, Target};

@@ -368,7 +368,7 @@ fn triangle(scene: &Scene, t: usize) -> [u32; 3] {
     ]
 }
 
-fn triangle_area(scene: &Scene, t: usize) -> f64 {
+pub(crate) fn triangle_area(scene: &Scene, t: usize) -> f64 {
     let [a, b, c] = triangle(scene, t).map(|i| Vec3::from(scene.vertices[i as usize].position));
     let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
     0.5 * (b - a).cross(c - a).length()
@@ -528,7 +528,7 @@ fn bisect(
 
 /// Geometric normal of a triangle, flipped to agree with its vertex normals when those say
 /// otherwise (assets whose winding disagrees with their shading normals). `None` without area.
-fn triangle_normal(scene: &Scene, t: usize) -> Option<(Vec3, [Vec3; 3])> {
+pub(crate) fn triangle_normal(scene: &Scene, t: usize) -> Option<(Vec3, [Vec3; 3])> {
     let idx = triangle(scene, t);
     let corners = idx.map(|i| Vec3::from(scene.vertices[i as usize].position));
     let n = (corners[1] - corners[0])

@@ -1,0 +1,273 @@
+//! `surfels` (seed paper 001, issue 12): indirect light from surfels, a flux hierarchy over
+//! them, precomputed light-transport links from SH caches to hierarchy nodes and per-pixel
+//! spherical-harmonics shading, with progressive multi-bounce.
+//!
+//! This module holds the method's per-scene precomputation, built on the CPU and tested
+//! against independent answers; the per-frame passes and the method's registration come next
+//! (until then `surfels` is not selectable):
+//!
+//! - [`sampling`]: n_S surfels of equal area over every triangle ("Surfel Placement").
+//! - [`hierarchy`]: the binary tree over the surfels by agglomerative clustering with the
+//!   paper's tree metric ("Surfel Clustering and Tree Metric"), up which flux is pulled.
+//! - [`grid`]: the lattice of SH caches over the scene's bounds ("Cache Placement").
+//! - [`sh`]: real spherical harmonics and the zonal projections of the diffuse and normalised
+//!   Phong lobes (eq. 5–8, appendix B) the links and the shading are expressed in.
+
+pub mod grid;
+pub mod hierarchy;
+pub mod sampling;
+pub mod sh;
+
+use crate::gi::precompute::{BuildEnv, Progress};
+use crate::scene::Scene;
+use glam::Vec3;
+use grid::{CacheGrid, GridError};
+use hierarchy::{ClusterWeights, HierarchyError, Leaf, Tree};
+use sampling::{SamplingError, Surfel};
+
+/// n_S by default (the paper's "32k").
+pub const DEFAULT_SURFELS: u32 = 32 * 1024;
+/// The most surfels the exact clustering is run on (node ids and memory stay small; the paper
+/// goes to 128k).
+pub const MAX_SURFELS: u32 = 256 * 1024;
+
+/// What the precomputation is built from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfelParams {
+    /// n_S.
+    pub surfels: u32,
+    /// Distance between neighbouring SH caches in scene units (`None`: from the extent, see
+    /// [`CacheGrid::default_spacing`]).
+    pub cache_spacing: Option<f32>,
+}
+
+impl Default for SurfelParams {
+    fn default() -> Self {
+        Self {
+            surfels: DEFAULT_SURFELS,
+            cache_spacing: None,
+        }
+    }
+}
+
+/// A scene's surfels, their hierarchy and the cache lattice.
+#[derive(Clone, Debug)]
+pub struct SurfelSet {
+    /// In the hierarchy's leaf order: surfel k is leaf k of [`Self::tree`], so every node's
+    /// surfels are one contiguous range.
+    pub surfels: Vec<Surfel>,
+    /// Area of each surfel (square scene units); they sum to the scene's triangle area.
+    pub surfel_area: f64,
+    pub tree: Tree,
+    pub grid: CacheGrid,
+}
+
+/// Why no surfel set was built.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SurfelError {
+    #[error("surfel_count {0} is outside 1..={MAX_SURFELS}")]
+    Count(u32),
+    #[error(transparent)]
+    Sampling(#[from] SamplingError),
+    #[error(transparent)]
+    Hierarchy(#[from] HierarchyError),
+    #[error(transparent)]
+    Grid(#[from] GridError),
+}
+
+/// Builds the surfels ([`sampling`]), their hierarchy ([`hierarchy`]) and the cache lattice
+/// ([`grid`]) of `scene`, reporting the steps `surfels`, `relaxing` and `clustering`.
+pub fn precompute(
+    scene: &Scene,
+    params: &SurfelParams,
+    env: &mut BuildEnv,
+) -> Result<SurfelSet, SurfelError> {
+    if !(1..=MAX_SURFELS).contains(&params.surfels) {
+        return Err(SurfelError::Count(params.surfels));
+    }
+    let extent = scene.bounds.max - scene.bounds.min;
+    let spacing = params
+        .cache_spacing
+        .unwrap_or_else(|| CacheGrid::default_spacing(extent));
+    // The lattice first: a bad spacing is refused before the long steps.
+    let grid = CacheGrid::new(scene.bounds.min, extent, spacing)?;
+    let sampled = sampling::sample(
+        scene,
+        params.surfels,
+        sampling::RELAX_STEPS,
+        env.progress,
+        env.cancelled,
+    )?;
+    let leaves: Vec<Leaf> = sampled
+        .surfels
+        .iter()
+        .map(|s| Leaf {
+            position: s.position,
+            normal: s.normal,
+            area: sampled.area as f32,
+        })
+        .collect();
+    // Ē, the diagonal of the bounds (at least a surfel's size, for a scene of one point).
+    let diagonal = f64::from(extent.length()).max(sampled.area.sqrt());
+    let progress = &mut *env.progress;
+    let tree = hierarchy::build(
+        &leaves,
+        diagonal,
+        ClusterWeights::default(),
+        &mut |done, total| {
+            progress(Progress {
+                step: "clustering",
+                done,
+                total,
+            })
+        },
+        env.cancelled,
+    )?;
+    let surfels = tree
+        .leaf_order
+        .iter()
+        .map(|&i| sampled.surfels[i as usize])
+        .collect();
+    Ok(SurfelSet {
+        surfels,
+        surfel_area: sampled.area,
+        tree,
+        grid,
+    })
+}
+
+/// The flux of every hierarchy node from its surfels' (eq. 4's senders are nodes): leaves
+/// carry their surfel's, and each internal node the sum of its children's, in the order the
+/// per-frame pull runs (children before parents).
+pub fn pull_flux(tree: &Tree, leaf_flux: &[Vec3]) -> Vec<Vec3> {
+    let leaves = leaf_flux.len();
+    let mut flux = leaf_flux.to_vec();
+    flux.extend(tree.children.iter().map(|_| Vec3::ZERO));
+    for (k, [a, b]) in tree.children.iter().enumerate() {
+        flux[leaves + k] = flux[*a as usize] + flux[*b as usize];
+    }
+    flux
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gi::precompute::Store;
+    use crate::scene::procedural;
+
+    fn build(scene: &Scene, params: &SurfelParams) -> Result<SurfelSet, SurfelError> {
+        let store = Store::new(std::env::temp_dir());
+        let mut steps = Vec::new();
+        let mut env = BuildEnv {
+            store: &store,
+            progress: &mut |p: Progress| steps.push(p.step),
+            cancelled: &|| false,
+        };
+        let set = precompute(scene, params, &mut env);
+        if set.is_ok() {
+            steps.dedup();
+            assert_eq!(steps, ["surfels", "relaxing", "clustering"]);
+        }
+        set
+    }
+
+    #[test]
+    fn the_cornell_box_gets_surfels_a_hierarchy_over_them_and_a_cache_lattice() {
+        let scene = procedural::cornell_box();
+        let params = SurfelParams {
+            surfels: 3000,
+            cache_spacing: None,
+        };
+        let set = build(&scene, &params).expect("surfel set");
+        let n = set.surfels.len();
+        assert_eq!(n, 3000);
+        assert_eq!(set.tree.children.len(), n - 1);
+        let root = 2 * n - 2;
+        let area = crate::gi::lightskin::caches::surface_area(&scene);
+        let root_area = f64::from(set.tree.area[root]);
+        assert!(
+            ((root_area - area) / area).abs() < 1e-4,
+            "{root_area} vs {area}"
+        );
+        assert_eq!(
+            (set.tree.first_leaf[root], set.tree.leaf_count[root]),
+            (0, n as u32)
+        );
+        // Leaf k is surfel k: every node's surfels are its leaf range.
+        for (k, s) in set.surfels.iter().enumerate() {
+            assert_eq!(set.tree.centre[k], s.position, "leaf {k}");
+        }
+        let bounds = scene.bounds;
+        for corner in bounds.corners() {
+            let weights = set.grid.trilinear(corner);
+            assert!(weights.iter().all(|&(i, _)| i < set.grid.count()));
+        }
+        assert!(set.grid.position(0).cmplt(bounds.min).all());
+        assert!(set
+            .grid
+            .position(set.grid.count() - 1)
+            .cmpgt(bounds.max)
+            .all());
+    }
+
+    #[test]
+    fn the_root_flux_is_the_sum_of_the_leaves() {
+        let scene = procedural::cornell_box();
+        let set = build(
+            &scene,
+            &SurfelParams {
+                surfels: 500,
+                cache_spacing: None,
+            },
+        )
+        .expect("surfel set");
+        let leaf_flux: Vec<Vec3> = (0..500)
+            .map(|k| Vec3::new(k as f32, 1.0, (k % 7) as f32 * 0.5))
+            .collect();
+        let flux = pull_flux(&set.tree, &leaf_flux);
+        let root = *flux.last().expect("a root");
+        let sum: Vec3 = leaf_flux.iter().sum();
+        assert!(
+            (root - sum).abs().max_element() < 1e-3 * sum.max_element(),
+            "{root} vs {sum}"
+        );
+        // Every node holds the flux of exactly its leaf range.
+        for (node, f) in flux.iter().enumerate() {
+            let (first, count) = (set.tree.first_leaf[node], set.tree.leaf_count[node]);
+            let range: Vec3 = leaf_flux[first as usize..(first + count) as usize]
+                .iter()
+                .sum();
+            assert!((*f - range).abs().max_element() <= 1e-3 * range.max_element().max(1.0));
+        }
+    }
+
+    #[test]
+    fn bad_parameters_are_refused_before_any_work() {
+        let scene = procedural::cornell_box();
+        let refused = |params: SurfelParams| build(&scene, &params).err();
+        assert_eq!(
+            refused(SurfelParams {
+                surfels: 0,
+                cache_spacing: None
+            }),
+            Some(SurfelError::Count(0))
+        );
+        assert!(matches!(
+            refused(SurfelParams {
+                surfels: 100,
+                cache_spacing: Some(1e-4)
+            }),
+            Some(SurfelError::Grid(GridError::TooMany { .. }))
+        ));
+        let store = Store::new(std::env::temp_dir());
+        let mut env = BuildEnv {
+            store: &store,
+            progress: &mut |_| {},
+            cancelled: &|| true,
+        };
+        assert_eq!(
+            precompute(&scene, &SurfelParams::default(), &mut env).err(),
+            Some(SurfelError::Sampling(SamplingError::Cancelled))
+        );
+    }
+}

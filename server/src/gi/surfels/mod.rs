@@ -9,20 +9,25 @@
 //! - [`sampling`]: n_S surfels of equal area over every triangle ("Surfel Placement").
 //! - [`hierarchy`]: the binary tree over the surfels by agglomerative clustering with the
 //!   paper's tree metric ("Surfel Clustering and Tree Metric"), up which flux is pulled.
+//! - [`links`]: every cache's n_L most important hierarchy nodes with their SH form factors
+//!   (eq. 3), and the cache lighting over them (eq. 4).
 //! - [`grid`]: the lattice of SH caches over the scene's bounds ("Cache Placement").
 //! - [`sh`]: real spherical harmonics and the zonal projections of the diffuse and normalised
 //!   Phong lobes (eq. 5–8, appendix B) the links and the shading are expressed in.
 
 pub mod grid;
 pub mod hierarchy;
+pub mod links;
 pub mod sampling;
 pub mod sh;
 
 use crate::gi::precompute::{BuildEnv, Progress};
+use crate::gi::reference::bvh::SceneBvh;
 use crate::scene::Scene;
 use glam::Vec3;
 use grid::{CacheGrid, GridError};
 use hierarchy::{ClusterWeights, HierarchyError, Leaf, Tree};
+use links::{LinkError, SurfelLinks};
 use sampling::{SamplingError, Surfel};
 
 /// n_S by default (the paper's "32k").
@@ -30,6 +35,11 @@ pub const DEFAULT_SURFELS: u32 = 32 * 1024;
 /// The most surfels the exact clustering is run on (node ids and memory stay small; the paper
 /// goes to 128k).
 pub const MAX_SURFELS: u32 = 256 * 1024;
+
+/// n_L by default (the paper's).
+pub const DEFAULT_LINKS: u32 = 128;
+/// SH bands by default (9 coefficients).
+pub const DEFAULT_BANDS: u32 = 3;
 
 /// What the precomputation is built from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -39,6 +49,10 @@ pub struct SurfelParams {
     /// Distance between neighbouring SH caches in scene units (`None`: from the extent, see
     /// [`CacheGrid::default_spacing`]).
     pub cache_spacing: Option<f32>,
+    /// n_L, links per cache.
+    pub links: u32,
+    /// SH bands l of the links' form factors (l² coefficients).
+    pub bands: u32,
 }
 
 impl Default for SurfelParams {
@@ -46,6 +60,8 @@ impl Default for SurfelParams {
         Self {
             surfels: DEFAULT_SURFELS,
             cache_spacing: None,
+            links: DEFAULT_LINKS,
+            bands: DEFAULT_BANDS,
         }
     }
 }
@@ -60,6 +76,8 @@ pub struct SurfelSet {
     pub surfel_area: f64,
     pub tree: Tree,
     pub grid: CacheGrid,
+    /// Every cache's links ([`links`]), in the grid's cache order.
+    pub links: SurfelLinks,
 }
 
 /// Why no surfel set was built.
@@ -73,10 +91,15 @@ pub enum SurfelError {
     Hierarchy(#[from] HierarchyError),
     #[error(transparent)]
     Grid(#[from] GridError),
+    #[error(transparent)]
+    Links(#[from] LinkError),
+    #[error("{0}")]
+    Bvh(String),
 }
 
-/// Builds the surfels ([`sampling`]), their hierarchy ([`hierarchy`]) and the cache lattice
-/// ([`grid`]) of `scene`, reporting the steps `surfels`, `relaxing` and `clustering`.
+/// Builds the surfels ([`sampling`]), their hierarchy ([`hierarchy`]), the cache lattice
+/// ([`grid`]) and every cache's links ([`links`]) of `scene`, reporting the steps `surfels`,
+/// `relaxing`, `clustering`, `bvh` and `links`.
 pub fn precompute(
     scene: &Scene,
     params: &SurfelParams,
@@ -123,16 +146,45 @@ pub fn precompute(
         },
         env.cancelled,
     )?;
-    let surfels = tree
+    let surfels: Vec<Surfel> = tree
         .leaf_order
         .iter()
         .map(|&i| sampled.surfels[i as usize])
         .collect();
+    progress(Progress {
+        step: "bvh",
+        done: 0,
+        total: 1,
+    });
+    let bvh = SceneBvh::build(scene).map_err(|e| SurfelError::Bvh(e.to_string()))?;
+    let positions: Vec<Vec3> = (0..grid.count()).map(|i| grid.position(i)).collect();
+    let senders = links::Senders {
+        surfels: &surfels,
+        area: sampled.area,
+        tree: &tree,
+        bvh: &bvh,
+        extent: extent.length(),
+    };
+    let links = links::build(
+        &senders,
+        &positions,
+        params.links,
+        params.bands,
+        &mut |done, total| {
+            progress(Progress {
+                step: "links",
+                done,
+                total,
+            })
+        },
+        env.cancelled,
+    )?;
     Ok(SurfelSet {
         surfels,
         surfel_area: sampled.area,
         tree,
         grid,
+        links,
     })
 }
 
@@ -166,7 +218,7 @@ mod tests {
         let set = precompute(scene, params, &mut env);
         if set.is_ok() {
             steps.dedup();
-            assert_eq!(steps, ["surfels", "relaxing", "clustering"]);
+            assert_eq!(steps, ["surfels", "relaxing", "clustering", "bvh", "links"]);
         }
         set
     }
@@ -176,7 +228,9 @@ mod tests {
         let scene = procedural::cornell_box();
         let params = SurfelParams {
             surfels: 3000,
-            cache_spacing: None,
+            cache_spacing: Some(1.0),
+            links: 16,
+            bands: 2,
         };
         let set = build(&scene, &params).expect("surfel set");
         let n = set.surfels.len();
@@ -208,6 +262,53 @@ mod tests {
             .position(set.grid.count() - 1)
             .cmpgt(bounds.max)
             .all());
+        // Caches in the room see the walls around them: at most the whole sphere, Σ c₀ ≤ 2/√π,
+        // and most see all but the open front (caches inside a block see almost nothing).
+        let full = 2.0 / std::f32::consts::PI.sqrt();
+        assert_eq!(set.links.visible.len(), set.grid.count());
+        let inside: Vec<f32> = (0..set.grid.count())
+            .filter(|&i| {
+                let p = set.grid.position(i);
+                (p - bounds.center())
+                    .abs()
+                    .cmplt((bounds.max - bounds.min) * 0.3)
+                    .all()
+            })
+            .map(|i| set.links.visible[i])
+            .collect();
+        eprintln!("Σ c₀ of the caches in the room: {inside:?} (whole sphere {full})");
+        assert!(inside.iter().all(|&v| v <= 1.02 * full), "{inside:?}");
+        let open = inside.iter().filter(|&&v| v > 0.7 * full).count();
+        assert!(2 * open >= inside.len(), "{inside:?}");
+    }
+
+    /// How long the precomputation takes at the defaults (`cargo test --release -- --ignored
+    /// surfel_precompute_time --nocapture`); not a test of speed, which benches measure.
+    #[test]
+    #[ignore]
+    fn surfel_precompute_time() {
+        let scene = procedural::cornell_box();
+        let store = Store::new(std::env::temp_dir());
+        let started = std::time::Instant::now();
+        let mut last = "";
+        let mut env = BuildEnv {
+            store: &store,
+            progress: &mut |p: Progress| {
+                if p.step != last {
+                    eprintln!("{:>8.2} s  {}", started.elapsed().as_secs_f64(), p.step);
+                    last = p.step;
+                }
+            },
+            cancelled: &|| false,
+        };
+        let set = precompute(&scene, &SurfelParams::default(), &mut env).expect("set");
+        eprintln!(
+            "{:>8.2} s  done: {} surfels, {} caches × {} links",
+            started.elapsed().as_secs_f64(),
+            set.surfels.len(),
+            set.grid.count(),
+            set.links.per_cache
+        );
     }
 
     #[test]
@@ -217,7 +318,9 @@ mod tests {
             &scene,
             &SurfelParams {
                 surfels: 500,
-                cache_spacing: None,
+                cache_spacing: Some(2.0),
+                links: 4,
+                bands: 1,
             },
         )
         .expect("surfel set");
@@ -248,14 +351,15 @@ mod tests {
         assert_eq!(
             refused(SurfelParams {
                 surfels: 0,
-                cache_spacing: None
+                ..SurfelParams::default()
             }),
             Some(SurfelError::Count(0))
         );
         assert!(matches!(
             refused(SurfelParams {
                 surfels: 100,
-                cache_spacing: Some(1e-4)
+                cache_spacing: Some(1e-4),
+                ..SurfelParams::default()
             }),
             Some(SurfelError::Grid(GridError::TooMany { .. }))
         ));

@@ -464,7 +464,7 @@ pub struct Precomputed {
     pub label: String,
     /// Its parameters by their names in the render's `gi` object (e.g. `cache_distance`),
     /// the scene's defaults filled in.
-    pub params: std::collections::BTreeMap<String, f64>,
+    pub params: std::collections::BTreeMap<String, f32>,
     pub state: PrecomputeState,
     /// Its size in the units the server budgets it in, once ready; absent for kinds whose
     /// size follows from the scene's triangles.
@@ -489,7 +489,7 @@ impl CacheVariant {
         if p.kind != LIGHT_CACHES {
             return None;
         }
-        let param = |name: &str| p.params.get(name).copied().unwrap_or(f64::NAN) as f32;
+        let param = |name: &str| p.params.get(name).copied().unwrap_or(f32::NAN);
         Some(Self {
             state: p.state,
             cache_distance: param("cache_distance"),

@@ -73,11 +73,16 @@ pub enum ServerEvent {
     /// is being computed; frames show direct light until then.
     CachesPending {
         scene: String,
+        /// The precomputation's `kind` in the scene's `precomputed` list.
+        #[serde(default = "light_caches_kind")]
+        kind: String,
         #[serde(default = "light_caches")]
         what: String,
     },
     CachesReady {
         scene: String,
+        #[serde(default = "light_caches_kind")]
+        kind: String,
         #[serde(default = "light_caches")]
         what: String,
     },
@@ -93,4 +98,8 @@ pub enum ServerEvent {
 /// What older servers' `caches_pending` and `caches_ready` events were about.
 fn light_caches() -> String {
     "light caches".into()
+}
+
+fn light_caches_kind() -> String {
+    crate::LIGHT_CACHES.into()
 }

@@ -127,25 +127,14 @@ impl CacheArgs {
             what: entry.label,
             message,
         })?;
-        let params: Vec<String> = key
-            .params
-            .iter()
-            .map(|(name, value)| format!("{name} {value}"))
-            .collect();
         log(&format!(
-            "{}: {}{}{}, {} in {:.1} ms",
+            "{}: {}{key}, {} in {:.1} ms",
             entry.label,
-            entry.kind,
             entry
                 .budget
                 .as_ref()
-                .map(|b| format!(", {} {}", built.units, b.unit))
+                .map(|b| format!("{} {}, ", built.units, b.unit))
                 .unwrap_or_default(),
-            if params.is_empty() {
-                String::new()
-            } else {
-                format!(" ({})", params.join(", "))
-            },
             if built.from_store {
                 "loaded"
             } else {

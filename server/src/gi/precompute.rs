@@ -63,6 +63,20 @@ impl std::hash::Hash for PrecomputeKey {
     }
 }
 
+impl std::fmt::Display for PrecomputeKey {
+    /// `cache_distance 0.5, cache_angle 30`, or the kind for a key without parameters.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.params.is_empty() {
+            return f.write_str(self.kind);
+        }
+        for (k, (name, value)) in self.params.iter().enumerate() {
+            let separator = if k == 0 { "" } else { ", " };
+            write!(f, "{separator}{name} {value}")?;
+        }
+        Ok(())
+    }
+}
+
 impl PrecomputeKey {
     /// The value of parameter `name`, if the key has it.
     pub fn param(&self, name: &str) -> Option<f32> {
@@ -149,9 +163,21 @@ pub struct Built {
     pub from_store: bool,
 }
 
-/// The service's per-set and total budgets apply to a kind whose size a request steers; its
-/// sets are counted in these units before they are built (estimated) and after (exact).
+/// Which of the service's memory budgets a kind's sets are counted in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BudgetPool {
+    /// Light caches: at most `--max-caches-per-set` per set and `--max-total-caches` over
+    /// every set of every scene.
+    LightCaches,
+    /// Triangles, over every scene and precomputation (`--max-total-triangles`): a set that
+    /// holds a copy of every triangle of its scene (a BVH) counts them a second time.
+    Triangles,
+}
+
+/// How a kind's sets are counted against the service's budgets: in units of its pool,
+/// estimated before they are built and exact after.
 pub struct UnitBudget {
+    pub pool: BudgetPool,
     /// What a unit is, in messages (`light caches`).
     pub unit: &'static str,
     /// The request field under `gi` that sizes a set; refusals name it.
@@ -166,13 +192,9 @@ pub struct PrecomputeEntry {
     pub kind: &'static str,
     /// What it is called in messages to people (`light caches`).
     pub label: &'static str,
-    /// Whether the scene's default set is queued as soon as a scene is added, because the
-    /// default GI method needs it.
-    pub eager: bool,
     /// The set a frame with GI parameters `gi` needs on a scene; errors name the `gi` field.
     pub key: fn(gi: &GiParams, facts: &SceneFacts) -> Result<PrecomputeKey, InvalidSetting>,
-    /// `None`: the set's size follows from what is budgeted already (triangles, parameter
-    /// ranges).
+    /// `None`: the set's size is bounded by its parameters' ranges alone.
     pub budget: Option<UnitBudget>,
     /// The set's size in [`UnitBudget`] units, estimated before it is built.
     pub estimate: fn(&PrecomputeKey, &SceneFacts) -> u64,
@@ -190,7 +212,8 @@ pub struct BuildEnv<'a> {
     /// Called from the building thread as steps advance.
     pub progress: &'a mut dyn FnMut(Progress),
     /// True once nobody can use the result (its scene was deleted): a long build checks it
-    /// between chunks of work and gives up.
+    /// between chunks of work and gives up (the surfels' do; the light caches and the BVH run
+    /// to the end).
     pub cancelled: &'a dyn Fn() -> bool,
 }
 
@@ -227,6 +250,7 @@ mod tests {
         .has_variants());
         assert_eq!(key("a", 2.5).param("cache_distance"), Some(2.5));
         assert_eq!(key("a", 2.5).param("cache_angle"), None);
+        assert_eq!(key("a", 2.5).to_string(), "cache_distance 2.5");
     }
 
     #[test]

@@ -368,14 +368,19 @@ impl Loop {
         truth.settings.history = None;
         truth.settings.debug_view = View::Final;
         truth.view = View::Final;
-        truth.precompute = Some(
-            job.scene
-                .precompute_key(&lightcast_protocol::GiParams {
-                    method,
-                    ..Default::default()
-                })?
-                .ok_or_else(|| ApiError::internal(format!("{method} precomputes nothing")))?,
-        );
+        truth.precompute = job.scene.precompute_key(&lightcast_protocol::GiParams {
+            method,
+            ..Default::default()
+        })?;
+        // The HTTP handler waited for it; a comparison never falls back to direct light.
+        if let Some(needed) = &truth.precompute {
+            if !matches!(self.scenes.precomputed(&job.scene, needed), Now::Ready(_)) {
+                return Err(ApiError::unavailable(format!(
+                    "still computing the {} of this scene; try again shortly",
+                    precompute_label(needed)
+                )));
+            }
+        }
         let key = {
             use std::hash::{Hash, Hasher};
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -385,15 +390,7 @@ impl Loop {
         let cached = self.comparisons.lookup(key);
         let frame = match cached {
             Some(frame) => ComparandFrame::Cached(frame),
-            None => {
-                let submitted = self.submit(&job.scene, &truth)?;
-                if submitted.gi_pending {
-                    return Err(ApiError::unavailable(
-                        "the reference's BVH of this scene is being rebuilt; try again shortly",
-                    ));
-                }
-                ComparandFrame::Pending(Box::new(submitted.pending))
-            }
+            None => ComparandFrame::Pending(Box::new(self.submit(&job.scene, &truth)?.pending)),
         };
         Ok(Comparand {
             method,
@@ -670,13 +667,14 @@ fn deliver(
     render_start_us: u64,
     encoder: &EncodePool,
 ) {
-    if let Some(key) = &plan.resolved.precompute {
-        session.note_precomputed(
-            &plan.lease_scene.id,
+    let needed = plan.resolved.precompute.as_ref().map(|key| {
+        (
+            plan.lease_scene.id.as_str(),
+            key.kind,
             precompute_label(key),
-            rendered.gi_pending,
-        );
-    }
+        )
+    });
+    session.note_precomputed(needed, rendered.gi_pending);
     metrics::counter!(super::metrics::FRAMES_RENDERED).increment(1);
     session.record_render(&rendered.stages());
     let mut flags = 0;

@@ -6,8 +6,8 @@ use super::budget::{over_budget, Held, MemoryBudget, Pool, Quota, TokenQuotas};
 use super::error::ApiError;
 use super::ids;
 use crate::gi::precompute::{
-    self, BuildEnv, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts, Store,
-    UnitBudget,
+    self, BudgetPool, BuildEnv, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts,
+    Store, UnitBudget,
 };
 use crate::scene::default_light::{default_camera, default_light};
 use crate::scene::Scene;
@@ -16,7 +16,7 @@ use lightcast_protocol::{
     DEFAULT_SCENE_ID,
 };
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{mpsc, Arc, Mutex, MutexGuard, Weak};
 use std::time::Instant;
 
@@ -47,6 +47,14 @@ struct Variant {
 }
 
 impl Variant {
+    /// Marks the set failed with `error` and gives its units back to the budget (it stays
+    /// listed with the error, so that a request for it is answered at once, not rebuilt).
+    fn fail(&mut self, error: String) {
+        self.state = PrecomputeState::Failed;
+        self.error = Some(error);
+        self.held = None;
+    }
+
     fn info(&self) -> Precomputed {
         Precomputed {
             kind: self.key.kind.to_string(),
@@ -55,7 +63,7 @@ impl Variant {
                 .key
                 .params
                 .iter()
-                .map(|(name, value)| (name.to_string(), f64::from(*value)))
+                .map(|(name, value)| (name.to_string(), *value))
                 .collect(),
             state: self.state,
             units: self.entry.budget.as_ref().and(self.units),
@@ -94,7 +102,6 @@ pub struct SceneEntry {
     owner: Option<String>,
     variants: Mutex<Vec<Variant>>,
     sessions: AtomicU64,
-    removed: AtomicBool,
     budget: Arc<MemoryBudget>,
     /// The scene's texture bytes and triangles, taken from the server's budgets while it is
     /// held.
@@ -162,7 +169,6 @@ impl SceneEntry {
             load_ms,
             variants: Mutex::new(Vec::new()),
             sessions: AtomicU64::new(0),
-            removed: AtomicBool::new(false),
             budget: Arc::clone(budget),
             _held: [texture_held, triangles_held],
         })
@@ -238,26 +244,42 @@ impl SceneEntry {
         key: &PrecomputeKey,
     ) -> Result<(), ApiError> {
         let estimated = (entry.estimate)(key, &self.facts);
-        let per_set = self.budget.caches_per_set;
-        if estimated > per_set {
-            return Err(ApiError::field(
-                format!("gi.{}", budget.field),
-                format!(
-                    "{} would make about {estimated} {} for this scene's {:.6} square units \
-                     of surface, more than this server's limit of {per_set} per set \
-                     (--max-caches-per-set); {}",
-                    describe_params(key),
-                    budget.unit,
-                    self.facts.surface_area,
-                    (budget.advice)(&self.facts, per_set)
-                ),
-            ));
+        if let Some((per_set, flag)) = self.per_set_limit(budget.pool) {
+            if estimated > per_set {
+                return Err(ApiError::field(
+                    format!("gi.{}", budget.field),
+                    format!(
+                        "{} would make about {estimated} {} for this scene's {:.6} square \
+                         units of surface, more than this server's limit of {per_set} per set \
+                         ({flag}); {}",
+                        key,
+                        budget.unit,
+                        self.facts.surface_area,
+                        (budget.advice)(&self.facts, per_set)
+                    ),
+                ));
+            }
         }
         self.reserve(entry, key).map(drop)
     }
 
-    /// Takes a new set's estimated units from the total budget (nothing for unbudgeted
-    /// kinds).
+    /// The pool a kind's units are taken from, with its flag.
+    fn pool(&self, pool: BudgetPool) -> (&Arc<Pool>, &'static str) {
+        match pool {
+            BudgetPool::LightCaches => (&self.budget.caches, "--max-total-caches"),
+            BudgetPool::Triangles => (&self.budget.triangles, "--max-total-triangles"),
+        }
+    }
+
+    /// The most units one set of the pool may hold, with its flag.
+    fn per_set_limit(&self, pool: BudgetPool) -> Option<(u64, &'static str)> {
+        match pool {
+            BudgetPool::LightCaches => Some((self.budget.caches_per_set, "--max-caches-per-set")),
+            BudgetPool::Triangles => None,
+        }
+    }
+
+    /// Takes a new set's estimated units from its pool (nothing for unbudgeted kinds).
     fn reserve(
         &self,
         entry: &PrecomputeEntry,
@@ -267,15 +289,14 @@ impl SceneEntry {
             return Ok(None);
         };
         let estimated = (entry.estimate)(key, &self.facts);
-        let pool = &self.budget.caches;
+        let (pool, flag) = self.pool(budget.pool);
         pool.try_take(estimated).map(Some).ok_or_else(|| {
             ApiError::field(
                 format!("gi.{}", budget.field),
                 format!(
-                    "{} would make about {estimated} {}, but only {} of this server's {} \
-                     (--max-total-caches) are left; {} or use the parameters of a set that \
-                     exists",
-                    describe_params(key),
+                    "{} would hold about {estimated} {}, but only {} of this server's {} \
+                     ({flag}) are left; {}",
+                    key,
                     budget.unit,
                     pool.available(),
                     pool.limit(),
@@ -285,24 +306,27 @@ impl SceneEntry {
         })
     }
 
-    /// Makes a built set's share of the total budget its real size. The estimate is of flat
-    /// geometry; curved or folded surfaces (or a small cache angle) can make more, and a set
-    /// beyond the per-set limit or what is left of the total is refused, its memory freed.
-    fn hold_built(&self, key: &PrecomputeKey, units: u64) -> Result<(), String> {
-        let Some(budget) = precompute::entries()
-            .find(|e| e.kind == key.kind)
-            .and_then(|e| e.budget.as_ref())
-        else {
+    /// Makes a built set's share of its pool its real size. The light caches' estimate is of
+    /// flat geometry; curved or folded surfaces (or a small cache angle) can make more, and a
+    /// set beyond the per-set limit or what is left of the total is refused, its memory freed.
+    fn hold_built(
+        &self,
+        entry: &PrecomputeEntry,
+        key: &PrecomputeKey,
+        units: u64,
+    ) -> Result<(), String> {
+        let Some(budget) = &entry.budget else {
             return Ok(());
         };
-        let per_set = self.budget.caches_per_set;
-        let advice = (budget.advice)(&self.facts, per_set);
-        if units > per_set {
-            return Err(format!(
-                "{units} {} were made, more than this server's limit of {per_set} per set \
-                 (--max-caches-per-set); {advice}",
-                budget.unit
-            ));
+        let retry = format!("ask for fewer {} than {}", budget.unit, key);
+        if let Some((per_set, flag)) = self.per_set_limit(budget.pool) {
+            if units > per_set {
+                return Err(format!(
+                    "{units} {} were made, more than this server's limit of {per_set} per set \
+                     ({flag}); {retry}",
+                    budget.unit
+                ));
+            }
         }
         let mut held = true;
         self.update_variant(key, &mut |v| {
@@ -311,12 +335,13 @@ impl SceneEntry {
         if held {
             Ok(())
         } else {
+            let (pool, flag) = self.pool(budget.pool);
             Err(format!(
-                "{units} {} were made, more than the {} left of this server's {} \
-                 (--max-total-caches); {advice}",
+                "{units} {} were made, more than the {} left of this server's {} ({flag}); \
+                 {retry}",
                 budget.unit,
-                self.budget.caches.available(),
-                self.budget.caches.limit()
+                pool.available(),
+                pool.limit()
             ))
         }
     }
@@ -371,18 +396,6 @@ pub fn precompute_failed(scene: &SceneEntry, key: &PrecomputeKey, error: &str) -
     )
 }
 
-/// `cache_distance 0.5, cache_angle 30` (or the kind, for one without parameters).
-fn describe_params(key: &PrecomputeKey) -> String {
-    if key.params.is_empty() {
-        return key.kind.to_string();
-    }
-    key.params
-        .iter()
-        .map(|(name, value)| format!("{name} {value}"))
-        .collect::<Vec<_>>()
-        .join(", ")
-}
-
 /// A queued precomputation. The queue holds its scene weakly: a scene deleted, or a one-shot
 /// render's upload whose request has ended, is skipped and its memory freed at once instead
 /// of waiting in the queue.
@@ -424,8 +437,7 @@ impl SceneRegistry {
                     if std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).is_err() {
                         tracing::error!(scene = %entry.id, kind = key.kind, "a precomputation panicked");
                         entry.update_variant(&key, &mut |v| {
-                            v.state = PrecomputeState::Failed;
-                            v.error = Some(
+                            v.fail(
                                 "the precomputation failed on an internal error (see the \
                                  server log)"
                                     .into(),
@@ -490,10 +502,8 @@ impl SceneRegistry {
         }
         // The default method's precomputation starts at once, so its first frame need not
         // wait for it.
-        for kind in precompute::entries().filter(|e| e.eager) {
-            if let Ok(key) = (kind.key)(&GiParams::default(), &entry.facts) {
-                self.precomputed(&entry, &key);
-            }
+        if let Ok(Some(key)) = entry.precompute_key(&GiParams::default()) {
+            self.precomputed(&entry, &key);
         }
         Ok(entry)
     }
@@ -549,7 +559,6 @@ impl SceneRegistry {
                 "scene '{id}' is used by {users} session(s); delete or move them first"
             )));
         }
-        entry.removed.store(true, Ordering::Relaxed);
         scenes.remove(id);
         metrics::gauge!(super::metrics::SCENES).set(scenes.len() as f64);
         Ok(())
@@ -601,11 +610,15 @@ impl SceneRegistry {
 /// outcome.
 fn precompute(store: &Store, scene: &Arc<SceneEntry>, key: &PrecomputeKey) {
     let update = |f: &mut dyn FnMut(&mut Variant)| scene.update_variant(key, f);
-    if scene.removed.load(Ordering::Relaxed) {
-        return;
-    }
-    let Some(entry) = precompute::entries().find(|e| e.kind == key.kind) else {
-        return;
+    // Held by nobody but this worker: the scene was deleted (and no request renders it any
+    // more), or it was a one-shot render's upload whose request has ended.
+    let cancelled = || Arc::strong_count(scene) == 1;
+    let entry = match precompute::entries().find(|e| e.kind == key.kind) {
+        Some(entry) if !cancelled() => entry,
+        _ => {
+            update(&mut |v| v.fail("cancelled: nothing uses the scene any more".into()));
+            return;
+        }
     };
     update(&mut |v| v.state = PrecomputeState::Running);
     let started = Instant::now();
@@ -619,16 +632,13 @@ fn precompute(store: &Store, scene: &Arc<SceneEntry>, key: &PrecomputeKey) {
             });
         })
     };
-    // Deleted, or held by nobody but this worker (a one-shot render's upload whose request
-    // has ended).
-    let cancelled = || scene.removed.load(Ordering::Relaxed) || Arc::strong_count(scene) == 1;
     let mut env = BuildEnv {
         store,
         progress: &mut progress,
         cancelled: &cancelled,
     };
     let result = (entry.build)(&scene.scene, key, &mut env).and_then(|built| {
-        scene.hold_built(key, built.units)?;
+        scene.hold_built(entry, key, built.units)?;
         Ok(built)
     });
     let seconds = started.elapsed().as_secs_f64();
@@ -657,9 +667,8 @@ fn precompute(store: &Store, scene: &Arc<SceneEntry>, key: &PrecomputeKey) {
         Err(e) => {
             tracing::warn!(scene = %scene.id, kind = key.kind, "{} failed: {e}", entry.label);
             update(&mut |v| {
-                v.state = PrecomputeState::Failed;
                 v.seconds = Some(seconds);
-                v.error = Some(e.clone());
+                v.fail(e.clone());
             });
         }
     }
@@ -788,9 +797,14 @@ mod tests {
             .expect("fits");
         let p = params(1.0);
         assert!(matches!(registry.precomputed(&entry, &p), Now::Pending));
-        assert_eq!(entry.hold_built(&p, 7), Ok(()));
+        assert_eq!(
+            entry.hold_built(&crate::gi::lightskin::PRECOMPUTE, &p, 7),
+            Ok(())
+        );
         assert_eq!(registry.budget().caches.used(), 7);
-        let e = entry.hold_built(&p, 10_001).expect_err("over");
+        let e = entry
+            .hold_built(&crate::gi::lightskin::PRECOMPUTE, &p, 10_001)
+            .expect_err("over");
         assert!(e.contains("--max-caches-per-set"), "{e}");
     }
 
@@ -926,6 +940,9 @@ mod tests {
             Now::Failed(e) => assert!(e.contains("internal error"), "{e}"),
             _ => panic!("the panicked variant must read as failed"),
         }
+        // The failed set gave its estimate back; the other still holds its own.
+        let second = (crate::gi::lightskin::PRECOMPUTE.estimate)(&params(2.0), &entry.facts);
+        assert_eq!(registry.budget().caches.used(), second);
     }
 
     /// Waits until `key` of `entry` is ready or failed.
@@ -983,10 +1000,11 @@ mod tests {
         assert_eq!(bvh_info.state, PrecomputeState::Ready);
         assert_eq!(bvh_info.progress, Some(1.0));
         assert!(bvh_info.params.is_empty());
-        assert_eq!(
-            bvh_info.units, None,
-            "the BVH is not counted in light caches"
-        );
+        // The BVH holds a copy of every triangle: counted against the triangle budget again.
+        let triangles = entry.scene.triangle_count() as u64;
+        assert_eq!(bvh_info.units, Some(triangles));
+        assert_eq!(bvh_info.unit.as_deref(), Some("triangles"));
+        assert_eq!(registry.budget().triangles.used(), 2 * triangles);
         assert_eq!(info.caches.len(), 2, "only light caches in the old list");
         assert_eq!(info.caches[1].cache_distance, 0.37);
         assert_eq!(info.caches[1].caches, info.precomputed[2].units);

@@ -83,7 +83,8 @@ struct State {
     last_change: Instant,
     next_due: Instant,
     /// Scene id whose pending light caches the client was told about.
-    caches_pending_told: Option<String>,
+    /// The (scene, kind) of the precomputation the client was last told its frames wait for.
+    pending_told: Option<(String, String)>,
 }
 
 /// One client's stream.
@@ -130,7 +131,7 @@ impl Session {
                 input_id: 0,
                 last_change: now,
                 next_due: now,
-                caches_pending_told: None,
+                pending_told: None,
             }),
             stats: Mutex::new(SessionStats::default()),
             slot: FrameSlot::default(),
@@ -286,27 +287,39 @@ impl Session {
         self.seq.fetch_add(1, Ordering::Relaxed) + 1
     }
 
-    /// Tells the client once per scene that frames lack GI until `what` (the method's
-    /// per-scene precomputation) is ready.
-    pub fn note_precomputed(&self, scene: &str, what: &str, pending: bool) {
+    /// Tells the client once when its frames start lacking GI because the precomputation
+    /// `needed` (scene, kind, label) of the frame's method is being built, and once when it
+    /// is ready. A session that moves on to another scene or method before then is told
+    /// about the new wait instead.
+    pub fn note_precomputed(&self, needed: Option<(&str, &str, &str)>, pending: bool) {
         let mut s = lock(&self.state);
-        let told = s.caches_pending_told.as_deref() == Some(scene);
-        let event = match (pending, told) {
-            (true, false) => {
-                s.caches_pending_told = Some(scene.to_string());
+        let same = |told: &Option<(String, String)>, scene: &str, kind: &str| {
+            told.as_ref()
+                .is_some_and(|(s, k)| s.as_str() == scene && k.as_str() == kind)
+        };
+        let event = match needed {
+            Some((scene, kind, what)) if pending && !same(&s.pending_told, scene, kind) => {
+                s.pending_told = Some((scene.to_string(), kind.to_string()));
                 ServerEvent::CachesPending {
                     scene: scene.to_string(),
+                    kind: kind.to_string(),
                     what: what.to_string(),
                 }
             }
-            (false, true) => {
-                s.caches_pending_told = None;
+            Some((scene, kind, what)) if !pending && same(&s.pending_told, scene, kind) => {
+                s.pending_told = None;
                 ServerEvent::CachesReady {
                     scene: scene.to_string(),
+                    kind: kind.to_string(),
                     what: what.to_string(),
                 }
             }
-            _ => return,
+            Some(_) if pending => return,
+            // The frame needed nothing it lacked: a wait it was told of no longer applies.
+            _ => {
+                s.pending_told = None;
+                return;
+            }
         };
         drop(s);
         let _ = self.events.send(event);

@@ -413,12 +413,14 @@ async fn a_reference_session_waits_for_the_bvh_built_in_the_background() {
         stream.next_frame(&mut events).await;
     }
     let pending = events.iter().find_map(|e| match e {
-        ServerEvent::CachesPending { scene, what } => Some((scene.clone(), what.clone())),
+        ServerEvent::CachesPending { scene, kind, what } => {
+            Some((scene.clone(), kind.clone(), what.clone()))
+        }
         _ => None,
     });
     assert_eq!(
         pending,
-        Some(("default".to_string(), "BVH".to_string())),
+        Some(("default".to_string(), "bvh".to_string(), "BVH".to_string())),
         "{events:?}"
     );
     let info = server.get_json("/v1/scenes/default").await;

@@ -17,7 +17,7 @@ pub mod proxy_occlusion;
 pub mod sampling;
 pub mod val_select;
 
-use super::precompute::{Built, PrecomputeEntry, PrecomputeKey, SceneData, UnitBudget};
+use super::precompute::{BudgetPool, Built, PrecomputeEntry, PrecomputeKey, SceneData, UnitBudget};
 use super::{
     DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
@@ -59,9 +59,8 @@ pub const ENTRY: MethodEntry = MethodEntry {
 
 /// The light caches (paper §3), one set per scene and (d_eps, θ_eps), kept in the store.
 pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
-    kind: "light_caches",
+    kind: lightcast_protocol::LIGHT_CACHES,
     label: "light caches",
-    eager: true,
     key: |gi, facts| {
         let defaults = CacheParams::for_area(facts.surface_area, facts.radius);
         let params = CacheParams {
@@ -80,6 +79,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         Ok(cache_key(&params))
     },
     budget: Some(UnitBudget {
+        pool: BudgetPool::LightCaches,
         unit: "light caches",
         field: "cache_distance",
         advice: |facts, allowed| {

@@ -30,7 +30,9 @@
 pub mod bvh;
 pub mod resolve;
 
-use super::precompute::{Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData};
+use super::precompute::{
+    BudgetPool, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, UnitBudget,
+};
 use super::{
     FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
 };
@@ -69,15 +71,20 @@ pub const ENTRY: MethodEntry = MethodEntry {
 
 /// The scene's BVH, built on the service's precompute worker so that a large scene's build
 /// (about 2 s for 1.2 M triangles) stalls no session. Not kept in the store: reading a
-/// stored BVH would cost about what building it does. Its size follows the scene's
-/// triangles, which are budgeted already.
+/// stored BVH would cost about what building it does. It holds a copy of every triangle
+/// (about 110 bytes each with the nodes) for as long as the scene is held, so it counts the
+/// scene's triangles against the total triangle budget a second time.
 pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
-    kind: "bvh",
+    kind: BVH,
     label: "BVH",
-    eager: false,
     key: |_, _| Ok(bvh_key()),
-    budget: None,
-    estimate: |_, _| 0,
+    budget: Some(UnitBudget {
+        pool: BudgetPool::Triangles,
+        unit: "triangles",
+        field: "method",
+        advice: |_, _| "delete a scene, or use a GI method other than the reference".into(),
+    }),
+    estimate: |_, facts| facts.triangles,
     build: |scene, _, env| {
         let total = scene.triangle_count() as u64;
         (env.progress)(Progress {
@@ -93,16 +100,19 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         });
         Ok(Built {
             data: Arc::new(bvh),
-            units: 0,
+            units: total,
             from_store: false,
         })
     },
 };
 
+/// Kind of the reference's precomputation.
+pub const BVH: &str = "bvh";
+
 /// The key of the scene's BVH (one per scene: it has no parameters).
 pub fn bvh_key() -> PrecomputeKey {
     PrecomputeKey {
-        kind: "bvh",
+        kind: BVH,
         params: Vec::new(),
     }
 }
@@ -806,11 +816,6 @@ impl Reference {
             scene: Arc::clone(&r.scene),
             tracer: None,
         })
-    }
-
-    /// The tracer, once the BVH has been set.
-    pub fn tracer(&self) -> Option<&PathTracer> {
-        self.tracer.as_ref()
     }
 }
 

@@ -157,7 +157,7 @@ fn floats_le(data: &[[f32; 4]]) -> Vec<u8> {
         (status = 400, description = "A parameter is invalid; `field` names it", body = lightcast_protocol::ErrorBody),
         (status = 413, description = "The uploaded scene exceeds a memory budget", body = lightcast_protocol::ErrorBody),
         (status = 429, description = "Too many renders or uploads at once, for the server or the token", body = lightcast_protocol::ErrorBody),
-        (status = 503, description = "Light caches still computing, or shutting down", body = lightcast_protocol::ErrorBody)))]
+        (status = 503, description = "The GI method's per-scene precomputation (light caches, BVH) still computing, or shutting down", body = lightcast_protocol::ErrorBody)))]
 pub async fn render(
     State(state): State<Arc<AppState>>,
     Extension(caller): Extension<Caller>,
@@ -221,17 +221,30 @@ pub async fn render(
     let mut resolved = resolve(&req.render, &entry, &state.limits, state.max_texture)
         .map_err(|e| e.within("render"))?;
     resolved.settings.capture_hdr |= raw;
+    let compared = match compare {
+        Some((method, _)) => entry.precompute_key(&lightcast_protocol::GiParams {
+            method,
+            ..Default::default()
+        })?,
+        None => None,
+    };
+    // Both are queued before either is waited for, so they are built back to back.
+    for key in resolved.precompute.iter().chain(&compared) {
+        state.scenes.precomputed(&entry, key);
+    }
     if let Some(key) = &resolved.precompute {
         wait_for_precomputed(&state, &entry, key, deadline).await?;
     }
-    if let Some((method, _)) = compare {
-        let truth = lightcast_protocol::GiParams {
-            method,
-            ..Default::default()
-        };
-        if let Some(key) = entry.precompute_key(&truth)? {
-            wait_for_precomputed(&state, &entry, &key, deadline).await?;
-        }
+    if let Some(key) = &compared {
+        // A failure of the comparison's data is the comparison's, not the render's method.
+        wait_for_precomputed(&state, &entry, key, deadline)
+            .await
+            .map_err(|mut e| {
+                if e.body.field.is_some() {
+                    e.body.field = Some("compare_to".into());
+                }
+                e
+            })?;
     }
     // The report and hash name what was actually rendered, defaults included.
     req.render.camera = Some(resolved.settings.camera.clone());

@@ -40,8 +40,12 @@ pub struct SurfelLinks {
     pub nodes: Vec<u32>,
     /// g_{s,i}, `bands²` per slot.
     pub coeffs: Vec<f32>,
-    /// Σ c₀ of every cache's links: how much of the scene it sees (zero inside geometry).
+    /// Σ c₀ of every cache's links: how much of the scene it sees.
     pub visible: Vec<f32>,
+    /// Whether a cache sees mostly back faces: it lies inside geometry or outside a closed
+    /// scene, where the little it sees through seams would darken its neighbours (the
+    /// paper's Fig. 7a), so the shading leaves it out.
+    pub inside: Vec<bool>,
 }
 
 /// Why no links were made.
@@ -62,6 +66,8 @@ pub struct Senders<'a> {
     pub tree: &'a Tree,
     /// For visibility rays.
     pub bvh: &'a SceneBvh,
+    /// For the facing of what the rays hit.
+    pub scene: &'a crate::scene::Scene,
     /// Length of the scene's bounds diagonal: ray offsets are relative to it.
     pub extent: f32,
 }
@@ -88,6 +94,7 @@ pub fn build(
         nodes: Vec::with_capacity(positions.len() * per_cache as usize),
         coeffs: Vec::new(),
         visible: Vec::with_capacity(positions.len()),
+        inside: Vec::with_capacity(positions.len()),
     };
     for (k, chunk) in positions.chunks(CHUNK).enumerate() {
         if cancelled() {
@@ -101,6 +108,7 @@ pub fn build(
             links.nodes.extend(c.nodes);
             links.coeffs.extend(c.coeffs);
             links.visible.push(c.visible);
+            links.inside.push(c.inside);
         }
         let done = (k * CHUNK + chunk.len()) as u64;
         progress(done, positions.len() as u64);
@@ -112,6 +120,33 @@ struct CacheLinks {
     nodes: Vec<u32>,
     coeffs: Vec<f32>,
     visible: f32,
+    inside: bool,
+}
+
+/// Directions probed for back faces around every cache.
+const PROBES: u32 = 64;
+
+/// Whether more than half of the surfaces seen from `p` in [`PROBES`] directions spread
+/// evenly over the sphere (a Fibonacci lattice) show it their back.
+fn sees_mostly_back_faces(senders: &Senders, p: Vec3) -> bool {
+    let (mut hits, mut back) = (0, 0);
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    for k in 0..PROBES {
+        let z = 1.0 - (2 * k + 1) as f32 / PROBES as f32;
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let phi = golden * k as f32;
+        let dir = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+        let Some(hit) = senders.bvh.intersect(p, dir, f32::INFINITY) else {
+            continue;
+        };
+        hits += 1;
+        let facing =
+            crate::gi::lightskin::caches::triangle_normal(senders.scene, hit.triangle as usize);
+        if facing.is_some_and(|(n, _)| n.dot(dir) > 0.0) {
+            back += 1;
+        }
+    }
+    2 * back > hits
 }
 
 /// Eq. 3 for every surfel seen from `p`, the cut of n_L nodes, and their coefficients.
@@ -181,6 +216,7 @@ fn cache_links(senders: &Senders, p: Vec3, per_cache: u32, bands: u32) -> CacheL
         nodes,
         coeffs,
         visible: y0 * weight.last().copied().unwrap_or(0.0),
+        inside: sees_mostly_back_faces(senders, p),
     }
 }
 
@@ -303,6 +339,7 @@ mod tests {
     }
 
     struct Built {
+        scene: Scene,
         surfels: Vec<Surfel>,
         area: f64,
         tree: Tree,
@@ -337,6 +374,7 @@ mod tests {
             .map(|&i| s.surfels[i as usize])
             .collect();
         Built {
+            scene: scene.clone(),
             surfels,
             area: s.area,
             tree,
@@ -351,6 +389,7 @@ mod tests {
             area: b.area,
             tree: &b.tree,
             bvh: &b.bvh,
+            scene: &b.scene,
             extent: b.extent,
         };
         build(&senders, &[p], per_cache, bands, &mut |_, _| {}, &|| false).expect("links")
@@ -391,6 +430,7 @@ mod tests {
             area: b.area,
             tree: &b.tree,
             bvh: &b.bvh,
+            scene: &b.scene,
             extent: b.extent,
         };
         let back: f32 = b
@@ -495,6 +535,7 @@ mod tests {
             area: b.area,
             tree: &b.tree,
             bvh: &b.bvh,
+            scene: &b.scene,
             extent: b.extent,
         };
         let refused = |per, bands| {

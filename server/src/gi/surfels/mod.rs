@@ -11,10 +11,14 @@
 //!   paper's tree metric ("Surfel Clustering and Tree Metric"), up which flux is pulled.
 //! - [`links`]: every cache's n_L most important hierarchy nodes with their SH form factors
 //!   (eq. 3), and the cache lighting over them (eq. 4).
+//! - [`cpu`]: the CPU reference of the per-frame steps (surfel radiosity with one more bounce
+//!   per frame, pull-up, cache lighting, interpolated irradiance) the GPU passes will be
+//!   compared with.
 //! - [`grid`]: the lattice of SH caches over the scene's bounds ("Cache Placement").
 //! - [`sh`]: real spherical harmonics and the zonal projections of the diffuse and normalised
 //!   Phong lobes (eq. 5–8, appendix B) the links and the shading are expressed in.
 
+pub mod cpu;
 pub mod grid;
 pub mod hierarchy;
 pub mod links;
@@ -163,6 +167,7 @@ pub fn precompute(
         area: sampled.area,
         tree: &tree,
         bvh: &bvh,
+        scene,
         extent: extent.length(),
     };
     let links = links::build(

@@ -1,0 +1,207 @@
+//! CPU reference of the surfels' per-frame steps (seed 001: "Flux in Surfels and Hierarchy",
+//! eq. 4–6 and the progressive multi-bounce), which the GPU passes are compared with:
+//!
+//! 1. every surfel's radiosity B_k = ρ_k·(E_direct,k + E_indirect,k) + B_emitted,k, where
+//!    E_indirect comes from last frame's caches (one more bounce per frame);
+//! 2. the flux pull-up of [`super::pull_flux`] (in surfel units: Φ̃ = Σ B);
+//! 3. every cache's SH radiance over its links, eq. 4 ([`super::links::cache_lighting`]);
+//! 4. the irradiance at a point from the caches around it: the SH radiance interpolated
+//!    trilinearly (caches inside geometry or outside a closed scene, which see mostly back
+//!    faces or nothing, are left out and the weights renormalised, the paper's fix for Fig.
+//!    7a's leaks), dotted with the
+//!    clamped-cosine lobe rotated to the normal (eq. 5–6).
+
+use super::links::cache_lighting;
+use super::{pull_flux, sh, SurfelSet};
+use glam::Vec3;
+
+/// Caches whose links see less than this Σ c₀ (a thousandth of the whole sphere's 2/√π) are
+/// inside geometry or outside the scene and are not interpolated.
+const MIN_VISIBLE: f32 = 1.128e-3;
+
+/// The irradiance on a surface at `p` with normal `n` from `cache_light` (`bands²` RGB
+/// coefficients per cache), interpolated over the caches around `p` that see the scene.
+pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Vec3 {
+    let count = sh::coefficient_count(set.links.bands);
+    let mut radiance = vec![Vec3::ZERO; count];
+    let mut total = 0.0;
+    for (cache, w) in set.grid.trilinear(p) {
+        if w <= 0.0 || set.links.visible[cache] < MIN_VISIBLE || set.links.inside[cache] {
+            continue;
+        }
+        total += w;
+        for (r, c) in radiance
+            .iter_mut()
+            .zip(&cache_light[cache * count..(cache + 1) * count])
+        {
+            *r += *c * w;
+        }
+    }
+    if total <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let mut lobe = vec![0.0; count];
+    sh::project_lobe(&sh::COSINE_ZONAL, set.links.bands, n, &mut lobe);
+    radiance
+        .iter()
+        .zip(&lobe)
+        .map(|(r, l)| *r * *l)
+        .sum::<Vec3>()
+        / total
+}
+
+/// One frame of the surfels: their radiosity from `direct` irradiance, `emitted` radiosity
+/// and last frame's `cache_light` (empty on the first frame: single bounce), then this
+/// frame's cache lighting. Each surfel reads the caches half a cache spacing above it, off
+/// its own surface. Returns (radiosity per surfel, cache lighting).
+pub fn frame(
+    set: &SurfelSet,
+    albedo: &[Vec3],
+    emitted: &[Vec3],
+    direct: &[Vec3],
+    cache_light: &[Vec3],
+) -> (Vec<Vec3>, Vec<Vec3>) {
+    let offset = 0.5 * set.grid.spacing;
+    let radiosity: Vec<Vec3> = set
+        .surfels
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let indirect = if cache_light.is_empty() {
+                Vec3::ZERO
+            } else {
+                irradiance(set, cache_light, s.position + offset * s.normal, s.normal)
+            };
+            albedo[k] * (direct[k] + indirect) + emitted[k]
+        })
+        .collect();
+    let light = cache_lighting(&set.links, &pull_flux(&set.tree, &radiosity));
+    (radiosity, light)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gi::precompute::{BuildEnv, Store};
+    use crate::gi::surfels::{precompute, SurfelParams};
+    use crate::scene::{Material, Scene, Vertex};
+    use std::f32::consts::PI;
+
+    /// A closed box of side 2 whose walls face inwards.
+    fn closed_box() -> Scene {
+        let (mut vertices, mut indices) = (Vec::new(), Vec::new());
+        for n in [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z] {
+            let t1 = n.any_orthonormal_vector();
+            let t2 = n.cross(t1);
+            let base = vertices.len() as u32;
+            for c in [-t1 - t2, t1 - t2, t1 + t2, -t1 + t2] {
+                vertices.push(Vertex {
+                    position: (c - n).to_array(),
+                    normal: n.to_array(),
+                    uv: [0.0, 0.0],
+                    material: 0,
+                });
+            }
+            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        }
+        Scene::new(
+            "box",
+            vertices,
+            indices,
+            vec![Material::default()],
+            vec![],
+            vec![],
+            vec![],
+        )
+        .expect("scene")
+    }
+
+    /// Every wall of a closed box emits radiance 1 (radiosity π) and reflects ρ = 0.6 of what
+    /// it receives. Everything sees the whole sphere of walls, so after b frames the radiosity
+    /// is π·Σ_{k≤b} ρ^k, which converges to π/(1 − ρ): the surfels' progressive bounces must
+    /// follow that series within 1.5 % (measured: 0.6 % after 12 frames; 4.8 % low after one
+    /// bounce when caches outside the box are not left out) and never overshoot it.
+    #[test]
+    fn bounces_in_a_closed_box_follow_the_geometric_series() {
+        let scene = closed_box();
+        let store = Store::new(std::env::temp_dir());
+        let mut env = BuildEnv {
+            store: &store,
+            progress: &mut |_| {},
+            cancelled: &|| false,
+        };
+        let params = SurfelParams {
+            surfels: 6144,
+            cache_spacing: Some(0.5),
+            links: 48,
+            bands: 3,
+        };
+        let set = precompute(&scene, &params, &mut env).expect("surfel set");
+        let n = set.surfels.len();
+        let rho = 0.6;
+        let albedo = vec![Vec3::splat(rho); n];
+        let emitted = vec![Vec3::splat(PI); n];
+        let direct = vec![Vec3::ZERO; n];
+        let mut light = Vec::new();
+        let limit = PI / (1.0 - rho);
+        let mut expected = 0.0;
+        for bounce in 0..12 {
+            expected += PI * rho.powi(bounce);
+            let (radiosity, next) = frame(&set, &albedo, &emitted, &direct, &light);
+            light = next;
+            let mean = radiosity.iter().map(|b| b.x).sum::<f32>() / n as f32;
+            let (low, high) = radiosity.iter().fold((f32::MAX, f32::MIN), |(lo, hi), b| {
+                (lo.min(b.x), hi.max(b.x))
+            });
+            eprintln!(
+                "bounce {bounce}: mean radiosity {mean:.4} (min {low:.4}, max {high:.4}), \
+                 series {expected:.4}, limit {limit:.4}"
+            );
+            assert!(
+                ((mean - expected) / expected).abs() < 0.015,
+                "bounce {bounce}: {mean} vs {expected}"
+            );
+            assert!(
+                high < 1.01 * limit,
+                "bounce {bounce}: {high} beyond {limit}"
+            );
+        }
+    }
+
+    /// The irradiance from uniform radiance L over the whole sphere is π·L on any surface.
+    #[test]
+    fn uniform_radiance_gives_pi_times_it_on_every_normal() {
+        let scene = closed_box();
+        let store = Store::new(std::env::temp_dir());
+        let mut env = BuildEnv {
+            store: &store,
+            progress: &mut |_| {},
+            cancelled: &|| false,
+        };
+        let params = SurfelParams {
+            surfels: 1024,
+            cache_spacing: Some(1.0),
+            links: 16,
+            bands: 2,
+        };
+        let set = precompute(&scene, &params, &mut env).expect("surfel set");
+        let count = sh::coefficient_count(2);
+        // L_00 = 2√π·L for L = 0.5: the SH projection of a constant.
+        let light: Vec<Vec3> = (0..set.grid.count() * count)
+            .map(|i| {
+                if i % count == 0 {
+                    Vec3::splat(PI.sqrt())
+                } else {
+                    Vec3::ZERO
+                }
+            })
+            .collect();
+        for n in [Vec3::X, -Vec3::Y, Vec3::new(0.6, 0.0, 0.8)] {
+            let e = irradiance(&set, &light, Vec3::new(0.1, 0.2, -0.3), n);
+            assert!(
+                (e - Vec3::splat(PI * 0.5)).abs().max_element() < 1e-4,
+                "{n}: {e}"
+            );
+        }
+    }
+}

@@ -2,7 +2,7 @@
 //! offline `lightcast-server render`.
 
 use lightcast_protocol::{
-    parse_vec3, Camera, ClusteredFlags, GiMethod, Light, LightKind, RenderParams, View,
+    parse_vec3, Camera, ClusteredFlags, GiMethod, GiParams, Light, LightKind, RenderParams, View,
 };
 
 /// What to render. Unset options keep the server's defaults (the scene's camera and light).
@@ -77,6 +77,12 @@ pub struct RenderFlags {
     pub spp: u32,
     #[command(flatten)]
     pub clustered: ClusteredFlags,
+    /// Any GI parameter by its name in `/v1/server`'s `gi_methods`, as NAME=VALUE (a JSON
+    /// value: `surfel_count=65536`, `visibility=off`); repeatable, applied after the flags
+    /// above. Every method's parameters are reachable this way, including methods added
+    /// after this client.
+    #[arg(long = "gi-param", value_name = "NAME=VALUE", value_parser = parse_gi_param)]
+    pub gi_params: Vec<(String, serde_json::Value)>,
     /// The final frame or a debug view.
     #[arg(long, value_enum, default_value = "final")]
     pub view: View,
@@ -132,6 +138,10 @@ impl RenderFlags {
             ..Default::default()
         };
         self.clustered.apply(&mut gi);
+        // Each pair was checked against the GI parameters when it was parsed.
+        if let Ok(set) = with_params(&gi, &self.gi_params) {
+            gi = set;
+        }
         RenderParams {
             scene: self.scene.clone(),
             width: self.width,
@@ -155,5 +165,70 @@ impl RenderFlags {
             || self.light_dir.is_some()
             || self.light_color.is_some()
             || self.light_intensity.is_some()
+    }
+}
+
+/// `gi` with the named fields replaced by the values.
+fn with_params(gi: &GiParams, params: &[(String, serde_json::Value)]) -> Result<GiParams, String> {
+    let mut value = serde_json::to_value(gi).map_err(|e| e.to_string())?;
+    let known = value.as_object().map(|o| o.len()).unwrap_or(0);
+    for (name, v) in params {
+        value[name.as_str()] = v.clone();
+    }
+    if value.as_object().map_or(0, |o| o.len()) != known {
+        let names: Vec<String> = serde_json::to_value(GiParams::default())
+            .ok()
+            .and_then(|v| v.as_object().map(|o| o.keys().cloned().collect()))
+            .unwrap_or_default();
+        return Err(format!("unknown GI parameter; known: {}", names.join(", ")));
+    }
+    serde_json::from_value(value).map_err(|e| e.to_string())
+}
+
+/// `NAME=VALUE` of `--gi-param`: VALUE is read as JSON, else taken as a string; the pair must
+/// name a GI parameter and fit its type.
+fn parse_gi_param(s: &str) -> Result<(String, serde_json::Value), String> {
+    let (name, raw) = s
+        .split_once('=')
+        .ok_or_else(|| format!("'{s}' is not NAME=VALUE"))?;
+    let value = serde_json::from_str(raw).unwrap_or_else(|_| serde_json::Value::String(raw.into()));
+    let pair = (name.to_string(), value);
+    with_params(&GiParams::default(), std::slice::from_ref(&pair))
+        .map_err(|e| format!("{name}: {e}"))?;
+    Ok(pair)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gi_params_by_name_are_checked_when_parsed_and_applied_over_the_flags() {
+        assert_eq!(
+            parse_gi_param("vpl_count=4096"),
+            Ok(("vpl_count".into(), serde_json::json!(4096)))
+        );
+        assert_eq!(
+            parse_gi_param("visibility=off"),
+            Ok(("visibility".into(), serde_json::json!("off")))
+        );
+        assert!(parse_gi_param("cache_distance=null").is_ok());
+        let unknown = parse_gi_param("vpls=4").expect_err("not a GI parameter");
+        assert!(
+            unknown.starts_with("vpls: unknown GI parameter; known: "),
+            "{unknown}"
+        );
+        assert!(unknown.contains("vpl_count"), "{unknown}");
+        assert!(parse_gi_param("vpl_count=many").is_err(), "wrong type");
+        assert!(parse_gi_param("vpl_count").is_err(), "no value");
+        let gi = with_params(
+            &GiParams::default(),
+            &[
+                ("rsm_size".into(), serde_json::json!(64)),
+                ("method".into(), serde_json::json!("clustered")),
+            ],
+        )
+        .expect("valid");
+        assert_eq!((gi.rsm_size, gi.method), (64, GiMethod::Clustered));
     }
 }

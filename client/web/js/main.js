@@ -208,7 +208,9 @@ async function useScene(id, render) {
 /** One of the scene's precomputations (light caches, BVH) as the scene line shows it. */
 function describePrecomputed(p) {
   if (p.state === 'ready') {
-    const what = p.units !== null && p.units !== undefined ? `${p.units.toLocaleString()} ${p.unit}` : p.label;
+    const size = p.units !== null && p.units !== undefined ? `${p.units.toLocaleString()} ${p.unit}` : null;
+    // "6,596 light caches", but "BVH of 1,090 triangles" where the unit is not the thing.
+    const what = !size ? p.label : p.unit === p.label ? size : `${p.label} of ${size}`;
     return `${what} (${(p.seconds ?? 0).toFixed(1)} s${p.from_store ? ', from the store' : ''})`;
   }
   if (p.state === 'failed') return `${p.label} failed: ${p.error}`;

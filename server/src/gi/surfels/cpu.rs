@@ -82,39 +82,9 @@ pub fn frame(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gi::precompute::{BuildEnv, Store};
-    use crate::gi::surfels::{precompute, SurfelParams};
-    use crate::scene::{Material, Scene, Vertex};
+    use crate::gi::surfels::test_scenes::{closed_box, surfel_set};
+    use crate::gi::surfels::SurfelParams;
     use std::f32::consts::PI;
-
-    /// A closed box of side 2 whose walls face inwards.
-    fn closed_box() -> Scene {
-        let (mut vertices, mut indices) = (Vec::new(), Vec::new());
-        for n in [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z] {
-            let t1 = n.any_orthonormal_vector();
-            let t2 = n.cross(t1);
-            let base = vertices.len() as u32;
-            for c in [-t1 - t2, t1 - t2, t1 + t2, -t1 + t2] {
-                vertices.push(Vertex {
-                    position: (c - n).to_array(),
-                    normal: n.to_array(),
-                    uv: [0.0, 0.0],
-                    material: 0,
-                });
-            }
-            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-        }
-        Scene::new(
-            "box",
-            vertices,
-            indices,
-            vec![Material::default()],
-            vec![],
-            vec![],
-            vec![],
-        )
-        .expect("scene")
-    }
 
     /// Every wall of a closed box emits radiance 1 (radiosity π) and reflects ρ = 0.6 of what
     /// it receives. Everything sees the whole sphere of walls, so after b frames the radiosity
@@ -124,19 +94,13 @@ mod tests {
     #[test]
     fn bounces_in_a_closed_box_follow_the_geometric_series() {
         let scene = closed_box();
-        let store = Store::new(std::env::temp_dir());
-        let mut env = BuildEnv {
-            store: &store,
-            progress: &mut |_| {},
-            cancelled: &|| false,
-        };
         let params = SurfelParams {
             surfels: 6144,
             cache_spacing: Some(0.5),
             links: 48,
             bands: 3,
         };
-        let set = precompute(&scene, &params, &mut env).expect("surfel set");
+        let set = surfel_set(&scene, &params);
         let n = set.surfels.len();
         let rho = 0.6;
         let albedo = vec![Vec3::splat(rho); n];
@@ -172,19 +136,13 @@ mod tests {
     #[test]
     fn uniform_radiance_gives_pi_times_it_on_every_normal() {
         let scene = closed_box();
-        let store = Store::new(std::env::temp_dir());
-        let mut env = BuildEnv {
-            store: &store,
-            progress: &mut |_| {},
-            cancelled: &|| false,
-        };
         let params = SurfelParams {
             surfels: 1024,
             cache_spacing: Some(1.0),
             links: 16,
             bands: 2,
         };
-        let set = precompute(&scene, &params, &mut env).expect("surfel set");
+        let set = surfel_set(&scene, &params);
         let count = sh::coefficient_count(2);
         // L_00 = 2√π·L for L = 0.5: the SH projection of a constant.
         let light: Vec<Vec3> = (0..set.grid.count() * count)

@@ -295,38 +295,9 @@ pub fn cache_lighting(links: &SurfelLinks, node_flux: &[Vec3]) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gi::surfels::test_scenes::{closed_box, quads};
     use crate::gi::surfels::{hierarchy, pull_flux, sampling};
-    use crate::scene::{Material, Scene, Vertex};
-
-    /// A scene of quads (corners counter-clockwise seen from their front).
-    fn quads(quads: &[[Vec3; 4]]) -> Scene {
-        let (mut vertices, mut indices) = (Vec::new(), Vec::new());
-        for corners in quads {
-            let n = (corners[1] - corners[0])
-                .cross(corners[2] - corners[0])
-                .normalize();
-            let base = vertices.len() as u32;
-            for p in corners {
-                vertices.push(Vertex {
-                    position: p.to_array(),
-                    normal: n.to_array(),
-                    uv: [0.0, 0.0],
-                    material: 0,
-                });
-            }
-            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-        }
-        Scene::new(
-            "quads",
-            vertices,
-            indices,
-            vec![Material::default()],
-            vec![],
-            vec![],
-            vec![],
-        )
-        .expect("scene")
-    }
+    use crate::scene::Scene;
 
     /// A square of half-side `h` at height `z`, facing down (towards the origin).
     fn facing_down(h: f32, z: f32) -> [Vec3; 4] {
@@ -345,6 +316,19 @@ mod tests {
         tree: Tree,
         bvh: SceneBvh,
         extent: f32,
+    }
+
+    impl Built {
+        fn senders(&self) -> Senders<'_> {
+            Senders {
+                surfels: &self.surfels,
+                area: self.area,
+                tree: &self.tree,
+                bvh: &self.bvh,
+                scene: &self.scene,
+                extent: self.extent,
+            }
+        }
     }
 
     fn build_scene(scene: &Scene, count: u32) -> Built {
@@ -384,14 +368,7 @@ mod tests {
     }
 
     fn links_at(b: &Built, p: Vec3, per_cache: u32, bands: u32) -> SurfelLinks {
-        let senders = Senders {
-            surfels: &b.surfels,
-            area: b.area,
-            tree: &b.tree,
-            bvh: &b.bvh,
-            scene: &b.scene,
-            extent: b.extent,
-        };
+        let senders = b.senders();
         build(&senders, &[p], per_cache, bands, &mut |_, _| {}, &|| false).expect("links")
     }
 
@@ -425,14 +402,7 @@ mod tests {
     fn an_occluder_hides_what_it_covers() {
         let scene = quads(&[facing_down(1.0, 1.0), facing_down(0.25, 0.5)]);
         let b = build_scene(&scene, 16384);
-        let senders = Senders {
-            surfels: &b.surfels,
-            area: b.area,
-            tree: &b.tree,
-            bvh: &b.bvh,
-            scene: &b.scene,
-            extent: b.extent,
-        };
+        let senders = b.senders();
         let back: f32 = b
             .surfels
             .iter()
@@ -473,13 +443,7 @@ mod tests {
     /// here (every surfel sends the same radiosity), so the links reproduce it.
     #[test]
     fn a_furnace_box_is_seen_whole_with_unit_radiance() {
-        // The wall whose inward normal is `n`: corners counter-clockwise seen from inside.
-        let wall = |n: Vec3| {
-            let t1 = n.any_orthonormal_vector();
-            let t2 = n.cross(t1);
-            [-t1 - t2, t1 - t2, t1 + t2, -t1 + t2].map(|c| c - n)
-        };
-        let scene = quads(&[Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z].map(wall));
+        let scene = closed_box();
         let b = build_scene(&scene, 16384);
         let links = links_at(&b, Vec3::new(0.1, -0.05, 0.02), 48, 3);
         let expected = 1.0 / std::f32::consts::PI.sqrt();
@@ -530,14 +494,7 @@ mod tests {
                 assert_eq!(used.len(), 512, "every surfel its own link");
             }
         }
-        let senders = Senders {
-            surfels: &b.surfels,
-            area: b.area,
-            tree: &b.tree,
-            bvh: &b.bvh,
-            scene: &b.scene,
-            extent: b.extent,
-        };
+        let senders = b.senders();
         let refused = |per, bands| {
             build(&senders, &[Vec3::ZERO], per, bands, &mut |_, _| {}, &|| {
                 false

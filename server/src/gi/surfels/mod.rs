@@ -206,6 +206,66 @@ pub fn pull_flux(tree: &Tree, leaf_flux: &[Vec3]) -> Vec<Vec3> {
     flux
 }
 
+/// Small scenes the surfel tests share.
+#[cfg(test)]
+pub(crate) mod test_scenes {
+    use crate::scene::{Material, Scene, Vertex};
+    use glam::Vec3;
+
+    /// One quad per entry, corners counter-clockwise seen from its front, uv (0,0), (1,0),
+    /// (1,1), (0,1) at the corners.
+    pub fn quads(quads: &[[Vec3; 4]]) -> Scene {
+        let (mut vertices, mut indices) = (Vec::new(), Vec::new());
+        for corners in quads {
+            let n = (corners[1] - corners[0])
+                .cross(corners[2] - corners[0])
+                .normalize();
+            let base = vertices.len() as u32;
+            let uvs = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+            for (p, uv) in corners.iter().zip(uvs) {
+                vertices.push(Vertex {
+                    position: p.to_array(),
+                    normal: n.to_array(),
+                    uv,
+                    material: 0,
+                });
+            }
+            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        }
+        Scene::new(
+            "quads",
+            vertices,
+            indices,
+            vec![Material::default()],
+            vec![],
+            vec![],
+            vec![],
+        )
+        .expect("scene")
+    }
+
+    /// A closed box of side 2 around the origin whose walls face inwards.
+    pub fn closed_box() -> Scene {
+        let wall = |n: Vec3| {
+            let t1 = n.any_orthonormal_vector();
+            let t2 = n.cross(t1);
+            [-t1 - t2, t1 - t2, t1 + t2, -t1 + t2].map(|c| c - n)
+        };
+        quads(&[Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z].map(wall))
+    }
+
+    /// The surfel set of `scene`, built without progress or cancellation.
+    pub fn surfel_set(scene: &Scene, params: &super::SurfelParams) -> super::SurfelSet {
+        let store = crate::gi::precompute::Store::new(std::env::temp_dir());
+        let mut env = crate::gi::precompute::BuildEnv {
+            store: &store,
+            progress: &mut |_| {},
+            cancelled: &|| false,
+        };
+        super::precompute(scene, params, &mut env).expect("surfel set")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -316,36 +316,8 @@ fn closest_barycentric(p: Vec3, t: [Vec3; 3]) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{procedural, Material, Vertex};
-
-    fn quad_scene(quads: &[[Vec3; 4]]) -> Scene {
-        let (mut vertices, mut indices) = (Vec::new(), Vec::new());
-        for corners in quads {
-            let n = (corners[1] - corners[0])
-                .cross(corners[2] - corners[0])
-                .normalize();
-            let base = vertices.len() as u32;
-            for (k, p) in corners.iter().enumerate() {
-                vertices.push(Vertex {
-                    position: p.to_array(),
-                    normal: n.to_array(),
-                    uv: [(k == 1 || k == 2) as u32 as f32, (k >= 2) as u32 as f32],
-                    material: 0,
-                });
-            }
-            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-        }
-        Scene::new(
-            "quads",
-            vertices,
-            indices,
-            vec![Material::default()],
-            vec![],
-            vec![],
-            vec![],
-        )
-        .expect("scene")
-    }
+    use crate::gi::surfels::test_scenes::quads;
+    use crate::scene::procedural;
 
     fn square(x0: f32, z0: f32, side: f32, y: f32) -> [Vec3; 4] {
         [
@@ -378,7 +350,7 @@ mod tests {
     #[test]
     fn triangles_get_surfels_in_proportion_to_their_area() {
         // Two quads of areas 1 and 3, not coplanar.
-        let scene = quad_scene(&[
+        let scene = quads(&[
             square(0.0, 0.0, 1.0, 0.0),
             [
                 Vec3::new(3.0, 0.0, 0.0),
@@ -396,10 +368,10 @@ mod tests {
     #[test]
     fn small_triangles_are_accumulated_until_they_make_a_surfel() {
         // 100 × 10 squares of side 0.01 in a row: 2,000 triangles of a twentieth of a surfel.
-        let quads: Vec<[Vec3; 4]> = (0..1000)
+        let squares: Vec<[Vec3; 4]> = (0..1000)
             .map(|k| square((k % 100) as f32 * 0.01, (k / 100) as f32 * 0.01, 0.01, 0.0))
             .collect();
-        let scene = quad_scene(&quads);
+        let scene = quads(&squares);
         let s = sample(&scene, 100, 0, &mut none(), &|| false).expect("surfels");
         let mut triangles: Vec<u32> = s.surfels.iter().map(|s| s.triangle).collect();
         triangles.sort_unstable();
@@ -439,7 +411,7 @@ mod tests {
 
     #[test]
     fn relaxation_evens_out_spacing_and_keeps_surfels_on_their_triangles() {
-        let scene = quad_scene(&[square(0.0, 0.0, 1.0, 0.0), square(0.0, 0.0, 1.0, 0.5)]);
+        let scene = quads(&[square(0.0, 0.0, 1.0, 0.0), square(0.0, 0.0, 1.0, 0.5)]);
         let nearest = |s: &Surfels| -> Vec<f32> {
             s.surfels
                 .iter()

@@ -80,6 +80,17 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
     --markdown "$out/gpu-street.md" --plots "$out/gpu-street")
   echo "command: ${cmd[*]}" >> "$out/environment.txt"
   "${cmd[@]}"
+  # Indirect light at half resolution against full (gi.indirect_downscale, issue 16): the
+  # paper's default configuration twice, each with its error against the reference.
+  if ! $quick; then
+    for d in 1 2; do
+      cmd=("$server" bench --scene "$scene" --width 1920 --height 1080 --reference-spp 256
+        --rsm-sizes 1024 --vals 8192 --view-samples 512 --indirect-downscale "$d"
+        --json "$out/gpu-street-downscale-$d.json" --markdown "$out/gpu-street-downscale-$d.md")
+      echo "command: ${cmd[*]}" >> "$out/environment.txt"
+      "${cmd[@]}"
+    done
+  fi
 fi
 
 if [ "$what" = service ] || [ "$what" = all ]; then

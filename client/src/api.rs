@@ -2,8 +2,8 @@
 
 use futures_util::{SinkExt, StreamExt};
 use lightcast_protocol::{
-    ClientMessage, ErrorBody, FrameHeader, RenderReport, RenderRequest, SceneInfo, ServerEvent,
-    SessionCreated, SessionInfo,
+    ClientMessage, ErrorBody, FrameHeader, RenderReport, SceneInfo, ServerEvent, SessionCreated,
+    SessionInfo,
 };
 use serde::de::DeserializeOwned;
 use tokio_tungstenite::tungstenite::Message;
@@ -112,6 +112,15 @@ impl Client {
         serde_json::from_str(&text).map_err(|_| ClientError::Unexpected { status, text })
     }
 
+    /// `/v1/server`: build, adapter, limits and the defaults of fields requests leave out.
+    pub async fn server_info(&self) -> Result<lightcast_protocol::ServerInfo, ClientError> {
+        self.json(
+            self.request(reqwest::Method::GET, "/v1/server"),
+            "/v1/server",
+        )
+        .await
+    }
+
     pub async fn scenes(&self) -> Result<Vec<SceneInfo>, ClientError> {
         self.json(
             self.request(reqwest::Method::GET, "/v1/scenes"),
@@ -177,9 +186,10 @@ impl Client {
     }
 
     /// One-shot render: the image bytes and the report.
+    /// `request` is a `RenderRequest` as JSON: fields it leaves out get the server's defaults.
     pub async fn render(
         &self,
-        request: &RenderRequest,
+        request: &serde_json::Value,
     ) -> Result<(Vec<u8>, RenderReport), ClientError> {
         let path = "/v1/render";
         let resp = self

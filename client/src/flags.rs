@@ -2,19 +2,23 @@
 //! offline `lightcast-server render`.
 
 use lightcast_protocol::{
-    parse_vec3, Camera, ClusteredFlags, GiMethod, GiParams, Light, LightKind, RenderParams, View,
+    parse_vec3, Camera, ClusteredFlags, GiMethod, GiParams, Light, LightKind, View,
 };
 
-/// What to render. Unset options keep the server's defaults (the scene's camera and light).
+/// What to render. Unset options are left out of the request, so the server's defaults apply
+/// (`lightcast-server` on a CPU adapter picks smaller GI settings than on a GPU; `/v1/server`
+/// lists them under `defaults`), and the scene's camera and light.
 #[derive(Clone, Debug, clap::Args)]
 pub struct RenderFlags {
     /// Scene id on the server (see `lightcast scenes list`).
     #[arg(long, default_value = "default")]
     pub scene: String,
-    #[arg(long, default_value_t = 960)]
-    pub width: u32,
-    #[arg(long, default_value_t = 540)]
-    pub height: u32,
+    /// Output width in pixels (server default 960).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Output height in pixels (server default 540).
+    #[arg(long)]
+    pub height: Option<u32>,
     /// Camera position X,Y,Z (looks at --camera-target, else the scene's default target).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     pub camera_pos: Option<[f32; 3]>,
@@ -42,21 +46,24 @@ pub struct RenderFlags {
     /// Fixed linear exposure scale (default: automatic).
     #[arg(long)]
     pub exposure: Option<f32>,
-    #[arg(long, default_value_t = 2048)]
-    pub shadow_map_size: u32,
-    /// Indirect light method.
-    #[arg(long, value_enum, default_value = "brsm")]
-    pub gi: GiMethod,
-    #[arg(long, default_value_t = 1024)]
-    pub rsm_size: u32,
-    #[arg(long, default_value_t = 512)]
-    pub view_samples: u32,
-    /// N_sVAL: VALs selected per frame (BRSM).
-    #[arg(long, default_value_t = 8192)]
-    pub vals: u32,
-    /// Uniform part α of BRSM's selection pdf.
-    #[arg(long, default_value_t = 0.3)]
-    pub defensive: f32,
+    /// Shadow map side in texels (server default 2048 on a GPU).
+    #[arg(long)]
+    pub shadow_map_size: Option<u32>,
+    /// Indirect light method (server default brsm).
+    #[arg(long, value_enum)]
+    pub gi: Option<GiMethod>,
+    /// RSM side per light face (server default 1024 on a GPU).
+    #[arg(long)]
+    pub rsm_size: Option<u32>,
+    /// N_VS: view samples of the BRSM importance (server default 512 on a GPU).
+    #[arg(long)]
+    pub view_samples: Option<u32>,
+    /// N_sVAL: VALs selected per frame (BRSM; server default 8192 on a GPU).
+    #[arg(long)]
+    pub vals: Option<u32>,
+    /// Uniform part α of BRSM's selection pdf (server default 0.3).
+    #[arg(long)]
+    pub defensive: Option<f32>,
     /// Do not dim proxy lights hidden behind other caches.
     #[arg(long)]
     pub no_occlusion: bool,
@@ -69,12 +76,17 @@ pub struct RenderFlags {
     /// Light-cache angle theta_eps in degrees.
     #[arg(long)]
     pub cache_angle: Option<f32>,
-    /// `--gi reference`: reflections after the visible surface (1: single bounce).
-    #[arg(long, default_value_t = 1)]
-    pub bounces: u32,
-    /// `--gi reference`: samples per pixel per frame (a render takes exactly this many).
-    #[arg(long, default_value_t = 4)]
-    pub spp: u32,
+    /// `--gi reference`: reflections after the visible surface (1: single bounce; the default).
+    #[arg(long)]
+    pub bounces: Option<u32>,
+    /// `--gi reference`: samples per pixel per frame (a render takes exactly this many;
+    /// server default 4).
+    #[arg(long)]
+    pub spp: Option<u32>,
+    /// Indirect light at 1/N of the output's width and height (1, 2 or 4; server default 1 on
+    /// a GPU, 2 on a CPU adapter).
+    #[arg(long)]
+    pub indirect_downscale: Option<u32>,
     #[command(flatten)]
     pub clustered: ClusteredFlags,
     /// Any GI parameter by its name in `/v1/server`'s `gi_methods`, as NAME=VALUE (a JSON
@@ -83,19 +95,31 @@ pub struct RenderFlags {
     /// after this client.
     #[arg(long = "gi-param", value_name = "NAME=VALUE", value_parser = parse_gi_param)]
     pub gi_params: Vec<(String, serde_json::Value)>,
-    /// The final frame or a debug view.
-    #[arg(long, value_enum, default_value = "final")]
-    pub view: View,
+    /// The final frame or a debug view (default final).
+    #[arg(long, value_enum)]
+    pub view: Option<View>,
+}
+
+/// Inserts `value` under `key` when it is given.
+fn put<T: serde::Serialize>(
+    map: &mut serde_json::Map<String, serde_json::Value>,
+    key: &str,
+    value: Option<T>,
+) {
+    if let Some(v) = value.and_then(|v| serde_json::to_value(v).ok()) {
+        map.insert(key.to_string(), v);
+    }
 }
 
 impl RenderFlags {
-    /// The request's `render` object; `scene_camera`/`scene_light` are the scene's defaults,
-    /// needed only when a flag changes part of them.
+    /// The request's `render` object with the fields the flags give, and no others;
+    /// `scene_camera`/`scene_light` are the scene's defaults, needed only when a flag changes
+    /// part of them.
     pub fn params(
         &self,
         scene_camera: Option<&Camera>,
         scene_light: Option<&Light>,
-    ) -> RenderParams {
+    ) -> serde_json::Value {
         let camera =
             if self.camera_pos.is_some() || self.camera_target.is_some() || self.fov.is_some() {
                 scene_camera.map(|c| Camera {
@@ -123,36 +147,38 @@ impl RenderFlags {
         } else {
             None
         };
-        let mut gi = lightcast_protocol::GiParams {
-            method: self.gi,
-            rsm_size: self.rsm_size,
-            view_samples: self.view_samples,
-            val_count: self.vals,
-            defensive: self.defensive,
-            occlusion: !self.no_occlusion,
-            glossy_exponent: self.glossy_exponent,
-            cache_distance: self.cache_distance,
-            cache_angle: self.cache_angle,
-            bounces: self.bounces,
-            spp: self.spp,
-            ..Default::default()
-        };
-        self.clustered.apply(&mut gi);
-        // Each pair was checked against the GI parameters when it was parsed.
-        if let Ok(set) = with_params(&gi, &self.gi_params) {
-            gi = set;
+        let mut gi = serde_json::Map::new();
+        put(&mut gi, "method", self.gi);
+        put(&mut gi, "rsm_size", self.rsm_size);
+        put(&mut gi, "view_samples", self.view_samples);
+        put(&mut gi, "val_count", self.vals);
+        put(&mut gi, "defensive", self.defensive);
+        put(&mut gi, "occlusion", self.no_occlusion.then_some(false));
+        put(&mut gi, "glossy_exponent", self.glossy_exponent);
+        put(&mut gi, "cache_distance", self.cache_distance);
+        put(&mut gi, "cache_angle", self.cache_angle);
+        put(&mut gi, "bounces", self.bounces);
+        put(&mut gi, "spp", self.spp);
+        put(&mut gi, "indirect_downscale", self.indirect_downscale);
+        for (name, value) in self.clustered.given() {
+            gi.insert(name.to_string(), value);
         }
-        RenderParams {
-            scene: self.scene.clone(),
-            width: self.width,
-            height: self.height,
-            camera,
-            light,
-            exposure: self.exposure,
-            shadow_map_size: self.shadow_map_size,
-            gi,
-            view: self.view,
+        for (name, value) in &self.gi_params {
+            gi.insert(name.clone(), value.clone());
         }
+        let mut render = serde_json::Map::new();
+        put(&mut render, "scene", Some(&self.scene));
+        put(&mut render, "width", self.width);
+        put(&mut render, "height", self.height);
+        put(&mut render, "camera", camera);
+        put(&mut render, "light", light);
+        put(&mut render, "exposure", self.exposure);
+        put(&mut render, "shadow_map_size", self.shadow_map_size);
+        put(&mut render, "view", self.view);
+        if !gi.is_empty() {
+            render.insert("gi".into(), gi.into());
+        }
+        render.into()
     }
 
     /// Whether the flags need the scene's default camera or light to fill in.

@@ -235,7 +235,14 @@ async fn run_one(
     }
     ticker.abort();
     bar.finish_and_clear();
-    let report = summarise(client.base(), cmd, sessions, &results, errors);
+    // What the sessions render: the flags, else the server's defaults.
+    let defaults = client.server_info().await?.defaults.render;
+    let rendered = Rendered {
+        width: cmd.render.width.unwrap_or(defaults.width),
+        height: cmd.render.height.unwrap_or(defaults.height),
+        gi: cmd.render.gi.unwrap_or(defaults.gi.method),
+    };
+    let report = summarise(client.base(), &rendered, sessions, &results, errors);
     if report.failed_sessions == sessions {
         anyhow::bail!(
             "every session failed: {}",
@@ -255,9 +262,16 @@ fn orbit_start(base: &lightcast_protocol::Camera, degrees: f64) -> lightcast_pro
     .unwrap_or_else(|| base.clone())
 }
 
+/// Size and GI method of the sessions' frames.
+struct Rendered {
+    width: u32,
+    height: u32,
+    gi: lightcast_protocol::GiMethod,
+}
+
 fn summarise(
     server: &str,
-    cmd: &LoadtestCmd,
+    rendered: &Rendered,
     sessions: u32,
     results: &[DriveResult],
     mut errors: Vec<String>,
@@ -292,9 +306,9 @@ fn summarise(
     LoadReport {
         server: server.to_string(),
         sessions,
-        width: cmd.render.width,
-        height: cmd.render.height,
-        gi: cmd.render.gi,
+        width: rendered.width,
+        height: rendered.height,
+        gi: rendered.gi,
         seconds: window,
         connect_ms: connect.summary(),
         first_frame_ms: first.summary(),

@@ -11,7 +11,7 @@ use anyhow::Context;
 use api::Client;
 use clap::{Parser, Subcommand};
 use flags::RenderFlags;
-use lightcast_protocol::{Codec, GiMethod, ImageFormat, RenderRequest, StreamMode};
+use lightcast_protocol::{Codec, GiMethod, ImageFormat, StreamMode};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -131,7 +131,7 @@ struct StreamCmd {
 
 /// Session parameters for streaming commands.
 pub fn session_params(
-    render: lightcast_protocol::RenderParams,
+    render: serde_json::Value,
     fps_cap: f32,
     codec: Codec,
     quality: u8,
@@ -268,13 +268,20 @@ async fn scenes(client: &Client, cmd: ScenesCommand, json: bool) -> anyhow::Resu
 
 async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<()> {
     let (camera, light) = scene_defaults(client, &cmd.render).await?;
-    let request = RenderRequest {
-        render: cmd.render.params(camera.as_ref(), light.as_ref()),
-        format: cmd.format,
-        quality: cmd.quality,
-        compare_to: cmd.compare_to,
-        compare_spp: cmd.compare_spp,
-    };
+    // Only what the flags set: the server fills in its defaults.
+    let mut request = serde_json::json!({
+        "render": cmd.render.params(camera.as_ref(), light.as_ref()),
+        "format": cmd.format,
+    });
+    if let Some(q) = cmd.quality {
+        request["quality"] = q.into();
+    }
+    if let Some(method) = cmd.compare_to {
+        request["compare_to"] = serde_json::to_value(method)?;
+    }
+    if let Some(spp) = cmd.compare_spp {
+        request["compare_spp"] = spp.into();
+    }
     let mut reports = Vec::new();
     let mut walls = Vec::new();
     let mut image = Vec::new();

@@ -246,6 +246,10 @@ pub struct GiParams {
     pub blur_normal: f32,
     /// `clustered`: how each VPL's visibility is found.
     pub visibility: ClusteredVisibility,
+    /// `lightskin`, `brsm`, `clustered` (the `reference` is always full resolution): indirect
+    /// light is computed at 1/n of the output's width and height (1, 2 or 4) and brought back
+    /// with an edge-aware upsample; 1 is full resolution.
+    pub indirect_downscale: u32,
 }
 
 impl Default for GiParams {
@@ -271,6 +275,7 @@ impl Default for GiParams {
             blur_distance: 0.1,
             blur_normal: 0.8,
             visibility: ClusteredVisibility::Off,
+            indirect_downscale: 1,
         }
     }
 }
@@ -770,54 +775,117 @@ pub struct ServerInfo {
     /// The GI methods this server runs, with their parameters and limits.
     #[serde(default)]
     pub gi_methods: Vec<GiMethodInfo>,
+    /// What a request gets for the render fields it leaves out.
+    #[serde(default)]
+    pub defaults: RenderDefaults,
+}
+
+/// Which set of defaults a server gives requests.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum DefaultsProfile {
+    /// The protocol's defaults ([`RenderParams::default`]): the paper's evaluation settings.
+    #[default]
+    Gpu,
+    /// Smaller GI settings and indirect light at reduced resolution, so a CPU (software)
+    /// adapter answers interactively.
+    Software,
+}
+
+/// The defaults of the render fields a request leaves out (`POST /v1/render`,
+/// `POST /v1/sessions`, and a merge patch's `null`). Fields a request sets are always used.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct RenderDefaults {
+    pub profile: DefaultsProfile,
+    /// Why the server chose the profile.
+    pub reason: String,
+    /// The complete defaults (`camera` and `light` `null`: the scene's own).
+    pub render: RenderParams,
+    /// The share of the viewer's canvas (in device pixels) a new viewer streams at.
+    pub viewer_scale: f32,
 }
 
 /// The `clustered` parameters as command-line flags, shared by `lightcast-server render` and
-/// the `lightcast` client so both spell them alike.
+/// the `lightcast` client so both spell them alike. Unset flags keep the defaults (the
+/// protocol's offline, the server's for the client).
 #[cfg(feature = "clap")]
-#[derive(Clone, Debug, PartialEq, clap::Args)]
+#[derive(Clone, Debug, Default, PartialEq, clap::Args)]
 pub struct ClusteredFlags {
-    /// `--gi clustered`: N, VPLs fetched from the RSM at Halton positions (256 … 65536).
-    #[arg(long, default_value_t = GiParams::default().vpl_count)]
-    pub vpls: u32,
-    /// `--gi clustered`: M, virtual area lights (k-means clusters of the VPLs; 1 … 256).
-    #[arg(long, default_value_t = GiParams::default().cluster_count)]
-    pub clusters: u32,
-    /// `--gi clustered`: k-means iterations per frame (0 … 64).
-    #[arg(long, default_value_t = GiParams::default().kmeans_iterations)]
-    pub kmeans_iterations: u32,
-    /// `--gi clustered`: w_x, weight of the distance (per scene extent) in the clustering.
-    #[arg(long, default_value_t = GiParams::default().cluster_position_weight)]
-    pub cluster_position_weight: f32,
-    /// `--gi clustered`: w_α, weight of the angle between normals (per radian).
-    #[arg(long, default_value_t = GiParams::default().cluster_normal_weight)]
-    pub cluster_normal_weight: f32,
-    /// `--gi clustered`: interleaved-sampling block side B (N/B² VPLs per pixel; 1 … 16).
-    #[arg(long, default_value_t = GiParams::default().interleave)]
-    pub interleave: u32,
-    /// `--gi clustered`: blur distance threshold, a fraction of the scene extent.
-    #[arg(long, default_value_t = GiParams::default().blur_distance)]
-    pub blur_distance: f32,
-    /// `--gi clustered`: blur normal threshold (smallest cosine).
-    #[arg(long, default_value_t = GiParams::default().blur_normal, allow_negative_numbers = true)]
-    pub blur_normal: f32,
-    /// `--gi clustered`: VPL visibility (`off`: none, the paper's baseline).
-    #[arg(long, value_enum, default_value = "off")]
-    pub visibility: ClusteredVisibility,
+    /// `--gi clustered`: N, VPLs fetched from the RSM at Halton positions (256 … 65536;
+    /// default 1024).
+    #[arg(long)]
+    pub vpls: Option<u32>,
+    /// `--gi clustered`: M, virtual area lights (k-means clusters of the VPLs; 1 … 256;
+    /// default 30).
+    #[arg(long)]
+    pub clusters: Option<u32>,
+    /// `--gi clustered`: k-means iterations per frame (0 … 64; default 4).
+    #[arg(long)]
+    pub kmeans_iterations: Option<u32>,
+    /// `--gi clustered`: w_x, weight of the distance (per scene extent) in the clustering
+    /// (default 0.7).
+    #[arg(long)]
+    pub cluster_position_weight: Option<f32>,
+    /// `--gi clustered`: w_α, weight of the angle between normals (per radian; default 0.3).
+    #[arg(long)]
+    pub cluster_normal_weight: Option<f32>,
+    /// `--gi clustered`: interleaved-sampling block side B (N/B² VPLs per pixel; 1 … 16;
+    /// default 8).
+    #[arg(long)]
+    pub interleave: Option<u32>,
+    /// `--gi clustered`: blur distance threshold, a fraction of the scene extent (default 0.1).
+    #[arg(long)]
+    pub blur_distance: Option<f32>,
+    /// `--gi clustered`: blur normal threshold (smallest cosine; default 0.8).
+    #[arg(long, allow_negative_numbers = true)]
+    pub blur_normal: Option<f32>,
+    /// `--gi clustered`: VPL visibility (`off`: none, the paper's baseline; the default).
+    #[arg(long, value_enum)]
+    pub visibility: Option<ClusteredVisibility>,
 }
 
 #[cfg(feature = "clap")]
 impl ClusteredFlags {
-    /// Sets the `clustered` fields of `gi`.
+    /// The flags given, by their `GiParams` field names.
+    pub fn given(&self) -> Vec<(&'static str, serde_json::Value)> {
+        let number = |v: Option<f32>| v.map(|v| serde_json::Value::from(f64::from(v)));
+        [
+            ("vpl_count", self.vpls.map(Into::into)),
+            ("cluster_count", self.clusters.map(Into::into)),
+            ("kmeans_iterations", self.kmeans_iterations.map(Into::into)),
+            (
+                "cluster_position_weight",
+                number(self.cluster_position_weight),
+            ),
+            ("cluster_normal_weight", number(self.cluster_normal_weight)),
+            ("interleave", self.interleave.map(Into::into)),
+            ("blur_distance", number(self.blur_distance)),
+            ("blur_normal", number(self.blur_normal)),
+            (
+                "visibility",
+                self.visibility.map(|v| serde_json::Value::from(v.name())),
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(name, v)| Some((name, v?)))
+        .collect()
+    }
+
+    /// Sets the `clustered` fields of `gi` the flags give.
     pub fn apply(&self, gi: &mut GiParams) {
-        gi.vpl_count = self.vpls;
-        gi.cluster_count = self.clusters;
-        gi.kmeans_iterations = self.kmeans_iterations;
-        gi.cluster_position_weight = self.cluster_position_weight;
-        gi.cluster_normal_weight = self.cluster_normal_weight;
-        gi.interleave = self.interleave;
-        gi.blur_distance = self.blur_distance;
-        gi.blur_normal = self.blur_normal;
-        gi.visibility = self.visibility;
+        let set = |field: &mut f32, v: Option<f32>| *field = v.unwrap_or(*field);
+        gi.vpl_count = self.vpls.unwrap_or(gi.vpl_count);
+        gi.cluster_count = self.clusters.unwrap_or(gi.cluster_count);
+        gi.kmeans_iterations = self.kmeans_iterations.unwrap_or(gi.kmeans_iterations);
+        set(
+            &mut gi.cluster_position_weight,
+            self.cluster_position_weight,
+        );
+        set(&mut gi.cluster_normal_weight, self.cluster_normal_weight);
+        gi.interleave = self.interleave.unwrap_or(gi.interleave);
+        set(&mut gi.blur_distance, self.blur_distance);
+        set(&mut gi.blur_normal, self.blur_normal);
+        gi.visibility = self.visibility.unwrap_or(gi.visibility);
     }
 }

@@ -105,6 +105,10 @@ stages! {
     ClusteredIndirect => "clustered_indirect",
     /// Geometry-aware blur of the interleaved shading (`clustered`).
     GeometryBlur => "geometry_blur",
+    /// The G-buffer reduced for indirect light at a lower resolution (`indirect_downscale`).
+    GbufferReduce => "gbuffer_reduce",
+    /// Indirect light brought back to the output's resolution (`indirect_downscale`).
+    IndirectUpsample => "indirect_upsample",
 }
 
 impl Stage {

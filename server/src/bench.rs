@@ -60,6 +60,10 @@ pub struct BenchArgs {
     /// Bounces of the reference's paths (1: the single-bounce light seed 004 approximates).
     #[arg(long, default_value_t = 1)]
     pub reference_bounces: u32,
+    /// Indirect light of every configuration at 1/N of the output's width and height (1, 2 or
+    /// 4; the reference stays at full resolution).
+    #[arg(long, default_value_t = 1)]
+    pub indirect_downscale: u32,
     /// Timed frames per configuration.
     #[arg(long, default_value_t = 30)]
     pub frames: u32,
@@ -434,6 +438,7 @@ pub fn run(
             rsm_size,
             occlusion: args.occlusion,
             glossy_exponent: args.glossy_exponent,
+            indirect_downscale: args.indirect_downscale,
             ..GiSettings::default()
         };
         let configs = std::iter::once(lightskin).chain(brsm_configs.iter().map(
@@ -445,6 +450,7 @@ pub fn run(
                 defensive: args.defensive,
                 occlusion: args.occlusion,
                 glossy_exponent: args.glossy_exponent,
+                indirect_downscale: args.indirect_downscale,
                 ..GiSettings::default()
             },
         ));

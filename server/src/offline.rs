@@ -251,6 +251,10 @@ pub struct RenderArgs {
     pub spp: u32,
     #[command(flatten)]
     pub clustered: lightcast_protocol::ClusteredFlags,
+    /// Indirect light at 1/n of the output's width and height (1, 2 or 4), upsampled with
+    /// the edges kept; 1 is full resolution.
+    #[arg(long, default_value_t = 1)]
+    pub indirect_downscale: u32,
     /// Phong exponent k for every material (direct and indirect shading); default: each
     /// material's own.
     #[arg(long)]
@@ -395,6 +399,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         glossy_exponent: args.glossy_exponent,
         bounces: args.bounces,
         spp: args.spp,
+        indirect_downscale: args.indirect_downscale,
         ..Default::default()
     };
     args.clustered.apply(&mut gi);

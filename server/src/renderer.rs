@@ -17,6 +17,7 @@ use crate::passes::{
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
     frame_uniforms::{CameraUniform, LightUniform},
     gbuffer::{GBuffer, GBufferPass},
+    indirect_resolution::{FullTargets, IndirectResolutionPass, ReducedTargets, MAX_DOWNSCALE},
     scene_buffers::{SceneBuffers, MATERIAL_GROUP},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},
@@ -206,6 +207,15 @@ impl RenderSettings {
         {
             return Err(invalid("light.cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees"));
         }
+        if !(1..=MAX_DOWNSCALE).contains(&self.gi.indirect_downscale) {
+            return Err(invalid(
+                "indirect_downscale",
+                format!(
+                    "{} is outside 1..={MAX_DOWNSCALE}",
+                    self.gi.indirect_downscale
+                ),
+            ));
+        }
         let faces = LightUniform::face_count(self.light.kind);
         (gi::entry(self.gi.method).1.validate)(&self.gi, faces)
             .map_err(|e| invalid(e.field, e.reason))?;
@@ -241,6 +251,16 @@ struct SizedTargets {
     readbacks: Vec<ReadbackSet>,
     exposure: ExposureBindings,
     tonemap: wgpu::BindGroup,
+    /// The reduced G-buffer and indirect target of the last downscale factor used (see
+    /// [`crate::passes::indirect_resolution`]).
+    reduced: Option<ReducedTargets>,
+}
+
+impl SizedTargets {
+    /// The G-buffers GI methods may have bound: the full one and the reduced one.
+    fn gbuffers(&self) -> impl Iterator<Item = &GBuffer> {
+        std::iter::once(&self.gbuffer).chain(self.reduced.as_ref().map(|r| &r.gbuffer))
+    }
 }
 
 /// Frames of one size that may be in flight at once (submitted, not yet read back).
@@ -378,6 +398,7 @@ pub struct Renderer {
     direct_pass: DirectLightPass,
     exposure_pass: ExposurePass,
     tonemap_pass: TonemapPass,
+    resolution_pass: IndirectResolutionPass,
     /// Targets of the most recently used output sizes, most recent first (sessions of
     /// different sizes share one renderer).
     sized: Vec<SizedTargets>,
@@ -419,6 +440,7 @@ impl Renderer {
             direct_pass: DirectLightPass::new(device),
             exposure_pass: ExposurePass::new(device),
             tonemap_pass: TonemapPass::new(device),
+            resolution_pass: IndirectResolutionPass::new(device),
             sized: Vec::new(),
             shadow_maps: Vec::new(),
             methods: gi::REGISTRY.iter().map(|_| None).collect(),
@@ -507,7 +529,7 @@ impl Renderer {
         // Release the least recently used targets first so a new size does not need them all
         // in memory at once.
         self.sized.truncate(MAX_SIZES - 1);
-        let live: Vec<&GBuffer> = self.sized.iter().map(|s| &s.gbuffer).collect();
+        let live: Vec<&GBuffer> = self.sized.iter().flat_map(SizedTargets::gbuffers).collect();
         for method in self.methods.iter_mut().flatten() {
             method.retain_targets(&live);
         }
@@ -558,9 +580,48 @@ impl Renderer {
             ldr,
             exposure,
             tonemap,
+            reduced: None,
         };
         check_allocation(scope, format!("{width}×{height} frame targets"))?;
         self.sized.insert(0, sized);
+        Ok(())
+    }
+
+    /// Gives the first of [`Self::sized`] reduced targets at 1/`factor` of its size, or
+    /// none for `factor` 1.
+    fn ensure_reduced(&mut self, factor: u32) -> Result<(), GpuError> {
+        let Some(sized) = self.sized.first_mut() else {
+            return Ok(());
+        };
+        if sized.reduced.as_ref().map(|r| r.factor) == Some(factor) {
+            return Ok(());
+        }
+        let released = sized.reduced.take();
+        if released.is_some() {
+            let live: Vec<&GBuffer> = self.sized.iter().flat_map(SizedTargets::gbuffers).collect();
+            for method in self.methods.iter_mut().flatten() {
+                method.retain_targets(&live);
+            }
+        }
+        if factor == 1 {
+            return Ok(());
+        }
+        let device = &self.shared.ctx.device;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let sized = &mut self.sized[0];
+        let reduced = self.resolution_pass.targets(
+            device,
+            &FullTargets {
+                camera: &self.shared.camera,
+                gbuffer: &sized.gbuffer,
+                indirect: &sized.indirect,
+                width: sized.width,
+                height: sized.height,
+            },
+            factor,
+        );
+        check_allocation(scope, format!("1/{factor} resolution indirect targets"))?;
+        sized.reduced = Some(reduced);
         Ok(())
     }
 
@@ -601,6 +662,12 @@ impl Renderer {
         let faces = LightUniform::face_count(settings.light.kind);
         self.ensure_shadow_map(settings.shadow_map_size, faces)?;
         let (method_index, _) = gi::entry(settings.gi.method);
+        let downscale = if gi::entry(settings.gi.method).1.downscales {
+            settings.gi.indirect_downscale
+        } else {
+            1
+        };
+        self.ensure_reduced(downscale)?;
         // Created before the targets are borrowed below.
         self.method_at(method_index)?;
         let (Some(sized), Some(shadow_map)) = (self.sized.first(), self.shadow_maps.first()) else {
@@ -645,21 +712,35 @@ impl Renderer {
             self.gbuffer_pass
                 .encode(e, &sized.gbuffer, &self.shared.scene_buffers)
         })?;
+        // A downscaled frame's GI method sees only the reduced G-buffer and target.
+        let reduced = sized.reduced.as_ref().filter(|_| downscale > 1);
+        if let Some(r) = reduced {
+            self.resolution_pass
+                .prepare(queue, r, settings.camera.fov_y_degrees, height);
+            stages.stage(Stage::GbufferReduce, |e| {
+                self.resolution_pass.encode_reduce(e, r)
+            })?;
+        }
         let frame = FrameInputs {
             resources: &self.shared,
-            width,
-            height,
+            width: reduced.map_or(width, |r| r.width),
+            height: reduced.map_or(height, |r| r.height),
             camera: &settings.camera,
             light: &settings.light,
             settings: &settings.gi,
-            gbuffer: &sized.gbuffer,
-            indirect: &sized.indirect,
+            gbuffer: reduced.map_or(&sized.gbuffer, |r| &r.gbuffer),
+            indirect: reduced.map_or(&sized.indirect, |r| &r.indirect),
             history: settings.history,
         };
         let Some(method) = self.methods[method_index].as_mut() else {
             unreachable!("the method was just created");
         };
         let progress: Option<ProgressBuffer> = method.encode(&frame, &mut stages)?;
+        if let Some(r) = reduced {
+            stages.stage(Stage::IndirectUpsample, |e| {
+                self.resolution_pass.encode_upsample(e, r, width, height)
+            })?;
+        }
         stages.stage(Stage::DirectLight, |e| {
             self.direct_pass
                 .encode(e, &direct_bind_group, width, height)

@@ -331,7 +331,10 @@ function onResize() {
 /** Session parameters of a new viewer: `?scene=&method=&view=&rsm=&fps=&scale=` may preset them. */
 function initialParams() {
   const q = new URLSearchParams(location.search);
+  // Without `?scale=`, the server's choice: a software adapter streams a quarter of the pixels.
+  const serverScale = state.server.defaults && state.server.defaults.viewer_scale;
   if (q.has('scale')) $('resolution-scale').value = q.get('scale');
+  else if (serverScale) $('resolution-scale').value = String(serverScale);
   const render = { ...streamSize(), gi: {} };
   if (q.has('scene')) render.scene = q.get('scene');
   if (q.has('method')) render.gi.method = q.get('method');
@@ -363,7 +366,8 @@ async function boot() {
     return;
   }
   const s = state.server;
-  $('server-info').textContent = `${s.build} · ${s.adapter}`;
+  const profile = s.defaults && s.defaults.profile === 'software' ? ' · software defaults (smaller GI, indirect at reduced resolution)' : '';
+  $('server-info').textContent = `${s.build} · ${s.adapter}${profile}`;
   stats.setStageNames(s.stages);
   panel.applyLimits(s.limits);
   panel.applyGiMethods(s.gi_methods || []);

@@ -86,6 +86,9 @@ pub struct GiSettings {
     pub blur_normal: f32,
     /// `clustered`: how VPL visibility is found.
     pub visibility: ClusteredVisibility,
+    /// Indirect light at 1/n of the output's width and height (the renderer reduces the
+    /// G-buffer and upsamples the method's result, see `passes::indirect_resolution`).
+    pub indirect_downscale: u32,
 }
 
 impl From<&lightcast_protocol::GiParams> for GiSettings {
@@ -113,6 +116,7 @@ impl From<&lightcast_protocol::GiParams> for GiSettings {
             blur_distance: p.blur_distance,
             blur_normal: p.blur_normal,
             visibility: p.visibility,
+            indirect_downscale: p.indirect_downscale,
         }
     }
 }
@@ -308,6 +312,10 @@ pub struct MethodEntry {
     pub describe: fn(&Limits) -> Vec<GiMethodInfo>,
     /// The per-scene data frames of `methods` need before their first frame, if any.
     pub precompute: Option<&'static precompute::PrecomputeEntry>,
+    /// Whether the renderer may run the method at `indirect_downscale` (the methods that
+    /// approximate; not `none`, which has nothing to compute, nor the reference, which is the
+    /// full-resolution truth the others are compared with).
+    pub downscales: bool,
 }
 
 /// Every method the renderer can run.
@@ -329,8 +337,27 @@ pub fn entry(method: GiMethod) -> (usize, &'static MethodEntry) {
 
 /// Descriptions of every registered method, in registry order, with the limits of a server
 /// configured with `limits`.
+/// The methods whose entry [`MethodEntry::downscales`] also take the renderer's
+/// `indirect_downscale`.
 pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
-    REGISTRY.iter().flat_map(|e| (e.describe)(limits)).collect()
+    let mut methods: Vec<GiMethodInfo> =
+        REGISTRY.iter().flat_map(|e| (e.describe)(limits)).collect();
+    for m in methods.iter_mut().filter(|m| entry(m.method).1.downscales) {
+        m.parameters.push(lightcast_protocol::GiParamInfo {
+            name: "indirect_downscale".into(),
+            kind: lightcast_protocol::GiParamKind::Integer,
+            default: lightcast_protocol::GiParams::default()
+                .indirect_downscale
+                .into(),
+            min: Some(1.0),
+            max: Some(crate::passes::indirect_resolution::MAX_DOWNSCALE.into()),
+            choices: Vec::new(),
+            description: "Indirect light at 1/n of the output's width and height, brought back \
+                          with an edge-aware (joint bilateral) upsample; 1: full resolution"
+                .into(),
+        });
+    }
+    methods
 }
 
 #[cfg(test)]

@@ -24,6 +24,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         }]
     },
     precompute: None,
+    downscales: false,
 };
 
 fn validate(_: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {

@@ -71,6 +71,18 @@ pub const TONEMAP: ShaderSource = ShaderSource {
     files: &[wgsl!("exposure_result.wgsl"), wgsl!("tonemap.wgsl")],
 };
 
+/// The G-buffer reduced for indirect light at a lower resolution.
+pub const GBUFFER_REDUCE: ShaderSource = ShaderSource {
+    name: "gbuffer_reduce",
+    files: &[wgsl!("gbuffer_reduce.wgsl")],
+};
+
+/// Reduced-resolution indirect light upsampled to the output's pixels.
+pub const INDIRECT_UPSAMPLE: ShaderSource = ShaderSource {
+    name: "indirect_upsample",
+    files: &[wgsl!("common.wgsl"), wgsl!("indirect_upsample.wgsl")],
+};
+
 pub const RSM: ShaderSource = ShaderSource {
     name: "rsm",
     files: &[
@@ -197,6 +209,8 @@ pub const ALL: &[&ShaderSource] = &[
     &DIRECT_LIGHT,
     &EXPOSURE,
     &TONEMAP,
+    &GBUFFER_REDUCE,
+    &INDIRECT_UPSAMPLE,
     &RSM,
     &IMPORTANCE,
     &CUMULATIVE_SUMS,
@@ -329,7 +343,8 @@ mod tests {
         use crate::gi::reference::{self, resolve};
         use crate::passes::bind::{wgsl_mismatches, BindGroupDesc};
         use crate::passes::{
-            direct_light, exposure, gbuffer, rsm, scene_buffers, shadow_map, tonemap,
+            direct_light, exposure, gbuffer, indirect_resolution, rsm, scene_buffers, shadow_map,
+            tonemap,
         };
         // Each module with its pipeline's bind groups, group i at index i.
         let passes: &[(&ShaderSource, &[&BindGroupDesc])] = &[
@@ -348,6 +363,8 @@ mod tests {
             (&DIRECT_LIGHT, &[&direct_light::GROUP]),
             (&EXPOSURE, &[&exposure::GROUP]),
             (&TONEMAP, &[&tonemap::GROUP]),
+            (&GBUFFER_REDUCE, &[&indirect_resolution::REDUCE_GROUP]),
+            (&INDIRECT_UPSAMPLE, &[&indirect_resolution::UPSAMPLE_GROUP]),
             (&RSM, &[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP]),
             (&IMPORTANCE, &[&importance::GROUP]),
             (&CUMULATIVE_SUMS, &[&cumulative_sums::GROUP]),

@@ -29,7 +29,22 @@ pub struct GBuffer {
 
 impl GBuffer {
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        Self::with_usage(
+            device,
+            width,
+            height,
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        )
+    }
+
+    /// A G-buffer whose colour targets have `usage` (a compute pass writing them, as
+    /// [`super::indirect_resolution`]'s reduction does, needs `STORAGE_BINDING`).
+    pub fn with_usage(
+        device: &wgpu::Device,
+        width: u32,
+        height: u32,
+        usage: wgpu::TextureUsages,
+    ) -> Self {
         let t = |label, format| Target::new(device, label, width, height, format, usage);
         Self {
             position: t("gbuffer position", FORMATS[0]),

@@ -9,6 +9,9 @@
 //! 7. [`cache_lighting`]: diffuse and glossy proxy lights per light cache.
 //! 8. [`proxy_occlusion`]: the proxies dimmed by the caches in between (double projection).
 //! 9. [`indirect_light`]: proxy lights interpolated per pixel.
+//!
+//! With `gi.indirect_downscale` > 1, [`indirect_resolution`] reduces the G-buffer before the
+//! GI method's stages (3–9, or another method's) and upsamples their result after them.
 //! 10. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
 //! 11. [`exposure`]: automatic exposure from the HDR image.
 //! 12. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
@@ -22,6 +25,7 @@ pub mod direct_light;
 pub mod exposure;
 pub mod frame_uniforms;
 pub mod gbuffer;
+pub mod indirect_resolution;
 pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;

@@ -26,6 +26,11 @@ pub struct ServeArgs {
     /// Count a CPU (software) adapter such as lavapipe as ready in /readyz.
     #[arg(long, env = "LIGHTCAST_ALLOW_CPU_ADAPTER")]
     pub allow_cpu_adapter: bool,
+    /// Defaults of the render fields requests leave out: `software` (smaller GI settings,
+    /// indirect light at half resolution) suits CPU adapters, `gpu` is the protocol's;
+    /// `auto` picks by the adapter. Fields a request sets are always used.
+    #[arg(long, value_enum, env = "LIGHTCAST_DEFAULTS", default_value = "auto")]
+    pub defaults: super::defaults::DefaultsChoice,
     /// wgpu backend.
     #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
     pub backend: BackendChoice,

@@ -8,6 +8,7 @@
 
 pub mod budget;
 pub mod config;
+pub mod defaults;
 pub mod encode;
 pub mod error;
 pub mod http;
@@ -141,6 +142,12 @@ impl Service {
             error,
         })?;
         let (shutdown, shutdown_rx) = tokio::sync::watch::channel(false);
+        let defaults = defaults::Defaults::choose(
+            args.defaults,
+            &ctx.info.name,
+            ctx.info.device_type == wgpu::DeviceType::Cpu,
+        );
+        log(&defaults.summary());
         let state = Arc::new(http::AppState::new(
             scenes,
             Arc::clone(&sessions),
@@ -149,6 +156,7 @@ impl Service {
             tokens,
             &ctx,
             args.allow_cpu_adapter,
+            defaults,
             timing_source.to_string(),
             shutdown_rx.clone(),
         ));

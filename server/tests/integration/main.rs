@@ -9,6 +9,7 @@ mod gpu_brsm_sampling;
 mod gpu_cache_lighting;
 mod gpu_clustered;
 mod gpu_direct_light;
+mod gpu_indirect_resolution;
 mod gpu_reference;
 mod gpu_scenes;
 mod render_cli;

@@ -1243,3 +1243,92 @@ async fn requests_over_the_time_limit_get_a_json_error() {
     assert_eq!(server.get("/healthz").await.status(), 200);
     server.stop().await;
 }
+
+/// The server's defaults fill what a request leaves out and nothing else: `--defaults
+/// software` (what a CPU adapter gets with `auto`) gives smaller GI settings and indirect light
+/// at half resolution, `--defaults gpu` the protocol's; `/v1/server` says which, and a patch's
+/// `null` restores the server's default.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn requests_get_the_servers_defaults_for_what_they_leave_out() {
+    let server = TestServer::start(&["--defaults", "software"]).await;
+    let info = server.get_json("/v1/server").await;
+    let defaults = &info["defaults"];
+    assert_eq!(defaults["profile"], "software");
+    assert_eq!(defaults["reason"], "--defaults software");
+    assert_eq!(defaults["viewer_scale"], 0.5);
+    assert_eq!(defaults["render"]["gi"]["rsm_size"], 128);
+    assert_eq!(defaults["render"]["gi"]["indirect_downscale"], 2);
+    let method = |name: &str| {
+        info["gi_methods"]
+            .as_array()
+            .expect("gi_methods")
+            .iter()
+            .find(|m| m["method"] == name)
+            .cloned()
+            .expect("described")
+    };
+    let param = |m: &Value, name: &str| {
+        m["parameters"]
+            .as_array()
+            .expect("parameters")
+            .iter()
+            .find(|p| p["name"] == name)
+            .cloned()
+    };
+    let brsm = method("brsm");
+    assert_eq!(param(&brsm, "rsm_size").expect("rsm_size")["default"], 128);
+    assert_eq!(
+        param(&brsm, "indirect_downscale").expect("listed")["default"],
+        2
+    );
+    assert!(param(&method("reference"), "indirect_downscale").is_none());
+    assert!(param(&method("none"), "indirect_downscale").is_none());
+
+    // A render that sets only its size gets the reduce and upsample stages; one that sets
+    // `indirect_downscale: 1` does not.
+    let small = json!({"render": {"width": 64, "height": 36}});
+    let (report, _) = render(&server, &small).await;
+    let stages: Vec<&str> = report.stages.iter().map(|s| s.stage.as_str()).collect();
+    assert!(
+        stages.contains(&"gbuffer_reduce") && stages.contains(&"indirect_upsample"),
+        "{stages:?}"
+    );
+    let full = json!({"render": {"width": 64, "height": 36, "gi": {"indirect_downscale": 1}}});
+    let (report, _) = render(&server, &full).await;
+    assert!(!report.stages.iter().any(|s| s.stage == "indirect_upsample"));
+
+    let created = server
+        .create_session(json!({"render": {"gi": {"rsm_size": 64}}}), None)
+        .await;
+    let gi = &created.session.params.render.gi;
+    assert_eq!(gi.rsm_size, 64, "a set field is used as sent");
+    assert_eq!((gi.val_count, gi.indirect_downscale), (512, 2));
+    assert_eq!(created.session.params.render.shadow_map_size, 1024);
+    let path = format!("/v1/sessions/{}", created.session.id);
+    let patched: Value = server
+        .http
+        .patch(server.url(&path))
+        .header("content-type", "application/merge-patch+json")
+        .body(r#"{"render": {"gi": {"rsm_size": null, "val_count": 300}}}"#)
+        .send()
+        .await
+        .expect("patch")
+        .json()
+        .await
+        .expect("session JSON");
+    assert_eq!(patched["params"]["render"]["gi"]["rsm_size"], 128);
+    assert_eq!(patched["params"]["render"]["gi"]["val_count"], 300);
+    server.stop().await;
+
+    let server = TestServer::start(&["--defaults", "gpu"]).await;
+    assert_eq!(
+        server.get_json("/v1/server").await["defaults"]["profile"],
+        "gpu"
+    );
+    let created = server.create_session(json!({}), None).await;
+    assert_eq!(
+        created.session.params.render,
+        lightcast_protocol::RenderParams::default()
+    );
+    server.stop().await;
+}

@@ -52,6 +52,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     create: |r| Ok(Box::new(Clustered::new(r))),
     describe,
     precompute: None,
+    downscales: true,
 };
 
 fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {

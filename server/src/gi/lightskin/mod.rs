@@ -55,6 +55,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     create: |r| Ok(Box::new(LightSkin::new(r))),
     describe,
     precompute: Some(&PRECOMPUTE),
+    downscales: true,
 };
 
 /// The light caches (paper §3), one set per scene and (d_eps, θ_eps), kept in the store.

@@ -67,6 +67,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     create: |r| Ok(Box::new(Reference::new(r)?)),
     describe,
     precompute: Some(&PRECOMPUTE),
+    downscales: false,
 };
 
 /// The scene's BVH, built on the service's precompute worker so that a large scene's build

@@ -77,6 +77,7 @@ pub async fn server_info(State(state): State<Arc<AppState>>) -> Json<ServerInfo>
             .iter()
             .map(|s| s.to_string())
             .collect(),
-        gi_methods: crate::gi::describe_all(&state.limits),
+        gi_methods: state.gi_methods(),
+        defaults: state.defaults.info.clone(),
     })
 }

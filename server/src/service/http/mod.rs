@@ -59,6 +59,8 @@ pub struct AppState {
     pub adapter: String,
     pub adapter_is_cpu: bool,
     pub allow_cpu_adapter: bool,
+    /// What requests get for the render fields they leave out.
+    pub defaults: crate::service::defaults::Defaults,
     pub timing_source: String,
     pub max_texture: u32,
     /// The GPU's wgpu instance, for the live-object gauges of `/metrics`.
@@ -85,6 +87,7 @@ impl AppState {
         tokens: Vec<String>,
         gpu: &crate::gpu::GpuContext,
         allow_cpu_adapter: bool,
+        defaults: crate::service::defaults::Defaults,
         timing_source: String,
         shutdown: tokio::sync::watch::Receiver<bool>,
     ) -> Self {
@@ -98,6 +101,7 @@ impl AppState {
             adapter: crate::gpu::context::AdapterSummary(&gpu.info).to_string(),
             adapter_is_cpu: gpu.info.device_type == wgpu::DeviceType::Cpu,
             allow_cpu_adapter,
+            defaults,
             timing_source,
             max_texture: gpu.device.limits().max_texture_dimension_2d,
             gpu_instance: gpu.instance.clone(),
@@ -107,6 +111,19 @@ impl AppState {
             admission,
             tickets: Mutex::new(HashMap::new()),
         }
+    }
+
+    /// The GI methods' descriptions with this server's limits, and its defaults as their
+    /// parameters' defaults.
+    pub fn gi_methods(&self) -> Vec<lightcast_protocol::GiMethodInfo> {
+        let defaults = serde_json::to_value(&self.defaults.info.render.gi).unwrap_or_default();
+        let mut methods = crate::gi::describe_all(&self.limits);
+        for p in methods.iter_mut().flat_map(|m| &mut m.parameters) {
+            if let Some(v) = defaults.get(&p.name) {
+                p.default = v.clone();
+            }
+        }
+        methods
     }
 
     pub fn auth_enabled(&self) -> bool {

@@ -4,7 +4,7 @@ use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
 use crate::service::encode;
-use crate::service::error::{parse_json, ApiError};
+use crate::service::error::ApiError;
 use crate::service::params::{check_gi_ranges, check_quality, resolve};
 use crate::service::render_loop::{Command, OneShot};
 use crate::service::scenes::{precompute_failed, precompute_label, Now, SceneEntry};
@@ -31,12 +31,7 @@ async fn read_request(
 ) -> Result<(RenderRequest, Option<Arc<SceneEntry>>), ApiError> {
     if !is_multipart(&request) {
         let body = read_body(request, &state.limits).await?;
-        let req = if body.iter().all(u8::is_ascii_whitespace) {
-            RenderRequest::default()
-        } else {
-            parse_json(&body)?
-        };
-        return Ok((req, None));
+        return Ok((state.defaults.parse(&body)?, None));
     }
     let _upload = state.admission.upload(caller.0.as_deref())?;
     let multipart = Multipart::from_request(request, state)
@@ -57,7 +52,7 @@ async fn read_request(
                     ),
                 ));
             }
-            req = Some(parse_json::<RenderRequest>(&file.bytes)?);
+            req = Some(state.defaults.parse::<RenderRequest>(&file.bytes)?);
         } else {
             files.push(file);
         }

@@ -49,6 +49,13 @@ pub fn apply_patch(
     let mut merged =
         serde_json::to_value(session.params()).map_err(|e| ApiError::internal(e.to_string()))?;
     merge_patch(&mut merged, patch);
+    // A `null` removed a field: it gets the server's default back.
+    if let Value::Object(map) = &mut merged {
+        let render = map
+            .entry("render")
+            .or_insert(Value::Object(Default::default()));
+        state.defaults.fill_render(render)?;
+    }
     let params: SessionParams = from_value(merged)?;
     let entry = state.scenes.get(&params.render.scene).map_err(|_| {
         ApiError::field(
@@ -93,11 +100,7 @@ pub async fn create(
     body: Result<Bytes, BytesRejection>,
 ) -> Result<(StatusCode, Json<SessionCreated>), ApiError> {
     let body = crate::service::error::body(body)?;
-    let params: SessionParams = if body.iter().all(u8::is_ascii_whitespace) {
-        SessionParams::default()
-    } else {
-        parse_json(&body)?
-    };
+    let params: SessionParams = state.defaults.parse(&body)?;
     let entry = super::scenes::scene(&state, &params.render.scene)?;
     let resolved = resolve_session(&params, &entry, &state.limits, state.max_texture)?;
     let session = Session::new(caller.0.clone(), params, resolved, entry.lease());

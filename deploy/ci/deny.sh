@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Dependency hygiene in CI: cargo-deny's licence, ban and source checks of every crate in
+# Cargo.lock against deploy/ci/deny.toml, offline. cargo-deny is built once from crates.io
+# (about 2.5 minutes on 2 cores) into target/deploy-ci/cargo-deny and reused while its pinned
+# version is unchanged. Advisories need the RustSec database from GitHub, which CI cannot
+# reach; see deny.toml.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+
+version=0.20.2
+root=target/deploy-ci/cargo-deny
+if [ "$("$root/bin/cargo-deny" --version 2>/dev/null)" != "cargo-deny $version" ]; then
+  echo "deny: installing cargo-deny $version into $root" >&2
+  cargo install --quiet --locked --version "$version" --root "$root" cargo-deny
+fi
+"$root/bin/cargo-deny" --offline --manifest-path Cargo.toml --all-features \
+  --config deploy/ci/deny.toml check licenses bans sources

@@ -40,6 +40,9 @@ pub enum GiMethod {
     Reference,
     /// VPLs from the RSM clustered into virtual area lights (seed paper 003, §4–6).
     Clustered,
+    /// Surfels, a flux hierarchy, precomputed SH links and SH caches with progressive
+    /// multi-bounce (seed paper 001).
+    Surfels,
 }
 
 impl GiMethod {
@@ -50,6 +53,7 @@ impl GiMethod {
         Self::Brsm,
         Self::Reference,
         Self::Clustered,
+        Self::Surfels,
     ];
 
     /// The name requests use.
@@ -60,6 +64,7 @@ impl GiMethod {
             Self::Brsm => "brsm",
             Self::Reference => "reference",
             Self::Clustered => "clustered",
+            Self::Surfels => "surfels",
         }
     }
 }
@@ -250,6 +255,16 @@ pub struct GiParams {
     /// light is computed at 1/n of the output's width and height (1, 2 or 4) and brought back
     /// with an edge-aware upsample; 1 is full resolution.
     pub indirect_downscale: u32,
+    /// `surfels`: n_S, surfels of equal area over every triangle. Another value starts a
+    /// precomputation of its own.
+    pub surfel_count: u32,
+    /// `surfels`: distance between neighbouring SH caches in scene units; `null` derives it
+    /// from the scene's extent (about 8,192 caches).
+    pub surfel_cache_spacing: Option<f32>,
+    /// `surfels`: n_L, links from every cache to the hierarchy nodes that light it most.
+    pub surfel_links: u32,
+    /// `surfels`: SH bands l of the links and caches (l² coefficients).
+    pub sh_bands: u32,
 }
 
 impl Default for GiParams {
@@ -276,6 +291,10 @@ impl Default for GiParams {
             blur_normal: 0.8,
             visibility: ClusteredVisibility::Off,
             indirect_downscale: 1,
+            surfel_count: 32 * 1024,
+            surfel_cache_spacing: None,
+            surfel_links: 128,
+            sh_bands: 3,
         }
     }
 }
@@ -739,6 +758,10 @@ pub struct Limits {
     /// Light caches over every parameter set of every scene (400 beyond).
     #[serde(default)]
     pub max_total_caches: u64,
+    /// `surfels` links (caches × links per cache) over every parameter set of every scene,
+    /// estimated before a set is built (400 naming `render.gi.surfel_links` beyond).
+    #[serde(default)]
+    pub max_total_surfel_links: u64,
     /// Scene uploads (`.glb`/multipart bodies of `/v1/scenes` and `/v1/render`) received or
     /// loading at once (429 beyond).
     #[serde(default)]

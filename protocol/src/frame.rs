@@ -109,6 +109,10 @@ stages! {
     GbufferReduce => "gbuffer_reduce",
     /// Indirect light brought back to the output's resolution (`indirect_downscale`).
     IndirectUpsample => "indirect_upsample",
+    /// The bounces a frame adds: surfel radiosity, flux pull-up and cache lighting (`surfels`).
+    SurfelBounce => "surfel_bounce",
+    /// Per-pixel indirect light from the SH caches (`surfels`).
+    SurfelShade => "surfel_shade",
 }
 
 impl Stage {

@@ -82,6 +82,19 @@ pub struct CacheArgs {
     /// cache directory).
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// `surfels`: n_S, surfels over every triangle (1024 … 262144; default 32768).
+    #[arg(long)]
+    pub surfels: Option<u32>,
+    /// `surfels`: distance between SH caches in scene units (default: about 8,192 caches
+    /// over the scene's bounds).
+    #[arg(long)]
+    pub surfel_cache_spacing: Option<f32>,
+    /// `surfels`: n_L, links per cache (16 … 512; default 128).
+    #[arg(long)]
+    pub surfel_links: Option<u32>,
+    /// `surfels`: SH bands of links and caches (2 … 4; default 3).
+    #[arg(long)]
+    pub sh_bands: Option<u32>,
 }
 
 impl CacheArgs {
@@ -96,11 +109,16 @@ impl CacheArgs {
         let Some(entry) = precompute::entry_for(method) else {
             return Ok(None);
         };
+        let d = lightcast_protocol::GiParams::default();
         let gi = lightcast_protocol::GiParams {
             method,
             cache_distance: self.cache_distance,
             cache_angle: self.cache_angle,
-            ..Default::default()
+            surfel_count: self.surfels.unwrap_or(d.surfel_count),
+            surfel_cache_spacing: self.surfel_cache_spacing,
+            surfel_links: self.surfel_links.unwrap_or(d.surfel_links),
+            sh_bands: self.sh_bands.unwrap_or(d.sh_bands),
+            ..d
         };
         let key = (entry.key)(&gi, &SceneFacts::of(scene)).map_err(|e| PrecomputeError {
             what: entry.label,

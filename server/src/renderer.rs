@@ -729,6 +729,7 @@ impl Renderer {
             light: &settings.light,
             settings: &settings.gi,
             gbuffer: reduced.map_or(&sized.gbuffer, |r| &r.gbuffer),
+            shadow: shadow_map,
             indirect: reduced.map_or(&sized.indirect, |r| &r.indirect),
             history: settings.history,
         };

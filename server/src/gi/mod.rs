@@ -9,6 +9,8 @@
 //!   paper 004), the `lightskin` and `brsm` methods.
 //! - [`reference`]: a progressive path tracer, the truth the others are measured against.
 //! - [`clustered`]: VPLs from the RSM clustered into virtual area lights (seed paper 003).
+//! - [`surfels`]: surfels, a flux hierarchy, precomputed SH links and SH caches with
+//!   progressive multi-bounce (seed paper 001).
 //!
 //! Adding a method: a module implementing [`Method`], an entry in [`REGISTRY`] (whose
 //! `describe` lists its parameters with their ranges: `/v1/server` publishes them, the service
@@ -64,7 +66,7 @@ pub struct GiSettings {
     /// Phong exponent k (eq. 3–4) for every material, in direct and indirect shading alike;
     /// `None` keeps the materials' own.
     pub glossy_exponent: Option<f32>,
-    /// `reference`: reflections after the surface a pixel sees (1: single bounce).
+    /// `reference`, `surfels`: reflections after the surface a pixel sees (1: single bounce).
     pub bounces: u32,
     /// `reference`: samples per pixel added per frame.
     pub spp: u32,
@@ -86,6 +88,7 @@ pub struct GiSettings {
     pub blur_normal: f32,
     /// `clustered`: how VPL visibility is found.
     pub visibility: ClusteredVisibility,
+
     /// Indirect light at 1/n of the output's width and height (the renderer reduces the
     /// G-buffer and upsamples the method's result, see `passes::indirect_resolution`).
     pub indirect_downscale: u32,
@@ -198,6 +201,9 @@ pub struct FrameInputs<'a> {
     pub light: &'a Light,
     pub settings: &'a GiSettings,
     pub gbuffer: &'a GBuffer,
+    /// The frame's shadow map, rendered before the GI stages (`surfels` lights its surfels
+    /// through it).
+    pub shadow: &'a crate::passes::shadow_map::ShadowMap,
     /// Indirect radiance per pixel (RGBA16F storage texture); the method writes every pixel.
     pub indirect: &'a Target,
     /// Which image history a progressive method may continue: a session's id, or `None` to
@@ -324,6 +330,7 @@ pub const REGISTRY: &[MethodEntry] = &[
     lightskin::ENTRY,
     reference::ENTRY,
     clustered::ENTRY,
+    surfels::ENTRY,
 ];
 
 /// The registry entry serving `method` and its index.

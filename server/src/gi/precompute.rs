@@ -102,6 +102,8 @@ pub struct SceneFacts {
     /// Radius of the scene's bounding sphere.
     pub radius: f32,
     pub triangles: u64,
+    /// Size of the scene's bounding box.
+    pub extent: glam::Vec3,
 }
 
 impl SceneFacts {
@@ -110,6 +112,7 @@ impl SceneFacts {
             surface_area: super::lightskin::caches::surface_area(scene),
             radius: scene.bounds.radius(),
             triangles: scene.triangle_count() as u64,
+            extent: scene.bounds.max - scene.bounds.min,
         }
     }
 }
@@ -172,6 +175,9 @@ pub enum BudgetPool {
     /// Triangles, over every scene and precomputation (`--max-total-triangles`): a set that
     /// holds a copy of every triangle of its scene (a BVH) counts them a second time.
     Triangles,
+    /// `surfels` links, caches × links per cache, over every set of every scene
+    /// (`--max-total-surfel-links`).
+    SurfelLinks,
 }
 
 /// How a kind's sets are counted against the service's budgets: in units of its pool,

@@ -201,6 +201,41 @@ pub const GEOMETRY_BLUR: ShaderSource = ShaderSource {
     files: &[wgsl!("clustered/vpls.wgsl"), wgsl!("clustered/blur.wgsl")],
 };
 
+/// `surfels`: every surfel's radiosity from the light, emission and the previous bounce.
+pub const SURFEL_LIGHT: ShaderSource = ShaderSource {
+    name: "surfel_light",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("lights.wgsl"),
+        wgsl!("surfels/sh.wgsl"),
+        wgsl!("surfels/caches.wgsl"),
+        wgsl!("surfels/surfel_light.wgsl"),
+    ],
+};
+
+/// `surfels`: flux pulled up one level of the hierarchy.
+pub const SURFEL_PULL: ShaderSource = ShaderSource {
+    name: "surfel_pull",
+    files: &[wgsl!("surfels/pull.wgsl")],
+};
+
+/// `surfels`: every cache's SH radiance over its links (eq. 4).
+pub const SURFEL_CACHE_LIGHT: ShaderSource = ShaderSource {
+    name: "surfel_cache_light",
+    files: &[wgsl!("surfels/cache_light.wgsl")],
+};
+
+/// `surfels`: per-pixel indirect light from the caches (eq. 5–8).
+pub const SURFEL_SHADE: ShaderSource = ShaderSource {
+    name: "surfel_shade",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("surfels/sh.wgsl"),
+        wgsl!("surfels/caches.wgsl"),
+        wgsl!("surfels/shade.wgsl"),
+    ],
+};
+
 /// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
@@ -224,6 +259,10 @@ pub const ALL: &[&ShaderSource] = &[
     &CLUSTERING,
     &CLUSTERED_INDIRECT,
     &GEOMETRY_BLUR,
+    &SURFEL_LIGHT,
+    &SURFEL_PULL,
+    &SURFEL_CACHE_LIGHT,
+    &SURFEL_SHADE,
 ];
 
 impl ShaderSource {
@@ -341,6 +380,7 @@ mod tests {
             val_select,
         };
         use crate::gi::reference::{self, resolve};
+        use crate::gi::surfels::passes as surfels;
         use crate::passes::bind::{wgsl_mismatches, BindGroupDesc};
         use crate::passes::{
             direct_light, exposure, gbuffer, indirect_resolution, rsm, scene_buffers, shadow_map,
@@ -380,6 +420,10 @@ mod tests {
             (&CLUSTERING, &[&clustered::CLUSTERING_GROUP]),
             (&CLUSTERED_INDIRECT, &[&clustered::INDIRECT_GROUP]),
             (&GEOMETRY_BLUR, &[&clustered::BLUR_GROUP]),
+            (&SURFEL_LIGHT, &[&surfels::LIGHT_GROUP]),
+            (&SURFEL_PULL, &[&surfels::PULL_GROUP]),
+            (&SURFEL_CACHE_LIGHT, &[&surfels::CACHE_LIGHT_GROUP]),
+            (&SURFEL_SHADE, &[&surfels::SHADE_GROUP]),
         ];
         let errors: Vec<String> = passes
             .iter()

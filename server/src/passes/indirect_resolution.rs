@@ -378,3 +378,36 @@ pub fn upsample_cpu(
     };
     radiance * reflectance(&p)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::shaders::{layout_check::assert_struct, GBUFFER_REDUCE, INDIRECT_UPSAMPLE};
+    use std::mem::{offset_of, size_of};
+
+    #[test]
+    fn resolution_structs_match_wgsl() {
+        assert_struct(
+            &GBUFFER_REDUCE,
+            "ReduceParams",
+            size_of::<ReduceParams>(),
+            &[
+                ("factor", offset_of!(ReduceParams, factor)),
+                ("pad0", offset_of!(ReduceParams, pad0)),
+                ("pad1", offset_of!(ReduceParams, pad1)),
+                ("pad2", offset_of!(ReduceParams, pad2)),
+            ],
+        );
+        assert_struct(
+            &INDIRECT_UPSAMPLE,
+            "UpsampleParams",
+            size_of::<UpsampleParams>(),
+            &[
+                ("factor", offset_of!(UpsampleParams, factor)),
+                ("footprint", offset_of!(UpsampleParams, footprint)),
+                ("pad0", offset_of!(UpsampleParams, pad0)),
+                ("pad1", offset_of!(UpsampleParams, pad1)),
+            ],
+        );
+    }
+}

@@ -102,6 +102,8 @@ pub struct MemoryBudget {
     pub caches: Arc<Pool>,
     /// Light caches of one parameter set.
     pub caches_per_set: u64,
+    /// `surfels` links over every parameter set of every scene.
+    pub surfel_links: Arc<Pool>,
 }
 
 impl MemoryBudget {
@@ -111,6 +113,7 @@ impl MemoryBudget {
             triangles: Pool::new(limits.max_total_triangles),
             caches: Pool::new(limits.max_total_caches),
             caches_per_set: limits.max_caches_per_set,
+            surfel_links: Pool::new(limits.max_total_surfel_links),
         }
     }
 }

@@ -163,6 +163,10 @@ pub struct LimitArgs {
     /// Light caches over every parameter set of every scene held.
     #[arg(long, env = "LIGHTCAST_MAX_TOTAL_CACHES", default_value_t = 1_000_000)]
     pub max_total_caches: u64,
+    /// `surfels` links (SH caches × links per cache, about 40 bytes each at 3 bands) over
+    /// every parameter set of every scene held.
+    #[arg(long, env = "LIGHTCAST_MAX_TOTAL_SURFEL_LINKS", default_value_t = 4 << 20)]
+    pub max_total_surfel_links: u64,
     /// Scene uploads received or loading at once (each body may take --max-upload-bytes).
     #[arg(long, env = "LIGHTCAST_MAX_UPLOADS", default_value_t = 4)]
     pub max_uploads: u32,
@@ -297,6 +301,12 @@ impl LimitArgs {
             self.max_caches_per_set,
             u64::MAX,
         )?;
+        within(
+            "max-total-surfel-links",
+            self.max_total_surfel_links,
+            1,
+            u64::MAX,
+        )?;
         within("max-uploads", self.max_uploads.into(), 1, 1024)?;
         within(
             "max-queued-renders",
@@ -338,6 +348,7 @@ impl LimitArgs {
             max_total_triangles: self.max_total_triangles,
             max_caches_per_set: self.max_caches_per_set,
             max_total_caches: self.max_total_caches,
+            max_total_surfel_links: self.max_total_surfel_links,
             max_uploads: self.max_uploads,
             max_queued_renders: self.max_queued_renders,
             max_width: self.max_width,

@@ -268,6 +268,7 @@ impl SceneEntry {
         match pool {
             BudgetPool::LightCaches => (&self.budget.caches, "--max-total-caches"),
             BudgetPool::Triangles => (&self.budget.triangles, "--max-total-triangles"),
+            BudgetPool::SurfelLinks => (&self.budget.surfel_links, "--max-total-surfel-links"),
         }
     }
 
@@ -275,7 +276,7 @@ impl SceneEntry {
     fn per_set_limit(&self, pool: BudgetPool) -> Option<(u64, &'static str)> {
         match pool {
             BudgetPool::LightCaches => Some((self.budget.caches_per_set, "--max-caches-per-set")),
-            BudgetPool::Triangles => None,
+            BudgetPool::Triangles | BudgetPool::SurfelLinks => None,
         }
     }
 

@@ -12,6 +12,7 @@ mod gpu_direct_light;
 mod gpu_indirect_resolution;
 mod gpu_reference;
 mod gpu_scenes;
+mod gpu_surfels;
 mod render_cli;
 mod scale_invariance;
 mod serve_cli;

@@ -1332,3 +1332,75 @@ async fn requests_get_the_servers_defaults_for_what_they_leave_out() {
     );
     server.stop().await;
 }
+
+/// `surfels` through the API: its precomputation is built off the render loop and listed with
+/// the scene, a render waits for it and reports the surfel stages, and its parameters and
+/// budget are checked with errors naming the field.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn surfels_render_through_the_api_after_their_precomputation() {
+    let server = TestServer::start(&["--max-total-surfel-links", "20000"]).await;
+    let gi = json!({"method": "surfels", "surfel_count": 2048, "surfel_cache_spacing": 0.4,
+                    "surfel_links": 16, "bounces": 2});
+    let request = json!({"render": {"width": 48, "height": 36, "gi": gi}});
+    let (report, png) = render(&server, &request).await;
+    let stages: Vec<&str> = report.stages.iter().map(|s| s.stage.as_str()).collect();
+    assert!(
+        stages.contains(&"surfel_bounce") && stages.contains(&"surfel_shade"),
+        "{stages:?}"
+    );
+    assert_eq!(
+        image::load_from_memory(&png)
+            .expect("png")
+            .to_rgba8()
+            .dimensions(),
+        (48, 36)
+    );
+    let scene = server.get_json("/v1/scenes/default").await;
+    let sets: Vec<&Value> = scene["precomputed"]
+        .as_array()
+        .expect("precomputed")
+        .iter()
+        .filter(|p| p["kind"] == "surfel_links")
+        .collect();
+    assert_eq!(sets.len(), 1, "{scene}");
+    assert_eq!(sets[0]["state"], "ready");
+    assert_eq!(sets[0]["params"]["surfel_links"], 16.0);
+
+    let refused = |gi: Value| json!({"render": {"width": 48, "height": 36, "gi": gi}});
+    for (gi, field) in [
+        (
+            json!({"method": "surfels", "surfel_links": 8}),
+            "render.gi.surfel_links",
+        ),
+        (
+            json!({"method": "surfels", "sh_bands": 5}),
+            "render.gi.sh_bands",
+        ),
+        (
+            json!({"method": "surfels", "surfel_count": 100}),
+            "render.gi.surfel_count",
+        ),
+        (
+            json!({"method": "surfels", "surfel_cache_spacing": -1.0}),
+            "render.gi.surfel_cache_spacing",
+        ),
+        // 512 caches × 64 links exceed --max-total-surfel-links 20000.
+        (
+            json!({"method": "surfels", "surfel_count": 2048, "surfel_cache_spacing": 0.4,
+                   "surfel_links": 64}),
+            "render.gi.surfel_links",
+        ),
+    ] {
+        let resp = server
+            .http
+            .post(server.url("/v1/render"))
+            .json(&refused(gi.clone()))
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 400, "{gi}");
+        let body: Value = resp.json().await.expect("error JSON");
+        assert_eq!(body["field"], field, "{gi}: {body}");
+    }
+    server.stop().await;
+}

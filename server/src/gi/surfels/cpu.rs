@@ -19,14 +19,19 @@ use glam::Vec3;
 /// inside geometry or outside the scene and are not interpolated.
 const MIN_VISIBLE: f32 = 1.128e-3;
 
-/// The irradiance on a surface at `p` with normal `n` from `cache_light` (`bands²` RGB
-/// coefficients per cache), interpolated over the caches around `p` that see the scene.
-pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Vec3 {
+/// Whether cache `cache` is interpolated: it sees the scene and not mostly back faces.
+pub fn usable(set: &SurfelSet, cache: usize) -> bool {
+    set.links.visible[cache] >= MIN_VISIBLE && !set.links.inside[cache]
+}
+
+/// The SH radiance of the usable caches around `p`, summed with their trilinear weights, and
+/// the sum of those weights (0 where none is usable).
+fn interpolate(set: &SurfelSet, cache_light: &[Vec3], p: Vec3) -> (Vec<Vec3>, f32) {
     let count = sh::coefficient_count(set.links.bands);
     let mut radiance = vec![Vec3::ZERO; count];
     let mut total = 0.0;
     for (cache, w) in set.grid.trilinear(p) {
-        if w <= 0.0 || set.links.visible[cache] < MIN_VISIBLE || set.links.inside[cache] {
+        if w <= 0.0 || !usable(set, cache) {
             continue;
         }
         total += w;
@@ -37,17 +42,65 @@ pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Ve
             *r += *c * w;
         }
     }
-    if total <= 0.0 {
-        return Vec3::ZERO;
-    }
-    let mut lobe = vec![0.0; count];
-    sh::project_lobe(&sh::COSINE_ZONAL, set.links.bands, n, &mut lobe);
+    (radiance, total)
+}
+
+/// ⟨radiance, lobe of `zonal` about `d`⟩ / total.
+fn lobe_integral(set: &SurfelSet, radiance: &[Vec3], total: f32, zonal: &[f32], d: Vec3) -> Vec3 {
+    let mut lobe = vec![0.0; radiance.len()];
+    sh::project_lobe(zonal, set.links.bands, d, &mut lobe);
     radiance
         .iter()
         .zip(&lobe)
         .map(|(r, l)| *r * *l)
         .sum::<Vec3>()
         / total
+}
+
+/// The irradiance on a surface at `p` with normal `n` from `cache_light` (`bands²` RGB
+/// coefficients per cache), interpolated over the caches around `p` that see the scene.
+pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Vec3 {
+    let (radiance, total) = interpolate(set, cache_light, p);
+    if total <= 0.0 {
+        return Vec3::ZERO;
+    }
+    lobe_integral(set, &radiance, total, &sh::COSINE_ZONAL, n)
+}
+
+/// A surface point as the shading pass sees it.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadedPoint {
+    pub position: Vec3,
+    pub normal: Vec3,
+    /// Unit direction to the viewer.
+    pub to_viewer: Vec3,
+    pub diffuse: Vec3,
+    pub glossy: Vec3,
+    /// Phong exponent k.
+    pub exponent: f32,
+}
+
+/// Indirect radiance towards the viewer (`shaders/surfels/shade.wgsl`, eq. 5–8): the diffuse
+/// lobe (ρ_d/π)·max(ω·n, 0) and the normalised Phong lobe about the mirror direction r,
+/// scaled by (k+2)/(k+1)·max(n·r, 0) to our direct light's lobe, clamped at 0 against SH
+/// ringing.
+pub fn shade(set: &SurfelSet, cache_light: &[Vec3], s: &ShadedPoint) -> Vec3 {
+    let (radiance, total) = interpolate(set, cache_light, s.position);
+    if total <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let n = s.normal.normalize();
+    let e = lobe_integral(set, &radiance, total, &sh::COSINE_ZONAL, n);
+    let r = (2.0 * n.dot(s.to_viewer) * n - s.to_viewer).normalize();
+    let k = s.exponent;
+    let glossy = lobe_integral(
+        set,
+        &radiance,
+        total,
+        &sh::phong_zonal(k, set.links.bands),
+        r,
+    ) * ((k + 2.0) / (k + 1.0) * n.dot(r).max(0.0));
+    s.diffuse / std::f32::consts::PI * e + s.glossy * glossy.max(Vec3::ZERO)
 }
 
 /// One frame of the surfels: their radiosity from `direct` irradiance, `emitted` radiosity

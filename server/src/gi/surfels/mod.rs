@@ -2,9 +2,8 @@
 //! them, precomputed light-transport links from SH caches to hierarchy nodes and per-pixel
 //! spherical-harmonics shading, with progressive multi-bounce.
 //!
-//! This module holds the method's per-scene precomputation, built on the CPU and tested
-//! against independent answers; the per-frame passes and the method's registration come next
-//! (until then `surfels` is not selectable):
+//! The per-scene precomputation ([`PRECOMPUTE`], kind `surfel_links`) is built on the CPU and
+//! tested against independent answers; the per-frame GPU passes ([`passes`]) against [`cpu`]:
 //!
 //! - [`sampling`]: n_S surfels of equal area over every triangle ("Surfel Placement").
 //! - [`hierarchy`]: the binary tree over the surfels by agglomerative clustering with the
@@ -12,8 +11,9 @@
 //! - [`links`]: every cache's n_L most important hierarchy nodes with their SH form factors
 //!   (eq. 3), and the cache lighting over them (eq. 4).
 //! - [`cpu`]: the CPU reference of the per-frame steps (surfel radiosity with one more bounce
-//!   per frame, pull-up, cache lighting, interpolated irradiance) the GPU passes will be
-//!   compared with.
+//!   per frame, pull-up, cache lighting, interpolated irradiance and shading) the GPU passes
+//!   are compared with.
+//! - [`passes`]: the GPU passes (surfel light, pull-up, cache lighting, shading).
 //! - [`grid`]: the lattice of SH caches over the scene's bounds ("Cache Placement").
 //! - [`sh`]: real spherical harmonics and the zonal projections of the diffuse and normalised
 //!   Phong lobes (eq. 5–8, appendix B) the links and the shading are expressed in.
@@ -22,20 +22,142 @@ pub mod cpu;
 pub mod grid;
 pub mod hierarchy;
 pub mod links;
+pub mod passes;
 pub mod sampling;
 pub mod sh;
 
-use crate::gi::precompute::{BuildEnv, Progress};
+use crate::gi::precompute::{
+    BudgetPool, BuildEnv, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts,
+    UnitBudget,
+};
 use crate::gi::reference::bvh::SceneBvh;
+use crate::gi::{
+    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
+    SceneResources,
+};
+use crate::gpu::timing::FrameStages;
+use crate::gpu::GpuContext;
 use crate::scene::Scene;
 use glam::Vec3;
 use grid::{CacheGrid, GridError};
 use hierarchy::{ClusterWeights, HierarchyError, Leaf, Tree};
+use lightcast_protocol::{GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Light, Limits, Stage};
 use links::{LinkError, SurfelLinks};
+use passes::{Bounce, SurfelBuffers, SurfelPasses, MAX_GPU_BANDS};
 use sampling::{SamplingError, Surfel};
+use std::any::{Any, TypeId};
+use std::sync::Arc;
 
 /// n_S by default (the paper's "32k").
 pub const DEFAULT_SURFELS: u32 = 32 * 1024;
+/// Fewest surfels a request may ask for.
+pub const MIN_SURFELS: u32 = 1024;
+/// Fewest and most links per cache a request may ask for.
+pub const LINK_RANGE: (u32, u32) = (16, 512);
+/// Fewest SH bands a request may ask for (the most is [`MAX_GPU_BANDS`]).
+pub const MIN_BANDS: u32 = 2;
+/// Image histories (sessions) whose bounces a scene's surfels keep at once.
+const MAX_HISTORIES: usize = 4;
+
+pub const ENTRY: MethodEntry = MethodEntry {
+    methods: &[GiMethod::Surfels],
+    type_id: TypeId::of::<Surfels>,
+    validate,
+    create: |r| Ok(Box::new(Surfels::new(r))),
+    describe,
+    precompute: Some(&PRECOMPUTE),
+    downscales: true,
+};
+
+/// Kind of the surfels' precomputation.
+pub const SURFEL_LINKS: &str = "surfel_links";
+
+/// The surfels, their hierarchy, the cache lattice and every cache's links, one set per scene
+/// and parameter set. Built on the precompute worker with progress and cancellation; not yet
+/// kept in the store (every server start builds it again).
+pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
+    kind: SURFEL_LINKS,
+    label: "surfel links",
+    key: |gi, facts| Ok(surfel_key(&surfel_params(gi, facts)?)),
+    budget: Some(UnitBudget {
+        pool: BudgetPool::SurfelLinks,
+        unit: "surfel links",
+        field: "surfel_links",
+        advice: |_, allowed| {
+            format!(
+                "use fewer surfel_links or a larger surfel_cache_spacing (at most {allowed} \
+                 caches × links)"
+            )
+        },
+    }),
+    estimate: |key, facts| {
+        let links = key.param("surfel_links").unwrap_or(0.0) as u64;
+        let spacing = key.param("surfel_cache_spacing").unwrap_or(f32::NAN);
+        CacheGrid::new(Vec3::ZERO, facts.extent, spacing)
+            .map_or(u64::MAX, |g| g.count() as u64 * links)
+    },
+    build: |scene, key, env| {
+        let params = SurfelParams {
+            surfels: key.param("surfel_count").unwrap_or(0.0) as u32,
+            cache_spacing: key.param("surfel_cache_spacing"),
+            links: key.param("surfel_links").unwrap_or(0.0) as u32,
+            bands: key.param("sh_bands").unwrap_or(0.0) as u32,
+        };
+        let set = precompute(scene, &params, env).map_err(|e| e.to_string())?;
+        Ok(Built {
+            units: (set.grid.count() as u64) * u64::from(set.links.per_cache),
+            data: Arc::new(set),
+            from_store: false,
+        })
+    },
+};
+
+/// The precomputation's parameters of a request, checked, with the default spacing resolved
+/// for the scene.
+fn surfel_params(
+    gi: &lightcast_protocol::GiParams,
+    facts: &SceneFacts,
+) -> Result<SurfelParams, InvalidSetting> {
+    let range = InvalidSetting::check_range;
+    range("surfel_count", gi.surfel_count, MIN_SURFELS, MAX_SURFELS)?;
+    range("surfel_links", gi.surfel_links, LINK_RANGE.0, LINK_RANGE.1)?;
+    range("sh_bands", gi.sh_bands, MIN_BANDS, MAX_GPU_BANDS)?;
+    let spacing = match gi.surfel_cache_spacing {
+        Some(s) if !(s.is_finite() && s > 0.0) => {
+            return Err(InvalidSetting::new(
+                "surfel_cache_spacing",
+                format!("{s} must be a positive number"),
+            ))
+        }
+        Some(s) => s,
+        None => CacheGrid::default_spacing(facts.extent),
+    };
+    // The lattice's own limits (at most `grid::MAX_CACHES`) before anything is queued.
+    CacheGrid::new(Vec3::ZERO, facts.extent, spacing)
+        .map_err(|e| InvalidSetting::new("surfel_cache_spacing", e.to_string()))?;
+    Ok(SurfelParams {
+        surfels: gi.surfel_count,
+        cache_spacing: Some(spacing),
+        links: gi.surfel_links,
+        bands: gi.sh_bands,
+    })
+}
+
+/// The key of the surfel set for `params` (the spacing resolved).
+fn surfel_key(params: &SurfelParams) -> PrecomputeKey {
+    PrecomputeKey {
+        kind: SURFEL_LINKS,
+        params: vec![
+            ("surfel_count", params.surfels as f32),
+            (
+                "surfel_cache_spacing",
+                params.cache_spacing.unwrap_or(f32::NAN),
+            ),
+            ("surfel_links", params.links as f32),
+            ("sh_bands", params.bands as f32),
+        ],
+    }
+}
 /// The most surfels the exact clustering is run on (node ids and memory stay small; the paper
 /// goes to 128k).
 pub const MAX_SURFELS: u32 = 256 * 1024;
@@ -191,6 +313,290 @@ pub fn precompute(
         grid,
         links,
     })
+}
+
+fn validate(g: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {
+    InvalidSetting::check_range("bounces", g.bounces, 1, crate::gi::reference::MAX_BOUNCES)
+}
+
+fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
+    let d = lightcast_protocol::GiParams::default();
+    let int = |name: &str, default: u32, min: u32, max: u32, text: &str| GiParamInfo {
+        name: name.into(),
+        kind: GiParamKind::Integer,
+        default: default.into(),
+        min: Some(min.into()),
+        max: Some(max.into()),
+        choices: Vec::new(),
+        description: text.into(),
+    };
+    vec![GiMethodInfo {
+        method: GiMethod::Surfels,
+        summary: "Surfels (seed 001): surfels lit by the light and by the previous bounce, \
+                  flux pulled up a hierarchy, SH caches lit over precomputed links and \
+                  interpolated per pixel; multi-bounce, one bounce more per frame"
+            .into(),
+        progressive: false,
+        parameters: vec![
+            int(
+                "bounces",
+                d.bounces,
+                1,
+                limits.max_bounces,
+                "Bounces of indirect light (1: single bounce, as the other methods); a \
+                 session adds one per frame while nothing changes, a render computes all",
+            ),
+            int(
+                "surfel_count",
+                d.surfel_count,
+                MIN_SURFELS,
+                MAX_SURFELS,
+                "n_S: surfels of equal area over every triangle (a precomputation per value)",
+            ),
+            GiParamInfo {
+                name: "surfel_cache_spacing".into(),
+                kind: GiParamKind::OptionalNumber,
+                default: serde_json::Value::Null,
+                min: Some(0.0),
+                max: None,
+                choices: Vec::new(),
+                description: "Distance between neighbouring SH caches in scene units (null: \
+                              about 8,192 caches over the scene's bounds)"
+                    .into(),
+            },
+            int(
+                "surfel_links",
+                d.surfel_links,
+                LINK_RANGE.0,
+                LINK_RANGE.1,
+                "n_L: links from every cache to the hierarchy nodes that light it most",
+            ),
+            int(
+                "sh_bands",
+                d.sh_bands,
+                MIN_BANDS,
+                MAX_GPU_BANDS,
+                "SH bands l of the links and caches (l² coefficients)",
+            ),
+        ],
+    }]
+}
+
+/// What a history's caches were lit by: a change restarts its bounces.
+#[derive(Clone, Debug, PartialEq)]
+struct LitBy {
+    light: Light,
+    shadow_map_size: u32,
+    bounces: u32,
+}
+
+/// One image history's caches: two cache-light buffers a bounce reads and writes in turn.
+struct History {
+    id: Option<u64>,
+    lit_by: LitBy,
+    /// Bounces the caches in `buffers[latest]` hold.
+    done: u32,
+    latest: usize,
+    buffers: [wgpu::Buffer; 2],
+}
+
+/// The history `id` of `histories` (most recently used first), moved to the front; restarted
+/// when its caches were lit otherwise, created (dropping the least recently used beyond
+/// [`MAX_HISTORIES`]) when it is new.
+fn history_for<'h>(
+    histories: &'h mut Vec<History>,
+    device: &wgpu::Device,
+    id: Option<u64>,
+    lit_by: LitBy,
+    set: &SurfelBuffers,
+) -> &'h mut History {
+    if let Some(i) = histories.iter().position(|h| h.id == id) {
+        let mut h = histories.remove(i);
+        if h.lit_by != lit_by {
+            h.lit_by = lit_by;
+            h.done = 0;
+        }
+        histories.insert(0, h);
+    } else {
+        histories.truncate(MAX_HISTORIES - 1);
+        let buffer = || set.cache_light_buffer(device);
+        histories.insert(
+            0,
+            History {
+                id,
+                lit_by,
+                done: 0,
+                latest: 0,
+                buffers: [buffer(), buffer()],
+            },
+        );
+    }
+    &mut histories[0]
+}
+
+/// A history's cache lighting as read back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CacheLight {
+    /// Bounces it holds.
+    pub bounces: u32,
+    /// RGB(A) SH coefficients, `sh_bands²` per cache.
+    pub coefficients: Vec<[f32; 4]>,
+}
+
+/// Per-scene state of the `surfels` method.
+pub struct Surfels {
+    ctx: GpuContext,
+    scene: Arc<Scene>,
+    passes: SurfelPasses,
+    set: Option<SurfelBuffers>,
+    /// Most recently used first.
+    histories: Vec<History>,
+}
+
+impl Surfels {
+    pub fn new(r: &SceneResources) -> Self {
+        Self {
+            ctx: r.ctx.clone(),
+            scene: Arc::clone(&r.scene),
+            passes: SurfelPasses::new(&r.ctx.device),
+            set: None,
+            histories: Vec::new(),
+        }
+    }
+
+    /// Uploads the scene's surfel set (the per-scene precomputation).
+    pub fn set_surfels(&mut self, set: &SurfelSet) -> Result<(), GiError> {
+        let buffers = SurfelBuffers::new(&self.ctx.device, &self.scene, set)
+            .map_err(|e| GiError::Scene(e.to_string()))?;
+        self.passes
+            .prepare(&self.ctx.device, &self.ctx.queue, &buffers);
+        self.set = Some(buffers);
+        self.histories.clear();
+        Ok(())
+    }
+
+    /// The cache lighting the last frame of `history` shaded with (blocking; for tests).
+    pub fn read_cache_light(
+        &self,
+        history: Option<u64>,
+    ) -> Result<Option<CacheLight>, crate::gpu::GpuError> {
+        let Some(h) = self.histories.iter().find(|h| h.id == history) else {
+            return Ok(None);
+        };
+        let bytes = crate::gpu::readback::read_buffer(&self.ctx, &h.buffers[h.latest])?;
+        Ok(Some(CacheLight {
+            bounces: h.done,
+            coefficients: bytemuck::pod_collect_to_vec(&bytes),
+        }))
+    }
+
+    /// The flux of every hierarchy node after the last bounce (blocking; for tests).
+    pub fn read_flux(&self) -> Result<Option<Vec<[f32; 4]>>, crate::gpu::GpuError> {
+        let Some(set) = &self.set else {
+            return Ok(None);
+        };
+        let bytes = crate::gpu::readback::read_buffer(&self.ctx, &set.flux)?;
+        Ok(Some(bytemuck::pod_collect_to_vec(&bytes)))
+    }
+}
+
+impl Method for Surfels {
+    fn set_scene_data(&mut self, data: &SceneData) -> Result<(), GiError> {
+        let set = data.downcast_ref::<SurfelSet>().ok_or_else(|| {
+            GiError::Scene("the surfels method's scene data must be its surfel set".into())
+        })?;
+        self.set_surfels(set)
+    }
+
+    fn encode(
+        &mut self,
+        frame: &FrameInputs,
+        stages: &mut FrameStages,
+    ) -> Result<Option<ProgressBuffer>, GiError> {
+        let set = self.set.take().ok_or_else(|| {
+            GiError::Scene(
+                "surfels needs the scene's surfel set; call Surfels::set_surfels first".into(),
+            )
+        })?;
+        let result = self.encode_with(&set, frame, stages);
+        self.set = Some(set);
+        result.map(|()| None)
+    }
+
+    fn as_any_mut(&mut self) -> &mut dyn Any {
+        self
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+impl Surfels {
+    fn encode_with(
+        &mut self,
+        set: &SurfelBuffers,
+        frame: &FrameInputs,
+        stages: &mut FrameStages,
+    ) -> Result<(), GiError> {
+        let r = frame.resources;
+        let wanted = frame.settings.bounces.max(1);
+        let lit_by = LitBy {
+            light: frame.light.clone(),
+            shadow_map_size: frame.shadow.size,
+            bounces: wanted,
+        };
+        let one_shot = frame.history.is_none();
+        let device = &self.ctx.device;
+        let passes = &self.passes;
+        let history = history_for(&mut self.histories, device, frame.history, lit_by, set);
+        // A render computes every bounce; a session adds one per frame until it has them all
+        // (the paper's progressive multi-bounce).
+        let steps = if one_shot {
+            wanted - history.done.min(wanted)
+        } else {
+            u32::from(history.done < wanted)
+        };
+        if steps > 0 {
+            stages.stage(Stage::SurfelBounce, |e| {
+                for _ in 0..steps {
+                    let previous = (history.done > 0).then_some(history.latest);
+                    let target = if history.done > 0 {
+                        1 - history.latest
+                    } else {
+                        0
+                    };
+                    passes.encode_light(
+                        device,
+                        e,
+                        set,
+                        &Bounce {
+                            light: &r.light,
+                            shadow: frame.shadow,
+                            previous: previous.map(|i| &history.buffers[i]),
+                        },
+                    );
+                    passes.encode_pull(device, e, set);
+                    passes.encode_cache_light(device, e, set, &history.buffers[target]);
+                    history.latest = target;
+                    history.done += 1;
+                }
+            })?;
+        }
+        stages.stage(Stage::SurfelShade, |e| {
+            passes.encode_shade(
+                device,
+                e,
+                &r.camera,
+                frame.gbuffer,
+                set,
+                &history.buffers[history.latest],
+                frame.indirect,
+                (frame.width, frame.height),
+            )
+        })?;
+        Ok(())
+    }
 }
 
 /// The flux of every hierarchy node from its surfels' (eq. 4's senders are nodes): leaves

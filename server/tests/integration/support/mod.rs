@@ -307,3 +307,47 @@ pub fn ref_vals(
         })
         .collect()
 }
+
+/// The G-buffer texel the CPU expects at pixel (x, y): the nearest surface along the pixel's
+/// ray, with its material as the G-buffer stores it (8-bit colours, f16 exponent); `None`
+/// where rays a tenth of a pixel away meet another plane (near an edge the rasteriser may
+/// pick either).
+pub fn surface_at(
+    scene: &Scene,
+    s: &RenderSettings,
+    x: u32,
+    y: u32,
+) -> Option<lightcast_server::gi::clustered::cpu::RefSurface> {
+    let hit = |fx: f32, fy: f32| {
+        let (o, d) = subpixel_ray(&s.camera, scene, s.width, s.height, fx, fy);
+        let (t, tri) = trace(scene, o, d, 100.0)?;
+        let corner =
+            |k: usize| Vec3::from(scene.vertices[scene.indices[tri * 3 + k] as usize].position);
+        let mut n = (corner(1) - corner(0))
+            .cross(corner(2) - corner(0))
+            .normalize();
+        if n.dot(d) > 0.0 {
+            n = -n;
+        }
+        Some((o + d * t, n, tri, n.dot(corner(0))))
+    };
+    let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+    let (position, n, tri, plane) = hit(cx, cy)?;
+    for (dx, dy) in [(-0.1, 0.0), (0.1, 0.0), (0.0, -0.1), (0.0, 0.1)] {
+        let (_, other_n, _, other_plane) = hit(cx + dx, cy + dy)?;
+        if other_n.dot(n) < 0.9999 || (other_plane - plane).abs() > 1e-4 {
+            return None;
+        }
+    }
+    let m = scene.materials[triangle_material(scene, tri) as usize].diffuse_glossy();
+    let unorm8 = |v: Vec3| (v * 255.0).round() / 255.0;
+    Some(lightcast_server::gi::clustered::cpu::RefSurface {
+        position,
+        normal: n,
+        brdf: material::DiffuseGlossy {
+            diffuse: unorm8(m.diffuse),
+            glossy: unorm8(m.glossy),
+            exponent: half::f16::from_f32(m.exponent).to_f32(),
+        },
+    })
+}

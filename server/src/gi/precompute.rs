@@ -14,7 +14,7 @@ use super::InvalidSetting;
 use crate::scene::Scene;
 use lightcast_protocol::GiParams;
 use std::any::Any;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// Data a method precomputed for one scene, shared read-only by every renderer of the scene.
@@ -117,6 +117,10 @@ impl SceneFacts {
     }
 }
 
+/// File extensions of the stored kinds: LightSkin's light caches, the surfels' links. One size
+/// limit covers them all.
+pub const STORED_EXTENSIONS: &[&str] = &["lcc", "lsl"];
+
 /// Where precomputed sets are kept between runs: files named by a hash of everything their
 /// computation reads, so each model is precomputed once.
 #[derive(Clone, Debug)]
@@ -132,6 +136,92 @@ impl Store {
         Self {
             dir: dir.into(),
             max_bytes: None,
+        }
+    }
+
+    /// Writes `bytes` to `file_name` atomically: a temporary file in the same directory, then
+    /// a rename, so readers never see half a file.
+    pub fn write_atomic(&self, file_name: &str, bytes: &[u8]) -> std::io::Result<PathBuf> {
+        std::fs::create_dir_all(&self.dir)?;
+        let path = self.dir.join(file_name);
+        let tmp = self.dir.join(format!(
+            "{file_name}.tmp-{}-{:?}",
+            std::process::id(),
+            std::thread::current().id()
+        ));
+        let written = std::fs::File::create(&tmp).and_then(|mut f| {
+            std::io::Write::write_all(&mut f, bytes)?;
+            f.sync_all()
+        });
+        let renamed = written.and_then(|()| std::fs::rename(&tmp, &path));
+        if renamed.is_err() {
+            // Best effort: a leftover temporary file is harmless, the error below is what counts.
+            let _ = std::fs::remove_file(&tmp);
+        }
+        renamed.map(|()| path)
+    }
+
+    /// Reads a stored file unless it is longer than `max` bytes (a foreign file is not worth
+    /// the memory), and marks it used for [`Self::evict`].
+    pub fn read_bounded(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
+        let mut file = std::fs::File::open(path)?;
+        let len = file.metadata()?.len();
+        if len > max {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidData,
+                format!("file is {len} bytes, more than the {max} it can have"),
+            ));
+        }
+        let mut bytes = Vec::with_capacity(len as usize);
+        std::io::Read::read_to_end(&mut file, &mut bytes)?;
+        // Eviction goes by modification time, so a use counts as one.
+        let touched = std::fs::File::options()
+            .append(true)
+            .open(path)
+            .and_then(|f| f.set_modified(std::time::SystemTime::now()));
+        if let Err(e) = touched {
+            tracing::debug!(path = %path.display(), "cannot mark the file used: {e}");
+        }
+        Ok(bytes)
+    }
+
+    /// Deletes the least recently used stored files of every kind ([`STORED_EXTENSIONS`])
+    /// other than `keep` until the rest fit in `max_bytes`.
+    pub fn evict(&self, keep: &Path) {
+        let Some(max_bytes) = self.max_bytes else {
+            return;
+        };
+        let Ok(entries) = std::fs::read_dir(&self.dir) else {
+            return;
+        };
+        let mut files: Vec<(std::time::SystemTime, u64, PathBuf)> = entries
+            .flatten()
+            .filter(|e| {
+                e.path()
+                    .extension()
+                    .is_some_and(|x| STORED_EXTENSIONS.iter().any(|k| x == *k))
+            })
+            .filter_map(|e| {
+                let meta = e.metadata().ok()?;
+                Some((meta.modified().ok()?, meta.len(), e.path()))
+            })
+            .collect();
+        let mut total: u64 = files.iter().map(|f| f.1).sum();
+        files.sort();
+        for (_, len, path) in files {
+            if total <= max_bytes {
+                break;
+            }
+            if path == keep {
+                continue;
+            }
+            match std::fs::remove_file(&path) {
+                Ok(()) => {
+                    total -= len;
+                    tracing::info!(path = %path.display(), "evicted a stored precomputation");
+                }
+                Err(e) => tracing::warn!(path = %path.display(), "cannot evict: {e}"),
+            }
         }
     }
 
@@ -267,5 +357,37 @@ mod tests {
         unique.dedup();
         assert_eq!(unique.len(), kinds.len(), "{kinds:?}");
         assert!(kinds.contains(&"light_caches") && kinds.contains(&"bvh"));
+    }
+
+    /// One size limit covers every stored kind: the oldest files go first, whatever their
+    /// kind, and the file just written stays; files of other kinds are left alone.
+    #[test]
+    fn eviction_counts_every_stored_kind() {
+        let dir = tempfile::tempdir().expect("temporary directory");
+        let store = Store {
+            dir: dir.path().to_path_buf(),
+            max_bytes: Some(250),
+        };
+        let old = std::time::SystemTime::now() - std::time::Duration::from_secs(3600);
+        for (i, name) in ["a.lsl", "b.lcc", "c.lsl", "notes.txt"].iter().enumerate() {
+            let path = store.write_atomic(name, &[0u8; 100]).expect("written");
+            let when = old + std::time::Duration::from_secs(i as u64 * 60);
+            std::fs::File::options()
+                .append(true)
+                .open(&path)
+                .and_then(|f| f.set_modified(when))
+                .expect("dated");
+        }
+        let kept = store.write_atomic("d.lcc", &[0u8; 100]).expect("written");
+        store.evict(&kept);
+        let left: Vec<String> = {
+            let mut names: Vec<String> = std::fs::read_dir(dir.path())
+                .expect("listed")
+                .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+                .collect();
+            names.sort();
+            names
+        };
+        assert_eq!(left, ["c.lsl", "d.lcc", "notes.txt"]);
     }
 }

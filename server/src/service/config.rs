@@ -34,11 +34,12 @@ pub struct ServeArgs {
     /// wgpu backend.
     #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
     pub backend: BackendChoice,
-    /// Where precomputed light caches are kept (default: the user's cache directory).
+    /// Where precomputed light caches and surfel sets are kept (default: the user's cache
+    /// directory).
     #[arg(long, env = "LIGHTCAST_CACHE_DIR")]
     pub cache_dir: Option<PathBuf>,
-    /// Most bytes of light-cache files kept there; the least recently used beyond it are
-    /// deleted (every uploaded scene adds files).
+    /// Most bytes of stored precomputations (light caches, surfel sets) kept there; the least
+    /// recently used beyond it are deleted (every uploaded scene adds files).
     #[arg(long, env = "LIGHTCAST_CACHE_MAX_BYTES", default_value_t = 4 << 30)]
     pub cache_max_bytes: u64,
     /// Scene loaded at start under the id `default`.

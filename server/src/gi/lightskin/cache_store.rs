@@ -11,9 +11,9 @@ use super::caches::{
     material_splits, precompute, CacheError, CacheParams, CacheSet, CacheStats, LightCache,
     Progress, StepTimings, MAX_CACHES, NEIGHBOURS,
 };
+use crate::gi::precompute::Store;
 use crate::scene::Scene;
 use sha2::{Digest, Sha256};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -129,18 +129,10 @@ impl CacheStore {
         params.validate()?;
         let key = Self::key(scene, params);
         let path = self.path(&key);
-        match read_bounded(&path, max_file_len(scene.vertices.len())) {
+        match Store::read_bounded(&path, max_file_len(scene.vertices.len())) {
             Ok(bytes) => match decode(&bytes, &key, params, scene.vertices.len()) {
                 Ok(set) => {
                     tracing::info!(path = %path.display(), caches = set.caches.len(), "light caches loaded");
-                    // Eviction goes by modification time, so a use counts as one.
-                    let touched = std::fs::File::options()
-                        .append(true)
-                        .open(&path)
-                        .and_then(|f| f.set_modified(std::time::SystemTime::now()));
-                    if let Err(e) = touched {
-                        tracing::debug!(path = %path.display(), "cannot mark the file used: {e}");
-                    }
                     return Ok((set, true));
                 }
                 Err(e) => {
@@ -160,61 +152,23 @@ impl CacheStore {
         Ok((set, false))
     }
 
-    /// Deletes the least recently used cache files other than `keep` until the rest fit in
-    /// `max_bytes`.
-    fn evict(&self, keep: &Path) {
-        let Some(max_bytes) = self.max_bytes else {
-            return;
-        };
-        let Ok(entries) = std::fs::read_dir(&self.dir) else {
-            return;
-        };
-        let mut files: Vec<(std::time::SystemTime, u64, PathBuf)> = entries
-            .flatten()
-            .filter(|e| e.path().extension().is_some_and(|x| x == "lcc"))
-            .filter_map(|e| {
-                let meta = e.metadata().ok()?;
-                Some((meta.modified().ok()?, meta.len(), e.path()))
-            })
-            .collect();
-        let mut total: u64 = files.iter().map(|f| f.1).sum();
-        files.sort();
-        for (_, len, path) in files {
-            if total <= max_bytes {
-                break;
-            }
-            if path == keep {
-                continue;
-            }
-            match std::fs::remove_file(&path) {
-                Ok(()) => {
-                    total -= len;
-                    tracing::info!(path = %path.display(), "evicted stored light caches");
-                }
-                Err(e) => tracing::warn!(path = %path.display(), "cannot evict: {e}"),
-            }
+    /// The store of every precomputed kind in the same directory, whose size limit covers
+    /// them all.
+    fn store(&self) -> Store {
+        Store {
+            dir: self.dir.clone(),
+            max_bytes: self.max_bytes,
         }
     }
 
-    /// Writes atomically: a temporary file in the same directory, then a rename.
+    fn evict(&self, keep: &Path) {
+        self.store().evict(keep);
+    }
+
     fn write(&self, key: &str, set: &CacheSet) -> std::io::Result<()> {
-        std::fs::create_dir_all(&self.dir)?;
-        let bytes = encode(key, set);
-        let tmp = self.dir.join(format!(
-            "{key}.lcc.tmp-{}-{:?}",
-            std::process::id(),
-            std::thread::current().id()
-        ));
-        let written = std::fs::File::create(&tmp).and_then(|mut f| {
-            f.write_all(&bytes)?;
-            f.sync_all()
-        });
-        let renamed = written.and_then(|()| std::fs::rename(&tmp, self.path(key)));
-        if renamed.is_err() {
-            // Best effort: a leftover temporary file is harmless, the error below is what counts.
-            let _ = std::fs::remove_file(&tmp);
-        }
-        renamed
+        self.store()
+            .write_atomic(&format!("{key}.lcc"), &encode(key, set))
+            .map(drop)
     }
 }
 
@@ -223,23 +177,6 @@ fn max_file_len(vertex_count: usize) -> u64 {
     (HEADER_LEN + CHECKSUM_LEN) as u64
         + MAX_CACHES * CACHE_SIZE as u64
         + vertex_count as u64 * VERTEX_ENTRY_SIZE as u64
-}
-
-/// Reads a file unless it is longer than `max` bytes (a foreign file is not worth the memory).
-fn read_bounded(path: &Path, max: u64) -> std::io::Result<Vec<u8>> {
-    let mut file = std::fs::File::open(path)?;
-    let len = file.metadata()?.len();
-    if len > max {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidData,
-            format!(
-                "file is {len} bytes, more than the {max} a cache file for this scene can have"
-            ),
-        ));
-    }
-    let mut bytes = Vec::with_capacity(len as usize);
-    std::io::Read::read_to_end(&mut file, &mut bytes)?;
-    Ok(bytes)
 }
 
 fn hex(bytes: &[u8]) -> String {

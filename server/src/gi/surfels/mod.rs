@@ -25,6 +25,7 @@ pub mod links;
 pub mod passes;
 pub mod sampling;
 pub mod sh;
+pub mod store;
 
 use crate::gi::precompute::{
     BudgetPool, BuildEnv, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts,
@@ -73,8 +74,8 @@ pub const ENTRY: MethodEntry = MethodEntry {
 pub const SURFEL_LINKS: &str = "surfel_links";
 
 /// The surfels, their hierarchy, the cache lattice and every cache's links, one set per scene
-/// and parameter set. Built on the precompute worker with progress and cancellation; not yet
-/// kept in the store (every server start builds it again).
+/// and parameter set. Built on the precompute worker with progress and cancellation, and kept
+/// in the store ([`store`], `<key>.lsl`) so a scene is built once per parameter set.
 pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
     kind: SURFEL_LINKS,
     label: "surfel links",
@@ -103,11 +104,13 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
             links: key.param("surfel_links").unwrap_or(0.0) as u32,
             bands: key.param("sh_bands").unwrap_or(0.0) as u32,
         };
-        let set = precompute(scene, &params, env).map_err(|e| e.to_string())?;
+        let store = env.store;
+        let (set, from_store) =
+            store::load_or_compute(store, scene, &params, env).map_err(|e| e.to_string())?;
         Ok(Built {
             units: (set.grid.count() as u64) * u64::from(set.links.per_cache),
             data: Arc::new(set),
-            from_store: false,
+            from_store,
         })
     },
 };

@@ -179,6 +179,7 @@ fn main() -> anyhow::Result<()> {
                     ..GiSettings::default()
                 },
                 history: None,
+                still: false,
             };
             let set =
                 caches::precompute(&scene, &caches::CacheParams::for_scene(&scene), &mut |_| {})?;

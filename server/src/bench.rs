@@ -392,6 +392,7 @@ pub fn run(
         debug_view: lightcast_protocol::View::Final,
         gi: GiSettings::default(),
         history: None,
+        still: false,
     };
     let (name, triangles, cache_count) = (
         scene.name.clone(),

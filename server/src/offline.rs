@@ -432,6 +432,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         debug_view: View::Final,
         gi: GiSettings::from(&gi),
         history: None,
+        still: false,
     }
 }
 

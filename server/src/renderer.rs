@@ -66,6 +66,9 @@ pub struct RenderSettings {
     /// The image history a progressive GI method may continue (a session's id); `None`
     /// starts afresh, so equal settings give equal pixels.
     pub history: Option<u64>,
+    /// A session's still: a GI method that converges by steps shows its converged result
+    /// when it can reach it within this frame (`surfels`: every bounce at once).
+    pub still: bool,
 }
 
 /// A rendered frame.
@@ -732,6 +735,7 @@ impl Renderer {
             shadow: shadow_map,
             indirect: reduced.map_or(&sized.indirect, |r| &r.indirect),
             history: settings.history,
+            still: settings.still,
         };
         let Some(method) = self.methods[method_index].as_mut() else {
             unreachable!("the method was just created");

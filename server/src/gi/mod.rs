@@ -209,6 +209,8 @@ pub struct FrameInputs<'a> {
     /// Which image history a progressive method may continue: a session's id, or `None` to
     /// start afresh (one-shot renders, so that equal requests give equal pixels).
     pub history: Option<u64>,
+    /// The frame is a session's still (see `RenderSettings::still`).
+    pub still: bool,
 }
 
 /// One GI method's per-scene GPU state and per-frame passes.

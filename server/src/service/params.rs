@@ -104,6 +104,7 @@ pub fn resolve(
         debug_view: params.view,
         gi: GiSettings::from(g),
         history: None,
+        still: false,
     };
     settings
         .validate_for(max_texture)

@@ -404,6 +404,7 @@ impl Loop {
         let render_start_us = unix_us();
         // A progressive method keeps refining this session's image while nothing changes.
         plan.resolved.settings.history = Some(history_id(&session.id));
+        plan.resolved.settings.still = plan.still;
         match self.submit(&plan.lease_scene, &plan.resolved) {
             // The wait for the GPU happens on the readback thread while this one encodes the
             // next frame.

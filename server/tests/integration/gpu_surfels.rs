@@ -269,6 +269,11 @@ fn bounces_follow_the_cpu_in_one_render_and_one_per_session_frame() {
     renderer.render(&session_settings).expect("render");
     let read = cache_light(&renderer, Some(7));
     assert_eq!(read.bounces, 1);
+    // A still does not wait for the frames: it shows every bounce at once.
+    session_settings.light.intensity *= 0.5;
+    session_settings.still = true;
+    renderer.render(&session_settings).expect("render");
+    assert_eq!(cache_light(&renderer, Some(7)).bounces, 3);
 }
 
 #[test]

@@ -347,7 +347,8 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
                 1,
                 limits.max_bounces,
                 "Bounces of indirect light (1: single bounce, as the other methods); a \
-                 session adds one per frame while nothing changes, a render computes all",
+                 session adds one per frame while the light stays put, a render and a \
+                 session's still compute all",
             ),
             int(
                 "surfel_count",
@@ -549,7 +550,8 @@ impl Surfels {
             shadow_map_size: frame.shadow.size,
             bounces: wanted,
         };
-        let one_shot = frame.history.is_none();
+        // A render, and a session's still, show every bounce.
+        let one_shot = frame.history.is_none() || frame.still;
         let device = &self.ctx.device;
         let passes = &self.passes;
         let history = history_for(&mut self.histories, device, frame.history, lit_by, set);

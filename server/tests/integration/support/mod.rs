@@ -78,6 +78,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         debug_view: lightcast_protocol::View::Final,
         gi: lightcast_server::gi::GiSettings::off(),
         history: None,
+        still: false,
     }
 }
 

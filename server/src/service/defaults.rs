@@ -20,7 +20,9 @@ pub enum DefaultsChoice {
 /// The software profile's render defaults, measured on lavapipe with 2 cores
 /// (`bench/first-minute.sh`, `bench/results/first-minute-lavapipe-*.md`): the README's
 /// `POST /v1/render -d '{}'` in 0.54 s instead of 3.2 s with the protocol's defaults, and
-/// about 2 GI frames a second in a viewer-sized stream instead of 0.25.
+/// about 2 GI frames a second in a viewer-sized stream instead of 0.25. `surfels` gets a
+/// quarter of the surfels and half the links: its precomputation on the Cornell box takes
+/// 34 s instead of about 2 minutes on 2 cores (once per parameter set: it is stored).
 fn software_render() -> RenderParams {
     let gpu = RenderParams::default();
     RenderParams {
@@ -30,6 +32,8 @@ fn software_render() -> RenderParams {
             view_samples: 32,
             val_count: 512,
             indirect_downscale: 2,
+            surfel_count: 8192,
+            surfel_links: 64,
             ..gpu.gi
         },
         ..gpu

@@ -163,6 +163,17 @@ pub enum View {
     Caches,
     /// The RSM's VPLs, each in the colour of the VAL it is clustered into; needs `clustered`.
     Clusters,
+    /// The frame darkened, with every surfel facing the camera drawn as a dot in the colour of
+    /// its radiosity; needs `surfels`.
+    Surfels,
+    /// The hierarchy cut of one cache's links: the frame darkened, the surfels under each
+    /// linked node in that node's colour and the cache as a white cross; the cache is the one
+    /// nearest the surface at the image's centre. Needs `surfels`.
+    SurfelLinks,
+    /// The caches' SH radiance interpolated at each pixel's surface point and evaluated along
+    /// its normal (what the caches say arrives from straight above the surface); needs
+    /// `surfels`.
+    CacheSh,
 }
 
 impl std::fmt::Display for View {
@@ -175,6 +186,9 @@ impl std::fmt::Display for View {
             Self::SelectedVals => "selected-vals",
             Self::Caches => "caches",
             Self::Clusters => "clusters",
+            Self::Surfels => "surfels",
+            Self::SurfelLinks => "surfel-links",
+            Self::CacheSh => "cache-sh",
         })
     }
 }
@@ -188,6 +202,17 @@ impl View {
     /// Whether the view shows the VPL clusters only `clustered` makes.
     pub fn needs_clustered(self) -> bool {
         self == Self::Clusters
+    }
+
+    /// Whether the view shows the surfels, their links or their caches only `surfels` makes.
+    pub fn needs_surfels(self) -> bool {
+        matches!(self, Self::Surfels | Self::SurfelLinks | Self::CacheSh)
+    }
+
+    /// Whether the view is made from the frame's indirect-light buffer, which the frame
+    /// must then read back.
+    pub fn reads_indirect(self) -> bool {
+        matches!(self, Self::Indirect | Self::CacheSh)
     }
 
     /// Whether the view shows GI data (any method but `none`).

@@ -1,6 +1,8 @@
 //! Debug images a researcher expects next to the final frame (the paper's Figures 2 and 6
 //! views): indirect light alone, RSM flux, importance map, selected VALs, the light caches
-//! and, for `clustered`, the VPLs coloured by VAL (seed 003's Figure 9, centre).
+//! and, for `clustered`, the VPLs coloured by VAL (seed 003's Figure 9, centre); for
+//! `surfels` the surfels by radiosity, one cache's links as a cut of the hierarchy and the
+//! caches' SH along the normal (seed 001's Figures 3 and 5).
 //! They are built on the CPU from buffers read back after a frame.
 
 use crate::gi::clustered::ClusterView;
@@ -10,6 +12,7 @@ use crate::gi::lightskin::{
     sampling::SamplingReadback,
 };
 use crate::gi::precompute::SceneData;
+use crate::gi::surfels::{self, links::NO_NODE, SurfelSet, SurfelView};
 use crate::gi::{lightskin::uses_light_caches, reference::luminance, GiMethod};
 use crate::gpu::GpuError;
 use crate::passes::{exposure::KEY, frame_uniforms::camera_view_proj, tonemap::tonemap_cpu};
@@ -31,6 +34,8 @@ pub enum ViewError {
     NeedsBrsm { view: View },
     #[error("view {view} shows the VPL clusters; use GI method clustered")]
     NeedsClustered { view: View },
+    #[error("view {view} shows the surfels' data; use GI method surfels")]
+    NeedsSurfels { view: View },
     #[error(transparent)]
     Gpu(#[from] GpuError),
 }
@@ -45,6 +50,13 @@ pub fn check(view: View, method: GiMethod) -> Result<(), ViewError> {
             Ok(())
         } else {
             Err(ViewError::NeedsClustered { view })
+        };
+    }
+    if view.needs_surfels() {
+        return if method == GiMethod::Surfels {
+            Ok(())
+        } else {
+            Err(ViewError::NeedsSurfels { view })
         };
     }
     if view.needs_gi() && view != View::Indirect && !uses_light_caches(method) {
@@ -102,6 +114,28 @@ pub fn compose(
                 .and_then(|d| d.0.downcast_ref::<ClusterView>())
                 .ok_or(needs_gi)?,
         ),
+        View::Surfels | View::SurfelLinks | View::CacheSh => {
+            let set = scene_data.and_then(|d| d.downcast_ref::<SurfelSet>());
+            let captured = debug
+                .as_ref()
+                .and_then(|d| d.0.downcast_ref::<SurfelView>());
+            match (view, set, captured) {
+                (View::Surfels, Some(set), Some(SurfelView::Radiosity(radiosity))) => {
+                    surfel_radiosity(&frame, camera, bounds, set, radiosity)
+                }
+                (View::SurfelLinks, Some(set), _) => surfel_links(&frame, camera, bounds, set),
+                (
+                    View::CacheSh,
+                    _,
+                    Some(SurfelView::CacheSh {
+                        width,
+                        height,
+                        radiance,
+                    }),
+                ) => cache_sh((frame.width, frame.height), *width, *height, radiance),
+                _ => return Err(needs_gi),
+            }
+        }
     })
 }
 
@@ -236,6 +270,214 @@ pub fn clusters(v: &ClusterView) -> Image {
     image
 }
 
+/// The frame at a third of its brightness, and a projection of scene points onto it.
+struct Overlay {
+    image: Image,
+    view_proj: glam::Mat4,
+    eye: Vec3,
+    /// Pixels per scene unit at clip-space depth w = 1.
+    pixels_per_unit: f32,
+}
+
+impl Overlay {
+    fn new(frame: &Frame, camera: &Camera, bounds: &Aabb) -> Self {
+        Self {
+            image: Image {
+                width: frame.width,
+                height: frame.height,
+                // Alpha stays opaque.
+                rgba8: frame
+                    .rgba8
+                    .chunks_exact(4)
+                    .flat_map(|p| [p[0] / 3, p[1] / 3, p[2] / 3, p[3]])
+                    .collect(),
+            },
+            view_proj: camera_view_proj(camera, frame.width as f32 / frame.height as f32, bounds),
+            eye: Vec3::from(camera.position),
+            pixels_per_unit: 0.5 * frame.height as f32
+                / (0.5 * camera.fov_y_degrees.to_radians()).tan(),
+        }
+    }
+
+    /// Every surfel facing the camera as a disc of its area's projected size in the colour
+    /// `colour` gives its index (none: not drawn), on black, the farthest first so that nearer
+    /// surfels cover them (surfels behind geometry show where nothing nearer covers them).
+    fn splat_surfels(&mut self, set: &SurfelSet, colour: impl Fn(usize) -> Option<[u8; 3]>) {
+        self.image
+            .rgba8
+            .chunks_exact_mut(4)
+            .for_each(|p| p[..3].fill(0));
+        let radius = (set.surfel_area / std::f64::consts::PI).sqrt() as f32;
+        let mut discs: Vec<(f32, usize)> = set
+            .surfels
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| s.normal.dot(self.eye - s.position) > 0.0)
+            .filter_map(|(k, s)| {
+                let w = (self.view_proj * s.position.extend(1.0)).w;
+                (w > 0.0).then_some((w, k))
+            })
+            .collect();
+        discs.sort_by(|a, b| b.0.total_cmp(&a.0));
+        for (w, k) in discs {
+            let (Some(rgb), Some((x, y))) = (colour(k), self.pixel(set.surfels[k].position)) else {
+                continue;
+            };
+            // At most 32 pixels across, so a surfel next to the camera does not fill the view.
+            let r = (radius * self.pixels_per_unit / w).clamp(0.5, 16.0);
+            let ri = r.ceil() as i64;
+            for dy in -ri..=ri {
+                for dx in -ri..=ri {
+                    if ((dx * dx + dy * dy) as f32) <= r * r {
+                        self.image.put(x + dx, y + dy, rgb);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The pixel of `p`, if it lies in front of the camera.
+    fn pixel(&self, p: Vec3) -> Option<(i64, i64)> {
+        let clip = self.view_proj * p.extend(1.0);
+        if clip.w <= 0.0 {
+            return None;
+        }
+        let ndc = clip.xyz() / clip.w;
+        Some((
+            ((ndc.x * 0.5 + 0.5) * self.image.width as f32) as i64,
+            ((0.5 - ndc.y * 0.5) * self.image.height as f32) as i64,
+        ))
+    }
+
+    /// A square dot of side 2·`radius` + 1 at `p` unless `p` faces away (normal `n`).
+    fn dot(&mut self, p: Vec3, n: Vec3, radius: i64, rgb: [u8; 3]) {
+        if n.dot(self.eye - p) <= 0.0 {
+            return;
+        }
+        if let Some((x, y)) = self.pixel(p) {
+            for dy in -radius..=radius {
+                for dx in -radius..=radius {
+                    self.image.put(x + dx, y + dy, rgb);
+                }
+            }
+        }
+    }
+
+    /// The dot radius that keeps `count` dots from covering more than a quarter of the
+    /// image: 1 (3×3 pixels) or 0.
+    fn radius_for(&self, count: usize) -> i64 {
+        let pixels = u64::from(self.image.width) * u64::from(self.image.height);
+        i64::from(count as u64 * 9 * 4 <= pixels)
+    }
+}
+
+/// The surfels facing the camera as discs in the colour of their radiosity (auto-exposed) on
+/// black: what the caches are lit from.
+pub fn surfel_radiosity(
+    frame: &Frame,
+    camera: &Camera,
+    bounds: &Aabb,
+    set: &SurfelSet,
+    radiosity: &[Vec3],
+) -> Image {
+    let exposure = auto_exposure(radiosity.iter().map(|b| luminance(b.to_array())));
+    let mut overlay = Overlay::new(frame, camera, bounds);
+    overlay.splat_surfels(set, |k| {
+        radiosity
+            .get(k)
+            .map(|b| tonemap_cpu(b.to_array(), exposure))
+    });
+    overlay.image
+}
+
+/// The cache whose links [`surfel_links`] shows: the usable cache nearest the point half a
+/// cache spacing above the surfel the camera's central ray meets first (surfels read their
+/// caches from there), or, where the ray meets none, nearest the camera's target.
+pub fn centre_cache(set: &SurfelSet, camera: &Camera) -> Option<usize> {
+    let eye = Vec3::from(camera.position);
+    let target = Vec3::from(camera.target);
+    let dir = (target - eye).normalize_or_zero();
+    // A surfel stands for a disc of its area; 1.5 × its radius closes the gaps between them.
+    let radius = 1.5 * (set.surfel_area / std::f64::consts::PI).sqrt() as f32;
+    let hit = set
+        .surfels
+        .iter()
+        .filter_map(|s| {
+            let facing = s.normal.dot(-dir);
+            if facing <= 1e-4 {
+                return None;
+            }
+            let t = s.normal.dot(s.position - eye) / -facing;
+            let on_plane = eye + t * dir;
+            (t > 0.0 && on_plane.distance(s.position) <= radius).then_some((t, s))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    let point = hit.map_or(target, |(t, s)| {
+        eye + t * dir + 0.5 * set.grid.spacing * s.normal
+    });
+    (0..set.grid.count())
+        .filter(|&c| surfels::cpu::usable(set, c))
+        .min_by(|&a, &b| {
+            let d = |c: usize| set.grid.position(c).distance_squared(point);
+            d(a).total_cmp(&d(b))
+        })
+}
+
+/// The hierarchy cut of one cache's links (seed 001's Figure 3): the surfels under each
+/// linked node as discs in that node's colour on black, the surfels under no link in dark
+/// grey, and the cache ([`centre_cache`]) as a white cross.
+pub fn surfel_links(frame: &Frame, camera: &Camera, bounds: &Aabb, set: &SurfelSet) -> Image {
+    let mut overlay = Overlay::new(frame, camera, bounds);
+    let Some(cache) = centre_cache(set, camera) else {
+        overlay.splat_surfels(set, |_| Some(UNLINKED));
+        return overlay.image;
+    };
+    let per_cache = set.links.per_cache as usize;
+    let mut colour = vec![UNLINKED; set.surfels.len()];
+    let linked = set.links.nodes[cache * per_cache..(cache + 1) * per_cache]
+        .iter()
+        .filter(|&&n| n != NO_NODE);
+    for (rank, &node) in linked.enumerate() {
+        let first = set.tree.first_leaf[node as usize] as usize;
+        let count = set.tree.leaf_count[node as usize] as usize;
+        colour[first..first + count].fill(index_colour(rank as u32));
+    }
+    overlay.splat_surfels(set, |k| colour.get(k).copied());
+    if let Some((x, y)) = overlay.pixel(set.grid.position(cache)) {
+        for d in -4..=4 {
+            overlay.image.put(x + d, y, [255; 3]);
+            overlay.image.put(x, y + d, [255; 3]);
+        }
+    }
+    overlay.image
+}
+
+/// Surfels under none of the shown cache's links.
+const UNLINKED: [u8; 3] = [48; 3];
+
+/// The caches' SH radiance along each pixel's normal, auto-exposed; black where no geometry
+/// is. `radiance` is `width` × `height` (the method's resolution, reduced by
+/// `indirect_downscale`), shown at the frame's `out` size by nearest neighbour.
+pub fn cache_sh(out: (u32, u32), width: u32, height: u32, radiance: &[[f32; 4]]) -> Image {
+    let rgb = |c: &[f32; 4]| [c[0], c[1], c[2]];
+    let exposure = auto_exposure(radiance.iter().map(|c| luminance(rgb(c))));
+    let source = |x: u32, y: u32| {
+        let sx = (u64::from(x) * u64::from(width) / u64::from(out.0.max(1))) as usize;
+        let sy = (u64::from(y) * u64::from(height) / u64::from(out.1.max(1))) as usize;
+        radiance.get(sy * width as usize + sx)
+    };
+    Image::from_rgb(
+        out.0,
+        out.1,
+        (0..out.1)
+            .flat_map(|y| (0..out.0).map(move |x| (x, y)))
+            .map(|(x, y)| match source(x, y) {
+                Some(c) if c[3] != 0.0 => tonemap_cpu(rgb(c), exposure),
+                _ => [0; 3],
+            }),
+    )
+}
+
 /// The frame at a third of its brightness with every light cache facing the camera drawn as a
 /// dot in the colour of its diffuse proxy light (caches behind geometry are drawn too). Dots
 /// are 3×3 pixels unless that would cover more than a quarter of the image.
@@ -246,40 +488,14 @@ pub fn caches(
     caches: &[LightCache],
     lighting: &[CacheLighting],
 ) -> Image {
-    let mut image = Image {
-        width: frame.width,
-        height: frame.height,
-        rgba8: frame.rgba8.iter().map(|&c| c / 3).collect(),
-    };
-    let view_proj = camera_view_proj(camera, frame.width as f32 / frame.height as f32, bounds);
+    let mut overlay = Overlay::new(frame, camera, bounds);
     let exposure = auto_exposure(lighting.iter().map(|l| luminance(l.diffuse_flux)));
-    let eye = Vec3::from(camera.position);
-    let pixels = u64::from(frame.width) * u64::from(frame.height);
-    let radius: i64 = if caches.len() as u64 * 9 * 4 <= pixels {
-        1
-    } else {
-        0
-    };
+    let radius = overlay.radius_for(caches.len());
     for (c, l) in caches.iter().zip(lighting) {
-        let p = Vec3::from(c.position);
-        if Vec3::from(c.normal).dot(eye - p) <= 0.0 {
-            continue;
-        }
-        let clip = view_proj * p.extend(1.0);
-        if clip.w <= 0.0 {
-            continue;
-        }
-        let ndc = clip.xyz() / clip.w;
-        let x = ((ndc.x * 0.5 + 0.5) * frame.width as f32) as i64;
-        let y = ((0.5 - ndc.y * 0.5) * frame.height as f32) as i64;
         let colour = tonemap_cpu(l.diffuse_flux, exposure);
-        for dy in -radius..=radius {
-            for dx in -radius..=radius {
-                image.put(x + dx, y + dy, colour);
-            }
-        }
+        overlay.dot(Vec3::from(c.position), Vec3::from(c.normal), radius, colour);
     }
-    image
+    overlay.image
 }
 
 #[cfg(test)]
@@ -322,6 +538,43 @@ mod tests {
             check(View::Caches, GiMethod::Clustered),
             Err(ViewError::NeedsLightCaches { .. })
         ));
+    }
+
+    #[test]
+    fn the_surfel_views_need_surfels_and_surfels_has_no_light_caches() {
+        for view in [View::Surfels, View::SurfelLinks, View::CacheSh] {
+            assert!(check(view, GiMethod::Surfels).is_ok());
+            for other in [GiMethod::Brsm, GiMethod::Clustered, GiMethod::Reference] {
+                assert!(matches!(
+                    check(view, other),
+                    Err(ViewError::NeedsSurfels { .. })
+                ));
+            }
+        }
+        assert!(check(View::Indirect, GiMethod::Surfels).is_ok());
+        assert!(matches!(
+            check(View::Caches, GiMethod::Surfels),
+            Err(ViewError::NeedsLightCaches { .. })
+        ));
+        assert!(View::CacheSh.reads_indirect() && View::Indirect.reads_indirect());
+        assert!(!View::Surfels.reads_indirect());
+    }
+
+    /// A half-resolution view is shown at the frame's size, each value over 2×2 pixels.
+    #[test]
+    fn the_cache_sh_view_fills_the_frame_from_a_reduced_resolution() {
+        let radiance = [[1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 0.0]];
+        let image = cache_sh((4, 2), 2, 1, &radiance);
+        assert_eq!((image.width, image.height), (4, 2));
+        let at = |x: usize, y: usize| {
+            let i = (y * 4 + x) * 4;
+            [image.rgba8[i], image.rgba8[i + 1], image.rgba8[i + 2]]
+        };
+        for y in 0..2 {
+            assert!(at(0, y)[0] > 0 && at(1, y)[0] > 0, "row {y}");
+            assert_eq!(at(2, y), [0; 3], "no geometry");
+            assert_eq!(at(3, y), [0; 3], "no geometry");
+        }
     }
 
     #[test]

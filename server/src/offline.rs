@@ -280,7 +280,8 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub caches: CacheArgs,
     /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
-    /// importance map, selected VALs, light caches, VPL clusters).
+    /// importance map, selected VALs, light caches, VPL clusters, surfels by radiosity, one
+    /// cache's links, the caches' SH along the normal).
     #[arg(long, value_enum, default_value = "final")]
     pub view: View,
     /// wgpu backend.
@@ -335,6 +336,8 @@ pub enum OfflineError {
     ViewNeedsBrsm { view: View },
     #[error("--view {view} shows the VPL clusters; use --gi clustered")]
     ViewNeedsClustered { view: View },
+    #[error("--view {view} shows the surfels' data; use --gi surfels")]
+    ViewNeedsSurfels { view: View },
     #[error("writing {path}: {error}")]
     Write {
         path: PathBuf,
@@ -352,6 +355,7 @@ impl From<debug_views::ViewError> for OfflineError {
             }
             debug_views::ViewError::NeedsBrsm { view } => Self::ViewNeedsBrsm { view },
             debug_views::ViewError::NeedsClustered { view } => Self::ViewNeedsClustered { view },
+            debug_views::ViewError::NeedsSurfels { view } => Self::ViewNeedsSurfels { view },
             debug_views::ViewError::Gpu(g) => Self::Gpu(g),
         }
     }
@@ -453,6 +457,8 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         scene.textures.len()
     ));
 
+    // A view the method cannot show is refused before the adapter and the precomputation.
+    debug_views::check(args.view, args.gi)?;
     let ctx = GpuContext::new(args.backend)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
     log(&format!("adapter: {adapter}"));
@@ -468,9 +474,8 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         renderer.set_scene_data(args.gi, data)?;
     }
     let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
-    debug_views::check(args.view, args.gi)?;
     let mut settings = settings;
-    settings.capture_hdr = args.view == View::Indirect;
+    settings.capture_hdr = args.view.reads_indirect();
     settings.debug_view = args.view;
     let frame = renderer.render(&settings)?;
     let exposure_scale = frame.exposure_scale;

@@ -736,6 +736,7 @@ impl Renderer {
             indirect: reduced.map_or(&sized.indirect, |r| &r.indirect),
             history: settings.history,
             still: settings.still,
+            debug_view: settings.debug_view,
         };
         let Some(method) = self.methods[method_index].as_mut() else {
             unreachable!("the method was just created");

@@ -211,6 +211,9 @@ pub struct FrameInputs<'a> {
     pub history: Option<u64>,
     /// The frame is a session's still (see `RenderSettings::still`).
     pub still: bool,
+    /// The debug view the frame is read back for: a method may compute what only that view
+    /// shows (to hand it over in [`Method::capture_debug`]).
+    pub debug_view: View,
 }
 
 /// One GI method's per-scene GPU state and per-frame passes.

@@ -236,6 +236,17 @@ pub const SURFEL_SHADE: ShaderSource = ShaderSource {
     ],
 };
 
+/// `surfels`: debug view `cache-sh`, the caches' SH radiance along each pixel's normal.
+pub const SURFEL_CACHE_SH_VIEW: ShaderSource = ShaderSource {
+    name: "surfel_cache_sh_view",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("surfels/sh.wgsl"),
+        wgsl!("surfels/caches.wgsl"),
+        wgsl!("surfels/cache_sh_view.wgsl"),
+    ],
+};
+
 /// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
@@ -263,6 +274,7 @@ pub const ALL: &[&ShaderSource] = &[
     &SURFEL_PULL,
     &SURFEL_CACHE_LIGHT,
     &SURFEL_SHADE,
+    &SURFEL_CACHE_SH_VIEW,
 ];
 
 impl ShaderSource {
@@ -424,6 +436,7 @@ mod tests {
             (&SURFEL_PULL, &[&surfels::PULL_GROUP]),
             (&SURFEL_CACHE_LIGHT, &[&surfels::CACHE_LIGHT_GROUP]),
             (&SURFEL_SHADE, &[&surfels::SHADE_GROUP]),
+            (&SURFEL_CACHE_SH_VIEW, &[&surfels::SH_VIEW_GROUP]),
         ];
         let errors: Vec<String> = passes
             .iter()

@@ -83,7 +83,8 @@ pub fn resolve(
         ViewError::NeedsGi { .. }
         | ViewError::NeedsLightCaches { .. }
         | ViewError::NeedsBrsm { .. }
-        | ViewError::NeedsClustered { .. } => ApiError::field("view", e.to_string()),
+        | ViewError::NeedsClustered { .. }
+        | ViewError::NeedsSurfels { .. } => ApiError::field("view", e.to_string()),
         ViewError::Gpu(g) => ApiError::internal(g.to_string()),
     })?;
     let precompute = entry.precompute_key(g)?;
@@ -100,7 +101,7 @@ pub fn resolve(
             .unwrap_or_else(|| entry.default_light.clone()),
         exposure,
         shadow_map_size: params.shadow_map_size,
-        capture_hdr: params.view == View::Indirect,
+        capture_hdr: params.view.reads_indirect(),
         debug_view: params.view,
         gi: GiSettings::from(g),
         history: None,

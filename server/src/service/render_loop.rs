@@ -633,7 +633,7 @@ fn finish(
 ) -> Result<Rendered, ApiError> {
     record_metrics(&frame);
     let hdr = frame.hdr.take();
-    let indirect = if view == View::Indirect {
+    let indirect = if view.reads_indirect() {
         frame.indirect.clone()
     } else {
         frame.indirect.take()

@@ -5,9 +5,12 @@
 
 use crate::support::*;
 use glam::Vec3;
+use lightcast_server::debug_views::{centre_cache, compose, index_colour, View};
+use lightcast_server::gi::precompute::SceneData;
 use lightcast_server::gi::precompute::{BuildEnv, Store};
 use lightcast_server::gi::surfels::cpu::{self, ShadedPoint};
 use lightcast_server::gi::surfels::passes::surfel_materials;
+use lightcast_server::gi::surfels::SurfelView;
 use lightcast_server::gi::surfels::{
     self, pull_flux, CacheLight, SurfelParams, SurfelSet, Surfels,
 };
@@ -287,28 +290,42 @@ fn shading_matches_the_cpu_at_the_pixels() {
     let frame = renderer.render(&s).expect("render");
     let indirect = frame.indirect.as_ref().expect("captured");
     let light = vec3s(&cache_light(&renderer, None).coefficients);
+    compare_pixels(&scene, &s, indirect, |surface| {
+        let to_viewer = (Vec3::from(s.camera.position) - surface.position).normalize();
+        cpu::shade(
+            &set,
+            &light,
+            &ShadedPoint {
+                position: surface.position,
+                normal: surface.normal,
+                to_viewer,
+                diffuse: surface.brdf.diffuse,
+                glossy: surface.brdf.glossy,
+                exponent: surface.brdf.exponent,
+            },
+        )
+    });
+}
+
+/// Every third pixel of a `W` × `H` GPU image that shows a surface against `want` of it:
+/// within 3 % (f16 output, and a rasterised position within a pixel of the ray cast's),
+/// over 100 pixels, most of them lit.
+fn compare_pixels(
+    scene: &Scene,
+    s: &RenderSettings,
+    gpu: &[[f32; 4]],
+    want: impl Fn(&lightcast_server::gi::clustered::cpu::RefSurface) -> Vec3,
+) {
     let (mut compared, mut bright) = (0, 0);
     for y in (0..H).step_by(3) {
         for x in (0..W).step_by(3) {
-            let Some(surface) = surface_at(&scene, &s, x, y) else {
+            let Some(surface) = surface_at(scene, s, x, y) else {
                 continue;
             };
-            let to_viewer = (Vec3::from(s.camera.position) - surface.position).normalize();
-            let want = cpu::shade(
-                &set,
-                &light,
-                &ShadedPoint {
-                    position: surface.position,
-                    normal: surface.normal,
-                    to_viewer,
-                    diffuse: surface.brdf.diffuse,
-                    glossy: surface.brdf.glossy,
-                    exponent: surface.brdf.exponent,
-                },
-            );
-            let c = indirect[(y * W + x) as usize];
+            let c = gpu[(y * W + x) as usize];
+            assert_eq!(c[3], 1.0, "pixel {x},{y} shows geometry");
+            let want = want(&surface);
             let got = Vec3::new(c[0], c[1], c[2]);
-            // f16 output and a rasterised position within a pixel of the ray cast's.
             assert!(
                 close(got, want, 0.03, 1e-3),
                 "pixel {x},{y}: GPU {got}, CPU {want}"
@@ -320,6 +337,97 @@ fn shading_matches_the_cpu_at_the_pixels() {
     assert!(
         compared > 100 && bright > compared / 2,
         "{compared} pixels, {bright} lit"
+    );
+}
+
+/// Debug view `cache-sh` on the GPU against `cpu::radiance_along` at the pixels, and the
+/// other two surfel views made from the same frame's data: `surfels` reads back every
+/// surfel's radiosity (the leaves of the flux the bounce left), `surfel-links` draws one
+/// cache's cut, every surfel at most once.
+#[test]
+fn debug_views_show_the_caches_sh_the_surfels_and_one_caches_links() {
+    let Setup {
+        scene,
+        set,
+        mut renderer,
+    } = setup(&SMALL);
+    let mut s = settings_for(&scene, 2);
+    s.debug_view = View::CacheSh;
+    let frame = renderer.render(&s).expect("render");
+    let Some(SurfelView::CacheSh {
+        width,
+        height,
+        radiance,
+    }) = frame
+        .debug
+        .as_ref()
+        .and_then(|d| d.0.downcast_ref::<SurfelView>())
+    else {
+        panic!("cache-sh reads back its view");
+    };
+    assert_eq!((*width, *height, radiance.len()), (W, H, (W * H) as usize));
+    let light = vec3s(&cache_light(&renderer, None).coefficients);
+    compare_pixels(&scene, &s, radiance, |surface| {
+        cpu::radiance_along(&set, &light, surface.position, surface.normal)
+    });
+    let data: SceneData = std::sync::Arc::new(set.clone());
+    let image = compose(View::CacheSh, frame, &s.camera, &scene.bounds, Some(&data))
+        .expect("cache-sh composes");
+    assert_eq!((image.width, image.height), (W, H));
+
+    s.debug_view = View::Surfels;
+    let frame = renderer.render(&s).expect("render");
+    let Some(SurfelView::Radiosity(radiosity)) = frame
+        .debug
+        .as_ref()
+        .and_then(|d| d.0.downcast_ref::<SurfelView>())
+    else {
+        panic!("surfels reads back the radiosity");
+    };
+    let flux = renderer
+        .gi_if_created::<Surfels>()
+        .expect("created")
+        .read_flux()
+        .expect("readback")
+        .expect("a set");
+    assert_eq!(radiosity.len(), set.surfels.len());
+    assert_eq!(radiosity[..], vec3s(&flux[..set.surfels.len()])[..]);
+    let image = compose(
+        View::Surfels,
+        frame.clone(),
+        &s.camera,
+        &scene.bounds,
+        Some(&data),
+    )
+    .expect("surfels composes");
+    let drawn = image
+        .rgba8
+        .chunks_exact(4)
+        .filter(|p| p[..3] != [0; 3])
+        .count();
+    assert!(drawn > (W * H / 4) as usize, "{drawn} pixels show surfels");
+    assert!(image.rgba8.chunks_exact(4).all(|p| p[3] == 255), "opaque");
+
+    let cache = centre_cache(&set, &s.camera).expect("the box has usable caches");
+    assert!(cpu::usable(&set, cache));
+    let image = compose(
+        View::SurfelLinks,
+        frame,
+        &s.camera,
+        &scene.bounds,
+        Some(&data),
+    )
+    .expect("surfel-links composes");
+    let colours: std::collections::BTreeSet<[u8; 3]> = image
+        .rgba8
+        .chunks_exact(4)
+        .map(|p| [p[0], p[1], p[2]])
+        .filter(|p| (0..SMALL.links).any(|k| index_colour(k) == *p))
+        .collect();
+    assert!(colours.len() > 4, "{} link colours drawn", colours.len());
+    assert!(
+        image.rgba8.chunks_exact(4).any(|p| p[..3] == [255; 3]),
+        "the cache's cross"
     );
 }
 

@@ -1366,6 +1366,26 @@ async fn surfels_render_through_the_api_after_their_precomputation() {
     assert_eq!(sets[0]["state"], "ready");
     assert_eq!(sets[0]["params"]["surfel_links"], 16.0);
 
+    // The surfels' debug views, from the same set; other methods are refused them.
+    for view in ["surfels", "surfel-links", "cache-sh"] {
+        let request = json!({"render": {"width": 48, "height": 36, "gi": gi, "view": view}});
+        let (_, png) = render(&server, &request).await;
+        let image = image::load_from_memory(&png).expect("png").to_rgba8();
+        let lit = image.pixels().filter(|p| p.0[..3] != [0; 3]).count();
+        assert!(lit > 48 * 36 / 4, "{view}: {lit} pixels drawn");
+        let resp = server
+            .http
+            .post(server.url("/v1/render"))
+            .json(&json!({"render": {"width": 48, "height": 36, "view": view,
+                                     "gi": {"method": "brsm"}}}))
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 400, "{view} with brsm");
+        let body: Value = resp.json().await.expect("error JSON");
+        assert_eq!(body["field"], "render.view", "{body}");
+    }
+
     let refused = |gi: Value| json!({"render": {"width": 48, "height": 36, "gi": gi}});
     for (gi, field) in [
         (

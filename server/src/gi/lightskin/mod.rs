@@ -452,7 +452,7 @@ impl Method for LightSkin {
                     count: caches.count as usize,
                 }))
             }
-            View::Final | View::Indirect | View::Clusters => None,
+            _ => None,
         }
     }
 

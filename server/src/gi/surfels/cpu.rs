@@ -67,6 +67,18 @@ pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Ve
     lobe_integral(set, &radiance, total, &sh::COSINE_ZONAL, n)
 }
 
+/// The caches' SH radiance at `p` evaluated along `n`, L(n) = Σ L_i·y_i(n) / Σ w (debug view
+/// `cache-sh`, `shaders/surfels/cache_sh_view.wgsl`); zero where no usable cache is around.
+pub fn radiance_along(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Vec3 {
+    let (radiance, total) = interpolate(set, cache_light, p);
+    if total <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let mut y = vec![0.0; radiance.len()];
+    sh::eval(set.links.bands, n.normalize(), &mut y);
+    radiance.iter().zip(&y).map(|(r, y)| *r * *y).sum::<Vec3>() / total
+}
+
 /// A surface point as the shading pass sees it.
 #[derive(Clone, Copy, Debug)]
 pub struct ShadedPoint {

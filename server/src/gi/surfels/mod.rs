@@ -33,16 +33,19 @@ use crate::gi::precompute::{
 };
 use crate::gi::reference::bvh::SceneBvh;
 use crate::gi::{
-    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
-    SceneResources,
+    DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
+    ProgressBuffer, SceneResources,
 };
+use crate::gpu::readback::{stage_buffer, PendingMap};
 use crate::gpu::timing::FrameStages;
 use crate::gpu::GpuContext;
 use crate::scene::Scene;
 use glam::Vec3;
 use grid::{CacheGrid, GridError};
 use hierarchy::{ClusterWeights, HierarchyError, Leaf, Tree};
-use lightcast_protocol::{GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Light, Limits, Stage};
+use lightcast_protocol::{
+    GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Light, Limits, Stage, View,
+};
 use links::{LinkError, SurfelLinks};
 use passes::{Bounce, SurfelBuffers, SurfelPasses, MAX_GPU_BANDS};
 use sampling::{SamplingError, Surfel};
@@ -455,6 +458,8 @@ pub struct Surfels {
     set: Option<SurfelBuffers>,
     /// Most recently used first.
     histories: Vec<History>,
+    /// The last frame's `cache-sh` debug view (width, height, one RGBA value per pixel).
+    sh_view: Option<(u32, u32, wgpu::Buffer)>,
 }
 
 impl Surfels {
@@ -465,6 +470,7 @@ impl Surfels {
             passes: SurfelPasses::new(&r.ctx.device),
             set: None,
             histories: Vec::new(),
+            sh_view: None,
         }
     }
 
@@ -527,12 +533,102 @@ impl Method for Surfels {
         result.map(|()| None)
     }
 
+    fn capture_debug(
+        &self,
+        view: View,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Option<Box<dyn DebugCapture>> {
+        let staged = match view {
+            View::Surfels => {
+                let set = self.set.as_ref()?;
+                SurfelCapture::Radiosity {
+                    surfels: set.surfel_count as usize,
+                    staged: stage_buffer(device, encoder, &set.flux),
+                }
+            }
+            View::CacheSh => {
+                let (width, height, buffer) = self.sh_view.as_ref()?;
+                SurfelCapture::CacheSh {
+                    width: *width,
+                    height: *height,
+                    staged: stage_buffer(device, encoder, buffer),
+                }
+            }
+            _ => return None,
+        };
+        Some(Box::new(staged))
+    }
+
     fn as_any_mut(&mut self) -> &mut dyn Any {
         self
     }
 
     fn as_any(&self) -> &dyn Any {
         self
+    }
+}
+
+/// What the surfels' debug views read back with a frame.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SurfelView {
+    /// `surfels`: every surfel's radiosity, in the set's surfel order.
+    Radiosity(Vec<Vec3>),
+    /// `cache-sh`: the caches' SH radiance along each pixel's normal (alpha 0 where no
+    /// geometry is), row-major at the method's resolution.
+    CacheSh {
+        width: u32,
+        height: u32,
+        radiance: Vec<[f32; 4]>,
+    },
+}
+
+/// The staged copies behind a [`SurfelView`].
+enum SurfelCapture {
+    Radiosity {
+        surfels: usize,
+        staged: wgpu::Buffer,
+    },
+    CacheSh {
+        width: u32,
+        height: u32,
+        staged: wgpu::Buffer,
+    },
+}
+
+impl DebugCapture for SurfelCapture {
+    fn read(
+        self: Box<Self>,
+        ctx: &GpuContext,
+        submission: Option<&wgpu::SubmissionIndex>,
+    ) -> Result<DebugData, crate::gpu::GpuError> {
+        let (pending, capture) = match *self {
+            Self::Radiosity { surfels, staged } => (PendingMap::new(&staged), Ok(surfels)),
+            Self::CacheSh {
+                width,
+                height,
+                staged,
+            } => (PendingMap::new(&staged), Err((width, height))),
+        };
+        ctx.wait_for(submission)?;
+        let bytes = pending.finish()?;
+        let view = match capture {
+            // A node's flux in surfel units is the sum of its surfels' radiosities, so a leaf's
+            // is its surfel's radiosity; the leaves come first.
+            Ok(surfels) => SurfelView::Radiosity(
+                bytemuck::pod_collect_to_vec::<u8, [f32; 4]>(&bytes)
+                    .iter()
+                    .take(surfels)
+                    .map(|f| Vec3::new(f[0], f[1], f[2]))
+                    .collect(),
+            ),
+            Err((width, height)) => SurfelView::CacheSh {
+                width,
+                height,
+                radiance: bytemuck::pod_collect_to_vec(&bytes),
+            },
+        };
+        Ok(DebugData(Arc::new(view)))
     }
 }
 
@@ -598,7 +694,24 @@ impl Surfels {
                 &history.buffers[history.latest],
                 frame.indirect,
                 (frame.width, frame.height),
-            )
+            );
+            if frame.debug_view == View::CacheSh {
+                let size = (frame.width, frame.height);
+                if !matches!(&self.sh_view, Some((w, h, _)) if (*w, *h) == size) {
+                    let buffer = passes::sh_view_buffer(device, size.0, size.1);
+                    self.sh_view = Some((size.0, size.1, buffer));
+                }
+                if let Some((_, _, out)) = &self.sh_view {
+                    passes.encode_sh_view(
+                        device,
+                        e,
+                        frame.gbuffer,
+                        set,
+                        &history.buffers[history.latest],
+                        out,
+                    );
+                }
+            }
         })?;
         Ok(())
     }

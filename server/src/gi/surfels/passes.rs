@@ -133,6 +133,18 @@ bind_group! {
     }
 }
 
+bind_group! {
+    /// Group 0 of `shaders/surfels/cache_sh_view.wgsl` (debug view `cache-sh`).
+    pub struct ShViewResources as SH_VIEW_GROUP("surfel cache sh view", wgpu::ShaderStages::COMPUTE) {
+        g_position: bind::TEXTURE,
+        g_normal_exponent: bind::TEXTURE,
+        grid: bind::PARAMS,
+        cache_usable: bind::STORAGE,
+        cache_light: bind::STORAGE,
+        view_out: bind::STORAGE_RW,
+    }
+}
+
 /// Diffuse albedo and emitted radiosity of the surface under every surfel: the material's
 /// base colour (times its texture at the surfel's uv) split as the raster passes split it.
 pub fn surfel_materials(scene: &Scene, set: &SurfelSet) -> Vec<(Vec3, Vec3)> {
@@ -321,6 +333,8 @@ pub struct SurfelPasses {
     cache_layout: wgpu::BindGroupLayout,
     shade: wgpu::ComputePipeline,
     shade_layout: wgpu::BindGroupLayout,
+    sh_view: wgpu::ComputePipeline,
+    sh_view_layout: wgpu::BindGroupLayout,
     shadow_sampler: wgpu::Sampler,
     light_params: [wgpu::Buffer; 2],
     /// Bound in place of the previous bounce's caches on a first bounce (not read there).
@@ -339,16 +353,19 @@ impl SurfelPasses {
         let pull_layout = PULL_GROUP.layout(device);
         let cache_layout = CACHE_LIGHT_GROUP.layout(device);
         let shade_layout = SHADE_GROUP.layout(device);
+        let sh_view_layout = SH_VIEW_GROUP.layout(device);
         let params = |label| params_buffer(device, label, 16);
         Self {
             light: pipeline(&shaders::SURFEL_LIGHT, &light_layout),
             pull: pipeline(&shaders::SURFEL_PULL, &pull_layout),
             cache: pipeline(&shaders::SURFEL_CACHE_LIGHT, &cache_layout),
             shade: pipeline(&shaders::SURFEL_SHADE, &shade_layout),
+            sh_view: pipeline(&shaders::SURFEL_CACHE_SH_VIEW, &sh_view_layout),
             light_layout,
             pull_layout,
             cache_layout,
             shade_layout,
+            sh_view_layout,
             shadow_sampler: device.create_sampler(&wgpu::SamplerDescriptor {
                 label: Some("surfel shadow comparison"),
                 mag_filter: wgpu::FilterMode::Linear,
@@ -514,6 +531,47 @@ impl SurfelPasses {
         .bind(device, &self.shade_layout);
         crate::passes::dispatch_2d(encoder, "surfel shade", &self.shade, &group, size.0, size.1);
     }
+
+    /// Debug view `cache-sh`: the caches' SH radiance of `source` along every pixel's normal
+    /// into `out` (a [`sh_view_buffer`] of the G-buffer's size).
+    pub fn encode_sh_view(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        gbuffer: &GBuffer,
+        buffers: &SurfelBuffers,
+        source: &wgpu::Buffer,
+        out: &wgpu::Buffer,
+    ) {
+        let size = gbuffer.position.texture.size();
+        let group = ShViewResources {
+            g_position: &gbuffer.position,
+            g_normal_exponent: &gbuffer.normal_exponent,
+            grid: &buffers.grid,
+            cache_usable: &buffers.cache_usable,
+            cache_light: source,
+            view_out: out,
+        }
+        .bind(device, &self.sh_view_layout);
+        crate::passes::dispatch_2d(
+            encoder,
+            "surfel cache sh view",
+            &self.sh_view,
+            &group,
+            size.width,
+            size.height,
+        );
+    }
+}
+
+/// A buffer for [`SurfelPasses::encode_sh_view`]: one RGBA f32 value per pixel.
+pub fn sh_view_buffer(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("surfel cache sh view"),
+        size: u64::from(width) * u64::from(height) * 16,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
 }
 
 #[cfg(test)]

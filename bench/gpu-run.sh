@@ -2,13 +2,15 @@
 # The GPU benchmarks the issues ask for, in one command, on a machine with a GPU:
 #   - the paper's evaluation (`lightcast-server bench`, issue 3) at 1920×1080 on the
 #     procedural street scene, LightSkin against BRSM over RSM sizes, VAL counts and view samples;
+#   - seed 001's evaluation (`bench --gi surfels`, issue 12) on the Cornell box and the street;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080.
 #
 #   bench/gpu-run.sh KIT_DIR OUT_DIR [gi|service|all] [--quick]
 #
 # KIT_DIR comes from bench/gpu-kit.sh (binaries, font, Vulkan loader .debs). Results land in
-# OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-service.md, environment.txt and
+# OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-surfels-{cornell,street}.{md,json,
+# …png}, gpu-service.md, environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
 # adapter (a software one included) to check this script; its numbers mean nothing.
 set -euo pipefail
@@ -91,6 +93,24 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
       "${cmd[@]}"
     done
   fi
+  # Seed 001 (issue 12): surfels over n_S, n_L and SH bands around 32k / 128 / 3, error at one
+  # and three bounces, on the Cornell box and the street (the precomputation runs on the CPU).
+  if $quick; then
+    surfel_runs=("procedural:cornell|--width 160 --height 90 --sweep-surfels 1024,2048 --sweep-links 16 --sweep-bands 3 --surfels 2048 --surfel-links 16 --surfel-cache-spacing 0.5 --frames 2 --warmup 1 --reference-spp 16")
+  else
+    surfel_runs=("procedural:cornell|--width 1920 --height 1080 --reference-spp 1024"
+      "$scene|--width 1920 --height 1080 --reference-spp 256")
+  fi
+  for run in "${surfel_runs[@]}"; do
+    s="${run%%|*}"
+    name=$(case "$s" in *cornell*) echo cornell ;; *) echo street ;; esac)
+    read -r -a flags <<< "${run#*|}"
+    cmd=("$server" bench --gi surfels --scene "$s" "${flags[@]}"
+      --json "$out/gpu-surfels-$name.json" --markdown "$out/gpu-surfels-$name.md"
+      --plots "$out/gpu-surfels-$name")
+    echo "command: ${cmd[*]}" >> "$out/environment.txt"
+    "${cmd[@]}"
+  done
 fi
 
 if [ "$what" = service ] || [ "$what" = all ]; then

@@ -26,6 +26,11 @@ use std::path::PathBuf;
 /// Options of `lightcast-server bench`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct BenchArgs {
+    /// Which evaluation: `brsm` (seed 004: LightSkin and BRSM over RSM sizes, VAL counts and
+    /// view samples) or `surfels` (seed 001: surfel count, links and SH bands, see
+    /// `crate::bench_surfels`).
+    #[arg(long, value_enum, default_value = "brsm")]
+    pub gi: GiMethod,
     /// Scene: a .gltf/.glb file or a procedural scene (see `render --help`).
     #[arg(long)]
     pub scene: Option<String>,
@@ -72,6 +77,8 @@ pub struct BenchArgs {
     pub warmup: u32,
     #[command(flatten)]
     pub caches: CacheArgs,
+    #[command(flatten)]
+    pub surfels: crate::bench_surfels::SurfelSweep,
     /// Write the results as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -91,7 +98,7 @@ pub struct BenchArgs {
 }
 
 /// Median and 95th percentile of a stage's time.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct StageStats {
     pub median_ms: f64,
     pub p95_ms: f64,
@@ -184,6 +191,12 @@ pub enum BenchError {
     NoFrames,
     #[error("reference: {0}")]
     Reference(#[from] crate::gi::reference::ReferenceError),
+    #[error(
+        "bench --gi {0}: only brsm (with LightSkin as its baseline) and surfels have an evaluation"
+    )]
+    NoEvaluation(GiMethod),
+    #[error("surfels: {0}")]
+    Surfels(String),
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -191,7 +204,7 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
     sorted[i.min(sorted.len() - 1)]
 }
 
-fn stats(mut v: Vec<f64>) -> StageStats {
+pub(crate) fn stats(mut v: Vec<f64>) -> StageStats {
     v.sort_by(f64::total_cmp);
     StageStats {
         median_ms: percentile(&v, 0.5),
@@ -246,24 +259,27 @@ fn difference_picture(truth: &[[f32; 3]], other: &[[f32; 4]], mean: f64) -> Vec<
         .collect()
 }
 
-/// Renders the reference's indirect light for `settings`' camera, light and size.
-fn render_reference(
+/// Renders the reference's indirect light for `settings`' camera, light and size, with paths
+/// of `bounces` reflections.
+pub(crate) fn render_reference(
     ctx: &GpuContext,
     scene: &Scene,
     settings: &RenderSettings,
     args: &BenchArgs,
+    bounces: u32,
     progress: &mut dyn FnMut(u64, u64, &str),
 ) -> Result<crate::gi::reference::ReferenceImage, BenchError> {
     use crate::gi::reference::{PathTracer, ReferenceSettings};
     let mut tracer = PathTracer::new(ctx.clone(), scene)?;
     let reference = ReferenceSettings {
-        bounces: args.reference_bounces,
+        bounces,
         seed: 0,
         glossy_exponent: args.glossy_exponent,
     };
     // Small calls keep each submission short (lavapipe drops long ones) and show progress.
     let per_call = 4;
     let mut done = 0;
+    let label = format!("reference path tracing, {bounces} bounce(s): samples per pixel");
     while done < args.reference_spp {
         let n = per_call.min(args.reference_spp - done);
         tracer.accumulate(
@@ -275,33 +291,31 @@ fn render_reference(
             n,
         )?;
         done += n;
-        progress(
-            u64::from(done),
-            u64::from(args.reference_spp),
-            "reference path tracing",
-        );
+        progress(u64::from(done), u64::from(args.reference_spp), &label);
     }
     Ok(tracer
         .read()?
         .expect("the reference has accumulated samples"))
 }
 
-struct Timed {
-    stages: BTreeMap<String, StageStats>,
-    gi: StageStats,
-    frame: StageStats,
-    indirect: Vec<[f32; 4]>,
+pub(crate) struct Timed {
+    pub stages: BTreeMap<String, StageStats>,
+    pub gi: StageStats,
+    pub frame: StageStats,
+    pub indirect: Vec<[f32; 4]>,
     /// The last frame's HDR image and exposure scale.
-    hdr: Vec<[f32; 4]>,
-    exposure: f32,
+    pub hdr: Vec<[f32; 4]>,
+    pub exposure: f32,
 }
 
-/// Renders `warmup + frames` frames; the last one also captures the indirect buffer.
-fn time_config(
+/// Renders `warmup + frames` frames, frame `i` with the settings `vary(i, settings)` makes of
+/// `settings`; the last one also captures the indirect buffer.
+pub(crate) fn time_config(
     renderer: &mut Renderer,
     settings: &RenderSettings,
     warmup: u32,
     frames: u32,
+    vary: &dyn Fn(u32, &mut RenderSettings),
     tick: &mut dyn FnMut(),
 ) -> Result<Timed, BenchError> {
     let mut per_stage: BTreeMap<String, Vec<f64>> = BTreeMap::new();
@@ -309,6 +323,7 @@ fn time_config(
     let (mut indirect, mut hdr, mut exposure) = (Vec::new(), Vec::new(), 1.0);
     for i in 0..warmup + frames {
         let mut s = settings.clone();
+        vary(i, &mut s);
         s.capture_hdr = i + 1 == warmup + frames;
         let frame = renderer.render(&s)?;
         tick();
@@ -400,7 +415,7 @@ pub fn run(
         caches.caches.len(),
     );
     let truth = if args.reference_spp > 0 {
-        let image = render_reference(&ctx, &scene, &base, args, progress)?;
+        let image = render_reference(&ctx, &scene, &base, args, args.reference_bounces, progress)?;
         log(&format!(
             "reference: {} spp, {} bounce(s), relative standard error {:.2} %",
             image.samples,
@@ -463,13 +478,14 @@ pub fn run(
                     gi.val_count, gi.view_samples
                 ),
                 _ => format!("lightskin rsm {rsm_size}²"),
-            };
+            } + ": frames";
             let settings = RenderSettings { gi, ..base.clone() };
             let timed = time_config(
                 &mut renderer,
                 &settings,
                 args.warmup,
                 args.frames,
+                &|_, _| {},
                 &mut || {
                     done += 1;
                     progress(done, total, &label);

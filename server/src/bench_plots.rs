@@ -1,8 +1,9 @@
 //! PNG plots of a [`BenchReport`]: relative error against LightSkin, against the path-traced
 //! reference (when the run had one) and frames per second, over the RSM size, one line per
-//! configuration (the paper's Figures 3 and 5).
+//! configuration (the paper's Figures 3 and 5); and of a [`SurfelReport`], seed 001's Figure 8.
 
 use crate::bench::{BenchReport, BenchRow};
+use crate::bench_surfels::{SurfelReport, SurfelRow, Varied};
 use crate::gi::GiMethod;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -273,6 +274,90 @@ pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, 
     Ok(paths)
 }
 
+/// Writes `<prefix>-error-by-surfels.png` and `<prefix>-error-by-links.png` (seed 001's
+/// Figure 8: the error against the reference over n_S and over n_L, the other parameters at
+/// the sweep's centre, one line per bounce count) and `<prefix>-gi-ms-by-surfels.png`;
+/// returns their paths.
+pub fn write_surfel_plots(report: &SurfelReport, prefix: &Path) -> Result<Vec<PathBuf>, PlotError> {
+    ensure_font()?;
+    let path_for = |suffix: &str| {
+        let mut name = prefix.as_os_str().to_owned();
+        name.push(suffix);
+        PathBuf::from(name)
+    };
+    let lines = |what, x, y: &dyn Fn(&SurfelRow, usize) -> f64| surfel_lines(report, what, x, y);
+    let error = |r: &SurfelRow, b: usize| {
+        r.errors
+            .get(b)
+            .map_or(0.0, |e| e.vs_reference.mae_relative * 100.0)
+    };
+    let y_label = "MAE / reference mean (%)";
+    let mut paths = Vec::new();
+    let path = path_for("-error-by-surfels.png");
+    draw_over(
+        &path,
+        "surfels: error against the reference by surfel count",
+        &Axis("surfels n_S"),
+        y_label,
+        &lines(Varied::Surfels, |r| r.surfels, &error),
+    )?;
+    paths.push(path);
+    let path = path_for("-error-by-links.png");
+    draw_over(
+        &path,
+        "surfels: error against the reference by links per cache",
+        &Axis("links per cache n_L"),
+        y_label,
+        &lines(Varied::Links, |r| r.links, &error),
+    )?;
+    paths.push(path);
+    let path = path_for("-gi-ms-by-surfels.png");
+    let gi_ms = lines(Varied::Surfels, |r| r.surfels, &|r, _| r.gi.median_ms);
+    draw_over(
+        &path,
+        &format!(
+            "surfels: GPU time of the GI stages per frame ({})",
+            report.adapter
+        ),
+        &Axis("surfels n_S"),
+        "GI ms (median)",
+        &gi_ms[..gi_ms.len().min(1)]
+            .iter()
+            .map(|(_, points)| ("moving light".to_string(), points.clone()))
+            .collect::<Vec<_>>(),
+    )?;
+    paths.push(path);
+    Ok(paths)
+}
+
+/// One line per bounce count of `report` over the rows that vary `what` (and the centre):
+/// points (log2 of `x`, `y(row, bounce index)`) by increasing x.
+fn surfel_lines(
+    report: &SurfelReport,
+    what: Varied,
+    x: fn(&SurfelRow) -> u32,
+    y: &dyn Fn(&SurfelRow, usize) -> f64,
+) -> Vec<(String, Vec<(f64, f64)>)> {
+    let mut rows: Vec<&SurfelRow> = report
+        .rows
+        .iter()
+        .filter(|r| r.varied == what || r.varied == Varied::Centre)
+        .collect();
+    rows.sort_by_key(|r| x(r));
+    report
+        .references
+        .iter()
+        .enumerate()
+        .map(|(b, reference)| {
+            let points = rows
+                .iter()
+                .map(|r| (f64::from(x(r)).log2(), y(r, b)))
+                .collect();
+            (format!("{} bounce(s)", reference.bounces), points)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -290,7 +375,7 @@ mod tests {
             val_count: vals,
             view_samples: vals.map(|_| 512),
             stages: Default::default(),
-            gi: stats.clone(),
+            gi: stats,
             frame: stats,
             fps,
             mad,
@@ -378,5 +463,82 @@ mod tests {
             assert!(rgb.pixels().filter(|p| p.0 != [255, 255, 255]).count() > 1000);
         }
         std::fs::remove_dir_all(&dir).expect("remove temp dir");
+    }
+
+    /// The Figure 8 lines: one per bounce count, over the rows that vary n_S (or n_L) and the
+    /// centre, by increasing count; the three plots are written.
+    #[test]
+    fn surfel_plots_draw_one_line_per_bounce_count_over_the_varied_rows() {
+        use crate::bench_surfels::{BounceError, SurfelReference};
+        let stats = StageStats {
+            median_ms: 2.0,
+            p95_ms: 3.0,
+        };
+        let row = |varied, surfels, links, error: f64| SurfelRow {
+            varied,
+            surfels,
+            links,
+            bands: 3,
+            caches: 8,
+            usable_caches: 4,
+            precompute_s: 1.0,
+            stages: Default::default(),
+            gi: stats,
+            frame: stats,
+            fps: 500.0,
+            errors: [1, 3]
+                .map(|bounces| BounceError {
+                    bounces,
+                    vs_reference: crate::quality::ErrorStats {
+                        mae: error,
+                        rmse: error,
+                        mae_relative: error * f64::from(bounces),
+                        block_mae_relative: error,
+                        bias_relative: 0.0,
+                    },
+                })
+                .to_vec(),
+        };
+        let report = SurfelReport {
+            adapter: "test".into(),
+            timing_source: crate::gpu::timing::TimingSource::GpuTimestamps,
+            cpu_threads: 2,
+            scene: "t".into(),
+            triangles: 1,
+            width: 1,
+            height: 1,
+            frames: 1,
+            warmup: 0,
+            cache_spacing: 0.5,
+            references: [1, 3]
+                .map(|bounces| SurfelReference {
+                    bounces,
+                    spp: 1,
+                    relative_standard_error: 0.1,
+                })
+                .to_vec(),
+            rows: vec![
+                row(Varied::Centre, 2048, 64, 0.2),
+                row(Varied::Surfels, 8192, 64, 0.1),
+                row(Varied::Surfels, 1024, 64, 0.4),
+                row(Varied::Links, 2048, 16, 0.5),
+            ],
+            methods: Vec::new(),
+        };
+        let error = |r: &SurfelRow, b: usize| r.errors[b].vs_reference.mae_relative;
+        let by_surfels = surfel_lines(&report, Varied::Surfels, |r| r.surfels, &error);
+        assert_eq!(by_surfels.len(), 2);
+        assert_eq!(by_surfels[0].0, "1 bounce(s)");
+        assert_eq!(by_surfels[0].1, vec![(10.0, 0.4), (11.0, 0.2), (13.0, 0.1)]);
+        assert_eq!(by_surfels[1].1[0], (10.0, 0.4 * 3.0));
+        let by_links = surfel_lines(&report, Varied::Links, |r| r.links, &error);
+        assert_eq!(by_links[0].1, vec![(4.0, 0.5), (6.0, 0.2)]);
+        let dir = tempfile::tempdir().expect("temp dir");
+        let paths = write_surfel_plots(&report, &dir.path().join("s")).expect("plots");
+        assert_eq!(paths.len(), 3);
+        for path in &paths {
+            let image = image::open(path).expect("a PNG");
+            assert_eq!((image.width(), image.height()), (960, 600));
+        }
     }
 }

@@ -7,6 +7,7 @@
 pub mod bench;
 #[cfg(feature = "plots")]
 pub mod bench_plots;
+pub mod bench_surfels;
 pub mod debug_views;
 pub mod gi;
 pub mod gpu;

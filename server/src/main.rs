@@ -5,6 +5,8 @@
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use lightcast_server::bench::{self, BenchArgs};
+use lightcast_server::bench_surfels;
+use lightcast_server::gi::GiMethod;
 use lightcast_server::offline::{self, RenderArgs};
 use lightcast_server::service::{self, config::LogFormat, ServeArgs};
 
@@ -37,6 +39,22 @@ enum Command {
     /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
     /// BRSM's error against LightSkin (the paper's Figures 3 and 5).
     Bench(BenchArgs),
+}
+
+/// Writes a bench's plots with `write` when `--plots PREFIX` was given.
+#[cfg(feature = "plots")]
+fn write_plots(
+    prefix: Option<&std::path::Path>,
+    write: impl FnOnce(
+        &std::path::Path,
+    ) -> Result<Vec<std::path::PathBuf>, lightcast_server::bench_plots::PlotError>,
+) -> anyhow::Result<()> {
+    if let Some(prefix) = prefix {
+        for path in write(prefix)? {
+            eprintln!("wrote {}", path.display());
+        }
+    }
+    Ok(())
 }
 
 fn serve(args: &ServeArgs) -> anyhow::Result<()> {
@@ -112,32 +130,60 @@ fn main() -> anyhow::Result<()> {
             }
             let bar = indicatif::ProgressBar::new(0);
             bar.set_style(
-                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} frames {msg}")
+                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
                     .context("progress bar template")?,
             );
-            let mut log = |line: &str| bar.println(line);
+            // Without a terminal the bar is hidden and prints nothing: log lines and each new
+            // step then go to stderr as plain lines, so a scripted run still shows progress.
+            let hidden = bar.is_hidden();
+            let mut log = |line: &str| {
+                if hidden {
+                    eprintln!("{line}");
+                } else {
+                    bar.println(line);
+                }
+            };
+            let mut step = String::new();
             let mut progress = |done: u64, total: u64, label: &str| {
+                if hidden && step != label {
+                    eprintln!("{label} ({total})");
+                    step = label.to_string();
+                }
                 bar.set_length(total);
                 bar.set_position(done);
                 bar.set_message(label.to_string());
             };
-            let report = bench::run(&args, &mut log, &mut progress).context("bench failed")?;
-            bar.finish_and_clear();
-            let markdown = report.markdown();
+            let (markdown, json) = match args.gi {
+                GiMethod::Surfels => {
+                    let report = bench_surfels::run(&args, &mut log, &mut progress)
+                        .context("bench failed")?;
+                    bar.finish_and_clear();
+                    #[cfg(feature = "plots")]
+                    write_plots(args.plots.as_deref(), |prefix| {
+                        lightcast_server::bench_plots::write_surfel_plots(&report, prefix)
+                    })?;
+                    (report.markdown(), serde_json::to_string_pretty(&report)?)
+                }
+                GiMethod::Brsm | GiMethod::Lightskin => {
+                    let report =
+                        bench::run(&args, &mut log, &mut progress).context("bench failed")?;
+                    bar.finish_and_clear();
+                    #[cfg(feature = "plots")]
+                    write_plots(args.plots.as_deref(), |prefix| {
+                        lightcast_server::bench_plots::write_plots(&report, prefix)
+                    })?;
+                    (report.markdown(), serde_json::to_string_pretty(&report)?)
+                }
+                other => return Err(bench::BenchError::NoEvaluation(other).into()),
+            };
             print!("{markdown}");
             if let Some(path) = &args.json {
-                std::fs::write(path, serde_json::to_string_pretty(&report)?)
+                std::fs::write(path, json)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
             if let Some(path) = &args.markdown {
                 std::fs::write(path, &markdown)
                     .with_context(|| format!("writing {}", path.display()))?;
-            }
-            #[cfg(feature = "plots")]
-            if let Some(prefix) = &args.plots {
-                for path in lightcast_server::bench_plots::write_plots(&report, prefix)? {
-                    eprintln!("wrote {}", path.display());
-                }
             }
         }
     }

@@ -190,6 +190,24 @@ pub fn run(
         bands: args.caches.sh_bands.unwrap_or(defaults.bands),
     };
     let configs = configurations(centre, &args.surfels);
+    // Every configuration is checked as a request would be before the long steps start.
+    let facts = crate::gi::precompute::SceneFacts::of(&scene);
+    for (_, p) in &configs {
+        let gi = lightcast_protocol::GiParams {
+            method: GiMethod::Surfels,
+            surfel_count: p.surfels,
+            surfel_cache_spacing: p.cache_spacing,
+            surfel_links: p.links,
+            sh_bands: p.bands,
+            ..Default::default()
+        };
+        (surfels::PRECOMPUTE.key)(&gi, &facts).map_err(|e| {
+            BenchError::Surfels(format!(
+                "{} surfels, {} links, {} bands: {e}",
+                p.surfels, p.links, p.bands
+            ))
+        })?;
+    }
     log(&format!(
         "scene {}: {} triangles; {} configurations around {} surfels, {} links, {} bands, caches {spacing} apart",
         scene.name,

@@ -1404,6 +1404,11 @@ async fn surfels_render_through_the_api_after_their_precomputation() {
             json!({"method": "surfels", "surfel_cache_spacing": -1.0}),
             "render.gi.surfel_cache_spacing",
         ),
+        // Link coefficients beyond one 128 MiB GPU binding.
+        (
+            json!({"method": "surfels", "surfel_cache_spacing": 0.05, "surfel_links": 64}),
+            "render.gi.surfel_links",
+        ),
         // 512 caches × 64 links exceed --max-total-surfel-links 20000.
         (
             json!({"method": "surfels", "surfel_count": 2048, "surfel_cache_spacing": 0.4,

@@ -58,6 +58,10 @@ pub const DEFAULT_SURFELS: u32 = 32 * 1024;
 pub const MIN_SURFELS: u32 = 1024;
 /// Fewest and most links per cache a request may ask for.
 pub const LINK_RANGE: (u32, u32) = (16, 512);
+/// Most bytes of link coefficients a request may make: wgpu's default storage binding size,
+/// which every adapter the server accepts offers (larger GPUs bind more, but a request must
+/// not depend on the machine it lands on).
+pub const MAX_LINK_BYTES: u64 = 128 << 20;
 /// Fewest SH bands a request may ask for (the most is [`MAX_GPU_BANDS`]).
 pub const MIN_BANDS: u32 = 2;
 /// Image histories (sessions) whose bounces a scene's surfels keep at once.
@@ -139,8 +143,26 @@ fn surfel_params(
         None => CacheGrid::default_spacing(facts.extent),
     };
     // The lattice's own limits (at most `grid::MAX_CACHES`) before anything is queued.
-    CacheGrid::new(Vec3::ZERO, facts.extent, spacing)
+    let grid = CacheGrid::new(Vec3::ZERO, facts.extent, spacing)
         .map_err(|e| InvalidSetting::new("surfel_cache_spacing", e.to_string()))?;
+    // The links' coefficients are bound as one buffer; refused here rather than by the GPU
+    // after minutes of precomputation.
+    let bytes = passes::link_coefficient_bytes(grid.count() as u64, gi.surfel_links, gi.sh_bands);
+    if bytes > MAX_LINK_BYTES {
+        return Err(InvalidSetting::new(
+            "surfel_links",
+            format!(
+                "{} caches × {} links × {} SH coefficients take {} MiB, more than the {} MiB \
+                 a GPU binds at once; use fewer surfel_links or sh_bands, or a larger \
+                 surfel_cache_spacing",
+                grid.count(),
+                gi.surfel_links,
+                gi.sh_bands * gi.sh_bands,
+                bytes.div_ceil(1 << 20),
+                MAX_LINK_BYTES >> 20
+            ),
+        ));
+    }
     Ok(SurfelParams {
         surfels: gi.surfel_count,
         cache_spacing: Some(spacing),
@@ -869,6 +891,27 @@ mod tests {
         assert!(inside.iter().all(|&v| v <= 1.02 * full), "{inside:?}");
         let open = inside.iter().filter(|&&v| v > 0.7 * full).count();
         assert!(2 * open >= inside.len(), "{inside:?}");
+    }
+
+    /// A set whose link coefficients would not fit one GPU binding is refused with the
+    /// request, naming `surfel_links`; the same lattice with fewer links or bands passes.
+    #[test]
+    fn link_coefficients_beyond_one_binding_are_refused_before_precomputing() {
+        let facts = SceneFacts::of(&procedural::cornell_box());
+        let gi = |links, bands| lightcast_protocol::GiParams {
+            method: GiMethod::Surfels,
+            surfel_cache_spacing: Some(0.05),
+            surfel_links: links,
+            sh_bands: bands,
+            ..Default::default()
+        };
+        // Some 80,000 caches 0.05 apart: 64 links × 9 coefficients × 4 bytes each exceed
+        // 128 MiB, 32 links or 4 coefficients do not.
+        let refused = surfel_params(&gi(64, 3), &facts).expect_err("too large");
+        assert_eq!(refused.field, "surfel_links");
+        assert!(refused.reason.contains("128 MiB"), "{}", refused.reason);
+        assert!(surfel_params(&gi(32, 3), &facts).is_ok());
+        assert!(surfel_params(&gi(64, 2), &facts).is_ok());
     }
 
     /// How long the precomputation takes at the defaults (`cargo test --release -- --ignored

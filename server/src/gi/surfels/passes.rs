@@ -215,12 +215,40 @@ pub struct SurfelBuffers {
 pub enum UploadError {
     #[error("the surfels' GPU passes take at most {MAX_GPU_BANDS} SH bands, the set has {0}")]
     Bands(u32),
+    #[error("the {what} take {bytes} bytes, more than the GPU binds at once ({limit} bytes); use fewer links or SH bands, or a larger cache spacing")]
+    TooLarge {
+        what: &'static str,
+        bytes: u64,
+        limit: u64,
+    },
+}
+
+/// Bytes of the links' SH coefficients of a set with `caches` caches, `links` links each and
+/// `bands` SH bands: the largest buffer the surfels bind.
+pub fn link_coefficient_bytes(caches: u64, links: u32, bands: u32) -> u64 {
+    caches * u64::from(links) * sh::coefficient_count(bands) as u64 * 4
 }
 
 impl SurfelBuffers {
     pub fn new(device: &wgpu::Device, scene: &Scene, set: &SurfelSet) -> Result<Self, UploadError> {
         if set.links.bands > MAX_GPU_BANDS {
             return Err(UploadError::Bands(set.links.bands));
+        }
+        let limits = device.limits();
+        let limit = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let bytes = link_coefficient_bytes(
+            set.grid.count() as u64,
+            set.links.per_cache,
+            set.links.bands,
+        );
+        if bytes > limit {
+            return Err(UploadError::TooLarge {
+                what: "links' SH coefficients",
+                bytes,
+                limit,
+            });
         }
         let storage = |label: &str, contents: &[u8]| {
             // wgpu refuses empty bindings; a 16-byte zero buffer stands in for an empty list.

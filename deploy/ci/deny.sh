@@ -13,5 +13,9 @@ if [ "$("$root/bin/cargo-deny" --version 2>/dev/null)" != "cargo-deny $version" 
   echo "deny: installing cargo-deny $version into $root" >&2
   cargo install --quiet --locked --version "$version" --root "$root" cargo-deny
 fi
+# cargo-deny reads the metadata of every crate in Cargo.lock, for every target (wasi, android
+# …), offline: fetch them first, since a build downloads only the host's (a fresh cargo home
+# lacked `wasip2` and failed here).
+cargo fetch --locked --quiet
 "$root/bin/cargo-deny" --offline --manifest-path Cargo.toml --all-features \
   --config deploy/ci/deny.toml check licenses bans sources

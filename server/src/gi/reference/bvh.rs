@@ -189,6 +189,57 @@ impl SceneBvh {
         }
     }
 
+    /// Whether anything lies on the ray before `t_max`: a shadow ray, which stops at the
+    /// first hit instead of looking for the nearest (the surfels' link rays trace one per
+    /// surfel and cache).
+    pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+        if self.nodes.is_empty() {
+            return false;
+        }
+        let inv_dir = dir.recip();
+        let mut stack = [0u32; MAX_STACK];
+        let mut depth = 0;
+        let mut node = 0u32;
+        loop {
+            let n = &self.nodes[node as usize];
+            if n.prim_count > 0 {
+                let hit = (n.first_index..n.first_index + n.prim_count).any(|i| {
+                    intersect_triangle(&self.triangles[i as usize], origin, dir)
+                        .is_some_and(|h| h.t < t_max)
+                });
+                if hit {
+                    return true;
+                }
+            } else {
+                let (a, b) = (n.first_index, n.first_index + 1);
+                let ta = slab(&self.nodes[a as usize], origin, inv_dir, t_max);
+                let tb = slab(&self.nodes[b as usize], origin, inv_dir, t_max);
+                match (ta < f32::INFINITY, tb < f32::INFINITY) {
+                    (true, true) => {
+                        stack[depth] = b;
+                        depth += 1;
+                        node = a;
+                        continue;
+                    }
+                    (true, false) => {
+                        node = a;
+                        continue;
+                    }
+                    (false, true) => {
+                        node = b;
+                        continue;
+                    }
+                    (false, false) => {}
+                }
+            }
+            if depth == 0 {
+                return false;
+            }
+            depth -= 1;
+            node = stack[depth];
+        }
+    }
+
     /// The nearest hit by testing every triangle (the check for [`Self::intersect`]).
     pub fn intersect_brute_force(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
         self.triangles
@@ -292,6 +343,17 @@ mod tests {
         for (origin, dir) in rays(scene, 2000, 7) {
             let fast = bvh.intersect(origin, dir, f32::INFINITY);
             let slow = bvh.intersect_brute_force(origin, dir, f32::INFINITY);
+            // The shadow query agrees with the nearest hit at the hit's distance and at half
+            // and twice of it (a limit short of every hit and one past the first).
+            let t = slow.map_or(1.0, |h| h.t);
+            for limit in [0.5 * t, 2.0 * t, f32::INFINITY] {
+                let want = bvh.intersect_brute_force(origin, dir, limit).is_some();
+                assert_eq!(
+                    bvh.occluded(origin, dir, limit),
+                    want,
+                    "ray {origin} {dir} to {limit}"
+                );
+            }
             match (fast, slow) {
                 (None, None) => {}
                 (Some(a), Some(b)) => {

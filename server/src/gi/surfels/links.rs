@@ -171,7 +171,7 @@ fn cache_links(senders: &Senders, p: Vec3, per_cache: u32, bands: u32) -> CacheL
                 return (0.0, dir);
             }
             // The surfel's own triangle ends the ray at d: stop just short of it.
-            if senders.bvh.intersect(p, dir, d - epsilon).is_some() {
+            if senders.bvh.occluded(p, dir, d - epsilon) {
                 return (0.0, dir);
             }
             let solid_angle = 2.0

@@ -823,6 +823,10 @@ pub struct ServerInfo {
     /// The GI methods this server runs, with their parameters and limits.
     #[serde(default)]
     pub gi_methods: Vec<GiMethodInfo>,
+    /// This replica's name where several serve behind one proxy (`--replica`): session ids
+    /// start with it, and every response carries it as `Lightcast-Replica`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub replica: Option<String>,
     /// What a request gets for the render fields it leaves out.
     #[serde(default)]
     pub defaults: RenderDefaults,

@@ -23,6 +23,17 @@ pub struct ServeArgs {
     /// A file with one bearer token per line (blank lines and `#` comments skipped).
     #[arg(long, env = "LIGHTCAST_TOKENS_FILE")]
     pub tokens_file: Option<PathBuf>,
+    /// This replica's name where several serve behind one proxy: a DNS label such as the
+    /// StatefulSet pod name. Session ids then start with it and carry a signature under the
+    /// routing key, so the proxy routes each session's requests to its replica and any
+    /// replica answers 421 naming the owner of a session it does not hold (deploy/README.md).
+    /// Needs --routing-key-file.
+    #[arg(long, env = "LIGHTCAST_REPLICA")]
+    pub replica: Option<String>,
+    /// A file holding the key every replica signs session ids with (at least 32 bytes; a
+    /// trailing newline is ignored). Needs --replica.
+    #[arg(long, env = "LIGHTCAST_ROUTING_KEY_FILE")]
+    pub routing_key_file: Option<PathBuf>,
     /// Count a CPU (software) adapter such as lavapipe as ready in /readyz.
     #[arg(long, env = "LIGHTCAST_ALLOW_CPU_ADAPTER")]
     pub allow_cpu_adapter: bool,
@@ -202,6 +213,13 @@ pub enum ConfigError {
         path: PathBuf,
         error: std::io::Error,
     },
+    #[error("reading routing key file {path}: {error}")]
+    RoutingKeyFile {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    #[error("--replica: {0}")]
+    Routing(#[from] crate::service::routing::RoutingError),
 }
 
 impl LimitArgs {
@@ -389,6 +407,35 @@ impl LimitArgs {
 }
 
 impl ServeArgs {
+    /// Session routing across replicas from `--replica` and `--routing-key-file` (both or
+    /// neither).
+    pub fn routing(&self) -> Result<Option<crate::service::routing::Routing>, ConfigError> {
+        let (replica, path) = match (&self.replica, &self.routing_key_file) {
+            (None, None) => return Ok(None),
+            (Some(r), Some(p)) => (r, p),
+            (Some(_), None) => {
+                return Err(ConfigError::Invalid {
+                    flag: "replica",
+                    reason: "needs --routing-key-file, the key every replica shares".into(),
+                })
+            }
+            (None, Some(_)) => {
+                return Err(ConfigError::Invalid {
+                    flag: "routing-key-file",
+                    reason: "needs --replica, this replica's name".into(),
+                })
+            }
+        };
+        let mut key = std::fs::read(path).map_err(|error| ConfigError::RoutingKeyFile {
+            path: path.clone(),
+            error,
+        })?;
+        while key.last().is_some_and(|b| *b == b'\n' || *b == b'\r') {
+            key.pop();
+        }
+        Ok(Some(crate::service::routing::Routing::new(replica, &key)?))
+    }
+
     /// Tokens from `--token` and `--tokens-file`; empty means auth is off.
     pub fn tokens(&self) -> Result<Vec<String>, ConfigError> {
         let mut tokens: Vec<String> = self
@@ -438,6 +485,47 @@ pub(crate) mod tests {
             .limits
             .limits(0)
             .expect("default limits are valid")
+    }
+
+    #[derive(clap::Parser)]
+    struct Serve {
+        #[command(flatten)]
+        serve: super::ServeArgs,
+    }
+
+    /// `--replica` and `--routing-key-file` come together; the key file's trailing newline is
+    /// not part of the key, and a short key is refused.
+    #[test]
+    fn routing_needs_a_name_and_a_long_enough_key_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let key = dir.path().join("key");
+        let routing = |extra: &[&str]| {
+            let mut argv = vec!["test"];
+            argv.extend_from_slice(extra);
+            Serve::parse_from(argv).serve.routing()
+        };
+        let path = key.to_string_lossy().into_owned();
+        assert!(routing(&[]).expect("off").is_none());
+        assert!(routing(&["--replica", "a"]).is_err());
+        assert!(routing(&["--routing-key-file", &path]).is_err());
+        assert!(matches!(
+            routing(&["--replica", "a", "--routing-key-file", &path]),
+            Err(super::ConfigError::RoutingKeyFile { .. })
+        ));
+        std::fs::write(&key, format!("{}\n", "k".repeat(31))).expect("write");
+        assert!(matches!(
+            routing(&["--replica", "a", "--routing-key-file", &path]),
+            Err(super::ConfigError::Routing(_))
+        ));
+        std::fs::write(&key, format!("{}\n", "k".repeat(32))).expect("write");
+        let on = routing(&["--replica", "lightcast-0", "--routing-key-file", &path])
+            .expect("valid")
+            .expect("on");
+        assert_eq!(on.replica(), "lightcast-0");
+        assert!(matches!(
+            routing(&["--replica", "Not_A_Label", "--routing-key-file", &path]),
+            Err(super::ConfigError::Routing(_))
+        ));
     }
 
     #[test]

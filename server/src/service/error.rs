@@ -9,7 +9,12 @@ use lightcast_protocol::ErrorBody;
 pub struct ApiError {
     pub status: StatusCode,
     pub body: ErrorBody,
+    /// The replica that holds what was asked for (421), sent as `Lightcast-Owner`.
+    pub owner: Option<String>,
 }
+
+/// The header of a 421 naming the replica that holds the session.
+pub const OWNER_HEADER: &str = "lightcast-owner";
 
 /// Most characters of a client's own value (an id, a name) repeated in an error message:
 /// enough to recognise it, while a 100 KB id cannot make its error 100 KB.
@@ -41,7 +46,23 @@ impl ApiError {
                 field: None,
                 message: shorten(message.into(), MESSAGE_CHARS),
             },
+            owner: None,
         }
+    }
+
+    /// 421 `misdirected`: session `id` is genuine but lives on replica `owner`.
+    pub fn misdirected(id: &str, owner: &str) -> Self {
+        let mut e = Self::new(
+            StatusCode::MISDIRECTED_REQUEST,
+            "misdirected",
+            format!(
+                "session '{}' lives on replica '{owner}'; send its requests there (a proxy \
+                 routes on the part of the id before the first '.')",
+                echo(id)
+            ),
+        );
+        e.owner = Some(owner.to_string());
+        e
     }
 
     /// 400 `invalid_field`: the value of `field` is unusable.
@@ -109,7 +130,14 @@ impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         metrics::counter!(crate::service::metrics::ERRORS, "kind" => self.body.error.clone())
             .increment(1);
-        (self.status, axum::Json(self.body)).into_response()
+        let mut response = (self.status, axum::Json(self.body)).into_response();
+        if let Some(value) = self
+            .owner
+            .and_then(|o| axum::http::HeaderValue::from_str(&o).ok())
+        {
+            response.headers_mut().insert(OWNER_HEADER, value);
+        }
+        response
     }
 }
 

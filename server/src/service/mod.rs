@@ -17,6 +17,7 @@ pub mod listen;
 pub mod metrics;
 pub mod params;
 pub mod render_loop;
+pub mod routing;
 pub mod scenes;
 pub mod sessions;
 
@@ -114,7 +115,16 @@ impl Service {
             .insert(scene, source, Some(DEFAULT_SCENE_ID), load_ms, None)
             .map_err(|e| ServeError::Task(e.body.message))?;
 
-        let sessions = Arc::new(sessions::SessionRegistry::new(&limits));
+        let routing = args
+            .routing()
+            .map_err(|e| ServeError::Task(e.to_string()))?;
+        if let Some(r) = &routing {
+            log(&format!(
+                "replica {}: session ids carry this name, signed with the routing key",
+                r.replica()
+            ));
+        }
+        let sessions = Arc::new(sessions::SessionRegistry::new(&limits, routing));
         ::metrics::gauge!(metrics::SESSION_CAPACITY).set(f64::from(limits.max_sessions));
         let encoder = Arc::new(encode::EncodePool::new(
             args.encode_threads

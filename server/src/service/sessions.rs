@@ -5,6 +5,7 @@ use super::budget::{Quota, TokenQuotas};
 use super::error::ApiError;
 use super::ids;
 use super::params::Resolved;
+use super::routing::{Owner, Routing};
 use super::scenes::{lock, SceneLease};
 use lightcast_protocol::{
     ErrorBody, Limits, ServerEvent, SessionInfo, SessionParams, SessionStats, StageMs, StreamMode,
@@ -109,7 +110,9 @@ pub struct Session {
 }
 
 impl Session {
+    /// A session called `id` ([`SessionRegistry::new_id`]).
     pub fn new(
+        id: String,
         owner: Option<String>,
         params: SessionParams,
         resolved: Resolved,
@@ -117,7 +120,7 @@ impl Session {
     ) -> Arc<Self> {
         let now = Instant::now();
         Arc::new(Self {
-            id: ids::new_id("se"),
+            id,
             owner,
             created_unix_ms: unix_ms(),
             state: Mutex::new(State {
@@ -391,15 +394,30 @@ pub struct SessionRegistry {
     sessions: Mutex<BTreeMap<String, Arc<Session>>>,
     max: usize,
     quotas: TokenQuotas,
+    /// This replica's name and the shared key, where several replicas serve.
+    routing: Option<Routing>,
 }
 
 impl SessionRegistry {
-    pub fn new(limits: &Limits) -> Self {
+    pub fn new(limits: &Limits, routing: Option<Routing>) -> Self {
         Self {
             sessions: Mutex::new(BTreeMap::new()),
             max: limits.max_sessions as usize,
             quotas: TokenQuotas::new(limits),
+            routing,
         }
+    }
+
+    /// A new session id: `se_<random>`, or `REPLICA.se_<random>.<mac>` where replicas route.
+    pub fn new_id(&self) -> String {
+        self.routing
+            .as_ref()
+            .map_or_else(|| ids::new_id("se"), Routing::session_id)
+    }
+
+    /// This replica's name, where replicas route.
+    pub fn replica(&self) -> Option<&str> {
+        self.routing.as_ref().map(Routing::replica)
     }
 
     /// Adds a session within the server's limit and its token's quota.
@@ -423,7 +441,18 @@ impl SessionRegistry {
     }
 
     /// The session `id`, if `token` may use it (the creator's token when auth is on).
+    /// Refuses an id this replica cannot hold: 421 naming the owner for another replica's
+    /// genuine id, 404 for a forged one (as for any unknown id).
+    pub fn check_here(&self, id: &str) -> Result<(), ApiError> {
+        match self.routing.as_ref().map(|r| r.owner(id)) {
+            None | Some(Owner::Here) => Ok(()),
+            Some(Owner::Elsewhere(owner)) => Err(ApiError::misdirected(id, &owner)),
+            Some(Owner::Forged) => Err(ApiError::not_found("session", id)),
+        }
+    }
+
     pub fn get(&self, id: &str, token: Option<&str>) -> Result<Arc<Session>, ApiError> {
+        self.check_here(id)?;
         let session = lock(&self.sessions)
             .get(id)
             .cloned()

@@ -4,5 +4,6 @@
 mod api;
 mod budgets;
 mod hardening;
+mod routing;
 mod streaming;
 mod viewer;

@@ -79,5 +79,6 @@ pub async fn server_info(State(state): State<Arc<AppState>>) -> Json<ServerInfo>
             .collect(),
         gi_methods: state.gi_methods(),
         defaults: state.defaults.info.clone(),
+        replica: state.sessions.replica().map(str::to_string),
     })
 }

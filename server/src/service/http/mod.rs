@@ -244,11 +244,34 @@ fn caller(state: &AppState, request: &Request) -> Result<Caller, ApiError> {
             .and_then(|rest| rest.strip_suffix("/stream")),
         ticket,
     ) {
+        // Another replica's session: say where it lives rather than that the ticket is unknown.
+        state.sessions.check_here(session)?;
         return state.redeem_ticket(ticket, session).map(Caller);
     }
     Err(ApiError::unauthorized(
         "this server needs a bearer token: send 'Authorization: Bearer TOKEN'",
     ))
+}
+
+/// The header every response of a replica carries its name in (`--replica`).
+pub const REPLICA_HEADER: &str = "lightcast-replica";
+
+/// Names this replica on every response, so a client or an operator behind a proxy sees which
+/// replica answered.
+pub async fn name_replica(
+    State(state): State<Arc<AppState>>,
+    request: Request,
+    next: Next,
+) -> Response {
+    let mut response = next.run(request).await;
+    if let Some(value) = state
+        .sessions
+        .replica()
+        .and_then(|r| axum::http::HeaderValue::from_str(r).ok())
+    {
+        response.headers_mut().insert(REPLICA_HEADER, value);
+    }
+    response
 }
 
 /// Refuses a request head over this server's limits with 414/431 and the JSON error body (hyper
@@ -505,6 +528,10 @@ pub fn router(state: Arc<AppState>) -> Router {
             check_head,
         ))
         .layer(axum::middleware::from_fn(json_errors))
+        .layer(axum::middleware::from_fn_with_state(
+            Arc::clone(&state),
+            name_replica,
+        ))
         .layer(tower_http::trace::TraceLayer::new_for_http())
         .with_state(state)
 }

@@ -103,7 +103,13 @@ pub async fn create(
     let params: SessionParams = state.defaults.parse(&body)?;
     let entry = super::scenes::scene(&state, &params.render.scene)?;
     let resolved = resolve_session(&params, &entry, &state.limits, state.max_texture)?;
-    let session = Session::new(caller.0.clone(), params, resolved, entry.lease());
+    let session = Session::new(
+        state.sessions.new_id(),
+        caller.0.clone(),
+        params,
+        resolved,
+        entry.lease(),
+    );
     state.sessions.insert(Arc::clone(&session))?;
     tracing::info!(session = %session.id, scene = %entry.id, "session created");
     let ticket = state.issue_ticket(&session.id, caller.0);
@@ -122,7 +128,7 @@ pub async fn create(
 /// Shows a session: parameters, counters and the last frame's stage times.
 #[utoipa::path(get, path = "/v1/sessions/{id}", tag = "sessions",
     params(("id" = String, Path, description = "Session id")),
-    responses((status = 200, body = SessionInfo), (status = 404, body = lightcast_protocol::ErrorBody)))]
+    responses((status = 200, body = SessionInfo), (status = 404, body = lightcast_protocol::ErrorBody), (status = 421, description = "The session lives on another replica (named in the Lightcast-Owner header)", body = lightcast_protocol::ErrorBody)))]
 pub async fn show(
     State(state): State<Arc<AppState>>,
     Extension(caller): Extension<Caller>,
@@ -139,7 +145,7 @@ pub async fn show(
     responses(
         (status = 200, body = SessionInfo),
         (status = 400, body = lightcast_protocol::ErrorBody),
-        (status = 404, body = lightcast_protocol::ErrorBody)))]
+        (status = 404, body = lightcast_protocol::ErrorBody), (status = 421, description = "The session lives on another replica (named in the Lightcast-Owner header)", body = lightcast_protocol::ErrorBody)))]
 pub async fn update(
     State(state): State<Arc<AppState>>,
     Extension(caller): Extension<Caller>,
@@ -156,7 +162,7 @@ pub async fn update(
 /// Ends a session; its WebSocket gets a `closing` event and closes.
 #[utoipa::path(delete, path = "/v1/sessions/{id}", tag = "sessions",
     params(("id" = String, Path, description = "Session id")),
-    responses((status = 204, description = "Deleted"), (status = 404, body = lightcast_protocol::ErrorBody)))]
+    responses((status = 204, description = "Deleted"), (status = 404, body = lightcast_protocol::ErrorBody), (status = 421, description = "The session lives on another replica (named in the Lightcast-Owner header)", body = lightcast_protocol::ErrorBody)))]
 pub async fn delete(
     State(state): State<Arc<AppState>>,
     Extension(caller): Extension<Caller>,
@@ -172,7 +178,7 @@ pub async fn delete(
 /// header: `GET /v1/sessions/{id}/stream?ticket=…`.
 #[utoipa::path(post, path = "/v1/sessions/{id}/ticket", tag = "sessions",
     params(("id" = String, Path, description = "Session id")),
-    responses((status = 200, body = StreamTicket), (status = 404, body = lightcast_protocol::ErrorBody)))]
+    responses((status = 200, body = StreamTicket), (status = 404, body = lightcast_protocol::ErrorBody), (status = 421, description = "The session lives on another replica (named in the Lightcast-Owner header)", body = lightcast_protocol::ErrorBody)))]
 pub async fn ticket(
     State(state): State<Arc<AppState>>,
     Extension(caller): Extension<Caller>,

@@ -59,6 +59,7 @@ impl RateLimit {
     responses(
         (status = 101, description = "WebSocket: binary frames (FrameHeader + image) and JSON ServerEvent text out; JSON ClientMessage text in"),
         (status = 404, body = ErrorBody),
+        (status = 421, description = "The session lives on another replica (named in the Lightcast-Owner header)", body = ErrorBody),
         (status = 409, description = "A stream is already attached", body = ErrorBody),
         (status = 426, description = "Not a WebSocket request", body = ErrorBody)))]
 pub async fn stream(

@@ -12,7 +12,8 @@
 # - with --tests: chromium, and nodejs + npm where Node.js is missing, for the browser viewer's
 #   test (Debian's Chromium driven by playwright-core, which never downloads a browser), then
 #   `npm ci` in client/web for playwright-core at the version its package-lock.json pins.
-#   Also python3-venv where `python3 -m venv` cannot work, for deploy/ci/check.sh's tools.
+#   Also python3-venv where `python3 -m venv` cannot work, for deploy/ci/check.sh's tools, and
+#   haproxy for the test of three replicas behind a proxy.
 # Checked, not installed: Rust (cargo at least the workspace's `rust-version` in Cargo.toml, from
 # https://rustup.rs) and, with --tests, Node.js at least what the pinned playwright-core needs.
 # Packages are installed as root, or through sudo for other users.
@@ -46,6 +47,8 @@ command -v c++ >/dev/null 2>&1 || packages+=(g++)
 
 if $tests; then
   command -v chromium >/dev/null 2>&1 || packages+=(chromium)
+  # The three-replica routing test runs a real proxy.
+  [ -x /usr/sbin/haproxy ] || packages+=(haproxy)
   command -v node >/dev/null 2>&1 || packages+=(nodejs)
   command -v npm >/dev/null 2>&1 || packages+=(npm)
   python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || packages+=(python3-venv)

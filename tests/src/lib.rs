@@ -64,6 +64,22 @@ impl TestServer {
         }
     }
 
+    /// A client of whatever serves at `base` (a proxy in front of servers started here):
+    /// the same helpers, and [`Self::stop`] stops nothing.
+    pub fn remote(base: String) -> Self {
+        Self {
+            base,
+            http: reqwest::Client::new(),
+            service: None,
+            _cache: tempfile::tempdir().expect("temporary directory"),
+        }
+    }
+
+    /// The port this server listens on.
+    pub fn port(&self) -> u16 {
+        self.service.as_ref().map_or(0, |s| s.addr.port())
+    }
+
     pub fn url(&self, path: &str) -> String {
         format!("{}{path}", self.base)
     }

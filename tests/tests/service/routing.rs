@@ -73,3 +73,206 @@ async fn a_session_is_found_on_its_replica_and_pointed_to_from_the_others() {
     a.stop().await;
     b.stop().await;
 }
+
+/// HAProxy in front of `replicas`, routing as `deploy/README.md` describes: session paths to
+/// the replica their id names, everything else round-robin over the replicas it finds healthy.
+/// Stopped when dropped.
+struct Proxy {
+    child: std::process::Child,
+    port: u16,
+    _dir: tempfile::TempDir,
+}
+
+impl Proxy {
+    fn start(replicas: &[(&str, u16)]) -> Self {
+        let haproxy = std::env::var("HAPROXY").unwrap_or_else(|_| "/usr/sbin/haproxy".into());
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .expect("a free port")
+            .port();
+        let mut config = format!(
+            "global\n  maxconn 512\ndefaults\n  mode http\n  timeout connect 2s\n  \
+             timeout client 120s\n  timeout server 120s\n  timeout tunnel 300s\n\
+             frontend web\n  bind 127.0.0.1:{port}\n  \
+             http-request set-var(req.replica) path,field(4,/),field(1,.) if {{ path_reg ^/v1/sessions/[a-z0-9-]+\\. }}\n  \
+             use_backend %[var(req.replica)] if {{ var(req.replica) -m found }}\n  \
+             default_backend any\n\
+             backend any\n  balance roundrobin\n  option httpchk GET /healthz\n"
+        );
+        for (name, p) in replicas {
+            config += &format!("  server {name} 127.0.0.1:{p} check inter 200ms fall 1 rise 1\n");
+        }
+        for (name, p) in replicas {
+            config += &format!("backend {name}\n  server {name} 127.0.0.1:{p}\n");
+        }
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("haproxy.cfg");
+        std::fs::write(&path, config).expect("haproxy.cfg");
+        let child = std::process::Command::new(&haproxy)
+            .arg("-db")
+            .arg("-f")
+            .arg(&path)
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("starting {haproxy} ({e}): install it with deploy/setup-debian.sh --tests")
+            });
+        Self {
+            child,
+            port,
+            _dir: dir,
+        }
+    }
+}
+
+impl Drop for Proxy {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Frames of `stream` until `count` more have arrived; panics if it closes.
+async fn frames(
+    stream: &mut lightcast_e2e::Stream,
+    count: usize,
+) -> Vec<lightcast_e2e::ReceivedFrame> {
+    let mut events = Vec::new();
+    let mut out = Vec::new();
+    while out.len() < count {
+        out.push(stream.next_frame(&mut events).await);
+    }
+    out
+}
+
+/// Issue 14 part 4: three replicas behind a real HAProxy configured by the routing rule.
+/// Sessions created through it spread over the replicas, stream through it, follow camera
+/// input and take tickets through it; when one replica stops, its client gets a clear close
+/// and a new session lands on another replica while the others' streams go on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn three_replicas_behind_haproxy_route_sessions_and_survive_one_stopping() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let key = dir.path().join("routing.key");
+    std::fs::write(&key, "0123456789abcdef0123456789abcdef").expect("key file");
+    let key = key.to_string_lossy().into_owned();
+    let names = ["lightcast-0", "lightcast-1", "lightcast-2"];
+    let mut replicas = Vec::new();
+    for name in names {
+        replicas.push(TestServer::start(&["--replica", name, "--routing-key-file", &key]).await);
+    }
+    let ports: Vec<(&str, u16)> = names
+        .iter()
+        .copied()
+        .zip(replicas.iter().map(TestServer::port))
+        .collect();
+    let proxy = Proxy::start(&ports);
+    let front = TestServer::remote(format!("http://127.0.0.1:{}", proxy.port));
+    tokio::time::timeout(lightcast_e2e::PATIENCE, async {
+        while !matches!(front.http.get(front.url("/healthz")).send().await, Ok(r) if r.status() == 200) {
+            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+        }
+    })
+    .await
+    .expect("the proxy answers");
+
+    // Three sessions through the proxy land on three replicas.
+    let mut created = Vec::new();
+    for _ in 0..3 {
+        created.push(front.create_session(direct_session(32, 24), None).await);
+    }
+    let owners: std::collections::BTreeSet<&str> = created
+        .iter()
+        .map(|c| c.session.id.split('.').next().expect("a replica part"))
+        .collect();
+    assert_eq!(
+        owners.len(),
+        3,
+        "sessions spread over the replicas: {owners:?}"
+    );
+
+    // Each streams through the proxy with its ticket, and a session's requests reach its owner.
+    let mut streams = Vec::new();
+    for c in &created {
+        let mut s = front.connect(c).await;
+        frames(&mut s, 2).await;
+        streams.push(s);
+        let info = front.get(&format!("/v1/sessions/{}", c.session.id)).await;
+        assert_eq!(info.status(), 200);
+        let owner = c.session.id.split('.').next().expect("owner");
+        assert_eq!(info.headers()["lightcast-replica"], owner);
+    }
+    let ticket = front
+        .http
+        .post(front.url(&format!("/v1/sessions/{}/ticket", created[1].session.id)))
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(ticket.status(), 200, "a ticket through the proxy");
+
+    // Camera input through the proxy shows in the frames.
+    let before = frames(&mut streams[0], 1).await.remove(0);
+    streams[0]
+        .send(
+            serde_json::json!({"type": "camera", "input_id": 9, "camera": {
+            "position": [0.9, 1.0, 2.5], "target": [-1.0, 1.0, 0.0], "fov_y_degrees": 50.0}}),
+        )
+        .await;
+    let mut events = Vec::new();
+    let moved = loop {
+        let f = streams[0].next_frame(&mut events).await;
+        if f.header.input_id == 9 {
+            break f;
+        }
+    };
+    let diff = lightcast_e2e::mean_abs_diff(&before.rgba, &moved.rgba);
+    assert!(
+        diff > 5.0,
+        "the camera moved the image by only {diff:.2} levels"
+    );
+
+    // Stop the replica holding the third session: its client is told and closed.
+    let doomed = created[2]
+        .session
+        .id
+        .split('.')
+        .next()
+        .expect("owner")
+        .to_string();
+    let index = names
+        .iter()
+        .position(|n| *n == doomed)
+        .expect("a known replica");
+    let stopping = tokio::spawn(replicas.remove(index).stop());
+    let mut dying = streams.pop().expect("third stream");
+    let mut reason = None;
+    loop {
+        match dying.next().await {
+            Incoming::Event(ServerEvent::Closing { reason: r }) => reason = Some(r),
+            Incoming::Closed => break,
+            _ => {}
+        }
+    }
+    assert_eq!(reason.as_deref(), Some("server shutting down"));
+    stopping.await.expect("stopped");
+
+    // The other streams go on, and a new session lands on a replica still running.
+    for s in &mut streams {
+        assert_eq!(frames(s, 3).await.len(), 3);
+    }
+    tokio::time::sleep(std::time::Duration::from_millis(800)).await;
+    let again = front.create_session(direct_session(32, 24), None).await;
+    let owner = again.session.id.split('.').next().expect("owner");
+    assert_ne!(
+        owner, doomed,
+        "the proxy no longer sends new sessions to the stopped replica"
+    );
+    let mut s = front.connect(&again).await;
+    frames(&mut s, 1).await;
+    for s in &mut streams {
+        assert_eq!(frames(s, 2).await.len(), 2);
+    }
+    drop(proxy);
+    for r in replicas {
+        r.stop().await;
+    }
+}

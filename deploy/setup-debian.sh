@@ -13,7 +13,7 @@
 #   test (Debian's Chromium driven by playwright-core, which never downloads a browser), then
 #   `npm ci` in client/web for playwright-core at the version its package-lock.json pins.
 #   Also python3-venv where `python3 -m venv` cannot work, for deploy/ci/check.sh's tools, and
-#   haproxy for the test of three replicas behind a proxy.
+#   nginx for the test of three replicas behind a proxy (the chart's router's rule).
 # Checked, not installed: Rust (cargo at least the workspace's `rust-version` in Cargo.toml, from
 # https://rustup.rs) and, with --tests, Node.js at least what the pinned playwright-core needs.
 # Packages are installed as root, or through sudo for other users.
@@ -48,7 +48,7 @@ command -v c++ >/dev/null 2>&1 || packages+=(g++)
 if $tests; then
   command -v chromium >/dev/null 2>&1 || packages+=(chromium)
   # The three-replica routing test runs a real proxy.
-  [ -x /usr/sbin/haproxy ] || packages+=(haproxy)
+  [ -x /usr/sbin/nginx ] || packages+=(nginx)
   command -v node >/dev/null 2>&1 || packages+=(nodejs)
   command -v npm >/dev/null 2>&1 || packages+=(npm)
   python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || packages+=(python3-venv)

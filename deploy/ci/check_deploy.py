@@ -54,6 +54,13 @@ EVERYTHING_ON = {
     "podAnnotations": {"note": "x"},
 }
 
+# Sessions routed across the pods by the chart's router (issue 14).
+ROUTING_ON = {
+    "routing": {"enabled": True, "key": "0123456789abcdef0123456789abcdef"},
+    "ingress": {"enabled": True, "className": "nginx"},
+}
+ROUTING_RULE = CHART / "files/routing.conf"
+
 # Values the chart must refuse, each with the words its error must contain.
 BAD_VALUES = [
     ({"replicas": 3}, "Additional property replicas is not allowed"),
@@ -61,6 +68,8 @@ BAD_VALUES = [
     ({"gpu": {"count": 0}}, "gpu.count"),
     ({"cache": {"size": "lots"}}, "cache.size"),
     ({"server": {"env": {"MAX_FPS": "60"}}}, "server.env"),
+    ({"routing": {"enabled": True}}, "routing.existingSecret or routing.key"),
+    ({"routing": {"key": "too short"}}, "routing.key"),
     ({"autoscaling": {"enabled": True, "minReplicas": 5, "maxReplicas": 2}},
      "autoscaling.minReplicas (5) is above autoscaling.maxReplicas (2)"),
 ]
@@ -234,12 +243,70 @@ def check_default_render(objects, image, env_names):
         fail("chart: no PodDisruptionBudget by default")
 
 
+def check_routing_render(objects, env_names):
+    """With routing on: pods name themselves and read the key, the router carries the shared
+    rule verbatim, the Ingress goes through the router, and no Service of the pods selects it."""
+    (statefulset,) = by_kind(objects, "StatefulSet")
+    env = {e["name"]: e for e in statefulset["spec"]["template"]["spec"]["containers"][0]["env"]}
+    for name in env:
+        if name not in env_names:
+            fail(f"chart (routing): env {name} is no flag of the server")
+    replica = env.get("LIGHTCAST_REPLICA", {}).get("valueFrom", {}).get("fieldRef", {})
+    if replica.get("fieldPath") != "metadata.name":
+        fail("chart (routing): LIGHTCAST_REPLICA is not the pod's name")
+    if "LIGHTCAST_ROUTING_KEY_FILE" not in env:
+        fail("chart (routing): no LIGHTCAST_ROUTING_KEY_FILE")
+    routers = [c for c in by_kind(objects, "ConfigMap") if c["metadata"]["name"].endswith("-router")]
+    conf = [line.strip() for line in routers[0]["data"]["default.conf"].splitlines()] if routers else []
+    missing = [line.strip() for line in ROUTING_RULE.read_text().splitlines()
+               if line.strip() and line.strip() not in conf]
+    if len(routers) != 1 or missing:
+        fail(f"chart (routing): the router's configuration lacks files/routing.conf's {missing}")
+    else:
+        check_router_config(routers[0]["data"]["default.conf"])
+    (ingress,) = by_kind(objects, "Ingress")
+    backend = ingress["spec"]["rules"][0]["http"]["paths"][0]["backend"]["service"]["name"]
+    if not backend.endswith("-router"):
+        fail(f"chart (routing): the Ingress sends to {backend}, not the router")
+    (deployment,) = by_kind(objects, "Deployment")
+    router_labels = deployment["spec"]["template"]["metadata"]["labels"]
+    for service in by_kind(objects, "Service"):
+        selector = service["spec"]["selector"]
+        selects_router = all(router_labels.get(k) == v for k, v in selector.items())
+        if selects_router != service["metadata"]["name"].endswith("-router"):
+            fail(f"chart (routing): Service {service['metadata']['name']} selects "
+                 f"{'the router' if selects_router else 'not the router'}")
+
+
+def check_router_config(conf):
+    """`nginx -t` on the router's configuration as rendered (its resolver pointed at loopback:
+    the cluster's DNS name does not resolve here)."""
+    nginx = "/usr/sbin/nginx"
+    if not Path(nginx).exists():
+        fail("chart (routing): nginx is needed to check the router's configuration; install it "
+             "(deploy/setup-debian.sh --tests)")
+        return
+    conf = re.sub(r"^resolver \S+", "resolver 127.0.0.1", conf, flags=re.M)
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "default.conf").write_text(conf)
+        temp_paths = " ".join(f"{k}_temp_path {tmp}/{k};"
+                              for k in ["client_body", "proxy", "fastcgi", "uwsgi", "scgi"])
+        (Path(tmp) / "nginx.conf").write_text(
+            f"pid {tmp}/nginx.pid;\nerror_log {tmp}/error.log;\nevents {{}}\n"
+            f"http {{\n{temp_paths}\ninclude {tmp}/default.conf;\n}}\n")
+        result = subprocess.run([nginx, "-t", "-q", "-e", f"{tmp}/error.log", "-c",
+                                 f"{tmp}/nginx.conf"], capture_output=True, text=True)
+        if result.returncode != 0:
+            fail(f"chart (routing): nginx -t refuses the router's configuration:\n"
+                 f"{result.stdout}{result.stderr}")
+
+
 def write_chart_run(objects, path):
     """What runtime_layout.py runs the server with: the container's env and the tokens file the
     chart's Secret holds, as rendered."""
     (statefulset,) = by_kind(objects, "StatefulSet")
     env = statefulset["spec"]["template"]["spec"]["containers"][0]["env"]
-    (secret,) = by_kind(objects, "Secret")
+    (secret,) = [s for s in by_kind(objects, "Secret") if s["metadata"]["name"].endswith("-tokens")]
     (tokens,) = secret["stringData"].values()
     path.write_text(json.dumps({"env": {e["name"]: e["value"] for e in env},
                                 "tokens_file": tokens, "token": EVERYTHING_ON["auth"]["tokens"][0]}))
@@ -265,7 +332,7 @@ def check_autoscaling(objects):
 FREE_FORM = {"imagePullSecrets", "nodeSelector", "tolerations", "affinity", "resources",
              "server.env", "auth.tokens", "ingress.annotations", "ingress.hosts", "ingress.tls",
              "metrics.serviceMonitor.labels", "metrics.serviceMonitor.tokenSecret", "podLabels",
-             "podAnnotations"}
+             "podAnnotations", "routing.router.resources"}
 
 
 def value_keys(values, prefix=""):
@@ -315,9 +382,11 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         everything = Path(tmp) / "everything-on.yaml"
         everything.write_text(yaml.safe_dump(EVERYTHING_ON))
+        routing = Path(tmp) / "routing-on.yaml"
+        routing.write_text(yaml.safe_dump(ROUTING_ON))
         renders = {}
         for name, files in [("default values", []), ("values-scaled-out.yaml", [SCALED_OUT]),
-                            ("every option on", [everything])]:
+                            ("every option on", [everything]), ("routing on", [routing])]:
             objects, error = render(args.helm, files)
             if objects is None:
                 fail(f"helm template with {name}:\n{error}")
@@ -335,6 +404,8 @@ def main():
         write_chart_run(renders["every option on"], args.chart_run_out)
     if "values-scaled-out.yaml" in renders:
         check_autoscaling(renders["values-scaled-out.yaml"])
+    if "routing on" in renders:
+        check_routing_render(renders["routing on"], env_names)
     check_bad_values(args.helm)
     check_values_documented()
 

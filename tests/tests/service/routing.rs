@@ -74,8 +74,9 @@ async fn a_session_is_found_on_its_replica_and_pointed_to_from_the_others() {
     b.stop().await;
 }
 
-/// HAProxy in front of `replicas`, routing as `deploy/README.md` describes: session paths to
-/// the replica their id names, everything else round-robin over the replicas it finds healthy.
+/// nginx in front of `replicas` with the chart's routing rule
+/// (`deploy/helm/lightcast/files/routing.conf`): session paths to the replica their id names,
+/// everything else round-robin over the replicas (a refused connection is retried on the next).
 /// Stopped when dropped.
 struct Proxy {
     child: std::process::Child,
@@ -85,37 +86,53 @@ struct Proxy {
 
 impl Proxy {
     fn start(replicas: &[(&str, u16)]) -> Self {
-        let haproxy = std::env::var("HAPROXY").unwrap_or_else(|_| "/usr/sbin/haproxy".into());
+        let nginx = std::env::var("NGINX").unwrap_or_else(|_| "/usr/sbin/nginx".into());
         let port = std::net::TcpListener::bind("127.0.0.1:0")
             .and_then(|l| l.local_addr())
             .expect("a free port")
             .port();
-        let mut config = format!(
-            "global\n  maxconn 512\ndefaults\n  mode http\n  timeout connect 2s\n  \
-             timeout client 120s\n  timeout server 120s\n  timeout tunnel 300s\n\
-             frontend web\n  bind 127.0.0.1:{port}\n  \
-             http-request set-var(req.replica) path,field(4,/),field(1,.) if {{ path_reg ^/v1/sessions/[a-z0-9-]+\\. }}\n  \
-             use_backend %[var(req.replica)] if {{ var(req.replica) -m found }}\n  \
-             default_backend any\n\
-             backend any\n  balance roundrobin\n  option httpchk GET /healthz\n"
-        );
-        for (name, p) in replicas {
-            config += &format!("  server {name} 127.0.0.1:{p} check inter 200ms fall 1 rise 1\n");
-        }
-        for (name, p) in replicas {
-            config += &format!("backend {name}\n  server {name} 127.0.0.1:{p}\n");
-        }
+        let rule = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../deploy/helm/lightcast/files/routing.conf"
+        ))
+        .expect("the chart's routing rule");
         let dir = tempfile::tempdir().expect("temp dir");
-        let path = dir.path().join("haproxy.cfg");
-        std::fs::write(&path, config).expect("haproxy.cfg");
-        let child = std::process::Command::new(&haproxy)
-            .arg("-db")
-            .arg("-f")
+        let tmp = dir.path().display();
+        let servers: String = replicas
+            .iter()
+            .map(|(_, p)| format!("server 127.0.0.1:{p}; "))
+            .collect();
+        let mut config = format!(
+            "daemon off;\nworker_processes 1;\npid {tmp}/nginx.pid;\nerror_log {tmp}/error.log;\n\
+             events {{ worker_connections 512; }}\nhttp {{\n\
+             access_log off;\nclient_body_temp_path {tmp}/body;\nproxy_temp_path {tmp}/proxy;\n\
+             fastcgi_temp_path {tmp}/fastcgi;\nuwsgi_temp_path {tmp}/uwsgi;\nscgi_temp_path {tmp}/scgi;\n\
+             {rule}\nmap $http_upgrade $connection_upgrade {{ default upgrade; \"\" close; }}\n\
+             upstream any {{ {servers}}}\n"
+        );
+        let mut names = String::new();
+        for (name, p) in replicas {
+            config += &format!("upstream {name} {{ server 127.0.0.1:{p}; }}\n");
+            names += &format!("{name} {name}; ");
+        }
+        config += &format!(
+            "map $lightcast_replica $lightcast_upstream {{ default any; {names}}}\n\
+             server {{\n listen 127.0.0.1:{port};\n location / {{\n\
+             proxy_pass http://$lightcast_upstream;\n proxy_http_version 1.1;\n\
+             proxy_set_header Upgrade $http_upgrade;\n proxy_set_header Connection $connection_upgrade;\n\
+             proxy_read_timeout 300s;\n }}\n}}\n}}\n"
+        );
+        let path = dir.path().join("nginx.conf");
+        std::fs::write(&path, config).expect("nginx.conf");
+        let child = std::process::Command::new(&nginx)
+            .arg("-e")
+            .arg(dir.path().join("error.log"))
+            .arg("-c")
             .arg(&path)
             .stdout(std::process::Stdio::null())
             .spawn()
             .unwrap_or_else(|e| {
-                panic!("starting {haproxy} ({e}): install it with deploy/setup-debian.sh --tests")
+                panic!("starting {nginx} ({e}): install it with deploy/setup-debian.sh --tests")
             });
         Self {
             child,
@@ -145,12 +162,12 @@ async fn frames(
     out
 }
 
-/// Issue 14 part 4: three replicas behind a real HAProxy configured by the routing rule.
+/// Issue 14 part 4: three replicas behind a real nginx configured with the chart's routing rule.
 /// Sessions created through it spread over the replicas, stream through it, follow camera
 /// input and take tickets through it; when one replica stops, its client gets a clear close
 /// and a new session lands on another replica while the others' streams go on.
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
-async fn three_replicas_behind_haproxy_route_sessions_and_survive_one_stopping() {
+async fn three_replicas_behind_nginx_route_sessions_and_survive_one_stopping() {
     let dir = tempfile::tempdir().expect("temp dir");
     let key = dir.path().join("routing.key");
     std::fs::write(&key, "0123456789abcdef0123456789abcdef").expect("key file");
@@ -259,12 +276,11 @@ async fn three_replicas_behind_haproxy_route_sessions_and_survive_one_stopping()
     for s in &mut streams {
         assert_eq!(frames(s, 3).await.len(), 3);
     }
-    tokio::time::sleep(std::time::Duration::from_millis(800)).await;
     let again = front.create_session(direct_session(32, 24), None).await;
     let owner = again.session.id.split('.').next().expect("owner");
     assert_ne!(
         owner, doomed,
-        "the proxy no longer sends new sessions to the stopped replica"
+        "a new session does not land on the stopped replica"
     );
     let mut s = front.connect(&again).await;
     frames(&mut s, 1).await;

@@ -36,3 +36,8 @@ app.kubernetes.io/managed-by: {{ .Release.Service }}
 {{- define "lightcast.containerPort" -}}
 8080
 {{- end }}
+
+{{/* The Secret the routing key comes from. */}}
+{{- define "lightcast.routingSecret" -}}
+{{- default (printf "%s-routing" (include "lightcast.fullname" .)) .Values.routing.existingSecret }}
+{{- end }}

@@ -363,6 +363,24 @@ pub(crate) fn time_config(
     })
 }
 
+/// The frame every configuration of a bench renders: the scene's camera and light at the
+/// bench's size and exposure, a 2048² shadow map, indirect light by `gi`.
+pub(crate) fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiSettings) -> RenderSettings {
+    RenderSettings {
+        width: args.width,
+        height: args.height,
+        camera: default_camera(scene),
+        light: default_light(scene),
+        exposure: args.exposure.0,
+        shadow_map_size: 2048,
+        capture_hdr: false,
+        debug_view: lightcast_protocol::View::Final,
+        gi,
+        history: None,
+        still: false,
+    }
+}
+
 /// Runs the benchmark, reporting progress through `progress(done, total, label)`.
 pub fn run(
     args: &BenchArgs,
@@ -396,19 +414,7 @@ pub fn run(
     let ctx = GpuContext::new(args.backend)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
     log(&format!("adapter: {adapter}"));
-    let base = RenderSettings {
-        width: args.width,
-        height: args.height,
-        camera: default_camera(&scene),
-        light: default_light(&scene),
-        exposure: args.exposure.0,
-        shadow_map_size: 2048,
-        capture_hdr: false,
-        debug_view: lightcast_protocol::View::Final,
-        gi: GiSettings::default(),
-        history: None,
-        still: false,
-    };
+    let base = base_settings(args, &scene, GiSettings::default());
     let (name, triangles, cache_count) = (
         scene.name.clone(),
         scene.triangle_count(),
@@ -632,43 +638,74 @@ impl BenchReport {
                 r.final_flip.map_or("-".to_string(), |f| format!("{f:.4}"))
             );
         }
-        s += "\nPer-stage medians (ms):\n\n| method | RSM | VALs | view samples |";
-        let stage_names: Vec<&String> = self
-            .rows
-            .iter()
-            .flat_map(|r| r.stages.keys())
-            .collect::<std::collections::BTreeSet<_>>()
-            .into_iter()
-            .collect();
-        for name in &stage_names {
-            s += &format!(" {name} |");
-        }
-        s += "\n|---|---|---|---|";
-        s += &"---|".repeat(stage_names.len());
-        s += "\n";
-        for r in &self.rows {
-            s += &format!(
-                "| {:?} | {}² | {} | {} |",
-                r.method,
-                r.rsm_size,
-                r.val_count.map_or("all".to_string(), |v| v.to_string()),
-                r.view_samples.map_or("-".to_string(), |v| v.to_string())
-            );
-            for name in &stage_names {
-                s += &r
-                    .stages
-                    .get(*name)
-                    .map_or(" - |".to_string(), |st| format!(" {:.3} |", st.median_ms));
-            }
-            s += "\n";
-        }
+        s += &stage_table(
+            &["method", "RSM", "VALs", "view samples"],
+            self.rows.iter().map(|r| {
+                (
+                    vec![
+                        format!("{:?}", r.method),
+                        format!("{}²", r.rsm_size),
+                        r.val_count.map_or("all".to_string(), |v| v.to_string()),
+                        r.view_samples.map_or("-".to_string(), |v| v.to_string()),
+                    ],
+                    &r.stages,
+                )
+            }),
+        );
         s
     }
+}
+
+/// "Per-stage medians (ms)" as a markdown table: the `labels` columns, then one column per stage
+/// any row timed, "-" where a row did not run it.
+pub(crate) fn stage_table<'a>(
+    labels: &[&str],
+    rows: impl Iterator<Item = (Vec<String>, &'a BTreeMap<String, StageStats>)> + Clone,
+) -> String {
+    let names: std::collections::BTreeSet<&String> =
+        rows.clone().flat_map(|(_, stages)| stages.keys()).collect();
+    let mut s = format!("\nPer-stage medians (ms):\n\n| {} |", labels.join(" | "));
+    for name in &names {
+        s += &format!(" {name} |");
+    }
+    s += "\n|";
+    s += &"---|".repeat(labels.len() + names.len());
+    s += "\n";
+    for (cells, stages) in rows {
+        s += &format!("| {} |", cells.join(" | "));
+        for name in &names {
+            s += &stages
+                .get(*name)
+                .map_or(" - |".to_string(), |st| format!(" {:.3} |", st.median_ms));
+        }
+        s += "\n";
+    }
+    s
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn stage_tables_have_a_column_per_stage_any_row_ran() {
+        let stat = |ms| StageStats {
+            median_ms: ms,
+            p95_ms: ms,
+        };
+        let a = BTreeMap::from([("gbuffer".to_string(), stat(1.0))]);
+        let b = BTreeMap::from([
+            ("gbuffer".to_string(), stat(2.0)),
+            ("tonemap".to_string(), stat(0.5)),
+        ]);
+        let rows = [(vec!["x".to_string()], &a), (vec!["y".to_string()], &b)];
+        let table = stage_table(&["row"], rows.iter().cloned());
+        assert_eq!(
+            table,
+            "\nPer-stage medians (ms):\n\n| row | gbuffer | tonemap |\n|---|---|---|\n\
+             | x | 1.000 | - |\n| y | 2.000 | 0.500 |\n"
+        );
+    }
 
     #[test]
     fn percentiles_of_sorted_samples() {

@@ -22,10 +22,7 @@ use crate::gpu::{context::AdapterSummary, GpuContext};
 use crate::offline::DEFAULT_SCENE;
 use crate::quality::{errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
-use crate::scene::{
-    default_light::{default_camera, default_light},
-    Scene,
-};
+use crate::scene::Scene;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -220,24 +217,16 @@ pub fn run(
     let ctx = GpuContext::new(args.backend)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
     log(&format!("adapter: {adapter}"));
-    let base = RenderSettings {
-        width: args.width,
-        height: args.height,
-        camera: default_camera(&scene),
-        light: default_light(&scene),
-        exposure: args.exposure.0,
-        shadow_map_size: 2048,
-        capture_hdr: false,
-        debug_view: lightcast_protocol::View::Final,
-        gi: GiSettings {
+    let base = crate::bench::base_settings(
+        args,
+        &scene,
+        GiSettings {
             method: GiMethod::Surfels,
             glossy_exponent: args.glossy_exponent,
             indirect_downscale: args.indirect_downscale,
             ..GiSettings::default()
         },
-        history: None,
-        still: false,
-    };
+    );
     let mut references = Vec::new();
     let mut truths = Vec::new();
     for &bounces in &args.surfels.bounces {
@@ -583,30 +572,19 @@ impl SurfelReport {
                 );
             }
         }
-        s += "\nPer-stage medians (ms):\n\n| surfels | links | bands |";
-        let names: Vec<&String> = self
-            .rows
-            .iter()
-            .flat_map(|r| r.stages.keys())
-            .collect::<std::collections::BTreeSet<_>>()
-            .into_iter()
-            .collect();
-        for name in &names {
-            s += &format!(" {name} |");
-        }
-        s += "\n|---|---|---|";
-        s += &"---|".repeat(names.len());
-        s += "\n";
-        for r in &self.rows {
-            s += &format!("| {} | {} | {} |", r.surfels, r.links, r.bands);
-            for name in &names {
-                s += &r
-                    .stages
-                    .get(*name)
-                    .map_or(" - |".to_string(), |st| format!(" {:.3} |", st.median_ms));
-            }
-            s += "\n";
-        }
+        s += &crate::bench::stage_table(
+            &["surfels", "links", "bands"],
+            self.rows.iter().map(|r| {
+                (
+                    vec![
+                        r.surfels.to_string(),
+                        r.links.to_string(),
+                        r.bands.to_string(),
+                    ],
+                    &r.stages,
+                )
+            }),
+        );
         s
     }
 }

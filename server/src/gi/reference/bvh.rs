@@ -142,6 +142,11 @@ impl SceneBvh {
     /// The nearest hit with `t` in (0, `t_max`), walking the tree as the WGSL traversal does:
     /// the nearer child first, a stack for the other.
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+        self.traverse(origin, dir, t_max, false)
+    }
+
+    /// The nearest hit before `t_max`, or with `any` the first one found.
+    fn traverse(&self, origin: Vec3, dir: Vec3, t_max: f32, any: bool) -> Option<Hit> {
         if self.nodes.is_empty() {
             return None;
         }
@@ -158,6 +163,9 @@ impl SceneBvh {
                     if let Some(hit) = intersect_triangle(&self.triangles[i as usize], origin, dir)
                     {
                         if hit.t < t_best {
+                            if any {
+                                return Some(hit);
+                            }
                             t_best = hit.t;
                             best = Some(hit);
                         }
@@ -193,51 +201,7 @@ impl SceneBvh {
     /// first hit instead of looking for the nearest (the surfels' link rays trace one per
     /// surfel and cache).
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        if self.nodes.is_empty() {
-            return false;
-        }
-        let inv_dir = dir.recip();
-        let mut stack = [0u32; MAX_STACK];
-        let mut depth = 0;
-        let mut node = 0u32;
-        loop {
-            let n = &self.nodes[node as usize];
-            if n.prim_count > 0 {
-                let hit = (n.first_index..n.first_index + n.prim_count).any(|i| {
-                    intersect_triangle(&self.triangles[i as usize], origin, dir)
-                        .is_some_and(|h| h.t < t_max)
-                });
-                if hit {
-                    return true;
-                }
-            } else {
-                let (a, b) = (n.first_index, n.first_index + 1);
-                let ta = slab(&self.nodes[a as usize], origin, inv_dir, t_max);
-                let tb = slab(&self.nodes[b as usize], origin, inv_dir, t_max);
-                match (ta < f32::INFINITY, tb < f32::INFINITY) {
-                    (true, true) => {
-                        stack[depth] = b;
-                        depth += 1;
-                        node = a;
-                        continue;
-                    }
-                    (true, false) => {
-                        node = a;
-                        continue;
-                    }
-                    (false, true) => {
-                        node = b;
-                        continue;
-                    }
-                    (false, false) => {}
-                }
-            }
-            if depth == 0 {
-                return false;
-            }
-            depth -= 1;
-            node = stack[depth];
-        }
+        self.traverse(origin, dir, t_max, true).is_some()
     }
 
     /// The nearest hit by testing every triangle (the check for [`Self::intersect`]).

@@ -189,6 +189,18 @@ pub enum Incoming {
 }
 
 impl Stream {
+    /// Reads until the server closes the stream; the reason of its `closing` event, if any.
+    pub async fn closing_reason(&mut self) -> Option<String> {
+        let mut reason = None;
+        loop {
+            match self.next().await {
+                Incoming::Event(ServerEvent::Closing { reason: r }) => reason = Some(r),
+                Incoming::Closed => return reason,
+                _ => {}
+            }
+        }
+    }
+
     pub async fn send(&mut self, message: Value) {
         self.ws
             .send(Message::Text(message.to_string().into()))

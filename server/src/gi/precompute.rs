@@ -299,6 +299,16 @@ pub struct PrecomputeEntry {
     pub build: BuildFn,
 }
 
+/// Feeds a store key everything about `scene`'s geometry a precomputation reads: the vertex
+/// and index counts and bytes.
+pub fn hash_geometry(h: &mut sha2::Sha256, scene: &Scene) {
+    use sha2::Digest;
+    h.update((scene.vertices.len() as u64).to_le_bytes());
+    h.update(bytemuck::cast_slice(&scene.vertices));
+    h.update((scene.indices.len() as u64).to_le_bytes());
+    h.update(bytemuck::cast_slice(&scene.indices));
+}
+
 /// [`PrecomputeEntry::build`].
 pub type BuildFn = fn(&Scene, &PrecomputeKey, &mut BuildEnv) -> Result<Built, String>;
 

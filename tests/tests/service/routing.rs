@@ -261,15 +261,10 @@ async fn three_replicas_behind_nginx_route_sessions_and_survive_one_stopping() {
         .expect("a known replica");
     let stopping = tokio::spawn(replicas.remove(index).stop());
     let mut dying = streams.pop().expect("third stream");
-    let mut reason = None;
-    loop {
-        match dying.next().await {
-            Incoming::Event(ServerEvent::Closing { reason: r }) => reason = Some(r),
-            Incoming::Closed => break,
-            _ => {}
-        }
-    }
-    assert_eq!(reason.as_deref(), Some("server shutting down"));
+    assert_eq!(
+        dying.closing_reason().await.as_deref(),
+        Some("server shutting down")
+    );
     stopping.await.expect("stopped");
 
     // The other streams go on, and a new session lands on a replica still running.

@@ -257,15 +257,10 @@ async fn shutdown_sends_closing_to_open_streams() {
     let mut events = Vec::new();
     stream.next_frame(&mut events).await;
     let stopping = tokio::spawn(server.stop());
-    let mut reason = None;
-    loop {
-        match stream.next().await {
-            Incoming::Event(ServerEvent::Closing { reason: r }) => reason = Some(r),
-            Incoming::Closed => break,
-            _ => {}
-        }
-    }
-    assert_eq!(reason.as_deref(), Some("server shutting down"));
+    assert_eq!(
+        stream.closing_reason().await.as_deref(),
+        Some("server shutting down")
+    );
     stopping.await.expect("shutdown task");
 }
 

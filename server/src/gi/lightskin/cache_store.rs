@@ -95,10 +95,7 @@ impl CacheStore {
         let mut h = Sha256::new();
         h.update(MAGIC);
         h.update(FORMAT_VERSION.to_le_bytes());
-        h.update((scene.vertices.len() as u64).to_le_bytes());
-        h.update(bytemuck::cast_slice(&scene.vertices));
-        h.update((scene.indices.len() as u64).to_le_bytes());
-        h.update(bytemuck::cast_slice(&scene.indices));
+        crate::gi::precompute::hash_geometry(&mut h, scene);
         let splits = material_splits(scene);
         h.update((splits.len() as u64).to_le_bytes());
         for m in &splits {

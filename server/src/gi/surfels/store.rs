@@ -34,10 +34,7 @@ pub fn key(scene: &Scene, params: &SurfelParams) -> String {
     let mut h = Sha256::new();
     h.update(MAGIC);
     h.update(FORMAT_VERSION.to_le_bytes());
-    h.update((scene.vertices.len() as u64).to_le_bytes());
-    h.update(bytemuck::cast_slice(&scene.vertices));
-    h.update((scene.indices.len() as u64).to_le_bytes());
-    h.update(bytemuck::cast_slice(&scene.indices));
+    crate::gi::precompute::hash_geometry(&mut h, scene);
     h.update(params.surfels.to_le_bytes());
     h.update(params.cache_spacing.unwrap_or(f32::NAN).to_le_bytes());
     h.update(params.links.to_le_bytes());

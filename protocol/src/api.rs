@@ -163,12 +163,12 @@ pub enum View {
     Caches,
     /// The RSM's VPLs, each in the colour of the VAL it is clustered into; needs `clustered`.
     Clusters,
-    /// The frame darkened, with every surfel facing the camera drawn as a dot in the colour of
-    /// its radiosity; needs `surfels`.
+    /// Every surfel facing the camera as a disc of its projected size in the colour of its
+    /// radiosity, on black; needs `surfels`.
     Surfels,
-    /// The hierarchy cut of one cache's links: the frame darkened, the surfels under each
-    /// linked node in that node's colour and the cache as a white cross; the cache is the one
-    /// nearest the surface at the image's centre. Needs `surfels`.
+    /// The hierarchy cut of one cache's links: on black, the surfels under each linked node in
+    /// that node's colour (the others dark grey) and the cache as a white cross; the cache is
+    /// the one nearest the surface at the image's centre. Needs `surfels`.
     SurfelLinks,
     /// The caches' SH radiance interpolated at each pixel's surface point and evaluated along
     /// its normal (what the caches say arrives from straight above the surface); needs

@@ -3,6 +3,8 @@
 #   - the paper's evaluation (`lightcast-server bench`, issue 3) at 1920×1080 on the
 #     procedural street scene, LightSkin against BRSM over RSM sizes, VAL counts and view samples;
 #   - seed 001's evaluation (`bench --gi surfels`, issue 12) on the Cornell box and the street;
+#   - seed 003's evaluation (`bench --gi clustered`, issue 11) on the Cornell box (also at the
+#     paper's 800×800) and the street;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080.
 #
@@ -10,7 +12,8 @@
 #
 # KIT_DIR comes from bench/gpu-kit.sh (binaries, font, Vulkan loader .debs). Results land in
 # OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-surfels-{cornell,street}.{md,json,
-# …png}, gpu-service.md, environment.txt and
+# …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png}, gpu-service.md,
+# environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
 # adapter (a software one included) to check this script; its numbers mean nothing.
 set -euo pipefail
@@ -108,6 +111,27 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
     cmd=("$server" bench --gi surfels --scene "$s" "${flags[@]}"
       --json "$out/gpu-surfels-$name.json" --markdown "$out/gpu-surfels-$name.md"
       --plots "$out/gpu-surfels-$name")
+    echo "command: ${cmd[*]}" >> "$out/environment.txt"
+    "${cmd[@]}"
+  done
+  # Seed 003 (issue 11): clustered over VPL counts × VAL counts with per-VPL hard shadows and
+  # no visibility as baselines (Tables 1–2, Figure 10), the other methods at equal time; the
+  # paper's anchor is 800×800, 1,024 VPLs, 30 VALs (19.7 fps on a GeForce 8800 GTX).
+  if $quick; then
+    clustered_runs=("procedural:cornell|--width 160 --height 90 --rsm-sizes 64 --sweep-vpls 256 --sweep-clusters 5,30 --baseline-vpls 256 --paraboloid-size 32 --baseline-paraboloid-size 32 --frames 2 --warmup 1 --reference-spp 16")
+  else
+    clustered_runs=("procedural:cornell|--width 1920 --height 1080 --rsm-sizes 1024 --reference-spp 1024 --compare-methods"
+      "procedural:cornell|--width 800 --height 800 --rsm-sizes 1024 --sweep-vpls 1024 --sweep-clusters 30 --baseline-vpls 1024 --reference-spp 256"
+      "$scene|--width 1920 --height 1080 --rsm-sizes 1024 --reference-spp 256 --compare-methods")
+  fi
+  for run in "${clustered_runs[@]}"; do
+    s="${run%%|*}"
+    read -r -a flags <<< "${run#*|}"
+    name=$(case "$s" in *cornell*) echo cornell ;; *) echo street ;; esac)
+    case " ${flags[*]} " in *" 800 "*) name="$name-800" ;; esac
+    cmd=("$server" bench --gi clustered --scene "$s" "${flags[@]}"
+      --json "$out/gpu-clustered-$name.json" --markdown "$out/gpu-clustered-$name.md"
+      --plots "$out/gpu-clustered-$name")
     echo "command: ${cmd[*]}" >> "$out/environment.txt"
     "${cmd[@]}"
   done

@@ -115,18 +115,28 @@ pub struct GiParamInfo {
 #[serde(rename_all = "snake_case")]
 pub enum ClusteredVisibility {
     /// Every VPL sees every point (the paper's "without visibility" baseline, Figure 10).
-    #[default]
     Off,
+    /// The paper's method (§4.1–4.2): one paraboloid depth map per VAL, convolution soft
+    /// shadow maps give each VPL the fractional visibility of its VAL.
+    #[default]
+    Cssm,
+    /// Instant radiosity with one hard-shadow paraboloid map per VPL: exact from-point
+    /// visibility up to the map's resolution, the baseline clustering is measured against
+    /// (Figure 10's "instant radiosity"; for small N).
+    #[cfg_attr(feature = "clap", value(name = "vpl_shadows"))]
+    VplShadows,
 }
 
 impl ClusteredVisibility {
     /// Every choice, as `/v1/server` lists them.
-    pub const ALL: &'static [ClusteredVisibility] = &[Self::Off];
+    pub const ALL: &'static [ClusteredVisibility] = &[Self::Off, Self::Cssm, Self::VplShadows];
 
     /// The name requests use.
     pub fn name(self) -> &'static str {
         match self {
             Self::Off => "off",
+            Self::Cssm => "cssm",
+            Self::VplShadows => "vpl_shadows",
         }
     }
 }
@@ -163,6 +173,14 @@ pub enum View {
     Caches,
     /// The RSM's VPLs, each in the colour of the VAL it is clustered into; needs `clustered`.
     Clusters,
+    /// The frame at a third of its brightness with every lit VPL as a dot at its surface
+    /// point in the colour of its flux; needs `clustered`.
+    Vpls,
+    /// The visibility of one light at every pixel's surface, white where it sees the light
+    /// and black in its shadow: the soft shadow of VAL `shadow_light` (`cssm`), the hard
+    /// shadow of VPL `shadow_light` (`vpl_shadows`), white everywhere with visibility off.
+    /// Needs `clustered`.
+    ValShadow,
     /// Every surfel facing the camera as a disc of its projected size in the colour of its
     /// radiosity, on black; needs `surfels`.
     Surfels,
@@ -186,6 +204,8 @@ impl std::fmt::Display for View {
             Self::SelectedVals => "selected-vals",
             Self::Caches => "caches",
             Self::Clusters => "clusters",
+            Self::Vpls => "vpls",
+            Self::ValShadow => "val-shadow",
             Self::Surfels => "surfels",
             Self::SurfelLinks => "surfel-links",
             Self::CacheSh => "cache-sh",
@@ -199,9 +219,9 @@ impl View {
         matches!(self, Self::Importance | Self::SelectedVals)
     }
 
-    /// Whether the view shows the VPL clusters only `clustered` makes.
+    /// Whether the view shows the VPLs, clusters or shadows only `clustered` makes.
     pub fn needs_clustered(self) -> bool {
-        self == Self::Clusters
+        matches!(self, Self::Clusters | Self::Vpls | Self::ValShadow)
     }
 
     /// Whether the view shows the surfels, their links or their caches only `surfels` makes.
@@ -276,6 +296,14 @@ pub struct GiParams {
     pub blur_normal: f32,
     /// `clustered`: how each VPL's visibility is found.
     pub visibility: ClusteredVisibility,
+    /// `clustered`: side in texels of each paraboloid depth map (one per VAL with `cssm`,
+    /// one per VPL with `vpl_shadows`); a power of two.
+    pub paraboloid_size: u32,
+    /// `clustered`: K, Fourier terms of the convolution soft shadow maps (§4.1).
+    pub fourier_terms: u32,
+    /// `clustered`: the light whose shadow the `val-shadow` view shows: a VAL's index, or a
+    /// VPL's with `vpl_shadows`.
+    pub shadow_light: u32,
     /// `lightskin`, `brsm`, `clustered` (the `reference` is always full resolution): indirect
     /// light is computed at 1/n of the output's width and height (1, 2 or 4) and brought back
     /// with an edge-aware upsample; 1 is full resolution.
@@ -314,7 +342,10 @@ impl Default for GiParams {
             interleave: 8,
             blur_distance: 0.1,
             blur_normal: 0.8,
-            visibility: ClusteredVisibility::Off,
+            visibility: ClusteredVisibility::Cssm,
+            paraboloid_size: 256,
+            fourier_terms: 4,
+            shadow_light: 0,
             indirect_downscale: 1,
             surfel_count: 32 * 1024,
             surfel_cache_spacing: None,
@@ -892,9 +923,21 @@ pub struct ClusteredFlags {
     /// `--gi clustered`: blur normal threshold (smallest cosine; default 0.8).
     #[arg(long, allow_negative_numbers = true)]
     pub blur_normal: Option<f32>,
-    /// `--gi clustered`: VPL visibility (`off`: none, the paper's baseline; the default).
+    /// `--gi clustered`: VPL visibility (`cssm`: soft shadows per VAL, the paper's method
+    /// and the default; `off`: none; `vpl_shadows`: a hard shadow map per VPL).
     #[arg(long, value_enum)]
     pub visibility: Option<ClusteredVisibility>,
+    /// `--gi clustered`: side of each paraboloid depth map in texels (a power of two, 16 …
+    /// 1024; default 256).
+    #[arg(long)]
+    pub paraboloid_size: Option<u32>,
+    /// `--gi clustered`: K, Fourier terms of the soft shadow maps (1 … 4; default 4).
+    #[arg(long)]
+    pub fourier_terms: Option<u32>,
+    /// `--gi clustered`: the VAL (with `vpl_shadows` the VPL) whose shadow `--view
+    /// val-shadow` shows (default 0).
+    #[arg(long)]
+    pub shadow_light: Option<u32>,
 }
 
 #[cfg(feature = "clap")]
@@ -918,6 +961,9 @@ impl ClusteredFlags {
                 "visibility",
                 self.visibility.map(|v| serde_json::Value::from(v.name())),
             ),
+            ("paraboloid_size", self.paraboloid_size.map(Into::into)),
+            ("fourier_terms", self.fourier_terms.map(Into::into)),
+            ("shadow_light", self.shadow_light.map(Into::into)),
         ]
         .into_iter()
         .filter_map(|(name, v)| Some((name, v?)))
@@ -939,5 +985,8 @@ impl ClusteredFlags {
         set(&mut gi.blur_distance, self.blur_distance);
         set(&mut gi.blur_normal, self.blur_normal);
         gi.visibility = self.visibility.unwrap_or(gi.visibility);
+        gi.paraboloid_size = self.paraboloid_size.unwrap_or(gi.paraboloid_size);
+        gi.fourier_terms = self.fourier_terms.unwrap_or(gi.fourier_terms);
+        gi.shadow_light = self.shadow_light.unwrap_or(gi.shadow_light);
     }
 }

@@ -113,6 +113,10 @@ stages! {
     SurfelBounce => "surfel_bounce",
     /// Per-pixel indirect light from the SH caches (`surfels`).
     SurfelShade => "surfel_shade",
+    /// One paraboloid depth map per VAL (`cssm`) or per VPL (`vpl_shadows`) (`clustered`).
+    ParaboloidMaps => "paraboloid_maps",
+    /// The depth maps' Fourier basis textures and their mip chains (`clustered`, `cssm`).
+    CssmBasis => "cssm_basis",
 }
 
 impl Stage {

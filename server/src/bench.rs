@@ -27,8 +27,10 @@ use std::path::PathBuf;
 #[derive(Clone, Debug, clap::Args)]
 pub struct BenchArgs {
     /// Which evaluation: `brsm` (seed 004: LightSkin and BRSM over RSM sizes, VAL counts and
-    /// view samples) or `surfels` (seed 001: surfel count, links and SH bands, see
-    /// `crate::bench_surfels`).
+    /// view samples), `surfels` (seed 001: surfel count, links and SH bands, see
+    /// `crate::bench_surfels`) or `clustered` (seed 003: VPL and VAL counts against per-VPL
+    /// shadows and no visibility, see `crate::bench_clustered`; its RSM is the first of
+    /// `--rsm-sizes`).
     #[arg(long, value_enum, default_value = "brsm")]
     pub gi: GiMethod,
     /// Scene: a .gltf/.glb file or a procedural scene (see `render --help`).
@@ -79,6 +81,8 @@ pub struct BenchArgs {
     pub caches: CacheArgs,
     #[command(flatten)]
     pub surfels: crate::bench_surfels::SurfelSweep,
+    #[command(flatten)]
+    pub clustered: crate::bench_clustered::ClusteredSweep,
     /// Write the results as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -192,11 +196,13 @@ pub enum BenchError {
     #[error("reference: {0}")]
     Reference(#[from] crate::gi::reference::ReferenceError),
     #[error(
-        "bench --gi {0}: only brsm (with LightSkin as its baseline) and surfels have an evaluation"
+        "bench --gi {0}: only brsm (with LightSkin as its baseline), surfels and clustered have an evaluation"
     )]
     NoEvaluation(GiMethod),
     #[error("surfels: {0}")]
     Surfels(String),
+    #[error("clustered: {0}")]
+    Clustered(String),
 }
 
 fn percentile(sorted: &[f64], q: f64) -> f64 {
@@ -361,6 +367,182 @@ pub(crate) fn time_config(
         hdr,
         exposure,
     })
+}
+
+/// One method at one setting of the equal-time comparison.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MethodRow {
+    pub method: GiMethod,
+    /// The setting, e.g. `RSM 256², 2048 VALs`.
+    pub setting: String,
+    pub gi: StageStats,
+    /// Error against the single-bounce reference.
+    pub vs_reference: ErrorStats,
+    /// The method's setting whose GI time is nearest the centre's.
+    pub nearest_equal_time: bool,
+}
+
+/// The settings each method is tried at in the equal-time comparison, cheapest first
+/// (`surfels` is left out: each setting is a precomputation of its own).
+fn ladders(base: &GiSettings) -> Vec<(GiSettings, String)> {
+    let lightskin = [64, 128, 256].map(|rsm_size| {
+        (
+            GiSettings {
+                method: GiMethod::Lightskin,
+                rsm_size,
+                ..*base
+            },
+            format!("RSM {rsm_size}²"),
+        )
+    });
+    let brsm = [512, 2048, 8192].map(|val_count| {
+        (
+            GiSettings {
+                method: GiMethod::Brsm,
+                rsm_size: 256,
+                val_count,
+                ..*base
+            },
+            format!(
+                "RSM 256², {val_count} VALs, {} view samples",
+                base.view_samples
+            ),
+        )
+    });
+    let clustered = [256, 1024, 4096].map(|vpl_count| {
+        (
+            GiSettings {
+                method: GiMethod::Clustered,
+                vpl_count,
+                ..*base
+            },
+            format!(
+                "{vpl_count} VPLs, {} VALs, {}",
+                base.cluster_count,
+                base.visibility.name()
+            ),
+        )
+    });
+    lightskin.into_iter().chain(brsm).chain(clustered).collect()
+}
+
+/// The comparison of all GI methods at equal time: `centre` (a method's setting with its GI
+/// time and single-bounce error) first, then the ladder of every other method, each rung's
+/// error against the single-bounce reference `truth`; per method the rung nearest the
+/// centre's GI time is marked.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn equal_time(
+    renderer: &mut Renderer,
+    scene: &Scene,
+    base: &RenderSettings,
+    args: &BenchArgs,
+    centre: MethodRow,
+    truth: &[[f32; 3]],
+    log: &mut dyn FnMut(&str),
+    progress: &mut dyn FnMut(u64, u64, &str),
+) -> Result<Vec<MethodRow>, BenchError> {
+    let target = centre.gi.median_ms;
+    let skip = centre.method;
+    let mut out = vec![centre];
+    let caches = args.caches.load(scene, log)?;
+    renderer
+        .gi::<crate::gi::lightskin::LightSkin>()?
+        .set_caches(&caches)
+        .map_err(crate::renderer::RenderError::from)?;
+    let ladder: Vec<_> = ladders(&GiSettings {
+        bounces: 1,
+        ..base.gi
+    })
+    .into_iter()
+    .filter(|(gi, _)| gi.method != skip)
+    .collect();
+    let total = ladder.len() as u64 * u64::from(args.warmup + args.frames);
+    let mut done = 0;
+    for (gi, setting) in ladder {
+        let label = format!("{:?} {setting}: frames", gi.method);
+        let settings = RenderSettings { gi, ..base.clone() };
+        let timed = time_config(
+            renderer,
+            &settings,
+            args.warmup,
+            args.frames,
+            &|_, _| {},
+            &mut || {
+                done += 1;
+                progress(done, total, &label);
+            },
+        )?;
+        out.push(MethodRow {
+            method: gi.method,
+            setting,
+            gi: timed.gi,
+            vs_reference: errors(truth, &timed.indirect, args.width as usize),
+            nearest_equal_time: false,
+        });
+    }
+    for method in [GiMethod::Lightskin, GiMethod::Brsm, GiMethod::Clustered] {
+        if method == skip {
+            continue;
+        }
+        let nearest = out
+            .iter_mut()
+            .filter(|r| r.method == method)
+            .min_by(|a, b| {
+                let d = |r: &MethodRow| (r.gi.median_ms - target).abs();
+                d(a).total_cmp(&d(b))
+            });
+        if let Some(row) = nearest {
+            row.nearest_equal_time = true;
+        }
+    }
+    Ok(out)
+}
+
+/// The equal-time table of [`equal_time`]'s rows; `against` names the centre's method.
+pub(crate) fn equal_time_table(rows: &[MethodRow], against: &str) -> String {
+    let mut s = format!(
+        "\nAll GI methods at one bounce against the same reference; ✓ marks each method's setting whose GI time is nearest {against}'s (equal time):\n\n| method | setting | GI ms (median / p95) | MAE / mean | 8×8-block MAE / mean | bias | equal time |\n|---|---|---|---|---|---|---|\n"
+    );
+    for m in rows {
+        s += &format!(
+            "| {:?} | {} | {:.3} / {:.3} | {:.2} % | {:.2} % | {:+.2} % | {} |\n",
+            m.method,
+            m.setting,
+            m.gi.median_ms,
+            m.gi.p95_ms,
+            m.vs_reference.mae_relative * 100.0,
+            m.vs_reference.block_mae_relative * 100.0,
+            m.vs_reference.bias_relative * 100.0,
+            if m.nearest_equal_time { "✓" } else { "" }
+        );
+    }
+    s
+}
+
+/// Frames of one configuration under a moving light: each frame's light differs from the last
+/// by a millionth of its intensity, so nothing that depends on the light is reused, as in a
+/// session while the light moves.
+pub(crate) fn time_moving_light(
+    renderer: &mut Renderer,
+    settings: &RenderSettings,
+    args: &BenchArgs,
+    what: &str,
+    progress: &mut dyn FnMut(u64, u64, &str),
+) -> Result<Timed, BenchError> {
+    let total = u64::from(args.warmup + args.frames);
+    let mut done = 0;
+    let label = format!("{what}: frames");
+    time_config(
+        renderer,
+        settings,
+        args.warmup,
+        args.frames,
+        &|i, s| s.light.intensity *= 1.0 + 1e-6 * (i % 2) as f32,
+        &mut || {
+            done += 1;
+            progress(done, total, &label);
+        },
+    )
 }
 
 /// The frame every configuration of a bench renders: the scene's camera and light at the

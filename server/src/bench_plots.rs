@@ -1,10 +1,13 @@
 //! PNG plots of a [`BenchReport`]: relative error against LightSkin, against the path-traced
 //! reference (when the run had one) and frames per second, over the RSM size, one line per
-//! configuration (the paper's Figures 3 and 5); and of a [`SurfelReport`], seed 001's Figure 8.
+//! configuration (the paper's Figures 3 and 5); of a [`SurfelReport`], seed 001's Figure 8;
+//! and of a [`ClusteredReport`], seed 003's Figure 10.
 
 use crate::bench::{BenchReport, BenchRow};
+use crate::bench_clustered::ClusteredReport;
 use crate::bench_surfels::{SurfelReport, SurfelRow, Varied};
 use crate::gi::GiMethod;
+use lightcast_protocol::ClusteredVisibility;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -325,6 +328,105 @@ pub fn write_surfel_plots(report: &SurfelReport, prefix: &Path) -> Result<Vec<Pa
             .iter()
             .map(|(_, points)| ("moving light".to_string(), points.clone()))
             .collect::<Vec<_>>(),
+    )?;
+    paths.push(path);
+    Ok(paths)
+}
+
+/// Writes `<prefix>-error-by-vals.png` (seed 003's Figure 10: error against the reference by
+/// VAL count, one line per VPL count, with visibility off and per-VPL shadows as flat lines
+/// at each N) and `<prefix>-error-vs-vpl-shadows.png` (the error clustering adds to exact
+/// per-VPL visibility), and `<prefix>-gi-ms-by-vals.png`; returns their paths.
+pub fn write_clustered_plots(
+    report: &ClusteredReport,
+    prefix: &Path,
+) -> Result<Vec<PathBuf>, PlotError> {
+    ensure_font()?;
+    let path_for = |suffix: &str| {
+        let mut name = prefix.as_os_str().to_owned();
+        name.push(suffix);
+        PathBuf::from(name)
+    };
+    let mut vpl_counts: Vec<u32> = report.rows.iter().map(|r| r.vpls).collect();
+    vpl_counts.dedup();
+    let cssm = |n: u32| {
+        report
+            .rows
+            .iter()
+            .filter(move |r| r.vpls == n && r.visibility == ClusteredVisibility::Cssm)
+    };
+    let m_range = |n: u32| {
+        let xs: Vec<f64> = cssm(n)
+            .filter_map(|r| r.clusters)
+            .map(|m| f64::from(m).log2())
+            .collect();
+        let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+        (lo, xs.iter().copied().fold(lo, f64::max))
+    };
+    let mut by_reference = Vec::new();
+    let mut by_exact = Vec::new();
+    let mut gi_ms = Vec::new();
+    for &n in &vpl_counts {
+        let line =
+            |y: &dyn Fn(&crate::bench_clustered::ClusteredRow) -> Option<f64>| -> Vec<(f64, f64)> {
+                cssm(n)
+                    .filter_map(|r| Some((f64::from(r.clusters?).log2(), y(r)?)))
+                    .collect()
+            };
+        by_reference.push((
+            format!("{n} VPLs, CSSM"),
+            line(&|r| Some(r.vs_reference.mae_relative * 100.0)),
+        ));
+        let (lo, hi) = m_range(n);
+        for r in report
+            .rows
+            .iter()
+            .filter(|r| r.vpls == n && r.visibility != ClusteredVisibility::Cssm)
+        {
+            let y = r.vs_reference.mae_relative * 100.0;
+            by_reference.push((
+                format!("{n} VPLs, {}", r.visibility.name()),
+                vec![(lo, y), (hi, y)],
+            ));
+        }
+        let exact = line(&|r| Some(r.vs_vpl_shadows?.mae_relative * 100.0));
+        if !exact.is_empty() {
+            by_exact.push((format!("{n} VPLs, CSSM"), exact));
+        }
+        gi_ms.push((format!("{n} VPLs, CSSM"), line(&|r| Some(r.gi.median_ms))));
+    }
+    let mut paths = Vec::new();
+    let axis = Axis("VALs M");
+    let path = path_for("-error-by-vals.png");
+    draw_over(
+        &path,
+        "clustered: error against the reference by VAL count (Figure 10)",
+        &axis,
+        "MAE / reference mean (%)",
+        &by_reference,
+    )?;
+    paths.push(path);
+    if !by_exact.is_empty() {
+        let path = path_for("-error-vs-vpl-shadows.png");
+        draw_over(
+            &path,
+            "clustered: difference from per-VPL hard shadows by VAL count",
+            &axis,
+            "MAE / per-VPL-shadow mean (%)",
+            &by_exact,
+        )?;
+        paths.push(path);
+    }
+    let path = path_for("-gi-ms-by-vals.png");
+    draw_over(
+        &path,
+        &format!(
+            "clustered: GPU time of the GI stages per frame ({})",
+            report.adapter
+        ),
+        &axis,
+        "GI ms (median)",
+        &gi_ms,
     )?;
     paths.push(path);
     Ok(paths)

@@ -14,7 +14,7 @@
 //! - the error of the indirect light against the path-traced reference at every bounce count
 //!   of `--bounces` (the reference traced with as many bounces, the surfels converged to them).
 
-use crate::bench::{render_reference, time_config, BenchArgs, BenchError, StageStats, Timed};
+use crate::bench::{render_reference, BenchArgs, BenchError, MethodRow, StageStats, Timed};
 use crate::gi::precompute::{BuildEnv, Store};
 use crate::gi::surfels::{self, SurfelParams, Surfels};
 use crate::gi::{GiMethod, GiSettings};
@@ -93,19 +93,6 @@ pub struct SurfelReference {
     pub bounces: u32,
     pub spp: u32,
     pub relative_standard_error: f32,
-}
-
-/// One method at one setting of the equal-time comparison.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct MethodRow {
-    pub method: GiMethod,
-    /// The setting, e.g. `RSM 256², 2048 VALs`.
-    pub setting: String,
-    pub gi: StageStats,
-    /// Error against the single-bounce reference.
-    pub vs_reference: ErrorStats,
-    /// The method's setting whose GI time is nearest the sweep centre's.
-    pub nearest_equal_time: bool,
 }
 
 /// The whole run.
@@ -345,48 +332,8 @@ pub fn run(
     })
 }
 
-/// The settings each other method is tried at, cheapest first.
-fn ladders(base: &GiSettings) -> Vec<(GiSettings, String)> {
-    let lightskin = [64, 128, 256].map(|rsm_size| {
-        (
-            GiSettings {
-                method: GiMethod::Lightskin,
-                rsm_size,
-                ..*base
-            },
-            format!("RSM {rsm_size}²"),
-        )
-    });
-    let brsm = [512, 2048, 8192].map(|val_count| {
-        (
-            GiSettings {
-                method: GiMethod::Brsm,
-                rsm_size: 256,
-                val_count,
-                ..*base
-            },
-            format!(
-                "RSM 256², {val_count} VALs, {} view samples",
-                base.view_samples
-            ),
-        )
-    });
-    let clustered = [256, 1024, 4096].map(|vpl_count| {
-        (
-            GiSettings {
-                method: GiMethod::Clustered,
-                vpl_count,
-                ..*base
-            },
-            format!("{vpl_count} VPLs, {} VALs", base.cluster_count),
-        )
-    });
-    lightskin.into_iter().chain(brsm).chain(clustered).collect()
-}
-
 /// The equal-time comparison: the sweep's centre (its GI time under a moving light, its
-/// single-bounce error), then every other method's ladder, each rung's error against the
-/// single-bounce reference `truth`; per method the rung nearest the centre's GI time is marked.
+/// single-bounce error), then every other method's ladder (see [`crate::bench::equal_time`]).
 #[allow(clippy::too_many_arguments)]
 fn compare_methods(
     renderer: &mut Renderer,
@@ -407,8 +354,7 @@ fn compare_methods(
         .iter()
         .find(|e| e.bounces == 1)
         .ok_or(BenchError::Surfels("no single-bounce error".into()))?;
-    let target = centre.gi.median_ms;
-    let mut out = vec![MethodRow {
+    let centre = MethodRow {
         method: GiMethod::Surfels,
         setting: format!(
             "{} surfels, {} links, {} bands",
@@ -417,58 +363,13 @@ fn compare_methods(
         gi: centre.gi,
         vs_reference: single.vs_reference,
         nearest_equal_time: true,
-    }];
-    let caches = args.caches.load(scene, log)?;
-    renderer
-        .gi::<crate::gi::lightskin::LightSkin>()?
-        .set_caches(&caches)
-        .map_err(crate::renderer::RenderError::from)?;
-    let ladder = ladders(&GiSettings {
-        bounces: 1,
-        ..base.gi
-    });
-    let total = ladder.len() as u64 * u64::from(args.warmup + args.frames);
-    let mut done = 0;
-    for (gi, setting) in ladder {
-        let label = format!("{:?} {setting}: frames", gi.method);
-        let settings = RenderSettings { gi, ..base.clone() };
-        let timed = time_config(
-            renderer,
-            &settings,
-            args.warmup,
-            args.frames,
-            &|_, _| {},
-            &mut || {
-                done += 1;
-                progress(done, total, &label);
-            },
-        )?;
-        out.push(MethodRow {
-            method: gi.method,
-            setting,
-            gi: timed.gi,
-            vs_reference: errors(truth, &timed.indirect, args.width as usize),
-            nearest_equal_time: false,
-        });
-    }
-    for method in [GiMethod::Lightskin, GiMethod::Brsm, GiMethod::Clustered] {
-        let nearest = out
-            .iter_mut()
-            .filter(|r| r.method == method)
-            .min_by(|a, b| {
-                let d = |r: &MethodRow| (r.gi.median_ms - target).abs();
-                d(a).total_cmp(&d(b))
-            });
-        if let Some(row) = nearest {
-            row.nearest_equal_time = true;
-        }
-    }
-    Ok(out)
+    };
+    crate::bench::equal_time(renderer, scene, base, args, centre, truth, log, progress)
 }
 
-/// Frames of one configuration under a moving light: each frame's light differs from the last
-/// by a millionth of its intensity, so each frame runs a full bounce (surfel light, pull-up,
-/// cache light) and the shading, as a session does while the light moves.
+/// [`crate::bench::time_moving_light`] with a history, so every frame runs a full bounce
+/// (surfel light, pull-up, cache light) and the shading, as a session does while the light
+/// moves.
 fn time_moving_light(
     renderer: &mut Renderer,
     base: &RenderSettings,
@@ -480,20 +381,7 @@ fn time_moving_light(
         history: Some(1),
         ..base.clone()
     };
-    let total = u64::from(args.warmup + args.frames);
-    let mut done = 0;
-    let label = format!("{what}: frames");
-    time_config(
-        renderer,
-        &settings,
-        args.warmup,
-        args.frames,
-        &|i, s| s.light.intensity *= 1.0 + 1e-6 * (i % 2) as f32,
-        &mut || {
-            done += 1;
-            progress(done, total, &label);
-        },
-    )
+    crate::bench::time_moving_light(renderer, &settings, args, what, progress)
 }
 
 impl SurfelReport {
@@ -557,20 +445,7 @@ impl SurfelReport {
             s += "\n";
         }
         if !self.methods.is_empty() {
-            s += "\nAll GI methods at one bounce against the same reference; ✓ marks each method's setting whose GI time is nearest the surfels' (equal time):\n\n| method | setting | GI ms (median / p95) | MAE / mean | 8×8-block MAE / mean | bias | equal time |\n|---|---|---|---|---|---|---|\n";
-            for m in &self.methods {
-                s += &format!(
-                    "| {:?} | {} | {:.3} / {:.3} | {:.2} % | {:.2} % | {:+.2} % | {} |\n",
-                    m.method,
-                    m.setting,
-                    m.gi.median_ms,
-                    m.gi.p95_ms,
-                    m.vs_reference.mae_relative * 100.0,
-                    m.vs_reference.block_mae_relative * 100.0,
-                    m.vs_reference.bias_relative * 100.0,
-                    if m.nearest_equal_time { "✓" } else { "" }
-                );
-            }
+            s += &crate::bench::equal_time_table(&self.methods, "the surfels");
         }
         s += &crate::bench::stage_table(
             &["surfels", "links", "bands"],

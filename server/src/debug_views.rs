@@ -5,7 +5,7 @@
 //! caches' SH along the normal (seed 001's Figures 3 and 5).
 //! They are built on the CPU from buffers read back after a frame.
 
-use crate::gi::clustered::ClusterView;
+use crate::gi::clustered::{ClusterView, LightShadowTexel, LightShadowView};
 use crate::gi::lightskin::{
     cache_lighting::CacheLighting,
     caches::{CacheSet, LightCache},
@@ -108,10 +108,22 @@ pub fn compose(
             };
             self::caches(&frame, camera, bounds, &caches.caches, lighting)
         }
-        View::Clusters => clusters(
-            debug
+        View::Clusters | View::Vpls => {
+            let captured = debug
                 .as_ref()
                 .and_then(|d| d.0.downcast_ref::<ClusterView>())
+                .ok_or(needs_gi)?;
+            if view == View::Clusters {
+                clusters(captured)
+            } else {
+                vpls(&frame, camera, bounds, captured)
+            }
+        }
+        View::ValShadow => light_shadow(
+            (frame.width, frame.height),
+            debug
+                .as_ref()
+                .and_then(|d| d.0.downcast_ref::<LightShadowView>())
                 .ok_or(needs_gi)?,
         ),
         View::Surfels | View::SurfelLinks | View::CacheSh => {
@@ -268,6 +280,40 @@ pub fn clusters(v: &ClusterView) -> Image {
         }
     }
     image
+}
+
+/// The frame at a third of its brightness with every lit VPL as a dot at its surface point in
+/// the colour of its flux (auto-exposed over the VPLs): where the light's first bounce starts.
+pub fn vpls(frame: &Frame, camera: &Camera, bounds: &Aabb, v: &ClusterView) -> Image {
+    let mut overlay = Overlay::new(frame, camera, bounds);
+    let lit: Vec<usize> = (0..v.mapping.len())
+        .filter(|&i| v.mapping[i].is_some())
+        .collect();
+    let exposure = auto_exposure(lit.iter().map(|&i| luminance(v.flux[i])));
+    let radius = overlay.radius_for(lit.len());
+    for i in lit {
+        overlay.dot(
+            Vec3::from(v.positions[i]),
+            Vec3::from(v.normals[i]),
+            radius,
+            tonemap_cpu(v.flux[i], exposure),
+        );
+    }
+    overlay.image
+}
+
+/// Colour of `val-shadow` pixels the light cannot reach whatever the visibility.
+pub const FACING_AWAY: [u8; 3] = [0, 0, 96];
+
+/// One light's visibility as grey (white: sees the light), dark blue where the light and the
+/// surface face away from each other, black where no geometry is; scaled from the method's
+/// resolution to `out`.
+pub fn light_shadow(out: (u32, u32), v: &LightShadowView) -> Image {
+    scaled_image(out, (v.width, v.height), &v.texels, |texel| match texel {
+        Some(LightShadowTexel::Visibility(v)) => [(v.clamp(0.0, 1.0) * 255.0).round() as u8; 3],
+        Some(LightShadowTexel::FacingAway) => FACING_AWAY,
+        Some(LightShadowTexel::Empty) | None => [0; 3],
+    })
 }
 
 /// The frame at a third of its brightness, and a projection of scene points onto it.
@@ -455,27 +501,39 @@ pub fn surfel_links(frame: &Frame, camera: &Camera, bounds: &Aabb, set: &SurfelS
 /// Surfels under none of the shown cache's links.
 const UNLINKED: [u8; 3] = [48; 3];
 
-/// The caches' SH radiance along each pixel's normal, auto-exposed; black where no geometry
-/// is. `radiance` is `width` × `height` (the method's resolution, reduced by
-/// `indirect_downscale`), shown at the frame's `out` size by nearest neighbour.
-pub fn cache_sh(out: (u32, u32), width: u32, height: u32, radiance: &[[f32; 4]]) -> Image {
-    let rgb = |c: &[f32; 4]| [c[0], c[1], c[2]];
-    let exposure = auto_exposure(radiance.iter().map(|c| luminance(rgb(c))));
-    let source = |x: u32, y: u32| {
-        let sx = (u64::from(x) * u64::from(width) / u64::from(out.0.max(1))) as usize;
-        let sy = (u64::from(y) * u64::from(height) / u64::from(out.1.max(1))) as usize;
-        radiance.get(sy * width as usize + sx)
+/// An `out`-sized image of `texels` (row-major, `size`), each output pixel the colour
+/// `colour` gives its nearest texel (`None` past the end): for views made at the method's
+/// resolution.
+fn scaled_image<T>(
+    out: (u32, u32),
+    size: (u32, u32),
+    texels: &[T],
+    colour: impl Fn(Option<&T>) -> [u8; 3],
+) -> Image {
+    let texel = |x: u32, y: u32| {
+        let sx = u64::from(x) * u64::from(size.0) / u64::from(out.0.max(1));
+        let sy = u64::from(y) * u64::from(size.1) / u64::from(out.1.max(1));
+        texels.get((sy * u64::from(size.0) + sx) as usize)
     };
     Image::from_rgb(
         out.0,
         out.1,
         (0..out.1)
             .flat_map(|y| (0..out.0).map(move |x| (x, y)))
-            .map(|(x, y)| match source(x, y) {
-                Some(c) if c[3] != 0.0 => tonemap_cpu(rgb(c), exposure),
-                _ => [0; 3],
-            }),
+            .map(|(x, y)| colour(texel(x, y))),
     )
+}
+
+/// The caches' SH radiance along each pixel's normal, auto-exposed; black where no geometry
+/// is. `radiance` is `width` × `height` (the method's resolution, reduced by
+/// `indirect_downscale`), shown at the frame's `out` size by nearest neighbour.
+pub fn cache_sh(out: (u32, u32), width: u32, height: u32, radiance: &[[f32; 4]]) -> Image {
+    let rgb = |c: &[f32; 4]| [c[0], c[1], c[2]];
+    let exposure = auto_exposure(radiance.iter().map(|c| luminance(rgb(c))));
+    scaled_image(out, (width, height), radiance, |texel| match texel {
+        Some(c) if c[3] != 0.0 => tonemap_cpu(rgb(c), exposure),
+        _ => [0; 3],
+    })
 }
 
 /// The frame at a third of its brightness with every light cache facing the camera drawn as a
@@ -511,6 +569,9 @@ mod tests {
             rsm_height: 8,
             texels: vec![3, 7 * 16 + 2, 5 * 16 + 12, 7 * 16 + 15],
             mapping: vec![Some(0), Some(5), None, Some(5)],
+            positions: vec![[0.0; 3]; 4],
+            normals: vec![[0.0, 1.0, 0.0]; 4],
+            flux: vec![[1.0; 3]; 4],
         };
         let image = clusters(&view);
         assert_eq!((image.width, image.height), (16, 8));
@@ -524,6 +585,35 @@ mod tests {
         assert_eq!(at(5 * 16 + 12), [0; 3], "an unlit VPL is not drawn");
         let colours: std::collections::BTreeSet<[u8; 3]> = (0..64).map(index_colour).collect();
         assert_eq!(colours.len(), 64);
+    }
+
+    /// Visibility is grey, facing-away pixels dark blue, empty ones black; a 2×1 view scaled
+    /// to 4×2 repeats each texel.
+    #[test]
+    fn the_light_shadow_view_shows_visibility_as_grey() {
+        let view = LightShadowView {
+            width: 2,
+            height: 1,
+            texels: vec![
+                LightShadowTexel::Visibility(0.5),
+                LightShadowTexel::FacingAway,
+            ],
+        };
+        let image = light_shadow((4, 2), &view);
+        let at = |x: usize, y: usize| {
+            let i = (y * 4 + x) * 4;
+            [image.rgba8[i], image.rgba8[i + 1], image.rgba8[i + 2]]
+        };
+        assert_eq!(at(0, 0), [128; 3]);
+        assert_eq!(at(1, 1), [128; 3]);
+        assert_eq!(at(2, 0), FACING_AWAY);
+        assert_eq!(at(3, 1), FACING_AWAY);
+        let empty = LightShadowView {
+            width: 1,
+            height: 1,
+            texels: vec![LightShadowTexel::Empty],
+        };
+        assert_eq!(light_shadow((1, 1), &empty).rgba8[..3], [0, 0, 0]);
     }
 
     #[test]

@@ -5,6 +5,7 @@
 //! it behind HTTP and WebSocket.
 
 pub mod bench;
+pub mod bench_clustered;
 #[cfg(feature = "plots")]
 pub mod bench_plots;
 pub mod bench_surfels;

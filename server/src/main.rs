@@ -5,10 +5,10 @@
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use lightcast_server::bench::{self, BenchArgs};
-use lightcast_server::bench_surfels;
 use lightcast_server::gi::GiMethod;
 use lightcast_server::offline::{self, RenderArgs};
 use lightcast_server::service::{self, config::LogFormat, ServeArgs};
+use lightcast_server::{bench_clustered, bench_surfels};
 
 #[derive(Parser)]
 #[command(
@@ -161,6 +161,16 @@ fn main() -> anyhow::Result<()> {
                     #[cfg(feature = "plots")]
                     write_plots(args.plots.as_deref(), |prefix| {
                         lightcast_server::bench_plots::write_surfel_plots(&report, prefix)
+                    })?;
+                    (report.markdown(), serde_json::to_string_pretty(&report)?)
+                }
+                GiMethod::Clustered => {
+                    let report = bench_clustered::run(&args, &mut log, &mut progress)
+                        .context("bench failed")?;
+                    bar.finish_and_clear();
+                    #[cfg(feature = "plots")]
+                    write_plots(args.plots.as_deref(), |prefix| {
+                        lightcast_server::bench_plots::write_clustered_plots(&report, prefix)
                     })?;
                     (report.markdown(), serde_json::to_string_pretty(&report)?)
                 }

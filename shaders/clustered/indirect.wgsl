@@ -1,8 +1,7 @@
 // Indirect light from the VPLs (seed paper 003, §4 and §6 "Indirect Lighting"): the pixel at
 // (x, y) is lit by the VPLs i ≡ (y mod B)·B + (x mod B) (mod B²) of interleaved sampling with
 // B×B blocks, weighted by B² so that the geometry-aware blur's average over a block estimates
-// the sum over all N. Visibility is off: every VPL sees every point (the paper's "without
-// visibility" baseline).
+// the sum over all N. Each VPL's light is weighted by its visibility (clustered/visibility.wgsl).
 
 @group(0) @binding(0) var<storage, read> params: ClusteredParams;
 @group(0) @binding(1) var<storage, read> camera: CameraUniform;
@@ -29,30 +28,80 @@ fn vpl_radiance(vpl: Vpl, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBr
     return eval_brdf(s, n, w, v) * vpl.flux * (cos_i * cos_x / (vpl.area + PI * d2));
 }
 
+// The surface pixel `id` sees: its point, unit normal and Phong exponent; `covered` false
+// where no geometry is (the pixel's output is then cleared).
+struct Receiver {
+    x: vec3<f32>,
+    n: vec3<f32>,
+    exponent: f32,
+    covered: bool,
+}
+
+fn receiver(texel: vec2<i32>) -> Receiver {
+    let position = textureLoad(g_position, texel, 0);
+    let ne = textureLoad(g_normal_exponent, texel, 0);
+    return Receiver(position.xyz, normalize(ne.xyz), ne.w, position.w != 0.0);
+}
+
 @compute @workgroup_size(8, 8)
 fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     if id.x >= params.width || id.y >= params.height {
         return;
     }
     let texel = vec2<i32>(id.xy);
-    let position = textureLoad(g_position, texel, 0);
-    if position.w == 0.0 {
+    let r = receiver(texel);
+    if !r.covered {
         textureStore(interleaved_out, texel, vec4<f32>(0.0));
         return;
     }
-    let ne = textureLoad(g_normal_exponent, texel, 0);
-    let x = position.xyz;
-    let n = normalize(ne.xyz);
-    let v = normalize(camera.position - x);
-    let s = SurfaceBrdf(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb, ne.w);
+    let v = normalize(camera.position - r.x);
+    let s = SurfaceBrdf(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb, r.exponent);
     let b = params.interleave;
     let stride = b * b;
     var radiance = vec3<f32>(0.0);
     for (var i = (id.y % b) * b + id.x % b; i < params.vpl_count; i += stride) {
         let vpl = vpls[i];
         if vpl.lit != 0u {
-            radiance += vpl_radiance(vpl, x, n, v, s);
+            let l = vpl_radiance(vpl, r.x, r.n, v, s);
+            if any(l > vec3<f32>(0.0)) {
+                radiance += l * vpl_visibility(i, r.x, r.n);
+            }
         }
     }
     textureStore(interleaved_out, texel, vec4<f32>(radiance * f32(stride), 1.0));
+}
+
+// The `val-shadow` debug view: the visibility of light `shadow_light` (a VAL, or a VPL with
+// per-VPL shadows) at every pixel's surface; alpha 0 where no geometry is, 0.5 where the
+// light and the surface face away from each other.
+@compute @workgroup_size(8, 8)
+fn light_shadow(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= params.width || id.y >= params.height {
+        return;
+    }
+    let texel = vec2<i32>(id.xy);
+    let r = receiver(texel);
+    let j = params.shadow_light;
+    let to_light = map_origin(params, centres[j]) - r.x;
+    if !r.covered {
+        textureStore(interleaved_out, texel, vec4<f32>(0.0));
+        return;
+    }
+    // Where the light and the surface do not face each other the light sends nothing, and
+    // its visibility does not matter.
+    if dot(r.n, to_light) <= 0.0 || dot(centres[j].normal, to_light) >= 0.0 {
+        textureStore(interleaved_out, texel, vec4<f32>(0.0, 0.0, 0.0, 0.5));
+        return;
+    }
+    var v = 1.0;
+    switch params.visibility {
+        case VISIBILITY_CSSM: {
+            v = cssm_visibility(j, r.x, r.n);
+        }
+        case VISIBILITY_VPL_SHADOWS: {
+            v = hard_visibility(j, r.x, r.n);
+        }
+        default: {}
+    }
+    textureStore(interleaved_out, texel, vec4<f32>(v, v, v, 1.0));
 }

@@ -102,6 +102,8 @@ var<workgroup> sum_normal: array<vec3<f32>, 64>;
 var<workgroup> counts: array<u32, 64>;
 var<workgroup> low: array<vec2<f32>, 64>;
 var<workgroup> high: array<vec2<f32>, 64>;
+var<workgroup> nearest_distance: array<f32, 64>;
+var<workgroup> nearest: array<u32, 64>;
 
 // Sums of the positions and normals of cluster k's VPLs, complete in slot 0. Each thread sums
 // a fixed stride of the VPLs, then a tree halves the partial sums.
@@ -156,23 +158,13 @@ fn update(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_ind
     }
 }
 
-// An orthonormal tangent basis of unit `n` (Duff et al. 2017, "Building an Orthonormal
-// Basis, Revisited", listing 3): continuous except at n.z = 0 with n.z's sign.
-fn tangent_basis(n: vec3<f32>) -> mat2x3<f32> {
-    let s = select(-1.0, 1.0, n.z >= 0.0);
-    let a = -1.0 / (s + n.z);
-    let b = n.x * n.y * a;
-    return mat2x3<f32>(
-        vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x),
-        vec3<f32>(b, s + n.y * n.y * a, -n.y),
-    );
-}
-
 var<workgroup> centre: Val;
 
-// The final VAL (§5, §6 "Clustering"): mean position and normal of the VPLs C maps to it,
-// and as its area the 2D bounding rectangle of their positions projected onto the plane
-// perpendicular to that mean normal.
+// The final VAL (§5, §6 "Clustering"): the mean normal of the VPLs C maps to it, as its area
+// the 2D bounding rectangle of their positions projected onto the plane perpendicular to that
+// mean normal, and as its position that of its VPL nearest to their mean (the lowest index
+// among equals): the paper keeps the mean, but a mean can fall inside an object (VPLs on a
+// floor and on a box top), whose paraboloid map would then shadow everything.
 @compute @workgroup_size(64)
 fn finalize(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) local: u32) {
     let k = group.x;
@@ -185,21 +177,39 @@ fn finalize(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
     let basis = tangent_basis(c.normal);
     var lo = vec2<f32>(3.4e38);
     var hi = vec2<f32>(-3.4e38);
+    var best = 3.4e38;
+    var best_index = NO_VAL;
     for (var i = local; i < params.vpl_count; i += GROUP) {
         if mapping[i] == k {
             let d = vpls[i].position - c.position;
             let st = vec2<f32>(dot(d, basis[0]), dot(d, basis[1]));
             lo = min(lo, st);
             hi = max(hi, st);
+            // Strides visit indices in increasing order: keep the first of equals.
+            let l = length(d);
+            if l < best {
+                best = l;
+                best_index = i;
+            }
         }
     }
     low[local] = lo;
     high[local] = hi;
+    nearest_distance[local] = best;
+    nearest[local] = best_index;
     workgroupBarrier();
     for (var span = GROUP / 2u; span > 0u; span /= 2u) {
         if local < span {
             low[local] = min(low[local], low[local + span]);
             high[local] = max(high[local], high[local + span]);
+            let a = local;
+            let b = local + span;
+            let other_wins = nearest_distance[b] < nearest_distance[a]
+                || (nearest_distance[b] == nearest_distance[a] && nearest[b] < nearest[a]);
+            if other_wins {
+                nearest_distance[a] = nearest_distance[b];
+                nearest[a] = nearest[b];
+            }
         }
         workgroupBarrier();
     }
@@ -209,6 +219,7 @@ fn finalize(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_i
         if c.count > 0u {
             let extent = high[0] - low[0];
             val.area = extent.x * extent.y;
+            val.position = vpls[nearest[0]].position;
         }
         vals[k] = val;
     }

@@ -21,7 +21,21 @@ struct ClusteredParams {
     blur_distance: f32,
     // Smallest cosine between the normals of blurred pixels.
     blur_normal: f32,
-    pad0: u32,
+    // VISIBILITY_OFF, VISIBILITY_CSSM or VISIBILITY_VPL_SHADOWS (clustered/paraboloid.wgsl).
+    visibility: u32,
+    // Side S of one paraboloid map in texels (a power of two).
+    map_size: u32,
+    // The maps' atlas: tile j is at column j % atlas_columns, row j / atlas_columns.
+    atlas_columns: u32,
+    atlas_rows: u32,
+    // K of the convolution soft shadow maps (§4.1), 1 to FOURIER_MAX_TERMS.
+    fourier_terms: u32,
+    // The scene's extent (bounding-box diagonal): depths in the maps are distances over it.
+    extent: f32,
+    // The light whose visibility the `val-shadow` debug view shows.
+    shadow_light: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 // Mirrored by `Vpl` in server/src/gi/clustered/passes.rs.
@@ -61,4 +75,16 @@ const NO_VAL: u32 = 0xffffffffu;
 fn cluster_distance(p: ClusteredParams, vpl: Vpl, centre: Val) -> f32 {
     let angle = acos(clamp(dot(vpl.normal, centre.normal), -1.0, 1.0));
     return p.position_weight * distance(vpl.position, centre.position) + p.normal_weight * angle;
+}
+
+// An orthonormal tangent basis of unit `n` (Duff et al. 2017, "Building an Orthonormal
+// Basis, Revisited", listing 3): continuous except at n.z = 0 with n.z's sign.
+fn tangent_basis(n: vec3<f32>) -> mat2x3<f32> {
+    let s = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (s + n.z);
+    let b = n.x * n.y * a;
+    return mat2x3<f32>(
+        vec3<f32>(1.0 + s * n.x * n.x * a, s * b, -s * n.x),
+        vec3<f32>(b, s + n.y * n.y * a, -n.y),
+    );
 }

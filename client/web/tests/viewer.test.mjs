@@ -327,9 +327,10 @@ async function main() {
       await page.selectOption('[data-field="render.gi.method"]', 'clustered');
       await page.waitForSelector('[data-field="render.gi.vpl_count"]', { state: 'visible', timeout: PATIENCE_MS });
       const choices = await page.locator('[data-field="render.gi.visibility"] option').allTextContents();
-      assert.deepEqual(choices, ['off'], 'the visibility choices come from /v1/server');
+      assert.deepEqual(choices, ['off', 'cssm', 'vpl_shadows'], 'the visibility choices come from /v1/server');
       assert.ok(!(await page.locator('[data-field="render.gi.view_samples"]').isVisible()), 'clustered hides BRSM parameters');
       await page.waitForSelector('#stage-rows tr[data-stage="clustering"]', { timeout: PATIENCE_MS });
+      await page.waitForSelector('#stage-rows tr[data-stage="paraboloid_maps"]', { timeout: PATIENCE_MS });
       await page.selectOption('[data-field="render.gi.method"]', 'brsm');
       await page.waitForSelector('[data-field="render.gi.view_samples"]', { state: 'visible', timeout: PATIENCE_MS });
     });

@@ -88,6 +88,12 @@ pub struct GiSettings {
     pub blur_normal: f32,
     /// `clustered`: how VPL visibility is found.
     pub visibility: ClusteredVisibility,
+    /// `clustered`: side of each paraboloid depth map in texels.
+    pub paraboloid_size: u32,
+    /// `clustered`: K, Fourier terms of the convolution soft shadow maps.
+    pub fourier_terms: u32,
+    /// `clustered`: the light the `val-shadow` view shows.
+    pub shadow_light: u32,
 
     /// Indirect light at 1/n of the output's width and height (the renderer reduces the
     /// G-buffer and upsamples the method's result, see `passes::indirect_resolution`).
@@ -119,6 +125,9 @@ impl From<&lightcast_protocol::GiParams> for GiSettings {
             blur_distance: p.blur_distance,
             blur_normal: p.blur_normal,
             visibility: p.visibility,
+            paraboloid_size: p.paraboloid_size,
+            fourier_terms: p.fourier_terms,
+            shadow_light: p.shadow_light,
             indirect_downscale: p.indirect_downscale,
         }
     }

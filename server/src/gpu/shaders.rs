@@ -191,8 +191,38 @@ pub const CLUSTERED_INDIRECT: ShaderSource = ShaderSource {
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
+        wgsl!("clustered/paraboloid.wgsl"),
+        wgsl!("clustered/visibility.wgsl"),
         wgsl!("clustered/indirect.wgsl"),
     ],
+};
+
+/// `clustered`: one paraboloid depth map per VAL or VPL, all in one instanced draw.
+pub const PARABOLOID_MAPS: ShaderSource = ShaderSource {
+    name: "paraboloid_maps",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("clustered/vpls.wgsl"),
+        wgsl!("clustered/paraboloid.wgsl"),
+        wgsl!("clustered/paraboloid_maps.wgsl"),
+    ],
+};
+
+/// `clustered`: the Fourier basis of the paraboloid depth maps.
+pub const CSSM_BASIS: ShaderSource = ShaderSource {
+    name: "cssm_basis",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("clustered/vpls.wgsl"),
+        wgsl!("clustered/paraboloid.wgsl"),
+        wgsl!("clustered/cssm_basis.wgsl"),
+    ],
+};
+
+/// `clustered`: one mip level of the basis textures.
+pub const CSSM_MIPS: ShaderSource = ShaderSource {
+    name: "cssm_mips",
+    files: &[wgsl!("clustered/cssm_mips.wgsl")],
 };
 
 /// The geometry-aware blur of `clustered`.
@@ -269,6 +299,9 @@ pub const ALL: &[&ShaderSource] = &[
     &REFERENCE_BVH_TEST,
     &CLUSTERING,
     &CLUSTERED_INDIRECT,
+    &PARABOLOID_MAPS,
+    &CSSM_BASIS,
+    &CSSM_MIPS,
     &GEOMETRY_BLUR,
     &SURFEL_LIGHT,
     &SURFEL_PULL,
@@ -431,6 +464,9 @@ mod tests {
             (&REFERENCE_RESOLVE, &[&resolve::GROUP]),
             (&CLUSTERING, &[&clustered::CLUSTERING_GROUP]),
             (&CLUSTERED_INDIRECT, &[&clustered::INDIRECT_GROUP]),
+            (&PARABOLOID_MAPS, &[&clustered::MAPS_GROUP]),
+            (&CSSM_BASIS, &[&clustered::BASIS_GROUP]),
+            (&CSSM_MIPS, &[&clustered::MIPS_GROUP]),
             (&GEOMETRY_BLUR, &[&clustered::BLUR_GROUP]),
             (&SURFEL_LIGHT, &[&surfels::LIGHT_GROUP]),
             (&SURFEL_PULL, &[&surfels::PULL_GROUP]),

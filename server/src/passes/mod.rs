@@ -239,6 +239,29 @@ pub fn params_buffer(device: &wgpu::Device, label: &str, size: usize) -> wgpu::B
     })
 }
 
+/// A render pass that only writes depth into `view`, cleared to 1 (the far plane).
+pub fn begin_depth_pass<'e>(
+    encoder: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    view: &wgpu::TextureView,
+) -> wgpu::RenderPass<'e> {
+    encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Store,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
+}
+
 /// A compute pass without timestamp writes (stages are timed on the encoder).
 pub fn begin_compute<'e>(
     encoder: &'e mut wgpu::CommandEncoder,

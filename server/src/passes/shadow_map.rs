@@ -164,21 +164,7 @@ impl ShadowMapPass {
         scene: &SceneBuffers,
     ) {
         for (face, view) in map.face_views.iter().enumerate() {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("shadow map face"),
-                color_attachments: &[],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = super::begin_depth_pass(encoder, "shadow map face", view);
             let offset = [ParamSlots::offset(face as u32)];
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_group, &offset);

@@ -37,7 +37,10 @@ fn request_field(renderer_field: &str) -> String {
         | "cluster_normal_weight"
         | "interleave"
         | "blur_distance"
-        | "blur_normal" => {
+        | "blur_normal"
+        | "paraboloid_size"
+        | "fourier_terms"
+        | "shadow_light" => {
             format!("gi.{renderer_field}")
         }
         "light.cone" => "light.outer_cone".to_string(),

@@ -6,7 +6,7 @@
 
 use crate::support::*;
 use glam::Vec3;
-use lightcast_protocol::{Light, LightKind};
+use lightcast_protocol::{ClusteredVisibility, Light, LightKind};
 use lightcast_server::gi::clustered::cpu::{self, RefCluster, RefVpl, Weights};
 use lightcast_server::gi::clustered::passes::{Vpl, NO_VAL};
 use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
@@ -20,9 +20,12 @@ use std::f32::consts::FRAC_PI_2;
 const W: u32 = 48;
 const H: u32 = 36;
 
+/// `clustered` without visibility: the shading these tests check against the CPU has none
+/// (`gpu_clustered_visibility` checks it).
 fn clustered(vpl_count: u32, cluster_count: u32, iterations: u32, interleave: u32) -> GiSettings {
     GiSettings {
         method: GiMethod::Clustered,
+        visibility: ClusteredVisibility::Off,
         rsm_size: 64,
         vpl_count,
         cluster_count,
@@ -472,8 +475,8 @@ fn interleaved_shading_and_blur_match_the_cpu() {
     eprintln!("interleaved shading: worst relative error {worst:e} over {checked} pixels");
 }
 
-/// The indirect light of `clustered` against the path-traced reference is finite and well
-/// below that of `none` (no indirect light at all).
+/// The indirect light of `clustered` without visibility against the path-traced reference is
+/// finite and well below that of `none` (no indirect light at all).
 #[test]
 fn clustered_error_against_the_reference_is_finite_and_below_none() {
     let scene = procedural::cornell_box();

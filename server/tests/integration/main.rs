@@ -8,6 +8,7 @@ mod fuzz;
 mod gpu_brsm_sampling;
 mod gpu_cache_lighting;
 mod gpu_clustered;
+mod gpu_clustered_visibility;
 mod gpu_direct_light;
 mod gpu_indirect_resolution;
 mod gpu_reference;

@@ -312,6 +312,8 @@ fn clustered_renders_with_its_flags() {
         "2",
         "--interleave",
         "4",
+        "--paraboloid-size",
+        "32",
         "--json",
     ];
     let (lit, stdout, _) = render_ok("clustered.png", &[&common[..], &flags[..]].concat());
@@ -327,11 +329,14 @@ fn clustered_renders_with_its_flags() {
         ),
         (&512.into(), &8.into(), &2.into(), &4.into())
     );
-    assert_eq!(gi["visibility"], "off");
+    assert_eq!(gi["visibility"], "cssm");
+    assert_eq!(gi["paraboloid_size"], 32);
     for stage in [
         "rsm",
         "vpl_generation",
         "clustering",
+        "paraboloid_maps",
+        "cssm_basis",
         "clustered_indirect",
         "geometry_blur",
     ] {
@@ -349,6 +354,13 @@ fn clustered_renders_with_its_flags() {
     );
     assert_eq!(clusters.dimensions(), (32, 32), "the RSM's size");
     assert!(mean_level(&clusters) > 1.0, "the clusters view is black");
+    for view in ["vpls", "val-shadow"] {
+        let (image, _, _) = render_ok(
+            &format!("clustered-{view}.png"),
+            &[&common[..], &flags[..12], &["--view", view]].concat(),
+        );
+        assert!(mean_level(&image) > 1.0, "the {view} view is black");
+    }
 }
 
 #[test]

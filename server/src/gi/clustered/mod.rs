@@ -4,12 +4,16 @@
 //! into M virtual area lights restarted from the same seeds every frame (§5), and every pixel
 //! lit by all N VPLs through interleaved sampling and a geometry-aware blur (§6).
 //!
-//! Visibility is `off` so far: every VPL sees every point, the paper's "without visibility"
-//! baseline of Figure 10. The VALs (position, normal, area) and the mapping C are what the
-//! soft-shadow visibility of §4.1–4.2 will read. [`passes`] holds the GPU passes; [`cpu`] is
-//! the CPU reference of their equations.
+//! Visibility (`visibility`): `cssm`, the paper's, renders one paraboloid depth map per VAL
+//! and turns it into convolution soft shadow maps (§4.1–4.2), whose fractional V_C(i)(x)
+//! every VPL of the VAL shares; `vpl_shadows` renders a map per VPL and tests it hard (exact
+//! from-point visibility up to the map's resolution, Figure 10's instant-radiosity baseline);
+//! `off` lets every VPL see every point (Figure 10's "without visibility"). The maps draw
+//! alpha-masked materials as opaque. [`passes`] holds the GPU passes; [`cpu`] is the CPU
+//! reference of their equations.
 
 pub mod cpu;
+pub mod cpu_visibility;
 pub mod passes;
 
 use super::{
@@ -28,8 +32,8 @@ use lightcast_protocol::{
     ClusteredVisibility, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage, View,
 };
 use passes::{
-    BlurResources, ClusterBuffers, ClusteredParams, ClusteringPass, ImagePass, IndirectResources,
-    Val, Vpl, BLUR_GROUP, INDIRECT_GROUP,
+    AtlasLayout, BlurResources, ClusterBuffers, ClusteredParams, ClusteringPass, ImagePass,
+    IndirectResources, Val, VisibilityPass, VisibilityTargets, Vpl, BLUR_GROUP, INDIRECT_GROUP,
 };
 use std::any::{Any, TypeId};
 use std::sync::Arc;
@@ -44,6 +48,12 @@ pub const MAX_CLUSTER_COUNT: u32 = 256;
 pub const MAX_KMEANS_ITERATIONS: u32 = 64;
 /// Largest interleaving block side (the blur reads B² pixels per pixel).
 pub const MAX_INTERLEAVE: u32 = 16;
+/// Smallest and largest side of a paraboloid map.
+pub const MIN_PARABOLOID_SIZE: u32 = 16;
+pub const MAX_PARABOLOID_SIZE: u32 = 1024;
+/// Most bytes of paraboloid maps and CSSM basis a frame may hold: 30 VALs at 256² take
+/// 75 MiB, 256 VALs fit at 128², 1,024 hard-shadow VPLs at 256².
+pub const MAX_VISIBILITY_BYTES: u64 = 256 << 20;
 
 pub const ENTRY: MethodEntry = MethodEntry {
     methods: &[GiMethod::Clustered],
@@ -88,6 +98,57 @@ fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
     }
     unit("blur_distance", g.blur_distance, 0.0)?;
     unit("blur_normal", g.blur_normal, -1.0)?;
+    range(
+        "paraboloid_size",
+        g.paraboloid_size,
+        MIN_PARABOLOID_SIZE,
+        MAX_PARABOLOID_SIZE,
+    )?;
+    if !g.paraboloid_size.is_power_of_two() {
+        return Err(InvalidSetting::new(
+            "paraboloid_size",
+            format!(
+                "{} is not a power of two (the maps' mip chains halve it down to 1)",
+                g.paraboloid_size
+            ),
+        ));
+    }
+    range(
+        "fourier_terms",
+        g.fourier_terms,
+        1,
+        passes::FOURIER_MAX_TERMS,
+    )?;
+    let lights = match g.visibility {
+        ClusteredVisibility::VplShadows => g.vpl_count,
+        _ => g.cluster_count,
+    };
+    range("shadow_light", g.shadow_light, 0, lights - 1)?;
+    let atlas = AtlasLayout::of(
+        g.visibility,
+        g.paraboloid_size,
+        g.vpl_count,
+        g.cluster_count,
+    );
+    let count = match g.visibility {
+        ClusteredVisibility::VplShadows => format!("{} VPLs", g.vpl_count),
+        _ => format!("{} VALs", g.cluster_count),
+    };
+    let side = atlas.tallest_side();
+    if !atlas.fits() {
+        return Err(InvalidSetting::new(
+            "paraboloid_size",
+            format!(
+                "{count} with {} {s}×{s} paraboloid maps need {} MiB and an atlas {side} texels \
+                 high; the limits are {} MiB and {}: lower paraboloid_size or the count",
+                g.visibility.name(),
+                atlas.bytes().div_ceil(1 << 20),
+                MAX_VISIBILITY_BYTES >> 20,
+                passes::MAX_ATLAS_SIDE,
+                s = g.paraboloid_size,
+            ),
+        ));
+    }
     Ok(())
 }
 
@@ -108,8 +169,8 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
     vec![GiMethodInfo {
         method: GiMethod::Clustered,
         summary: "Clustered visibility (seed 003, §4-6): N VPLs from the RSM, k-means into M \
-                  virtual area lights, interleaved shading and a geometry-aware blur; \
-                  visibility off so far (the paper's baseline without visibility)"
+                  virtual area lights, one paraboloid convolution soft shadow map per VAL, \
+                  interleaved shading and a geometry-aware blur"
             .into(),
         progressive: false,
         parameters: vec![
@@ -189,52 +250,152 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
                     .iter()
                     .map(|v| v.name().to_string())
                     .collect(),
-                description: "VPL visibility: off (every VPL sees every point, the paper's \
-                              baseline without visibility)"
+                description: "VPL visibility: cssm (each VPL shares its VAL's soft shadow \
+                              from a paraboloid convolution soft shadow map, §4.1-4.2), \
+                              vpl_shadows (a hard-shadow paraboloid map per VPL: instant \
+                              radiosity, Figure 10's baseline) or off (every VPL sees every \
+                              point)"
                     .into(),
             },
+            param(
+                "paraboloid_size",
+                int,
+                d.paraboloid_size.into(),
+                (MIN_PARABOLOID_SIZE.into(), MAX_PARABOLOID_SIZE.into()),
+                "Side of each paraboloid depth map in texels, a power of two; with the map \
+                 count (M for cssm, N for vpl_shadows) within 256 MiB",
+            ),
+            param(
+                "fourier_terms",
+                int,
+                d.fourier_terms.into(),
+                (1.0, passes::FOURIER_MAX_TERMS.into()),
+                "K: Fourier terms of the convolution soft shadow maps (§4.1); fewer terms \
+                 soften every shadow",
+            ),
+            param(
+                "shadow_light",
+                int,
+                d.shadow_light.into(),
+                (0.0, f64::from(MAX_VPL_COUNT - 1)),
+                "The light whose shadow the val-shadow view shows: a VAL below \
+                 cluster_count, or with vpl_shadows a VPL below vpl_count",
+            ),
         ],
     }]
 }
 
-/// What the `clusters` debug view shows of a frame: the RSM texel of every VPL and its VAL.
+/// What the `clusters` and `vpls` debug views show of a frame: every VPL's RSM texel,
+/// surface point, normal, flux and VAL.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClusterView {
     pub rsm_width: u32,
     pub rsm_height: u32,
     /// Row-major RSM texel of each VPL.
     pub texels: Vec<u32>,
-    /// C: each VPL's VAL, `None` for unlit VPLs.
+    /// C: each VPL's VAL, `None` for unlit VPLs. With `vpl_shadows` every lit VPL is its own
+    /// light: C(i) = i.
     pub mapping: Vec<Option<u32>>,
+    pub positions: Vec<[f32; 3]>,
+    pub normals: Vec<[f32; 3]>,
+    pub flux: Vec<[f32; 3]>,
 }
 
-/// Staged copies of the VPLs and the mapping for [`ClusterView`].
-struct ClusterCapture {
-    rsm_width: u32,
-    rsm_height: u32,
-    vpls: wgpu::Buffer,
-    mapping: wgpu::Buffer,
+/// One pixel of the `val-shadow` view.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightShadowTexel {
+    /// No geometry.
+    Empty,
+    /// The light and the surface face away from each other: no light either way.
+    FacingAway,
+    /// The light's visibility at the surface, 0 (shadow) to 1.
+    Visibility(f32),
 }
 
-impl DebugCapture for ClusterCapture {
+/// What the `val-shadow` view shows: one light's visibility per pixel, row-major at the
+/// method's resolution.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LightShadowView {
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<LightShadowTexel>,
+}
+
+/// Staged copies behind [`ClusterView`] and [`LightShadowView`].
+enum ClusteredCapture {
+    Clusters {
+        rsm_width: u32,
+        rsm_height: u32,
+        vpls: wgpu::Buffer,
+        /// `None`: every lit VPL is its own light (`vpl_shadows`).
+        mapping: Option<wgpu::Buffer>,
+    },
+    LightShadow {
+        width: u32,
+        height: u32,
+        readback: TextureReadback,
+    },
+}
+
+impl DebugCapture for ClusteredCapture {
     fn read(
         self: Box<Self>,
         ctx: &GpuContext,
         submission: Option<&wgpu::SubmissionIndex>,
     ) -> Result<DebugData, GpuError> {
-        let (vpls, mapping) = (PendingMap::new(&self.vpls), PendingMap::new(&self.mapping));
-        ctx.wait_for(submission)?;
-        let vpls: Vec<Vpl> = bytemuck::pod_collect_to_vec(&vpls.finish()?);
-        let mapping: Vec<u32> = bytemuck::pod_collect_to_vec(&mapping.finish()?);
-        Ok(DebugData(Arc::new(ClusterView {
-            rsm_width: self.rsm_width,
-            rsm_height: self.rsm_height,
-            texels: vpls.iter().map(|v| v.texel).collect(),
-            mapping: mapping
-                .iter()
-                .map(|&c| (c != passes::NO_VAL).then_some(c))
-                .collect(),
-        })))
+        match *self {
+            Self::Clusters {
+                rsm_width,
+                rsm_height,
+                vpls,
+                mapping,
+            } => {
+                let vpls = PendingMap::new(&vpls);
+                let mapping = mapping.as_ref().map(PendingMap::new);
+                ctx.wait_for(submission)?;
+                let vpls: Vec<Vpl> = bytemuck::pod_collect_to_vec(&vpls.finish()?);
+                let mapping: Vec<Option<u32>> = match mapping {
+                    Some(m) => bytemuck::pod_collect_to_vec::<u8, u32>(&m.finish()?)
+                        .into_iter()
+                        .map(|c| (c != passes::NO_VAL).then_some(c))
+                        .collect(),
+                    None => (0..)
+                        .zip(&vpls)
+                        .map(|(i, v)| (v.lit != 0).then_some(i))
+                        .collect(),
+                };
+                Ok(DebugData(Arc::new(ClusterView {
+                    rsm_width,
+                    rsm_height,
+                    texels: vpls.iter().map(|v| v.texel).collect(),
+                    mapping,
+                    positions: vpls.iter().map(|v| v.position).collect(),
+                    normals: vpls.iter().map(|v| v.normal).collect(),
+                    flux: vpls.iter().map(|v| v.flux).collect(),
+                })))
+            }
+            Self::LightShadow {
+                width,
+                height,
+                readback,
+            } => {
+                let pending = readback.begin_read();
+                ctx.wait_for(submission)?;
+                let texels: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&pending.finish()?);
+                Ok(DebugData(Arc::new(LightShadowView {
+                    width,
+                    height,
+                    texels: texels
+                        .iter()
+                        .map(|t| match t[3] {
+                            0.0 => LightShadowTexel::Empty,
+                            1.0 => LightShadowTexel::Visibility(t[0]),
+                            _ => LightShadowTexel::FacingAway,
+                        })
+                        .collect(),
+                })))
+            }
+        }
     }
 }
 
@@ -253,18 +414,29 @@ const MAX_INTERLEAVED: usize = 4;
 struct FrameTargets {
     rsm: Option<Rsm>,
     buffers: Option<ClusterBuffers>,
+    visibility: Option<VisibilityTargets>,
     /// Most recently used first.
     interleaved: Vec<Interleaved>,
 }
 
+/// What [`FrameTargets::prepare`] hands a frame.
+struct Prepared<'a> {
+    rsm: &'a Rsm,
+    buffers: &'a ClusterBuffers,
+    visibility: &'a VisibilityTargets,
+    interleaved: &'a Target,
+}
+
 impl FrameTargets {
-    /// The RSM, cluster buffers and interleaved texture of this frame, made or reused.
+    /// The RSM, cluster buffers, visibility maps and interleaved texture of this frame, made
+    /// or reused.
     fn prepare(
         &mut self,
         device: &wgpu::Device,
+        visibility_pass: &VisibilityPass,
         frame: &FrameInputs,
         faces: u32,
-    ) -> (&Rsm, &ClusterBuffers, &Target) {
+    ) -> Prepared<'_> {
         let g = frame.settings;
         if !self
             .rsm
@@ -287,6 +459,18 @@ impl FrameTargets {
         let buffers = self
             .buffers
             .get_or_insert_with(|| ClusterBuffers::new(device, g.vpl_count, g.cluster_count));
+        let atlas = AtlasLayout::of(
+            g.visibility,
+            g.paraboloid_size,
+            g.vpl_count,
+            g.cluster_count,
+        );
+        if !self.visibility.as_ref().is_some_and(|v| v.layout == atlas) {
+            self.visibility = None;
+        }
+        let visibility = self
+            .visibility
+            .get_or_insert_with(|| VisibilityTargets::new(device, visibility_pass, atlas));
         let gbuffer = &frame.gbuffer.position.texture;
         match self.interleaved.iter().position(|i| &i.gbuffer == gbuffer) {
             Some(i) => {
@@ -304,7 +488,12 @@ impl FrameTargets {
                 );
             }
         }
-        (rsm, buffers, &self.interleaved[0].target)
+        Prepared {
+            rsm,
+            buffers,
+            visibility,
+            interleaved: &self.interleaved[0].target,
+        }
     }
 }
 
@@ -314,13 +503,18 @@ pub struct Clustered {
     rsm_pass: RsmPass,
     params: wgpu::Buffer,
     clustering: ClusteringPass,
+    visibility: VisibilityPass,
     indirect: ImagePass,
+    /// The `val-shadow` view's pass.
+    light_shadow: ImagePass,
     blur: ImagePass,
     targets: FrameTargets,
     /// The scene's extent (bounding-box diagonal): the unit of Δx and of the blur distance.
     extent: f32,
     /// Whether the last frame ran (the buffers hold its results).
     encoded: bool,
+    /// The last frame's visibility.
+    visibility_mode: ClusteredVisibility,
 }
 
 /// Everything a frame's clustering produced, read back for tests.
@@ -338,6 +532,10 @@ pub struct ClusteredReadback {
     pub mapping: Vec<u32>,
     /// The interleaved shading before the blur (RGBA).
     pub interleaved: Vec<[f32; 4]>,
+    /// Where the paraboloid maps lie, and their depths (distance over the extent, 1 where
+    /// nothing was hit), row-major over the atlas.
+    pub atlas: AtlasLayout,
+    pub maps: Vec<f32>,
     /// The scene's extent the distances were scaled by.
     pub extent: f32,
 }
@@ -354,11 +552,18 @@ impl Clustered {
                 size_of::<ClusteredParams>(),
             ),
             clustering: ClusteringPass::new(device),
+            visibility: VisibilityPass::new(device),
             indirect: ImagePass::new(
                 device,
                 &INDIRECT_GROUP,
                 &crate::gpu::shaders::CLUSTERED_INDIRECT,
                 "shade",
+            ),
+            light_shadow: ImagePass::new(
+                device,
+                &INDIRECT_GROUP,
+                &crate::gpu::shaders::CLUSTERED_INDIRECT,
+                "light_shadow",
             ),
             blur: ImagePass::new(
                 device,
@@ -369,6 +574,7 @@ impl Clustered {
             targets: FrameTargets::default(),
             extent: (r.scene.bounds.radius() * 2.0).max(f32::MIN_POSITIVE),
             encoded: false,
+            visibility_mode: ClusteredVisibility::default(),
         }
     }
 
@@ -376,13 +582,17 @@ impl Clustered {
     /// for tests), or `None` before the first frame.
     pub fn read_back(&self) -> Result<Option<ClusteredReadback>, GpuError> {
         let t = &self.targets;
-        let (Some(rsm), Some(buffers), Some(interleaved), true) =
-            (&t.rsm, &t.buffers, t.interleaved.first(), self.encoded)
-        else {
+        let (Some(rsm), Some(buffers), Some(visibility), Some(interleaved), true) = (
+            &t.rsm,
+            &t.buffers,
+            &t.visibility,
+            t.interleaved.first(),
+            self.encoded,
+        ) else {
             return Ok(None);
         };
         let ctx = &self.ctx;
-        let read_texture = |t: &wgpu::Texture, bytes: u32| -> Result<Vec<[f32; 4]>, GpuError> {
+        let read_raw = |t: &wgpu::Texture, bytes: u32| -> Result<Vec<u8>, GpuError> {
             let size = t.size();
             let readback =
                 TextureReadback::new(&ctx.device, "clustered", size.width, size.height, bytes);
@@ -391,7 +601,10 @@ impl Clustered {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
             readback.encode_copy(&mut encoder, t);
             ctx.queue.submit([encoder.finish()]);
-            let raw = readback.read(ctx)?;
+            readback.read(ctx)
+        };
+        let read_texture = |t: &wgpu::Texture, bytes: u32| -> Result<Vec<[f32; 4]>, GpuError> {
+            let raw = read_raw(t, bytes)?;
             Ok(if bytes == 8 {
                 bytemuck::pod_collect_to_vec::<u8, half::f16>(&raw)
                     .chunks_exact(4)
@@ -411,6 +624,8 @@ impl Clustered {
             vals: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.vals)?),
             mapping: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.mapping)?),
             interleaved: read_texture(&interleaved.target.texture, 16)?,
+            atlas: visibility.layout,
+            maps: bytemuck::pod_collect_to_vec(&read_raw(&visibility.depth.texture, 4)?),
             extent: self.extent,
         }))
     }
@@ -426,10 +641,18 @@ impl Method for Clustered {
         let g = frame.settings;
         let faces = light_faces(frame.light, &r.scene.bounds);
         let device = &r.ctx.device;
-        let (rsm, buffers, interleaved) = self.targets.prepare(device, frame, faces.len() as u32);
+        let Prepared {
+            rsm,
+            buffers,
+            visibility,
+            interleaved,
+        } = self
+            .targets
+            .prepare(device, &self.visibility, frame, faces.len() as u32);
         let queue = &r.ctx.queue;
         let rsm_faces: Vec<RsmFace> = faces.iter().map(|f| RsmFace::new(f, g.rsm_size)).collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
+        let atlas = visibility.layout;
         let params = ClusteredParams {
             rsm_width: rsm.width(),
             rsm_height: rsm.height(),
@@ -442,12 +665,25 @@ impl Method for Clustered {
             height: frame.height,
             blur_distance: g.blur_distance * self.extent,
             blur_normal: g.blur_normal,
-            pad0: 0,
+            visibility: passes::visibility_code(g.visibility),
+            map_size: atlas.map_size,
+            atlas_columns: atlas.columns,
+            atlas_rows: atlas.rows,
+            fourier_terms: g.fourier_terms,
+            extent: self.extent,
+            shadow_light: g.shadow_light,
+            pad1: 0,
+            pad2: 0,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         let clustering_group = self.clustering.bind(device, &self.params, rsm, buffers);
+        // The maps' lights: the VALs, or every VPL for the hard-shadow baseline.
+        let centres = match g.visibility {
+            ClusteredVisibility::VplShadows => &buffers.vpls,
+            ClusteredVisibility::Off | ClusteredVisibility::Cssm => &buffers.vals,
+        };
         let gb = frame.gbuffer;
-        let indirect_group = IndirectResources {
+        let indirect_resources = IndirectResources {
             params: &self.params,
             camera: &r.camera,
             g_position: &gb.position,
@@ -456,8 +692,13 @@ impl Method for Clustered {
             g_glossy: &gb.glossy,
             vpls: &buffers.vpls,
             interleaved_out: interleaved,
-        }
-        .bind(device, &self.indirect.layout);
+            centres,
+            mapping: &buffers.mapping,
+            depth_atlas: &visibility.depth.view,
+            basis: &visibility.basis_view,
+            basis_sampler: &visibility.sampler,
+        };
+        let indirect_group = indirect_resources.bind(device, &self.indirect.layout);
         let blur_group = BlurResources {
             params: &self.params,
             g_position: &gb.position,
@@ -467,6 +708,7 @@ impl Method for Clustered {
         }
         .bind(device, &self.blur.layout);
         self.encoded = true;
+        self.visibility_mode = g.visibility;
         stages.stage(Stage::Rsm, |e| {
             self.rsm_pass.encode(e, rsm, &r.scene_buffers)
         })?;
@@ -474,16 +716,47 @@ impl Method for Clustered {
             self.clustering
                 .encode_vpls(e, &clustering_group, g.vpl_count)
         })?;
-        stages.stage(Stage::Clustering, |e| {
-            self.clustering
-                .encode_clustering(e, &clustering_group, buffers, g.kmeans_iterations)
-        })?;
+        // Per-VPL shadows need no VALs: the baseline's cost leaves clustering out.
+        if g.visibility != ClusteredVisibility::VplShadows {
+            stages.stage(Stage::Clustering, |e| {
+                self.clustering.encode_clustering(
+                    e,
+                    &clustering_group,
+                    buffers,
+                    g.kmeans_iterations,
+                )
+            })?;
+        }
+        if g.visibility != ClusteredVisibility::Off {
+            stages.stage(Stage::ParaboloidMaps, |e| {
+                self.visibility.encode_maps(
+                    device,
+                    e,
+                    &self.params,
+                    centres,
+                    &r.scene_buffers,
+                    visibility,
+                )
+            })?;
+        }
+        if g.visibility == ClusteredVisibility::Cssm {
+            stages.stage(Stage::CssmBasis, |e| {
+                self.visibility.encode_basis(e, visibility)
+            })?;
+        }
         stages.stage(Stage::ClusteredIndirect, |e| {
             self.indirect
                 .encode(e, &indirect_group, frame.width, frame.height)
         })?;
+        // The view's pass runs after the blur has read the interleaved texture it overwrites.
+        let shadow_group = (frame.debug_view == View::ValShadow)
+            .then(|| indirect_resources.bind(device, &self.light_shadow.layout));
         stages.stage(Stage::GeometryBlur, |e| {
-            self.blur.encode(e, &blur_group, frame.width, frame.height)
+            self.blur.encode(e, &blur_group, frame.width, frame.height);
+            if let Some(group) = &shadow_group {
+                self.light_shadow
+                    .encode(e, group, frame.width, frame.height);
+            }
         })?;
         Ok(None)
     }
@@ -495,15 +768,33 @@ impl Method for Clustered {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Option<Box<dyn DebugCapture>> {
         let t = &self.targets;
-        let (View::Clusters, Some(rsm), Some(buffers)) = (view, &t.rsm, &t.buffers) else {
-            return None;
+        let capture = match view {
+            View::Clusters | View::Vpls => {
+                let (rsm, buffers) = (t.rsm.as_ref()?, t.buffers.as_ref()?);
+                // The per-VPL baseline skips the clustering: its mapping is stale.
+                let own_lights = self.visibility_mode == ClusteredVisibility::VplShadows;
+                ClusteredCapture::Clusters {
+                    rsm_width: rsm.width(),
+                    rsm_height: rsm.height(),
+                    vpls: stage_buffer(device, encoder, &buffers.vpls),
+                    mapping: (!own_lights).then(|| stage_buffer(device, encoder, &buffers.mapping)),
+                }
+            }
+            View::ValShadow => {
+                let target = &t.interleaved.first()?.target.texture;
+                let size = target.size();
+                let readback =
+                    TextureReadback::new(device, "light shadow", size.width, size.height, 16);
+                readback.encode_copy(encoder, target);
+                ClusteredCapture::LightShadow {
+                    width: size.width,
+                    height: size.height,
+                    readback,
+                }
+            }
+            _ => return None,
         };
-        Some(Box::new(ClusterCapture {
-            rsm_width: rsm.width(),
-            rsm_height: rsm.height(),
-            vpls: stage_buffer(device, encoder, &buffers.vpls),
-            mapping: stage_buffer(device, encoder, &buffers.mapping),
-        }))
+        Some(Box::new(capture))
     }
 
     fn retain_targets(&mut self, live: &[&GBuffer]) {

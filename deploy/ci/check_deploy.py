@@ -58,6 +58,7 @@ EVERYTHING_ON = {
 ROUTING_ON = {
     "routing": {"enabled": True, "key": "0123456789abcdef0123456789abcdef"},
     "ingress": {"enabled": True, "className": "nginx"},
+    "sceneStore": {"enabled": True},
 }
 ROUTING_RULE = CHART / "files/routing.conf"
 
@@ -256,6 +257,7 @@ def check_routing_render(objects, env_names):
         fail("chart (routing): LIGHTCAST_REPLICA is not the pod's name")
     if "LIGHTCAST_ROUTING_KEY_FILE" not in env:
         fail("chart (routing): no LIGHTCAST_ROUTING_KEY_FILE")
+    check_scene_store(objects, statefulset, env)
     routers = [c for c in by_kind(objects, "ConfigMap") if c["metadata"]["name"].endswith("-router")]
     conf = [line.strip() for line in routers[0]["data"]["default.conf"].splitlines()] if routers else []
     missing = [line.strip() for line in ROUTING_RULE.read_text().splitlines()
@@ -276,6 +278,28 @@ def check_routing_render(objects, env_names):
         if selects_router != service["metadata"]["name"].endswith("-router"):
             fail(f"chart (routing): Service {service['metadata']['name']} selects "
                  f"{'the router' if selects_router else 'not the router'}")
+
+
+def check_scene_store(objects, statefulset, env):
+    """With the scene store on: every pod mounts the same ReadWriteMany claim where
+    LIGHTCAST_SCENE_STORE points."""
+    path = env.get("LIGHTCAST_SCENE_STORE", {}).get("value")
+    pod = statefulset["spec"]["template"]["spec"]
+    mounts = {m["name"]: m["mountPath"] for m in pod["containers"][0]["volumeMounts"]}
+    volumes = {v["name"]: v for v in pod["volumes"]}
+    claims = {c["metadata"]["name"]: c for c in by_kind(objects, "PersistentVolumeClaim")}
+    names = [n for n, p in mounts.items() if p == path]
+    if not path or not names:
+        fail("chart (scene store): LIGHTCAST_SCENE_STORE is not set to a mounted volume")
+        return
+    claim_name = volumes.get(names[0], {}).get("persistentVolumeClaim", {}).get("claimName")
+    claim = claims.get(claim_name)
+    if claim is None or claim["spec"]["accessModes"] != ["ReadWriteMany"]:
+        fail(f"chart (scene store): {path} is not on a ReadWriteMany claim the chart makes "
+             f"(claim {claim_name})")
+    if any(t["metadata"]["name"] == names[0]
+           for t in statefulset["spec"].get("volumeClaimTemplates", [])):
+        fail("chart (scene store): the store is a per-pod claim, not one shared volume")
 
 
 def check_router_config(conf):

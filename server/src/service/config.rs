@@ -34,6 +34,12 @@ pub struct ServeArgs {
     /// trailing newline is ignored). Needs --replica.
     #[arg(long, env = "LIGHTCAST_ROUTING_KEY_FILE")]
     pub routing_key_file: Option<PathBuf>,
+    /// A directory shared by every replica (a ReadWriteMany volume) where scenes added through
+    /// `POST /v1/scenes` are kept, so that each replica can load any of them on first use and a
+    /// deletion reaches all (deploy/README.md). Without it a scene lives on the replica it was
+    /// uploaded to.
+    #[arg(long, env = "LIGHTCAST_SCENE_STORE")]
+    pub scene_store: Option<PathBuf>,
     /// Count a CPU (software) adapter such as lavapipe as ready in /readyz.
     #[arg(long, env = "LIGHTCAST_ALLOW_CPU_ADAPTER")]
     pub allow_cpu_adapter: bool,

@@ -18,6 +18,7 @@ pub mod metrics;
 pub mod params;
 pub mod render_loop;
 pub mod routing;
+pub mod scene_store;
 pub mod scenes;
 pub mod sessions;
 
@@ -51,6 +52,8 @@ pub enum ServeError {
     Encoder(#[from] rayon::ThreadPoolBuildError),
     #[error("the server task failed: {0}")]
     Task(String),
+    #[error(transparent)]
+    SceneStore(#[from] scene_store::StoreError),
 }
 
 /// A running service.
@@ -158,8 +161,20 @@ impl Service {
             ctx.info.device_type == wgpu::DeviceType::Cpu,
         );
         log(&defaults.summary());
+        let scene_store = match &args.scene_store {
+            Some(dir) => {
+                let store = scene_store::SceneStore::open(dir)?;
+                log(&format!(
+                    "scene store: {} (uploaded scenes are shared with every replica using it)",
+                    dir.display()
+                ));
+                Some(store)
+            }
+            None => None,
+        };
         let state = Arc::new(http::AppState::new(
             scenes,
+            scene_store,
             Arc::clone(&sessions),
             render_tx.clone(),
             limits,

@@ -97,8 +97,8 @@ pub struct SceneEntry {
     /// message.
     facts: SceneFacts,
     pub load_ms: f64,
-    /// The token that uploaded the scene, the only one that may delete it (`None`: the
-    /// server's own scenes, or auth off).
+    /// The SHA-256 of the token that uploaded the scene, the only one that may delete it
+    /// (`None`: the server's own scenes, or auth off); the token itself is never kept.
     owner: Option<String>,
     variants: Mutex<Vec<Variant>>,
     sessions: AtomicU64,
@@ -354,6 +354,11 @@ impl SceneEntry {
     }
 
     /// Marks the scene in use until the lease is dropped.
+    /// Whether the `caller` token may delete the scene: any caller where it has no owner.
+    pub fn owned_by(&self, caller: Option<&str>) -> bool {
+        owner_allows(self.owner.as_deref(), caller)
+    }
+
     pub fn lease(self: &Arc<Self>) -> SceneLease {
         self.sessions.fetch_add(1, Ordering::Relaxed);
         SceneLease(Arc::clone(self))
@@ -401,6 +406,13 @@ pub fn precompute_failed(scene: &SceneEntry, key: &PrecomputeKey, error: &str) -
 /// render's upload whose request has ended, is skipped and its memory freed at once instead
 /// of waiting in the queue.
 type Job = (Weak<SceneEntry>, PrecomputeKey);
+
+/// Whether `caller` may delete a scene whose owner digest is `owner` (`None`: anyone).
+pub fn owner_allows(owner: Option<&str>, caller: Option<&str>) -> bool {
+    owner.is_none_or(|digest| {
+        caller.map(super::scene_store::owner_digest).as_deref() == Some(digest)
+    })
+}
 
 /// Precomputations waiting at most; beyond them a request is refused for now.
 const MAX_QUEUED_JOBS: usize = 32;
@@ -463,8 +475,8 @@ impl SceneRegistry {
     }
 
     /// Adds a loaded scene under `id` (a new random id when `None`), deletable only with the
-    /// `owner` token when there is one, and queues the precomputation of its default light
-    /// caches.
+    /// token whose [`owner_digest`](super::scene_store::owner_digest) is `owner` when there is
+    /// one, and queues the precomputation of its default light caches.
     pub fn insert(
         &self,
         scene: Scene,
@@ -549,7 +561,7 @@ impl SceneRegistry {
         if id == DEFAULT_SCENE_ID {
             return Err(ApiError::conflict("the default scene cannot be deleted"));
         }
-        if entry.owner.is_some() && entry.owner.as_deref() != caller {
+        if !entry.owned_by(caller) {
             return Err(ApiError::forbidden(format!(
                 "scene '{id}' was uploaded with another token; only that token can delete it"
             )));
@@ -563,6 +575,18 @@ impl SceneRegistry {
         scenes.remove(id);
         metrics::gauge!(super::metrics::SCENES).set(scenes.len() as f64);
         Ok(())
+    }
+
+    /// Drops scene `id` if no session uses it (it was deleted from the scene store by
+    /// another replica); returns whether it was dropped.
+    pub fn forget(&self, id: &str) -> bool {
+        let mut scenes = lock(&self.scenes);
+        let unused = scenes.get(id).is_some_and(|e| e.in_use() == 0);
+        if unused {
+            scenes.remove(id);
+            metrics::gauge!(super::metrics::SCENES).set(scenes.len() as f64);
+        }
+        unused
     }
 
     /// The data of `scene`'s precomputation `key`, queueing it on first use.

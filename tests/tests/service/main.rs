@@ -5,5 +5,6 @@ mod api;
 mod budgets;
 mod hardening;
 mod routing;
+mod scene_store;
 mod streaming;
 mod viewer;

@@ -165,17 +165,29 @@ async fn frames(
 /// Issue 14 part 4: three replicas behind a real nginx configured with the chart's routing rule.
 /// Sessions created through it spread over the replicas, stream through it, follow camera
 /// input and take tickets through it; when one replica stops, its client gets a clear close
-/// and a new session lands on another replica while the others' streams go on.
+/// and a new session lands on another replica while the others' streams go on. The sessions
+/// use a scene uploaded through the proxy, which every replica loads from the shared store.
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
 async fn three_replicas_behind_nginx_route_sessions_and_survive_one_stopping() {
     let dir = tempfile::tempdir().expect("temp dir");
     let key = dir.path().join("routing.key");
     std::fs::write(&key, "0123456789abcdef0123456789abcdef").expect("key file");
     let key = key.to_string_lossy().into_owned();
+    let store = dir.path().join("scenes").to_string_lossy().into_owned();
     let names = ["lightcast-0", "lightcast-1", "lightcast-2"];
     let mut replicas = Vec::new();
     for name in names {
-        replicas.push(TestServer::start(&["--replica", name, "--routing-key-file", &key]).await);
+        replicas.push(
+            TestServer::start(&[
+                "--replica",
+                name,
+                "--routing-key-file",
+                &key,
+                "--scene-store",
+                &store,
+            ])
+            .await,
+        );
     }
     let ports: Vec<(&str, u16)> = names
         .iter()
@@ -192,10 +204,25 @@ async fn three_replicas_behind_nginx_route_sessions_and_survive_one_stopping() {
     .await
     .expect("the proxy answers");
 
+    // A scene uploaded through the proxy (to whichever replica it picks) serves sessions on
+    // every replica: they share the scene store.
+    let uploaded = front
+        .http
+        .post(front.url("/v1/scenes?name=box"))
+        .header("content-type", "model/gltf-binary")
+        .body(lightcast_e2e::cornell_glb())
+        .send()
+        .await
+        .expect("upload");
+    assert_eq!(uploaded.status(), 201);
+    let scene: Value = uploaded.json().await.expect("SceneInfo");
+    let mut on_uploaded = direct_session(32, 24);
+    on_uploaded["render"]["scene"] = scene["id"].clone();
+
     // Three sessions through the proxy land on three replicas.
     let mut created = Vec::new();
     for _ in 0..3 {
-        created.push(front.create_session(direct_session(32, 24), None).await);
+        created.push(front.create_session(on_uploaded.clone(), None).await);
     }
     let owners: std::collections::BTreeSet<&str> = created
         .iter()

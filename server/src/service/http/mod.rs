@@ -51,6 +51,8 @@ struct Ticket {
 /// Everything the handlers share.
 pub struct AppState {
     pub scenes: Arc<SceneRegistry>,
+    /// Scenes shared with the other replicas (`--scene-store`), if any.
+    pub scene_store: Option<crate::service::scene_store::SceneStore>,
     pub sessions: Arc<SessionRegistry>,
     pub render_tx: mpsc::Sender<Command>,
     pub limits: Limits,
@@ -81,6 +83,7 @@ impl AppState {
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         scenes: Arc<SceneRegistry>,
+        scene_store: Option<crate::service::scene_store::SceneStore>,
         sessions: Arc<SessionRegistry>,
         render_tx: mpsc::Sender<Command>,
         limits: Limits,
@@ -94,6 +97,7 @@ impl AppState {
         let admission = crate::service::budget::Admission::new(&limits);
         Self {
             scenes,
+            scene_store,
             sessions,
             render_tx,
             limits,

@@ -166,7 +166,7 @@ pub async fn render(
     let (mut req, uploaded) = read_request(&state, &caller, request).await?;
     let entry = match uploaded {
         Some(e) => e,
-        None => super::scenes::scene(&state, &req.render.scene)?,
+        None => super::scenes::scene(&state, &req.render.scene).await?,
     };
     let quality = check_quality(req.quality)?;
     let raw = matches!(req.format, ImageFormat::RawFinal | ImageFormat::RawIndirect);

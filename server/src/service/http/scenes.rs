@@ -6,7 +6,8 @@ use crate::scene::procedural::Spec;
 use crate::scene::Scene;
 use crate::service::budget::over_budget;
 use crate::service::error::{echo, parse_json, ApiError};
-use crate::service::scenes::{triangles_over_budget, SceneEntry};
+use crate::service::scene_store::{owner_digest, Recipe, SceneStore, StoredScene};
+use crate::service::scenes::{owner_allows, triangles_over_budget, SceneEntry};
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
 use axum::http::{header, StatusCode};
@@ -17,6 +18,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// An uploaded file: its name (from the multipart filename) and bytes.
+#[derive(Clone)]
 pub struct UploadedFile {
     pub name: String,
     pub bytes: Bytes,
@@ -255,7 +257,20 @@ pub struct UploadQuery {
 #[utoipa::path(get, path = "/v1/scenes", tag = "scenes",
     responses((status = 200, body = Vec<SceneInfo>)))]
 pub async fn list(State(state): State<Arc<AppState>>) -> Json<Vec<SceneInfo>> {
-    Json(state.scenes.list().iter().map(|e| e.info()).collect())
+    let mut infos: Vec<SceneInfo> = state.scenes.list().iter().map(|e| e.info()).collect();
+    if let Some(store) = &state.scene_store {
+        let store = store.clone();
+        let stored = tokio::task::spawn_blocking(move || store.list())
+            .await
+            .unwrap_or_default();
+        // Scenes another replica added, as it described them, until one is used here.
+        for record in stored {
+            if !infos.iter().any(|i| i.id == record.id) {
+                infos.push(record.info);
+            }
+        }
+    }
+    Json(infos)
 }
 
 /// Adds a scene: a `.glb` body (any content type but JSON or multipart), a
@@ -289,8 +304,13 @@ pub async fn create(
     } else {
         Some(state.admission.upload(caller.0.as_deref())?)
     };
+    if let Some(store) = &state.scene_store {
+        check_store_room(store, &state.limits)?;
+    }
     let started = Instant::now();
     let max_triangles = state.limits.max_triangles;
+    // What the scene store keeps to rebuild the scene on another replica.
+    let recipe_files: (Recipe, Vec<UploadedFile>);
     let (mut scene, source) = if is_multipart(&request) {
         let multipart = Multipart::from_request(request, &state)
             .await
@@ -301,6 +321,10 @@ pub async fn create(
             .map(|(_, f)| f)
             .collect();
         let (main, resources) = split_scene_files(files)?;
+        let kept: Vec<UploadedFile> = std::iter::once(main.clone())
+            .chain(resources.iter().cloned())
+            .collect();
+        recipe_files = (upload_recipe(&kept), kept);
         (
             load_upload(&state, main, resources).await?,
             "upload".to_string(),
@@ -314,6 +338,12 @@ pub async fn create(
         }
         let parsed = Spec::parse(&spec.procedural)
             .map_err(|e| ApiError::field("procedural", e.to_string()))?;
+        recipe_files = (
+            Recipe::Procedural {
+                spec: spec.procedural.clone(),
+            },
+            Vec::new(),
+        );
         let triangles = parsed.triangle_count();
         if triangles > max_triangles {
             return Err(ApiError::field(
@@ -345,6 +375,10 @@ pub async fn create(
             name: query.name.clone().unwrap_or_else(|| "upload.glb".into()),
             bytes: body,
         };
+        recipe_files = (
+            upload_recipe(std::slice::from_ref(&main)),
+            vec![main.clone()],
+        );
         (
             load_upload(&state, main, Vec::new()).await?,
             "upload".to_string(),
@@ -354,11 +388,129 @@ pub async fn create(
         scene.name = name;
     }
     let load_ms = started.elapsed().as_secs_f64() * 1e3;
+    let owner = caller.0.as_deref().map(owner_digest);
     let entry = state
         .scenes
-        .insert(scene, source, None, load_ms, caller.0)?;
+        .insert(scene, source, None, load_ms, owner.clone())?;
+    if let Some(store) = &state.scene_store {
+        let (recipe, files) = recipe_files;
+        let record = StoredScene {
+            id: entry.id.clone(),
+            name: entry.scene.name.clone(),
+            recipe,
+            owner_sha256: owner,
+            info: entry.info(),
+        };
+        let store = store.clone();
+        if let Err(e) = off_thread(move || store.put(&record, &files)).await {
+            // Without its stored copy the other replicas could not use it: undo the add.
+            let _ = state.scenes.remove(&entry.id, caller.0.as_deref());
+            return Err(e);
+        }
+    }
     tracing::info!(scene = %entry.id, triangles = entry.scene.triangle_count(), "scene added");
     Ok((StatusCode::CREATED, Json(entry.info())))
+}
+
+/// The recipe of uploaded files, the scene file first.
+fn upload_recipe(files: &[UploadedFile]) -> Recipe {
+    Recipe::Upload {
+        files: files.iter().map(|f| f.name.clone()).collect(),
+    }
+}
+
+/// Refuses an addition when the shared store already holds `--max-scenes` scenes (each
+/// replica's own limit is checked when the scene is added to it).
+fn check_store_room(store: &SceneStore, limits: &Limits) -> Result<(), ApiError> {
+    let stored = store.list().len();
+    if stored >= limits.max_scenes as usize {
+        return Err(ApiError::too_many(
+            "too_many_scenes",
+            format!(
+                "the scene store holds {stored} scenes, the limit (--max-scenes); delete one first"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// `work` on a blocking thread; its error, or the thread's, as a 500 (the store's files, or a
+/// recipe the server wrote itself, failing is the server's problem, not the request's).
+async fn off_thread<T, E>(
+    work: impl FnOnce() -> Result<T, E> + Send + 'static,
+) -> Result<T, ApiError>
+where
+    T: Send + 'static,
+    E: std::fmt::Display + Send + 'static,
+{
+    tokio::task::spawn_blocking(work)
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))?
+        .map_err(|e| ApiError::internal(e.to_string()))
+}
+
+/// Whether scene `id` is one a client added (the server's own scenes are never stored).
+fn client_scene(id: &str) -> bool {
+    id.starts_with("sc_")
+}
+
+/// The scene `id` from this replica, or loaded from the scene store when another replica
+/// added it; a scene deleted from the store is forgotten here too.
+pub async fn fetch(state: &AppState, id: &str) -> Result<Arc<SceneEntry>, ApiError> {
+    let Some(store) = state.scene_store.as_ref().filter(|_| client_scene(id)) else {
+        return state.scenes.get(id);
+    };
+    let record = {
+        let (store, id) = (store.clone(), id.to_string());
+        off_thread(move || store.record(&id)).await?
+    };
+    let Some(record) = record else {
+        // Deleted on another replica: sessions holding it keep it until they end.
+        let _ = state.scenes.forget(id);
+        return Err(ApiError::not_found("scene", id));
+    };
+    if let Ok(entry) = state.scenes.get(id) {
+        return Ok(entry);
+    }
+    let started = Instant::now();
+    let scene = match &record.recipe {
+        Recipe::Upload { .. } => {
+            let files = {
+                let (store, record) = (store.clone(), record.clone());
+                off_thread(move || store.files(&record)).await?
+            };
+            let mut files = files.into_iter();
+            let main = files
+                .next()
+                .ok_or_else(|| ApiError::internal(format!("stored scene '{id}' has no files")))?;
+            load_upload(state, main, files.collect()).await?
+        }
+        Recipe::Procedural { spec } => {
+            let parsed = Spec::parse(spec).map_err(|e| ApiError::internal(e.to_string()))?;
+            let triangles = parsed.triangle_count();
+            let left = &state.scenes.budget().triangles;
+            if triangles > left.available() {
+                return Err(triangles_over_budget(triangles, left));
+            }
+            off_thread(move || parsed.build()).await?
+        }
+    };
+    let mut scene = scene;
+    scene.name = record.name.clone();
+    if let Ok(entry) = state.scenes.get(id) {
+        // Another request loaded it meanwhile.
+        return Ok(entry);
+    }
+    let load_ms = started.elapsed().as_secs_f64() * 1e3;
+    let entry = state.scenes.insert(
+        scene,
+        record.info.source.clone(),
+        Some(id),
+        load_ms,
+        record.owner_sha256.clone(),
+    )?;
+    tracing::info!(scene = %id, "scene loaded from the scene store");
+    Ok(entry)
 }
 
 /// Shows a scene: size, bounds, lights, cameras and the state of its light caches.
@@ -369,7 +521,7 @@ pub async fn show(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<SceneInfo>, ApiError> {
-    Ok(Json(state.scenes.get(&id)?.info()))
+    Ok(Json(fetch(&state, &id).await?.info()))
 }
 
 /// Deletes a scene no session uses (409 while any does; the default scene stays). With auth
@@ -386,14 +538,36 @@ pub async fn delete(
     Extension(caller): Extension<Caller>,
     Path(id): Path<String>,
 ) -> Result<StatusCode, ApiError> {
-    state.scenes.remove(&id, caller.0.as_deref())?;
+    let Some(store) = state.scene_store.as_ref().filter(|_| client_scene(&id)) else {
+        state.scenes.remove(&id, caller.0.as_deref())?;
+        return Ok(StatusCode::NO_CONTENT);
+    };
+    let record = store
+        .record(&id)
+        .map_err(|e| ApiError::internal(e.to_string()))?;
+    match (state.scenes.contains(&id), record) {
+        (true, _) => state.scenes.remove(&id, caller.0.as_deref())?,
+        (false, Some(record)) => {
+            if !owner_allows(record.owner_sha256.as_deref(), caller.0.as_deref()) {
+                return Err(ApiError::forbidden(format!(
+                    "scene '{id}' was uploaded with another token; only that token can delete it"
+                )));
+            }
+        }
+        (false, None) => return Err(ApiError::not_found("scene", &id)),
+    }
+    store
+        .remove(&id)
+        .map_err(|e| ApiError::internal(e.to_string()))?;
     Ok(StatusCode::NO_CONTENT)
 }
 
-/// The scene a request names.
-pub fn scene(state: &AppState, id: &str) -> Result<Arc<SceneEntry>, ApiError> {
-    state
-        .scenes
-        .get(id)
-        .map_err(|_| ApiError::field("render.scene", format!("no scene with id '{}'", echo(id))))
+/// The scene a request names (loaded from the scene store where another replica added it).
+pub async fn scene(state: &AppState, id: &str) -> Result<Arc<SceneEntry>, ApiError> {
+    fetch(state, id).await.map_err(|e| match e.status {
+        StatusCode::NOT_FOUND => {
+            ApiError::field("render.scene", format!("no scene with id '{}'", echo(id)))
+        }
+        _ => e,
+    })
 }

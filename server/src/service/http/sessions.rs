@@ -1,7 +1,7 @@
 //! `/v1/sessions`: create, read, steer and delete streaming sessions.
 
 use super::{AppState, Caller, TICKET_TTL};
-use crate::service::error::{echo, from_value, parse_json, ApiError};
+use crate::service::error::{from_value, parse_json, ApiError};
 use crate::service::params::resolve_session;
 use crate::service::sessions::Session;
 use axum::body::Bytes;
@@ -34,7 +34,7 @@ pub fn merge_patch(target: &mut Value, patch: &Value) {
 }
 
 /// Applies a merge patch of [`SessionParams`] to a session, all or nothing.
-pub fn apply_patch(
+pub async fn apply_patch(
     state: &AppState,
     session: &Session,
     patch: &Value,
@@ -57,12 +57,7 @@ pub fn apply_patch(
         state.defaults.fill_render(render)?;
     }
     let params: SessionParams = from_value(merged)?;
-    let entry = state.scenes.get(&params.render.scene).map_err(|_| {
-        ApiError::field(
-            "render.scene",
-            format!("no scene with id '{}'", echo(&params.render.scene)),
-        )
-    })?;
+    let entry = super::scenes::scene(state, &params.render.scene).await?;
     let resolved = resolve_session(&params, &entry, &state.limits, state.max_texture)?;
     session.apply(params, resolved, entry.lease(), input_id);
     state.wake();
@@ -101,7 +96,7 @@ pub async fn create(
 ) -> Result<(StatusCode, Json<SessionCreated>), ApiError> {
     let body = crate::service::error::body(body)?;
     let params: SessionParams = state.defaults.parse(&body)?;
-    let entry = super::scenes::scene(&state, &params.render.scene)?;
+    let entry = super::scenes::scene(&state, &params.render.scene).await?;
     let resolved = resolve_session(&params, &entry, &state.limits, state.max_texture)?;
     let session = Session::new(
         state.sessions.new_id(),
@@ -155,7 +150,7 @@ pub async fn update(
     let body = crate::service::error::body(body)?;
     let session = state.sessions.get(&id, caller.0.as_deref())?;
     let patch: Value = parse_json(&body)?;
-    apply_patch(&state, &session, &patch, 0)?;
+    apply_patch(&state, &session, &patch, 0).await?;
     Ok(Json(session.info()))
 }
 

@@ -164,7 +164,7 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
                             unacked -= 1;
                         }
                         if owed_ack || limit.allow() {
-                            handle(state, session, text.as_bytes())
+                            handle(state, session, text.as_bytes()).await
                         } else {
                             Some(error_event(ApiError::too_many(
                                 "rate_limited",
@@ -246,7 +246,7 @@ fn is_ack(text: &[u8]) -> bool {
 }
 
 /// Handles one control message; returns the event to answer with, if any.
-fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEvent> {
+async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEvent> {
     let raw: serde_json::Value = match parse_object(text, "a control message") {
         Ok(v) => v,
         Err(e) => return Some(error_event(e)),
@@ -268,19 +268,27 @@ fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEven
     // Camera and light go through the session's strict parameter path as they were sent, so
     // a misspelt field inside them is named (`render.camera.zoom`) rather than dropped.
     let result = match message {
-        ClientMessage::Camera { input_id, .. } => apply_patch(
-            state,
-            session,
-            &json!({"render": {"camera": raw["camera"]}}),
-            input_id,
-        ),
-        ClientMessage::Light { input_id, .. } => apply_patch(
-            state,
-            session,
-            &json!({"render": {"light": raw["light"]}}),
-            input_id,
-        ),
-        ClientMessage::Update { patch, input_id } => apply_patch(state, session, &patch, input_id),
+        ClientMessage::Camera { input_id, .. } => {
+            apply_patch(
+                state,
+                session,
+                &json!({"render": {"camera": raw["camera"]}}),
+                input_id,
+            )
+            .await
+        }
+        ClientMessage::Light { input_id, .. } => {
+            apply_patch(
+                state,
+                session,
+                &json!({"render": {"light": raw["light"]}}),
+                input_id,
+            )
+            .await
+        }
+        ClientMessage::Update { patch, input_id } => {
+            apply_patch(state, session, &patch, input_id).await
+        }
         ClientMessage::Pause => {
             session.set_paused(true);
             Ok(())

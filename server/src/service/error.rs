@@ -11,7 +11,13 @@ pub struct ApiError {
     pub body: ErrorBody,
     /// The replica that holds what was asked for (421), sent as `Lightcast-Owner`.
     pub owner: Option<String>,
+    /// Seconds after which the request may succeed (429), sent as `Retry-After`.
+    pub retry_after: Option<u32>,
 }
+
+/// `Retry-After` of a 429: a hint, as nobody knows when a session ends or an upload finishes;
+/// short enough that a client (or the proxy, trying another replica first) retries soon.
+pub const RETRY_AFTER_SECS: u32 = 2;
 
 /// The header of a 421 naming the replica that holds the session.
 pub const OWNER_HEADER: &str = "lightcast-owner";
@@ -47,6 +53,7 @@ impl ApiError {
                 message: shorten(message.into(), MESSAGE_CHARS),
             },
             owner: None,
+            retry_after: None,
         }
     }
 
@@ -98,8 +105,11 @@ impl ApiError {
         Self::new(StatusCode::FORBIDDEN, "forbidden", message)
     }
 
+    /// 429: a limit of the server or of the token is reached for now (with `Retry-After`).
     pub fn too_many(kind: &str, message: impl Into<String>) -> Self {
-        Self::new(StatusCode::TOO_MANY_REQUESTS, kind, message)
+        let mut e = Self::new(StatusCode::TOO_MANY_REQUESTS, kind, message);
+        e.retry_after = Some(RETRY_AFTER_SECS);
+        e
     }
 
     pub fn unavailable(message: impl Into<String>) -> Self {
@@ -136,6 +146,11 @@ impl IntoResponse for ApiError {
             .and_then(|o| axum::http::HeaderValue::from_str(&o).ok())
         {
             response.headers_mut().insert(OWNER_HEADER, value);
+        }
+        if let Some(seconds) = self.retry_after {
+            response
+                .headers_mut()
+                .insert(axum::http::header::RETRY_AFTER, seconds.into());
         }
         response
     }

@@ -100,7 +100,9 @@ impl Proxy {
         let tmp = dir.path().display();
         let servers: String = replicas
             .iter()
-            .map(|(_, p)| format!("server 127.0.0.1:{p}; "))
+            // As the chart's router, which resolves the pods per request and so keeps no
+            // failure count: a full replica (429) is tried again by the next request.
+            .map(|(_, p)| format!("server 127.0.0.1:{p} max_fails=0; "))
             .collect();
         let mut config = format!(
             "daemon off;\nworker_processes 1;\npid {tmp}/nginx.pid;\nerror_log {tmp}/error.log;\n\
@@ -139,6 +141,21 @@ impl Proxy {
             port,
             _dir: dir,
         }
+    }
+}
+
+impl Proxy {
+    /// A client of the proxy, once it answers.
+    async fn front(&self) -> TestServer {
+        let front = TestServer::remote(format!("http://127.0.0.1:{}", self.port));
+        tokio::time::timeout(lightcast_e2e::PATIENCE, async {
+            while !matches!(front.http.get(front.url("/healthz")).send().await, Ok(r) if r.status() == 200) {
+                tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+            }
+        })
+        .await
+        .expect("the proxy answers");
+        front
     }
 }
 
@@ -195,14 +212,7 @@ async fn three_replicas_behind_nginx_route_sessions_and_survive_one_stopping() {
         .zip(replicas.iter().map(TestServer::port))
         .collect();
     let proxy = Proxy::start(&ports);
-    let front = TestServer::remote(format!("http://127.0.0.1:{}", proxy.port));
-    tokio::time::timeout(lightcast_e2e::PATIENCE, async {
-        while !matches!(front.http.get(front.url("/healthz")).send().await, Ok(r) if r.status() == 200) {
-            tokio::time::sleep(std::time::Duration::from_millis(100)).await;
-        }
-    })
-    .await
-    .expect("the proxy answers");
+    let front = proxy.front().await;
 
     // A scene uploaded through the proxy (to whichever replica it picks) serves sessions on
     // every replica: they share the scene store.
@@ -309,6 +319,87 @@ async fn three_replicas_behind_nginx_route_sessions_and_survive_one_stopping() {
     for s in &mut streams {
         assert_eq!(frames(s, 2).await.len(), 2);
     }
+    drop(proxy);
+    for r in replicas {
+        r.stop().await;
+    }
+}
+
+/// A full replica answers 429 with `Retry-After`, and the proxy (the chart's routing rule) tries
+/// another replica for a new session, so sessions fill every replica before any client is
+/// refused; once all are full the client gets the 429 and its `Retry-After`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn the_proxy_tries_another_replica_when_one_is_full() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let key = dir.path().join("routing.key");
+    std::fs::write(&key, "0123456789abcdef0123456789abcdef").expect("key file");
+    let key = key.to_string_lossy().into_owned();
+    let names = ["lightcast-0", "lightcast-1", "lightcast-2"];
+    let mut replicas = Vec::new();
+    for name in names {
+        replicas.push(
+            TestServer::start(&[
+                "--replica",
+                name,
+                "--routing-key-file",
+                &key,
+                "--max-sessions",
+                "2",
+            ])
+            .await,
+        );
+    }
+    // lightcast-0 is full before the proxy sends it anything.
+    for _ in 0..2 {
+        replicas[0]
+            .create_session(direct_session(16, 16), None)
+            .await;
+    }
+    let refused = replicas[0]
+        .http
+        .post(replicas[0].url("/v1/sessions"))
+        .json(&direct_session(16, 16))
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(refused.status(), 429);
+    assert_eq!(refused.headers()["retry-after"], "2");
+
+    let ports: Vec<(&str, u16)> = names
+        .iter()
+        .copied()
+        .zip(replicas.iter().map(TestServer::port))
+        .collect();
+    let proxy = Proxy::start(&ports);
+    let front = proxy.front().await;
+    let mut owners = Vec::new();
+    for _ in 0..4 {
+        let created = front.create_session(direct_session(16, 16), None).await;
+        owners.push(
+            created
+                .session
+                .id
+                .split('.')
+                .next()
+                .expect("owner")
+                .to_string(),
+        );
+    }
+    owners.sort();
+    assert_eq!(
+        owners,
+        ["lightcast-1", "lightcast-1", "lightcast-2", "lightcast-2"],
+        "the four sessions filled the replicas with room"
+    );
+    let full = front
+        .http
+        .post(front.url("/v1/sessions"))
+        .json(&direct_session(16, 16))
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(full.status(), 429, "every replica is full");
+    assert_eq!(full.headers()["retry-after"], "2");
     drop(proxy);
     for r in replicas {
         r.stop().await;

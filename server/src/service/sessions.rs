@@ -190,6 +190,11 @@ impl Session {
         }
     }
 
+    /// The scene the session renders now.
+    pub fn scene(&self) -> Arc<super::scenes::SceneEntry> {
+        Arc::clone(&lock(&self.state).lease.0)
+    }
+
     pub fn scene_id(&self) -> String {
         lock(&self.state).lease.0.id.clone()
     }

@@ -57,7 +57,14 @@ pub async fn apply_patch(
         state.defaults.fill_render(render)?;
     }
     let params: SessionParams = from_value(merged)?;
-    let entry = super::scenes::scene(state, &params.render.scene).await?;
+    // Camera and light messages keep the scene: only a change of scene looks it up (in the
+    // scene store too, a file read per message otherwise).
+    let current = session.scene();
+    let entry = if current.id == params.render.scene {
+        current
+    } else {
+        super::scenes::scene(state, &params.render.scene).await?
+    };
     let resolved = resolve_session(&params, &entry, &state.limits, state.max_texture)?;
     session.apply(params, resolved, entry.lease(), input_id);
     state.wake();

@@ -8,12 +8,15 @@
 # - mesa-vulkan-drivers (lavapipe, a CPU Vulkan driver) only when no Vulkan driver is installed,
 #   so machines without a GPU can still render (slowly) and run the tests.
 # - fonts-dejavu-core: the font of the benchmark's PNG plots.
-# - gcc and g++ where missing: cargo links with cc, and the FLIP metric builds C++.
+# - gcc and g++ where missing: cargo links with cc, and the FLIP metric and OpenH264 (the
+#   `h264` stream encoder, built from the source its crate bundles) build C++.
+# - nasm: OpenH264's assembly (several times faster encoding); without it the C code is used.
 # - with --tests: chromium, and nodejs + npm where Node.js is missing, for the browser viewer's
 #   test (Debian's Chromium driven by playwright-core, which never downloads a browser), then
 #   `npm ci` in client/web for playwright-core at the version its package-lock.json pins.
 #   Also python3-venv where `python3 -m venv` cannot work, for deploy/ci/check.sh's tools, and
-#   nginx for the test of three replicas behind a proxy (the chart's router's rule).
+#   nginx for the test of three replicas behind a proxy (the chart's router's rule) and of the
+#   client over TLS, and openssl for that test's private CA.
 # Checked, not installed: Rust (cargo at least the workspace's `rust-version` in Cargo.toml, from
 # https://rustup.rs) and, with --tests, Node.js at least what the pinned playwright-core needs.
 # Packages are installed as root, or through sudo for other users.
@@ -44,11 +47,13 @@ fi
 [ -f /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf ] || packages+=(fonts-dejavu-core)
 command -v cc >/dev/null 2>&1 || packages+=(gcc libc6-dev)
 command -v c++ >/dev/null 2>&1 || packages+=(g++)
+command -v nasm >/dev/null 2>&1 || packages+=(nasm)
 
 if $tests; then
   command -v chromium >/dev/null 2>&1 || packages+=(chromium)
   # The three-replica routing test runs a real proxy.
   [ -x /usr/sbin/nginx ] || packages+=(nginx)
+  command -v openssl >/dev/null 2>&1 || packages+=(openssl)
   command -v node >/dev/null 2>&1 || packages+=(nodejs)
   command -v npm >/dev/null 2>&1 || packages+=(npm)
   python3 -c 'import ensurepip, venv' >/dev/null 2>&1 || packages+=(python3-venv)

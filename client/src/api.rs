@@ -6,12 +6,14 @@ use lightcast_protocol::{
     SessionInfo,
 };
 use serde::de::DeserializeOwned;
+use std::path::Path;
+use std::sync::Arc;
 use tokio_tungstenite::tungstenite::Message;
 
 /// Why a request failed.
 #[derive(Debug, thiserror::Error)]
 pub enum ClientError {
-    #[error("{url}: cannot reach the server: {error}")]
+    #[error("{url}: cannot reach the server: {}", causes(error))]
     Unreachable { url: String, error: reqwest::Error },
     #[error("server answered {status}: {}{}", body.message, body.field.as_ref().map(|f| format!(" (field {f})")).unwrap_or_default())]
     Api {
@@ -42,20 +44,80 @@ pub struct Client {
     base: String,
     token: Option<String>,
     http: reqwest::Client,
+    /// TLS of `wss://` streams, the same as of the HTTP requests.
+    tls: Arc<rustls::ClientConfig>,
+}
+
+/// An error with its causes (reqwest's own message hides why: a refused certificate, a
+/// refused connection).
+fn causes(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(e) = source {
+        text += &format!(": {e}");
+        source = e.source();
+    }
+    text
+}
+
+/// TLS for `https://` and `wss://` (rustls with ring): the system's trusted certificates
+/// (Debian's ca-certificates) plus every PEM certificate in `ca_cert` (a private CA).
+pub fn tls_config(ca_cert: Option<&Path>) -> Result<Arc<rustls::ClientConfig>, ClientError> {
+    use rustls::pki_types::{pem::PemObject, CertificateDer};
+    let mut roots = rustls::RootCertStore::empty();
+    // Unreadable system certificates leave those out; a --ca-cert can still be trusted.
+    let system = rustls_native_certs::load_native_certs();
+    roots.add_parsable_certificates(system.certs);
+    if let Some(path) = ca_cert {
+        let invalid =
+            |why: String| ClientError::Invalid(format!("--ca-cert {}: {why}", path.display()));
+        let pem = std::fs::read(path).map_err(|e| invalid(e.to_string()))?;
+        let certs: Vec<CertificateDer<'static>> = CertificateDer::pem_slice_iter(&pem)
+            .collect::<Result<_, _>>()
+            .map_err(|e| invalid(format!("not PEM certificates: {e}")))?;
+        if certs.is_empty() {
+            return Err(invalid("no PEM certificate in the file".into()));
+        }
+        for cert in certs {
+            roots
+                .add(cert)
+                .map_err(|e| invalid(format!("unusable certificate: {e}")))?;
+        }
+    }
+    let config = rustls::ClientConfig::builder_with_provider(Arc::new(
+        rustls::crypto::ring::default_provider(),
+    ))
+    .with_safe_default_protocol_versions()
+    .map_err(|e| ClientError::Invalid(format!("TLS: {e}")))?
+    .with_root_certificates(roots)
+    .with_no_client_auth();
+    Ok(Arc::new(config))
 }
 
 impl Client {
-    pub fn new(server: &str, token: Option<String>) -> Result<Self, ClientError> {
+    /// A client of `server` (`http://` or `https://`), trusting `ca_cert` besides the
+    /// system's certificates.
+    pub fn new(
+        server: &str,
+        token: Option<String>,
+        ca_cert: Option<&Path>,
+    ) -> Result<Self, ClientError> {
         let base = server.trim_end_matches('/').to_string();
         if !(base.starts_with("http://") || base.starts_with("https://")) {
             return Err(ClientError::Invalid(format!(
                 "--server must be an http:// or https:// URL, got '{server}'"
             )));
         }
+        let tls = tls_config(ca_cert)?;
+        let http = reqwest::Client::builder()
+            .tls_backend_preconfigured((*tls).clone())
+            .build()
+            .map_err(|e| ClientError::Invalid(format!("HTTP client: {e}")))?;
         Ok(Self {
             base,
             token,
-            http: reqwest::Client::new(),
+            http,
+            tls,
         })
     }
 
@@ -247,12 +309,14 @@ impl Client {
             "{ws_base}{}?ticket={}",
             created.session.stream, created.ticket.ticket
         );
-        let (ws, _) = tokio_tungstenite::connect_async(&url)
-            .await
-            .map_err(|error| ClientError::WebSocket {
-                url: url.clone(),
-                error: Box::new(error),
-            })?;
+        let connector = tokio_tungstenite::Connector::Rustls(Arc::clone(&self.tls));
+        let (ws, _) =
+            tokio_tungstenite::connect_async_tls_with_config(&url, None, false, Some(connector))
+                .await
+                .map_err(|error| ClientError::WebSocket {
+                    url: url.clone(),
+                    error: Box::new(error),
+                })?;
         Ok(Stream { ws, url })
     }
 }
@@ -364,7 +428,7 @@ mod tests {
 
     #[test]
     fn rejects_non_http_servers() {
-        assert!(Client::new("ftp://x", None).is_err());
-        assert!(Client::new("http://127.0.0.1:8080/", None).is_ok());
+        assert!(Client::new("ftp://x", None, None).is_err());
+        assert!(Client::new("http://127.0.0.1:8080/", None, None).is_ok());
     }
 }

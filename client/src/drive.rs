@@ -3,6 +3,7 @@
 
 use crate::api::{Client, ClientError, Incoming};
 use crate::stats::{unix_us, FrameSplit, Latencies};
+use lightcast_protocol::frame::FLAG_KEYFRAME;
 use lightcast_protocol::{Camera, ClientMessage, FrameHeader, SessionStats};
 use serde::Deserialize;
 use std::collections::VecDeque;
@@ -114,6 +115,8 @@ pub struct DriveOptions {
     pub max_frames: Option<u64>,
     /// Write every frame's image here.
     pub save_dir: Option<PathBuf>,
+    /// Append an `h264` stream's access units to this file, from the first keyframe on.
+    pub video_out: Option<PathBuf>,
     /// Frames and bytes count from this instant (after a load test's ramp-up).
     pub measure_from: Instant,
     pub deadline: Instant,
@@ -134,12 +137,16 @@ pub struct DriveResult {
     pub server_stats: Option<SessionStats>,
     pub errors: Vec<String>,
     pub last_header: Option<FrameHeader>,
+    /// Video frames written to [`DriveOptions::video_out`], and keyframes among all received.
+    pub video_frames: u64,
+    pub keyframes: u64,
 }
 
 fn extension(h: &FrameHeader) -> &'static str {
     match h.codec {
         lightcast_protocol::Codec::Jpeg => "jpg",
         lightcast_protocol::Codec::Png => "png",
+        lightcast_protocol::Codec::H264 => "h264",
     }
 }
 
@@ -161,6 +168,13 @@ pub async fn drive(
         std::fs::create_dir_all(dir)
             .map_err(|e| ClientError::Invalid(format!("creating {}: {e}", dir.display())))?;
     }
+    let mut video = match &opts.video_out {
+        Some(path) => Some(
+            std::fs::File::create(path)
+                .map_err(|e| ClientError::Invalid(format!("creating {}: {e}", path.display())))?,
+        ),
+        None => None,
+    };
     let period = if opts.input_hz > 0.0 {
         Duration::from_secs_f64(1.0 / opts.input_hz)
     } else {
@@ -221,6 +235,19 @@ pub async fn drive(
                         std::fs::write(&path, &payload).map_err(|e| {
                             ClientError::Invalid(format!("writing {}: {e}", path.display()))
                         })?;
+                    }
+                    if header.flags & FLAG_KEYFRAME != 0 {
+                        result.keyframes += 1;
+                    }
+                    // A decoder starts at a keyframe: earlier frames (sent before the stream's
+                    // first keyframe reached us) cannot be decoded and are left out.
+                    let video_started = result.video_frames > 0 || header.flags & FLAG_KEYFRAME != 0;
+                    if let Some(file) = video.as_mut().filter(|_| header.codec.is_video() && video_started) {
+                        use std::io::Write;
+                        file.write_all(&payload).map_err(|e| {
+                            ClientError::Invalid(format!("writing the video: {e}"))
+                        })?;
+                        result.video_frames += 1;
                     }
                     result.last_header = Some(header);
                     on_frame();

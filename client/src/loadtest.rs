@@ -198,6 +198,7 @@ async fn run_one(
             input_hz: cmd.input_hz,
             max_frames: None,
             save_dir: None,
+            video_out: None,
             measure_from,
             deadline,
         };

@@ -36,6 +36,10 @@ struct Cli {
     /// Print results as JSON instead of tables.
     #[arg(long, global = true)]
     json: bool,
+    /// PEM certificate(s) to trust for an https:// server besides the system's (a private CA
+    /// or a self-signed certificate).
+    #[arg(long, global = true, env = "LIGHTCAST_CA_CERT")]
+    ca_cert: Option<std::path::PathBuf>,
     #[command(subcommand)]
     command: Command,
 }
@@ -108,9 +112,13 @@ struct StreamCmd {
     /// Stop after this many frames.
     #[arg(long)]
     frames: Option<u64>,
-    /// Save every frame into this directory (NNNNNN.jpg / .png by sequence number).
+    /// Save every frame into this directory (NNNNNN.jpg / .png / .h264 by sequence number).
     #[arg(long)]
     save: Option<PathBuf>,
+    /// With `--codec h264`: write the stream to this file as raw H.264 (Annex B, from its first
+    /// keyframe), which ffmpeg, ffplay and VLC play (`ffplay -f h264 FILE`).
+    #[arg(long)]
+    video: Option<PathBuf>,
     /// Replay a camera path: JSON `{"keyframes": [{"t": SECONDS, "camera": {...}}, ...]}`.
     #[arg(long)]
     camera_path: Option<PathBuf>,
@@ -120,11 +128,15 @@ struct StreamCmd {
     /// Most frames per second the server sends.
     #[arg(long, default_value_t = 30.0)]
     fps_cap: f32,
+    /// Frame codec: jpeg, png, or h264 (video).
     #[arg(long, value_enum, default_value = "jpeg")]
     codec: Codec,
     /// JPEG quality 1–100.
     #[arg(long, default_value_t = 85)]
     quality: u8,
+    /// With `--codec h264`: target bitrate in kbit/s (100–200000; default the server's).
+    #[arg(long)]
+    bitrate_kbps: Option<u32>,
     #[command(flatten)]
     render: RenderFlags,
 }
@@ -160,7 +172,7 @@ async fn scene_defaults(
 }
 
 async fn run(cli: Cli) -> anyhow::Result<()> {
-    let client = Client::new(&cli.server, cli.token.clone())?;
+    let client = Client::new(&cli.server, cli.token.clone(), cli.ca_cert.as_deref())?;
     match cli.command {
         Command::Scenes(cmd) => scenes(&client, cmd, cli.json).await,
         Command::Render(cmd) => render(&client, cmd, cli.json).await,
@@ -364,15 +376,22 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
         Some(p) => drive::Motion::Path(drive::CameraPath::load(p).map_err(anyhow::Error::msg)?),
         None => drive::Motion::Still,
     };
+    if !cmd.codec.is_video() && (cmd.video.is_some() || cmd.bitrate_kbps.is_some()) {
+        anyhow::bail!("--video and --bitrate-kbps need --codec h264");
+    }
     let (camera, light) = scene_defaults(client, &cmd.render).await?;
     let now = Instant::now();
+    let mut params = session_params(
+        cmd.render.params(camera.as_ref(), light.as_ref()),
+        cmd.fps_cap,
+        cmd.codec,
+        cmd.quality,
+    );
+    if let Some(kbps) = cmd.bitrate_kbps {
+        params["encoding"]["bitrate_kbps"] = kbps.into();
+    }
     let opts = drive::DriveOptions {
-        params: session_params(
-            cmd.render.params(camera.as_ref(), light.as_ref()),
-            cmd.fps_cap,
-            cmd.codec,
-            cmd.quality,
-        ),
+        params,
         motion,
         input_hz: if cmd.camera_path.is_some() {
             cmd.input_hz
@@ -381,6 +400,7 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
         },
         max_frames: cmd.frames,
         save_dir: cmd.save.clone(),
+        video_out: cmd.video.clone(),
         measure_from: now,
         deadline: now + Duration::from_secs_f64(cmd.duration),
     };
@@ -400,6 +420,11 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
         "throttled": server.frames_throttled,
         "errors": result.errors,
         "saved_to": cmd.save,
+        "video": cmd.video.as_ref().map(|path| serde_json::json!({
+            "path": path,
+            "frames": result.video_frames,
+            "keyframes": result.keyframes,
+        })),
     });
     if json {
         return print_json(&summary);

@@ -296,3 +296,244 @@ async fn an_unreachable_server_is_reported_plainly() {
     assert!(stderr.contains("cannot reach"), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+/// Runs `openssl ARGS…` in `dir`, failing the test on an error.
+fn openssl(dir: &std::path::Path, args: &[&str]) {
+    let out = std::process::Command::new("openssl")
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("openssl runs (deploy/setup-debian.sh --tests installs it)");
+    assert!(
+        out.status.success(),
+        "openssl {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `lightcast` reaches a server through TLS (`https://` requests, a `wss://` stream) behind a
+/// real nginx terminating TLS with a certificate of a private CA: with `--ca-cert` the CA is
+/// trusted, without it the client refuses the certificate and says so.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn render_and_stream_over_tls_with_a_private_ca() {
+    let server = TestServer::start(&[]).await;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    openssl(
+        d,
+        &[
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-subj",
+            "/CN=lightcast test CA",
+            "-keyout",
+            "ca.key",
+            "-out",
+            "ca.pem",
+        ],
+    );
+    openssl(
+        d,
+        &[
+            "req",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-subj",
+            "/CN=127.0.0.1",
+            "-keyout",
+            "server.key",
+            "-out",
+            "server.csr",
+        ],
+    );
+    std::fs::write(
+        d.join("san.ext"),
+        "subjectAltName=IP:127.0.0.1,DNS:localhost\n",
+    )
+    .expect("ext");
+    openssl(
+        d,
+        &[
+            "x509",
+            "-req",
+            "-in",
+            "server.csr",
+            "-CA",
+            "ca.pem",
+            "-CAkey",
+            "ca.key",
+            "-CAcreateserial",
+            "-days",
+            "2",
+            "-extfile",
+            "san.ext",
+            "-out",
+            "server.pem",
+        ],
+    );
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
+    let tmp = d.display();
+    let config = format!(
+        "daemon off;\nworker_processes 1;\npid {tmp}/nginx.pid;\nerror_log {tmp}/error.log;\n\
+         events {{ worker_connections 64; }}\nhttp {{\naccess_log off;\n\
+         client_body_temp_path {tmp}/body;\nproxy_temp_path {tmp}/proxy;\n\
+         fastcgi_temp_path {tmp}/fastcgi;\nuwsgi_temp_path {tmp}/uwsgi;\nscgi_temp_path {tmp}/scgi;\n\
+         map $http_upgrade $connection_upgrade {{ default upgrade; \"\" close; }}\n\
+         server {{\n listen 127.0.0.1:{port} ssl;\n ssl_certificate {tmp}/server.pem;\n\
+         ssl_certificate_key {tmp}/server.key;\n location / {{\n\
+         proxy_pass http://127.0.0.1:{};\n proxy_http_version 1.1;\n\
+         proxy_set_header Upgrade $http_upgrade;\n proxy_set_header Connection $connection_upgrade;\n\
+         }}\n}}\n}}\n",
+        server.port()
+    );
+    std::fs::write(d.join("nginx.conf"), config).expect("nginx.conf");
+    let nginx = std::env::var("NGINX").unwrap_or_else(|_| "/usr/sbin/nginx".into());
+    let proxy = std::process::Command::new(&nginx)
+        .arg("-e")
+        .arg(d.join("error.log"))
+        .arg("-c")
+        .arg(d.join("nginx.conf"))
+        // Not the test's pipes: a child holding them would keep the harness waiting.
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| panic!("starting {nginx} ({e}): deploy/setup-debian.sh --tests"));
+    let proxy = KillOnDrop(proxy);
+    let https = format!("https://127.0.0.1:{port}");
+    let ca = d.join("ca.pem").to_string_lossy().into_owned();
+    let out = d.join("tls.png").to_string_lossy().into_owned();
+    let mut listed = None;
+    for _ in 0..100 {
+        let o = lightcast(&https, &["--ca-cert", &ca, "--json", "scenes", "list"]).await;
+        if o.status.success() {
+            listed = Some(o);
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    let listed = listed.expect("the TLS proxy answers with --ca-cert");
+    assert_eq!(json(&listed)[0]["id"], "default");
+
+    let render = lightcast(
+        &https,
+        &with(
+            &[
+                "--ca-cert",
+                &ca,
+                "--json",
+                "render",
+                "--gi",
+                "none",
+                "--out",
+                &out,
+            ],
+            SMALL,
+        ),
+    )
+    .await;
+    assert_eq!(json(&render)["report"]["width"], 64);
+    assert!(std::path::Path::new(&out).exists());
+    let stream = lightcast(
+        &https,
+        &[
+            "--ca-cert",
+            &ca,
+            "--json",
+            "stream",
+            "--frames",
+            "3",
+            "--duration",
+            "120",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "--gi",
+            "none",
+        ],
+    )
+    .await;
+    let report = json(&stream);
+    assert!(report["frames"].as_u64().unwrap_or(0) >= 3, "{report}");
+
+    let untrusted = lightcast(&https, &["scenes", "list"]).await;
+    assert!(
+        !untrusted.status.success(),
+        "a private CA is not trusted by default"
+    );
+    let message = String::from_utf8_lossy(&untrusted.stderr).to_lowercase();
+    assert!(message.contains("certificate"), "{message}");
+    drop(proxy);
+    server.stop().await;
+}
+
+/// A child process stopped when the test ends, passing or not.
+struct KillOnDrop(std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `stream --codec h264 --video FILE` writes a raw H.264 stream that an independent decoder
+/// plays from its first byte: every frame decodes at the requested size.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stream_saves_h264_video_a_decoder_plays() {
+    let server = TestServer::start(&[]).await;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let video = dir.path().join("out.h264");
+    let video_arg = video.to_string_lossy().into_owned();
+    let args = [
+        "--json",
+        "stream",
+        "--frames",
+        "6",
+        "--duration",
+        "120",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--gi",
+        "none",
+        "--codec",
+        "h264",
+        "--bitrate-kbps",
+        "2000",
+        "--video",
+        &video_arg,
+    ];
+    let out = lightcast(&server.base, &args).await;
+    let report = json(&out);
+    assert_eq!(report["video"]["frames"], 6, "{report}");
+    assert!(report["video"]["keyframes"].as_u64() >= Some(1), "{report}");
+    let bytes = std::fs::read(&video).expect("the video file");
+    let mut decoder = openh264::decoder::Decoder::new().expect("decoder");
+    let mut pictures = 0;
+    for nal in openh264::nal_units(&bytes) {
+        if let Some(picture) = decoder.decode(nal).expect("decodes") {
+            use openh264::formats::YUVSource;
+            assert_eq!(picture.dimensions(), (64, 48));
+            pictures += 1;
+        }
+    }
+    assert_eq!(pictures, 6, "one picture per saved frame");
+
+    // Video flags without the video codec are refused before anything is sent.
+    let refused = lightcast(&server.base, &["stream", "--video", &video_arg]).await;
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(stderr.contains("--codec h264"), "{stderr}");
+    server.stop().await;
+}

@@ -9,8 +9,9 @@ a cluster. Run by deploy/ci/check.sh, which installs the pinned tools this takes
   kubernetes-validate's strict schemas (unknown fields rejected) for the oldest and newest
   Kubernetes the package knows; the ServiceMonitor (a custom resource without a schema there)
   passes servicemonitor.schema.json. Then the chart must agree with the image and the server
-  (user, port, cache path, env names, probe paths, GPU limit, metric names), every value must be
-  in deploy/README.md's table, and bad values must be refused naming the key.
+  (user, port, cache path, env names, probe paths, GPU limit, metric names), the ServiceMonitor
+  must select the pods' Service alone, every value must be in deploy/README.md's table, and bad
+  values must be refused naming the key.
 """
 
 import argparse
@@ -59,6 +60,8 @@ ROUTING_ON = {
     "routing": {"enabled": True, "key": "0123456789abcdef0123456789abcdef"},
     "ingress": {"enabled": True, "className": "nginx"},
     "sceneStore": {"enabled": True},
+    # With the router's Service beside the pods' two, which the ServiceMonitor must not select.
+    "metrics": {"serviceMonitor": {"enabled": True}},
 }
 ROUTING_RULE = CHART / "files/routing.conf"
 
@@ -280,6 +283,28 @@ def check_routing_render(objects, env_names):
                  f"{'the router' if selects_router else 'not the router'}")
 
 
+def check_service_monitor(name, objects):
+    """The ServiceMonitor selects one Service, the one of the StatefulSet's pods that is not
+    headless: each pod is scraped once, and the router's pods (whose /metrics is some pod's)
+    not at all."""
+    monitors = by_kind(objects, "ServiceMonitor")
+    if not monitors:
+        return
+    (monitor,) = monitors
+    wanted = monitor["spec"]["selector"]["matchLabels"]
+    (statefulset,) = by_kind(objects, "StatefulSet")
+    pod_labels = statefulset["spec"]["template"]["metadata"]["labels"]
+    services = by_kind(objects, "Service")
+    selected = [s["metadata"]["name"] for s in services
+                if all(s["metadata"].get("labels", {}).get(k) == v for k, v in wanted.items())]
+    expected = [s["metadata"]["name"] for s in services
+                if s["spec"].get("clusterIP") != "None"
+                and all(pod_labels.get(k) == v for k, v in s["spec"]["selector"].items())]
+    if len(expected) != 1 or selected != expected:
+        fail(f"chart ({name}): the ServiceMonitor selects the Services {selected}; it must select "
+             f"only the pods' Service {expected}")
+
+
 def check_scene_store(objects, statefulset, env):
     """With the scene store on: every pod mounts the same ReadWriteMany claim where
     LIGHTCAST_SCENE_STORE points."""
@@ -430,6 +455,10 @@ def main():
         check_autoscaling(renders["values-scaled-out.yaml"])
     if "routing on" in renders:
         check_routing_render(renders["routing on"], env_names)
+    for name, objects in renders.items():
+        check_service_monitor(name, objects)
+    if not any(by_kind(objects, "ServiceMonitor") for objects in renders.values()):
+        fail("chart: no render has a ServiceMonitor to check")
     check_bad_values(args.helm)
     check_values_documented()
 

@@ -391,7 +391,8 @@ impl Default for RenderParams {
     }
 }
 
-/// Image codecs of frames and stills.
+/// Codecs of a session's frames and stills. `h264` is a video codec: a stream's frames only
+/// (each frame message one access unit), never a still.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
@@ -399,11 +400,40 @@ pub enum Codec {
     #[default]
     Jpeg,
     Png,
+    /// H.264 constrained baseline, Annex B byte stream (start codes; SPS and PPS in front of
+    /// every keyframe), as WebCodecs' `VideoDecoder` takes it without a `description`.
+    H264,
+}
+
+impl Codec {
+    /// The codec's byte in a frame header.
+    pub fn wire(self) -> u8 {
+        match self {
+            Self::Jpeg => 0,
+            Self::Png => 1,
+            Self::H264 => 2,
+        }
+    }
+
+    /// The codec of a frame header's byte.
+    pub fn from_wire(byte: u8) -> Option<Self> {
+        [Self::Jpeg, Self::Png, Self::H264]
+            .into_iter()
+            .find(|c| c.wire() == byte)
+    }
+
+    /// Whether frames of this codec depend on earlier ones (so none may be dropped).
+    pub fn is_video(self) -> bool {
+        self == Self::H264
+    }
 }
 
 /// How a session encodes its frames. While input keeps arriving frames use
-/// `moving_quality`; once input has rested for `still_after_ms` one still follows in
-/// `still_codec` at `quality` (as remote-visualisation tools do).
+/// `moving_quality` (JPEG); once input has rested for `still_after_ms` one still follows in
+/// `still_codec` at `quality` (as remote-visualisation tools do). With `codec: h264` the
+/// frames are video: rate-controlled to `bitrate_kbps`, never worse than `max_qp`, with a
+/// keyframe every `keyframe_interval` frames and whenever the stream (re)connects, the size or
+/// a parameter changes, or the client sends `keyframe`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(default)]
 pub struct Encoding {
@@ -414,7 +444,15 @@ pub struct Encoding {
     pub moving_quality: u8,
     /// Rest time before the high-quality still; 0 turns stills off.
     pub still_after_ms: u32,
+    /// `png` (lossless) or `jpeg` at `quality`; not `h264`.
     pub still_codec: Codec,
+    /// H.264: target bitrate in kbit/s (100–200,000).
+    pub bitrate_kbps: u32,
+    /// H.264: the coarsest quantiser the rate control may use (10–51; lower keeps more detail
+    /// when the bitrate is tight, at the cost of exceeding it).
+    pub max_qp: u8,
+    /// H.264: frames between periodic keyframes (0: only the keyframes the stream needs).
+    pub keyframe_interval: u32,
 }
 
 impl Default for Encoding {
@@ -425,6 +463,9 @@ impl Default for Encoding {
             moving_quality: 70,
             still_after_ms: 300,
             still_codec: Codec::Png,
+            bitrate_kbps: 8_000,
+            max_qp: 40,
+            keyframe_interval: 300,
         }
     }
 }
@@ -861,6 +902,20 @@ pub struct ServerInfo {
     /// What a request gets for the render fields it leaves out.
     #[serde(default)]
     pub defaults: RenderDefaults,
+    /// Session stream codecs and the video encoder behind `h264`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub video: Option<VideoInfo>,
+}
+
+/// What a server can encode a session's frames in.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct VideoInfo {
+    /// Codecs `encoding.codec` may name.
+    pub codecs: Vec<Codec>,
+    /// The H.264 encoder in use (`--encoder`): `openh264`.
+    pub encoder: String,
+    /// Whether that encoder runs on dedicated hardware rather than the CPU.
+    pub hardware: bool,
 }
 
 /// Which set of defaults a server gives requests.

@@ -11,8 +11,9 @@
 //!     32    8  send time, server clock, µs since the Unix epoch
 //!     40    4  width
 //!     44    4  height
-//!     48    1  codec (0 JPEG, 1 PNG)
-//!     49    1  flags (bit 0 still, bit 1 GI pending: direct light only, bit 2 moving)
+//!     48    1  codec (0 JPEG, 1 PNG, 2 H.264: one Annex B access unit)
+//!     49    1  flags (bit 0 still, bit 1 GI pending: direct light only, bit 2 moving,
+//!                     bit 3 keyframe: an H.264 IDR access unit a decoder can start from)
 //!     50    1  stage count N
 //!     51    1  JPEG quality (0 for PNG)
 //!     52    4  f32 encode ms
@@ -117,6 +118,8 @@ stages! {
     ParaboloidMaps => "paraboloid_maps",
     /// The depth maps' Fourier basis textures and their mip chains (`clustered`, `cssm`).
     CssmBasis => "cssm_basis",
+    /// The 8-bit output converted to Y'CbCr 4:2:0 for the video encoder (`h264` streams).
+    Yuv420 => "yuv420",
 }
 
 impl Stage {
@@ -140,6 +143,7 @@ impl Stage {
                 | Self::DirectLight
                 | Self::Exposure
                 | Self::Tonemap
+                | Self::Yuv420
                 | Self::ReadbackCopy
         )
     }
@@ -165,6 +169,8 @@ impl std::fmt::Display for Stage {
 pub const FLAG_STILL: u8 = 1;
 pub const FLAG_GI_PENDING: u8 = 2;
 pub const FLAG_MOVING: u8 = 4;
+/// An H.264 keyframe (IDR access unit with SPS and PPS): a decoder can start here.
+pub const FLAG_KEYFRAME: u8 = 8;
 
 /// The decoded header of a binary frame message.
 #[derive(Clone, Debug, PartialEq)]
@@ -235,10 +241,7 @@ impl FrameHeader {
         }
         out.extend_from_slice(&self.width.to_le_bytes());
         out.extend_from_slice(&self.height.to_le_bytes());
-        out.push(match self.codec {
-            Codec::Jpeg => 0,
-            Codec::Png => 1,
-        });
+        out.push(self.codec.wire());
         out.push(self.flags);
         out.push(stages.len() as u8);
         out.push(self.quality);
@@ -290,11 +293,7 @@ impl FrameHeader {
                 stages: stage_count,
             });
         }
-        let codec = match message[48] {
-            0 => Codec::Jpeg,
-            1 => Codec::Png,
-            other => return Err(FrameHeaderError::Codec(other)),
-        };
+        let codec = Codec::from_wire(message[48]).ok_or(FrameHeaderError::Codec(message[48]))?;
         let payload = &message[header_len..];
         let payload_len = u32_at(64);
         if payload_len as usize != payload.len() {

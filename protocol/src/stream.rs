@@ -37,6 +37,8 @@ pub enum ClientMessage {
     Resume,
     /// Send one lossless (PNG) still of the current view now.
     Still,
+    /// Make the next video frame a keyframe (`h264`: a decoder that lost its place restarts).
+    Keyframe,
     /// The client has shown frame `seq`; frames not acknowledged do not hold anything back,
     /// but the server measures the round trip from them.
     Ack {
@@ -56,6 +58,13 @@ pub enum ServerEvent {
     /// First message on a new WebSocket: the session as it stands.
     Hello {
         session: Box<SessionInfo>,
+        /// The codecs this server encodes a session's frames in (`jpeg`, `png`, `h264`); a
+        /// client switches `encoding.codec` to one it can decode.
+        #[serde(default)]
+        codecs: Vec<crate::Codec>,
+        /// The video encoder behind `h264` (`openh264`), absent where there is none.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        video_encoder: Option<String>,
     },
     /// Parameters changed (by this socket, another or `PATCH`); the new state.
     Updated {

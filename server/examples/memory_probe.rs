@@ -180,6 +180,7 @@ fn main() -> anyhow::Result<()> {
                 },
                 history: None,
                 still: false,
+                yuv420: false,
             };
             let set =
                 caches::precompute(&scene, &caches::CacheParams::for_scene(&scene), &mut |_| {})?;

@@ -560,6 +560,7 @@ pub(crate) fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiSettings) -> 
         gi,
         history: None,
         still: false,
+        yuv420: false,
     }
 }
 

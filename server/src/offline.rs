@@ -437,6 +437,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         gi: GiSettings::from(&gi),
         history: None,
         still: false,
+        yuv420: false,
     }
 }
 

@@ -8,7 +8,7 @@ use crate::gi::{
     ProgressSums, SceneResources,
 };
 use crate::gpu::{
-    readback::{PendingMap, TextureReadback},
+    readback::{PendingMap, PendingRows, TextureReadback},
     timing::{timestamp_staging, FrameTimer, PendingTimings, StageTiming, TimingSource},
     GpuContext, GpuError,
 };
@@ -21,6 +21,7 @@ use crate::passes::{
     scene_buffers::{SceneBuffers, MATERIAL_GROUP},
     shadow_map::{ShadowMap, ShadowMapPass},
     tonemap::{TonemapPass, LDR_FORMAT},
+    yuv420::{Yuv420, Yuv420Layout, Yuv420Pass, Yuv420Target},
     Target, INDIRECT_FORMAT,
 };
 use crate::scene::Scene;
@@ -69,6 +70,10 @@ pub struct RenderSettings {
     /// A session's still: a GI method that converges by steps shows its converged result
     /// when it can reach it within this frame (`surfels`: every bounce at once).
     pub still: bool,
+    /// Read the output back as Y'CbCr 4:2:0 for a video encoder ([`Frame::yuv420`]) instead
+    /// of RGBA8: 1.5 instead of 4 bytes per pixel cross the bus, and the CPU skips the colour
+    /// conversion.
+    pub yuv420: bool,
 }
 
 /// A rendered frame.
@@ -76,8 +81,11 @@ pub struct RenderSettings {
 pub struct Frame {
     pub width: u32,
     pub height: u32,
-    /// sRGB RGBA8, rows top to bottom.
+    /// sRGB RGBA8, rows top to bottom; empty when [`RenderSettings::yuv420`] asked for
+    /// [`Frame::yuv420`] instead.
     pub rgba8: Vec<u8>,
+    /// The output as Y'CbCr 4:2:0, when [`RenderSettings::yuv420`] was set.
+    pub yuv420: Option<Yuv420>,
     /// Linear HDR radiance, RGBA, when [`RenderSettings::capture_hdr`] was set. Alpha 0 marks
     /// pixels no geometry covers.
     pub hdr: Option<Vec<[f32; 4]>>,
@@ -254,6 +262,8 @@ struct SizedTargets {
     readbacks: Vec<ReadbackSet>,
     exposure: ExposureBindings,
     tonemap: wgpu::BindGroup,
+    /// The output's Y'CbCr planes (video frames).
+    yuv420: Yuv420Target,
     /// The reduced G-buffer and indirect target of the last downscale factor used (see
     /// [`crate::passes::indirect_resolution`]).
     reduced: Option<ReducedTargets>,
@@ -272,6 +282,8 @@ const READBACK_RING: usize = 3;
 /// Where one frame's results are copied for reading back.
 struct ReadbackSet {
     ldr: TextureReadback,
+    /// The Y'CbCr planes of a video frame.
+    yuv420: wgpu::Buffer,
     hdr: TextureReadback,
     indirect: TextureReadback,
     exposure: wgpu::Buffer,
@@ -286,6 +298,12 @@ impl ReadbackSet {
     fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
         Self {
             ldr: TextureReadback::new(device, "ldr readback", width, height, 4),
+            yuv420: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("yuv420 readback"),
+                size: Yuv420Layout::new(width, height).bytes() as u64,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
             hdr: TextureReadback::new(device, "hdr readback", width, height, 8),
             indirect: TextureReadback::new(device, "indirect readback", width, height, 8),
             exposure: device.create_buffer(&wgpu::BufferDescriptor {
@@ -322,7 +340,8 @@ pub struct PendingFrame {
     ctx: GpuContext,
     width: u32,
     height: u32,
-    ldr: TextureReadback,
+    /// RGBA8, or the Y'CbCr planes of a video frame.
+    output: Output,
     hdr: Option<(TextureReadback, TextureReadback)>,
     exposure: wgpu::Buffer,
     /// Samples accumulated and the staging buffer of the [`ProgressSums`].
@@ -335,11 +354,26 @@ pub struct PendingFrame {
     _lease: SetLease,
 }
 
+/// Where a frame's output is read back from.
+enum Output {
+    Rgba8(TextureReadback),
+    Yuv420(Yuv420Layout, wgpu::Buffer),
+}
+
+/// An [`Output`] being mapped.
+enum Reading {
+    Rgba8(PendingRows),
+    Yuv420(Yuv420Layout, PendingMap),
+}
+
 impl PendingFrame {
     /// Waits for the GPU to finish the frame and reads it back.
     pub fn wait(self) -> Result<Frame, GpuError> {
         let started = std::time::Instant::now();
-        let ldr = self.ldr.begin_read();
+        let output = match &self.output {
+            Output::Rgba8(ldr) => Reading::Rgba8(ldr.begin_read()),
+            Output::Yuv420(layout, buffer) => Reading::Yuv420(*layout, PendingMap::new(buffer)),
+        };
         let hdr = self
             .hdr
             .as_ref()
@@ -351,7 +385,16 @@ impl PendingFrame {
             .map(|(samples, buffer)| (*samples, PendingMap::new(buffer)));
         let timings = self.timings.begin();
         self.ctx.wait_for(self.submission.as_ref())?;
-        let rgba8 = ldr.finish()?;
+        let (rgba8, yuv420) = match output {
+            Reading::Rgba8(ldr) => (ldr.finish()?, None),
+            Reading::Yuv420(layout, map) => (
+                Vec::new(),
+                Some(Yuv420 {
+                    layout,
+                    data: map.finish()?,
+                }),
+            ),
+        };
         let (hdr, indirect) = match hdr {
             Some((h, i)) => (
                 Some(rgba16f_to_f32(&h.finish()?)),
@@ -378,6 +421,7 @@ impl PendingFrame {
             width: self.width,
             height: self.height,
             rgba8,
+            yuv420,
             hdr,
             indirect,
             timings: timings.finish()?,
@@ -401,6 +445,7 @@ pub struct Renderer {
     direct_pass: DirectLightPass,
     exposure_pass: ExposurePass,
     tonemap_pass: TonemapPass,
+    yuv420_pass: Yuv420Pass,
     resolution_pass: IndirectResolutionPass,
     /// Targets of the most recently used output sizes, most recent first (sessions of
     /// different sizes share one renderer).
@@ -443,6 +488,7 @@ impl Renderer {
             direct_pass: DirectLightPass::new(device),
             exposure_pass: ExposurePass::new(device),
             tonemap_pass: TonemapPass::new(device),
+            yuv420_pass: Yuv420Pass::new(device),
             resolution_pass: IndirectResolutionPass::new(device),
             sized: Vec::new(),
             shadow_maps: Vec::new(),
@@ -554,8 +600,13 @@ impl Renderer {
             width,
             height,
             LDR_FORMAT,
-            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+            wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
         );
+        let yuv420 = self
+            .yuv420_pass
+            .target(device, &self.shared.ctx.queue, &ldr, width, height);
         let indirect = Target::new(
             device,
             "indirect",
@@ -583,6 +634,7 @@ impl Renderer {
             ldr,
             exposure,
             tonemap,
+            yuv420,
             reduced: None,
         };
         check_allocation(scope, format!("{width}×{height} frame targets"))?;
@@ -760,10 +812,19 @@ impl Renderer {
         stages.stage(Stage::Tonemap, |e| {
             self.tonemap_pass.encode(e, &sized.tonemap, width, height)
         })?;
+        if settings.yuv420 {
+            stages.stage(Stage::Yuv420, |e| {
+                self.yuv420_pass.encode(e, &sized.yuv420);
+            })?;
+        }
         let mut debug = None;
         stages.stage(Stage::ReadbackCopy, |e| {
             debug = method.capture_debug(settings.debug_view, &self.shared.ctx.device, e);
-            set.ldr.encode_copy(e, &sized.ldr.texture);
+            if settings.yuv420 {
+                e.copy_buffer_to_buffer(&sized.yuv420.planes, 0, &set.yuv420, 0, None);
+            } else {
+                set.ldr.encode_copy(e, &sized.ldr.texture);
+            }
             if settings.capture_hdr {
                 set.hdr.encode_copy(e, &sized.hdr.texture);
                 set.indirect.encode_copy(e, &sized.indirect.texture);
@@ -778,7 +839,11 @@ impl Renderer {
             ctx: self.shared.ctx.clone(),
             width,
             height,
-            ldr: set.ldr.clone(),
+            output: if settings.yuv420 {
+                Output::Yuv420(sized.yuv420.layout, set.yuv420.clone())
+            } else {
+                Output::Rgba8(set.ldr.clone())
+            },
             hdr: settings
                 .capture_hdr
                 .then(|| (set.hdr.clone(), set.indirect.clone())),

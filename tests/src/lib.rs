@@ -9,6 +9,15 @@ use serde_json::{json, Value};
 use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
 
+/// A reqwest client builder for the tests. The workspace builds reqwest with rustls and no
+/// built-in crypto provider (the `lightcast` client brings its own, ring); tests install ring
+/// as the process's default once, so plain clients work too.
+pub fn http_builder() -> reqwest::ClientBuilder {
+    // Err: already installed by an earlier call.
+    let _ = rustls::crypto::ring::default_provider().install_default();
+    reqwest::Client::builder()
+}
+
 /// How long a test waits for any one thing from the server before failing.
 pub const PATIENCE: Duration = Duration::from_secs(120);
 
@@ -58,7 +67,7 @@ impl TestServer {
             .expect("the server starts");
         Self {
             base: format!("http://{}", service.addr),
-            http: reqwest::Client::new(),
+            http: http_builder().build().expect("HTTP client"),
             service: Some(service),
             _cache: cache,
         }
@@ -69,7 +78,7 @@ impl TestServer {
     pub fn remote(base: String) -> Self {
         Self {
             base,
-            http: reqwest::Client::new(),
+            http: http_builder().build().expect("HTTP client"),
             service: None,
             _cache: tempfile::tempdir().expect("temporary directory"),
         }
@@ -117,7 +126,7 @@ impl TestServer {
         let (ws, _) = tokio_tungstenite::connect_async(url)
             .await
             .expect("WebSocket opens");
-        Stream { ws }
+        Stream { ws, video: None }
     }
 
     /// GET without a token; panics only when the request cannot be made.
@@ -160,7 +169,12 @@ impl TestServer {
 /// A decoded binary frame.
 pub struct ReceivedFrame {
     pub header: FrameHeader,
+    /// The image (an H.264 frame as the stream's decoder shows it).
     pub rgba: image::RgbaImage,
+    /// The encoded payload as it came.
+    pub payload: Vec<u8>,
+    /// An H.264 frame's decoded luma plane, rows packed.
+    pub luma: Option<Vec<u8>>,
 }
 
 impl ReceivedFrame {
@@ -179,6 +193,30 @@ pub struct Stream {
     pub ws: tokio_tungstenite::WebSocketStream<
         tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>,
     >,
+    /// The decoder of an `h264` stream (OpenH264's, independent of the server's encoder
+    /// state), made at the first video frame.
+    video: Option<openh264::decoder::Decoder>,
+}
+
+/// Decodes one H.264 access unit: RGBA (the decoder's own conversion) and the luma plane.
+fn decode_h264(
+    decoder: &mut openh264::decoder::Decoder,
+    unit: &[u8],
+) -> (image::RgbaImage, Vec<u8>) {
+    use openh264::formats::YUVSource;
+    let picture = decoder
+        .decode(unit)
+        .expect("a decodable access unit")
+        .expect("one picture per access unit");
+    let (w, h) = picture.dimensions();
+    let mut rgba = vec![0; w * h * 4];
+    picture.write_rgba8(&mut rgba);
+    let stride = picture.strides().0;
+    let luma = (0..h)
+        .flat_map(|y| picture.y()[y * stride..y * stride + w].to_vec())
+        .collect();
+    let image = image::RgbaImage::from_raw(w as u32, h as u32, rgba).expect("sized buffer");
+    (image, luma)
 }
 
 /// What the server sent next.
@@ -223,10 +261,24 @@ impl Stream {
                 Some(Ok(Message::Binary(bytes))) => {
                     let (header, payload) =
                         FrameHeader::decode(&bytes).expect("valid frame header");
-                    let rgba = image::load_from_memory(payload)
-                        .expect("decodable image")
-                        .to_rgba8();
-                    return Incoming::Frame(Box::new(ReceivedFrame { header, rgba }));
+                    let (rgba, luma) = if header.codec.is_video() {
+                        let decoder = self.video.get_or_insert_with(|| {
+                            openh264::decoder::Decoder::new().expect("an H.264 decoder")
+                        });
+                        let (rgba, luma) = decode_h264(decoder, payload);
+                        (rgba, Some(luma))
+                    } else {
+                        let rgba = image::load_from_memory(payload)
+                            .expect("decodable image")
+                            .to_rgba8();
+                        (rgba, None)
+                    };
+                    return Incoming::Frame(Box::new(ReceivedFrame {
+                        header,
+                        rgba,
+                        payload: payload.to_vec(),
+                        luma,
+                    }));
                 }
                 Some(Ok(Message::Text(text))) => {
                     return Incoming::Event(serde_json::from_str(&text).expect("ServerEvent JSON"))

@@ -1,6 +1,7 @@
 // One streaming session: creates it, opens its WebSocket with a ticket, and keeps it alive.
 // When the socket drops it reconnects by itself (with backoff); when the session is gone
-// (deleted, or the server restarted) it creates a new one with the last known parameters.
+// (deleted, the server restarted, or behind the router its replica gone) it creates a new one
+// with the last known parameters.
 // A ping every few seconds notices links that died silently (sleep, NAT timeouts).
 
 import { ApiError, Unreachable, request, sendJson, wsUrl } from './api.js';
@@ -9,6 +10,11 @@ const MIN_BACKOFF_MS = 500;
 const MAX_BACKOFF_MS = 8000;
 const PING_EVERY_MS = 5000;
 const SILENCE_LIMIT_MS = 15000;
+// Answers to the old session's ticket request that start a new session: 404 (gone), 421 (it
+// belongs to a replica this address does not reach) and the router's 502/503/504 for a replica
+// that is gone or unready, which may never come back (a scale-in). Each attempt still waits out
+// the backoff, so a cluster that is down is not flooded with new sessions.
+const SESSION_LOST = new Set([404, 421, 502, 503, 504]);
 
 export class Connection {
   /**
@@ -139,7 +145,10 @@ export class Connection {
         const t = await sendJson('POST', `v1/sessions/${encodeURIComponent(this.sessionId)}/ticket`);
         return t.ticket;
       } catch (e) {
-        if (!(e instanceof ApiError) || e.status !== 404) throw e;
+        if (!(e instanceof ApiError) || !SESSION_LOST.has(e.status)) throw e;
+        // Its replica may only be unreachable for a while: ask it to end the session (best
+        // effort) so that it does not hold a slot there until it idles out.
+        if (e.status !== 404) this.deleteSession(this.sessionId);
         this.sessionId = null;
       }
     }

@@ -72,6 +72,12 @@ pub const TONEMAP: ShaderSource = ShaderSource {
 };
 
 /// The G-buffer reduced for indirect light at a lower resolution.
+/// The tone-mapped frame as Y'CbCr 4:2:0 for the video encoder.
+pub const YUV420: ShaderSource = ShaderSource {
+    name: "yuv420",
+    files: &[wgsl!("yuv420.wgsl")],
+};
+
 pub const GBUFFER_REDUCE: ShaderSource = ShaderSource {
     name: "gbuffer_reduce",
     files: &[wgsl!("gbuffer_reduce.wgsl")],
@@ -285,6 +291,7 @@ pub const ALL: &[&ShaderSource] = &[
     &DIRECT_LIGHT,
     &EXPOSURE,
     &TONEMAP,
+    &YUV420,
     &GBUFFER_REDUCE,
     &INDIRECT_UPSAMPLE,
     &RSM,
@@ -429,7 +436,7 @@ mod tests {
         use crate::passes::bind::{wgsl_mismatches, BindGroupDesc};
         use crate::passes::{
             direct_light, exposure, gbuffer, indirect_resolution, rsm, scene_buffers, shadow_map,
-            tonemap,
+            tonemap, yuv420,
         };
         // Each module with its pipeline's bind groups, group i at index i.
         let passes: &[(&ShaderSource, &[&BindGroupDesc])] = &[
@@ -448,6 +455,7 @@ mod tests {
             (&DIRECT_LIGHT, &[&direct_light::GROUP]),
             (&EXPOSURE, &[&exposure::GROUP]),
             (&TONEMAP, &[&tonemap::GROUP]),
+            (&YUV420, &[&yuv420::GROUP]),
             (&GBUFFER_REDUCE, &[&indirect_resolution::REDUCE_GROUP]),
             (&INDIRECT_UPSAMPLE, &[&indirect_resolution::UPSAMPLE_GROUP]),
             (&RSM, &[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP]),

@@ -15,6 +15,7 @@
 //! 10. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
 //! 11. [`exposure`]: automatic exposure from the HDR image.
 //! 12. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
+//! 13. [`yuv420`]: for video, the 8-bit output as Y'CbCr 4:2:0 (read back instead of RGBA).
 //!
 //! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry
 //! and materials. Every pass, here and in `gi/`, declares each bind group once with
@@ -30,6 +31,7 @@ pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;
 pub mod tonemap;
+pub mod yuv420;
 
 /// Format of the indirect-light buffer every GI method writes and direct light adds in.
 pub const INDIRECT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;

@@ -182,8 +182,7 @@ impl TokenQuotas {
     /// 429 `<kind>_quota` naming the quota and its flag.
     pub fn refusal(&self, kind: Quota, limit: u32) -> ApiError {
         let (error, flag) = kind.names();
-        ApiError::new(
-            StatusCode::TOO_MANY_REQUESTS,
+        ApiError::too_many(
             error,
             format!(
                 "this token holds {limit} {}, its quota ({flag}); wait for one to end",
@@ -283,8 +282,7 @@ impl Admission {
     ) -> Result<Admitted, ApiError> {
         let token_held = self.quotas.take(token, kind)?;
         let global_held = global.try_take(1).ok_or_else(|| {
-            ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
+            ApiError::too_many(
                 error,
                 format!(
                     "the server has {} {} at once, its limit ({flag}); try again shortly",
@@ -314,6 +312,7 @@ pub fn over_budget(kind: &str, message: impl Into<String>) -> ApiError {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::service::error::RETRY_AFTER_SECS;
 
     #[test]
     fn a_pool_refuses_beyond_its_limit_and_gets_back_what_holders_drop() {
@@ -353,6 +352,7 @@ mod tests {
             .expect_err("alice's quota is one upload");
         assert_eq!(refused.status, StatusCode::TOO_MANY_REQUESTS);
         assert_eq!(refused.body.error, "upload_quota");
+        assert_eq!(refused.retry_after, Some(RETRY_AFTER_SECS), "quotas too");
         assert!(refused.body.message.contains("--token-max-uploads"));
         assert!(
             quotas.take(Some("bob"), Quota::Uploads).is_ok(),
@@ -396,6 +396,7 @@ mod tests {
             (e.status, e.body.error.as_str()),
             (StatusCode::TOO_MANY_REQUESTS, "too_many_uploads")
         );
+        assert_eq!(e.retry_after, Some(RETRY_AFTER_SECS), "queues too");
         assert!(
             e.body.message.contains("--max-uploads"),
             "{}",

@@ -62,9 +62,13 @@ pub struct ServeArgs {
     /// Scene loaded at start under the id `default`.
     #[arg(long, env = "LIGHTCAST_DEFAULT_SCENE", default_value = crate::offline::DEFAULT_SCENE)]
     pub default_scene: String,
-    /// Threads encoding frames (JPEG/PNG) off the render loop. Default: half the CPUs.
+    /// Threads encoding frames (JPEG/PNG, H.264) off the render loop. Default: half the CPUs.
     #[arg(long, env = "LIGHTCAST_ENCODE_THREADS")]
     pub encode_threads: Option<usize>,
+    /// The H.264 encoder of `h264` streams: `auto` (the best this machine has) or `openh264`
+    /// (software, always built in). `/v1/server` says which is used.
+    #[arg(long, value_enum, env = "LIGHTCAST_ENCODER", default_value = "auto")]
+    pub encoder: super::video::EncoderChoice,
     /// Log lines for people (`text`) or one JSON object per line for log collectors (`json`).
     #[arg(long, value_enum, env = "LIGHTCAST_LOG_FORMAT", default_value = "text")]
     pub log_format: LogFormat,

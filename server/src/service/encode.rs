@@ -11,11 +11,14 @@ pub enum EncodeError {
     Png(#[from] image::ImageError),
     #[error("{width}×{height} is too large for JPEG (at most 65535 per side)")]
     TooLarge { width: u32, height: u32 },
+    #[error("h264 is a stream codec: a single image is JPEG or PNG")]
+    NotAStill,
 }
 
-/// Encodes an RGBA8 image; `quality` (1–100) applies to JPEG.
+/// Encodes an RGBA8 image as a still; `quality` (1–100) applies to JPEG.
 pub fn encode(image: &Image, codec: Codec, quality: u8) -> Result<Vec<u8>, EncodeError> {
     match codec {
+        Codec::H264 => Err(EncodeError::NotAStill),
         Codec::Jpeg => {
             let (Ok(w), Ok(h)) = (u16::try_from(image.width), u16::try_from(image.height)) else {
                 return Err(EncodeError::TooLarge {
@@ -48,18 +51,22 @@ pub fn encode(image: &Image, codec: Codec, quality: u8) -> Result<Vec<u8>, Encod
     }
 }
 
-/// The encoder threads.
+/// The encoder threads, and the video encoder they use for `h264` streams.
 pub struct EncodePool {
     pool: rayon::ThreadPool,
+    pub video: super::video::EncoderKind,
 }
 
 impl EncodePool {
-    pub fn new(threads: usize) -> Result<Self, rayon::ThreadPoolBuildError> {
+    pub fn new(
+        threads: usize,
+        video: super::video::EncoderKind,
+    ) -> Result<Self, rayon::ThreadPoolBuildError> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
             .thread_name(|i| format!("encode-{i}"))
             .build()?;
-        Ok(Self { pool })
+        Ok(Self { pool, video })
     }
 
     /// Default size: half the CPUs, at least one.

@@ -11,7 +11,8 @@ pub struct ApiError {
     pub body: ErrorBody,
     /// The replica that holds what was asked for (421), sent as `Lightcast-Owner`.
     pub owner: Option<String>,
-    /// Seconds after which the request may succeed (429), sent as `Retry-After`.
+    /// Seconds after which the request may succeed, sent as `Retry-After`: set by
+    /// [`ApiError::new`] on every 429, so none goes without it.
     pub retry_after: Option<u32>,
 }
 
@@ -53,7 +54,7 @@ impl ApiError {
                 message: shorten(message.into(), MESSAGE_CHARS),
             },
             owner: None,
-            retry_after: None,
+            retry_after: (status == StatusCode::TOO_MANY_REQUESTS).then_some(RETRY_AFTER_SECS),
         }
     }
 
@@ -107,9 +108,7 @@ impl ApiError {
 
     /// 429: a limit of the server or of the token is reached for now (with `Retry-After`).
     pub fn too_many(kind: &str, message: impl Into<String>) -> Self {
-        let mut e = Self::new(StatusCode::TOO_MANY_REQUESTS, kind, message);
-        e.retry_after = Some(RETRY_AFTER_SECS);
-        e
+        Self::new(StatusCode::TOO_MANY_REQUESTS, kind, message)
     }
 
     pub fn unavailable(message: impl Into<String>) -> Self {
@@ -371,5 +370,25 @@ mod tests {
             .body
             .field
             .is_some_and(|f| f.chars().count() < 4 * ECHO_CHARS + 20));
+    }
+
+    #[test]
+    fn every_429_carries_retry_after() {
+        for e in [
+            ApiError::too_many("too_many_sessions", "full"),
+            ApiError::new(StatusCode::TOO_MANY_REQUESTS, "upload_quota", "quota"),
+        ] {
+            let response = e.into_response();
+            assert_eq!(response.status(), StatusCode::TOO_MANY_REQUESTS);
+            assert_eq!(
+                response.headers()[axum::http::header::RETRY_AFTER],
+                RETRY_AFTER_SECS.to_string()
+            );
+        }
+        let other = ApiError::unavailable("stopping").into_response();
+        assert!(other
+            .headers()
+            .get(axum::http::header::RETRY_AFTER)
+            .is_none());
     }
 }

@@ -21,6 +21,7 @@ pub mod routing;
 pub mod scene_store;
 pub mod scenes;
 pub mod sessions;
+pub mod video;
 
 use crate::gi::precompute::Store;
 use crate::gpu::{GpuContext, GpuError};
@@ -129,9 +130,20 @@ impl Service {
         }
         let sessions = Arc::new(sessions::SessionRegistry::new(&limits, routing));
         ::metrics::gauge!(metrics::SESSION_CAPACITY).set(f64::from(limits.max_sessions));
+        let video = video::EncoderKind::select(args.encoder);
+        log(&format!(
+            "h264 streams: {} ({})",
+            video.name(),
+            if video.hardware() {
+                "hardware"
+            } else {
+                "software"
+            }
+        ));
         let encoder = Arc::new(encode::EncodePool::new(
             args.encode_threads
                 .unwrap_or_else(encode::EncodePool::default_threads),
+            video,
         )?);
         let timing_source = if ctx.timestamps {
             "gpu_timestamps"
@@ -183,6 +195,7 @@ impl Service {
             args.allow_cpu_adapter,
             defaults,
             timing_source.to_string(),
+            video,
             shutdown_rx.clone(),
         ));
         if state.auth_enabled() {

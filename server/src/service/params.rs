@@ -8,6 +8,7 @@ use crate::gi::precompute::PrecomputeKey;
 use crate::gi::GiSettings;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
+use crate::service::video::{VideoConfig, MAX_LONG_SIDE, MAX_SHORT_SIDE};
 use lightcast_protocol::{Encoding, GiParams, Limits, RenderParams, SessionParams, View};
 
 /// Settings of one frame, ready for the render loop.
@@ -109,6 +110,7 @@ pub fn resolve(
         gi: GiSettings::from(g),
         history: None,
         still: false,
+        yuv420: false,
     };
     settings
         .validate_for(max_texture)
@@ -186,18 +188,42 @@ pub fn resolve_session(
     max_texture: u32,
 ) -> Result<Resolved, ApiError> {
     let Encoding {
+        codec,
         quality: q,
         moving_quality,
         still_after_ms,
-        ..
+        still_codec,
+        bitrate_kbps,
+        max_qp,
+        keyframe_interval,
     } = params.encoding;
     quality("encoding.quality", q)?;
     quality("encoding.moving_quality", moving_quality)?;
-    if still_after_ms > 60_000 {
+    within("encoding.still_after_ms", still_after_ms, 0, 60_000)?;
+    if still_codec.is_video() {
         return Err(ApiError::field(
-            "encoding.still_after_ms",
-            format!("{still_after_ms} is outside 0..=60000"),
+            "encoding.still_codec",
+            "h264 is a stream codec; a still is png or jpeg",
         ));
+    }
+    within("encoding.bitrate_kbps", bitrate_kbps, 100, 200_000)?;
+    within("encoding.max_qp", u32::from(max_qp), 10, 51)?;
+    within("encoding.keyframe_interval", keyframe_interval, 0, 100_000)?;
+    if codec.is_video() {
+        let (w, h) = (params.render.width, params.render.height);
+        if let Err(e) = VideoConfig::check_size(w, h) {
+            let width_limit = if w >= h {
+                MAX_LONG_SIDE
+            } else {
+                MAX_SHORT_SIDE
+            };
+            let field = if w % 2 == 1 || w > width_limit {
+                "render.width"
+            } else {
+                "render.height"
+            };
+            return Err(ApiError::field(field, format!("encoding.codec h264: {e}")));
+        }
     }
     if !(params.fps_cap.is_finite() && params.fps_cap >= 0.1 && params.fps_cap <= limits.max_fps) {
         return Err(ApiError::field(

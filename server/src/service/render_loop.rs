@@ -7,13 +7,15 @@ use super::error::ApiError;
 use super::params::{render_error, Resolved};
 use super::scenes::{precompute_failed, precompute_label, Now, SceneEntry, SceneRegistry};
 use super::sessions::{unix_us, FramePlan, Session, SessionRegistry};
+use super::video::VideoConfig;
 use crate::debug_views::{self, Image};
 use crate::gi::precompute::{PrecomputeKey, SceneData};
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
+use crate::passes::yuv420::Yuv420;
 use crate::quality::Truth;
 use crate::renderer::{Frame, FrameProgress, PendingFrame, Renderer};
-use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_MOVING, FLAG_STILL};
+use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_KEYFRAME, FLAG_MOVING, FLAG_STILL};
 use lightcast_protocol::{Comparison, FrameHeader, GiMethod, StageMs, View};
 use std::collections::{HashMap, VecDeque};
 use std::sync::{mpsc, Arc};
@@ -46,7 +48,10 @@ pub struct OneShot {
 
 /// A rendered frame: the image of the requested view plus what was measured.
 pub struct Rendered {
+    /// The view's image (empty pixels when `yuv420` holds the frame instead).
     pub image: Image,
+    /// The final view as Y'CbCr 4:2:0, converted on the GPU for a video stream.
+    pub yuv420: Option<Yuv420>,
     pub timings: Vec<StageTiming>,
     pub timing_source: TimingSource,
     pub readback_ms: f64,
@@ -276,6 +281,9 @@ impl Loop {
         } else {
             resolved.view
         };
+        // Debug views are composed on the CPU from RGBA; only the final view goes to video
+        // as planes converted on the GPU.
+        settings.yuv420 &= view == View::Final;
         let renderer_key = (
             scene.id.clone(),
             data.as_ref()
@@ -405,6 +413,7 @@ impl Loop {
         // A progressive method keeps refining this session's image while nothing changes.
         plan.resolved.settings.history = Some(history_id(&session.id));
         plan.resolved.settings.still = plan.still;
+        plan.resolved.settings.yuv420 = plan.codec.is_video();
         match self.submit(&plan.lease_scene, &plan.resolved) {
             // The wait for the GPU happens on the readback thread while this one encodes the
             // next frame.
@@ -639,6 +648,7 @@ fn finish(
         frame.indirect.take()
     };
     let timings = std::mem::take(&mut frame.timings);
+    let yuv420 = frame.yuv420.take();
     let (timing_source, readback_ms, exposure_scale, progress) = (
         frame.timing_source,
         frame.readback_ms,
@@ -648,6 +658,7 @@ fn finish(
     let image = image(view, frame).map_err(|e| ApiError::internal(e.to_string()))?;
     Ok(Rendered {
         image,
+        yuv420,
         timings,
         timing_source,
         readback_ms,
@@ -718,22 +729,48 @@ fn deliver(
     let seq = header.seq;
     let session = Arc::clone(session);
     let image = rendered.image;
+    // Sends the encoded frame with the time its encoding took.
+    let finish = move |session: &Session, started: Instant, payload: &[u8], flags: u8| {
+        let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+        super::metrics::record_duration(
+            super::metrics::ENCODE_SECONDS,
+            super::metrics::ENCODE_MS,
+            encode_ms,
+        );
+        let header = FrameHeader {
+            encode_ms: encode_ms as f32,
+            flags: header.flags | flags,
+            ..header
+        };
+        session.deliver(seq, header.encode_with(payload), !codec.is_video());
+    };
+    if codec.is_video() {
+        let config = VideoConfig::new(image.width, image.height, &plan.encoding, plan.fps);
+        let (kind, yuv420) = (encoder.video, rendered.yuv420);
+        let target = Arc::clone(&session);
+        session.queue_video(
+            encoder,
+            Box::new(move |stream| {
+                let started = Instant::now();
+                // Debug views are composed on the CPU and converted here.
+                let frame = yuv420
+                    .unwrap_or_else(|| Yuv420::from_rgba8(&image.rgba8, image.width, image.height));
+                let keyframe = target.take_keyframe_request();
+                match stream.encode(kind, config, &frame, keyframe) {
+                    Ok(unit) => {
+                        let flags = if unit.keyframe { FLAG_KEYFRAME } else { 0 };
+                        finish(&target, started, &unit.data, flags);
+                    }
+                    Err(e) => target.frame_failed(ApiError::internal(e.to_string()).body),
+                }
+            }),
+        );
+        return;
+    }
     encoder.spawn(move || {
         let started = Instant::now();
         match encode::encode(&image, codec, quality) {
-            Ok(payload) => {
-                let encode_ms = started.elapsed().as_secs_f64() * 1e3;
-                super::metrics::record_duration(
-                    super::metrics::ENCODE_SECONDS,
-                    super::metrics::ENCODE_MS,
-                    encode_ms,
-                );
-                let header = FrameHeader {
-                    encode_ms: encode_ms as f32,
-                    ..header
-                };
-                session.deliver(seq, header.encode_with(&payload));
-            }
+            Ok(payload) => finish(&session, started, &payload, 0),
             Err(e) => session.frame_failed(ApiError::internal(e.to_string()).body),
         }
     });

@@ -7,10 +7,11 @@ use super::ids;
 use super::params::Resolved;
 use super::routing::{Owner, Routing};
 use super::scenes::{lock, SceneLease};
+use super::video::VideoStream;
 use lightcast_protocol::{
     ErrorBody, Limits, ServerEvent, SessionInfo, SessionParams, SessionStats, StageMs, StreamMode,
 };
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -31,17 +32,25 @@ pub fn unix_us() -> u64 {
         .map_or(0, |d| d.as_micros() as u64)
 }
 
-/// Holds the newest encoded frame of a session; a newer frame replaces an unsent one.
+/// Holds a session's encoded frames until the socket sends them. A newer frame replaces the
+/// unsent images (JPEG, PNG); unsent video frames stay queued, since the frames after them
+/// are coded against them. The render loop's [`MAX_IN_FLIGHT`] bounds the queue.
 #[derive(Default)]
 pub struct FrameSlot {
-    frame: Mutex<Option<Vec<u8>>>,
+    /// (message, whether a newer frame may replace it).
+    frames: Mutex<VecDeque<(Vec<u8>, bool)>>,
     notify: Notify,
 }
 
 impl FrameSlot {
-    /// Stores `message`; returns true when it replaced a frame the client never got.
-    pub fn publish(&self, message: Vec<u8>) -> bool {
-        let replaced = lock(&self.frame).replace(message).is_some();
+    /// Queues `message`; returns how many unsent frames it replaced.
+    pub fn publish(&self, message: Vec<u8>, replaceable: bool) -> u32 {
+        let mut frames = lock(&self.frames);
+        let before = frames.len();
+        frames.retain(|(_, replaceable)| !replaceable);
+        let replaced = (before - frames.len()) as u32;
+        frames.push_back((message, replaceable));
+        drop(frames);
         self.notify.notify_one();
         replaced
     }
@@ -49,13 +58,16 @@ impl FrameSlot {
     /// Waits for the next frame.
     pub async fn take(&self) -> Vec<u8> {
         loop {
-            if let Some(frame) = lock(&self.frame).take() {
+            if let Some((frame, _)) = lock(&self.frames).pop_front() {
                 return frame;
             }
             self.notify.notified().await;
         }
     }
 }
+
+/// Work on a session's video stream, run in the order it was queued ([`Session::queue_video`]).
+pub type VideoJob = Box<dyn FnOnce(&mut VideoStream) + Send>;
 
 /// What the render loop should render for a session now.
 pub struct FramePlan {
@@ -67,6 +79,9 @@ pub struct FramePlan {
     pub moving: bool,
     pub codec: lightcast_protocol::Codec,
     pub quality: u8,
+    /// The session's encoding (video settings) and fps cap when the frame was planned.
+    pub encoding: lightcast_protocol::Encoding,
+    pub fps: f32,
 }
 
 struct State {
@@ -107,6 +122,11 @@ pub struct Session {
     /// Sequence number of the newest frame put into the slot.
     newest_delivered: std::sync::atomic::AtomicU64,
     closed: watch::Sender<Option<String>>,
+    /// The `h264` encoder, and the frames waiting for it in order.
+    video: Mutex<VideoStream>,
+    video_jobs: Mutex<VecDeque<VideoJob>>,
+    /// The next video frame must be a keyframe (a stream attached, or the client asked).
+    keyframe_wanted: AtomicBool,
 }
 
 impl Session {
@@ -145,14 +165,49 @@ impl Session {
             seq: std::sync::atomic::AtomicU64::new(0),
             newest_delivered: std::sync::atomic::AtomicU64::new(0),
             closed: watch::channel(None).0,
+            video: Mutex::new(VideoStream::default()),
+            video_jobs: Mutex::new(VecDeque::new()),
+            keyframe_wanted: AtomicBool::new(true),
         })
     }
 
     /// Claims the session's one stream; false when another is attached.
     pub fn attach(&self) -> bool {
-        self.connected
+        let attached = self
+            .connected
             .compare_exchange(false, true, Ordering::AcqRel, Ordering::Acquire)
-            .is_ok()
+            .is_ok();
+        if attached {
+            // A new client's decoder starts at a keyframe.
+            self.request_keyframe();
+        }
+        attached
+    }
+
+    /// Makes the next video frame a keyframe.
+    pub fn request_keyframe(&self) {
+        self.keyframe_wanted.store(true, Ordering::Release);
+    }
+
+    /// Whether the next video frame must be a keyframe (clears the request).
+    pub fn take_keyframe_request(&self) -> bool {
+        self.keyframe_wanted.swap(false, Ordering::AcqRel)
+    }
+
+    /// Queues `job` on the session's video stream and has `pool` run the queue: video frames
+    /// must reach their encoder in order, while the pool's threads take jobs in any order.
+    /// Whichever pool job holds the stream runs every queued job, oldest first.
+    pub fn queue_video(self: &Arc<Self>, pool: &super::encode::EncodePool, job: VideoJob) {
+        lock(&self.video_jobs).push_back(job);
+        let session = Arc::clone(self);
+        pool.spawn(move || {
+            let mut stream = lock(&session.video);
+            loop {
+                let next = lock(&session.video_jobs).pop_front();
+                let Some(job) = next else { break };
+                job(&mut stream);
+            }
+        });
     }
 
     /// The stream went away (or never came).
@@ -288,6 +343,8 @@ impl Session {
             moving,
             codec,
             quality,
+            encoding: enc,
+            fps: s.params.fps_cap,
         })
     }
 
@@ -354,19 +411,21 @@ impl Session {
         let _ = self.events.send(ServerEvent::RenderError { error });
     }
 
-    /// Frame `seq` finished encoding: into the slot, counting the one it replaced as dropped.
-    /// Frames are encoded in parallel, so one may finish after a newer one; it is dropped too.
-    pub fn deliver(&self, seq: u64, message: Vec<u8>) {
-        if self.newest_delivered.fetch_max(seq, Ordering::AcqRel) > seq {
-            self.in_flight.fetch_sub(1, Ordering::Relaxed);
-            lock(&self.stats).frames_dropped += 1;
-            metrics::counter!(super::metrics::FRAMES_DROPPED).increment(1);
-            return;
-        }
-        if self.slot.publish(message) {
-            self.in_flight.fetch_sub(1, Ordering::Relaxed);
-            lock(&self.stats).frames_dropped += 1;
-            metrics::counter!(super::metrics::FRAMES_DROPPED).increment(1);
+    /// Frame `seq` finished encoding: into the slot, counting the images it replaced as
+    /// dropped. Images are encoded in parallel, so one may finish after a newer frame; it is
+    /// dropped too. Video frames (`replaceable` false) are never dropped: they arrive in order
+    /// and later frames are coded against them.
+    pub fn deliver(&self, seq: u64, message: Vec<u8>, replaceable: bool) {
+        let newer_sent = self.newest_delivered.fetch_max(seq, Ordering::AcqRel) > seq;
+        let dropped = if replaceable && newer_sent {
+            1
+        } else {
+            self.slot.publish(message, replaceable)
+        };
+        if dropped > 0 {
+            self.in_flight.fetch_sub(dropped, Ordering::Relaxed);
+            lock(&self.stats).frames_dropped += u64::from(dropped);
+            metrics::counter!(super::metrics::FRAMES_DROPPED).increment(u64::from(dropped));
         }
     }
 

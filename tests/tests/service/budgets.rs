@@ -437,6 +437,17 @@ async fn one_token_cannot_take_every_slot() {
         "{body}"
     );
     assert!(message_is(&body, |m| m.contains("--token-max-sessions")));
+    // Quota refusals are 429s like the server's own limits, so they carry Retry-After too.
+    let resp = server
+        .http
+        .post(server.url("/v1/sessions"))
+        .bearer_auth(alice)
+        .json(&direct_session(16, 16))
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(resp.status(), 429);
+    assert_eq!(resp.headers()["retry-after"], "2");
     server
         .create_session(direct_session(16, 16), Some(bob))
         .await;

@@ -129,7 +129,7 @@ async fn idle_and_slow_connections_are_capped_and_closed_while_others_are_served
 
     // Another client is served while all of them are held (they are still open afterwards:
     // reading finds nothing yet rather than the end).
-    let other = reqwest::Client::builder()
+    let other = lightcast_e2e::http_builder()
         .local_address(loopback(2))
         .build()
         .expect("client");

@@ -7,4 +7,5 @@ mod hardening;
 mod routing;
 mod scene_store;
 mod streaming;
+mod video;
 mod viewer;

@@ -14,7 +14,7 @@ async fn a_session_streams_frames_and_follows_the_camera() {
     let mut stream = server.connect(&created).await;
     let mut events = Vec::new();
     match stream.next().await {
-        Incoming::Event(ServerEvent::Hello { session }) => {
+        Incoming::Event(ServerEvent::Hello { session, .. }) => {
             assert_eq!(session.id, created.session.id)
         }
         _ => panic!("the first message must be hello"),

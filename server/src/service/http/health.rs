@@ -1,6 +1,7 @@
 //! Liveness, readiness, metrics and server information.
 
 use super::AppState;
+use crate::service::video::STREAM_CODECS;
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -80,5 +81,10 @@ pub async fn server_info(State(state): State<Arc<AppState>>) -> Json<ServerInfo>
         gi_methods: state.gi_methods(),
         defaults: state.defaults.info.clone(),
         replica: state.sessions.replica().map(str::to_string),
+        video: Some(lightcast_protocol::VideoInfo {
+            codecs: STREAM_CODECS.to_vec(),
+            encoder: state.video_encoder.name().to_string(),
+            hardware: state.video_encoder.hardware(),
+        }),
     })
 }

@@ -64,6 +64,8 @@ pub struct AppState {
     /// What requests get for the render fields they leave out.
     pub defaults: crate::service::defaults::Defaults,
     pub timing_source: String,
+    /// The encoder of `h264` streams.
+    pub video_encoder: crate::service::video::EncoderKind,
     pub max_texture: u32,
     /// The GPU's wgpu instance, for the live-object gauges of `/metrics`.
     pub gpu_instance: wgpu::Instance,
@@ -92,6 +94,7 @@ impl AppState {
         allow_cpu_adapter: bool,
         defaults: crate::service::defaults::Defaults,
         timing_source: String,
+        video_encoder: crate::service::video::EncoderKind,
         shutdown: tokio::sync::watch::Receiver<bool>,
     ) -> Self {
         let admission = crate::service::budget::Admission::new(&limits);
@@ -107,6 +110,7 @@ impl AppState {
             allow_cpu_adapter,
             defaults,
             timing_source,
+            video_encoder,
             max_texture: gpu.device.limits().max_texture_dimension_2d,
             gpu_instance: gpu.instance.clone(),
             build: build_id(),

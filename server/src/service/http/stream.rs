@@ -138,6 +138,8 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
     let mut last_heard = Instant::now();
     let hello = ServerEvent::Hello {
         session: Box::new(session.info()),
+        codecs: crate::service::video::STREAM_CODECS.to_vec(),
+        video_encoder: Some(state.video_encoder.name().to_string()),
     };
     if !send_event(&mut socket, &hello).await {
         return;
@@ -301,6 +303,10 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
         ClientMessage::Still => {
             session.request_still();
             state.wake();
+            Ok(())
+        }
+        ClientMessage::Keyframe => {
+            session.request_keyframe();
             Ok(())
         }
         ClientMessage::Ack { .. } => {

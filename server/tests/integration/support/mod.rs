@@ -79,6 +79,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         gi: lightcast_server::gi::GiSettings::off(),
         history: None,
         still: false,
+        yuv420: false,
     }
 }
 

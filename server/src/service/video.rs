@@ -1,0 +1,399 @@
+//! Video streams (`encoding.codec: h264`): one stateful encoder per session, fed the session's
+//! frames in order, each frame one Annex B access unit.
+//!
+//! The encoder is one interface ([`VideoEncoder`]) behind `--encoder`; the one that always
+//! builds is Cisco's OpenH264, compiled from the source the `openh264` crate bundles (software,
+//! constrained baseline). A hardware encoder (NVENC, VA-API) would be another [`EncoderKind`]:
+//! none is here because no binding to one builds from the registries this project reaches and
+//! none could be tested without the hardware (README, "Video streams").
+
+use crate::passes::yuv420::Yuv420;
+use lightcast_protocol::{Codec, Encoding};
+use openh264::encoder::{
+    BitRate, Encoder, EncoderConfig, FrameRate, FrameType, IntraFramePeriod, Profile, QpRange,
+    RateControlMode, TransferCharacteristics, UsageType, VuiConfig,
+};
+use openh264::formats::YUVSource;
+use openh264::OpenH264API;
+
+/// The codecs a session's frames can be encoded in (`encoding.codec`).
+pub const STREAM_CODECS: &[Codec] = &[Codec::Jpeg, Codec::Png, Codec::H264];
+
+/// Largest frame OpenH264 encodes (its level 5.2 limit): 3840 on the longer side, 2160 on the
+/// shorter.
+pub const MAX_LONG_SIDE: u32 = 3840;
+pub const MAX_SHORT_SIDE: u32 = 2160;
+
+#[derive(Debug, thiserror::Error)]
+pub enum VideoError {
+    #[error("H.264 encoder ({encoder}): {message}")]
+    Encoder {
+        encoder: &'static str,
+        message: String,
+    },
+    #[error("H.264 needs even frame sizes and at most {MAX_LONG_SIDE}×{MAX_SHORT_SIDE}; got {width}×{height}")]
+    Size { width: u32, height: u32 },
+}
+
+/// Which encoder makes `h264` streams (`--encoder`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum EncoderChoice {
+    /// The best encoder this machine has: OpenH264 until a hardware encoder is added.
+    #[default]
+    Auto,
+    /// Cisco's OpenH264 on the CPU, built into the server.
+    Openh264,
+}
+
+/// An encoder implementation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EncoderKind {
+    OpenH264,
+}
+
+impl EncoderKind {
+    /// The encoder `choice` selects on this machine.
+    pub fn select(choice: EncoderChoice) -> Self {
+        match choice {
+            EncoderChoice::Auto | EncoderChoice::Openh264 => Self::OpenH264,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::OpenH264 => "openh264",
+        }
+    }
+
+    pub fn hardware(self) -> bool {
+        match self {
+            Self::OpenH264 => false,
+        }
+    }
+
+    /// A new encoder for frames of `config`; its first access unit is a keyframe.
+    pub fn create(self, config: &VideoConfig) -> Result<Box<dyn VideoEncoder>, VideoError> {
+        match self {
+            Self::OpenH264 => Ok(Box::new(OpenH264Encoder::new(config)?)),
+        }
+    }
+}
+
+/// What an encoder is made for; a stream whose config changes gets a new encoder (and so a
+/// keyframe).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VideoConfig {
+    pub width: u32,
+    pub height: u32,
+    pub bitrate_kbps: u32,
+    pub max_qp: u8,
+    pub keyframe_interval: u32,
+    /// The session's fps cap: the rate control spreads the bitrate over this many frames.
+    pub fps: f32,
+}
+
+impl VideoConfig {
+    pub fn new(width: u32, height: u32, encoding: &Encoding, fps: f32) -> Self {
+        Self {
+            width,
+            height,
+            bitrate_kbps: encoding.bitrate_kbps,
+            max_qp: encoding.max_qp,
+            keyframe_interval: encoding.keyframe_interval,
+            fps,
+        }
+    }
+
+    /// Whether H.264 can carry frames of `width`×`height` (4:2:0 needs even sides).
+    pub fn check_size(width: u32, height: u32) -> Result<(), VideoError> {
+        let (long, short) = (width.max(height), width.min(height));
+        if width % 2 == 1 || height % 2 == 1 || long > MAX_LONG_SIDE || short > MAX_SHORT_SIDE {
+            return Err(VideoError::Size { width, height });
+        }
+        Ok(())
+    }
+}
+
+/// One encoded frame.
+#[derive(Clone, Debug)]
+pub struct AccessUnit {
+    /// Annex B NAL units (start codes included).
+    pub data: Vec<u8>,
+    /// An IDR access unit, with SPS and PPS: decoding can start here.
+    pub keyframe: bool,
+}
+
+/// A stateful video encoder: frames must come in display order.
+pub trait VideoEncoder: Send {
+    /// Encodes the next frame, as a keyframe when `keyframe` (else the encoder decides).
+    fn encode(&mut self, frame: &Yuv420, keyframe: bool) -> Result<AccessUnit, VideoError>;
+}
+
+struct OpenH264Encoder {
+    encoder: Encoder,
+}
+
+fn openh264_error(e: openh264::Error) -> VideoError {
+    VideoError::Encoder {
+        encoder: EncoderKind::OpenH264.name(),
+        message: e.to_string(),
+    }
+}
+
+impl OpenH264Encoder {
+    fn new(config: &VideoConfig) -> Result<Self, VideoError> {
+        VideoConfig::check_size(config.width, config.height)?;
+        let settings = EncoderConfig::new()
+            .profile(Profile::Baseline)
+            .usage_type(UsageType::CameraVideoRealTime)
+            .rate_control_mode(RateControlMode::Bitrate)
+            .bitrate(BitRate::from_bps(config.bitrate_kbps.saturating_mul(1000)))
+            .max_frame_rate(FrameRate::from_hz(config.fps))
+            .qp(QpRange::new(0, config.max_qp.min(51)))
+            .intra_frame_period(IntraFramePeriod::from_num_frames(config.keyframe_interval))
+            // Every rendered frame becomes an access unit: the client's frame counter, input
+            // ids and stage timings ride on them.
+            .skip_frames(false)
+            // One thread per stream: the encode pool already spreads sessions over the CPUs.
+            .num_threads(1)
+            // What the GPU's conversion wrote: BT.709 matrix and limited range applied to the
+            // sRGB-encoded output, so the decoder's colour management sees sRGB again.
+            .vui(VuiConfig::bt709().transfer_characteristics(TransferCharacteristics::Srgb));
+        let encoder = Encoder::with_api_config(OpenH264API::from_source(), settings)
+            .map_err(openh264_error)?;
+        Ok(Self { encoder })
+    }
+}
+
+/// The planes of a [`Yuv420`] as OpenH264 reads them.
+struct Planes<'a>(&'a Yuv420);
+
+impl YUVSource for Planes<'_> {
+    fn dimensions(&self) -> (usize, usize) {
+        (self.0.layout.width as usize, self.0.layout.height as usize)
+    }
+
+    fn strides(&self) -> (usize, usize, usize) {
+        let l = self.0.layout;
+        (
+            l.luma_stride as usize,
+            l.chroma_stride as usize,
+            l.chroma_stride as usize,
+        )
+    }
+
+    fn y(&self) -> &[u8] {
+        self.0.y()
+    }
+
+    fn u(&self) -> &[u8] {
+        self.0.cb()
+    }
+
+    fn v(&self) -> &[u8] {
+        self.0.cr()
+    }
+}
+
+impl VideoEncoder for OpenH264Encoder {
+    fn encode(&mut self, frame: &Yuv420, keyframe: bool) -> Result<AccessUnit, VideoError> {
+        if keyframe {
+            self.encoder.force_intra_frame();
+        }
+        let stream = self
+            .encoder
+            .encode(&Planes(frame))
+            .map_err(openh264_error)?;
+        Ok(AccessUnit {
+            keyframe: matches!(stream.frame_type(), FrameType::IDR | FrameType::I),
+            data: stream.to_vec(),
+        })
+    }
+}
+
+/// A session's video encoder and what it was made for.
+#[derive(Default)]
+pub struct VideoStream {
+    encoder: Option<(VideoConfig, Box<dyn VideoEncoder>)>,
+}
+
+impl VideoStream {
+    /// Encodes the session's next frame with `kind`, making a new encoder (so a keyframe)
+    /// when `config` differs from the last frame's.
+    pub fn encode(
+        &mut self,
+        kind: EncoderKind,
+        config: VideoConfig,
+        frame: &Yuv420,
+        keyframe: bool,
+    ) -> Result<AccessUnit, VideoError> {
+        if self.encoder.as_ref().is_none_or(|(c, _)| *c != config) {
+            self.encoder = None;
+            self.encoder = Some((config, kind.create(&config)?));
+        }
+        let Some((_, encoder)) = self.encoder.as_mut() else {
+            unreachable!("made above");
+        };
+        let result = encoder.encode(frame, keyframe);
+        if result.is_err() {
+            // The next frame starts afresh with a keyframe rather than after a broken one.
+            self.encoder = None;
+        }
+        result
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use openh264::decoder::Decoder;
+
+    /// A moving gradient with a square, `t` frames in.
+    fn frame(width: u32, height: u32, t: u32) -> Yuv420 {
+        textured(width, height, t, 0)
+    }
+
+    /// [`frame`] plus noise of ±`grain` levels that changes every frame: content that costs
+    /// whatever bits the rate control allows.
+    fn textured(width: u32, height: u32, t: u32, grain: u32) -> Yuv420 {
+        let rgba: Vec<u8> = (0..width * height)
+            .flat_map(|i| {
+                let (x, y) = (i % width, i / width);
+                let hash = (i ^ (t << 20)).wrapping_mul(2_654_435_761) >> 24;
+                let noise =
+                    |c: u32| (c + hash % (2 * grain + 1)).saturating_sub(grain).min(255) as u8;
+                let square = (x + 3 * t) % width < width / 4 && y > height / 3 && y < height / 2;
+                if square {
+                    [230, 200, 40, 255]
+                } else {
+                    [
+                        noise((x + 2 * t) * 255 / width),
+                        noise(y * 255 / height),
+                        noise(((x + y) / 2) % 256),
+                        255,
+                    ]
+                }
+            })
+            .collect();
+        Yuv420::from_rgba8(&rgba, width, height)
+    }
+
+    fn psnr(a: &[u8], b: &[u8]) -> f64 {
+        let mse = a
+            .iter()
+            .zip(b)
+            .map(|(x, y)| (f64::from(*x) - f64::from(*y)).powi(2))
+            .sum::<f64>()
+            / a.len() as f64;
+        10.0 * (255.0 * 255.0 / mse.max(1e-9)).log10()
+    }
+
+    /// The luma plane a decoder returned, rows packed.
+    fn decoded_luma(decoder: &mut Decoder, unit: &[u8], width: u32, height: u32) -> Vec<u8> {
+        let picture = decoder
+            .decode(unit)
+            .expect("decodes")
+            .expect("a picture per access unit");
+        let (w, h) = picture.dimensions();
+        assert_eq!((w, h), (width as usize, height as usize));
+        let stride = picture.strides().0;
+        (0..h)
+            .flat_map(|y| picture.y()[y * stride..y * stride + w].to_vec())
+            .collect()
+    }
+
+    fn luma_rows(frame: &Yuv420) -> Vec<u8> {
+        let l = frame.layout;
+        (0..l.height as usize)
+            .flat_map(|y| {
+                let start = y * l.luma_stride as usize;
+                frame.y()[start..start + l.width as usize].to_vec()
+            })
+            .collect()
+    }
+
+    fn config(width: u32, height: u32) -> VideoConfig {
+        VideoConfig::new(width, height, &Encoding::default(), 30.0)
+    }
+
+    #[test]
+    fn a_stream_round_trips_through_an_independent_decoder() {
+        let (w, h) = (160, 96);
+        let mut stream = VideoStream::default();
+        let mut decoder = Decoder::new().expect("decoder");
+        let mut sizes = Vec::new();
+        for t in 0..12 {
+            let input = frame(w, h, t);
+            let unit = stream
+                .encode(EncoderKind::OpenH264, config(w, h), &input, false)
+                .expect("encodes");
+            assert_eq!(unit.keyframe, t == 0, "only the first frame is a keyframe");
+            assert_eq!(&unit.data[..4], &[0, 0, 0, 1], "Annex B start code");
+            let luma = decoded_luma(&mut decoder, &unit.data, w, h);
+            let p = psnr(&luma, &luma_rows(&input));
+            // At 8 Mbit/s a 160×96 frame is nearly lossless; 35 dB is visually transparent.
+            assert!(p > 35.0, "frame {t}: PSNR {p:.1} dB");
+            sizes.push(unit.data.len());
+        }
+        assert!(
+            sizes[1..].iter().all(|&s| s < sizes[0]),
+            "P-frames are smaller than the keyframe: {sizes:?}"
+        );
+    }
+
+    #[test]
+    fn keyframes_on_request_and_on_a_new_size() {
+        let mut stream = VideoStream::default();
+        let kind = EncoderKind::OpenH264;
+        let first = stream.encode(kind, config(64, 48), &frame(64, 48, 0), false);
+        assert!(first.expect("encodes").keyframe);
+        let delta = stream.encode(kind, config(64, 48), &frame(64, 48, 1), false);
+        assert!(!delta.expect("encodes").keyframe);
+        let asked = stream.encode(kind, config(64, 48), &frame(64, 48, 2), true);
+        assert!(asked.expect("encodes").keyframe);
+        // A resize makes a new encoder, whose stream a fresh decoder starts on.
+        let resized = stream
+            .encode(kind, config(96, 64), &frame(96, 64, 3), false)
+            .expect("encodes");
+        assert!(resized.keyframe);
+        let mut decoder = Decoder::new().expect("decoder");
+        assert_eq!(
+            decoded_luma(&mut decoder, &resized.data, 96, 64).len(),
+            96 * 64
+        );
+    }
+
+    #[test]
+    fn a_lower_bitrate_sends_fewer_bytes() {
+        let (w, h) = (192, 128);
+        let bytes = |kbps: u32| {
+            let mut stream = VideoStream::default();
+            let cfg = VideoConfig {
+                bitrate_kbps: kbps,
+                max_qp: 51,
+                ..config(w, h)
+            };
+            (0..20)
+                .map(|t| {
+                    stream
+                        .encode(EncoderKind::OpenH264, cfg, &textured(w, h, t, 40), false)
+                        .expect("encodes")
+                        .data
+                        .len()
+                })
+                .sum::<usize>()
+        };
+        let (low, high) = (bytes(100), bytes(4_000));
+        assert!(low * 2 < high, "100 kbit/s: {low} B, 4 Mbit/s: {high} B");
+    }
+
+    #[test]
+    fn odd_and_oversized_frames_are_refused() {
+        assert!(VideoConfig::check_size(1920, 1080).is_ok());
+        assert!(VideoConfig::check_size(2160, 3840).is_ok());
+        assert!(VideoConfig::check_size(641, 480).is_err());
+        assert!(VideoConfig::check_size(640, 481).is_err());
+        assert!(VideoConfig::check_size(4096, 2160).is_err());
+        assert!(VideoConfig::check_size(3840, 2162).is_err());
+    }
+}

@@ -1,0 +1,166 @@
+//! `h264` session streams end to end: the server's encoder against an independent decoder
+//! (OpenH264's), keyframes when the stream needs them, and precise refusals.
+
+use lightcast_e2e::{direct_session, mean_abs_diff, Incoming, ReceivedFrame, TestServer};
+use lightcast_protocol::frame::FLAG_KEYFRAME;
+use lightcast_protocol::{Codec, ServerEvent};
+use serde_json::{json, Value};
+
+fn h264_session(width: u32, height: u32) -> Value {
+    let mut params = direct_session(width, height);
+    params["encoding"] = json!({"codec": "h264", "still_after_ms": 0});
+    params
+}
+
+fn keyframe(f: &ReceivedFrame) -> bool {
+    f.header.flags & FLAG_KEYFRAME != 0
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_h264_session_streams_decodable_video_with_keyframes_where_needed() {
+    let server = TestServer::start(&[]).await;
+    let info = server.get_json("/v1/server").await;
+    assert_eq!(info["video"]["encoder"], "openh264", "{info}");
+    assert_eq!(info["video"]["hardware"], false);
+    assert!(info["stages"]
+        .as_array()
+        .is_some_and(|s| s.contains(&json!("yuv420"))));
+
+    let created = server.create_session(h264_session(96, 64), None).await;
+    let mut stream = server.connect(&created).await;
+    match stream.next().await {
+        Incoming::Event(ServerEvent::Hello {
+            codecs,
+            video_encoder,
+            ..
+        }) => {
+            assert!(codecs.contains(&Codec::H264), "{codecs:?}");
+            assert_eq!(video_encoder.as_deref(), Some("openh264"));
+        }
+        _ => panic!("the first message must be hello"),
+    }
+    let mut events = Vec::new();
+    let first = stream.next_frame(&mut events).await;
+    assert_eq!(first.header.codec, Codec::H264);
+    assert!(keyframe(&first), "a stream starts with a keyframe");
+    assert_eq!(
+        first.rgba.dimensions(),
+        (96, 64),
+        "the decoder shows the frame"
+    );
+    assert!(first.stage("yuv420").is_some(), "converted on the GPU");
+    // Annex B with the parameter sets in front of the picture.
+    assert_eq!(&first.payload[..4], &[0, 0, 0, 1]);
+    assert_eq!(first.payload[4] & 0x1f, 7, "SPS first");
+
+    let mut deltas = 0;
+    for _ in 0..4 {
+        let f = stream.next_frame(&mut events).await;
+        deltas += usize::from(!keyframe(&f));
+        assert!(
+            f.payload.len() < first.payload.len(),
+            "P-frames are smaller"
+        );
+    }
+    assert_eq!(deltas, 4, "no keyframe without a reason");
+
+    // The picture follows the camera.
+    stream
+        .send(json!({"type": "camera", "input_id": 3, "camera": {
+            "position": [0.9, 1.0, 2.5], "target": [-1.0, 1.0, 0.0], "fov_y_degrees": 50.0}}))
+        .await;
+    let moved = loop {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.input_id == 3 {
+            break f;
+        }
+    };
+    let change = mean_abs_diff(&first.rgba, &moved.rgba);
+    assert!(
+        change > 5.0,
+        "the camera move changed the decoded picture by {change:.1}"
+    );
+
+    // A client that lost its place asks for a keyframe.
+    stream.send(json!({"type": "keyframe"})).await;
+    let mut asked = false;
+    for _ in 0..3 {
+        asked |= keyframe(&stream.next_frame(&mut events).await);
+    }
+    assert!(asked, "a keyframe follows the request");
+
+    // A new size starts a new stream at a keyframe the same decoder follows.
+    stream
+        .send(json!({"type": "update", "patch": {"render": {"width": 128, "height": 80}}}))
+        .await;
+    let resized = loop {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.width == 128 {
+            break f;
+        }
+    };
+    assert!(
+        keyframe(&resized),
+        "the first frame of a new size is a keyframe"
+    );
+    assert_eq!(resized.rgba.dimensions(), (128, 80));
+    assert!(
+        !events
+            .iter()
+            .any(|e| matches!(e, ServerEvent::RenderError { .. })),
+        "{events:?}"
+    );
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_video_parameters_are_refused_naming_the_field() {
+    let server = TestServer::start(&[]).await;
+    let cases: [(Value, &str); 6] = [
+        (json!({"encoding": {"codec": "h265"}}), "encoding.codec"),
+        (
+            json!({"encoding": {"codec": "h264", "bitrate_kbps": 50}}),
+            "encoding.bitrate_kbps",
+        ),
+        (
+            json!({"encoding": {"codec": "h264", "max_qp": 60}}),
+            "encoding.max_qp",
+        ),
+        (
+            json!({"encoding": {"still_codec": "h264"}}),
+            "encoding.still_codec",
+        ),
+        (
+            json!({"encoding": {"codec": "h264"}, "render": {"width": 97, "height": 64}}),
+            "render.width",
+        ),
+        (
+            json!({"encoding": {"codec": "h264"}, "render": {"width": 96, "height": 63}}),
+            "render.height",
+        ),
+    ];
+    for (params, field) in cases {
+        let resp = server
+            .http
+            .post(server.url("/v1/sessions"))
+            .json(&params)
+            .send()
+            .await
+            .expect("request");
+        assert_eq!(resp.status(), 400, "{params}");
+        let body: Value = resp.json().await.expect("error JSON");
+        assert_eq!(body["field"], field, "{params}: {body}");
+    }
+    // The same checks guard a running session: an odd size is refused, the session goes on.
+    let created = server.create_session(h264_session(64, 48), None).await;
+    let mut stream = server.connect(&created).await;
+    stream
+        .send(json!({"type": "update", "patch": {"render": {"width": 65}}}))
+        .await;
+    let error = stream.next_error().await;
+    assert_eq!(error.field.as_deref(), Some("render.width"), "{error:?}");
+    let mut events = Vec::new();
+    let after = stream.next_frame(&mut events).await;
+    assert_eq!(after.rgba.dimensions(), (64, 48));
+    server.stop().await;
+}

@@ -157,7 +157,10 @@ async fn a_scene_uploaded_to_one_replica_is_used_and_deleted_on_another() {
     // Only the uploading token deletes it, from the replica that did not upload it; then the
     // uploader forgets it too.
     assert_eq!(delete(&b, &format!("/v1/scenes/{id}"), BOB).await, 403);
-    assert_eq!(delete_once_unused(&b, &format!("/v1/scenes/{id}"), ALICE).await, 204);
+    assert_eq!(
+        delete_once_unused(&b, &format!("/v1/scenes/{id}"), ALICE).await,
+        204
+    );
     assert_eq!(
         get(&a, &format!("/v1/scenes/{id}"), ALICE).await.status(),
         404

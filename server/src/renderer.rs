@@ -38,7 +38,8 @@ pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
 pub const MAX_SHADOW_TEXELS: u64 = 8192 * 8192;
 /// Largest Phong exponent accepted (a mirror-like lobe; beyond it the lobe is a single texel).
 pub const MAX_GLOSSY_EXPONENT: f32 = 10_000.0;
-/// Most output pixels: the frame's targets take about 70 bytes per pixel (4.5 GiB at this size).
+/// Most output pixels: the frame's targets take about 76 bytes per pixel (4.7 GiB at this size;
+/// 6 of them the video planes and their read-back copies).
 pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
 
 /// Output sizes whose targets a renderer keeps at once.

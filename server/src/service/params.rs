@@ -8,7 +8,7 @@ use crate::gi::precompute::PrecomputeKey;
 use crate::gi::GiSettings;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
-use crate::service::video::{VideoConfig, MAX_LONG_SIDE, MAX_SHORT_SIDE};
+use crate::service::video::{VideoConfig, VideoError};
 use lightcast_protocol::{Encoding, GiParams, Limits, RenderParams, SessionParams, View};
 
 /// Settings of one frame, ready for the render loop.
@@ -211,18 +211,11 @@ pub fn resolve_session(
     within("encoding.keyframe_interval", keyframe_interval, 0, 100_000)?;
     if codec.is_video() {
         let (w, h) = (params.render.width, params.render.height);
-        if let Err(e) = VideoConfig::check_size(w, h) {
-            let width_limit = if w >= h {
-                MAX_LONG_SIDE
-            } else {
-                MAX_SHORT_SIDE
-            };
-            let field = if w % 2 == 1 || w > width_limit {
-                "render.width"
-            } else {
-                "render.height"
-            };
-            return Err(ApiError::field(field, format!("encoding.codec h264: {e}")));
+        if let Err(e @ VideoError::Size { side, .. }) = VideoConfig::check_size(w, h) {
+            return Err(ApiError::field(
+                format!("render.{side}"),
+                format!("encoding.codec h264: {e}"),
+            ));
         }
     }
     if !(params.fps_cap.is_finite() && params.fps_cap >= 0.1 && params.fps_cap <= limits.max_fps) {

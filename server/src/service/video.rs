@@ -32,7 +32,12 @@ pub enum VideoError {
         message: String,
     },
     #[error("H.264 needs even frame sizes and at most {MAX_LONG_SIDE}×{MAX_SHORT_SIDE}; got {width}×{height}")]
-    Size { width: u32, height: u32 },
+    Size {
+        width: u32,
+        height: u32,
+        /// The side at fault (`width` or `height`).
+        side: &'static str,
+    },
 }
 
 /// Which encoder makes `h264` streams (`--encoder`).
@@ -106,11 +111,25 @@ impl VideoConfig {
 
     /// Whether H.264 can carry frames of `width`×`height` (4:2:0 needs even sides).
     pub fn check_size(width: u32, height: u32) -> Result<(), VideoError> {
-        let (long, short) = (width.max(height), width.min(height));
-        if width % 2 == 1 || height % 2 == 1 || long > MAX_LONG_SIDE || short > MAX_SHORT_SIDE {
-            return Err(VideoError::Size { width, height });
-        }
-        Ok(())
+        // The longer side may reach MAX_LONG_SIDE, the other MAX_SHORT_SIDE.
+        let limits = if width >= height {
+            (MAX_LONG_SIDE, MAX_SHORT_SIDE)
+        } else {
+            (MAX_SHORT_SIDE, MAX_LONG_SIDE)
+        };
+        let fits = |side: u32, limit: u32| side.is_multiple_of(2) && side <= limit;
+        let side = if !fits(width, limits.0) {
+            "width"
+        } else if !fits(height, limits.1) {
+            "height"
+        } else {
+            return Ok(());
+        };
+        Err(VideoError::Size {
+            width,
+            height,
+            side,
+        })
     }
 }
 
@@ -391,9 +410,15 @@ mod tests {
     fn odd_and_oversized_frames_are_refused() {
         assert!(VideoConfig::check_size(1920, 1080).is_ok());
         assert!(VideoConfig::check_size(2160, 3840).is_ok());
-        assert!(VideoConfig::check_size(641, 480).is_err());
-        assert!(VideoConfig::check_size(640, 481).is_err());
-        assert!(VideoConfig::check_size(4096, 2160).is_err());
-        assert!(VideoConfig::check_size(3840, 2162).is_err());
+        let side = |w, h| match VideoConfig::check_size(w, h) {
+            Err(VideoError::Size { side, .. }) => side,
+            other => panic!("{w}×{h}: {other:?}"),
+        };
+        assert_eq!(side(641, 480), "width");
+        assert_eq!(side(640, 481), "height");
+        assert_eq!(side(4096, 2160), "width");
+        assert_eq!(side(3840, 2162), "height");
+        assert_eq!(side(2162, 3840), "width");
+        assert_eq!(side(2160, 3842), "height");
     }
 }

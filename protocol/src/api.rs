@@ -433,7 +433,9 @@ impl Codec {
 /// `still_codec` at `quality` (as remote-visualisation tools do). With `codec: h264` the
 /// frames are video: rate-controlled to `bitrate_kbps`, never worse than `max_qp`, with a
 /// keyframe every `keyframe_interval` frames and whenever the stream (re)connects, the size or
-/// a parameter changes, or the client sends `keyframe`.
+/// a parameter changes, or the client sends `keyframe`. With `interactive_scale` below 1,
+/// frames while moving are rendered and encoded smaller (see [`Encoding::interactive_size`])
+/// for the client to upscale; frames at rest and stills keep the full size.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(default)]
 pub struct Encoding {
@@ -453,6 +455,27 @@ pub struct Encoding {
     pub max_qp: u8,
     /// H.264: frames between periodic keyframes (0: only the keyframes the stream needs).
     pub keyframe_interval: u32,
+    /// While moving (input within the last `still_after_ms`), render and encode at this
+    /// fraction of `render.width` × `render.height` (0.25–1; 1, the default, turns it off).
+    /// Fewer pixels to shade, encode and send while the view changes; the client stretches
+    /// the frame to the full size. With `still_after_ms` 0 nothing counts as moving.
+    pub interactive_scale: f32,
+}
+
+/// The smallest side [`Encoding::interactive_size`] scales down to.
+pub const MIN_INTERACTIVE_SIDE: u32 = 16;
+
+impl Encoding {
+    /// The size of a frame rendered while moving, for a session of `width` × `height`: each
+    /// side times `interactive_scale`, rounded down to an even number (H.264's 4:2:0 needs
+    /// one), never below [`MIN_INTERACTIVE_SIDE`] nor above the full side.
+    pub fn interactive_size(&self, width: u32, height: u32) -> (u32, u32) {
+        let scale = |side: u32| {
+            let scaled = (side as f32 * self.interactive_scale) as u32 & !1;
+            scaled.max(MIN_INTERACTIVE_SIDE).min(side)
+        };
+        (scale(width), scale(height))
+    }
 }
 
 impl Default for Encoding {
@@ -466,6 +489,7 @@ impl Default for Encoding {
             bitrate_kbps: 8_000,
             max_qp: 40,
             keyframe_interval: 300,
+            interactive_scale: 1.0,
         }
     }
 }

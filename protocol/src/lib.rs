@@ -118,4 +118,29 @@ mod tests {
                 .expect("nested unknown fields are tolerated");
         assert_eq!(params.render.gi.method, GiMethod::None);
     }
+
+    #[test]
+    fn interactive_size_scales_to_even_sides_within_bounds() {
+        let scaled = |scale: f32, w: u32, h: u32| {
+            Encoding {
+                interactive_scale: scale,
+                ..Encoding::default()
+            }
+            .interactive_size(w, h)
+        };
+        // Off by default: the full size.
+        assert_eq!(
+            Encoding::default().interactive_size(1920, 1080),
+            (1920, 1080)
+        );
+        assert_eq!(scaled(0.5, 1920, 1080), (960, 540));
+        // 1280 × 0.75 = 960, 718 × 0.75 = 538.5: rounded down to even.
+        assert_eq!(scaled(0.75, 1280, 718), (960, 538));
+        assert_eq!(scaled(0.25, 998, 566), (248, 140));
+        // Never below 16 pixels, never above the full side (a 10-pixel side stays 10).
+        assert_eq!(scaled(0.25, 40, 10), (16, 10));
+        // Odd full sides (JPEG allows them) come out even when scaled.
+        let (w, h) = scaled(0.5, 1001, 333);
+        assert_eq!((w % 2, h % 2), (0, 0));
+    }
 }

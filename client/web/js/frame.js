@@ -1,6 +1,7 @@
 // Decoder of the binary frame message (protocol/src/frame.rs is the reference):
 // a 68-byte little-endian header, 8 bytes per stage, the progressive method's sample count and
-// relative error (8 bytes, absent from older servers), then the JPEG or PNG payload.
+// relative error (8 bytes, absent from older servers), then the payload: a JPEG or PNG image,
+// or one H.264 access unit (Annex B).
 
 const FIXED_LEN = 68;
 const STAGE_LEN = 8;
@@ -11,6 +12,11 @@ const SUPPORTED_VERSION = 1;
 export const FLAG_STILL = 1;
 export const FLAG_GI_PENDING = 2;
 export const FLAG_MOVING = 4;
+export const FLAG_KEYFRAME = 8;
+
+/** The codec byte's names (protocol `Codec::wire`). */
+const CODECS = ['jpeg', 'png', 'h264'];
+const MIMES = { jpeg: 'image/jpeg', png: 'image/png' };
 
 export class FrameError extends Error {}
 
@@ -34,8 +40,8 @@ export function decodeFrame(buffer) {
   if (headerLen + payloadLen !== buffer.byteLength) {
     throw new FrameError(`payload of ${buffer.byteLength - headerLen} bytes, header says ${payloadLen}`);
   }
-  const codec = v.getUint8(48);
-  if (codec > 1) throw new FrameError(`unknown codec ${codec}`);
+  const codec = CODECS[v.getUint8(48)];
+  if (!codec) throw new FrameError(`unknown codec ${v.getUint8(48)}`);
   const stages = [];
   for (let i = 0; i < stageCount; i++) {
     const o = FIXED_LEN + STAGE_LEN * i;
@@ -50,7 +56,9 @@ export function decodeFrame(buffer) {
     sendUs: Number(v.getBigUint64(32, true)),
     width: v.getUint32(40, true),
     height: v.getUint32(44, true),
-    mime: codec === 0 ? 'image/jpeg' : 'image/png',
+    codec,
+    /** The image type of a JPEG or PNG payload; `null` for video. */
+    mime: MIMES[codec] || null,
     flags: v.getUint8(49),
     quality: v.getUint8(51),
     encodeMs: v.getFloat32(52, true),

@@ -9,6 +9,7 @@ import { FLAG_GI_PENDING, FrameError, decodeFrame } from './frame.js';
 import { Panel, patchFor } from './panel.js';
 import { Stats } from './stats.js';
 import { download, renderStill } from './still.js';
+import { H264Decoder, canDecodeH264 } from './video.js';
 
 const $ = (id) => document.getElementById(id);
 const MAX_MESSAGES = 4;
@@ -40,13 +41,24 @@ const state = {
   sessionId: null,
   /** The scene whose precomputations `watchScene` is polling, if any. */
   watching: null,
+  /** Whether this page decodes H.264 (WebCodecs), probed at start. */
+  decodesH264: false,
+  /** The codecs the server encodes, from `/v1/server` and then each `hello`. */
+  serverCodecs: ['jpeg', 'png'],
 };
 
 const stats = new Stats({
   frameCount: $('frame-count'), fps: $('fps'), latency: $('latency'), bandwidth: $('bandwidth'),
-  gpu: $('gpu-ms'), readback: $('readback-ms'), encode: $('encode-ms'), dropped: $('dropped'),
+  gpu: $('gpu-ms'), readback: $('readback-ms'), encode: $('encode-ms'), decode: $('decode-ms'),
+  dropped: $('dropped'),
   frameInfo: $('frame-info'), stageRows: $('stage-rows'), stageChart: $('stage-chart'),
   fpsChart: $('fps-chart'), latencyChart: $('latency-chart'), bandwidthChart: $('bandwidth-chart'),
+});
+const video = new H264Decoder(paintVideo, (reason) => {
+  if (state.connection && state.connection.send({ type: 'keyframe' })) {
+    canvas.dataset.keyframeRequests = String(Number(canvas.dataset.keyframeRequests || 0) + 1);
+  }
+  message(`${reason}: asked the server for a keyframe`, 'info', 4000);
 });
 const panel = new Panel($('panel'), (patch) => sendUpdate(patch));
 const controls = new Controls(canvas, {
@@ -134,12 +146,19 @@ async function onFrame(buffer) {
     if (e instanceof FrameError) message(`bad frame: ${e.message}`);
     return;
   }
-  const received = performance.now();
-  let latency = null;
+  // Input→frame latency runs from sending the input to painting the first frame showing it.
+  let sentAt = null;
   if (frame.inputId && state.sentInputs.has(frame.inputId)) {
-    latency = received - state.sentInputs.get(frame.inputId);
+    sentAt = state.sentInputs.get(frame.inputId);
     for (const id of state.sentInputs.keys()) if (id <= frame.inputId) state.sentInputs.delete(id);
   }
+  if (frame.codec === 'h264') {
+    // Painted by the decoder's output callback (`paintVideo`), in order.
+    frame.sentAt = sentAt;
+    video.decode(frame);
+    return;
+  }
+  const received = performance.now();
   let bitmap;
   try {
     bitmap = await createImageBitmap(new Blob([frame.payload], { type: frame.mime }));
@@ -147,24 +166,42 @@ async function onFrame(buffer) {
     message(`frame ${frame.seq} could not be decoded: ${e.message}`);
     return;
   }
-  // Decoding finishes out of order sometimes; never paint an older frame over a newer one.
-  if (frame.seq > state.drawnSeq) {
-    state.drawnSeq = frame.seq;
-    // Sized by the decoded image, not the header's claim.
-    if (canvas.width !== bitmap.width || canvas.height !== bitmap.height) {
-      canvas.width = bitmap.width;
-      canvas.height = bitmap.height;
-    }
-    context.drawImage(bitmap, 0, 0, canvas.width, canvas.height);
-    canvas.dataset.shownInput = String(frame.inputId);
-    stats.frame(frame, latency);
-    $('hud').dataset.giPending = String((frame.flags & FLAG_GI_PENDING) !== 0);
-    if (received - state.lastAck >= ACK_EVERY_MS) {
-      state.lastAck = received;
-      state.connection.send({ type: 'ack', seq: frame.seq });
-    }
-  }
+  paint(bitmap, bitmap.width, bitmap.height, frame, sentAt, performance.now() - received);
   bitmap.close();
+}
+
+function paintVideo(picture, frame, decodeMs) {
+  paint(picture, picture.displayWidth, picture.displayHeight, frame, frame.sentAt, decodeMs);
+  picture.close();
+}
+
+/** Paints a decoded frame (an ImageBitmap or a VideoFrame) unless a newer one is showing. */
+function paint(image, width, height, frame, sentAt, decodeMs) {
+  // Decoding finishes out of order sometimes; never paint an older frame over a newer one.
+  if (frame.seq <= state.drawnSeq) return;
+  state.drawnSeq = frame.seq;
+  // Sized by the decoded image, not the header's claim; a frame rendered smaller while the
+  // view moves (`encoding.interactive_scale`) is stretched to the session's full size.
+  const full = state.params && state.params.render;
+  const reduced = full && width < full.width && height < full.height;
+  const size = reduced ? full : { width, height };
+  if (canvas.width !== size.width || canvas.height !== size.height) {
+    canvas.width = size.width;
+    canvas.height = size.height;
+  }
+  context.drawImage(image, 0, 0, canvas.width, canvas.height);
+  const now = performance.now();
+  canvas.dataset.shownInput = String(frame.inputId);
+  // For tests and anyone inspecting the page: what the painted frame was.
+  canvas.dataset.codec = frame.codec;
+  canvas.dataset.frameSize = `${width}x${height}`;
+  if (reduced) canvas.dataset.reducedFrames = String(Number(canvas.dataset.reducedFrames || 0) + 1);
+  stats.frame(frame, sentAt === null ? null : now - sentAt, decodeMs);
+  $('hud').dataset.giPending = String((frame.flags & FLAG_GI_PENDING) !== 0);
+  if (now - state.lastAck >= ACK_EVERY_MS) {
+    state.lastAck = now;
+    state.connection.send({ type: 'ack', seq: frame.seq });
+  }
 }
 
 // ---- session and scene ----
@@ -177,7 +214,9 @@ function onSession(session) {
   if (restarted) {
     state.drawnSeq = 0;
     stats.resetSequence();
+    video.reset();
   }
+  stats.setEncoding(session.params.encoding);
   panel.clearErrors();
   panel.show(session.params);
   $('scene-select').value = session.params.render.scene;
@@ -306,11 +345,11 @@ function changeLight(mutate) {
 function streamSize() {
   const scale = Number($('resolution-scale').value);
   const limits = state.server.limits;
-  const w = Math.round(canvas.clientWidth * devicePixelRatio * scale);
-  const h = Math.round(canvas.clientHeight * devicePixelRatio * scale);
+  // Even sizes: H.264's 4:2:0 chroma halves both sides (the server refuses odd ones for it).
+  const even = (v, max) => 2 * Math.floor(Math.max(16, Math.min(max, v)) / 2);
   return {
-    width: Math.max(16, Math.min(limits.max_width, w)),
-    height: Math.max(16, Math.min(limits.max_height, h)),
+    width: even(Math.round(canvas.clientWidth * devicePixelRatio * scale), limits.max_width),
+    height: even(Math.round(canvas.clientHeight * devicePixelRatio * scale), limits.max_height),
   };
 }
 
@@ -328,7 +367,40 @@ function onResize() {
 
 // ---- start ----
 
-/** Session parameters of a new viewer: `?scene=&method=&view=&rsm=&fps=&scale=` may preset them. */
+/** Whether frames in `codec` can be both encoded by the server and decoded here. */
+function usable(codec) {
+  return state.serverCodecs.includes(codec) && (codec !== 'h264' || state.decodesH264);
+}
+
+/**
+ * The stream's codec: `?codec=` (jpeg, png, h264 or auto, the default), where auto takes H.264
+ * when the server encodes it and this page decodes it, else JPEG.
+ */
+function chooseCodec(asked) {
+  if (asked === 'auto' || !asked) return usable('h264') ? 'h264' : 'jpeg';
+  if (usable(asked)) return asked;
+  message(`codec ${asked} is not available here (${state.decodesH264 ? 'the server does not encode it' : 'this browser has no WebCodecs H.264 decoder, which needs https or localhost'}); streaming JPEG`, 'info');
+  return 'jpeg';
+}
+
+/**
+ * The server's `hello` says which codecs it encodes (a replica behind a router may differ from
+ * the one `/v1/server` answered): a session in a codec this page cannot use goes back to JPEG.
+ */
+function negotiate(hello) {
+  if (Array.isArray(hello.codecs) && hello.codecs.length) state.serverCodecs = hello.codecs;
+  panel.applyCodecs(['jpeg', 'png', 'h264'].filter(usable));
+  const codec = hello.session.params.encoding.codec;
+  if (!usable(codec)) {
+    message(`the server cannot stream ${codec} to this page; switching to JPEG`, 'info');
+    sendUpdate({ encoding: { codec: 'jpeg' } });
+  }
+}
+
+/**
+ * Session parameters of a new viewer: `?scene=&method=&view=&rsm=&fps=&scale=&codec=&interactive=`
+ * may preset them.
+ */
 function initialParams() {
   const q = new URLSearchParams(location.search);
   // Without `?scale=`, the server's choice: a software adapter streams a quarter of the pixels.
@@ -340,7 +412,12 @@ function initialParams() {
   if (q.has('method')) render.gi.method = q.get('method');
   if (q.has('view')) render.view = q.get('view');
   if (q.has('rsm')) render.gi.rsm_size = Number(q.get('rsm'));
-  const params = { render };
+  // While the view moves, frames at half the size (upscaled here) unless `?interactive=`.
+  const encoding = {
+    codec: chooseCodec(q.get('codec')),
+    interactive_scale: q.has('interactive') ? Number(q.get('interactive')) : 0.5,
+  };
+  const params = { render, encoding };
   if (q.has('fps')) params.fps_cap = Number(q.get('fps'));
   return params;
 }
@@ -356,6 +433,7 @@ async function boot() {
   try {
     state.server = await getJson('v1/server');
     await refreshScenes();
+    state.decodesH264 = await canDecodeH264();
   } catch (e) {
     if (e instanceof ApiError && e.status === 401) {
       setStatus('unauthorized', e.message);
@@ -371,12 +449,17 @@ async function boot() {
   stats.setStageNames(s.stages);
   panel.applyLimits(s.limits);
   panel.applyGiMethods(s.gi_methods || []);
+  // An older server without `video` streams JPEG and PNG only.
+  if (s.video && Array.isArray(s.video.codecs)) state.serverCodecs = s.video.codecs;
+  panel.applyCodecs(['jpeg', 'png', 'h264'].filter(usable));
+  document.body.dataset.decodesH264 = String(state.decodesH264);
   state.connection = new Connection(initialParams(), {
     onFrame,
     onSession,
     onStatus: setStatus,
     onEvent: (event) => {
-      if (event.type === 'error') showError(event.error, 'refused');
+      if (event.type === 'hello') negotiate(event);
+      else if (event.type === 'error') showError(event.error, 'refused');
       else if (event.type === 'render_error') showError(event.error, 'render failed');
       else if (event.type === 'caches_pending') {
         message(`computing the ${event.what} of ${event.scene}: direct light until ready`, 'info');

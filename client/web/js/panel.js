@@ -114,6 +114,15 @@ export class Panel {
     this.giParamLabels = built;
   }
 
+  /** Offers only the stream codecs both the server and this page handle. */
+  applyCodecs(codecs) {
+    const select = this.control('encoding.codec');
+    for (const option of select.options) {
+      option.disabled = !codecs.includes(option.value);
+      option.title = option.disabled ? 'not available: the server does not encode it, or this browser cannot decode it' : '';
+    }
+  }
+
   /** Shows the parameters of `method` and hides the others'. */
   showMethod(method) {
     const names = this.methodParams.get(method) || new Set();

@@ -1,6 +1,8 @@
 // Live numbers of the stream: per-stage GPU times (a table and a stacked chart of the last
 // seconds) and fps, input→frame latency and bandwidth (counters and sparklines).
 
+import { FLAG_KEYFRAME } from './frame.js';
+
 const WINDOW_MS = 10000;
 // Long enough to show a rate for slow streams (a software adapter renders BRSM at < 1 fps).
 const RATE_WINDOW_MS = 5000;
@@ -37,14 +39,22 @@ export class Stats {
     return this.stageNames[index] || `stage ${index}`;
   }
 
-  /** Records a painted frame; `latencyMs` when it answers an input of ours. */
-  frame(header, latencyMs) {
+  /** The session's encoding, for the target bitrate the frame line shows. */
+  setEncoding(encoding) {
+    this.encoding = encoding;
+  }
+
+  /**
+   * Records a painted frame: `latencyMs` from the input it answers (null if none of ours),
+   * `decodeMs` the time this page took to decode it.
+   */
+  frame(header, latencyMs, decodeMs) {
     const now = performance.now();
     if (this.lastSeq && header.seq > this.lastSeq + 1) this.dropped += header.seq - this.lastSeq - 1;
     this.lastSeq = Math.max(this.lastSeq, header.seq);
     this.total += 1;
     if (this.firstFrameAt === null) this.firstFrameAt = now;
-    this.frames.push({ t: now, header, latencyMs });
+    this.frames.push({ t: now, header, latencyMs, decodeMs });
     while (this.frames.length && this.frames[0].t < now - WINDOW_MS) this.frames.shift();
     this.el.frameCount.textContent = String(this.total);
     this.el.frameCount.dataset.count = String(this.total);
@@ -87,16 +97,24 @@ export class Stats {
     this.el.gpu.textContent = fmt(mean((f) => f.header.gpuMs), 2);
     this.el.encode.textContent = fmt(mean((f) => f.header.encodeMs), 2);
     this.el.readback.textContent = fmt(mean((f) => f.header.readbackMs), 2);
+    this.el.decode.textContent = fmt(mean((f) => f.decodeMs), 2);
     if (last) {
       const h = last.header;
       const progress = h.samples > 0 ? ` · ${h.samples} spp, ±${(h.relativeError * 100).toFixed(1)} %` : '';
-      this.el.frameInfo.textContent = `#${h.seq} · ${h.width}×${h.height} · ${h.mime === 'image/png' ? 'PNG' : `JPEG q${h.quality}`} · ${(h.bytes / 1024).toFixed(0)} KiB${progress}`;
+      this.el.frameInfo.textContent = `#${h.seq} · ${h.width}×${h.height} · ${this.codecLabel(h)} · ${(h.bytes / 1024).toFixed(0)} KiB${progress}`;
     }
     this.renderStageTable(recent);
     this.drawStages();
     sparkline(this.el.fpsChart, this.samples.map((s) => s.fps), '#59a14f');
     sparkline(this.el.latencyChart, this.samples.map((s) => s.latency), '#e15759');
     sparkline(this.el.bandwidthChart, this.samples.map((s) => s.mbps), '#4e79a7');
+  }
+
+  codecLabel(h) {
+    if (h.codec === 'png') return 'PNG';
+    if (h.codec === 'jpeg') return `JPEG q${h.quality}`;
+    const target = this.encoding ? ` · target ${(this.encoding.bitrate_kbps / 1000).toFixed(1)} Mbit/s` : '';
+    return `H.264${(h.flags & FLAG_KEYFRAME) !== 0 ? ' keyframe' : ''}${target}`;
   }
 
   renderStageTable(recent) {

@@ -178,6 +178,41 @@ async function apiPage(browser) {
   }
 }
 
+/** A browser without WebCodecs (or on plain http off localhost) streams JPEG instead. */
+async function withoutWebCodecs(browser) {
+  const context = await browser.newContext({ viewport: { width: 480, height: 360 } });
+  const page = await context.newPage();
+  await page.addInitScript(() => {
+    delete window.VideoDecoder;
+    delete window.EncodedVideoChunk;
+  });
+  try {
+    await step('without WebCodecs the page falls back to JPEG', async () => {
+      await page.goto(`${base}/?method=none&scale=0.5&fps=10`);
+      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+      await waitForFrames(page, 3, 'JPEG frames');
+      assert.equal(await page.$eval('body', (b) => b.dataset.decodesH264), 'false');
+      assert.equal(await page.$eval('#frame', (c) => c.dataset.codec), 'jpeg');
+      assert.equal((await pageSession(page)).params.encoding.codec, 'jpeg');
+      const disabled = await page.$eval('select[data-field="encoding.codec"] option[value="h264"]', (o) => o.disabled);
+      assert.ok(disabled, 'h264 is not offered where it cannot be decoded');
+      const shot = await snapshot(page);
+      assert.ok(shot.mean > 3 && shot.sd > 3, `canvas is blank: mean ${shot.mean.toFixed(1)}, sd ${shot.sd.toFixed(1)}`);
+    });
+    await step('asking for h264 without a decoder streams JPEG and says why', async () => {
+      await page.goto(`${base}/?method=none&scale=0.5&fps=10&codec=h264`);
+      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+      await waitForFrames(page, 2, 'JPEG frames');
+      assert.equal((await pageSession(page)).params.encoding.codec, 'jpeg');
+      const messages = await page.$eval('#messages', (e) => e.textContent);
+      assert.match(messages, /no WebCodecs H\.264 decoder/, `the page says why: '${messages}'`);
+    });
+  } finally {
+    await page.close({ runBeforeUnload: true });
+    await context.close();
+  }
+}
+
 async function main() {
   await mkdir(artifacts, { recursive: true });
   const browser = await chromium.launch({ executablePath, args: CHROMIUM_ARGS, headless: true });
@@ -205,6 +240,21 @@ async function main() {
       assert.ok(shot.mean > 3 && shot.sd > 3, `canvas is blank: mean ${shot.mean.toFixed(1)}, sd ${shot.sd.toFixed(1)}`);
     });
 
+    // Chromium decodes H.264 in WebCodecs on http://127.0.0.1 (a secure context), so the page
+    // asks for it: every step below runs on an h264 stream.
+    await step('the stream is H.264, decoded with WebCodecs', async () => {
+      assert.equal(await page.$eval('body', (b) => b.dataset.decodesH264), 'true', 'the page found an H.264 decoder');
+      assert.equal((await pageSession(page)).params.encoding.codec, 'h264', 'the session streams h264');
+      await page.waitForFunction(() => document.getElementById('frame').dataset.codec === 'h264',
+        null, { timeout: PATIENCE_MS });
+      const info = await page.$eval('#frame-info', (e) => e.textContent);
+      assert.match(info, /H\.264.*target \d+\.\d Mbit\/s/, `the frame line names the codec and bitrate: '${info}'`);
+      await page.waitForFunction(() => Number.isFinite(Number(document.getElementById('decode-ms').textContent)),
+        null, { timeout: 5000 }).catch(async () => {
+        throw new Error(`decode ms is not shown (got '${await page.$eval('#decode-ms', (e) => e.textContent)}')`);
+      });
+    });
+
     await step('a drag changes the image', async () => {
       const box = await page.locator('#frame').boundingBox();
       const [x, y] = [box.x + box.width / 2, box.y + box.height / 2];
@@ -215,6 +265,15 @@ async function main() {
         await page.mouse.up();
       }, 'the drag');
       assert.ok(diff > 4, `the image hardly changed after the drag: mean abs diff ${diff.toFixed(2)} grey levels`);
+      // interactive_scale 0.5 (the viewer's default): frames while dragging are half size,
+      // stretched to the canvas; the still after rest is full size again.
+      const reduced = await page.$eval('#frame', (c) => Number(c.dataset.reducedFrames || 0));
+      assert.ok(reduced > 0, 'no half-size frame was painted while dragging');
+      const full = (await pageSession(page)).params.render;
+      await page.waitForFunction((size) => document.getElementById('frame').dataset.frameSize === size,
+        `${full.width}x${full.height}`, { timeout: PATIENCE_MS }).catch(async () => {
+        throw new Error(`no full-size frame at rest (last ${await page.$eval('#frame', (c) => c.dataset.frameSize)})`);
+      });
       // The counters are redrawn four times a second.
       await page.waitForFunction(() => /^\d+ \/ \d+$/.test(document.getElementById('latency').textContent),
         null, { timeout: 5000 }).catch(async () => {
@@ -450,6 +509,7 @@ async function main() {
       } while (Date.now() < deadline);
       throw new Error(`session ${id} is left after the page closed`);
     });
+    await withoutWebCodecs(browser);
     await apiPage(browser);
     if (process.env.LIGHTCAST_AUTH_URL) await withAuth(browser, process.env.LIGHTCAST_AUTH_URL, process.env.LIGHTCAST_AUTH_TOKEN);
   } catch (e) {

@@ -196,6 +196,7 @@ pub fn resolve_session(
         bitrate_kbps,
         max_qp,
         keyframe_interval,
+        interactive_scale,
     } = params.encoding;
     quality("encoding.quality", q)?;
     quality("encoding.moving_quality", moving_quality)?;
@@ -209,6 +210,12 @@ pub fn resolve_session(
     within("encoding.bitrate_kbps", bitrate_kbps, 100, 200_000)?;
     within("encoding.max_qp", u32::from(max_qp), 10, 51)?;
     within("encoding.keyframe_interval", keyframe_interval, 0, 100_000)?;
+    if !(0.25..=1.0).contains(&interactive_scale) {
+        return Err(ApiError::field(
+            "encoding.interactive_scale",
+            format!("{interactive_scale} is outside 0.25..=1"),
+        ));
+    }
     if codec.is_video() {
         let (w, h) = (params.render.width, params.render.height);
         if let Err(e @ VideoError::Size { side, .. }) = VideoConfig::check_size(w, h) {

@@ -332,10 +332,16 @@ impl Session {
             s.still_version = s.version;
         }
         s.rendered_version = s.version;
+        let mut resolved = s.resolved.clone();
+        if moving && !want_still {
+            let settings = &mut resolved.settings;
+            (settings.width, settings.height) =
+                enc.interactive_size(settings.width, settings.height);
+        }
         // In flight from now until it is sent, dropped or fails.
         self.in_flight.fetch_add(1, Ordering::Relaxed);
         Ok(FramePlan {
-            resolved: s.resolved.clone(),
+            resolved,
             lease_scene: Arc::clone(&s.lease.0),
             version: s.version,
             input_id: s.input_id,

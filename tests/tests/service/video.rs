@@ -116,7 +116,7 @@ async fn an_h264_session_streams_decodable_video_with_keyframes_where_needed() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_video_parameters_are_refused_naming_the_field() {
     let server = TestServer::start(&[]).await;
-    let cases: [(Value, &str); 6] = [
+    let cases: [(Value, &str); 8] = [
         (json!({"encoding": {"codec": "h265"}}), "encoding.codec"),
         (
             json!({"encoding": {"codec": "h264", "bitrate_kbps": 50}}),
@@ -129,6 +129,14 @@ async fn bad_video_parameters_are_refused_naming_the_field() {
         (
             json!({"encoding": {"still_codec": "h264"}}),
             "encoding.still_codec",
+        ),
+        (
+            json!({"encoding": {"interactive_scale": 0.1}}),
+            "encoding.interactive_scale",
+        ),
+        (
+            json!({"encoding": {"interactive_scale": 1.5}}),
+            "encoding.interactive_scale",
         ),
         (
             json!({"encoding": {"codec": "h264"}, "render": {"width": 97, "height": 64}}),
@@ -162,5 +170,78 @@ async fn bad_video_parameters_are_refused_naming_the_field() {
     let mut events = Vec::new();
     let after = stream.next_frame(&mut events).await;
     assert_eq!(after.rgba.dimensions(), (64, 48));
+    server.stop().await;
+}
+
+/// `interactive_scale`: while input keeps arriving the frames are rendered and encoded at half
+/// the size (each size change a keyframe the same decoder follows); once input rests the
+/// still and the frames after it are full size again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn interactive_scale_streams_smaller_frames_while_moving_and_full_ones_at_rest() {
+    use lightcast_protocol::frame::{FLAG_MOVING, FLAG_STILL};
+    let server = TestServer::start(&[]).await;
+    let mut params = h264_session(128, 96);
+    params["encoding"]["interactive_scale"] = json!(0.5);
+    params["encoding"]["still_after_ms"] = json!(500);
+    let created = server.create_session(params, None).await;
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    // Input on every frame: each one shows the newest camera and is "moving".
+    let mut moving = Vec::new();
+    for k in 1..=6u64 {
+        let x = 0.2 * k as f32;
+        stream
+            .send(json!({"type": "camera", "input_id": k, "camera": {
+                "position": [x, 1.0, 2.5], "target": [0.0, 1.0, 0.0], "fov_y_degrees": 50.0}}))
+            .await;
+        let f = loop {
+            let f = stream.next_frame(&mut events).await;
+            if f.header.input_id == k {
+                break f;
+            }
+        };
+        moving.push(f);
+    }
+    for f in &moving {
+        assert!(
+            f.header.flags & FLAG_MOVING != 0,
+            "input {} moving",
+            f.header.input_id
+        );
+        assert_eq!((f.header.width, f.header.height), (64, 48));
+        assert_eq!(f.rgba.dimensions(), (64, 48), "decoded at the reduced size");
+    }
+    // At rest: the lossless still at full size, then full-size video again.
+    let still = loop {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.flags & FLAG_STILL != 0 {
+            break f;
+        }
+    };
+    assert_eq!(still.header.codec, Codec::Png);
+    assert_eq!(still.rgba.dimensions(), (128, 96));
+    let rest = stream.next_frame(&mut events).await;
+    assert_eq!(rest.header.codec, Codec::H264);
+    assert_eq!(rest.header.flags & FLAG_MOVING, 0);
+    assert_eq!(rest.rgba.dimensions(), (128, 96));
+    assert!(keyframe(&rest), "a new size starts at a keyframe");
+    // The reduced frame shows the same view as the still, upscaled: close, not equal.
+    let upscaled = image::imageops::resize(
+        &moving[5].rgba,
+        128,
+        96,
+        image::imageops::FilterType::Triangle,
+    );
+    let diff = mean_abs_diff(&upscaled, &still.rgba);
+    assert!(
+        diff < 12.0,
+        "the half-size frame upscaled differs by {diff:.1}"
+    );
+    assert!(
+        !events
+            .iter()
+            .any(|e| matches!(e, ServerEvent::RenderError { .. })),
+        "{events:?}"
+    );
     server.stop().await;
 }

@@ -42,6 +42,7 @@ const ASSETS: &[Asset] = &[
     asset!("js/panel.js", "text/javascript; charset=utf-8"),
     asset!("js/stats.js", "text/javascript; charset=utf-8"),
     asset!("js/still.js", "text/javascript; charset=utf-8"),
+    asset!("js/video.js", "text/javascript; charset=utf-8"),
 ];
 
 /// The page may load only its own files, draw decoded frames (blob URLs) and talk to this

@@ -8,6 +8,7 @@ pub mod bench;
 pub mod bench_clustered;
 #[cfg(feature = "plots")]
 pub mod bench_plots;
+pub mod bench_stream;
 pub mod bench_surfels;
 pub mod debug_views;
 pub mod gi;

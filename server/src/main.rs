@@ -1,10 +1,11 @@
 //! `lightcast-server`: the binary. Subcommands: `serve` (the default: the HTTP/WebSocket
-//! service), `render` (offline, one frame to a file) and `bench` (the paper's evaluation of the
-//! GI methods).
+//! service), `render` (offline, one frame to a file), `bench` (the paper's evaluation of the
+//! GI methods) and `bench-stream` (JPEG against H.264 on one camera path).
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
 use lightcast_server::bench::{self, BenchArgs};
+use lightcast_server::bench_stream::{self, StreamBenchArgs};
 use lightcast_server::gi::GiMethod;
 use lightcast_server::offline::{self, RenderArgs};
 use lightcast_server::service::{self, config::LogFormat, ServeArgs};
@@ -39,6 +40,10 @@ enum Command {
     /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
     /// BRSM's error against LightSkin (the paper's Figures 3 and 5).
     Bench(BenchArgs),
+    /// Stream one camera path as JPEG and as H.264 at each size: bytes per frame and per
+    /// second, encode ms, read-back bytes and GPU ms, PSNR and FLIP against the lossless
+    /// frames, and issue 13's targets (input→frame latency: `bench/stream-codecs.sh`).
+    BenchStream(StreamBenchArgs),
 }
 
 /// Writes a bench's plots with `write` when `--plots PREFIX` was given.
@@ -52,6 +57,56 @@ fn write_plots(
     if let Some(prefix) = prefix {
         for path in write(prefix)? {
             eprintln!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// Runs a bench as `run(log, progress)` under a progress bar on stderr.
+fn with_progress<T>(
+    run: impl FnOnce(&mut dyn FnMut(&str), &mut dyn FnMut(u64, u64, &str)) -> anyhow::Result<T>,
+) -> anyhow::Result<T> {
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
+            .context("progress bar template")?,
+    );
+    // Without a terminal the bar is hidden and prints nothing: log lines and each new
+    // step then go to stderr as plain lines, so a scripted run still shows progress.
+    let hidden = bar.is_hidden();
+    let mut log = |line: &str| {
+        if hidden {
+            eprintln!("{line}");
+        } else {
+            bar.println(line);
+        }
+    };
+    let mut step = String::new();
+    let mut progress = |done: u64, total: u64, label: &str| {
+        if hidden && step != label {
+            eprintln!("{label} ({total})");
+            step = label.to_string();
+        }
+        bar.set_length(total);
+        bar.set_position(done);
+        bar.set_message(label.to_string());
+    };
+    let result = run(&mut log, &mut progress);
+    bar.finish_and_clear();
+    result
+}
+
+/// Prints a bench's markdown and writes it and its JSON where asked.
+fn write_report(
+    markdown: &str,
+    json: &str,
+    markdown_path: Option<&std::path::Path>,
+    json_path: Option<&std::path::Path>,
+) -> anyhow::Result<()> {
+    print!("{markdown}");
+    for (path, text) in [(json_path, json), (markdown_path, markdown)] {
+        if let Some(path) = path {
+            std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
         }
     }
     Ok(())
@@ -128,36 +183,11 @@ fn main() -> anyhow::Result<()> {
                     "--plots needs a build with plots: `cargo build --release -p lightcast-server --features plots`"
                 );
             }
-            let bar = indicatif::ProgressBar::new(0);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} {msg}")
-                    .context("progress bar template")?,
-            );
-            // Without a terminal the bar is hidden and prints nothing: log lines and each new
-            // step then go to stderr as plain lines, so a scripted run still shows progress.
-            let hidden = bar.is_hidden();
-            let mut log = |line: &str| {
-                if hidden {
-                    eprintln!("{line}");
-                } else {
-                    bar.println(line);
-                }
-            };
-            let mut step = String::new();
-            let mut progress = |done: u64, total: u64, label: &str| {
-                if hidden && step != label {
-                    eprintln!("{label} ({total})");
-                    step = label.to_string();
-                }
-                bar.set_length(total);
-                bar.set_position(done);
-                bar.set_message(label.to_string());
-            };
             let (markdown, json) = match args.gi {
                 GiMethod::Surfels => {
-                    let report = bench_surfels::run(&args, &mut log, &mut progress)
-                        .context("bench failed")?;
-                    bar.finish_and_clear();
+                    let report = with_progress(|log, progress| {
+                        bench_surfels::run(&args, log, progress).context("bench failed")
+                    })?;
                     #[cfg(feature = "plots")]
                     write_plots(args.plots.as_deref(), |prefix| {
                         lightcast_server::bench_plots::write_surfel_plots(&report, prefix)
@@ -165,9 +195,9 @@ fn main() -> anyhow::Result<()> {
                     (report.markdown(), serde_json::to_string_pretty(&report)?)
                 }
                 GiMethod::Clustered => {
-                    let report = bench_clustered::run(&args, &mut log, &mut progress)
-                        .context("bench failed")?;
-                    bar.finish_and_clear();
+                    let report = with_progress(|log, progress| {
+                        bench_clustered::run(&args, log, progress).context("bench failed")
+                    })?;
                     #[cfg(feature = "plots")]
                     write_plots(args.plots.as_deref(), |prefix| {
                         lightcast_server::bench_plots::write_clustered_plots(&report, prefix)
@@ -175,9 +205,9 @@ fn main() -> anyhow::Result<()> {
                     (report.markdown(), serde_json::to_string_pretty(&report)?)
                 }
                 GiMethod::Brsm | GiMethod::Lightskin => {
-                    let report =
-                        bench::run(&args, &mut log, &mut progress).context("bench failed")?;
-                    bar.finish_and_clear();
+                    let report = with_progress(|log, progress| {
+                        bench::run(&args, log, progress).context("bench failed")
+                    })?;
                     #[cfg(feature = "plots")]
                     write_plots(args.plots.as_deref(), |prefix| {
                         lightcast_server::bench_plots::write_plots(&report, prefix)
@@ -186,15 +216,23 @@ fn main() -> anyhow::Result<()> {
                 }
                 other => return Err(bench::BenchError::NoEvaluation(other).into()),
             };
-            print!("{markdown}");
-            if let Some(path) = &args.json {
-                std::fs::write(path, json)
-                    .with_context(|| format!("writing {}", path.display()))?;
-            }
-            if let Some(path) = &args.markdown {
-                std::fs::write(path, &markdown)
-                    .with_context(|| format!("writing {}", path.display()))?;
-            }
+            write_report(
+                &markdown,
+                &json,
+                args.markdown.as_deref(),
+                args.json.as_deref(),
+            )?;
+        }
+        Command::BenchStream(args) => {
+            let report = with_progress(|log, progress| {
+                bench_stream::run(&args, log, progress).context("bench-stream failed")
+            })?;
+            write_report(
+                &report.markdown(),
+                &serde_json::to_string_pretty(&report)?,
+                args.markdown.as_deref(),
+                args.json.as_deref(),
+            )?;
         }
     }
     Ok(())

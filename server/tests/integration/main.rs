@@ -13,6 +13,7 @@ mod gpu_direct_light;
 mod gpu_indirect_resolution;
 mod gpu_reference;
 mod gpu_scenes;
+mod gpu_stream_bench;
 mod gpu_surfels;
 mod gpu_yuv420;
 mod render_cli;

@@ -6,24 +6,27 @@
 #   - seed 003's evaluation (`bench --gi clustered`, issue 11) on the Cornell box (also at the
 #     paper's 800×800) and the street;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
-#     1280×720 and 1920×1080.
+#     1280×720 and 1920×1080;
+#   - JPEG against H.264 (`bench/stream-codecs.sh`, issue 13): one camera path at 1280×720 and
+#     1920×1080, in process (bytes, encode ms, PSNR/FLIP, the targets) and through the service
+#     (input→frame latency); needs python3 for its tables.
 #
-#   bench/gpu-run.sh KIT_DIR OUT_DIR [gi|service|all] [--quick]
+#   bench/gpu-run.sh KIT_DIR OUT_DIR [gi|service|stream|all] [--quick]
 #
 # KIT_DIR comes from bench/gpu-kit.sh (binaries, font, Vulkan loader .debs). Results land in
 # OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-surfels-{cornell,street}.{md,json,
 # …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png}, gpu-service.md,
-# environment.txt and
+# gpu-stream-codecs.{md,json}, environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
 # adapter (a software one included) to check this script; its numbers mean nothing.
 set -euo pipefail
-kit="$(cd "${1:?usage: $0 KIT_DIR OUT_DIR [gi|service|all] [--quick]}" && pwd)"
-out="${2:?usage: $0 KIT_DIR OUT_DIR [gi|service|all] [--quick]}"
+kit="$(cd "${1:?usage: $0 KIT_DIR OUT_DIR [gi|service|stream|all] [--quick]}" && pwd)"
+out="${2:?usage: $0 KIT_DIR OUT_DIR [gi|service|stream|all] [--quick]}"
 what="${3:-all}"
 quick=false
 [ "${4:-}" = "--quick" ] || [ "$what" = "--quick" ] && quick=true
 [ "$what" = "--quick" ] && what=all
-case "$what" in gi|service|all) ;; *) echo "gpu-run: unknown part '$what'" >&2; exit 2 ;; esac
+case "$what" in gi|service|stream|all) ;; *) echo "gpu-run: unknown part '$what'" >&2; exit 2 ;; esac
 mkdir -p "$out"
 exec > >(tee -a "$out/run.log") 2>&1
 
@@ -178,6 +181,21 @@ if [ "$what" = service ] || [ "$what" = all ]; then
   wait $server_pid || true
   trap - EXIT
   rm "$out/server.log"
+fi
+if [ "$what" = stream ] || [ "$what" = all ]; then
+  # The same flags as bench/results/lavapipe-stream-codecs.md, so the two compare: a drive
+  # down the street at about 15 m/s, JPEG at four qualities (the equal-PSNR bracket) and H.264
+  # at 8000 and 3000 kbit/s.
+  stream_flags=(--scene 'procedural:street?blocks=8' --stream-seconds 20)
+  if $quick; then
+    stream_flags+=(--quick)
+  fi
+  echo "gpu-run: JPEG against H.264" >&2
+  cmd=("$(dirname "$0")/stream-codecs.sh" --bin "$kit" "${stream_flags[@]}"
+    --out "$out/gpu-stream-codecs" -- --motion dolly --dolly-per-second 0.03
+    --jpeg-qualities 50,70,80,90 --flip-every 2)
+  echo "command: ${cmd[*]}" >> "$out/environment.txt"
+  "${cmd[@]}" > /dev/null
 fi
 [ -z "$cache" ] || rm -rf "$cache"
 echo "gpu-run: done; results in $out" >&2

@@ -70,6 +70,12 @@ else
   cache="$work/cache"
 fi
 mkdir -p "$cache"
+# A command as the shell would read it back (the scene's `?` and `&` quoted).
+quoted() {
+  local line
+  printf -v line '%q ' "$@"
+  echo "${line% }"
+}
 server_pid=
 cleanup() {
   if [ -n "$server_pid" ]; then
@@ -92,11 +98,11 @@ bench_cmd=("$server" bench-stream --scene "$scene" --sizes "$sizes" --frames "$f
   --fps "$fps" --shadow-map-size "$shadow" --path-seconds "$path_seconds"
   --write-path "$work/path.json" --json "$work/bench.json" --markdown "$work/bench.md"
   "${extra[@]}")
-echo "stream-codecs: ${bench_cmd[*]}" >&2
+echo "stream-codecs: $(quoted "${bench_cmd[@]}")" >&2
 LIGHTCAST_CACHE_DIR="$cache" "${bench_cmd[@]}" >/dev/null
 
 serve_cmd=("$server" serve --listen "127.0.0.1:$port" --allow-cpu-adapter --default-scene "$scene")
-echo "stream-codecs: ${serve_cmd[*]}" >&2
+echo "stream-codecs: $(quoted "${serve_cmd[@]}")" >&2
 LIGHTCAST_CACHE_DIR="$cache" "${serve_cmd[@]}" >"$work/server.log" 2>&1 &
 server_pid=$!
 url="http://127.0.0.1:$port"
@@ -126,15 +132,16 @@ for size in "${size_list[@]}"; do
     cmd=("$client" --server "$url" --json stream --scene default --width "$w" --height "$h"
       --gi "$gi" --shadow-map-size "$shadow" --fps-cap "$fps" --input-hz "$fps"
       --camera-path "$work/path.json" --duration "$stream_seconds" "${codec_flags[@]}")
-    echo "stream-codecs: ${cmd[*]}" >&2
+    echo "stream-codecs: $(quoted "${cmd[@]}")" >&2
     "${cmd[@]}" > "$work/stream-$w-$h-$codec.json"
-    runs+=("$w|$h|$codec|${cmd[*]}|$work/stream-$w-$h-$codec.json")
+    runs+=("$w|$h|$codec|$(quoted "${cmd[@]}")|$work/stream-$w-$h-$codec.json")
   done
 done
 
 # Both parts, the machine and the commands in one markdown file and one JSON file.
-WORK="$work" BENCH_CMD="${bench_cmd[*]}" SERVE_CMD="${serve_cmd[*]}" STREAM_SECONDS="$stream_seconds" \
-  FPS="$fps" SHADOW="$shadow" GI="$gi" SCENE="$scene" OUT="$out" \
+WORK="$work" BENCH_CMD="$(quoted "${bench_cmd[@]}")" SERVE_CMD="$(quoted "${serve_cmd[@]}")" \
+  STREAM_SECONDS="$stream_seconds" FPS="$fps" SHADOW="$shadow" GI="$gi" SCENE="$scene" OUT="$out" \
+  JPEG_QUALITY="$jpeg_quality" H264_KBPS="$h264_kbps" \
   REVISION="$(git -C "$root" rev-parse --short HEAD 2>/dev/null || cat "$bin/revision" 2>/dev/null || echo unknown)" \
   python3 - "${runs[@]}" <<'PY'
 import json, os, platform, sys
@@ -180,7 +187,8 @@ md += ["```", "", "## In process (`lightcast-server bench-stream`)", "",
        f"(camera messages at {env['FPS']} Hz) for {env['STREAM_SECONDS']} s, fps cap "
        f"{env['FPS']}, GI {env['GI']}, shadow map {env['SHADOW']}², exposure automatic; JPEG at "
        "the moving quality, H.264 at the default bitrate. Server and client share this "
-       "machine. Input→frame: from sending a camera message to receiving the first frame that "
+       "machine. The server renders as fast as it can up to the cap, so where it falls short "
+       "each frame shows more motion than at the nominal fps. Input→frame: from sending a camera message to receiving the first frame that "
        "shows it. Server split: the frame headers' means (GPU stages, waiting for the "
        "read-back, encoding).", "",
        "| size | codec | frames | fps | bytes/frame | kB/s | kbit/s | input→frame ms p50 / p95 (samples) | server GPU / read-back / encode ms | dropped / throttled | errors |",
@@ -190,7 +198,8 @@ for r in runs:
     lat = s["input_to_frame_ms"]
     split = s["split"]
     per_frame = s["bytes_per_second"] / s["fps"] if s["fps"] > 0 else 0
-    label = "JPEG q70" if r["codec"] == "jpeg" else "H.264 8000 kbit/s"
+    label = (f"JPEG q{env['JPEG_QUALITY']}" if r["codec"] == "jpeg"
+             else f"H.264 {env['H264_KBPS']} kbit/s")
     md.append(
         f"| {r['width']}×{r['height']} | {label} | {s['frames']} | {s['fps']:.2f} | "
         f"{per_frame:.0f} | {s['bytes_per_second'] / 1e3:.0f} | {s['bytes_per_second'] * 8 / 1e3:.0f} | "

@@ -5,7 +5,7 @@
 # own time limit so that one slow part cannot cost the others, packed into files that fit the
 # tool's limits. Build the kit first, here: bench/gpu-kit.sh; then run, with `.gpu-kit` carried:
 #
-#   bench/gpu-session.sh [gi|service|all]     # results: $OUT/results.tgz, $OUT/probe.txt
+#   bench/gpu-session.sh [gi|service|stream|all]   # results: $OUT/results.tgz, $OUT/probe.txt
 set -u
 root="$(cd "$(dirname "$0")/.." && pwd)"
 kit="$root/.gpu-kit"
@@ -40,6 +40,11 @@ if [ "$part" = service ] || [ "$part" = all ]; then
   log "service bench"
   timeout 200 "$root/bench/gpu-run.sh" "$kit" "$r" service
   log "service rc=$?"
+fi
+if [ "$part" = stream ] || [ "$part" = all ]; then
+  log "stream codecs bench"
+  timeout 300 "$root/bench/gpu-run.sh" "$kit" "$r" stream
+  log "stream rc=$?"
 fi
 # The 1080p difference pictures (2 MB each) would not fit the 16 MB a file may have.
 tar czf "$out/results.tgz" --exclude='*-diff-*' -C "$r" .

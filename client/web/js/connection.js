@@ -15,6 +15,17 @@ const SILENCE_LIMIT_MS = 15000;
 // that is gone or unready, which may never come back (a scale-in). Each attempt still waits out
 // the backoff, so a cluster that is down is not flooded with new sessions.
 const SESSION_LOST = new Set([404, 421, 502, 503, 504]);
+// Refused parameters a new session drops, one per attempt, before it gives up and retries.
+const MAX_REFUSED_FIELDS = 4;
+
+/** A copy of `params` without the field at `path` (dot-separated), which the server defaults. */
+function withoutField(params, path) {
+  const copy = structuredClone(params);
+  const keys = path.split('.');
+  const parent = keys.slice(0, -1).reduce((o, k) => (o && typeof o === 'object' ? o[k] : undefined), copy);
+  if (parent && typeof parent === 'object') delete parent[keys[keys.length - 1]];
+  return copy;
+}
 
 export class Connection {
   /**
@@ -153,15 +164,19 @@ export class Connection {
       }
     }
     let created;
-    try {
-      created = await sendJson('POST', 'v1/sessions', this.params);
-    } catch (e) {
-      // The scene went away with the old session (e.g. a restarted server): fall back to the
-      // server's default scene rather than retrying forever.
-      if (!(e instanceof ApiError) || e.field !== 'render.scene') throw e;
-      this.handlers.onEvent({ type: 'error', error: { error: e.kind, field: e.field, message: `${e.message}; using the default scene` } });
-      this.params = { ...this.params, render: { ...this.params.render, scene: 'default' } };
-      created = await sendJson('POST', 'v1/sessions', this.params);
+    for (let attempt = 0; ; attempt++) {
+      try {
+        created = await sendJson('POST', 'v1/sessions', this.params);
+        break;
+      } catch (e) {
+        // A parameter the server refuses (one from the address, or a scene that went away
+        // with a restarted server) would be refused again on every retry: say so, and ask
+        // again with the server's default for that field.
+        const refused = e instanceof ApiError && e.field && (e.status === 400 || e.status === 404);
+        if (!refused || attempt >= MAX_REFUSED_FIELDS) throw e;
+        this.handlers.onEvent({ type: 'error', error: { error: e.kind, field: e.field, message: `${e.message}; using the server's default` } });
+        this.params = withoutField(this.params, e.field);
+      }
     }
     if (generation !== this.generation) {
       // Stopped while the session was being created: it must not outlive the page.

@@ -412,11 +412,15 @@ function initialParams() {
   if (q.has('method')) render.gi.method = q.get('method');
   if (q.has('view')) render.view = q.get('view');
   if (q.has('rsm')) render.gi.rsm_size = Number(q.get('rsm'));
-  // While the view moves, frames at half the size (upscaled here) unless `?interactive=`.
-  const encoding = {
-    codec: chooseCodec(q.get('codec')),
-    interactive_scale: q.has('interactive') ? Number(q.get('interactive')) : 0.5,
-  };
+  // While the view moves, frames at half the size (upscaled here) unless `?interactive=`;
+  // a number out of range is the server's to refuse, naming the field.
+  let interactive = 0.5;
+  if (q.has('interactive')) {
+    const asked = Number(q.get('interactive'));
+    if (Number.isFinite(asked)) interactive = asked;
+    else message(`?interactive=${q.get('interactive')} is not a number (0.25–1); using ${interactive}`);
+  }
+  const encoding = { codec: chooseCodec(q.get('codec')), interactive_scale: interactive };
   const params = { render, encoding };
   if (q.has('fps')) params.fps_cap = Number(q.get('fps'));
   return params;

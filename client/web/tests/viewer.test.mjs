@@ -207,6 +207,17 @@ async function withoutWebCodecs(browser) {
       const messages = await page.$eval('#messages', (e) => e.textContent);
       assert.match(messages, /no WebCodecs H\.264 decoder/, `the page says why: '${messages}'`);
     });
+    // Not about WebCodecs, but a page of its own is at hand: a session the server refuses
+    // is not retried forever with the same bad field.
+    await step('a refused parameter in the address is named, and the server default used', async () => {
+      await page.goto(`${base}/?method=none&scale=0.5&fps=10&interactive=5`);
+      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+      const messages = await page.$eval('#messages', (e) => e.textContent);
+      assert.match(messages, /encoding\.interactive_scale/, `the page names the field: '${messages}'`);
+      assert.match(messages, /using the server's default/, `the page says what it did: '${messages}'`);
+      assert.equal((await pageSession(page)).params.encoding.interactive_scale, 1);
+      await waitForFrames(page, 2, 'frames with the default');
+    });
   } finally {
     await page.close({ runBeforeUnload: true });
     await context.close();

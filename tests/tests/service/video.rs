@@ -16,6 +16,15 @@ fn keyframe(f: &ReceivedFrame) -> bool {
     f.header.flags & FLAG_KEYFRAME != 0
 }
 
+fn assert_no_render_errors(events: &[ServerEvent]) {
+    assert!(
+        !events
+            .iter()
+            .any(|e| matches!(e, ServerEvent::RenderError { .. })),
+        "{events:?}"
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_h264_session_streams_decodable_video_with_keyframes_where_needed() {
     let server = TestServer::start(&[]).await;
@@ -104,12 +113,7 @@ async fn an_h264_session_streams_decodable_video_with_keyframes_where_needed() {
         "the first frame of a new size is a keyframe"
     );
     assert_eq!(resized.rgba.dimensions(), (128, 80));
-    assert!(
-        !events
-            .iter()
-            .any(|e| matches!(e, ServerEvent::RenderError { .. })),
-        "{events:?}"
-    );
+    assert_no_render_errors(&events);
     server.stop().await;
 }
 
@@ -237,11 +241,6 @@ async fn interactive_scale_streams_smaller_frames_while_moving_and_full_ones_at_
         diff < 12.0,
         "the half-size frame upscaled differs by {diff:.1}"
     );
-    assert!(
-        !events
-            .iter()
-            .any(|e| matches!(e, ServerEvent::RenderError { .. })),
-        "{events:?}"
-    );
+    assert_no_render_errors(&events);
     server.stop().await;
 }

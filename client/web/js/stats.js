@@ -101,7 +101,8 @@ export class Stats {
     if (last) {
       const h = last.header;
       const progress = h.samples > 0 ? ` · ${h.samples} spp, ±${(h.relativeError * 100).toFixed(1)} %` : '';
-      this.el.frameInfo.textContent = `#${h.seq} · ${h.width}×${h.height} · ${this.codecLabel(h)} · ${(h.bytes / 1024).toFixed(0)} KiB${progress}`;
+      // Video P-frames are often under a KiB: one decimal below 10 KiB.
+      this.el.frameInfo.textContent = `#${h.seq} · ${h.width}×${h.height} · ${this.codecLabel(h)} · ${(h.bytes / 1024).toFixed(h.bytes < 10240 ? 1 : 0)} KiB${progress}`;
     }
     this.renderStageTable(recent);
     this.drawStages();

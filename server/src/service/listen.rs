@@ -16,7 +16,7 @@ use std::io;
 use std::net::IpAddr;
 use std::pin::Pin;
 use std::sync::{Arc, Mutex};
-use std::task::{Context, Poll};
+use std::task::{ready, Context, Poll};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
@@ -75,7 +75,7 @@ pub async fn serve(
             Ok(slot) => {
                 tokio::spawn(connection(
                     Counted {
-                        io: stream,
+                        io: Lingering::new(stream),
                         _slot: slot,
                     },
                     app.clone(),
@@ -143,7 +143,7 @@ async fn refuse(stream: TcpStream, refusal: ApiError) {
     });
     let _ = tokio::time::timeout(
         REFUSAL_TIME,
-        builder.serve_connection(TokioIo::new(stream), service),
+        builder.serve_connection(TokioIo::new(Lingering::new(stream)), service),
     )
     .await;
 }
@@ -276,7 +276,7 @@ impl Drop for Slot {
 /// A connection that holds its [`Slot`] for as long as it is open, also after hyper hands it
 /// over to a WebSocket.
 struct Counted {
-    io: TcpStream,
+    io: Lingering,
     _slot: Slot,
 }
 
@@ -317,6 +317,89 @@ impl AsyncWrite for Counted {
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
         Pin::new(&mut self.io).poll_shutdown(cx)
+    }
+}
+
+/// Longest a closing connection keeps reading what its client still sends (see [`Lingering`]).
+const LINGER_TIME: Duration = Duration::from_secs(2);
+
+/// A socket that closes the way nginx's `lingering_close` does. A response sent before its
+/// request body was read (a 413 for a body over its limit, a 400 decided from the query) ends
+/// the connection with request bytes still unread, and closing a socket with unread bytes makes
+/// the kernel send a reset instead of a FIN; a reset makes the client's kernel discard the
+/// response the client has not read yet, so the client saw "connection reset" instead of the
+/// JSON error, now and then (issue 15's hardening test, on CI). Shutting down here sends the
+/// FIN after the response, then reads and drops what the client still sends until it closes
+/// too or [`LINGER_TIME`] passes, and only then lets the socket go.
+struct Lingering {
+    io: TcpStream,
+    /// Set once the write side is shut down: when to stop reading.
+    deadline: Option<Pin<Box<tokio::time::Sleep>>>,
+}
+
+impl Lingering {
+    fn new(io: TcpStream) -> Self {
+        Self { io, deadline: None }
+    }
+}
+
+impl AsyncRead for Lingering {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.io).poll_read(cx, buf)
+    }
+}
+
+impl AsyncWrite for Lingering {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.io).poll_write(cx, buf)
+    }
+
+    fn poll_write_vectored(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        bufs: &[io::IoSlice<'_>],
+    ) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.io).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.io.is_write_vectored()
+    }
+
+    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.io).poll_flush(cx)
+    }
+
+    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        let this = &mut *self;
+        if this.deadline.is_none() {
+            ready!(Pin::new(&mut this.io).poll_shutdown(cx))?;
+            this.deadline = Some(Box::pin(tokio::time::sleep(LINGER_TIME)));
+        }
+        let mut scratch = [0u8; 8192];
+        loop {
+            if let Some(deadline) = this.deadline.as_mut() {
+                if deadline.as_mut().poll(cx).is_ready() {
+                    return Poll::Ready(Ok(()));
+                }
+            }
+            let mut buf = ReadBuf::new(&mut scratch);
+            match ready!(Pin::new(&mut this.io).poll_read(cx, &mut buf)) {
+                // More of what the client sent: dropped. Reads are under tokio's cooperative
+                // budget, so a fast sender cannot hold this task's thread.
+                Ok(()) if !buf.filled().is_empty() => {}
+                // The client closed (or reset) its side: nothing can be lost any more.
+                Ok(()) | Err(_) => return Poll::Ready(Ok(())),
+            }
+        }
     }
 }
 

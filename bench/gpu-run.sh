@@ -185,7 +185,7 @@ fi
 if [ "$what" = stream ] || [ "$what" = all ]; then
   # The same flags as bench/results/lavapipe-stream-codecs.md, so the two compare: a drive
   # down the street at about 15 m/s, JPEG at four qualities (the equal-PSNR bracket) and H.264
-  # at 8000 and 3000 kbit/s.
+  # at the automatic bitrate and 8000 kbit/s.
   stream_flags=(--scene 'procedural:street?blocks=8' --stream-seconds 20)
   if $quick; then
     stream_flags+=(--quick)

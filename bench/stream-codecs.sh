@@ -87,11 +87,11 @@ cleanup() {
 trap cleanup EXIT
 
 # The service's own settings, shared by both parts: fps cap 30 (the bench's nominal fps), a
-# 2048² shadow map, automatic exposure, JPEG at the moving quality, H.264 at its default bitrate.
+# 2048² shadow map, automatic exposure, JPEG at the moving quality, H.264 at its default
+# (automatic) bitrate.
 fps=30
 shadow=2048
 jpeg_quality=70
-h264_kbps=8000
 path_seconds=$((stream_seconds + 5)) # the path runs on while the session connects
 
 bench_cmd=("$server" bench-stream --scene "$scene" --sizes "$sizes" --frames "$frames" --gi "$gi"
@@ -127,7 +127,7 @@ for size in "${size_list[@]}"; do
   for codec in jpeg h264; do
     case $codec in
       jpeg) codec_flags=(--codec jpeg --quality "$jpeg_quality") ;;
-      h264) codec_flags=(--codec h264 --bitrate-kbps "$h264_kbps") ;;
+      h264) codec_flags=(--codec h264) ;;
     esac
     cmd=("$client" --server "$url" --json stream --scene default --width "$w" --height "$h"
       --gi "$gi" --shadow-map-size "$shadow" --fps-cap "$fps" --input-hz "$fps"
@@ -141,7 +141,7 @@ done
 # Both parts, the machine and the commands in one markdown file and one JSON file.
 WORK="$work" BENCH_CMD="$(quoted "${bench_cmd[@]}")" SERVE_CMD="$(quoted "${serve_cmd[@]}")" \
   STREAM_SECONDS="$stream_seconds" FPS="$fps" SHADOW="$shadow" GI="$gi" SCENE="$scene" OUT="$out" \
-  JPEG_QUALITY="$jpeg_quality" H264_KBPS="$h264_kbps" \
+  JPEG_QUALITY="$jpeg_quality" \
   REVISION="$(git -C "$root" rev-parse --short HEAD 2>/dev/null || cat "$bin/revision" 2>/dev/null || echo unknown)" \
   python3 - "${runs[@]}" <<'PY'
 import json, os, platform, sys
@@ -199,7 +199,7 @@ for r in runs:
     split = s["split"]
     per_frame = s["bytes_per_second"] / s["fps"] if s["fps"] > 0 else 0
     label = (f"JPEG q{env['JPEG_QUALITY']}" if r["codec"] == "jpeg"
-             else f"H.264 {env['H264_KBPS']} kbit/s")
+             else "H.264 auto")
     md.append(
         f"| {r['width']}×{r['height']} | {label} | {s['frames']} | {s['fps']:.2f} | "
         f"{per_frame:.0f} | {s['bytes_per_second'] / 1e3:.0f} | {s['bytes_per_second'] * 8 / 1e3:.0f} | "

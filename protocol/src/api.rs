@@ -448,8 +448,10 @@ pub struct Encoding {
     pub still_after_ms: u32,
     /// `png` (lossless) or `jpeg` at `quality`; not `h264`.
     pub still_codec: Codec,
-    /// H.264: target bitrate in kbit/s (100–200,000).
-    pub bitrate_kbps: u32,
+    /// H.264: target bitrate in kbit/s (100–200,000). `null`, the default, chooses it from
+    /// the frame: [`AUTO_BITS_PER_PIXEL`] bits for every pixel of every frame at `fps_cap`
+    /// (about 3.1 Mbit/s at 1920×1080 and 30 fps; see [`Encoding::bitrate_kbps_for`]).
+    pub bitrate_kbps: Option<u32>,
     /// H.264: the coarsest quantiser the rate control may use (10–51; lower keeps more detail
     /// when the bitrate is tight, at the cost of exceeding it).
     pub max_qp: u8,
@@ -465,6 +467,17 @@ pub struct Encoding {
 /// The smallest side [`Encoding::interactive_size`] scales down to.
 pub const MIN_INTERACTIVE_SIDE: u32 = 16;
 
+/// The range of `encoding.bitrate_kbps`, also what an automatic bitrate is held to.
+pub const MIN_BITRATE_KBPS: u32 = 100;
+pub const MAX_BITRATE_KBPS: u32 = 200_000;
+
+/// Bits per pixel per frame of an automatic H.264 bitrate (`bitrate_kbps: null`). Chosen from
+/// `bench-stream` on the street at 1920×1080 while moving (bench/results/
+/// lavapipe-stream-codecs.md): about 3 Mbit/s at 30 fps sent under 1/5 of JPEG q70's bytes at
+/// 2 dB better PSNR, where the old fixed 8 Mbit/s sent a third of them. A fixed rate was also
+/// far too much for a small window and too little for 4K at 60 fps.
+pub const AUTO_BITS_PER_PIXEL: f64 = 0.05;
+
 impl Encoding {
     /// The size of a frame rendered while moving, for a session of `width` × `height`: each
     /// side times `interactive_scale`, rounded down to an even number (H.264's 4:2:0 needs
@@ -476,6 +489,16 @@ impl Encoding {
         };
         (scale(width), scale(height))
     }
+
+    /// The H.264 target bitrate for frames of `width` × `height` at `fps`: `bitrate_kbps`
+    /// when set, else [`AUTO_BITS_PER_PIXEL`] of the pixel rate, within
+    /// [`MIN_BITRATE_KBPS`]..=[`MAX_BITRATE_KBPS`].
+    pub fn bitrate_kbps_for(&self, width: u32, height: u32, fps: f32) -> u32 {
+        self.bitrate_kbps.unwrap_or_else(|| {
+            let bits = AUTO_BITS_PER_PIXEL * f64::from(width) * f64::from(height) * f64::from(fps);
+            ((bits / 1000.0).round() as u32).clamp(MIN_BITRATE_KBPS, MAX_BITRATE_KBPS)
+        })
+    }
 }
 
 impl Default for Encoding {
@@ -486,7 +509,7 @@ impl Default for Encoding {
             moving_quality: 70,
             still_after_ms: 300,
             still_codec: Codec::Png,
-            bitrate_kbps: 8_000,
+            bitrate_kbps: None,
             max_qp: 40,
             keyframe_interval: 300,
             interactive_scale: 1.0,
@@ -940,6 +963,11 @@ pub struct VideoInfo {
     pub encoder: String,
     /// Whether that encoder runs on dedicated hardware rather than the CPU.
     pub hardware: bool,
+    /// Bits per pixel per frame of an automatic bitrate (`encoding.bitrate_kbps: null`).
+    pub auto_bits_per_pixel: f64,
+    /// Threads (and slices) one stream's encoder uses for frames of 1920×1080 on this
+    /// machine: one per about half a megapixel, at most the CPUs.
+    pub threads_1080p: u16,
 }
 
 /// Which set of defaults a server gives requests.

@@ -143,4 +143,28 @@ mod tests {
         let (w, h) = scaled(0.5, 1001, 333);
         assert_eq!((w % 2, h % 2), (0, 0));
     }
+
+    #[test]
+    fn an_automatic_bitrate_follows_the_pixel_rate_within_the_range() {
+        let auto = Encoding::default();
+        assert_eq!(auto.bitrate_kbps, None, "automatic by default");
+        // 0.05 bit × 1920 × 1080 × 30 / 1000 = 3110.4.
+        assert_eq!(auto.bitrate_kbps_for(1920, 1080, 30.0), 3110);
+        assert_eq!(auto.bitrate_kbps_for(1280, 720, 30.0), 1382);
+        // Twice the frames, twice the bits; a quarter of the pixels, a quarter.
+        assert_eq!(auto.bitrate_kbps_for(1920, 1080, 60.0), 6221);
+        assert_eq!(auto.bitrate_kbps_for(960, 540, 30.0), 778);
+        // Held to the range a client may set.
+        assert_eq!(auto.bitrate_kbps_for(64, 48, 1.0), MIN_BITRATE_KBPS);
+        assert_eq!(auto.bitrate_kbps_for(3840, 2160, 1000.0), MAX_BITRATE_KBPS);
+        let fixed = Encoding {
+            bitrate_kbps: Some(8000),
+            ..Encoding::default()
+        };
+        assert_eq!(
+            fixed.bitrate_kbps_for(64, 48, 1.0),
+            8000,
+            "a set bitrate is kept"
+        );
+    }
 }

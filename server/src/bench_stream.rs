@@ -86,11 +86,11 @@ pub struct StreamBenchArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [70, 90],
           value_parser = clap::value_parser!(u8).range(1..=100))]
     pub jpeg_qualities: Vec<u8>,
-    /// H.264 bitrates in kbit/s, comma-separated (the range a session's
-    /// `encoding.bitrate_kbps` accepts; the service's default is 8000).
-    #[arg(long, value_delimiter = ',', default_values_t = [8000, 3000],
-          value_parser = clap::value_parser!(u32).range(100..=200_000))]
-    pub h264_kbps: Vec<u32>,
+    /// H.264 bitrates, comma-separated: kbit/s in the range a session's
+    /// `encoding.bitrate_kbps` accepts, or `auto`, the service's default (chosen from each
+    /// frame size at `--fps`).
+    #[arg(long, value_delimiter = ',', default_values_t = [H264Rate::Auto, H264Rate::Kbps(8000)])]
+    pub h264_kbps: Vec<H264Rate>,
     /// Measure FLIP on every Nth frame only (FLIP is the slowest measurement here; PSNR is
     /// measured on every frame).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
@@ -140,19 +140,84 @@ impl std::fmt::Display for FrameSize {
     }
 }
 
+/// An H.264 bitrate of `--h264-kbps`: kbit/s, or the service's automatic one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum H264Rate {
+    /// `encoding.bitrate_kbps: null`: [`lightcast_protocol::AUTO_BITS_PER_PIXEL`] of each
+    /// size's pixel rate.
+    Auto,
+    Kbps(u32),
+}
+
+impl H264Rate {
+    /// The kbit/s a session streaming `width`×`height` at `fps` would get.
+    fn kbps(self, width: u32, height: u32, fps: f32) -> u32 {
+        let bitrate_kbps = match self {
+            Self::Auto => None,
+            Self::Kbps(kbps) => Some(kbps),
+        };
+        Encoding {
+            bitrate_kbps,
+            ..Encoding::default()
+        }
+        .bitrate_kbps_for(width, height, fps)
+    }
+}
+
+impl std::str::FromStr for H264Rate {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        let range = lightcast_protocol::MIN_BITRATE_KBPS..=lightcast_protocol::MAX_BITRATE_KBPS;
+        match s.parse::<u32>() {
+            Ok(kbps) if range.contains(&kbps) => Ok(Self::Kbps(kbps)),
+            _ => Err(format!(
+                "`{s}` is neither `auto` nor kbit/s in {}..={}",
+                range.start(),
+                range.end()
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for H264Rate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Auto => f.write_str("auto"),
+            Self::Kbps(kbps) => write!(f, "{kbps}"),
+        }
+    }
+}
+
 /// One codec setting under test.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(tag = "codec", rename_all = "snake_case")]
 pub enum CodecSetting {
-    Jpeg { quality: u8 },
-    H264 { bitrate_kbps: u32 },
+    Jpeg {
+        quality: u8,
+    },
+    /// `auto`: the service's automatic bitrate at this size, `bitrate_kbps` what it came to.
+    H264 {
+        bitrate_kbps: u32,
+        auto: bool,
+    },
 }
 
 impl std::fmt::Display for CodecSetting {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Jpeg { quality } => write!(f, "JPEG q{quality}"),
-            Self::H264 { bitrate_kbps } => write!(f, "H.264 {bitrate_kbps} kbit/s"),
+            Self::H264 {
+                bitrate_kbps,
+                auto: false,
+            } => write!(f, "H.264 {bitrate_kbps} kbit/s"),
+            Self::H264 {
+                bitrate_kbps,
+                auto: true,
+            } => write!(f, "H.264 auto ({bitrate_kbps} kbit/s)"),
         }
     }
 }
@@ -267,6 +332,8 @@ impl Basis {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Comparison {
     pub h264_kbps: u32,
+    /// The service's automatic bitrate.
+    pub h264_auto: bool,
     pub jpeg_quality: u8,
     /// Why this JPEG (one or both).
     pub bases: Vec<Basis>,
@@ -492,10 +559,10 @@ impl Codecs {
             .map(|&setting| {
                 let state = match setting {
                     CodecSetting::Jpeg { quality } => CodecState::Jpeg { quality },
-                    CodecSetting::H264 { bitrate_kbps } => {
+                    CodecSetting::H264 { bitrate_kbps, .. } => {
                         let encoding = Encoding {
                             codec: Codec::H264,
-                            bitrate_kbps,
+                            bitrate_kbps: Some(bitrate_kbps),
                             ..Encoding::default()
                         };
                         let config = VideoConfig::new(width, height, &encoding, fps);
@@ -636,7 +703,7 @@ pub fn compare(rows: &[CodecRow], moving_quality: u8) -> Vec<Comparison> {
         .collect();
     let mut out: Vec<Comparison> = Vec::new();
     for h in rows {
-        let CodecSetting::H264 { bitrate_kbps } = h.setting else {
+        let CodecSetting::H264 { bitrate_kbps, auto } = h.setting else {
             continue;
         };
         let moving = jpegs.iter().find(|(q, _)| *q == moving_quality);
@@ -662,6 +729,7 @@ pub fn compare(rows: &[CodecRow], moving_quality: u8) -> Vec<Comparison> {
             let bytes_ratio = h.bytes_per_frame / jpeg.bytes_per_frame.max(1.0);
             out.push(Comparison {
                 h264_kbps: bitrate_kbps,
+                h264_auto: auto,
                 jpeg_quality: quality,
                 bases: vec![basis],
                 bytes_ratio,
@@ -783,11 +851,15 @@ fn targets(sizes: &[SizeReport], defaults: &Encoding) -> Option<Targets> {
         .filter_map(|c| {
             let setting = CodecSetting::H264 {
                 bitrate_kbps: c.h264_kbps,
+                auto: c.h264_auto,
             };
             let row = size.rows.iter().find(|r| r.setting == setting)?;
             Some(TargetCheck {
                 h264_kbps: c.h264_kbps,
-                default_bitrate: c.h264_kbps == defaults.bitrate_kbps,
+                default_bitrate: match defaults.bitrate_kbps {
+                    None => c.h264_auto,
+                    Some(kbps) => !c.h264_auto && c.h264_kbps == kbps,
+                },
                 bytes_ratio: c.bytes_ratio,
                 psnr_delta_db: c.psnr_delta_db,
                 bytes_met: c.meets_bytes_target,
@@ -890,16 +962,18 @@ pub fn run(
         renderer.set_scene_data(args.gi, data)?;
     }
     let timing_source = renderer.timing_source();
-    let settings: Vec<CodecSetting> = args
-        .jpeg_qualities
-        .iter()
-        .map(|&quality| CodecSetting::Jpeg { quality })
-        .chain(
-            args.h264_kbps
-                .iter()
-                .map(|&bitrate_kbps| CodecSetting::H264 { bitrate_kbps }),
-        )
-        .collect();
+    // An automatic bitrate comes to a different number at each size.
+    let settings = |size: FrameSize| -> Vec<CodecSetting> {
+        let jpegs = args
+            .jpeg_qualities
+            .iter()
+            .map(|&quality| CodecSetting::Jpeg { quality });
+        let h264 = args.h264_kbps.iter().map(|&rate| CodecSetting::H264 {
+            bitrate_kbps: rate.kbps(size.width, size.height, args.fps),
+            auto: rate == H264Rate::Auto,
+        });
+        jpegs.chain(h264).collect()
+    };
     let defaults = Encoding::default();
     let total = args.sizes.len() as u64 * u64::from(args.frames);
     let mut done = 0;
@@ -910,7 +984,7 @@ pub fn run(
             &base,
             &motion,
             size,
-            &settings,
+            &settings(size),
             args,
             defaults.moving_quality,
             &mut done,
@@ -1178,9 +1252,26 @@ mod tests {
     }
 
     #[test]
+    fn h264_rates_are_auto_or_kbit_per_second_in_the_sessions_range() {
+        assert_eq!("auto".parse(), Ok(H264Rate::Auto));
+        assert_eq!("3000".parse(), Ok(H264Rate::Kbps(3000)));
+        for bad in ["99", "200001", "fast", "", "-5"] {
+            let e = bad.parse::<H264Rate>().expect_err(bad);
+            assert!(e.contains("100..=200000"), "{bad}: {e}");
+        }
+        // `auto` is what a session with `bitrate_kbps: null` gets at each size.
+        assert_eq!(H264Rate::Auto.kbps(1920, 1080, 30.0), 3110);
+        assert_eq!(H264Rate::Auto.kbps(1280, 720, 30.0), 1382);
+        assert_eq!(H264Rate::Kbps(8000).kbps(1280, 720, 30.0), 8000);
+    }
+
+    #[test]
     fn h264_is_compared_with_the_moving_quality_and_the_closest_psnr_below() {
         let jpeg = |quality| CodecSetting::Jpeg { quality };
-        let h264 = |bitrate_kbps| CodecSetting::H264 { bitrate_kbps };
+        let h264 = |bitrate_kbps| CodecSetting::H264 {
+            bitrate_kbps,
+            auto: false,
+        };
         let rows = [
             row(jpeg(50), 60_000.0, 36.0),
             row(jpeg(70), 80_000.0, 38.0),
@@ -1227,11 +1318,13 @@ mod tests {
             wait: stats(vec![1.0]),
         };
         let size = |width, height| {
-            let mut fast = row(CodecSetting::H264 { bitrate_kbps: 3000 }, 9_000.0, 38.5);
+            let h264 = |bitrate_kbps, auto| CodecSetting::H264 { bitrate_kbps, auto };
+            let mut fast = row(h264(3000, false), 9_000.0, 38.5);
             fast.encode = stats(vec![5.0, 6.0]);
             let rows = vec![
                 row(CodecSetting::Jpeg { quality: 70 }, 80_000.0, 38.0),
-                row(CodecSetting::H264 { bitrate_kbps: 8000 }, 20_000.0, 41.0),
+                // The automatic bitrate (the service's default) came to 8000 here.
+                row(h264(8000, true), 20_000.0, 41.0),
                 fast,
             ];
             SizeReport {
@@ -1327,7 +1420,10 @@ mod tests {
         let settings = [
             CodecSetting::Jpeg { quality: 50 },
             CodecSetting::Jpeg { quality: 95 },
-            CodecSetting::H264 { bitrate_kbps: 8000 },
+            CodecSetting::H264 {
+                bitrate_kbps: 8000,
+                auto: false,
+            },
         ];
         let mut codecs = Codecs::new(&settings, w, h, 30.0).expect("encoders");
         let mut ceiling = 0.0;

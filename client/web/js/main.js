@@ -216,7 +216,7 @@ function onSession(session) {
     stats.resetSequence();
     video.reset();
   }
-  stats.setEncoding(session.params.encoding);
+  stats.setEncoding(session.params.encoding, session.params.fps_cap);
   panel.clearErrors();
   panel.show(session.params);
   $('scene-select').value = session.params.render.scene;
@@ -455,6 +455,7 @@ async function boot() {
   panel.applyGiMethods(s.gi_methods || []);
   // An older server without `video` streams JPEG and PNG only.
   if (s.video && Array.isArray(s.video.codecs)) state.serverCodecs = s.video.codecs;
+  if (s.video) stats.setAutoBitsPerPixel(s.video.auto_bits_per_pixel);
   panel.applyCodecs(['jpeg', 'png', 'h264'].filter(usable));
   document.body.dataset.decodesH264 = String(state.decodesH264);
   state.connection = new Connection(initialParams(), {

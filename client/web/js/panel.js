@@ -22,6 +22,9 @@ function read(control) {
       return /^-?\d+$/.test(raw) ? { value: Number(raw) } : { error: 'enter a whole number' };
     case 'float':
       return raw !== '' && Number.isFinite(Number(raw)) ? { value: Number(raw) } : { error: 'enter a number' };
+    case 'optional-int':
+      if (raw === '') return { value: null };
+      return /^\d+$/.test(raw) ? { value: Number(raw) } : { error: 'enter a whole number, or leave it empty' };
     case 'optional-float':
       if (raw === '') return { value: null };
       return Number.isFinite(Number(raw)) ? { value: Number(raw) } : { error: 'enter a number, or leave it empty' };

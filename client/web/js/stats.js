@@ -39,9 +39,29 @@ export class Stats {
     return this.stageNames[index] || `stage ${index}`;
   }
 
-  /** The session's encoding, for the target bitrate the frame line shows. */
-  setEncoding(encoding) {
+  /**
+   * The session's encoding and fps cap, for the target bitrate the frame line shows; with
+   * `bitrate_kbps` null the server picks `autoBitsPerPixel` (from `/v1/server`) bits per pixel
+   * of each frame at the fps cap, as `Encoding::bitrate_kbps_for` does.
+   */
+  setEncoding(encoding, fpsCap) {
     this.encoding = encoding;
+    this.fpsCap = fpsCap;
+  }
+
+  setAutoBitsPerPixel(bits) {
+    this.autoBitsPerPixel = bits;
+  }
+
+  /** The H.264 target of a frame of `width`×`height`, in kbit/s, and whether it is automatic. */
+  targetKbps(width, height) {
+    if (!this.encoding) return null;
+    if (this.encoding.bitrate_kbps !== null && this.encoding.bitrate_kbps !== undefined) {
+      return { kbps: this.encoding.bitrate_kbps, auto: false };
+    }
+    if (!this.autoBitsPerPixel || !this.fpsCap) return null;
+    const kbps = Math.min(200000, Math.max(100, Math.round((this.autoBitsPerPixel * width * height * this.fpsCap) / 1000)));
+    return { kbps, auto: true };
   }
 
   /**
@@ -114,7 +134,8 @@ export class Stats {
   codecLabel(h) {
     if (h.codec === 'png') return 'PNG';
     if (h.codec === 'jpeg') return `JPEG q${h.quality}`;
-    const target = this.encoding ? ` · target ${(this.encoding.bitrate_kbps / 1000).toFixed(1)} Mbit/s` : '';
+    const t = this.targetKbps(h.width, h.height);
+    const target = t ? ` · target ${(t.kbps / 1000).toFixed(1)} Mbit/s${t.auto ? ' (auto)' : ''}` : '';
     return `H.264${(h.flags & FLAG_KEYFRAME) !== 0 ? ' keyframe' : ''}${target}`;
   }
 

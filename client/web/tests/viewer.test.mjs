@@ -259,7 +259,22 @@ async function main() {
       await page.waitForFunction(() => document.getElementById('frame').dataset.codec === 'h264',
         null, { timeout: PATIENCE_MS });
       const info = await page.$eval('#frame-info', (e) => e.textContent);
-      assert.match(info, /H\.264.*target \d+\.\d Mbit\/s/, `the frame line names the codec and bitrate: '${info}'`);
+      assert.match(info, /H\.264.*target \d+\.\d Mbit\/s \(auto\)/, `the frame line names the codec and the automatic bitrate: '${info}'`);
+      assert.equal((await pageSession(page)).params.encoding.bitrate_kbps, null, 'the bitrate is automatic by default');
+      // A bitrate typed in the panel is the session's; emptying the field makes it automatic again.
+      const bitrate = page.locator('[data-field="encoding.bitrate_kbps"]');
+      const frameLine = (pattern) => page.waitForFunction((p) => new RegExp(p).test(document.getElementById('frame-info').textContent),
+        pattern, { timeout: PATIENCE_MS });
+      await bitrate.fill('2500');
+      await bitrate.press('Enter');
+      await bitrate.blur();
+      await frameLine('target 2\\.5 Mbit/s ·');
+      assert.equal((await pageSession(page)).params.encoding.bitrate_kbps, 2500);
+      await bitrate.fill('');
+      await bitrate.press('Enter');
+      await bitrate.blur();
+      await frameLine('Mbit/s \\(auto\\)');
+      assert.equal((await pageSession(page)).params.encoding.bitrate_kbps, null, 'an empty field restores the automatic bitrate');
       await page.waitForFunction(() => Number.isFinite(Number(document.getElementById('decode-ms').textContent)),
         null, { timeout: 5000 }).catch(async () => {
         throw new Error(`decode ms is not shown (got '${await page.$eval('#decode-ms', (e) => e.textContent)}')`);

@@ -207,7 +207,14 @@ pub fn resolve_session(
             "h264 is a stream codec; a still is png or jpeg",
         ));
     }
-    within("encoding.bitrate_kbps", bitrate_kbps, 100, 200_000)?;
+    if let Some(kbps) = bitrate_kbps {
+        within(
+            "encoding.bitrate_kbps",
+            kbps,
+            lightcast_protocol::MIN_BITRATE_KBPS,
+            lightcast_protocol::MAX_BITRATE_KBPS,
+        )?;
+    }
     within("encoding.max_qp", u32::from(max_qp), 10, 51)?;
     within("encoding.keyframe_interval", keyframe_interval, 0, 100_000)?;
     if !(0.25..=1.0).contains(&interactive_scale) {

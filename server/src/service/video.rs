@@ -9,12 +9,8 @@
 
 use crate::passes::yuv420::Yuv420;
 use lightcast_protocol::{Codec, Encoding};
-use openh264::encoder::{
-    BitRate, Encoder, EncoderConfig, FrameRate, FrameType, IntraFramePeriod, Profile, QpRange,
-    RateControlMode, TransferCharacteristics, UsageType, VuiConfig,
-};
-use openh264::formats::YUVSource;
-use openh264::OpenH264API;
+
+mod software;
 
 /// The codecs a session's frames can be encoded in (`encoding.codec`).
 pub const STREAM_CODECS: &[Codec] = &[Codec::Jpeg, Codec::Png, Codec::H264];
@@ -79,9 +75,18 @@ impl EncoderKind {
     /// A new encoder for frames of `config`; its first access unit is a keyframe.
     pub fn create(self, config: &VideoConfig) -> Result<Box<dyn VideoEncoder>, VideoError> {
         match self {
-            Self::OpenH264 => Ok(Box::new(OpenH264Encoder::new(config)?)),
+            Self::OpenH264 => Ok(Box::new(software::SoftwareEncoder::new(config)?)),
         }
     }
+}
+
+/// Threads (each encoding one slice of every frame) for a stream of `width`×`height` on this
+/// machine: [`software::threads_for`] its pixels and CPUs.
+pub fn encoder_threads(width: u32, height: u32) -> u16 {
+    software::threads_for(
+        u64::from(width) * u64::from(height),
+        std::thread::available_parallelism().map_or(1, |n| n.get()),
+    )
 }
 
 /// What an encoder is made for; a stream whose config changes gets a new encoder (and so a
@@ -95,6 +100,8 @@ pub struct VideoConfig {
     pub keyframe_interval: u32,
     /// The session's fps cap: the rate control spreads the bitrate over this many frames.
     pub fps: f32,
+    /// Encoder threads, each encoding one slice of every frame.
+    pub threads: u16,
 }
 
 impl VideoConfig {
@@ -102,10 +109,11 @@ impl VideoConfig {
         Self {
             width,
             height,
-            bitrate_kbps: encoding.bitrate_kbps,
+            bitrate_kbps: encoding.bitrate_kbps_for(width, height, fps),
             max_qp: encoding.max_qp,
             keyframe_interval: encoding.keyframe_interval,
             fps,
+            threads: encoder_threads(width, height),
         }
     }
 
@@ -148,85 +156,9 @@ pub trait VideoEncoder: Send {
     fn encode(&mut self, frame: &Yuv420, keyframe: bool) -> Result<AccessUnit, VideoError>;
 }
 
-struct OpenH264Encoder {
-    encoder: Encoder,
-}
-
-fn openh264_error(e: openh264::Error) -> VideoError {
-    VideoError::Encoder {
-        encoder: EncoderKind::OpenH264.name(),
-        message: e.to_string(),
-    }
-}
-
-impl OpenH264Encoder {
-    fn new(config: &VideoConfig) -> Result<Self, VideoError> {
-        VideoConfig::check_size(config.width, config.height)?;
-        let settings = EncoderConfig::new()
-            .profile(Profile::Baseline)
-            .usage_type(UsageType::CameraVideoRealTime)
-            .rate_control_mode(RateControlMode::Bitrate)
-            .bitrate(BitRate::from_bps(config.bitrate_kbps.saturating_mul(1000)))
-            .max_frame_rate(FrameRate::from_hz(config.fps))
-            .qp(QpRange::new(0, config.max_qp.min(51)))
-            .intra_frame_period(IntraFramePeriod::from_num_frames(config.keyframe_interval))
-            // Every rendered frame becomes an access unit: the client's frame counter, input
-            // ids and stage timings ride on them.
-            .skip_frames(false)
-            // One thread per stream: the encode pool already spreads sessions over the CPUs.
-            .num_threads(1)
-            // What the GPU's conversion wrote: BT.709 matrix and limited range applied to the
-            // sRGB-encoded output, so the decoder's colour management sees sRGB again.
-            .vui(VuiConfig::bt709().transfer_characteristics(TransferCharacteristics::Srgb));
-        let encoder = Encoder::with_api_config(OpenH264API::from_source(), settings)
-            .map_err(openh264_error)?;
-        Ok(Self { encoder })
-    }
-}
-
-/// The planes of a [`Yuv420`] as OpenH264 reads them.
-struct Planes<'a>(&'a Yuv420);
-
-impl YUVSource for Planes<'_> {
-    fn dimensions(&self) -> (usize, usize) {
-        (self.0.layout.width as usize, self.0.layout.height as usize)
-    }
-
-    fn strides(&self) -> (usize, usize, usize) {
-        let l = self.0.layout;
-        (
-            l.luma_stride as usize,
-            l.chroma_stride as usize,
-            l.chroma_stride as usize,
-        )
-    }
-
-    fn y(&self) -> &[u8] {
-        self.0.y()
-    }
-
-    fn u(&self) -> &[u8] {
-        self.0.cb()
-    }
-
-    fn v(&self) -> &[u8] {
-        self.0.cr()
-    }
-}
-
-impl VideoEncoder for OpenH264Encoder {
+impl VideoEncoder for software::SoftwareEncoder {
     fn encode(&mut self, frame: &Yuv420, keyframe: bool) -> Result<AccessUnit, VideoError> {
-        if keyframe {
-            self.encoder.force_intra_frame();
-        }
-        let stream = self
-            .encoder
-            .encode(&Planes(frame))
-            .map_err(openh264_error)?;
-        Ok(AccessUnit {
-            keyframe: matches!(stream.frame_type(), FrameType::IDR | FrameType::I),
-            data: stream.to_vec(),
-        })
+        software::SoftwareEncoder::encode(self, frame, keyframe)
     }
 }
 
@@ -266,6 +198,7 @@ impl VideoStream {
 mod tests {
     use super::*;
     use openh264::decoder::Decoder;
+    use openh264::formats::YUVSource;
 
     /// A moving gradient with a square, `t` frames in.
     fn frame(width: u32, height: u32, t: u32) -> Yuv420 {
@@ -331,8 +264,13 @@ mod tests {
             .collect()
     }
 
+    /// A stream at 8 Mbit/s: tiny test frames would get the automatic bitrate's floor.
     fn config(width: u32, height: u32) -> VideoConfig {
-        VideoConfig::new(width, height, &Encoding::default(), 30.0)
+        let encoding = Encoding {
+            bitrate_kbps: Some(8000),
+            ..Encoding::default()
+        };
+        VideoConfig::new(width, height, &encoding, 30.0)
     }
 
     #[test]
@@ -404,6 +342,53 @@ mod tests {
         };
         let (low, high) = (bytes(100), bytes(4_000));
         assert!(low * 2 < high, "100 kbit/s: {low} B, 4 Mbit/s: {high} B");
+    }
+
+    #[test]
+    fn frames_get_a_slice_thread_per_half_megapixel_up_to_the_cpus() {
+        let threads = |w: u64, h: u64, cpus| software::threads_for(w * h, cpus);
+        assert_eq!(threads(640, 360, 16), 1);
+        assert_eq!(threads(1280, 720, 16), 2);
+        assert_eq!(threads(1920, 1080, 16), 4);
+        assert_eq!(threads(3840, 2160, 16), 8, "at most eight");
+        assert_eq!(threads(1920, 1080, 2), 2, "at most the CPUs");
+        assert_eq!(threads(1920, 1080, 0), 1);
+    }
+
+    /// The slices of each access unit: NAL unit types 1 (non-IDR) and 5 (IDR).
+    fn slices(unit: &[u8]) -> usize {
+        openh264::nal_units(unit)
+            .filter(|nal| {
+                let header = nal.iter().position(|&b| b == 1).map(|i| nal[i + 1]);
+                matches!(header.map(|h| h & 0x1f), Some(1 | 5))
+            })
+            .count()
+    }
+
+    /// With several threads each frame is that many slices, and decodes as well as one slice.
+    #[test]
+    fn threaded_streams_are_sliced_and_decode() {
+        let (w, h) = (160, 96);
+        for threads in [1, 3] {
+            let cfg = VideoConfig {
+                threads,
+                ..config(w, h)
+            };
+            let mut stream = VideoStream::default();
+            let mut decoder = Decoder::new().expect("decoder");
+            for t in 0..6 {
+                let input = frame(w, h, t);
+                let unit = stream
+                    .encode(EncoderKind::OpenH264, cfg, &input, false)
+                    .expect("encodes");
+                assert_eq!(slices(&unit.data), usize::from(threads), "frame {t}");
+                let p = psnr(
+                    &decoded_luma(&mut decoder, &unit.data, w, h),
+                    &luma_rows(&input),
+                );
+                assert!(p > 35.0, "{threads} threads, frame {t}: PSNR {p:.1} dB");
+            }
+        }
     }
 
     #[test]

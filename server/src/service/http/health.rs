@@ -85,6 +85,8 @@ pub async fn server_info(State(state): State<Arc<AppState>>) -> Json<ServerInfo>
             codecs: STREAM_CODECS.to_vec(),
             encoder: state.video_encoder.name().to_string(),
             hardware: state.video_encoder.hardware(),
+            auto_bits_per_pixel: lightcast_protocol::AUTO_BITS_PER_PIXEL,
+            threads_1080p: crate::service::video::encoder_threads(1920, 1080),
         }),
     })
 }

@@ -359,6 +359,8 @@ pub struct SizeReport {
     /// Mean PSNR of the GPU's 4:2:0 planes converted back to RGB, no codec in between: the
     /// best any 4:2:0 codec can reach on these frames.
     pub yuv420_psnr_db: f64,
+    /// Threads (and slices) each H.264 stream of this size used, as the service's would here.
+    pub h264_threads: u16,
     pub rows: Vec<CodecRow>,
     pub comparisons: Vec<Comparison>,
 }
@@ -833,6 +835,7 @@ fn measure_size(
         yuv420: yuv420.finish(),
         conversion_gpu: stats(conversion),
         yuv420_psnr_db: yuv420_psnr.iter().sum::<f64>() / yuv420_psnr.len().max(1) as f64,
+        h264_threads: crate::service::video::encoder_threads(size.width, size.height),
         comparisons: compare(&rows, moving_quality),
         rows,
     })
@@ -1028,7 +1031,7 @@ impl StreamBenchReport {
     /// the targets.
     pub fn markdown(&self) -> String {
         let mut s = format!(
-            "Scene `{}` ({} triangles), GI {}, shadow map {}², exposure {}; the camera {}, {} frames at {} fps nominal ({:.1} s of the path). Adapter {}, {:?}; {} CPU threads. Every decoded frame is compared with the lossless RGBA8 frame: PSNR over RGB (mean and minimum over the frames), mean FLIP error ({}). JPEG: `jpeg-encoder` (4:2:0 below quality 90, 4:4:4 from 90), one frame at a time. H.264: OpenH264, constrained baseline, one thread, max QP {}, keyframe interval {}, one stateful stream per setting fed the frames in order (its first frame is the keyframe), decoded by OpenH264's decoder and converted back with nearest chroma. Bytes per second: mean bytes per frame × {} fps. Encode ms: the encode call alone.\n",
+            "Scene `{}` ({} triangles), GI {}, shadow map {}², exposure {}; the camera {}, {} frames at {} fps nominal ({:.1} s of the path). Adapter {}, {:?}; {} CPU threads. Every decoded frame is compared with the lossless RGBA8 frame: PSNR over RGB (mean and minimum over the frames), mean FLIP error ({}). JPEG: `jpeg-encoder` (4:2:0 below quality 90, 4:4:4 from 90), one frame at a time. H.264: OpenH264, constrained baseline, low complexity, one slice per thread ({}), max QP {}, keyframe interval {}, one stateful stream per setting fed the frames in order (its first frame is the keyframe), decoded by OpenH264's decoder and converted back with nearest chroma. Bytes per second: mean bytes per frame × {} fps. Encode ms: the encode call alone.\n",
             self.scene,
             self.triangles,
             self.gi,
@@ -1046,6 +1049,11 @@ impl StreamBenchReport {
             } else {
                 format!("one frame in {}", self.flip_every)
             },
+            self.sizes
+                .iter()
+                .map(|s| format!("{}×{}: {}", s.width, s.height, s.h264_threads))
+                .collect::<Vec<_>>()
+                .join(", "),
             self.max_qp,
             self.keyframe_interval,
             self.fps,
@@ -1334,6 +1342,7 @@ mod tests {
                 yuv420: readback(),
                 conversion_gpu: stats(vec![1.0]),
                 yuv420_psnr_db: 45.0,
+                h264_threads: 2,
                 comparisons: compare(&rows, 70),
                 rows,
             }

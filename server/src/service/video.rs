@@ -391,6 +391,102 @@ mod tests {
         }
     }
 
+    /// Reads an H.264 bit string (emulation-prevention bytes already removed).
+    struct Bits<'a> {
+        bytes: &'a [u8],
+        at: usize,
+    }
+
+    impl Bits<'_> {
+        fn bit(&mut self) -> u32 {
+            let b = (self.bytes[self.at / 8] >> (7 - self.at % 8)) & 1;
+            self.at += 1;
+            u32::from(b)
+        }
+
+        fn bits(&mut self, n: u32) -> u32 {
+            (0..n).fold(0, |v, _| (v << 1) | self.bit())
+        }
+
+        /// ue(v), H.264 §9.1.
+        fn ue(&mut self) -> u32 {
+            let mut zeros = 0;
+            while self.bit() == 0 {
+                zeros += 1;
+            }
+            (1 << zeros) - 1 + self.bits(zeros)
+        }
+    }
+
+    /// (video_full_range_flag, colour_primaries, transfer_characteristics,
+    /// matrix_coefficients) of a baseline SPS, H.264 §7.3.2.1.1 and Annex E.1.1.
+    fn colour_description(sps: &[u8]) -> (u32, u32, u32, u32) {
+        let mut rbsp = Vec::new();
+        for &b in &sps[1..] {
+            if b == 3 && rbsp.ends_with(&[0, 0]) {
+                continue;
+            }
+            rbsp.push(b);
+        }
+        let mut r = Bits {
+            bytes: &rbsp,
+            at: 0,
+        };
+        assert_eq!(r.bits(8), 66, "baseline profile");
+        r.bits(16); // constraint flags, level
+        r.ue(); // seq_parameter_set_id
+        r.ue(); // log2_max_frame_num_minus4
+        match r.ue() {
+            0 => {
+                r.ue();
+            }
+            2 => {}
+            other => panic!("pic_order_cnt_type {other}"),
+        }
+        r.ue(); // max_num_ref_frames
+        r.bit(); // gaps_in_frame_num_value_allowed_flag
+        r.ue(); // pic_width_in_mbs_minus1
+        r.ue(); // pic_height_in_map_units_minus1
+        assert_eq!(r.bit(), 1, "frame_mbs_only_flag");
+        r.bit(); // direct_8x8_inference_flag
+        if r.bit() == 1 {
+            (0..4).for_each(|_| {
+                r.ue();
+            });
+        }
+        assert_eq!(r.bit(), 1, "vui_parameters_present_flag");
+        if r.bit() == 1 && r.bits(8) == 255 {
+            r.bits(32);
+        }
+        if r.bit() == 1 {
+            r.bit();
+        }
+        assert_eq!(r.bit(), 1, "video_signal_type_present_flag");
+        r.bits(3); // video_format
+        let full_range = r.bit();
+        assert_eq!(r.bit(), 1, "colour_description_present_flag");
+        (full_range, r.bits(8), r.bits(8), r.bits(8))
+    }
+
+    /// Every keyframe's SPS says what the GPU conversion wrote (`shaders/yuv420.wgsl`): limited
+    /// range, BT.709 primaries and matrix, the sRGB transfer, so decoders colour it right.
+    #[test]
+    fn keyframes_signal_bt709_limited_range_with_the_srgb_transfer() {
+        let mut stream = VideoStream::default();
+        // 1080p has a cropping window (1088 coded rows): the parse must pass it.
+        for (w, h) in [(160, 96), (1920, 1080)] {
+            let unit = stream
+                .encode(EncoderKind::OpenH264, config(w, h), &frame(w, h, 0), true)
+                .expect("encodes");
+            let sps: Vec<&[u8]> = openh264::nal_units(&unit.data)
+                .map(|nal| &nal[nal.iter().position(|&b| b == 1).map_or(0, |i| i + 1)..])
+                .filter(|nal| nal[0] & 0x1f == 7)
+                .collect();
+            assert_eq!(sps.len(), 1, "{w}×{h}: one SPS before the IDR");
+            assert_eq!(colour_description(sps[0]), (0, 1, 13, 1), "{w}×{h}");
+        }
+    }
+
     #[test]
     fn odd_and_oversized_frames_are_refused() {
         assert!(VideoConfig::check_size(1920, 1080).is_ok());

@@ -74,10 +74,7 @@ pub async fn serve(
         match open.admit(peer.ip()) {
             Ok(slot) => {
                 tokio::spawn(connection(
-                    Counted {
-                        io: Lingering::new(stream),
-                        _slot: slot,
-                    },
+                    Lingering::new(stream, Some(slot)),
                     app.clone(),
                     Arc::clone(&builder),
                     shutdown.clone(),
@@ -101,7 +98,7 @@ pub async fn serve(
 }
 
 async fn connection(
-    io: Counted,
+    io: Lingering,
     app: Router,
     builder: Arc<http1::Builder>,
     mut shutdown: watch::Receiver<bool>,
@@ -143,7 +140,7 @@ async fn refuse(stream: TcpStream, refusal: ApiError) {
     });
     let _ = tokio::time::timeout(
         REFUSAL_TIME,
-        builder.serve_connection(TokioIo::new(Lingering::new(stream)), service),
+        builder.serve_connection(TokioIo::new(Lingering::new(stream, None)), service),
     )
     .await;
 }
@@ -273,53 +270,6 @@ impl Drop for Slot {
     }
 }
 
-/// A connection that holds its [`Slot`] for as long as it is open, also after hyper hands it
-/// over to a WebSocket.
-struct Counted {
-    io: Lingering,
-    _slot: Slot,
-}
-
-impl AsyncRead for Counted {
-    fn poll_read(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &mut ReadBuf<'_>,
-    ) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.io).poll_read(cx, buf)
-    }
-}
-
-impl AsyncWrite for Counted {
-    fn poll_write(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        buf: &[u8],
-    ) -> Poll<io::Result<usize>> {
-        Pin::new(&mut self.io).poll_write(cx, buf)
-    }
-
-    fn poll_write_vectored(
-        mut self: Pin<&mut Self>,
-        cx: &mut Context<'_>,
-        bufs: &[io::IoSlice<'_>],
-    ) -> Poll<io::Result<usize>> {
-        Pin::new(&mut self.io).poll_write_vectored(cx, bufs)
-    }
-
-    fn is_write_vectored(&self) -> bool {
-        self.io.is_write_vectored()
-    }
-
-    fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.io).poll_flush(cx)
-    }
-
-    fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.io).poll_shutdown(cx)
-    }
-}
-
 /// Longest a closing connection keeps reading what its client still sends (see [`Lingering`]).
 const LINGER_TIME: Duration = Duration::from_secs(2);
 
@@ -331,15 +281,23 @@ const LINGER_TIME: Duration = Duration::from_secs(2);
 /// JSON error, now and then (issue 15's hardening test, on CI). Shutting down here sends the
 /// FIN after the response, then reads and drops what the client still sends until it closes
 /// too or [`LINGER_TIME`] passes, and only then lets the socket go.
+///
+/// It also holds the connection's [`Slot`] (none for a refused one) for as long as it is open,
+/// also after hyper hands it over to a WebSocket.
 struct Lingering {
     io: TcpStream,
     /// Set once the write side is shut down: when to stop reading.
     deadline: Option<Pin<Box<tokio::time::Sleep>>>,
+    _slot: Option<Slot>,
 }
 
 impl Lingering {
-    fn new(io: TcpStream) -> Self {
-        Self { io, deadline: None }
+    fn new(io: TcpStream, slot: Option<Slot>) -> Self {
+        Self {
+            io,
+            deadline: None,
+            _slot: slot,
+        }
     }
 }
 

@@ -45,6 +45,14 @@ fn check(what: &str, code: c_int) -> Result<(), VideoError> {
     }
 }
 
+/// The error for a function missing from OpenH264's vtable.
+fn missing(name: &str) -> VideoError {
+    VideoError::Encoder {
+        encoder: "openh264",
+        message: format!("OpenH264's encoder has no {name}"),
+    }
+}
+
 /// Slices (and threads) for a frame of `pixels`: one per ~0.5 megapixels, so a 720p frame
 /// gets two and 1080p four, at most `cores`. Each slice boundary costs a little compression
 /// (prediction does not cross it), so small frames keep one.
@@ -89,10 +97,6 @@ impl SoftwareEncoder {
 
     fn initialise(&self, config: &VideoConfig) -> Result<(), VideoError> {
         let vt = self.vtable();
-        let missing = |name: &str| VideoError::Encoder {
-            encoder: "openh264",
-            message: format!("OpenH264's encoder has no {name}"),
-        };
         let defaults = vt
             .GetDefaultParams
             .ok_or_else(|| missing("GetDefaultParams"))?;
@@ -178,10 +182,6 @@ impl SoftwareEncoder {
             });
         }
         let vt = *self.vtable();
-        let missing = |name: &str| VideoError::Encoder {
-            encoder: "openh264",
-            message: format!("OpenH264's encoder has no {name}"),
-        };
         if keyframe {
             let force = vt
                 .ForceIntraFrame

@@ -79,6 +79,10 @@ pub struct RenderFlags {
     /// `--gi reference`: reflections after the visible surface (1: single bounce; the default).
     #[arg(long)]
     pub bounces: Option<u32>,
+    /// `--gi reference` and `surfels`: emissive surfaces do not light the scene (where the
+    /// light stands in for them, as a scene's default light without lights of its own does).
+    #[arg(long)]
+    pub no_emitters: bool,
     /// `--gi reference`: samples per pixel per frame (a render takes exactly this many;
     /// server default 4).
     #[arg(long)]
@@ -158,6 +162,7 @@ impl RenderFlags {
         put(&mut gi, "cache_distance", self.cache_distance);
         put(&mut gi, "cache_angle", self.cache_angle);
         put(&mut gi, "bounces", self.bounces);
+        put(&mut gi, "emitters", self.no_emitters.then_some(false));
         put(&mut gi, "spp", self.spp);
         put(&mut gi, "indirect_downscale", self.indirect_downscale);
         for (name, value) in self.clustered.given() {

@@ -67,6 +67,14 @@ impl GiMethod {
             Self::Surfels => "surfels",
         }
     }
+
+    /// Whether the method lights the scene from emissive surfaces (area lights), as
+    /// `render.gi.emitters` asks. The others light it from the punctual light only, so a
+    /// comparison measures them against a reference with `emitters` off: the same light
+    /// sources.
+    pub fn lights_from_emitters(self) -> bool {
+        matches!(self, Self::Reference | Self::Surfels)
+    }
 }
 
 impl std::fmt::Display for GiMethod {
@@ -272,6 +280,11 @@ pub struct GiParams {
     /// `reference`: reflections after the surface a pixel sees; 1 is the single-bounce light
     /// seed 004 approximates, more give multi-bounce light.
     pub bounces: u32,
+    /// `reference`, `surfels`: emissive surfaces light the scene as area lights, besides the
+    /// punctual light. Turn it off where the punctual light stands in for them (a scene's
+    /// default light when it has no lights of its own, as in the Cornell box), or their light
+    /// counts twice. Comparisons of the other methods use a reference with it off.
+    pub emitters: bool,
     /// `reference`: samples per pixel added each frame. Sessions keep accumulating while the
     /// camera, light and parameters stay the same; a one-shot render takes exactly this many.
     pub spp: u32,
@@ -333,6 +346,7 @@ impl Default for GiParams {
             cache_distance: None,
             cache_angle: None,
             bounces: 1,
+            emitters: true,
             spp: 4,
             vpl_count: 1024,
             cluster_count: 30,
@@ -773,7 +787,9 @@ pub struct RenderRequest {
     /// comparison render is cached by its parameters, so repeating it costs one render.
     pub compare_to: Option<GiMethod>,
     /// Samples per pixel of a `reference` comparison render (default 256; at most the
-    /// server's `max_spp`). Its bounces are `render.gi.bounces`.
+    /// server's `max_spp`). Its bounces are `render.gi.bounces`; emissive surfaces light it
+    /// only when the compared method lights from them (`surfels`, `reference`) with
+    /// `render.gi.emitters` on, so both see the same light sources.
     pub compare_spp: Option<u32>,
 }
 

@@ -67,6 +67,13 @@ pub struct BenchArgs {
     /// Bounces of the reference's paths (1: the single-bounce light seed 004 approximates).
     #[arg(long, default_value_t = 1)]
     pub reference_bounces: u32,
+    /// Emissive surfaces light the scene as area lights for `surfels` and its reference. Off
+    /// by default: the built-in scenes' light stands in for their emitters (the Cornell box's
+    /// lamp), and the other methods light from the punctual light alone, so every method is
+    /// measured from the same sources. With it on, the other methods of
+    /// `--compare-methods` are still measured against a reference without emitters.
+    #[arg(long, default_value_t = false, action = clap::ArgAction::Set)]
+    pub emitters: bool,
     /// Indirect light of every configuration at 1/N of the output's width and height (1, 2 or
     /// 4; the reference stays at full resolution).
     #[arg(long, default_value_t = 1)]
@@ -266,7 +273,8 @@ fn difference_picture(truth: &[[f32; 3]], other: &[[f32; 4]], mean: f64) -> Vec<
 }
 
 /// Renders the reference's indirect light for `settings`' camera, light and size, with paths
-/// of `bounces` reflections.
+/// of `bounces` reflections, lit by the sources `settings`' method lights from: emissive
+/// surfaces only for a method that models them and has `emitters` on.
 pub(crate) fn render_reference(
     ctx: &GpuContext,
     scene: &Scene,
@@ -281,6 +289,7 @@ pub(crate) fn render_reference(
         bounces,
         seed: 0,
         glossy_exponent: args.glossy_exponent,
+        emitters: settings.gi.emitters && settings.gi.method.lights_from_emitters(),
     };
     // Small calls keep each submission short (lavapipe drops long ones) and show progress.
     let per_call = 4;

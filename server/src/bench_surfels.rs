@@ -211,6 +211,7 @@ pub fn run(
             method: GiMethod::Surfels,
             glossy_exponent: args.glossy_exponent,
             indirect_downscale: args.indirect_downscale,
+            emitters: args.emitters,
             ..GiSettings::default()
         },
     );
@@ -302,13 +303,22 @@ pub fn run(
                 .ok_or(BenchError::Surfels(
                     "--compare-methods needs 1 in --bounces".into(),
                 ))?;
+        // The other methods light from the punctual light alone: measure them against the
+        // same sources.
+        let without_emitters = if base.gi.emitters {
+            let mut s = base.clone();
+            s.gi.emitters = false;
+            render_reference(renderer.context(), &scene, &s, args, 1, progress)?.indirect
+        } else {
+            truths[single].clone()
+        };
         compare_methods(
             &mut renderer,
             &scene,
             &base,
             args,
             &rows,
-            &truths[single],
+            &without_emitters,
             log,
             progress,
         )?

@@ -264,6 +264,10 @@ pub struct RenderArgs {
     /// `reference`: reflections after the visible surface (1: single-bounce light, 1 … 16).
     #[arg(long, default_value_t = 1)]
     pub bounces: u32,
+    /// `reference`, `surfels`: emissive surfaces do not light the scene (use it where the light
+    /// stands in for them, as the default light of a scene without lights of its own does).
+    #[arg(long)]
+    pub no_emitters: bool,
     /// `reference`: samples per pixel (1 … 1024).
     #[arg(long, default_value_t = 256)]
     pub spp: u32,
@@ -420,6 +424,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         defensive: args.defensive,
         glossy_exponent: args.glossy_exponent,
         bounces: args.bounces,
+        emitters: !args.no_emitters,
         spp: args.spp,
         indirect_downscale: args.indirect_downscale,
         ..Default::default()

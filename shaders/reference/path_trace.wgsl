@@ -4,9 +4,11 @@
 // but exact visibility (BVH rays instead of shadow maps or caches).
 //
 // A path starts at the surface the pixel centre sees (the point the G-buffer rasterises) and
-// reflects `bounces` times. At each vertex y it reached it adds y's emission and, by next-event
-// estimation with a shadow ray, the punctual light y reflects. So `bounces` = 1 is the
-// single-bounce light seed 004 approximates; more add inter-reflections (seed 001).
+// reflects `bounces` times. At each vertex y it reached it adds y's emission (unless
+// `emitters` is off: methods that light from the punctual light alone are compared without
+// it) and, by next-event estimation with a shadow ray, the punctual light y reflects. So
+// `bounces` = 1 is the single-bounce light seed 004 approximates; more add inter-reflections
+// (seed 001).
 
 // Mirrored by `TraceParams` in server/src/gi/reference/mod.rs.
 struct TraceParams {
@@ -22,7 +24,8 @@ struct TraceParams {
     ray_epsilon: f32,
     // Phong exponent k for every material; 0 keeps each material's own.
     glossy_exponent: f32,
-    pad0: u32,
+    // 1: add the emission of the surfaces a path reaches (emissive surfaces as area lights).
+    emitters: u32,
     pad1: u32,
 }
 
@@ -153,7 +156,9 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
         }
         surface = surface_at(hit, origin, wi);
         wo = -wi;
-        radiance += throughput * surface.emissive;
+        if params.emitters != 0u {
+            radiance += throughput * surface.emissive;
+        }
         let incident = light_incident(light, surface.position);
         let cos_y = dot(surface.normal, incident.to_light);
         let lifted = surface.position + surface.geometric * params.ray_epsilon;

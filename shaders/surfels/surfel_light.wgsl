@@ -23,7 +23,8 @@ struct LightParams {
     feedback: u32,
     // Distance above the surfel at which the caches are read.
     offset: f32,
-    pad0: u32,
+    // 1: add the surfel's emission (emissive surfaces as area lights, §3).
+    emitters: u32,
 }
 
 @group(0) @binding(0) var<storage, read> params: LightParams;
@@ -54,5 +55,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     if params.feedback != 0u {
         indirect = irradiance_from(interpolate_caches(s.position + params.offset * s.normal), s.normal);
     }
-    flux[k] = vec4<f32>(s.albedo * (direct + indirect) + s.emitted, 0.0);
+    flux[k] = vec4<f32>(s.albedo * (direct + indirect) + s.emitted * f32(params.emitters), 0.0);
 }

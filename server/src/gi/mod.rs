@@ -68,6 +68,8 @@ pub struct GiSettings {
     pub glossy_exponent: Option<f32>,
     /// `reference`, `surfels`: reflections after the surface a pixel sees (1: single bounce).
     pub bounces: u32,
+    /// `reference`, `surfels`: emissive surfaces light the scene as area lights.
+    pub emitters: bool,
     /// `reference`: samples per pixel added per frame.
     pub spp: u32,
     /// `clustered`: N VPLs.
@@ -115,6 +117,7 @@ impl From<&lightcast_protocol::GiParams> for GiSettings {
             occlusion: p.occlusion,
             glossy_exponent: p.glossy_exponent,
             bounces: p.bounces,
+            emitters: p.emitters,
             spp: p.spp,
             vpl_count: p.vpl_count,
             cluster_count: p.cluster_count,
@@ -360,6 +363,22 @@ pub fn entry(method: GiMethod) -> (usize, &'static MethodEntry) {
 /// configured with `limits`.
 /// The methods whose entry [`MethodEntry::downscales`] also take the renderer's
 /// `indirect_downscale`.
+/// `render.gi.emitters` as `/v1/server` lists it for the methods that read it.
+pub(crate) fn emitters_param(d: &lightcast_protocol::GiParams) -> lightcast_protocol::GiParamInfo {
+    lightcast_protocol::GiParamInfo {
+        name: "emitters".into(),
+        kind: lightcast_protocol::GiParamKind::Boolean,
+        default: d.emitters.into(),
+        min: None,
+        max: None,
+        choices: Vec::new(),
+        description: "Emissive surfaces light the scene as area lights besides the punctual \
+                      light; off where the light stands in for them (a scene's default light \
+                      without lights of its own), or their light counts twice"
+            .into(),
+    }
+}
+
 pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
     let mut methods: Vec<GiMethodInfo> =
         REGISTRY.iter().flat_map(|e| (e.describe)(limits)).collect();

@@ -369,6 +369,8 @@ impl Loop {
             method,
             spp,
             bounces: asked.bounces,
+            // The same light sources: emitters only for a method that lights from them.
+            emitters: asked.emitters && asked.method.lights_from_emitters(),
             glossy_exponent: asked.glossy_exponent,
             ..crate::gi::GiSettings::default()
         };

@@ -1,7 +1,7 @@
 //! The reference path tracer (`gi::reference`) on lavapipe against answers known without it:
 //! the BVH traversal against brute-force intersection, one bounce between two plates against
 //! a numerically integrated CPU value, a closed emitting box against the geometric series
-//! of its albedo, textured and alpha-masked surfaces against untextured and absent ones.
+//! of its albedo (and dark with `emitters` off), textured and alpha-masked surfaces against untextured and absent ones.
 
 use super::support::{self, brdf, floor_corners, hit_plane, plain_material, quad};
 use glam::Vec3;
@@ -358,6 +358,21 @@ fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
         // Every path carries the same weight (cosine sampling of a Lambertian), so the
         // convergence estimate sees no variance.
         assert!(image.relative_standard_error < 1e-3);
+        // Without emitters the box has no light at all.
+        let dark_box = ReferenceSettings {
+            emitters: false,
+            ..settings
+        };
+        let image = converge(&mut tracer, (16, 12), &camera, &dark, &dark_box, 8);
+        assert!(
+            image.indirect.iter().all(|px| luminance(*px) == 0.0),
+            "{bounces} bounces without emitters: {:?}",
+            image
+                .indirect
+                .iter()
+                .map(|px| luminance(*px))
+                .fold(0.0, f32::max)
+        );
     }
 }
 

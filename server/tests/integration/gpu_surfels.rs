@@ -197,6 +197,23 @@ fn one_bounce_matches_the_cpu_from_surfel_light_to_cache_lighting() {
             "coefficient {i}: GPU {got}, CPU {want}"
         );
     }
+
+    // 4. With `emitters` off the emissive surfels keep only the light they reflect.
+    let mut dark = s.clone();
+    dark.gi.emitters = false;
+    renderer.render(&dark).expect("render");
+    let surfels = renderer.gi_if_created::<Surfels>().expect("created");
+    let without = vec3s(&surfels.read_flux().expect("readback").expect("set"));
+    let materials = surfel_materials(&scene, &set);
+    let emitting = materials.iter().filter(|m| m.1.max_element() > 0.0).count();
+    assert!(emitting > 0, "the scene has emissive surfels");
+    for (k, (albedo_emitted, got)) in materials.iter().zip(&without).enumerate() {
+        let want = flux[k] - albedo_emitted.1;
+        assert!(
+            close(*got, want, 1e-4, 1e-4),
+            "surfel {k} without emitters: GPU {got}, expected {want}"
+        );
+    }
 }
 
 #[test]

@@ -102,9 +102,10 @@ async fn one_shot_renders_are_reproducible_and_report_what_ran() {
     server.stop().await;
 }
 
-/// `compare_to: reference` reports a method's errors against the path-traced reference; the
-/// reference itself compared with an equal reference has none (same seed, same pixels), and a
-/// repeated comparison (served from the cache) reports the same numbers.
+/// `compare_to: reference` reports a method's errors against the path-traced reference lit by
+/// the same sources; the reference itself compared with an equal reference has none (same
+/// seed, same pixels), and a repeated comparison (served from the cache) reports the same
+/// numbers.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn renders_compare_with_the_reference() {
     let server = TestServer::start(&[]).await;
@@ -133,6 +134,42 @@ async fn renders_compare_with_the_reference() {
     assert_eq!(same.final_psnr_db, None);
     assert_eq!(same.final_flip, 0.0);
     assert!(r.stages.iter().any(|s| s.stage == "path_trace"));
+
+    // The same light sources on both sides: BRSM lights from the punctual light alone, so its
+    // reference leaves the lamp's emission out (its bias is the one against a reference with
+    // `emitters` off, not on), while a reference with `emitters` off is compared with one
+    // without them too (no error).
+    let raw_indirect = |body: &Value| {
+        let mut raw = body.clone();
+        raw["format"] = json!("raw_indirect");
+        raw
+    };
+    let sum = |bytes: &[u8]| -> f64 {
+        bytes
+            .chunks_exact(16)
+            .flat_map(|px| px[..12].chunks_exact(4))
+            .map(|c| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+            .sum()
+    };
+    let (_, brsm_raw) = render(&server, &raw_indirect(&brsm)).await;
+    let mut truth = Vec::new();
+    for emitters in [false, true] {
+        let mut body = raw_indirect(&reference);
+        body["render"]["gi"]["emitters"] = json!(emitters);
+        body.as_object_mut().expect("object").remove("compare_to");
+        truth.push(sum(&render(&server, &body).await.1));
+    }
+    assert!(truth[1] > 1.01 * truth[0], "the lamp adds light: {truth:?}");
+    let bias = sum(&brsm_raw) / truth[0] - 1.0;
+    assert!(
+        (c.indirect_bias_relative - bias).abs() < 1e-3,
+        "comparison bias {} vs {bias} against the reference without emitters",
+        c.indirect_bias_relative
+    );
+    let mut dark_reference = reference.clone();
+    dark_reference["render"]["gi"]["emitters"] = json!(false);
+    let (d, _) = render(&server, &dark_reference).await;
+    assert_eq!(d.comparison.expect("comparison").indirect_mae, 0.0);
 
     // `clustered` through the API: its stages, the same pixels for the same request (k-means
     // restarts from the same seeds) and a comparison closer to the truth than no indirect

@@ -158,6 +158,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
                               seed 004 approximates)"
                     .into(),
             },
+            super::emitters_param(&d),
             GiParamInfo {
                 name: "spp".into(),
                 kind: GiParamKind::Integer,
@@ -186,7 +187,8 @@ pub struct TraceParams {
     pub seed: u32,
     pub ray_epsilon: f32,
     pub glossy_exponent: f32,
-    pub pad0: u32,
+    /// 1: a path adds the emission of the surfaces it reaches (`GiSettings::emitters`).
+    pub emitters: u32,
     pub pad1: u32,
 }
 
@@ -354,6 +356,8 @@ pub struct ReferenceSettings {
     pub seed: u32,
     /// Phong exponent for every material (`None`: their own), as in the other methods.
     pub glossy_exponent: Option<f32>,
+    /// Whether emissive surfaces light the scene (area lights) besides the punctual light.
+    pub emitters: bool,
 }
 
 impl Default for ReferenceSettings {
@@ -362,6 +366,7 @@ impl Default for ReferenceSettings {
             bounces: 1,
             seed: 0,
             glossy_exponent: None,
+            emitters: true,
         }
     }
 }
@@ -703,7 +708,7 @@ impl PathTracer {
             // Far above f32 rounding at the scene's coordinates, far below its features.
             ray_epsilon: 1e-4 * scale,
             glossy_exponent: settings.glossy_exponent.unwrap_or(0.0),
-            pad0: 0,
+            emitters: u32::from(settings.emitters),
             pad1: 0,
         };
         let slots: Vec<TraceParams> = (0..samples)
@@ -769,6 +774,7 @@ impl PathTracer {
                 bounces: g.bounces,
                 seed: 0,
                 glossy_exponent: g.glossy_exponent,
+                emitters: g.emitters,
             },
         };
         stages.stage(Stage::PathTrace, |e| {
@@ -914,7 +920,7 @@ mod tests {
                 ("seed", offset_of!(TraceParams, seed)),
                 ("ray_epsilon", offset_of!(TraceParams, ray_epsilon)),
                 ("glossy_exponent", offset_of!(TraceParams, glossy_exponent)),
-                ("pad0", offset_of!(TraceParams, pad0)),
+                ("emitters", offset_of!(TraceParams, emitters)),
                 ("pad1", offset_of!(TraceParams, pad1)),
             ],
         );

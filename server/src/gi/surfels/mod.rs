@@ -375,6 +375,7 @@ fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
                  session adds one per frame while the light stays put, a render and a \
                  session's still compute all",
             ),
+            super::emitters_param(&d),
             int(
                 "surfel_count",
                 d.surfel_count,
@@ -417,6 +418,7 @@ struct LitBy {
     light: Light,
     shadow_map_size: u32,
     bounces: u32,
+    emitters: bool,
 }
 
 /// One image history's caches: two cache-light buffers a bounce reads and writes in turn.
@@ -667,6 +669,7 @@ impl Surfels {
             light: frame.light.clone(),
             shadow_map_size: frame.shadow.size,
             bounces: wanted,
+            emitters: frame.settings.emitters,
         };
         // A render, and a session's still, show every bounce.
         let one_shot = frame.history.is_none() || frame.still;
@@ -697,6 +700,7 @@ impl Surfels {
                             light: &r.light,
                             shadow: frame.shadow,
                             previous: previous.map(|i| &history.buffers[i]),
+                            emitters: frame.settings.emitters,
                         },
                     );
                     passes.encode_pull(device, e, set);

@@ -56,7 +56,8 @@ pub struct LightParams {
     pub surfel_count: u32,
     pub feedback: u32,
     pub offset: f32,
-    pub pad0: u32,
+    /// 1: add the surfels' emission (`GiSettings::emitters`).
+    pub emitters: u32,
 }
 
 /// Mirrors `PullLevel` in `shaders/surfels/pull.wgsl`.
@@ -349,6 +350,8 @@ pub struct Bounce<'a> {
     pub shadow: &'a ShadowMap,
     /// The cache lighting of the previous bounce (`None`: the first bounce).
     pub previous: Option<&'a wgpu::Buffer>,
+    /// Whether emissive surfels add their emission (area lights).
+    pub emitters: bool,
 }
 
 /// The four pipelines and their per-frame parameters.
@@ -364,7 +367,8 @@ pub struct SurfelPasses {
     sh_view: wgpu::ComputePipeline,
     sh_view_layout: wgpu::BindGroupLayout,
     shadow_sampler: wgpu::Sampler,
-    light_params: [wgpu::Buffer; 2],
+    /// By `feedback + 2·emitters`.
+    light_params: [wgpu::Buffer; 4],
     /// Bound in place of the previous bounce's caches on a first bounce (not read there).
     no_caches: wgpu::Buffer,
     cache_params: wgpu::Buffer,
@@ -401,7 +405,7 @@ impl SurfelPasses {
                 compare: Some(wgpu::CompareFunction::LessEqual),
                 ..Default::default()
             }),
-            light_params: [params("surfel light params"), params("surfel light params")],
+            light_params: std::array::from_fn(|_| params("surfel light params")),
             no_caches: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("surfel no caches"),
                 size: 16,
@@ -415,12 +419,12 @@ impl SurfelPasses {
 
     /// Writes the parameters of `buffers`' passes; call before encoding with them.
     pub fn prepare(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, buffers: &SurfelBuffers) {
-        for (feedback, params) in self.light_params.iter().enumerate() {
+        for (slot, params) in (0u32..).zip(&self.light_params) {
             let p = LightParams {
                 surfel_count: buffers.surfel_count,
-                feedback: feedback as u32,
+                feedback: slot % 2,
                 offset: buffers.offset,
-                pad0: 0,
+                emitters: slot / 2,
             };
             queue.write_buffer(params, 0, bytemuck::bytes_of(&p));
         }
@@ -462,9 +466,9 @@ impl SurfelPasses {
         buffers: &SurfelBuffers,
         bounce: &Bounce,
     ) {
-        let feedback = bounce.previous.is_some();
+        let slot = usize::from(bounce.previous.is_some()) + 2 * usize::from(bounce.emitters);
         let group = LightResources {
-            params: &self.light_params[usize::from(feedback)],
+            params: &self.light_params[slot],
             light: bounce.light,
             shadow_map: &bounce.shadow.array_view,
             shadow_sampler: &self.shadow_sampler,
@@ -646,7 +650,7 @@ mod tests {
                 ("surfel_count", offset_of!(LightParams, surfel_count)),
                 ("feedback", offset_of!(LightParams, feedback)),
                 ("offset", offset_of!(LightParams, offset)),
-                ("pad0", offset_of!(LightParams, pad0)),
+                ("emitters", offset_of!(LightParams, emitters)),
             ],
         );
         assert_struct(

@@ -353,9 +353,9 @@ fn rgb(image: &[[f32; 4]]) -> Vec<[f32; 3]> {
 /// hide the trend.
 ///
 /// Under the default downward light the same sweep is not monotone (recorded in the
-/// benchmark): VPLs on the floor and on the block tops share a normal, k-means can put them
-/// in one VAL, and its single map, seen from a floor VPL, lets the blocks shadow the light
-/// of the VPLs on top of them.
+/// benchmark, traced in bench/results/README.md): until M = 128 one VAL holds the floor's few,
+/// far-apart VPLs, and its single map between the blocks darkens light those VPLs send past
+/// them.
 #[test]
 fn error_against_the_reference_falls_with_the_val_count() {
     let scene = procedural::cornell_box();

@@ -54,7 +54,7 @@ fn generate_vpls(@builtin(global_invocation_id) id: vec3<u32>) {
 @compute @workgroup_size(64)
 fn seed_clusters(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
-    if k >= params.cluster_count {
+    if k >= params.cluster_count || params.keep_centres != 0u {
         return;
     }
     var val = Val(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, 0u, 0u, 0u, 0u);

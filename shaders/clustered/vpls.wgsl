@@ -34,7 +34,9 @@ struct ClusteredParams {
     extent: f32,
     // The light whose visibility the `val-shadow` debug view shows.
     shadow_light: u32,
-    pad1: u32,
+    // 1: k-means starts from the VALs already in `vals` (a previous frame's) instead of the
+    // seeds; only for comparing with §5.2's restart.
+    keep_centres: u32,
     pad2: u32,
 }
 

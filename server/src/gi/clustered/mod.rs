@@ -515,6 +515,8 @@ pub struct Clustered {
     encoded: bool,
     /// The last frame's visibility.
     visibility_mode: ClusteredVisibility,
+    /// VALs the next frame's k-means starts from instead of the seeds (once).
+    next_start: Option<Vec<Val>>,
 }
 
 /// Everything a frame's clustering produced, read back for tests.
@@ -575,7 +577,16 @@ impl Clustered {
             extent: (r.scene.bounds.radius() * 2.0).max(f32::MIN_POSITIVE),
             encoded: false,
             visibility_mode: ClusteredVisibility::default(),
+            next_start: None,
         }
+    }
+
+    /// Starts the next frame's k-means from `vals` (a previous frame's VALs, as
+    /// [`Self::read_back`] gives them) instead of the seeds: the reuse of last frame's clusters
+    /// that §5.2 argues against, so that tests and benchmarks can compare it with the restart.
+    /// Ignored unless the next frame has as many VALs.
+    pub fn start_next_frame_from(&mut self, vals: Vec<Val>) {
+        self.next_start = Some(vals);
     }
 
     /// The last frame's RSM, VPLs, VALs, mapping and interleaved shading (blocking readback;
@@ -672,8 +683,22 @@ impl Method for Clustered {
             fourier_terms: g.fourier_terms,
             extent: self.extent,
             shadow_light: g.shadow_light,
-            pad1: 0,
+            keep_centres: 0,
             pad2: 0,
+        };
+        let start = self
+            .next_start
+            .take()
+            .filter(|v| v.len() == g.cluster_count as usize);
+        let params = match &start {
+            Some(vals) => {
+                queue.write_buffer(&buffers.vals, 0, bytemuck::cast_slice(vals));
+                ClusteredParams {
+                    keep_centres: 1,
+                    ..params
+                }
+            }
+            None => params,
         };
         queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         let clustering_group = self.clustering.bind(device, &self.params, rsm, buffers);

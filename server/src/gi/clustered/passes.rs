@@ -45,7 +45,9 @@ pub struct ClusteredParams {
     pub extent: f32,
     /// The light the `val-shadow` view shows.
     pub shadow_light: u32,
-    pub pad1: u32,
+    /// 1: k-means starts from the VALs already in the buffer (a previous frame's, see
+    /// [`super::Clustered::start_next_frame_from`]) instead of the seeds.
+    pub keep_centres: u32,
     pub pad2: u32,
 }
 
@@ -282,11 +284,15 @@ pub struct ClusterBuffers {
     pub mapping: wgpu::Buffer,
 }
 
+/// A storage buffer the tests can read back (`COPY_SRC`) and, for the VALs a frame may start
+/// from, write (`COPY_DST`).
 fn storage(device: &wgpu::Device, label: &str, bytes: usize) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes as u64,
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
 }
@@ -690,7 +696,7 @@ mod tests {
                 ("fourier_terms", offset_of!(ClusteredParams, fourier_terms)),
                 ("extent", offset_of!(ClusteredParams, extent)),
                 ("shadow_light", offset_of!(ClusteredParams, shadow_light)),
-                ("pad1", offset_of!(ClusteredParams, pad1)),
+                ("keep_centres", offset_of!(ClusteredParams, keep_centres)),
                 ("pad2", offset_of!(ClusteredParams, pad2)),
             ],
         );

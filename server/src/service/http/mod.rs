@@ -369,12 +369,23 @@ async fn check_declared_length(
 
 /// Gives every error the JSON body `{"error", "field", "message"}`, also those axum and its
 /// extractors answer with plain text (a path that is not UTF-8, a rejected extractor), and
-/// closes the connection after a 413.
+/// closes the connection after an error to a request that carries a body.
 async fn json_errors(request: Request, next: Next) -> Response {
+    let headers = request.headers();
+    let has_body = headers.contains_key(header::TRANSFER_ENCODING)
+        || headers
+            .get(header::CONTENT_LENGTH)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.parse::<u64>().ok())
+            .is_some_and(|length| length > 0);
     let mut response = as_json_error(next.run(request).await).await;
-    if response.status() == StatusCode::PAYLOAD_TOO_LARGE {
-        // The rest of the body is never read, so hyper closes the connection after answering;
-        // saying so keeps the client from sending its next request on it (which would fail).
+    let status = response.status();
+    if has_body && (status.is_client_error() || status.is_server_error()) {
+        // An error may be decided before the body is read (a 413 over the limit, a 400 from
+        // the query of an upload). hyper then closes the connection after answering without
+        // saying so, and a client that sends its next request on the kept-alive connection in
+        // that moment loses it (CI saw `IncompleteMessage`). Saying so makes the client open
+        // a new one.
         response.headers_mut().insert(
             header::CONNECTION,
             header::HeaderValue::from_static("close"),

@@ -480,17 +480,10 @@ fn interleaved_shading_and_blur_match_the_cpu() {
 #[test]
 fn clustered_error_against_the_reference_is_finite_and_below_none() {
     let scene = procedural::cornell_box();
-    let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
+    let s = settings(W, H, default_camera(&scene), default_light(&scene));
     let mut renderer = Renderer::new(gpu(), scene.clone());
     set_bvh(&mut renderer);
-    let mut indirect = |gi: GiSettings| {
-        s.gi = gi;
-        renderer
-            .render(&s)
-            .expect("render")
-            .indirect
-            .expect("captured")
-    };
+    let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
     let reference = indirect(GiSettings {
         method: GiMethod::Reference,
         spp: 64,

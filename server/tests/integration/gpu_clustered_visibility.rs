@@ -299,16 +299,9 @@ fn hard_shadows_from_the_maps_match_ray_traced_visibility() {
 #[test]
 fn visibility_error_falls_with_the_val_count() {
     let scene = procedural::cornell_box();
-    let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
+    let s = settings(W, H, default_camera(&scene), default_light(&scene));
     let mut renderer = Renderer::new(gpu(), scene.clone());
-    let mut indirect = |gi: GiSettings| {
-        s.gi = gi;
-        renderer
-            .render(&s)
-            .expect("render")
-            .indirect
-            .expect("captured")
-    };
+    let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
     let n = 256;
     let mut run = |visibility, vals| indirect(clustered(visibility, n, vals, 32));
     let off = run(ClusteredVisibility::Off, 30);
@@ -369,17 +362,10 @@ fn error_against_the_reference_falls_with_the_val_count() {
         outer_cone: 0.5,
     };
     let (w, h) = (64, 48);
-    let mut s = settings(w, h, default_camera(&scene), corner);
+    let s = settings(w, h, default_camera(&scene), corner);
     let mut renderer = Renderer::new(gpu(), scene.clone());
     set_bvh(&mut renderer);
-    let mut indirect = |gi: GiSettings| {
-        s.gi = gi;
-        renderer
-            .render(&s)
-            .expect("render")
-            .indirect
-            .expect("captured")
-    };
+    let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
     let truth = rgb(&indirect(GiSettings {
         method: GiMethod::Reference,
         spp: 256,

@@ -466,15 +466,8 @@ fn error_against_the_reference_is_small_at_one_and_three_bounces() {
     });
     set_bvh(&mut renderer);
     for bounces in [1, 3] {
-        let mut s = settings_for(&scene, bounces);
-        let mut indirect = |gi: GiSettings| {
-            s.gi = gi;
-            renderer
-                .render(&s)
-                .expect("render")
-                .indirect
-                .expect("captured")
-        };
+        let s = settings_for(&scene, bounces);
+        let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
         let reference = indirect(GiSettings {
             method: GiMethod::Reference,
             spp: 64,

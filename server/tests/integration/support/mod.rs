@@ -83,6 +83,23 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
     }
 }
 
+/// The indirect-light buffer of `settings` rendered with `gi` instead of its own GI.
+pub fn indirect_with(
+    renderer: &mut Renderer,
+    settings: &RenderSettings,
+    gi: lightcast_server::gi::GiSettings,
+) -> Vec<[f32; 4]> {
+    let s = RenderSettings {
+        gi,
+        ..settings.clone()
+    };
+    renderer
+        .render(&s)
+        .expect("render")
+        .indirect
+        .expect("captured")
+}
+
 pub fn render(scene: Scene, settings: &RenderSettings) -> Frame {
     let mut renderer = Renderer::new(gpu(), scene);
     renderer.render(settings).expect("render")

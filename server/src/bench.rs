@@ -289,7 +289,7 @@ pub(crate) fn render_reference(
         bounces,
         seed: 0,
         glossy_exponent: args.glossy_exponent,
-        emitters: settings.gi.emitters && settings.gi.method.lights_from_emitters(),
+        emitters: settings.gi.reference_emitters(),
     };
     // Small calls keep each submission short (lavapipe drops long ones) and show progress.
     let per_call = 4;

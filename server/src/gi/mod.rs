@@ -152,6 +152,13 @@ impl GiSettings {
             ..Self::default()
         }
     }
+
+    /// Whether a reference this frame is compared with lets emissive surfaces light the
+    /// scene: only when the method lights from them too and `emitters` is on, so that both
+    /// see the same light sources.
+    pub fn reference_emitters(&self) -> bool {
+        self.emitters && self.method.lights_from_emitters()
+    }
 }
 
 /// A setting a method cannot use, naming its field (as the renderer's settings name it).

@@ -369,8 +369,7 @@ impl Loop {
             method,
             spp,
             bounces: asked.bounces,
-            // The same light sources: emitters only for a method that lights from them.
-            emitters: asked.emitters && asked.method.lights_from_emitters(),
+            emitters: asked.reference_emitters(),
             glossy_exponent: asked.glossy_exponent,
             ..crate::gi::GiSettings::default()
         };

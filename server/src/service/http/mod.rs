@@ -347,6 +347,14 @@ pub fn too_large(limit: u64, flag: &str) -> ApiError {
     )
 }
 
+/// The body length a request's `Content-Length` declares, if it is a number.
+fn declared_length(headers: &header::HeaderMap) -> Option<u64> {
+    headers
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse().ok())
+}
+
 /// Refuses a body whose declared length is over its limit before reading any of it, so an
 /// `Expect: 100-continue` client gets 413 at once instead of `100 Continue` (hyper sends that
 /// only when a handler starts reading the body).
@@ -355,11 +363,7 @@ async fn check_declared_length(
     request: Request,
     next: Next,
 ) -> Response {
-    let declared = request
-        .headers()
-        .get(header::CONTENT_LENGTH)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.parse::<u64>().ok());
+    let declared = declared_length(request.headers());
     let (limit, flag) = body_limit(&state.limits, &request);
     match declared {
         Some(length) if length > limit => too_large(limit, flag).into_response(),
@@ -373,11 +377,7 @@ async fn check_declared_length(
 async fn json_errors(request: Request, next: Next) -> Response {
     let headers = request.headers();
     let has_body = headers.contains_key(header::TRANSFER_ENCODING)
-        || headers
-            .get(header::CONTENT_LENGTH)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.parse::<u64>().ok())
-            .is_some_and(|length| length > 0);
+        || declared_length(headers).is_some_and(|length| length > 0);
     let mut response = as_json_error(next.run(request).await).await;
     let status = response.status();
     if has_body && (status.is_client_error() || status.is_server_error()) {

@@ -399,7 +399,7 @@ function negotiate(hello) {
 
 /**
  * Session parameters of a new viewer: `?scene=&method=&view=&rsm=&fps=&scale=&codec=&interactive=`
- * may preset them.
+ * may preset them, and `?gi.NAME=VALUE` any GI parameter `/v1/server` lists.
  */
 function initialParams() {
   const q = new URLSearchParams(location.search);
@@ -412,6 +412,14 @@ function initialParams() {
   if (q.has('method')) render.gi.method = q.get('method');
   if (q.has('view')) render.view = q.get('view');
   if (q.has('rsm')) render.gi.rsm_size = Number(q.get('rsm'));
+  // `?gi.surfel_links=16`: numbers and true/false as such, anything else as text; what the
+  // server refuses is named and left to its default like any other preset.
+  for (const [key, value] of q) {
+    if (!key.startsWith('gi.') || key.length === 3) continue;
+    const number = value.trim() === '' ? NaN : Number(value);
+    render.gi[key.slice(3)] = value === 'true' ? true : value === 'false' ? false
+      : Number.isFinite(number) ? number : value;
+  }
   // While the view moves, frames at half the size (upscaled here) unless `?interactive=`;
   // a number out of range is the server's to refuse, naming the field.
   let interactive = 0.5;

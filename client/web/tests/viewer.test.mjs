@@ -224,6 +224,42 @@ async function withoutWebCodecs(browser) {
   }
 }
 
+/**
+ * Surfels preset from the address with small parameters (its precomputation takes seconds, not
+ * the software defaults' half minute): the links precompute with progress on the scene line,
+ * the method's parameters and stages show, and its debug view streams.
+ */
+async function surfels(browser) {
+  const context = await browser.newContext({ viewport: { width: 480, height: 360 } });
+  const page = await context.newPage();
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(e.message));
+  try {
+    await step('surfels preset from the address precompute, shade and show their parameters', async () => {
+      await page.goto(`${base}/?method=surfels&scale=0.5&fps=10&gi.surfel_count=1024&gi.surfel_links=16&gi.bounces=2`);
+      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+      const gi = (await pageSession(page)).params.render.gi;
+      assert.deepEqual([gi.method, gi.surfel_count, gi.surfel_links, gi.bounces], ['surfels', 1024, 16, 2],
+        'the address presets the GI parameters');
+      assert.equal(await page.inputValue('[data-field="render.gi.surfel_links"]'), '16', 'the panel shows the preset');
+      assert.ok(await page.locator('[data-field="render.gi.sh_bands"]').isVisible(), 'surfels show their SH bands');
+      assert.ok(!(await page.locator('[data-field="render.gi.rsm_size"]').isVisible()), 'surfels hide RSM parameters');
+      await page.waitForFunction(() => /[\d,]+ surfel links \(/.test(document.getElementById('scene-state').textContent),
+        null, { timeout: PATIENCE_MS });
+      await page.waitForSelector('#stage-rows tr[data-stage="surfel_bounce"]', { timeout: PATIENCE_MS });
+      await page.waitForSelector('#stage-rows tr[data-stage="surfel_shade"]', { timeout: PATIENCE_MS });
+    });
+    await step('the surfels debug view streams', async () => {
+      const diff = await changeAfter(page, () => page.selectOption('[data-field="render.view"]', 'surfels'), 'the surfels view');
+      assert.ok(diff > 4, `the surfels view looks like the frame: ${diff.toFixed(2)}`);
+      assert.deepEqual(errors, [], 'no page errors');
+    });
+  } finally {
+    await page.close({ runBeforeUnload: true });
+    await context.close();
+  }
+}
+
 async function main() {
   await mkdir(artifacts, { recursive: true });
   const browser = await chromium.launch({ executablePath, args: CHROMIUM_ARGS, headless: true });
@@ -536,6 +572,7 @@ async function main() {
       throw new Error(`session ${id} is left after the page closed`);
     });
     await withoutWebCodecs(browser);
+    await surfels(browser);
     await apiPage(browser);
     if (process.env.LIGHTCAST_AUTH_URL) await withAuth(browser, process.env.LIGHTCAST_AUTH_URL, process.env.LIGHTCAST_AUTH_TOKEN);
   } catch (e) {

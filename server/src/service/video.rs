@@ -402,6 +402,33 @@ mod tests {
         }
     }
 
+    /// The widest, shortest frame that gets several threads (9 macroblock rows) has room for
+    /// two rate-control row groups, not sixteen slices: OpenH264 lowers the count and encodes.
+    #[test]
+    fn a_frame_too_short_for_its_slices_gets_fewer() {
+        let (w, h) = (3840, 144);
+        assert!(software::threads_for(u64::from(w * h), 16) >= 2);
+        let cfg = VideoConfig {
+            threads: 4,
+            ..config(w, h)
+        };
+        let mut stream = VideoStream::default();
+        let mut decoder = Decoder::new().expect("decoder");
+        for t in 0..3 {
+            let input = frame(w, h, t);
+            let unit = stream
+                .encode(EncoderKind::OpenH264, cfg, &input, false)
+                .expect("encodes");
+            let n = slices(&unit.data);
+            assert!((2..16).contains(&n), "frame {t}: {n} slices");
+            let p = psnr(
+                &decoded_luma(&mut decoder, &unit.data, w, h),
+                &luma_rows(&input),
+            );
+            assert!(p > 35.0, "frame {t}: PSNR {p:.1} dB");
+        }
+    }
+
     /// Reads an H.264 bit string (emulation-prevention bytes already removed).
     struct Bits<'a> {
         bytes: &'a [u8],

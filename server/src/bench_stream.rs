@@ -1031,7 +1031,7 @@ impl StreamBenchReport {
     /// the targets.
     pub fn markdown(&self) -> String {
         let mut s = format!(
-            "Scene `{}` ({} triangles), GI {}, shadow map {}², exposure {}; the camera {}, {} frames at {} fps nominal ({:.1} s of the path). Adapter {}, {:?}; {} CPU threads. Every decoded frame is compared with the lossless RGBA8 frame: PSNR over RGB (mean and minimum over the frames), mean FLIP error ({}). JPEG: `jpeg-encoder` (4:2:0 below quality 90, 4:4:4 from 90), one frame at a time. H.264: OpenH264, constrained baseline, low complexity, one slice per thread ({}), max QP {}, keyframe interval {}, one stateful stream per setting fed the frames in order (its first frame is the keyframe), decoded by OpenH264's decoder and converted back with nearest chroma. Bytes per second: mean bytes per frame × {} fps. Encode ms: the encode call alone.\n",
+            "Scene `{}` ({} triangles), GI {}, shadow map {}², exposure {}; the camera {}, {} frames at {} fps nominal ({:.1} s of the path). Adapter {}, {:?}; {} CPU threads. Every decoded frame is compared with the lossless RGBA8 frame: PSNR over RGB (mean and minimum over the frames), mean FLIP error ({}). JPEG: `jpeg-encoder` (4:2:0 below quality 90, 4:4:4 from 90), one frame at a time. H.264: OpenH264, constrained baseline, low complexity without pre-analysis, threads × slices per frame ({}), max QP {}, keyframe interval {}, one stateful stream per setting fed the frames in order (its first frame is the keyframe), decoded by OpenH264's decoder and converted back with nearest chroma. Bytes per second: mean bytes per frame × {} fps. Encode ms: the encode call alone.\n",
             self.scene,
             self.triangles,
             self.gi,
@@ -1051,7 +1051,13 @@ impl StreamBenchReport {
             },
             self.sizes
                 .iter()
-                .map(|s| format!("{}×{}: {}", s.width, s.height, s.h264_threads))
+                .map(|s| format!(
+                    "{}×{}: {} × {}",
+                    s.width,
+                    s.height,
+                    s.h264_threads,
+                    crate::service::video::slices_for(s.h264_threads)
+                ))
                 .collect::<Vec<_>>()
                 .join(", "),
             self.max_qp,

@@ -12,6 +12,7 @@ use crate::passes::yuv420::Yuv420;
 use lightcast_protocol::{Codec, Encoding};
 
 mod software;
+pub use software::slices_for;
 
 /// The codecs a session's frames can be encoded in (`encoding.codec`).
 pub const STREAM_CODECS: &[Codec] = &[Codec::Jpeg, Codec::Png, Codec::H264];

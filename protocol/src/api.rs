@@ -981,8 +981,9 @@ pub struct VideoInfo {
     pub hardware: bool,
     /// Bits per pixel per frame of an automatic bitrate (`encoding.bitrate_kbps: null`).
     pub auto_bits_per_pixel: f64,
-    /// Threads (and slices) one stream's encoder uses for frames of 1920×1080 on this
-    /// machine: one per about half a megapixel, at most the CPUs.
+    /// Threads one stream's encoder uses for frames of 1920×1080 on this machine: one per
+    /// about half a megapixel, at most the CPUs and OpenH264's four; with several, each frame
+    /// is four slices per thread.
     pub threads_1080p: u16,
 }
 

@@ -370,34 +370,38 @@ mod tests {
             .count()
     }
 
+    /// Streams `frames` frames of `w`×`h` on `threads` encoder threads through OpenH264's
+    /// decoder: each access unit's slice count and luma PSNR.
+    fn sliced_stream(w: u32, h: u32, threads: u16, frames: u32) -> Vec<(usize, f64)> {
+        let cfg = VideoConfig {
+            threads,
+            ..config(w, h)
+        };
+        let mut stream = VideoStream::default();
+        let mut decoder = Decoder::new().expect("decoder");
+        (0..frames)
+            .map(|t| {
+                let input = frame(w, h, t);
+                let unit = stream
+                    .encode(EncoderKind::OpenH264, cfg, &input, false)
+                    .expect("encodes");
+                let p = psnr(
+                    &decoded_luma(&mut decoder, &unit.data, w, h),
+                    &luma_rows(&input),
+                );
+                (slices(&unit.data), p)
+            })
+            .collect()
+    }
+
     /// With several threads each frame has four slices per thread, and decodes as well as one
     /// slice. (OpenH264 gives each slice at least one rate-control group of 2–4 macroblock
     /// rows and lowers the count for frames too small for that: 320×384 fits 12.)
     #[test]
     fn threaded_streams_are_sliced_and_decode() {
-        let (w, h) = (320, 384);
-        for threads in [1, 3] {
-            let cfg = VideoConfig {
-                threads,
-                ..config(w, h)
-            };
-            let mut stream = VideoStream::default();
-            let mut decoder = Decoder::new().expect("decoder");
-            for t in 0..6 {
-                let input = frame(w, h, t);
-                let unit = stream
-                    .encode(EncoderKind::OpenH264, cfg, &input, false)
-                    .expect("encodes");
-                let expected = if threads == 1 {
-                    1
-                } else {
-                    4 * usize::from(threads)
-                };
-                assert_eq!(slices(&unit.data), expected, "frame {t}");
-                let p = psnr(
-                    &decoded_luma(&mut decoder, &unit.data, w, h),
-                    &luma_rows(&input),
-                );
+        for (threads, expected) in [(1, 1), (3, 12)] {
+            for (t, (n, p)) in sliced_stream(320, 384, threads, 6).into_iter().enumerate() {
+                assert_eq!(n, expected, "{threads} threads, frame {t}");
                 assert!(p > 35.0, "{threads} threads, frame {t}: PSNR {p:.1} dB");
             }
         }
@@ -409,23 +413,8 @@ mod tests {
     fn a_frame_too_short_for_its_slices_gets_fewer() {
         let (w, h) = (3840, 144);
         assert!(software::threads_for(u64::from(w * h), 16) >= 2);
-        let cfg = VideoConfig {
-            threads: 4,
-            ..config(w, h)
-        };
-        let mut stream = VideoStream::default();
-        let mut decoder = Decoder::new().expect("decoder");
-        for t in 0..3 {
-            let input = frame(w, h, t);
-            let unit = stream
-                .encode(EncoderKind::OpenH264, cfg, &input, false)
-                .expect("encodes");
-            let n = slices(&unit.data);
+        for (t, (n, p)) in sliced_stream(w, h, 4, 3).into_iter().enumerate() {
             assert!((2..16).contains(&n), "frame {t}: {n} slices");
-            let p = psnr(
-                &decoded_luma(&mut decoder, &unit.data, w, h),
-                &luma_rows(&input),
-            );
             assert!(p > 35.0, "frame {t}: PSNR {p:.1} dB");
         }
     }

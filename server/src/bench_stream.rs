@@ -922,13 +922,13 @@ pub fn run(
         scene.name,
         scene.triangle_count()
     ));
-    let data = args
-        .caches
-        .precompute(args.gi, &scene, log)?
-        .map(|b| b.data);
     let ctx = GpuContext::new(args.backend)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
     log(&format!("adapter: {adapter}"));
+    let data = args
+        .caches
+        .precompute(args.gi, &scene, Some(&ctx), log)?
+        .map(|b| b.data);
     let base = RenderSettings {
         width: TARGET_SIZE.width,
         height: TARGET_SIZE.height,

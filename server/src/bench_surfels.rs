@@ -232,6 +232,7 @@ pub fn run(
         truths.push(image.indirect);
     }
     let (name, triangles) = (scene.name.clone(), scene.triangle_count());
+    let gpu = ctx.clone();
     let mut renderer = Renderer::new(ctx, scene.clone());
     let timing_source = renderer.timing_source();
     // Precomputed afresh (this store is never read): the bench measures the build.
@@ -251,6 +252,7 @@ pub fn run(
             store: &store,
             progress: &mut |p| progress(p.done, p.total, &format!("{what}: {}", p.step)),
             cancelled: &|| false,
+            gpu: Some(&gpu),
         };
         let set = surfels::precompute(&scene, &params, &mut env)
             .map_err(|e| BenchError::Surfels(e.to_string()))?;

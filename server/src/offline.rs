@@ -99,11 +99,13 @@ pub struct CacheArgs {
 
 impl CacheArgs {
     /// Builds what frames of `method` precompute per scene (loading it from the store where
-    /// it is there), logging progress and how long it took; `None` for methods without.
+    /// it is there, using `gpu` where the build can), logging progress and how long it took;
+    /// `None` for methods without.
     pub fn precompute(
         &self,
         method: GiMethod,
         scene: &Scene,
+        gpu: Option<&GpuContext>,
         log: &mut dyn FnMut(&str),
     ) -> Result<Option<Built>, PrecomputeError> {
         let Some(entry) = precompute::entry_for(method) else {
@@ -140,6 +142,7 @@ impl CacheArgs {
             store: &store,
             progress: &mut progress,
             cancelled: &|| false,
+            gpu,
         };
         let built = (entry.build)(scene, &key, &mut env).map_err(|message| PrecomputeError {
             what: entry.label,
@@ -169,7 +172,7 @@ impl CacheArgs {
         scene: &Scene,
         log: &mut dyn FnMut(&str),
     ) -> Result<Arc<CacheSet>, PrecomputeError> {
-        let built = self.precompute(GiMethod::Lightskin, scene, log)?;
+        let built = self.precompute(GiMethod::Lightskin, scene, None, log)?;
         built
             .and_then(|b| b.data.downcast::<CacheSet>().ok())
             .ok_or_else(|| PrecomputeError {
@@ -473,7 +476,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let setup_start = Instant::now();
     let data = args
         .caches
-        .precompute(args.gi, &scene, log)?
+        .precompute(args.gi, &scene, Some(&ctx), log)?
         .map(|b| b.data);
     let mut renderer = Renderer::new(ctx, scene);
     if let Some(data) = &data {

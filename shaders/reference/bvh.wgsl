@@ -79,8 +79,19 @@ fn bvh_triangle(i: u32, origin: vec3<f32>, dir: vec3<f32>, best: ptr<function, R
     }
 }
 
-// The nearest unmasked hit with t in (0, t_max): nearer child first, the other on a stack.
+// The nearest unmasked hit with t in (0, t_max).
 fn trace(origin: vec3<f32>, dir: vec3<f32>, t_max: f32) -> RayHit {
+    return bvh_traverse(origin, dir, t_max, false);
+}
+
+// Whether any unmasked triangle lies on the ray with t in (0, t_max): a shadow ray, which
+// stops at the first hit (`SceneBvh::occluded`).
+fn occluded(origin: vec3<f32>, dir: vec3<f32>, t_max: f32) -> bool {
+    return bvh_traverse(origin, dir, t_max, true).triangle != NO_HIT;
+}
+
+// Nearer child first, the other on a stack; with `any_hit`, the first hit found ends it.
+fn bvh_traverse(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, any_hit: bool) -> RayHit {
     var best = RayHit(t_max, NO_HIT, vec2<f32>(0.0));
     if arrayLength(&bvh_nodes) == 0u {
         return best;
@@ -95,6 +106,9 @@ fn trace(origin: vec3<f32>, dir: vec3<f32>, t_max: f32) -> RayHit {
         if n.prim_count > 0u {
             for (var i = n.first_index; i < n.first_index + n.prim_count; i++) {
                 bvh_triangle(i, origin, dir, &best);
+            }
+            if any_hit && best.triangle != NO_HIT {
+                break;
             }
         } else {
             let a = n.first_index;

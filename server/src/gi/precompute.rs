@@ -321,6 +321,9 @@ pub struct BuildEnv<'a> {
     /// between chunks of work and gives up (the surfels' do; the light caches and the BVH run
     /// to the end).
     pub cancelled: &'a dyn Fn() -> bool,
+    /// The adapter, for a build that can trace or compute on it (the surfels' link rays);
+    /// without one such builds run on the CPU.
+    pub gpu: Option<&'a crate::gpu::GpuContext>,
 }
 
 /// The precomputation frames of `method` need, if any.

@@ -283,6 +283,12 @@ pub const SURFEL_CACHE_SH_VIEW: ShaderSource = ShaderSource {
     ],
 };
 
+/// Eq. 3's visibility rays of the surfels' links, from caches to surfels (precomputation).
+pub const SURFEL_LINK_RAYS: ShaderSource = ShaderSource {
+    name: "surfel_link_rays",
+    files: &[wgsl!("reference/bvh.wgsl"), wgsl!("surfels/link_rays.wgsl")],
+};
+
 /// Every pass module; tests validate each with naga.
 pub const ALL: &[&ShaderSource] = &[
     &GBUFFER,
@@ -315,6 +321,7 @@ pub const ALL: &[&ShaderSource] = &[
     &SURFEL_CACHE_LIGHT,
     &SURFEL_SHADE,
     &SURFEL_CACHE_SH_VIEW,
+    &SURFEL_LINK_RAYS,
 ];
 
 impl ShaderSource {
@@ -432,7 +439,7 @@ mod tests {
             val_select,
         };
         use crate::gi::reference::{self, resolve};
-        use crate::gi::surfels::passes as surfels;
+        use crate::gi::surfels::{link_rays, passes as surfels};
         use crate::passes::bind::{wgsl_mismatches, BindGroupDesc};
         use crate::passes::{
             direct_light, exposure, gbuffer, indirect_resolution, rsm, scene_buffers, shadow_map,
@@ -481,6 +488,10 @@ mod tests {
             (&SURFEL_CACHE_LIGHT, &[&surfels::CACHE_LIGHT_GROUP]),
             (&SURFEL_SHADE, &[&surfels::SHADE_GROUP]),
             (&SURFEL_CACHE_SH_VIEW, &[&surfels::SH_VIEW_GROUP]),
+            (
+                &SURFEL_LINK_RAYS,
+                &[&link_rays::RAY_GROUP, &link_rays::BVH_GROUP],
+            ),
         ];
         let errors: Vec<String> = passes
             .iter()

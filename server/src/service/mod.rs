@@ -94,7 +94,7 @@ impl Service {
             dir: args.cache_dir.clone().unwrap_or_else(Store::default_dir),
             max_bytes: Some(args.cache_max_bytes),
         };
-        let scenes = scenes::SceneRegistry::new(store, &limits);
+        let scenes = scenes::SceneRegistry::new(store, &limits, Some(ctx.clone()));
         let spec = args.default_scene.clone();
         let started = Instant::now();
         let scene = tokio::task::spawn_blocking(move || Scene::open(&spec))

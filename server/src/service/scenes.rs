@@ -9,6 +9,7 @@ use crate::gi::precompute::{
     self, BudgetPool, BuildEnv, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts,
     Store, UnitBudget,
 };
+use crate::gpu::GpuContext;
 use crate::scene::default_light::{default_camera, default_light};
 use crate::scene::Scene;
 use lightcast_protocol::{
@@ -427,9 +428,12 @@ pub struct SceneRegistry {
 }
 
 impl SceneRegistry {
-    /// Starts the precompute worker (one thread; a precomputation may use rayon).
-    pub fn new(store: Store, limits: &Limits) -> Arc<Self> {
-        Self::with_worker(limits, move |entry, key| precompute(&store, entry, key))
+    /// Starts the precompute worker (one thread; a precomputation may use rayon, and `gpu`
+    /// where it can).
+    pub fn new(store: Store, limits: &Limits, gpu: Option<GpuContext>) -> Arc<Self> {
+        Self::with_worker(limits, move |entry, key| {
+            precompute(&store, gpu.as_ref(), entry, key)
+        })
     }
 
     /// [`SceneRegistry::new`] with `work` run on the worker thread for each queued job.
@@ -633,7 +637,12 @@ impl SceneRegistry {
 
 /// Runs on the precompute worker: loads or computes one precomputation and records the
 /// outcome.
-fn precompute(store: &Store, scene: &Arc<SceneEntry>, key: &PrecomputeKey) {
+fn precompute(
+    store: &Store,
+    gpu: Option<&GpuContext>,
+    scene: &Arc<SceneEntry>,
+    key: &PrecomputeKey,
+) {
     let update = |f: &mut dyn FnMut(&mut Variant)| scene.update_variant(key, f);
     // Held by nobody but this worker: the scene was deleted (and no request renders it any
     // more), or it was a one-shot render's upload whose request has ended.
@@ -661,6 +670,7 @@ fn precompute(store: &Store, scene: &Arc<SceneEntry>, key: &PrecomputeKey) {
         store,
         progress: &mut progress,
         cancelled: &cancelled,
+        gpu,
     };
     let result = (entry.build)(&scene.scene, key, &mut env).and_then(|built| {
         scene.hold_built(entry, key, built.units)?;
@@ -986,7 +996,7 @@ mod tests {
     #[test]
     fn the_bvh_is_built_on_the_worker_and_listed_with_the_light_caches() {
         let store = tempfile::tempdir().expect("temp dir");
-        let registry = SceneRegistry::new(Store::new(store.path()), &limits(4));
+        let registry = SceneRegistry::new(Store::new(store.path()), &limits(4), None);
         let entry = registry
             .insert(procedural::cornell_box(), "t".into(), None, 0.0, None)
             .expect("fits");

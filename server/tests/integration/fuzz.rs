@@ -226,7 +226,7 @@ fn cornell_entry() -> std::sync::Arc<lightcast_server::service::scenes::SceneEnt
         .expect("the Cornell box loads");
     // No light caches are queued for a detached scene: the store is never written.
     let store = Store::new(std::env::temp_dir().join("lightcast-fuzz-unused"));
-    SceneRegistry::new(store, &default_limits())
+    SceneRegistry::new(store, &default_limits(), None)
         .detached(scene, 0.0)
         .expect("the Cornell box is within the default budgets")
 }

@@ -40,6 +40,7 @@ fn surfel_set(scene: &Scene, params: &SurfelParams) -> SurfelSet {
         store: &store,
         progress: &mut |_| {},
         cancelled: &|| false,
+        gpu: None,
     };
     surfels::precompute(scene, params, &mut env).expect("surfel set")
 }

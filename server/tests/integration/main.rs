@@ -14,6 +14,7 @@ mod gpu_indirect_resolution;
 mod gpu_reference;
 mod gpu_scenes;
 mod gpu_stream_bench;
+mod gpu_surfel_links;
 mod gpu_surfels;
 mod gpu_yuv420;
 mod render_cli;

@@ -21,6 +21,7 @@
 pub mod cpu;
 pub mod grid;
 pub mod hierarchy;
+pub mod link_rays;
 pub mod links;
 pub mod passes;
 pub mod sampling;
@@ -325,6 +326,7 @@ pub fn precompute(
         &positions,
         params.links,
         params.bands,
+        links::RayDevice::for_adapter(env.gpu),
         &mut |done, total| {
             progress(Progress {
                 step: "links",
@@ -811,6 +813,7 @@ pub(crate) mod test_scenes {
             store: &store,
             progress: &mut |_| {},
             cancelled: &|| false,
+            gpu: None,
         };
         super::precompute(scene, params, &mut env).expect("surfel set")
     }
@@ -829,6 +832,7 @@ mod tests {
             store: &store,
             progress: &mut |p: Progress| steps.push(p.step),
             cancelled: &|| false,
+            gpu: None,
         };
         let set = precompute(scene, params, &mut env);
         if set.is_ok() {
@@ -936,6 +940,7 @@ mod tests {
                 }
             },
             cancelled: &|| false,
+            gpu: None,
         };
         let set = precompute(&scene, &SurfelParams::default(), &mut env).expect("set");
         eprintln!(
@@ -1004,6 +1009,7 @@ mod tests {
             store: &store,
             progress: &mut |_| {},
             cancelled: &|| true,
+            gpu: None,
         };
         assert_eq!(
             precompute(&scene, &SurfelParams::default(), &mut env).err(),

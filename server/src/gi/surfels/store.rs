@@ -430,6 +430,7 @@ mod tests {
                 store: &store,
                 progress: &mut |_| {},
                 cancelled: &|| false,
+                gpu: None,
             };
             load_or_compute(&store, scene, &params(), &mut env).expect("built")
         };

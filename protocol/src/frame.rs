@@ -110,8 +110,10 @@ stages! {
     GbufferReduce => "gbuffer_reduce",
     /// Indirect light brought back to the output's resolution (`indirect_downscale`).
     IndirectUpsample => "indirect_upsample",
-    /// The bounces a frame adds: surfel radiosity, flux pull-up and cache lighting (`surfels`).
-    SurfelBounce => "surfel_bounce",
+    /// Every surfel's radiosity from the light, its emission and the previous bounce
+    /// (`surfels`, per bounce a frame adds). Index 22 was `surfel_bounce` (this and the next
+    /// two together) until 2026-11-27.
+    SurfelLight => "surfel_light",
     /// Per-pixel indirect light from the SH caches (`surfels`).
     SurfelShade => "surfel_shade",
     /// One paraboloid depth map per VAL (`cssm`) or per VPL (`vpl_shadows`) (`clustered`).
@@ -120,6 +122,10 @@ stages! {
     CssmBasis => "cssm_basis",
     /// The 8-bit output converted to Y'CbCr 4:2:0 for the video encoder (`h264` streams).
     Yuv420 => "yuv420",
+    /// Surfel flux pulled up the hierarchy, one dispatch per level (`surfels`).
+    SurfelPull => "surfel_pull",
+    /// Every SH cache's radiance over its links, eq. 4 (`surfels`).
+    SurfelCacheLight => "surfel_cache_light",
 }
 
 impl Stage {

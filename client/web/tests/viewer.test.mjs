@@ -246,7 +246,7 @@ async function surfels(browser) {
       assert.ok(!(await page.locator('[data-field="render.gi.rsm_size"]').isVisible()), 'surfels hide RSM parameters');
       await page.waitForFunction(() => /[\d,]+ surfel links \(/.test(document.getElementById('scene-state').textContent),
         null, { timeout: PATIENCE_MS });
-      // Every frame shades; `surfel_bounce` only shows in the frames that add a bounce (the
+      // Every frame shades; `surfel_light` and the other bounce stages only show in the frames that add a bounce (the
       // first two here), too briefly to wait for.
       await page.waitForSelector('#stage-rows tr[data-stage="surfel_shade"]', { timeout: PATIENCE_MS });
     });

@@ -24,8 +24,10 @@ pub struct StageTiming {
     pub ms: f64,
 }
 
-/// Most stages a frame may time; a frame that names more is a programming error caught in tests.
-const MAX_STAGES: u32 = 32;
+/// Most stages a frame may time, a repeated one counted each time (a `surfels` render adds up
+/// to 16 bounces of three stages); a frame that names more is a programming error caught in
+/// tests.
+const MAX_STAGES: u32 = 64;
 
 /// Query storage reused from frame to frame.
 pub struct FrameTimer {
@@ -80,23 +82,38 @@ pub struct TimingsMap {
 }
 
 impl TimingsMap {
-    /// The stage times, in order, once the GPU work they time has finished (the caller polled).
+    /// The stage times, in the order each stage first ran, once the GPU work they time has
+    /// finished (the caller polled).
     pub fn finish(self) -> Result<Vec<StageTiming>, GpuError> {
         let Some((map, period_ns)) = self.map else {
-            return Ok(self.ready);
+            return Ok(sum_repeated(self.ready));
         };
         let bytes = map.finish()?;
         let ticks: &[u64] = bytemuck::cast_slice(&bytes);
-        Ok(self
-            .names
-            .iter()
-            .enumerate()
-            .map(|(i, &stage)| StageTiming {
-                stage,
-                ms: ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns / 1e6,
-            })
-            .collect())
+        Ok(sum_repeated(
+            self.names
+                .iter()
+                .enumerate()
+                .map(|(i, &stage)| StageTiming {
+                    stage,
+                    ms: ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns / 1e6,
+                })
+                .collect(),
+        ))
     }
+}
+
+/// One entry per stage: a stage that ran several times in a frame (a bounce each) reports the
+/// sum, where it first ran, so frame headers and tables name each stage once.
+fn sum_repeated(timings: Vec<StageTiming>) -> Vec<StageTiming> {
+    let mut summed: Vec<StageTiming> = Vec::with_capacity(timings.len());
+    for t in timings {
+        match summed.iter_mut().find(|s| s.stage == t.stage) {
+            Some(s) => s.ms += t.ms,
+            None => summed.push(t),
+        }
+    }
+    summed
 }
 
 impl FrameTimer {
@@ -237,5 +254,32 @@ impl FrameStages<'_> {
             },
             self.submitted,
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_repeated_stage_reports_its_sum_where_it_first_ran() {
+        let t = |stage, ms| StageTiming { stage, ms };
+        let frame = vec![
+            t(Stage::ShadowMap, 1.0),
+            t(Stage::SurfelLight, 2.0),
+            t(Stage::SurfelPull, 0.5),
+            t(Stage::SurfelLight, 3.0),
+            t(Stage::SurfelPull, 0.25),
+            t(Stage::SurfelShade, 4.0),
+        ];
+        assert_eq!(
+            sum_repeated(frame),
+            vec![
+                t(Stage::ShadowMap, 1.0),
+                t(Stage::SurfelLight, 5.0),
+                t(Stage::SurfelPull, 0.75),
+                t(Stage::SurfelShade, 4.0),
+            ]
+        );
     }
 }

@@ -254,10 +254,17 @@ fn bounces_follow_the_cpu_in_one_render_and_one_per_session_frame() {
 
     let three = settings_for(&scene, 3);
     let frame = renderer.render(&three).expect("render");
-    assert!(frame
-        .timings
-        .iter()
-        .any(|t| t.stage == lightcast_protocol::Stage::SurfelBounce));
+    // The paper's per-stage rows, each once: the three bounces' times are summed.
+    use lightcast_protocol::Stage;
+    for stage in [
+        Stage::SurfelLight,
+        Stage::SurfelPull,
+        Stage::SurfelCacheLight,
+        Stage::SurfelShade,
+    ] {
+        let times = frame.timings.iter().filter(|t| t.stage == stage).count();
+        assert_eq!(times, 1, "{stage} in {:?}", frame.timings);
+    }
     let read = cache_light(&renderer, None);
     assert_eq!(read.bounces, 3, "a render computes every bounce");
     for (i, (got, want)) in vec3s(&read.coefficients).iter().zip(&cpu_light).enumerate() {
@@ -277,7 +284,7 @@ fn bounces_follow_the_cpu_in_one_render_and_one_per_session_frame() {
         let bounced = frame
             .timings
             .iter()
-            .any(|t| t.stage == lightcast_protocol::Stage::SurfelBounce);
+            .any(|t| t.stage == Stage::SurfelCacheLight);
         assert_eq!(bounced, frame_index <= 3, "frame {frame_index}");
     }
     let session = cache_light(&renderer, Some(7));

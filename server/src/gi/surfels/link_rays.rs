@@ -45,8 +45,9 @@ bind_group! {
     }
 }
 
-/// Rays per submission on a GPU: a few milliseconds of work there, and 2 MiB of bits.
-const GPU_BATCH_RAYS: u64 = 1 << 24;
+/// Rays per submission on a GPU: 512 KiB of bits, and short enough (milliseconds) that the
+/// frames of sessions sharing the queue are not held up behind a batch for long.
+const GPU_BATCH_RAYS: u64 = 1 << 22;
 /// Rays per submission on a CPU adapter: lavapipe silently drops work of a submission that runs
 /// longer than about 2.8 s, and traces a few million of these rays a second on two cores.
 const CPU_ADAPTER_BATCH_RAYS: u64 = 1 << 20;

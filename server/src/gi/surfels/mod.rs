@@ -685,32 +685,34 @@ impl Surfels {
         } else {
             u32::from(history.done < wanted)
         };
-        if steps > 0 {
-            stages.stage(Stage::SurfelBounce, |e| {
-                for _ in 0..steps {
-                    let previous = (history.done > 0).then_some(history.latest);
-                    let target = if history.done > 0 {
-                        1 - history.latest
-                    } else {
-                        0
-                    };
-                    passes.encode_light(
-                        device,
-                        e,
-                        set,
-                        &Bounce {
-                            light: &r.light,
-                            shadow: frame.shadow,
-                            previous: previous.map(|i| &history.buffers[i]),
-                            emitters: frame.settings.emitters,
-                        },
-                    );
-                    passes.encode_pull(device, e, set);
-                    passes.encode_cache_light(device, e, set, &history.buffers[target]);
-                    history.latest = target;
-                    history.done += 1;
-                }
+        // The paper's rows (surfel lighting, pull, cache lighting) are timed apart; a frame that
+        // adds several bounces reports each stage's sum.
+        for _ in 0..steps {
+            let previous = (history.done > 0).then_some(history.latest);
+            let target = if history.done > 0 {
+                1 - history.latest
+            } else {
+                0
+            };
+            stages.stage(Stage::SurfelLight, |e| {
+                passes.encode_light(
+                    device,
+                    e,
+                    set,
+                    &Bounce {
+                        light: &r.light,
+                        shadow: frame.shadow,
+                        previous: previous.map(|i| &history.buffers[i]),
+                        emitters: frame.settings.emitters,
+                    },
+                )
             })?;
+            stages.stage(Stage::SurfelPull, |e| passes.encode_pull(device, e, set))?;
+            stages.stage(Stage::SurfelCacheLight, |e| {
+                passes.encode_cache_light(device, e, set, &history.buffers[target])
+            })?;
+            history.latest = target;
+            history.done += 1;
         }
         stages.stage(Stage::SurfelShade, |e| {
             passes.encode_shade(

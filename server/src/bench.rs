@@ -106,6 +106,35 @@ pub struct BenchArgs {
     pub exposure: ExposureArg,
     #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
     pub backend: BackendChoice,
+    /// How stages are timed: `gpu` (timestamp queries between stages), `wall` (each stage
+    /// submitted and waited for, timed by the CPU clock) or `auto` (`wall` on a CPU adapter,
+    /// whose timestamps put the work of some stages into others: on lavapipe a surfels cache
+    /// lighting of 10⁷ multiply-adds read 0.03 ms; `gpu` elsewhere).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub stage_clock: StageClock,
+}
+
+/// See [`BenchArgs::stage_clock`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum StageClock {
+    Auto,
+    Gpu,
+    Wall,
+}
+
+/// The adapter of `args.backend`, logged, with its stages timed as `args.stage_clock` says.
+pub fn open_adapter(args: &BenchArgs, log: &mut dyn FnMut(&str)) -> Result<GpuContext, BenchError> {
+    let mut ctx = GpuContext::new(args.backend)?;
+    let wall = match args.stage_clock {
+        StageClock::Auto => ctx.info.device_type == wgpu::DeviceType::Cpu,
+        StageClock::Gpu => false,
+        StageClock::Wall => true,
+    };
+    if wall {
+        ctx.timestamps = false;
+    }
+    log(&format!("adapter: {}", AdapterSummary(&ctx.info)));
+    Ok(ctx)
 }
 
 /// Median and 95th percentile of a stage's time.
@@ -603,9 +632,8 @@ pub fn run(
         scene.triangle_count(),
         caches.caches.len()
     ));
-    let ctx = GpuContext::new(args.backend)?;
+    let ctx = open_adapter(args, log)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
-    log(&format!("adapter: {adapter}"));
     let base = base_settings(args, &scene, GiSettings::default());
     let (name, triangles, cache_count) = (
         scene.name.clone(),

@@ -21,7 +21,7 @@ use crate::bench::{
 use crate::gi::clustered::passes::AtlasLayout;
 use crate::gi::clustered::MAX_VISIBILITY_BYTES;
 use crate::gi::{GiMethod, GiSettings};
-use crate::gpu::{context::AdapterSummary, GpuContext};
+use crate::gpu::context::AdapterSummary;
 use crate::offline::DEFAULT_SCENE;
 use crate::quality::{errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
@@ -201,9 +201,8 @@ pub fn run(
         configs.len(),
         base.gi.rsm_size
     ));
-    let ctx = GpuContext::new(args.backend)?;
+    let ctx = crate::bench::open_adapter(args, log)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
-    log(&format!("adapter: {adapter}"));
     let reference = render_reference(&ctx, &scene, &base, args, 1, progress)?;
     log(&format!(
         "reference: {} spp, relative standard error {:.2} %",

@@ -605,6 +605,7 @@ mod tests {
             adapter: "test".into(),
             timing_source: crate::gpu::timing::TimingSource::GpuTimestamps,
             cpu_threads: 2,
+            link_rays_on_gpu: false,
             scene: "t".into(),
             triangles: 1,
             width: 1,

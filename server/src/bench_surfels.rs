@@ -18,7 +18,7 @@ use crate::bench::{render_reference, BenchArgs, BenchError, MethodRow, StageStat
 use crate::gi::precompute::{BuildEnv, Store};
 use crate::gi::surfels::{self, SurfelParams, Surfels};
 use crate::gi::{GiMethod, GiSettings};
-use crate::gpu::{context::AdapterSummary, GpuContext};
+use crate::gpu::context::AdapterSummary;
 use crate::offline::DEFAULT_SCENE;
 use crate::quality::{errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
@@ -102,6 +102,9 @@ pub struct SurfelReport {
     pub timing_source: crate::gpu::timing::TimingSource,
     /// CPU threads the precomputation ran on.
     pub cpu_threads: usize,
+    /// Where the links' rays were traced: on the GPU adapter, or on the CPU for a CPU one
+    /// (`links::RayDevice::for_adapter`).
+    pub link_rays_on_gpu: bool,
     pub scene: String,
     pub triangles: usize,
     pub width: u32,
@@ -201,9 +204,8 @@ pub fn run(
         centre.links,
         centre.bands
     ));
-    let ctx = GpuContext::new(args.backend)?;
+    let ctx = crate::bench::open_adapter(args, log)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
-    log(&format!("adapter: {adapter}"));
     let base = crate::bench::base_settings(
         args,
         &scene,
@@ -331,6 +333,10 @@ pub fn run(
         adapter,
         timing_source,
         cpu_threads: rayon::current_num_threads(),
+        link_rays_on_gpu: matches!(
+            surfels::links::RayDevice::for_adapter(Some(&gpu)),
+            surfels::links::RayDevice::Gpu(_)
+        ),
         scene: name,
         triangles,
         width: args.width,
@@ -400,7 +406,7 @@ impl SurfelReport {
     /// Markdown tables: one row per configuration, then per-stage medians.
     pub fn markdown(&self) -> String {
         let mut s = format!(
-            "Scene `{}` ({} triangles), {}×{}, adapter {}, {:?}, {} frames after {} warm-up under a moving light, caches {} apart, precomputation on {} CPU threads.",
+            "Scene `{}` ({} triangles), {}×{}, adapter {}, {:?}, {} frames after {} warm-up under a moving light, caches {} apart, precomputation on {} CPU threads with the link rays on the {}.",
             self.scene,
             self.triangles,
             self.width,
@@ -410,7 +416,8 @@ impl SurfelReport {
             self.frames,
             self.warmup,
             self.cache_spacing,
-            self.cpu_threads
+            self.cpu_threads,
+            if self.link_rays_on_gpu { "GPU" } else { "CPU" }
         );
         for r in &self.references {
             s += &format!(

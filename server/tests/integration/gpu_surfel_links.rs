@@ -63,7 +63,7 @@ fn gpu_link_rays_agree_with_the_cpu_ray_by_ray() {
     let seen = traced
         .wait(traced.submit(0, &positions))
         .expect("the GPU traced the batch");
-    let epsilon = 1e-5 * senders.extent;
+    let epsilon = senders.ray_offset();
     let (mut rays, mut visible, mut differ) = (0u64, 0u64, 0u64);
     for (c, &p) in positions.iter().enumerate() {
         for (k, s) in set.surfels.iter().enumerate() {

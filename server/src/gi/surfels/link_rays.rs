@@ -223,7 +223,7 @@ impl LinkRays {
             surfels,
             words,
             batch,
-            epsilon: 1e-5 * senders.extent,
+            epsilon: senders.ray_offset(),
         })
     }
 

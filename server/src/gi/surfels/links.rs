@@ -76,6 +76,15 @@ pub struct Senders<'a> {
     pub extent: f32,
 }
 
+impl Senders<'_> {
+    /// How far short of its surfel a link ray stops, and how near a cache a surfel counts as
+    /// at it: far above f32 rounding at the scene's coordinates, far below its features (as
+    /// the reference tracer's ray offset). The CPU and GPU rays use the same.
+    pub fn ray_offset(&self) -> f32 {
+        1e-5 * self.extent
+    }
+}
+
 /// Where the link rays are traced.
 #[derive(Clone, Copy)]
 pub enum RayDevice<'a> {
@@ -231,9 +240,7 @@ fn cache_links(
 ) -> CacheLinks {
     let n = senders.surfels.len();
     let a = senders.area as f32;
-    // Far above f32 rounding at the scene's coordinates, far below its features (as the
-    // reference tracer's ray offset).
-    let epsilon = 1e-5 * senders.extent;
+    let epsilon = senders.ray_offset();
     let samples: Vec<(f32, Vec3)> = senders
         .surfels
         .iter()

@@ -29,6 +29,7 @@ use lightcast_protocol::{Camera, Codec, Encoding, Stage};
 use openh264::decoder::Decoder;
 use openh264::formats::YUVSource;
 use rayon::prelude::*;
+use std::io::Write;
 use std::path::PathBuf;
 use std::str::FromStr;
 use std::time::Instant;
@@ -103,6 +104,12 @@ pub struct StreamBenchArgs {
     /// stop at its end).
     #[arg(long, default_value_t = 12.0)]
     pub path_seconds: f32,
+    /// Also write each size's frames, as H.264 encodes them, to `PREFIX-WIDTHxHEIGHT.yuv`:
+    /// raw planar Y'CbCr 4:2:0 (I420, BT.709 limited range), frame after frame, so another
+    /// encoder can be measured on the same frames (`ffmpeg -f rawvideo -pix_fmt yuv420p -s
+    /// WIDTHxHEIGHT -i FILE …`). 3 MB per 1080p frame.
+    #[arg(long, value_name = "PREFIX")]
+    pub write_yuv: Option<PathBuf>,
     /// Write the results as JSON here (with every frame's bytes, encode time and errors).
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -260,6 +267,11 @@ pub enum StreamBenchError {
         path: PathBuf,
         error: std::io::Error,
     },
+    #[error("writing the frames to {path}: {error}")]
+    WriteYuv {
+        path: PathBuf,
+        error: std::io::Error,
+    },
 }
 
 /// One frame as one codec delivered it.
@@ -267,6 +279,8 @@ pub enum StreamBenchError {
 pub struct FrameSample {
     pub bytes: usize,
     pub encode_ms: f64,
+    /// CPU time of the whole process over the encode call: every encoder thread's.
+    pub encode_cpu_ms: f64,
     /// PSNR of the decoded frame against the lossless one, over RGB.
     pub psnr_db: f64,
     /// Mean FLIP error of the same, on the frames FLIP was measured on.
@@ -286,6 +300,10 @@ pub struct CodecRow {
     pub bytes_per_second: f64,
     /// The encode call alone.
     pub encode: StageStats,
+    /// CPU time per encode call, all encoder threads together: what a frame costs a machine
+    /// of this CPU class whatever its core count.
+    pub encode_cpu: StageStats,
+    pub encode_cpu_mean_ms: f64,
     pub psnr_mean_db: f64,
     pub psnr_min_db: f64,
     /// Mean FLIP error over the frames it was measured on.
@@ -377,6 +395,10 @@ pub struct TargetCheck {
     pub bytes_met: bool,
     pub encode_p95_ms: f64,
     pub encode_met: bool,
+    /// Mean CPU time per frame, all encoder threads.
+    pub encode_cpu_mean_ms: f64,
+    /// Cores of this CPU class one stream at the nominal fps keeps busy encoding.
+    pub cores_per_stream: f64,
 }
 
 /// Issue 13's targets at [`TARGET_SIZE`]: every H.264 bitrate of the run against JPEG at
@@ -502,9 +524,23 @@ enum CodecState {
 struct Delivered {
     bytes: usize,
     encode_ms: f64,
+    encode_cpu_ms: f64,
     keyframe: bool,
     /// The frame as the viewer's decoder shows it.
     rgb: Vec<[u8; 3]>,
+}
+
+/// Runs `encode`, timing it by the wall clock and by the process's CPU clock (every thread the
+/// encoder runs on; the bench runs nothing else meanwhile), both in ms.
+fn timed<T>(encode: impl FnOnce() -> T) -> (T, f64, f64) {
+    let cpu = || {
+        let t = rustix::time::clock_gettime(rustix::time::ClockId::ProcessCPUTime);
+        t.tv_sec as f64 * 1e3 + t.tv_nsec as f64 * 1e-6
+    };
+    let (wall, cpu_start) = (Instant::now(), cpu());
+    let out = encode();
+    let cpu_ms = cpu() - cpu_start;
+    (out, wall.elapsed().as_secs_f64() * 1e3, cpu_ms)
 }
 
 fn rgb_of(rgba8: &[u8]) -> Vec<[u8; 3]> {
@@ -608,23 +644,23 @@ impl Codecs {
             };
             delivered.push(match state {
                 CodecState::Jpeg { quality } => {
-                    let started = Instant::now();
-                    let bytes = encode::encode(image, Codec::Jpeg, *quality)?;
-                    let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+                    let (bytes, encode_ms, encode_cpu_ms) =
+                        timed(|| encode::encode(image, Codec::Jpeg, *quality));
+                    let bytes = bytes?;
                     let decoded =
                         ::image::load_from_memory_with_format(&bytes, ::image::ImageFormat::Jpeg)
                             .map_err(|e| decode_error(e.to_string()))?;
                     Delivered {
                         bytes: bytes.len(),
                         encode_ms,
+                        encode_cpu_ms,
                         keyframe: true,
                         rgb: decoded.to_rgb8().pixels().map(|p| p.0).collect(),
                     }
                 }
                 CodecState::H264 { encoder, decoder } => {
-                    let started = Instant::now();
-                    let unit = encoder.encode(planes, false)?;
-                    let encode_ms = started.elapsed().as_secs_f64() * 1e3;
+                    let (unit, encode_ms, encode_cpu_ms) = timed(|| encoder.encode(planes, false));
+                    let unit = unit?;
                     let picture = decoder
                         .decode(&unit.data)
                         .map_err(|e| decode_error(e.to_string()))?
@@ -633,6 +669,7 @@ impl Codecs {
                     Delivered {
                         bytes: unit.data.len(),
                         encode_ms,
+                        encode_cpu_ms,
                         keyframe: unit.keyframe,
                         rgb: rgb_of(&decoded.to_rgba8()),
                     }
@@ -655,6 +692,7 @@ impl Codecs {
             samples.push(FrameSample {
                 bytes: d.bytes,
                 encode_ms: d.encode_ms,
+                encode_cpu_ms: d.encode_cpu_ms,
                 psnr_db,
                 flip,
                 keyframe: d.keyframe,
@@ -679,6 +717,8 @@ impl Codecs {
                     max_frame_bytes: frames.iter().map(|f| f.bytes).max().unwrap_or(0),
                     bytes_per_second: bytes_per_frame * f64::from(fps),
                     encode: stats(frames.iter().map(|f| f.encode_ms).collect()),
+                    encode_cpu: stats(frames.iter().map(|f| f.encode_cpu_ms).collect()),
+                    encode_cpu_mean_ms: frames.iter().map(|f| f.encode_cpu_ms).sum::<f64>() / n,
                     psnr_mean_db: frames.iter().map(|f| f.psnr_db).sum::<f64>() / n,
                     psnr_min_db: frames
                         .iter()
@@ -797,6 +837,18 @@ fn measure_size(
     let (mut rgba8, mut yuv420) = (ReadbackTimes::default(), ReadbackTimes::default());
     let (mut conversion, mut yuv420_psnr) = (Vec::new(), Vec::new());
     let label = format!("{size}: frames");
+    let mut yuv_file = args
+        .write_yuv
+        .as_ref()
+        .map(|prefix| {
+            let mut name = prefix.as_os_str().to_owned();
+            name.push(format!("-{}x{}.yuv", size.width, size.height));
+            let path = PathBuf::from(name);
+            std::fs::File::create(&path)
+                .map(|file| (std::io::BufWriter::new(file), path.clone()))
+                .map_err(|error| StreamBenchError::WriteYuv { path, error })
+        })
+        .transpose()?;
     for i in 0..args.frames {
         let seconds = f64::from(i) / f64::from(args.fps);
         let lossless = RenderSettings {
@@ -816,6 +868,12 @@ fn measure_size(
             .as_ref()
             .expect("a frame rendered with yuv420 carries its planes");
         yuv420.add(&video, planes.data.len());
+        if let Some((file, path)) = &mut yuv_file {
+            write_i420(file, planes).map_err(|error| StreamBenchError::WriteYuv {
+                path: path.clone(),
+                error,
+            })?;
+        }
         conversion.push(stage_ms(&video, Stage::Yuv420));
         let image = Image {
             width: frame.width,
@@ -826,6 +884,10 @@ fn measure_size(
         codecs.add_frame(&image, planes, i % args.flip_every == 0)?;
         *done += 1;
         progress(*done, total, &label);
+    }
+    if let Some((mut file, path)) = yuv_file {
+        file.flush()
+            .map_err(|error| StreamBenchError::WriteYuv { path, error })?;
     }
     let rows = codecs.rows(args.fps);
     Ok(SizeReport {
@@ -841,9 +903,31 @@ fn measure_size(
     })
 }
 
+/// Writes `frame` as I420: each plane's visible samples row by row, without the layout's
+/// padding (what `-pix_fmt yuv420p` reads).
+fn write_i420(to: &mut impl std::io::Write, frame: &Yuv420) -> std::io::Result<()> {
+    let l = frame.layout;
+    let (chroma_width, chroma_rows) = (l.width.div_ceil(2) as usize, l.chroma_rows() as usize);
+    for (plane, stride, width, rows) in [
+        (
+            frame.y(),
+            l.luma_stride,
+            l.width as usize,
+            l.height as usize,
+        ),
+        (frame.cb(), l.chroma_stride, chroma_width, chroma_rows),
+        (frame.cr(), l.chroma_stride, chroma_width, chroma_rows),
+    ] {
+        for row in plane.chunks(stride as usize).take(rows) {
+            to.write_all(&row[..width])?;
+        }
+    }
+    Ok(())
+}
+
 /// Issue 13's targets from `sizes`, when the run has [`TARGET_SIZE`] and JPEG at the moving
-/// quality.
-fn targets(sizes: &[SizeReport], defaults: &Encoding) -> Option<Targets> {
+/// quality; streams run at `fps`.
+fn targets(sizes: &[SizeReport], defaults: &Encoding, fps: f32) -> Option<Targets> {
     let size = sizes
         .iter()
         .find(|s| (s.width, s.height) == (TARGET_SIZE.width, TARGET_SIZE.height))?;
@@ -868,6 +952,8 @@ fn targets(sizes: &[SizeReport], defaults: &Encoding) -> Option<Targets> {
                 bytes_met: c.meets_bytes_target,
                 encode_p95_ms: row.encode.p95_ms,
                 encode_met: row.encode.p95_ms <= TARGET_ENCODE_P95_MS,
+                encode_cpu_mean_ms: row.encode_cpu_mean_ms,
+                cores_per_stream: row.encode_cpu_mean_ms * f64::from(fps) / 1e3,
             })
         })
         .collect();
@@ -1013,7 +1099,7 @@ pub fn run(
         max_qp: defaults.max_qp,
         keyframe_interval: defaults.keyframe_interval,
         cpu_threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
-        targets: targets(&sizes, &defaults),
+        targets: targets(&sizes, &defaults, args.fps),
         sizes,
     })
 }
@@ -1031,7 +1117,7 @@ impl StreamBenchReport {
     /// the targets.
     pub fn markdown(&self) -> String {
         let mut s = format!(
-            "Scene `{}` ({} triangles), GI {}, shadow map {}², exposure {}; the camera {}, {} frames at {} fps nominal ({:.1} s of the path). Adapter {}, {:?}; {} CPU threads. Every decoded frame is compared with the lossless RGBA8 frame: PSNR over RGB (mean and minimum over the frames), mean FLIP error ({}). JPEG: `jpeg-encoder` (4:2:0 below quality 90, 4:4:4 from 90), one frame at a time. H.264: OpenH264, constrained baseline, low complexity without pre-analysis, threads × slices per frame ({}), max QP {}, keyframe interval {}, one stateful stream per setting fed the frames in order (its first frame is the keyframe), decoded by OpenH264's decoder and converted back with nearest chroma. Bytes per second: mean bytes per frame × {} fps. Encode ms: the encode call alone.\n",
+            "Scene `{}` ({} triangles), GI {}, shadow map {}², exposure {}; the camera {}, {} frames at {} fps nominal ({:.1} s of the path). Adapter {}, {:?}; {} CPU threads. Every decoded frame is compared with the lossless RGBA8 frame: PSNR over RGB (mean and minimum over the frames), mean FLIP error ({}). JPEG: `jpeg-encoder` (4:2:0 below quality 90, 4:4:4 from 90), one frame at a time. H.264: OpenH264, constrained baseline, low complexity without pre-analysis, threads × slices per frame ({}), max QP {}, keyframe interval {}, one stateful stream per setting fed the frames in order (its first frame is the keyframe), decoded by OpenH264's decoder and converted back with nearest chroma. Bytes per second: mean bytes per frame × {} fps. Encode ms: the encode call alone, by the wall clock; encode CPU ms: the process's CPU time over the same call (every encoder thread), what a frame costs whatever the core count.\n",
             self.scene,
             self.triangles,
             self.gi,
@@ -1073,12 +1159,12 @@ impl StreamBenchReport {
             return s;
         };
         s += &format!(
-            "Every H.264 bitrate against JPEG q{} (the moving quality): at most {TARGET_BYTES_RATIO} of its bytes at equal or better PSNR, and encode p95 at most {TARGET_ENCODE_P95_MS} ms.\n\n| H.264 | bytes ratio | PSNR Δ dB | bytes target | encode p95 ms | encode target |\n|---|---|---|---|---|---|\n",
-            t.jpeg_quality
+            "Every H.264 bitrate against JPEG q{} (the moving quality): at most {TARGET_BYTES_RATIO} of its bytes at equal or better PSNR, and encode p95 at most {TARGET_ENCODE_P95_MS} ms. The last two columns size a deployment of this CPU class: CPU per frame over all encoder threads, and the cores one stream at {} fps keeps busy encoding.\n\n| H.264 | bytes ratio | PSNR Δ dB | bytes target | encode p95 ms | encode target | encode CPU ms/frame | cores per stream |\n|---|---|---|---|---|---|---|---|\n",
+            t.jpeg_quality, self.fps
         );
         for c in &t.checks {
             s += &format!(
-                "| {} kbit/s{} | {:.3} (1/{:.1}) | {:+.2} | {} | {:.2} | {} |\n",
+                "| {} kbit/s{} | {:.3} (1/{:.1}) | {:+.2} | {} | {:.2} | {} | {:.1} | {:.2} |\n",
                 c.h264_kbps,
                 if c.default_bitrate { " (default)" } else { "" },
                 c.bytes_ratio,
@@ -1086,7 +1172,9 @@ impl StreamBenchReport {
                 c.psnr_delta_db,
                 met(c.bytes_met),
                 c.encode_p95_ms,
-                met(c.encode_met)
+                met(c.encode_met),
+                c.encode_cpu_mean_ms,
+                c.cores_per_stream
             );
         }
         let named = |pick: fn(&TargetCheck) -> bool| {
@@ -1114,11 +1202,11 @@ impl StreamBenchReport {
 impl SizeReport {
     fn markdown(&self) -> String {
         let mut s = format!("\n## {}×{}\n\n", self.width, self.height);
-        s += "| codec | bytes/frame (mean) | first frame | largest frame | kB/s | kbit/s | encode ms p50 / p95 | PSNR dB mean / min | FLIP mean | keyframes |\n";
-        s += "|---|---|---|---|---|---|---|---|---|---|\n";
+        s += "| codec | bytes/frame (mean) | first frame | largest frame | kB/s | kbit/s | encode ms p50 / p95 | encode CPU ms mean | PSNR dB mean / min | FLIP mean | keyframes |\n";
+        s += "|---|---|---|---|---|---|---|---|---|---|---|\n";
         for r in &self.rows {
             s += &format!(
-                "| {} | {:.0} | {} | {} | {:.0} | {:.0} | {:.2} / {:.2} | {:.2} / {:.2} | {:.4} | {} |\n",
+                "| {} | {:.0} | {} | {} | {:.0} | {:.0} | {:.2} / {:.2} | {:.2} | {:.2} / {:.2} | {:.4} | {} |\n",
                 r.setting,
                 r.bytes_per_frame,
                 r.first_frame_bytes,
@@ -1127,6 +1215,7 @@ impl SizeReport {
                 r.bytes_per_second * 8.0 / 1e3,
                 r.encode.median_ms,
                 r.encode.p95_ms,
+                r.encode_cpu_mean_ms,
                 r.psnr_mean_db,
                 r.psnr_min_db,
                 r.flip_mean,
@@ -1257,6 +1346,8 @@ mod tests {
             max_frame_bytes: bytes as usize,
             bytes_per_second: bytes * 30.0,
             encode: stats(vec![1.0]),
+            encode_cpu: stats(vec![1.0]),
+            encode_cpu_mean_ms: 1.0,
             psnr_mean_db: psnr_db,
             psnr_min_db: psnr_db,
             flip_mean: 0.0,
@@ -1335,6 +1426,7 @@ mod tests {
             let h264 = |bitrate_kbps, auto| CodecSetting::H264 { bitrate_kbps, auto };
             let mut fast = row(h264(3000, false), 9_000.0, 38.5);
             fast.encode = stats(vec![5.0, 6.0]);
+            fast.encode_cpu_mean_ms = 11.0;
             let rows = vec![
                 row(CodecSetting::Jpeg { quality: 70 }, 80_000.0, 38.0),
                 // The automatic bitrate (the service's default) came to 8000 here.
@@ -1355,10 +1447,10 @@ mod tests {
         };
         let defaults = Encoding::default();
         assert!(
-            targets(&[size(1280, 720)], &defaults).is_none(),
+            targets(&[size(1280, 720)], &defaults, 30.0).is_none(),
             "1080p only"
         );
-        let t = targets(&[size(1280, 720), size(1920, 1080)], &defaults).expect("1080p ran");
+        let t = targets(&[size(1280, 720), size(1920, 1080)], &defaults, 30.0).expect("1080p ran");
         assert_eq!(t.jpeg_quality, 70);
         let checks: Vec<_> = t
             .checks
@@ -1370,6 +1462,8 @@ mod tests {
             checks,
             [(8000, true, false, true), (3000, false, true, true)]
         );
+        // 11 ms of CPU per frame, 30 frames a second: a third of a core.
+        assert!((t.checks[1].cores_per_stream - 0.33).abs() < 1e-9);
         let markdown = StreamBenchReport {
             adapter: "test".into(),
             timing_source: TimingSource::CpuWallClock,
@@ -1459,6 +1553,7 @@ mod tests {
             assert!((r.bytes_per_second - 30.0 * r.bytes_per_frame).abs() < 1e-9);
             assert!(r.psnr_min_db <= r.psnr_mean_db);
             assert!(r.flip_mean > 0.0 && r.flip_mean < 0.5, "{}", r.setting);
+            assert!(r.encode_cpu_mean_ms > 0.0, "{}: {r:?}", r.setting);
         }
         let (q50, q95, video) = (&rows[0], &rows[1], &rows[2]);
         assert!(q95.bytes_per_frame > q50.bytes_per_frame);
@@ -1476,6 +1571,25 @@ mod tests {
             "{video:?}, 4:2:0 alone {ceiling:.2} dB"
         );
         assert_eq!(video.max_frame_bytes, video.first_frame_bytes);
+    }
+
+    #[test]
+    fn frames_are_written_as_i420_without_the_layout_padding() {
+        // 6 wide: chroma rows of 3 samples padded to 4, luma rows of 6 padded to 8.
+        let (w, h) = (6, 4);
+        let rgba8: Vec<u8> = (0..w * h * 4).map(|i| (i * 7 % 251) as u8).collect();
+        let frame = Yuv420::from_rgba8(&rgba8, w, h);
+        assert_eq!(
+            (frame.layout.luma_stride, frame.layout.chroma_stride),
+            (8, 4)
+        );
+        let mut written = Vec::new();
+        write_i420(&mut written, &frame).expect("written");
+        assert_eq!(written.len(), (w * h + 2 * (w / 2) * (h / 2)) as usize);
+        let (y, c) = ((w * h) as usize, ((w / 2) * (h / 2)) as usize);
+        assert_eq!(&written[6..12], &frame.y()[8..14], "luma row 1");
+        assert_eq!(&written[y + 3..y + 6], &frame.cb()[4..7], "Cb row 1");
+        assert_eq!(&written[y + c..y + c + 3], &frame.cr()[..3], "Cr row 0");
     }
 
     #[test]

@@ -3,10 +3,9 @@
 //!
 //! The encoder is one interface ([`VideoEncoder`]) behind `--encoder`; the one that always
 //! builds is Cisco's OpenH264, compiled from the source the `openh264` crate bundles (software,
-//! constrained baseline). A hardware encoder (NVENC, VA-API) would be another [`EncoderKind`]:
-//! none is here because the Hopper GPUs this project deploys on have no NVENC, no NVENC binding
-//! builds from the registries this project reaches, and none could be tested without the
-//! hardware (README, "Video streams").
+//! constrained baseline). A hardware encoder (NVENC, VA-API, e.g. through Debian's libavcodec)
+//! would be another [`EncoderKind`]: none is here because the Hopper GPUs this project deploys
+//! on have no NVENC and none could be tested without the hardware (README, "Video streams").
 
 use crate::passes::yuv420::Yuv420;
 use lightcast_protocol::{Codec, Encoding};

@@ -102,8 +102,8 @@ pub struct GiParamInfo {
     /// The field name in `render.gi`.
     pub name: String,
     pub kind: GiParamKind,
-    /// Default value (`null` for an optional number left unset).
-    #[schema(value_type = Object)]
+    /// Default value: a number, boolean or string (a `choice`), or `null` for an optional
+    /// number left unset.
     pub default: serde_json::Value,
     /// Smallest accepted value (numbers).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -219,13 +219,13 @@ impl RenderSettings {
         {
             return Err(invalid("light.cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees"));
         }
-        if !(1..=MAX_DOWNSCALE).contains(&self.gi.indirect_downscale) {
+        // Powers of two: a reduced pixel covers whole output pixels at every size the API
+        // allows in steps of 2 (H.264's even sizes), and the documented choices are 1, 2, 4.
+        let downscale = self.gi.indirect_downscale;
+        if !(downscale.is_power_of_two() && downscale <= MAX_DOWNSCALE) {
             return Err(invalid(
                 "indirect_downscale",
-                format!(
-                    "{} is outside 1..={MAX_DOWNSCALE}",
-                    self.gi.indirect_downscale
-                ),
+                format!("{downscale} is not one of 1, 2 or 4"),
             ));
         }
         let faces = LightUniform::face_count(self.light.kind);

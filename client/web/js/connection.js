@@ -18,13 +18,36 @@ const SESSION_LOST = new Set([404, 421, 502, 503, 504]);
 // Refused parameters a new session drops, one per attempt, before it gives up and retries.
 const MAX_REFUSED_FIELDS = 4;
 
-/** A copy of `params` without the field at `path` (dot-separated), which the server defaults. */
+/**
+ * A copy of `params` without the field at `path`, which the server defaults; `null` when
+ * `params` has no such field. The path joins keys with dots, and a key may hold dots itself
+ * (`?gi.a.b=1` gives `gi` the key `a.b`, refused as `render.gi.a.b`): at each level the
+ * longest run of parts that is a key is taken. An index (`position[0]`) drops the whole list.
+ */
 function withoutField(params, path) {
   const copy = structuredClone(params);
-  const keys = path.split('.');
-  const parent = keys.slice(0, -1).reduce((o, k) => (o && typeof o === 'object' ? o[k] : undefined), copy);
-  if (parent && typeof parent === 'object') delete parent[keys[keys.length - 1]];
-  return copy;
+  const parts = path.split('.');
+  // The key of `node` spelled by parts[i..end], as given or without its list index.
+  const keyOf = (node, i, end) => {
+    const joined = parts.slice(i, end).join('.');
+    const bare = joined.replace(/(\[\d+\])+$/, '');
+    return [joined, bare].find((k) => Object.hasOwn(node, k)) ?? null;
+  };
+  let node = copy;
+  let i = 0;
+  while (node && typeof node === 'object') {
+    let end = parts.length;
+    while (end > i && keyOf(node, i, end) === null) end--;
+    if (end === i) return null;
+    const key = keyOf(node, i, end);
+    if (end === parts.length) {
+      delete node[key];
+      return copy;
+    }
+    node = node[key];
+    i = end;
+  }
+  return null;
 }
 
 export class Connection {
@@ -173,9 +196,10 @@ export class Connection {
         // with a restarted server) would be refused again on every retry: say so, and ask
         // again with the server's default for that field.
         const refused = e instanceof ApiError && e.field && (e.status === 400 || e.status === 404);
-        if (!refused || attempt >= MAX_REFUSED_FIELDS) throw e;
+        const dropped = refused ? withoutField(this.params, e.field) : null;
+        if (dropped === null || attempt >= MAX_REFUSED_FIELDS) throw e;
         this.handlers.onEvent({ type: 'error', error: { error: e.kind, field: e.field, message: `${e.message}; using the server's default` } });
-        this.params = withoutField(this.params, e.field);
+        this.params = dropped;
       }
     }
     if (generation !== this.generation) {
@@ -193,6 +217,12 @@ export class Connection {
     if (error instanceof ApiError && error.status === 401) {
       this.generation += 1;
       this.handlers.onStatus('unauthorized', error.message);
+      return;
+    }
+    // A request the server refuses as malformed would be refused again on every retry.
+    if (error instanceof ApiError && error.status === 400) {
+      this.generation += 1;
+      this.handlers.onStatus('stopped', `${error.message} (not retried: reload with other parameters)`);
       return;
     }
     this.retry(error.message, error instanceof Unreachable ? 'unreachable' : 'reconnecting', generation);

@@ -366,10 +366,6 @@ pub fn entry(method: GiMethod) -> (usize, &'static MethodEntry) {
         .unwrap_or_else(|| panic!("GI method {method:?} is not registered in gi::REGISTRY"))
 }
 
-/// Descriptions of every registered method, in registry order, with the limits of a server
-/// configured with `limits`.
-/// The methods whose entry [`MethodEntry::downscales`] also take the renderer's
-/// `indirect_downscale`.
 /// `render.gi.emitters` as `/v1/server` lists it for the methods that read it.
 pub(crate) fn emitters_param(d: &lightcast_protocol::GiParams) -> lightcast_protocol::GiParamInfo {
     lightcast_protocol::GiParamInfo {
@@ -386,6 +382,9 @@ pub(crate) fn emitters_param(d: &lightcast_protocol::GiParams) -> lightcast_prot
     }
 }
 
+/// Descriptions of every registered method, in registry order, with the limits of a server
+/// configured with `limits`. The methods whose entry [`MethodEntry::downscales`] also take the
+/// renderer's `indirect_downscale`.
 pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
     let mut methods: Vec<GiMethodInfo> =
         REGISTRY.iter().flat_map(|e| (e.describe)(limits)).collect();
@@ -399,8 +398,9 @@ pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
             min: Some(1.0),
             max: Some(crate::passes::indirect_resolution::MAX_DOWNSCALE.into()),
             choices: Vec::new(),
-            description: "Indirect light at 1/n of the output's width and height, brought back \
-                          with an edge-aware (joint bilateral) upsample; 1: full resolution"
+            description: "Indirect light at 1/n of the output's width and height (n is 1, 2 \
+                          or 4), brought back with an edge-aware (joint bilateral) upsample; 1: \
+                          full resolution"
                 .into(),
         });
     }

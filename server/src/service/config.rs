@@ -528,6 +528,13 @@ pub(crate) mod tests {
             Err(super::ConfigError::Routing(_))
         ));
         std::fs::write(&key, format!("{}\n", "k".repeat(32))).expect("write");
+        assert!(matches!(
+            routing(&["--replica", "a", "--routing-key-file", &path]),
+            Err(super::ConfigError::Routing(
+                crate::service::routing::RoutingError::WeakKey(0)
+            ))
+        ));
+        std::fs::write(&key, "0123456789abcdef0123456789abcdef\n").expect("write");
         let on = routing(&["--replica", "lightcast-0", "--routing-key-file", &path])
             .expect("valid")
             .expect("on");

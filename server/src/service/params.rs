@@ -41,7 +41,8 @@ fn request_field(renderer_field: &str) -> String {
         | "blur_normal"
         | "paraboloid_size"
         | "fourier_terms"
-        | "shadow_light" => {
+        | "shadow_light"
+        | "indirect_downscale" => {
             format!("gi.{renderer_field}")
         }
         "light.cone" => "light.outer_cone".to_string(),

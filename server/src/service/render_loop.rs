@@ -747,7 +747,7 @@ fn deliver(
     };
     if codec.is_video() {
         let config = VideoConfig::new(image.width, image.height, &plan.encoding, plan.fps);
-        let (kind, yuv420) = (encoder.video, rendered.yuv420);
+        let (kind, yuv420, restarts) = (encoder.video, rendered.yuv420, plan.video_restarts);
         let target = Arc::clone(&session);
         session.queue_video(
             encoder,
@@ -756,7 +756,8 @@ fn deliver(
                 // Debug views are composed on the CPU and converted here.
                 let frame = yuv420
                     .unwrap_or_else(|| Yuv420::from_rgba8(&image.rgba8, image.width, image.height));
-                let keyframe = target.take_keyframe_request();
+                // `|`, not `||`: the keyframe also answers a pending request.
+                let keyframe = target.take_keyframe_request() | restarts;
                 match stream.encode(kind, config, &frame, keyframe) {
                     Ok(unit) => {
                         let flags = if unit.keyframe { FLAG_KEYFRAME } else { 0 };

@@ -21,6 +21,27 @@ pub enum RoutingError {
     Name(String),
     #[error("the routing key has {0} bytes; use at least {MIN_KEY_BYTES} random bytes")]
     ShortKey(usize),
+    #[error("the routing key's bytes repeat too much to be random (about {0} bits by their frequencies, at least {MIN_KEY_BITS} needed); use at least {MIN_KEY_BYTES} random bytes, e.g. `head -c 32 /dev/urandom | base64`")]
+    WeakKey(u32),
+}
+
+/// Fewest bits a routing key's byte frequencies must carry: the strength of the mac.
+pub const MIN_KEY_BITS: u32 = 128;
+
+/// The bits a key's byte frequencies carry (its length times the Shannon entropy of its byte
+/// histogram): an upper bound on its real entropy that catches keys a person typed, spaces or
+/// a word repeated, while random bytes, hex or base64 of 32 random bytes pass.
+fn frequency_bits(key: &[u8]) -> f64 {
+    let mut counts = [0u32; 256];
+    for &b in key {
+        counts[usize::from(b)] += 1;
+    }
+    let n = key.len() as f64;
+    counts
+        .iter()
+        .filter(|&&c| c > 0)
+        .map(|&c| -f64::from(c) * (f64::from(c) / n).log2())
+        .sum()
 }
 
 /// Whose session an id names.
@@ -66,6 +87,10 @@ impl Routing {
         }
         if key.len() < MIN_KEY_BYTES {
             return Err(RoutingError::ShortKey(key.len()));
+        }
+        let bits = frequency_bits(key);
+        if bits < f64::from(MIN_KEY_BITS) {
+            return Err(RoutingError::WeakKey(bits as u32));
         }
         Ok(Self {
             replica: replica.to_string(),
@@ -150,7 +175,7 @@ mod tests {
         assert_eq!(a.owner(&id[..id.len() - 1]), Owner::Forged);
         assert_eq!(a.owner("lightcast-0.x"), Owner::Forged);
         // The same id under another key.
-        let other = Routing::new("lightcast-1", b"another key of thirty-two bytes!").expect("c");
+        let other = Routing::new("lightcast-1", b"fedcba9876543210FEDCBA9876543210").expect("c");
         assert_eq!(other.owner(&id), Owner::Forged);
         // Plain ids (routing was off when they were made) are looked up here.
         assert_eq!(a.owner("se_0123456789abcdef"), Owner::Here);
@@ -169,5 +194,32 @@ mod tests {
             Routing::new("a", b"short").err(),
             Some(RoutingError::ShortKey(5))
         );
+        // Long enough, but nobody's random bytes (issue 30: 40 spaces were taken).
+        for weak in [
+            &[b' '; 40][..],
+            b"passwordpasswordpasswordpassword",
+            &[b'a'; 64][..],
+        ] {
+            assert!(
+                matches!(Routing::new("a", weak), Err(RoutingError::WeakKey(_))),
+                "{weak:?}"
+            );
+        }
+        // What operators are told to use passes: random bytes, as hex or base64.
+        let random: Vec<u8> = (0u32..32)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 24) as u8)
+            .collect();
+        let hex: String = random.iter().map(|b| format!("{b:02x}")).collect();
+        for good in [
+            &random[..],
+            hex.as_bytes(),
+            b"q3V8mZkq1Xb0cJp4T9rLw2YhN6sDfGa7Ue5iOxBtRvM=",
+        ] {
+            assert!(
+                Routing::new("a", good).is_ok(),
+                "{good:?}: {} bits",
+                frequency_bits(good)
+            );
+        }
     }
 }

@@ -78,6 +78,9 @@ pub struct FramePlan {
     pub still: bool,
     pub moving: bool,
     pub codec: lightcast_protocol::Codec,
+    /// The frame starts the video again after frames of another codec: a client that
+    /// switched decoders needs a keyframe.
+    pub video_restarts: bool,
     pub quality: u8,
     /// The session's encoding (video settings) and fps cap when the frame was planned.
     pub encoding: lightcast_protocol::Encoding,
@@ -98,7 +101,8 @@ struct State {
     input_id: u64,
     last_change: Instant,
     next_due: Instant,
-    /// Scene id whose pending light caches the client was told about.
+    /// The codec of the last streamed (not still) frame planned; `None` before the first.
+    streamed_codec: Option<lightcast_protocol::Codec>,
     /// The (scene, kind) of the precomputation the client was last told its frames wait for.
     pending_told: Option<(String, String)>,
 }
@@ -155,6 +159,7 @@ impl Session {
                 last_change: now,
                 next_due: now,
                 pending_told: None,
+                streamed_codec: None,
             }),
             stats: Mutex::new(SessionStats::default()),
             slot: FrameSlot::default(),
@@ -327,6 +332,12 @@ impl Session {
         } else {
             (enc.codec, enc.quality)
         };
+        let mut video_restarts = false;
+        if !want_still {
+            video_restarts =
+                codec.is_video() && s.streamed_codec.is_some_and(|last| !last.is_video());
+            s.streamed_codec = Some(codec);
+        }
         if want_still {
             s.still_requested = false;
             s.still_version = s.version;
@@ -348,6 +359,7 @@ impl Session {
             still: want_still,
             moving,
             codec,
+            video_restarts,
             quality,
             encoding: enc,
             fps: s.params.fps_cap,

@@ -501,6 +501,14 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         case(
             "POST",
             "/v1/sessions",
+            r#"{"render":{"gi":{"method":"brsm","indirect_downscale":3}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.indirect_downscale"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
             r#"{"render":{"gi":{"defensive":2}}}"#,
             400,
             "invalid_field",
@@ -887,6 +895,24 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
     stream
         .send(json!({"type": "ping", "nonce": 1, "extra": true}))
         .await;
+    // Values refused inside a message are named as the HTTP API names them (issue 30).
+    stream.send(json!({"type": "ack", "seq": -1})).await;
+    stream
+        .send(json!({"type": "camera", "camera": {"position": ["x", 0, 1], "target": [0, 0, 0], "fov_y_degrees": 45}}))
+        .await;
+    stream
+        .send_raw(Message::Text(
+            r#"{"type": "camera", "camera": {"position": [NaN, 0, 1], "target": [0, 0, 0], "fov_y_degrees": 45}}"#.into(),
+        ))
+        .await;
+    stream
+        .send_raw(Message::Text(
+            r#"{"type": "light", "light": {"kind": "point", "position": [0, 1e999, 0]}}"#.into(),
+        ))
+        .await;
+    stream
+        .send(json!({"type": "camera", "input_id": -2, "camera": {"position": [0, 0, 1], "target": [0, 0, 0], "fov_y_degrees": 45}}))
+        .await;
     let expected = [
         ("binary_not_accepted", None),
         ("malformed_json", None),
@@ -895,6 +921,11 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         ("invalid_field", Some("render.gi.val_count")),
         ("invalid_field", Some("render.camera.zoom")),
         ("invalid_field", Some("extra")),
+        ("invalid_field", Some("seq")),
+        ("invalid_field", Some("render.camera.position[0]")),
+        ("invalid_field", Some("render.camera.position[0]")),
+        ("invalid_field", Some("render.light.position[1]")),
+        ("invalid_field", Some("input_id")),
     ];
     for (kind, field) in expected {
         let error = stream.next_error().await;
@@ -904,21 +935,33 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
     let mut events = Vec::new();
     let frame = stream.next_frame(&mut events).await;
     assert_eq!(frame.header.width, 32);
-    // An oversized message closes only that socket; the server keeps serving.
+    // An oversized message closes only that socket, saying why (1009); so does text that is
+    // not UTF-8 (1007); the server keeps serving.
     stream
         .ws
         .send(Message::Text("x".repeat(10_000).into()))
         .await
         .ok();
-    let closed = tokio::time::timeout(PATIENCE, async {
-        loop {
-            if matches!(stream.next().await, Incoming::Closed) {
-                return;
-            }
-        }
-    })
-    .await;
-    assert!(closed.is_ok(), "an oversized message ends the connection");
+    assert_eq!(
+        stream.close_code().await,
+        Some(1009),
+        "an oversized message"
+    );
+    let other = server.create_session(small_session(32, 32), None).await;
+    let mut stream = server.connect(&other).await;
+    let not_utf8 = tokio_tungstenite::tungstenite::protocol::frame::Frame::message(
+        vec![b'{', 0xff, 0xfe, b'}'],
+        tokio_tungstenite::tungstenite::protocol::frame::coding::OpCode::Data(
+            tokio_tungstenite::tungstenite::protocol::frame::coding::Data::Text,
+        ),
+        true,
+    );
+    stream.ws.send(Message::Frame(not_utf8)).await.ok();
+    assert_eq!(
+        stream.close_code().await,
+        Some(1007),
+        "text that is not UTF-8"
+    );
 
     let health = server
         .http
@@ -960,6 +1003,23 @@ async fn rate_limited_messages_are_refused_not_fatal() {
     assert!(
         pongs >= 10 && limited >= 1,
         "{pongs} answered, {limited} limited"
+    );
+    // Binary messages are refused, and their refusals spend the same tokens (issue 30).
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    for _ in 0..30 {
+        stream.send_raw(Message::Binary(vec![1, 2, 3].into())).await;
+    }
+    let (mut refused, mut limited) = (0, 0);
+    while refused + limited < 30 {
+        match stream.next_event().await {
+            ServerEvent::Error { error } if error.error == "binary_not_accepted" => refused += 1,
+            ServerEvent::Error { error } if error.error == "rate_limited" => limited += 1,
+            _ => {}
+        }
+    }
+    assert!(
+        refused <= 15 && limited >= 15,
+        "binary: {refused} answered, {limited} limited"
     );
     tokio::time::sleep(Duration::from_millis(400)).await;
     stream.send(json!({"type": "ping", "nonce": 99})).await;

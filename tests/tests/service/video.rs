@@ -113,6 +113,30 @@ async fn an_h264_session_streams_decodable_video_with_keyframes_where_needed() {
         "the first frame of a new size is a keyframe"
     );
     assert_eq!(resized.rgba.dimensions(), (128, 80));
+
+    // Every switch back to H.264 after JPEG frames starts at a keyframe: a client that
+    // decoded JPEG meanwhile may have dropped its video decoder (issue 30: the second switch
+    // sent a P slice first).
+    for round in 0..2 {
+        for codec in [Codec::Jpeg, Codec::H264] {
+            let name = serde_json::to_value(codec).expect("codec");
+            stream
+                .send(json!({"type": "update", "patch": {"encoding": {"codec": name}}}))
+                .await;
+            let switched = loop {
+                let f = stream.next_frame(&mut events).await;
+                if f.header.codec == codec {
+                    break f;
+                }
+            };
+            if codec == Codec::H264 {
+                assert!(
+                    keyframe(&switched),
+                    "switch {round}: the first H.264 frame is a P slice"
+                );
+            }
+        }
+    }
     assert_no_render_errors(&events);
     server.stop().await;
 }

@@ -6,7 +6,7 @@ use crate::scene::procedural::Spec;
 use crate::scene::Scene;
 use crate::service::budget::over_budget;
 use crate::service::error::{echo, parse_json, ApiError};
-use crate::service::scene_store::{owner_digest, Recipe, SceneStore, StoredScene};
+use crate::service::scene_store::{owner_digest, plain_file_name, Recipe, SceneStore, StoredScene};
 use crate::service::scenes::{owner_allows, triangles_over_budget, SceneEntry};
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
@@ -91,13 +91,21 @@ pub fn is_json(request: &Request) -> bool {
     content_type_is(request, "application/json")
 }
 
-/// A file name safe to create in a fresh directory: no separators, no parent references, no
-/// percent escapes (so a glTF URI that names it cannot decode to anything else).
-fn safe_file_name(name: &str) -> bool {
-    !name.is_empty()
-        && name.len() <= 255
-        && !name.starts_with('.')
-        && !name.contains(['/', '\\', '%', '\0', ':'])
+/// Refuses a display name the server could not keep as data: empty, longer than
+/// [`super::MAX_NAME_BYTES`], or with control characters (a NUL would cut it short in logs
+/// and terminals). Any other text is fine: a name is never a path.
+pub fn display_name(field: &str, value: &str) -> Result<(), ApiError> {
+    bounded_name(field, value)?;
+    if value.is_empty() {
+        return Err(ApiError::field(field, "must not be empty"));
+    }
+    if let Some(c) = value.chars().find(|c| c.is_control()) {
+        return Err(ApiError::field(
+            field,
+            format!("must not contain control characters ({c:?})"),
+        ));
+    }
+    Ok(())
 }
 
 /// Every external URI of a glTF JSON document (buffers and images, not `data:` URIs).
@@ -182,7 +190,7 @@ pub async fn load_upload(
             load_gltf_slice(&main.bytes, None, &name, limits).map_err(invalid)?
         } else {
             for uri in external_uris(&main.bytes)? {
-                if !safe_file_name(&uri) || !resources.iter().any(|r| r.name == uri) {
+                if !plain_file_name(&uri) || !resources.iter().any(|r| r.name == uri) {
                     return Err(ApiError::bad_request(
                         "invalid_scene",
                         format!(
@@ -227,10 +235,22 @@ pub fn split_scene_files(
     match (mains.next(), mains.next()) {
         (Some(main), None) => {
             bounded_name("files", &main.name)?;
-            if let Some(bad) = resources.iter().find(|r| !safe_file_name(&r.name)) {
+            let names = || std::iter::once(&main).chain(&resources).map(|f| &f.name);
+            if let Some(bad) = names().find(|name| !plain_file_name(name)) {
                 return Err(ApiError::field(
                     "files",
-                    format!("'{}' is not a plain file name", bad.name),
+                    format!(
+                        "'{}' is not a plain file name (no '/', '\\', ':', '%', control \
+                         characters or leading '.')",
+                        echo(bad)
+                    ),
+                ));
+            }
+            let mut seen = std::collections::HashSet::new();
+            if let Some(twice) = names().find(|name| !seen.insert(*name)) {
+                return Err(ApiError::field(
+                    "files",
+                    format!("'{}' is uploaded twice", echo(twice)),
                 ));
             }
             Ok((main, resources))
@@ -247,9 +267,12 @@ pub fn split_scene_files(
 }
 
 #[derive(serde::Deserialize, utoipa::IntoParams)]
+#[into_params(parameter_in = Query)]
 #[serde(deny_unknown_fields)]
 pub struct UploadQuery {
-    /// Display name (default: the file's stem).
+    /// Display name, kept as data, never as a file name: any text of 1 to 256 bytes without
+    /// control characters (default: the uploaded file's stem, `upload` for a `.glb` body).
+    #[param(min_length = 1)]
     name: Option<String>,
 }
 
@@ -296,7 +319,7 @@ pub async fn create(
 ) -> Result<(StatusCode, Json<SceneInfo>), ApiError> {
     let Query(query) = query.map_err(|e| ApiError::bad_request("invalid_query", e.body_text()))?;
     if let Some(name) = &query.name {
-        bounded_name("name", name)?;
+        display_name("name", name)?;
     }
     // An upload's body may take --max-upload-bytes: its place is taken before it is read.
     let _upload = if is_json(&request) {
@@ -324,7 +347,7 @@ pub async fn create(
         let kept: Vec<UploadedFile> = std::iter::once(main.clone())
             .chain(resources.iter().cloned())
             .collect();
-        recipe_files = (upload_recipe(&kept), kept);
+        recipe_files = (Recipe::upload(&kept), kept);
         (
             load_upload(&state, main, resources).await?,
             "upload".to_string(),
@@ -334,7 +357,7 @@ pub async fn create(
         let spec: ProceduralScene = parse_json(&body)?;
         bounded_name("procedural", &spec.procedural)?;
         if let Some(name) = &spec.name {
-            bounded_name("name", name)?;
+            display_name("name", name)?;
         }
         let parsed = Spec::parse(&spec.procedural)
             .map_err(|e| ApiError::field("procedural", e.to_string()))?;
@@ -371,12 +394,14 @@ pub async fn create(
                 "send a .glb file as the body, a multipart upload or a procedural scene as JSON",
             ));
         }
+        // The display name (`?name=`) is applied below, as data; the file's own name is
+        // the server's.
         let main = UploadedFile {
-            name: query.name.clone().unwrap_or_else(|| "upload.glb".into()),
+            name: "upload.glb".into(),
             bytes: body,
         };
         recipe_files = (
-            upload_recipe(std::slice::from_ref(&main)),
+            Recipe::upload(std::slice::from_ref(&main)),
             vec![main.clone()],
         );
         (
@@ -410,13 +435,6 @@ pub async fn create(
     }
     tracing::info!(scene = %entry.id, triangles = entry.scene.triangle_count(), "scene added");
     Ok((StatusCode::CREATED, Json(entry.info())))
-}
-
-/// The recipe of uploaded files, the scene file first.
-fn upload_recipe(files: &[UploadedFile]) -> Recipe {
-    Recipe::Upload {
-        files: files.iter().map(|f| f.name.clone()).collect(),
-    }
 }
 
 /// Refuses an addition when the shared store already holds `--max-scenes` scenes (each

@@ -158,8 +158,21 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
             }
             incoming = socket.recv() => {
                 last_heard = Instant::now();
+                let rate_limited = || error_event(ApiError::too_many(
+                    "rate_limited",
+                    format!(
+                        "more than {} messages per second; message ignored",
+                        state.limits.max_messages_per_second
+                    ),
+                ));
                 let reply = match incoming {
-                    None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return,
+                    None | Some(Ok(Message::Close(_))) => return,
+                    Some(Err(e)) => {
+                        if let Some(frame) = refusal_close(e, state.limits.max_message_bytes) {
+                            let _ = send(&mut socket, Message::Close(Some(frame))).await;
+                        }
+                        return;
+                    }
                     Some(Ok(Message::Text(text))) => {
                         let owed_ack = unacked > 0 && is_ack(text.as_bytes());
                         if owed_ack {
@@ -168,15 +181,11 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
                         if owed_ack || limit.allow() {
                             handle(state, session, text.as_bytes()).await
                         } else {
-                            Some(error_event(ApiError::too_many(
-                                "rate_limited",
-                                format!(
-                                    "more than {} messages per second; message ignored",
-                                    state.limits.max_messages_per_second
-                                ),
-                            )))
+                            Some(rate_limited())
                         }
                     }
+                    // Refused, but each costs its reply: held to the same rate as text.
+                    Some(Ok(Message::Binary(_))) if !limit.allow() => Some(rate_limited()),
                     Some(Ok(Message::Binary(_))) => Some(error_event(ApiError::bad_request(
                         "binary_not_accepted",
                         "control messages are JSON text; binary messages are ignored",
@@ -236,6 +245,33 @@ async fn run(mut socket: WebSocket, state: &AppState, session: &Arc<Session>) {
     .await;
 }
 
+/// The close frame that tells a client why its message ended the stream (RFC 6455 §7.4.1):
+/// 1009 for a message over `max_bytes`, 1007 for text that is not UTF-8, 1002 for another
+/// protocol violation; `None` where the connection itself failed and nothing can be sent.
+fn refusal_close(error: axum::Error, max_bytes: u64) -> Option<CloseFrame> {
+    use axum::extract::ws::close_code;
+    use tungstenite::error::{CapacityError, Error};
+    let (code, reason) = match error.into_inner().downcast::<Error>().ok().map(|e| *e)? {
+        Error::Capacity(CapacityError::MessageTooLong { size, .. }) => (
+            close_code::SIZE,
+            format!("a message of {size} bytes is over this server's limit of {max_bytes} (--max-message-bytes)"),
+        ),
+        Error::Capacity(e) => (close_code::SIZE, e.to_string()),
+        Error::Utf8(e) => (close_code::INVALID, format!("a text message is not UTF-8: {e}")),
+        Error::Protocol(e) => (close_code::PROTOCOL, e.to_string()),
+        _ => return None,
+    };
+    // A close frame's reason has at most 123 bytes.
+    let mut cut = reason.len().min(123);
+    while !reason.is_char_boundary(cut) {
+        cut -= 1;
+    }
+    Some(CloseFrame {
+        code,
+        reason: reason[..cut].to_string().into(),
+    })
+}
+
 /// Whether a control message is an `ack` (a cheap look at its `type` only; `handle` still
 /// validates the whole message).
 fn is_ack(text: &[u8]) -> bool {
@@ -247,15 +283,76 @@ fn is_ack(text: &[u8]) -> bool {
     serde_json::from_slice::<Tag>(text).is_ok_and(|t| t.kind == Some("ack"))
 }
 
+/// A field of a control message named as the HTTP API names it: a camera or light message's
+/// `camera`/`light` sets the session's `render.camera`/`render.light`.
+fn session_path(path: &str) -> String {
+    let top = path.split(['.', '[']).next().unwrap_or_default();
+    if top == "camera" || top == "light" {
+        format!("render.{path}")
+    } else {
+        path.to_string()
+    }
+}
+
+/// `e`, a refusal of control message `raw`, naming the field at fault. serde reports a value
+/// refused inside an internally tagged enum (every [`ClientMessage`]) without its path, so the
+/// key at fault is the one whose absence makes the message parse or go missing; inside a
+/// camera or light, the path is that of the value's own type.
+fn message_error(raw: &serde_json::Value, e: ApiError) -> ApiError {
+    if let Some(field) = &e.body.field {
+        return ApiError::field(session_path(field), strip_field(&e));
+    }
+    let Some(object) = raw.as_object() else {
+        return e;
+    };
+    let culprit = object.keys().filter(|k| *k != "type").find(|key| {
+        let mut without = object.clone();
+        without.remove(*key);
+        match from_value::<ClientMessage>(serde_json::Value::Object(without)) {
+            Ok(_) => true,
+            Err(other) => other
+                .body
+                .message
+                .contains(&format!("missing field `{key}`")),
+        }
+    });
+    let Some(key) = culprit else {
+        return e;
+    };
+    let inner = match key.as_str() {
+        "camera" => from_value::<lightcast_protocol::Camera>(object[key].clone()).err(),
+        "light" => from_value::<lightcast_protocol::Light>(object[key].clone()).err(),
+        _ => None,
+    };
+    match inner
+        .as_ref()
+        .and_then(|i| Some((i.body.field.as_ref()?, strip_field(i))))
+    {
+        Some((field, message)) => ApiError::field(session_path(&format!("{key}.{field}")), message),
+        None => ApiError::field(session_path(key), e.body.message),
+    }
+}
+
+/// An error's message without the `field: ` in front of it.
+fn strip_field(e: &ApiError) -> String {
+    let message = &e.body.message;
+    e.body
+        .field
+        .as_ref()
+        .and_then(|f| message.strip_prefix(&format!("{f}: ")))
+        .unwrap_or(message)
+        .to_string()
+}
+
 /// Handles one control message; returns the event to answer with, if any.
 async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<ServerEvent> {
     let raw: serde_json::Value = match parse_object(text, "a control message") {
         Ok(v) => v,
-        Err(e) => return Some(error_event(e)),
+        Err(e) => return Some(error_event(message_error(&serde_json::Value::Null, e))),
     };
     let message: ClientMessage = match from_value(raw.clone()) {
         Ok(m) => m,
-        Err(e) => return Some(error_event(e)),
+        Err(e) => return Some(error_event(message_error(&raw, e))),
     };
     // serde lets a message without fields of its own (`pause`) carry any others; refuse those
     // as every other message's are, so `{"type": "pause", "session": …}` cannot look as if it

@@ -140,6 +140,9 @@ pub struct DriveResult {
     /// Video frames written to [`DriveOptions::video_out`], and keyframes among all received.
     pub video_frames: u64,
     pub keyframes: u64,
+    /// The longest wait between two frames inside the measuring window (from its start for
+    /// the first): how long the stream stalled, e.g. behind another client's work.
+    pub longest_gap: Duration,
 }
 
 fn extension(h: &FrameHeader) -> &'static str {
@@ -187,9 +190,12 @@ pub async fn drive(
     // (input id, when it was sent), oldest first.
     let mut pending: VecDeque<(u64, Instant)> = VecDeque::new();
     let mut received: u64 = 0;
+    let mut last_frame = opts.measure_from.max(Instant::now());
     loop {
         tokio::select! {
             _ = tokio::time::sleep_until(deadline) => break,
+            // Ctrl-C (SIGINT) ends the run early with its summary, as the deadline would.
+            _ = tokio::signal::ctrl_c() => break,
             _ = ticker.tick(), if opts.input_hz > 0.0 => {
                 if let Some(camera) = opts.motion.camera(started.elapsed().as_secs_f64()) {
                     stream.send(&ClientMessage::Camera { camera, input_id: next_input }).await?;
@@ -227,6 +233,8 @@ pub async fn drive(
                     if now >= opts.measure_from {
                         result.frames += 1;
                         result.bytes += wire_bytes as u64;
+                        result.longest_gap = result.longest_gap.max(now - last_frame);
+                        last_frame = now;
                     }
                     result.split.add(&header, unix_us());
                     stream.send(&ClientMessage::Ack { seq: header.seq }).await?;

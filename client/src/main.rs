@@ -106,7 +106,7 @@ fn parse_format(s: &str) -> Result<ImageFormat, String> {
 
 #[derive(clap::Args)]
 struct StreamCmd {
-    /// Seconds to stream.
+    /// Seconds to stream (Ctrl-C ends it sooner, with the summary).
     #[arg(long, default_value_t = 10.0)]
     duration: f64,
     /// Stop after this many frames.
@@ -414,6 +414,7 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
         "bytes_per_second": result.bytes as f64 / secs,
         "connect_ms": result.connect.as_secs_f64() * 1e3,
         "first_frame_ms": result.first_frame.map(|d| d.as_secs_f64() * 1e3),
+        "longest_gap_ms": result.longest_gap.as_secs_f64() * 1e3,
         "input_to_frame_ms": result.latencies.summary(),
         "split": result.split,
         "dropped": server.frames_dropped,
@@ -430,10 +431,11 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
         return print_json(&summary);
     }
     println!(
-        "{} frames in {secs:.1} s: {:.1} fps, {:.0} KiB/s",
+        "{} frames in {secs:.1} s: {:.1} fps, {:.0} KiB/s, longest gap {:.0} ms",
         result.frames,
         result.frames as f64 / secs,
-        result.bytes as f64 / secs / 1024.0
+        result.bytes as f64 / secs / 1024.0,
+        result.longest_gap.as_secs_f64() * 1e3
     );
     let l = result.latencies.summary();
     if l.samples > 0 {

@@ -221,6 +221,11 @@ async fn stream_replays_a_camera_path_and_saves_frames() {
     let summary = json(&lightcast(&server.base, &args).await);
     assert_eq!(summary["frames"], 4);
     assert!(summary["fps"].as_f64().is_some_and(|f| f > 0.0));
+    // Four frames arrived one after another: the longest wait between them is a real gap,
+    // no longer than the whole stream.
+    let gap = summary["longest_gap_ms"].as_f64().expect("longest_gap_ms");
+    let total = summary["seconds"].as_f64().expect("seconds") * 1e3;
+    assert!(gap > 0.0 && gap <= total, "{gap} of {total}");
     assert!(summary["split"]["gpu_ms"].as_f64().is_some_and(|g| g > 0.0));
     let saved: Vec<_> = std::fs::read_dir(&frames_dir)
         .expect("frames dir")

@@ -851,6 +851,11 @@ pub struct RenderReport {
     /// Errors against `compare_to`'s render, when the request asked for one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub comparison: Option<Comparison>,
+    /// What the request was estimated to cost before it ran (the comparison render included),
+    /// in seconds of this server's adapter: the number checked against `max_request_seconds`
+    /// (absent from offline renders, which have no such limit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimated_seconds: Option<f64>,
 }
 
 /// The server's limits; requests beyond them are refused with `invalid_field`.
@@ -929,6 +934,19 @@ pub struct Limits {
     /// One-shot renders queued or running at once (429 beyond).
     #[serde(default)]
     pub max_queued_renders: u32,
+    /// Estimated seconds of adapter work one request may buy: a one-shot render with its
+    /// comparison, or one frame of a session (400 naming the parameter to lower, and the
+    /// value that fits, beyond). Estimates are the GI methods' cost formulas.
+    #[serde(default)]
+    pub max_request_seconds: f64,
+    /// How many times faster than the reference adapter (lavapipe on 2 CPU cores, where the
+    /// cost formulas were measured) this server's adapter is taken to be.
+    #[serde(default)]
+    pub adapter_speed: f64,
+    /// Estimated seconds (on 2 CPU cores) a new per-scene precomputation may take (400
+    /// naming the parameter to lower beyond).
+    #[serde(default)]
+    pub max_precompute_seconds: f64,
     /// Per-token quotas (auth on only; `null` without auth): sessions one token holds (429
     /// `session_quota` beyond).
     #[serde(default)]

@@ -16,10 +16,12 @@
 //! `describe` lists its parameters with their ranges: `/v1/server` publishes them, the service
 //! enforces them and the viewer builds its controls from them; whose `precompute`, if the
 //! method needs per-scene data, is built off the render loop with progress, see
-//! [`precompute`]), a [`GiMethod`] variant and its parameters in the protocol's `GiParams`.
+//! [`precompute`]; whose `cost` estimates a frame from its parameters, see [`cost`]), a
+//! [`GiMethod`] variant and its parameters in the protocol's `GiParams`.
 //! The renderer, the service and the clients need no other change.
 
 pub mod clustered;
+pub mod cost;
 pub mod lightskin;
 pub mod none;
 pub mod precompute;
@@ -342,6 +344,11 @@ pub struct MethodEntry {
     pub describe: fn(&Limits) -> Vec<GiMethodInfo>,
     /// The per-scene data frames of `methods` need before their first frame, if any.
     pub precompute: Option<&'static precompute::PrecomputeEntry>,
+    /// Adds the estimated cost of the method's stages of one frame (the shared stages are
+    /// [`cost::shared`]'s), from its parameters and the frame's shape.
+    pub cost: fn(&lightcast_protocol::GiParams, &cost::FrameShape, &mut cost::Cost),
+    /// The parameters that scale that cost, in the order a refusal suggests lowering them.
+    pub knobs: &'static [cost::Knob],
     /// Whether the renderer may run the method at `indirect_downscale` (the methods that
     /// approximate; not `none`, which has nothing to compute, nor the reference, which is the
     /// full-resolution truth the others are compared with).

@@ -24,6 +24,8 @@ pub const ENTRY: MethodEntry = MethodEntry {
         }]
     },
     precompute: None,
+    cost: |_, _, _| {},
+    knobs: &[],
     downscales: false,
 };
 

@@ -294,6 +294,11 @@ pub struct PrecomputeEntry {
     pub budget: Option<UnitBudget>,
     /// The set's size in [`UnitBudget`] units, estimated before it is built.
     pub estimate: fn(&PrecomputeKey, &SceneFacts) -> u64,
+    /// Adds the build's estimated cost (reference ns of the 2-core CPU the weights were
+    /// measured on, see [`super::cost`]), from its key and the scene.
+    pub cost: fn(&PrecomputeKey, &SceneFacts, &mut super::cost::Cost),
+    /// The request parameters that scale that cost, in the order a refusal suggests them.
+    pub knobs: &'static [super::cost::Knob],
     /// Loads the set from the store or computes (and stores) it; errors are messages for the
     /// scene's info.
     pub build: BuildFn,

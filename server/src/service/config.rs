@@ -195,6 +195,20 @@ pub struct LimitArgs {
     /// One-shot renders queued or running at once.
     #[arg(long, env = "LIGHTCAST_MAX_QUEUED_RENDERS", default_value_t = 16)]
     pub max_queued_renders: u32,
+    /// Estimated seconds of adapter work one request may buy: a one-shot render (with its
+    /// comparison render) or one frame of a session. Costlier requests are refused with the
+    /// parameter to lower and the value that fits.
+    #[arg(long, env = "LIGHTCAST_MAX_REQUEST_COST", default_value_t = 10.0)]
+    pub max_request_cost: f64,
+    /// How many times faster than the reference adapter (lavapipe on 2 CPU cores) this one
+    /// runs the GI methods' cost formulas: `auto` is 1 on a CPU adapter and 256 on a GPU (an
+    /// H200 ran the compute-bound stages about 450 times faster, the raster ones less).
+    #[arg(long, env = "LIGHTCAST_ADAPTER_SPEED", default_value = "auto")]
+    pub adapter_speed: crate::service::cost::AdapterSpeed,
+    /// Estimated seconds of work (on 2 CPU cores) a new per-scene precomputation (light
+    /// caches, a BVH, surfel links) may take; costlier ones are refused before they start.
+    #[arg(long, env = "LIGHTCAST_MAX_PRECOMPUTE_COST", default_value_t = 600.0)]
+    pub max_precompute_cost: f64,
     /// With auth on: sessions one token may hold (default: its fair share of
     /// --max-sessions, the limit divided by the number of tokens, rounded up).
     #[arg(long, env = "LIGHTCAST_TOKEN_MAX_SESSIONS")]
@@ -343,6 +357,17 @@ impl LimitArgs {
             1,
             4096,
         )?;
+        for (flag, seconds) in [
+            ("max-request-cost", self.max_request_cost),
+            ("max-precompute-cost", self.max_precompute_cost),
+        ] {
+            if !(seconds.is_finite() && seconds > 0.0) {
+                return Err(ConfigError::Invalid {
+                    flag,
+                    reason: format!("{seconds} is not a positive number of seconds"),
+                });
+            }
+        }
         // Quotas only mean something when callers are told apart by their token.
         let quota = |flag: &'static str, given: Option<u32>, global: u32| {
             if tokens == 0 {
@@ -380,6 +405,10 @@ impl LimitArgs {
             max_total_surfel_links: self.max_total_surfel_links,
             max_uploads: self.max_uploads,
             max_queued_renders: self.max_queued_renders,
+            max_request_seconds: self.max_request_cost,
+            // Known once the adapter is: see [`AdapterSpeed::resolve`].
+            adapter_speed: 1.0,
+            max_precompute_seconds: self.max_precompute_cost,
             max_width: self.max_width,
             max_height: self.max_height,
             max_rsm_size: self.max_rsm_size,

@@ -8,6 +8,7 @@
 
 pub mod budget;
 pub mod config;
+pub mod cost;
 pub mod defaults;
 pub mod encode;
 pub mod error;
@@ -75,13 +76,23 @@ impl Service {
     pub async fn start(args: &ServeArgs, log: &(dyn Fn(&str) + Sync)) -> Result<Self, ServeError> {
         let connections = args.limits.connections();
         let tokens = args.tokens()?;
-        let limits = args.limits.limits(tokens.len())?;
+        let mut limits = args.limits.limits(tokens.len())?;
         let backend = args.backend;
         let ctx = tokio::task::spawn_blocking(move || GpuContext::new(backend))
             .await
             .map_err(|e| ServeError::Task(e.to_string()))??;
         let adapter = crate::gpu::context::AdapterSummary(&ctx.info).to_string();
         log(&format!("adapter: {adapter}"));
+        limits.adapter_speed = args
+            .limits
+            .adapter_speed
+            .resolve(ctx.info.device_type == wgpu::DeviceType::Cpu);
+        log(&format!(
+            "request cost: at most {} s of estimated adapter work per request or frame \
+             (--max-request-cost), the adapter taken as {}× the reference lavapipe \
+             (--adapter-speed); precomputations at most {} s (--max-precompute-cost)",
+            limits.max_request_seconds, limits.adapter_speed, limits.max_precompute_seconds
+        ));
         // A validation error is a bug in a pass, not something to take every session down
         // for: log it and count it instead of wgpu's default panic.
         ctx.device.on_uncaptured_error(Arc::new(|e: wgpu::Error| {

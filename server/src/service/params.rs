@@ -50,6 +50,21 @@ fn request_field(renderer_field: &str) -> String {
     }
 }
 
+/// What a frame of `settings` on the scene of `entry` costs besides its GI parameters.
+/// Multi-bounce methods are counted with every bounce: a still frame of a session adds them
+/// all, as a one-shot render does.
+pub fn frame_shape(settings: &RenderSettings, entry: &SceneEntry) -> crate::gi::cost::FrameShape {
+    crate::gi::cost::FrameShape {
+        width: settings.width,
+        height: settings.height,
+        shadow_map_size: settings.shadow_map_size,
+        light_faces: crate::passes::frame_uniforms::LightUniform::face_count(settings.light.kind),
+        triangles: entry.scene.triangle_count() as u64,
+        set_units: 0,
+        all_bounces: true,
+    }
+}
+
 /// `value` within `min..=max`, the error naming this server's range.
 fn within(field: &str, value: u32, min: u32, max: u32) -> Result<(), ApiError> {
     if !(min..=max).contains(&value) {
@@ -116,6 +131,16 @@ pub fn resolve(
     settings
         .validate_for(max_texture)
         .map_err(|e| render_error(&e))?;
+    if let Some(key) = &precompute {
+        entry.check_precompute_cost(g, key, limits)?;
+    }
+    super::cost::check_frame(
+        g,
+        frame_shape(&settings, entry),
+        &|g| entry.estimated_set_units(g),
+        None,
+        limits,
+    )?;
     Ok(Resolved {
         settings,
         view: params.view,

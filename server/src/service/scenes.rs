@@ -236,6 +236,36 @@ impl SceneEntry {
         Ok(Some(key))
     }
 
+    /// Units of the set frames of `gi` read (light caches, surfel links) as estimated before
+    /// it is built (0 for a method without one): what the frame's cost formulas count.
+    pub fn estimated_set_units(&self, gi: &GiParams) -> u64 {
+        precompute::entry_for(gi.method)
+            .and_then(|entry| {
+                Some((entry.estimate)(
+                    &(entry.key)(gi, &self.facts).ok()?,
+                    &self.facts,
+                ))
+            })
+            .unwrap_or(0)
+    }
+
+    /// Refuses set `key` of `gi` when the scene does not hold it yet and its build is
+    /// estimated over `--max-precompute-cost` (a set held or being built costs nothing more).
+    pub fn check_precompute_cost(
+        &self,
+        gi: &GiParams,
+        key: &PrecomputeKey,
+        limits: &lightcast_protocol::Limits,
+    ) -> Result<(), ApiError> {
+        let Some(entry) = precompute::entry_for(gi.method) else {
+            return Ok(());
+        };
+        if lock(&self.variants).iter().any(|v| v.key == *key) {
+            return Ok(());
+        }
+        super::cost::check_precompute(entry, gi, key, &self.facts, limits)
+    }
+
     /// Refuses a new set whose estimated size exceeds the per-set limit or what is left of
     /// the total.
     fn check_budget(

@@ -3,6 +3,7 @@
 
 mod api;
 mod budgets;
+mod costs;
 mod hardening;
 mod routing;
 mod scene_store;

@@ -16,6 +16,7 @@ pub mod cpu;
 pub mod cpu_visibility;
 pub mod passes;
 
+use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
 use super::{
     DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
@@ -29,7 +30,8 @@ use crate::passes::{
     Target,
 };
 use lightcast_protocol::{
-    ClusteredVisibility, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage, View,
+    ClusteredVisibility, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, GiParams, Limits, Stage,
+    View,
 };
 use passes::{
     AtlasLayout, BlurResources, ClusterBuffers, ClusteredParams, ClusteringPass, ImagePass,
@@ -62,8 +64,84 @@ pub const ENTRY: MethodEntry = MethodEntry {
     create: |r| Ok(Box::new(Clustered::new(r))),
     describe,
     precompute: None,
+    cost,
+    knobs: &[
+        Knob {
+            field: "vpl_count",
+            get: |g| g.vpl_count,
+            set: |g, v| g.vpl_count = v,
+            cheaper: Cheaper::Lower,
+        },
+        Knob {
+            field: "interleave",
+            get: |g| g.interleave,
+            set: |g, v| g.interleave = v,
+            cheaper: Cheaper::Higher,
+        },
+        Knob {
+            field: "paraboloid_size",
+            get: |g| g.paraboloid_size,
+            set: |g, v| g.paraboloid_size = v,
+            cheaper: Cheaper::Lower,
+        },
+        Knob {
+            field: "cluster_count",
+            get: |g| g.cluster_count,
+            set: |g, v| g.cluster_count = v,
+            cheaper: Cheaper::Lower,
+        },
+        Knob {
+            field: "kmeans_iterations",
+            get: |g| g.kmeans_iterations,
+            set: |g, v| g.kmeans_iterations = v,
+            cheaper: Cheaper::Lower,
+        },
+    ],
     downscales: true,
 };
+
+/// One frame's stages: the RSM and VPLs, k-means (§5.1: every pass compares N VPLs with M
+/// clusters), the paraboloid maps (§4.1: one per VAL, or per VPL for `vpl_shadows`, each
+/// drawing every triangle), interleaved shading (each pixel N/B² VPLs) and the blur (B²
+/// taps). Weights in reference ns per item, measured on the Cornell box at 64×48: 140 per
+/// pixel·VPL with CSSM (90 with hard VPL shadows, 50 without visibility), 10 per VPL·VAL per
+/// k-means pass, 1 µs per map·triangle plus 0.65 µs per CSSM map texel (0.33 without the
+/// Fourier basis), 30 per blur tap.
+fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
+    cost::rsm(gi, shape, cost);
+    let (n, m) = (f64::from(gi.vpl_count), f64::from(gi.cluster_count));
+    let pixels = shape.reduced_pixels(gi);
+    let block = f64::from(gi.interleave.max(1)).powi(2);
+    let texels = f64::from(gi.paraboloid_size).powi(2);
+    let (shade_ns, maps, texel_ns) = match gi.visibility {
+        ClusteredVisibility::Cssm => (140.0, m, 650.0),
+        ClusteredVisibility::VplShadows => (90.0, n, 330.0),
+        ClusteredVisibility::Off => (50.0, 0.0, 0.0),
+    };
+    cost.add(
+        "VPL shading (pixels × vpl_count / interleave²)",
+        pixels * n / block,
+        shade_ns,
+    );
+    if gi.visibility != ClusteredVisibility::VplShadows {
+        cost.add(
+            "k-means (vpl_count × cluster_count × (2 × kmeans_iterations + 2))",
+            n * m * f64::from(2 * gi.kmeans_iterations + 2),
+            10.0,
+        );
+    }
+    cost.add(
+        "paraboloid maps (maps × triangles)",
+        maps * shape.triangles as f64,
+        cost::NS_PER_TRIANGLE,
+    );
+    cost.add(
+        "paraboloid maps (maps × paraboloid_size²)",
+        maps * texels,
+        texel_ns,
+    );
+    cost.add("blur (pixels × interleave²)", pixels * block, 30.0);
+}
 
 fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
     let range = InvalidSetting::check_range;

@@ -17,6 +17,7 @@ pub mod proxy_occlusion;
 pub mod sampling;
 pub mod val_select;
 
+use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
 use super::precompute::{BudgetPool, Built, PrecomputeEntry, PrecomputeKey, SceneData, UnitBudget};
 use super::{
     DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
@@ -30,7 +31,9 @@ use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
 use cache_store::CacheStore;
 use caches::{CacheParams, CacheSet};
 use indirect_light::{CacheInputs, IndirectLightPass};
-use lightcast_protocol::{GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, Limits, Stage, View};
+use lightcast_protocol::{
+    GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, GiParams, Limits, Stage, View,
+};
 use proxy_occlusion::ProxyOcclusionPass;
 use sampling::{SamplingReadback, ValSampling};
 use std::any::{Any, TypeId};
@@ -55,8 +58,67 @@ pub const ENTRY: MethodEntry = MethodEntry {
     create: |r| Ok(Box::new(LightSkin::new(r))),
     describe,
     precompute: Some(&PRECOMPUTE),
+    cost,
+    knobs: &[
+        Knob {
+            field: "val_count",
+            get: |g| g.val_count,
+            set: |g, v| g.val_count = v,
+            cheaper: Cheaper::Lower,
+        },
+        Knob {
+            field: "view_samples",
+            get: |g| g.view_samples,
+            set: |g, v| g.view_samples = v,
+            cheaper: Cheaper::Lower,
+        },
+        Knob {
+            field: "rsm_size",
+            get: |g| g.rsm_size,
+            set: |g, v| g.rsm_size = v,
+            cheaper: Cheaper::Lower,
+        },
+    ],
     downscales: true,
 };
+
+/// One frame's stages (`set_units` are the light caches C): the RSM, BRSM's importance
+/// (N_VS view samples per texel) and VAL draw, cache lighting (C × VALs, every RSM texel for
+/// `lightskin`), proxy occlusion (C²) and the per-pixel interpolation. Weights in reference
+/// ns per item, measured on the Cornell box (6,596 caches, 64×48): 16 per cache·VAL
+/// (val_count 512 … 16,384, LightSkin RSM 64² … 256²), 4.5 per texel·view sample, 13 per
+/// cache pair, 1 µs per interpolated pixel.
+fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
+    cost::rsm(gi, shape, cost);
+    let caches = shape.set_units as f64;
+    let texels = shape.rsm_texels(gi);
+    if gi.method == GiMethod::Brsm {
+        cost.add(
+            "importance (faces × rsm_size² × view_samples)",
+            texels * f64::from(gi.view_samples),
+            4.5,
+        );
+        cost.add(
+            "cache lighting (caches × val_count)",
+            caches * f64::from(gi.val_count),
+            16.0,
+        );
+    } else {
+        cost.add(
+            "cache lighting (caches × faces × rsm_size²)",
+            caches * texels,
+            16.0,
+        );
+    }
+    if gi.occlusion {
+        cost.add("proxy occlusion (caches²)", caches * caches, 13.0);
+    }
+    cost.add(
+        "cache interpolation (pixels / indirect_downscale²)",
+        shape.reduced_pixels(gi),
+        1000.0,
+    );
+}
 
 /// The light caches (paper §3), one set per scene and (d_eps, θ_eps), kept in the store.
 pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
@@ -91,6 +153,17 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         },
     }),
     estimate: |key, facts| cache_params(key).estimated_caches(facts.surface_area),
+    // Placement samples the surface at a quarter of d_eps (about 8 per cache) plus every
+    // triangle, each a nearest-neighbour query: 1.5 µs per sample on the Cornell box.
+    cost: |key, facts, cost| {
+        let caches = cache_params(key).estimated_caches(facts.surface_area) as f64;
+        cost.add(
+            "cache placement (8 × caches + triangles samples)",
+            8.0 * caches + facts.triangles as f64,
+            1500.0,
+        );
+    },
+    knobs: &[],
     build: |scene, key, env| {
         let mut caches = CacheStore::new(&env.store.dir);
         if let Some(max) = env.store.max_bytes {

@@ -3,9 +3,10 @@
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
+use crate::service::cost::{check_frame, request_seconds};
 use crate::service::encode;
 use crate::service::error::ApiError;
-use crate::service::params::{check_gi_ranges, check_quality, resolve};
+use crate::service::params::{check_gi_ranges, check_quality, frame_shape, resolve};
 use crate::service::render_loop::{Command, OneShot};
 use crate::service::scenes::{precompute_failed, precompute_label, Now, SceneEntry};
 use axum::extract::{FromRequest, Multipart, Request, State};
@@ -215,6 +216,26 @@ pub async fn render(
     };
     let mut resolved = resolve(&req.render, &entry, &state.limits, state.max_texture)
         .map_err(|e| e.within("render"))?;
+    let shape = frame_shape(&resolved.settings, &entry);
+    let set_units = |g: &lightcast_protocol::GiParams| entry.estimated_set_units(g);
+    let compare_spp = compare.map(|(_, spp)| spp);
+    if compare_spp.is_some() {
+        // The render and the comparison render together, within --max-request-cost.
+        check_frame(
+            &req.render.gi,
+            shape,
+            &set_units,
+            compare_spp,
+            &state.limits,
+        )
+        .map_err(|e| {
+            if e.body.field.as_deref() == Some("compare_spp") {
+                e
+            } else {
+                e.within("render")
+            }
+        })?;
+    }
     resolved.settings.capture_hdr |= raw;
     let compared = match compare {
         Some((method, _)) => entry.precompute_key(&lightcast_protocol::GiParams {
@@ -241,6 +262,13 @@ pub async fn render(
                 e
             })?;
     }
+    let estimated_seconds = request_seconds(
+        &req.render.gi,
+        shape,
+        &set_units,
+        compare_spp,
+        &state.limits,
+    );
     // The report and hash name what was actually rendered, defaults included.
     req.render.camera = Some(resolved.settings.camera.clone());
     req.render.light = Some(resolved.settings.light.clone());
@@ -300,6 +328,7 @@ pub async fn render(
         light: resolved.settings.light,
         samples: rendered.progress.map(|p| p.samples),
         comparison: result.comparison,
+        estimated_seconds: Some(estimated_seconds),
     };
     let report_json =
         ascii_json(&serde_json::to_string(&report).map_err(|e| ApiError::internal(e.to_string()))?);

@@ -1,0 +1,407 @@
+//! Every request's cost, estimated before it runs and checked against this server's limits
+//! (issue 30): a one-shot render (with its comparison render), each frame of a session (one
+//! tick of the render loop: the render loop serves one frame at a time) and a precomputation a
+//! request would start. A request over a limit is refused with 400 naming the parameter to
+//! lower and the value of it that fits; nothing runs.
+//!
+//! The estimates are the methods' own formulas (`gi::cost`, each method's `cost`) in
+//! reference nanoseconds; `--adapter-speed` says how many times faster than the reference
+//! (lavapipe on 2 cores) this adapter is, and `--max-request-cost` how many estimated seconds
+//! one request may take on it. Precomputations run on the CPU and are held to
+//! `--max-precompute-cost` seconds of the reference's 2 cores.
+
+use super::error::ApiError;
+use crate::gi::cost::{self, Cost, FrameShape, Knob};
+use crate::gi::precompute::{PrecomputeEntry, PrecomputeKey, SceneFacts};
+use lightcast_protocol::{GiMethod, GiParams, Limits};
+
+/// `--adapter-speed`: `auto`, or how many times faster than the reference this adapter is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum AdapterSpeed {
+    Auto,
+    Times(f64),
+}
+
+/// What `auto` takes a GPU to be: an H200 ran the compute-bound stages about 450 times faster
+/// than the reference and its raster stages far less (`bench/results/gpu-h200-*`), so a
+/// lower ratio keeps raster-heavy requests within their limit there too.
+pub const GPU_SPEED: f64 = 256.0;
+
+impl std::str::FromStr for AdapterSpeed {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        match s.parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(Self::Times(v)),
+            _ => Err(format!("'{s}' is neither auto nor a positive number")),
+        }
+    }
+}
+
+impl AdapterSpeed {
+    /// The speed of an adapter (`is_cpu`: a software one).
+    pub fn resolve(self, is_cpu: bool) -> f64 {
+        match self {
+            Self::Times(v) => v,
+            Self::Auto if is_cpu => 1.0,
+            Self::Auto => GPU_SPEED,
+        }
+    }
+}
+
+/// A request's cost in reference ns, for a candidate set of GI parameters.
+type CostOf<'a> = &'a dyn Fn(&GiParams) -> Cost;
+
+const PRECOMPUTE_FLAG: &str = "--max-precompute-cost";
+
+/// How much one request may cost, in reference ns.
+fn request_budget_ns(limits: &Limits) -> f64 {
+    limits.max_request_seconds * 1e9 * limits.adapter_speed
+}
+
+/// The cost of one frame of `gi` on a frame of `shape` (its `set_units` replaced by those of
+/// `gi`'s precomputed set, which `set_units` estimates).
+pub fn frame_cost(gi: &GiParams, shape: FrameShape, set_units: &dyn Fn(&GiParams) -> u64) -> Cost {
+    let shape = FrameShape {
+        set_units: set_units(gi),
+        ..shape
+    };
+    let mut total = Cost::default();
+    cost::shared(&shape, &mut total);
+    (crate::gi::entry(gi.method).1.cost)(gi, &shape, &mut total);
+    total
+}
+
+/// The GI parameters of the render a one-shot of `gi` is compared with.
+fn truth(gi: &GiParams, spp: u32) -> GiParams {
+    GiParams {
+        method: GiMethod::Reference,
+        spp,
+        ..gi.clone()
+    }
+}
+
+/// The estimated seconds on this server's adapter of a frame of `gi` and, with `compare_spp`,
+/// the reference render it is compared with.
+pub fn request_seconds(
+    gi: &GiParams,
+    shape: FrameShape,
+    set_units: &dyn Fn(&GiParams) -> u64,
+    compare_spp: Option<u32>,
+    limits: &Limits,
+) -> f64 {
+    let compared = compare_spp.map_or(0.0, |spp| {
+        frame_cost(&truth(gi, spp), shape, set_units).ns()
+    });
+    (frame_cost(gi, shape, set_units).ns() + compared) * 1e-9 / limits.adapter_speed
+}
+
+/// The range `/v1/server` describes for `field` of `method`.
+fn range(method: GiMethod, field: &str, limits: &Limits) -> Option<(u32, u32)> {
+    let info = crate::gi::describe_all(limits)
+        .into_iter()
+        .find(|m| m.method == method)?;
+    let p = info.parameters.into_iter().find(|p| p.name == field)?;
+    Some((p.min? as u32, p.max? as u32))
+}
+
+fn seconds(ns: f64, speed: f64) -> String {
+    let s = ns * 1e-9 / speed;
+    if s >= 100.0 {
+        format!("{s:.0} s")
+    } else {
+        format!("{s:.2} s")
+    }
+}
+
+/// What a refusal says about a cost over `budget_ns`: the estimate, its largest terms and the
+/// limit's flag.
+fn over(what: &str, cost: &Cost, budget_ns: f64, speed: f64, flag: &str) -> String {
+    // Precomputations run on the CPU: their limit is in the reference's seconds.
+    let on = if flag == PRECOMPUTE_FLAG {
+        "on 2 CPU cores"
+    } else {
+        "on this adapter"
+    };
+    format!(
+        "{what} is estimated at {} {on} ({}), over this server's limit of {} ({flag})",
+        seconds(cost.ns(), speed),
+        cost.breakdown(),
+        seconds(budget_ns, speed),
+    )
+}
+
+/// The first of `knobs` (in their order) with a value that brings `cost_of` within
+/// `budget_ns`: `(field, value)`.
+fn fitting_knob(
+    gi: &GiParams,
+    knobs: &[Knob],
+    budget_ns: f64,
+    cost_of: CostOf,
+    limits: &Limits,
+) -> Option<(&'static str, u32)> {
+    let ns = |g: &GiParams| cost_of(g).ns();
+    knobs.iter().find_map(|knob| {
+        let range = range(gi.method, knob.field, limits)?;
+        let value = cost::fitting_value(gi, knob, range, budget_ns, &ns)?;
+        Some((knob.field, value))
+    })
+}
+
+/// The refusal of `gi` whose `cost` exceeds `budget_ns`: naming `gi.<knob>` with the value
+/// that fits, or, when no single parameter does, `fallback` (a field outside `gi`).
+#[allow(clippy::too_many_arguments)]
+fn refusal(
+    what: &str,
+    gi: &GiParams,
+    cost: &Cost,
+    budget_ns: f64,
+    knobs: &[Knob],
+    cost_of: CostOf,
+    limits: &Limits,
+    (flag, speed, fallback): (&str, f64, &str),
+) -> ApiError {
+    let message = over(what, cost, budget_ns, speed, flag);
+    match fitting_knob(gi, knobs, budget_ns, cost_of, limits) {
+        Some((field, value)) => {
+            let verb = if knobs
+                .iter()
+                .find(|k| k.field == field)
+                .is_some_and(|k| k.cheaper == cost::Cheaper::Higher)
+            {
+                "at least"
+            } else {
+                "at most"
+            };
+            ApiError::field(
+                format!("gi.{field}"),
+                format!("{message}; {field} {verb} {value} fits"),
+            )
+        }
+        None => ApiError::field(
+            fallback,
+            format!(
+                "{message}; no single GI parameter brings it within the limit: lower \
+                 width × height, or several GI parameters"
+            ),
+        ),
+    }
+}
+
+/// Refuses a frame of `gi` (plus, for a one-shot render compared with the reference, the
+/// comparison frame at `compare_spp`) over `--max-request-cost`. Field paths are relative to
+/// `render` but for `compare_spp`.
+pub fn check_frame(
+    gi: &GiParams,
+    shape: FrameShape,
+    set_units: &dyn Fn(&GiParams) -> u64,
+    compare_spp: Option<u32>,
+    limits: &Limits,
+) -> Result<(), ApiError> {
+    let budget = request_budget_ns(limits);
+    let speed = limits.adapter_speed;
+    let own = |g: &GiParams| frame_cost(g, shape, set_units);
+    let compared = compare_spp.map(|spp| frame_cost(&truth(gi, spp), shape, set_units));
+    let cost = own(gi);
+    let compared_ns = compared.as_ref().map_or(0.0, Cost::ns);
+    if cost.ns() + compared_ns <= budget {
+        return Ok(());
+    }
+    let knobs = crate::gi::entry(gi.method).1.knobs;
+    let flags = ("--max-request-cost", speed, "width");
+    let (Some(spp), Some(compared)) = (compare_spp, compared) else {
+        return Err(refusal(
+            "this frame",
+            gi,
+            &cost,
+            budget,
+            knobs,
+            &own,
+            limits,
+            flags,
+        ));
+    };
+    // The larger of the two frames is the one to make cheaper.
+    if compared.ns() >= cost.ns() {
+        let reference = crate::gi::entry(GiMethod::Reference).1.knobs;
+        let spp_knob: Vec<Knob> = reference
+            .iter()
+            .filter(|k| k.field == "spp")
+            .copied()
+            .collect();
+        let of_truth = |g: &GiParams| frame_cost(g, shape, set_units);
+        let left = budget - cost.ns();
+        if let Some((_, value)) = fitting_knob(&truth(gi, spp), &spp_knob, left, &of_truth, limits)
+        {
+            let mut both = cost.clone();
+            for t in compared.terms() {
+                both.add(t.what, 1.0, t.ns);
+            }
+            return Err(ApiError::field(
+                "compare_spp",
+                format!(
+                    "{}; compare_spp at most {value} fits",
+                    over(
+                        "this render and its comparison",
+                        &both,
+                        budget,
+                        speed,
+                        "--max-request-cost"
+                    )
+                ),
+            ));
+        }
+    }
+    let with_comparison = |g: &GiParams| {
+        let mut c = own(g);
+        c.add("comparison render", 1.0, compared_ns);
+        c
+    };
+    Err(refusal(
+        "this render and its comparison",
+        gi,
+        &with_comparison(gi),
+        budget,
+        knobs,
+        &with_comparison,
+        limits,
+        flags,
+    ))
+}
+
+/// Refuses a new precomputation `key` (of `entry`, for GI parameters `gi` on a scene with
+/// `facts`) estimated over `--max-precompute-cost`.
+pub fn check_precompute(
+    entry: &PrecomputeEntry,
+    gi: &GiParams,
+    key: &PrecomputeKey,
+    facts: &SceneFacts,
+    limits: &Limits,
+) -> Result<(), ApiError> {
+    let budget = limits.max_precompute_seconds * 1e9;
+    let cost_of_key = |key: &PrecomputeKey| {
+        let mut c = Cost::default();
+        (entry.cost)(key, facts, &mut c);
+        c
+    };
+    let cost = cost_of_key(key);
+    if cost.ns() <= budget {
+        return Ok(());
+    }
+    let cost_of = |g: &GiParams| match (entry.key)(g, facts) {
+        Ok(k) => cost_of_key(&k),
+        Err(_) => {
+            let mut c = Cost::default();
+            c.add("an invalid set", 1.0, f64::INFINITY);
+            c
+        }
+    };
+    let what = format!("building the {} of this scene", entry.label);
+    Err(refusal(
+        &what,
+        gi,
+        &cost,
+        budget,
+        entry.knobs,
+        &cost_of,
+        limits,
+        (PRECOMPUTE_FLAG, 1.0, "gi.method"),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits(seconds: f64) -> Limits {
+        let mut l = crate::service::config::tests::default_limits();
+        l.max_request_seconds = seconds;
+        l.adapter_speed = 1.0;
+        l
+    }
+
+    fn shape(width: u32, height: u32) -> FrameShape {
+        FrameShape {
+            width,
+            height,
+            shadow_map_size: 1024,
+            light_faces: 1,
+            triangles: 1090,
+            set_units: 0,
+            all_bounces: true,
+        }
+    }
+
+    /// The issue's repros: a 32×32 reference render with 256 spp and 16 bounces, and a 32×32
+    /// `clustered` render with 65,536 VPLs at interleave 1 (CSSM and hard VPL shadows).
+    #[test]
+    fn the_repros_are_refused_naming_a_value_that_fits() {
+        let limits = limits(10.0);
+        let none = |_: &GiParams| 0;
+        let reference = GiParams {
+            method: GiMethod::Reference,
+            spp: 256,
+            bounces: 16,
+            ..GiParams::default()
+        };
+        let e = check_frame(&reference, shape(32, 32), &none, None, &limits).expect_err("refused");
+        assert_eq!(
+            e.body.field.as_deref(),
+            Some("gi.spp"),
+            "{}",
+            e.body.message
+        );
+        let fits: u32 = e
+            .body
+            .message
+            .rsplit("spp at most ")
+            .next()
+            .and_then(|v| v.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .expect("a value");
+        let at = |spp| GiParams {
+            spp,
+            ..reference.clone()
+        };
+        assert!(check_frame(&at(fits), shape(32, 32), &none, None, &limits).is_ok());
+        assert!(check_frame(&at(fits + 1), shape(32, 32), &none, None, &limits).is_err());
+
+        for visibility in [
+            lightcast_protocol::ClusteredVisibility::Cssm,
+            lightcast_protocol::ClusteredVisibility::VplShadows,
+        ] {
+            let clustered = GiParams {
+                method: GiMethod::Clustered,
+                vpl_count: 65_536,
+                interleave: 1,
+                cluster_count: 256,
+                kmeans_iterations: 64,
+                visibility,
+                ..GiParams::default()
+            };
+            let e =
+                check_frame(&clustered, shape(32, 32), &none, None, &limits).expect_err("refused");
+            assert!(e.body.field.is_some(), "{}", e.body.message);
+        }
+    }
+
+    #[test]
+    fn cheap_frames_pass_and_a_comparison_counts() {
+        let limits = limits(10.0);
+        let none = |_: &GiParams| 0;
+        let brsm = GiParams::default();
+        check_frame(&brsm, shape(64, 48), &none, None, &limits).expect("a small frame");
+        check_frame(&brsm, shape(64, 48), &none, Some(16), &limits).expect("a cheap comparison");
+        let e = check_frame(&brsm, shape(64, 48), &none, Some(256_000), &limits)
+            .expect_err("an expensive comparison");
+        assert_eq!(
+            e.body.field.as_deref(),
+            Some("compare_spp"),
+            "{}",
+            e.body.message
+        );
+    }
+}

@@ -947,6 +947,10 @@ pub struct Limits {
     /// naming the parameter to lower beyond).
     #[serde(default)]
     pub max_precompute_seconds: f64,
+    /// A precomputation no session or waiting request has needed for this many seconds is
+    /// cancelled at its next check (the surfel links check between chunks of caches).
+    #[serde(default)]
+    pub unwanted_precompute_secs: u64,
     /// Per-token quotas (auth on only; `null` without auth): sessions one token holds (429
     /// `session_quota` beyond).
     #[serde(default)]

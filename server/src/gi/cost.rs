@@ -149,7 +149,18 @@ pub struct Knob {
     pub get: fn(&GiParams) -> u32,
     pub set: fn(&mut GiParams, u32),
     pub cheaper: Cheaper,
+    /// The values it takes, where not every integer of its range is one (ascending).
+    pub choices: &'static [u32],
 }
+
+/// `indirect_downscale`, for the methods the renderer runs at a reduced resolution.
+pub const DOWNSCALE_KNOB: Knob = Knob {
+    field: "indirect_downscale",
+    get: |g| g.indirect_downscale,
+    set: |g, v| g.indirect_downscale = v,
+    cheaper: Cheaper::Higher,
+    choices: &[1, 2, 4],
+};
 
 /// The value of a knob within `min..=max` closest to `current` that keeps `cost_of` within
 /// `budget_ns`, if any: costs are monotone in each knob, so a bisection finds it.
@@ -168,6 +179,21 @@ pub fn fitting_value(
     };
     if fits(current) {
         return Some(current);
+    }
+    if !knob.choices.is_empty() {
+        // The fitting choice nearest `current` on the cheaper side.
+        let mut cheaper = knob
+            .choices
+            .iter()
+            .copied()
+            .filter(|&v| match knob.cheaper {
+                Cheaper::Lower => v < current && v >= min,
+                Cheaper::Higher => v > current && v <= max,
+            });
+        return match knob.cheaper {
+            Cheaper::Lower => cheaper.rev().find(|&v| fits(v)),
+            Cheaper::Higher => cheaper.find(|&v| fits(v)),
+        };
     }
     // `good` fits, `bad` does not; they close in on the fitting value nearest `current`.
     let (mut good, mut bad) = match knob.cheaper {
@@ -226,6 +252,7 @@ mod tests {
             get: |g| g.spp,
             set: |g, v| g.spp = v,
             cheaper: Cheaper::Lower,
+            choices: &[],
         };
         let cost_of = |g: &GiParams| f64::from(g.spp) * 7.0;
         let gi = GiParams {
@@ -255,6 +282,7 @@ mod tests {
             get: |g| g.interleave,
             set: |g, v| g.interleave = v,
             cheaper: Cheaper::Higher,
+            choices: &[],
         };
         let per_block = |g: &GiParams| 4096.0 / f64::from(g.interleave).powi(2);
         let gi = GiParams {
@@ -265,5 +293,16 @@ mod tests {
             fitting_value(&gi, &interleave, (1, 16), 300.0, &per_block),
             Some(4)
         );
+        // A knob with choices only ever names one of them.
+        let reduced = |g: &GiParams| 4096.0 / f64::from(g.indirect_downscale).powi(2);
+        let full = GiParams {
+            indirect_downscale: 1,
+            ..GiParams::default()
+        };
+        let fit = |budget| fitting_value(&full, &DOWNSCALE_KNOB, (1, 4), budget, &reduced);
+        assert_eq!(fit(5000.0), Some(1));
+        assert_eq!(fit(1024.0), Some(2));
+        assert_eq!(fit(1000.0), Some(4), "3 would fit too, but is no choice");
+        assert_eq!(fit(100.0), None);
     }
 }

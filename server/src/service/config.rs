@@ -209,6 +209,11 @@ pub struct LimitArgs {
     /// caches, a BVH, surfel links) may take; costlier ones are refused before they start.
     #[arg(long, env = "LIGHTCAST_MAX_PRECOMPUTE_COST", default_value_t = 600.0)]
     pub max_precompute_cost: f64,
+    /// Seconds a precomputation goes on after the last session or request that needed it is
+    /// gone (a client retrying a 503 or a reloaded viewer picks it up again meanwhile); then it
+    /// is cancelled at its next check.
+    #[arg(long, env = "LIGHTCAST_UNWANTED_PRECOMPUTE_SECS", default_value_t = 60)]
+    pub unwanted_precompute_secs: u64,
     /// With auth on: sessions one token may hold (default: its fair share of
     /// --max-sessions, the limit divided by the number of tokens, rounded up).
     #[arg(long, env = "LIGHTCAST_TOKEN_MAX_SESSIONS")]
@@ -409,6 +414,7 @@ impl LimitArgs {
             // Known once the adapter is: see [`AdapterSpeed::resolve`].
             adapter_speed: 1.0,
             max_precompute_seconds: self.max_precompute_cost,
+            unwanted_precompute_secs: self.unwanted_precompute_secs,
             max_width: self.max_width,
             max_height: self.max_height,
             max_rsm_size: self.max_rsm_size,

@@ -210,7 +210,12 @@ pub fn check_frame(
     if cost.ns() + compared_ns <= budget {
         return Ok(());
     }
-    let knobs = crate::gi::entry(gi.method).1.knobs;
+    let method = crate::gi::entry(gi.method).1;
+    let mut knobs = method.knobs.to_vec();
+    if method.downscales {
+        knobs.push(cost::DOWNSCALE_KNOB);
+    }
+    let knobs = &knobs[..];
     let flags = ("--max-request-cost", speed, "width");
     let (Some(spp), Some(compared)) = (compare_spp, compared) else {
         return Err(refusal(

@@ -2,7 +2,7 @@
 //! the request field at fault.
 
 use super::error::ApiError;
-use super::scenes::SceneEntry;
+use super::scenes::{Demand, SceneEntry};
 use crate::debug_views::{self, ViewError};
 use crate::gi::precompute::PrecomputeKey;
 use crate::gi::GiSettings;
@@ -10,6 +10,7 @@ use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
 use crate::service::video::{VideoConfig, VideoError};
 use lightcast_protocol::{Encoding, GiParams, Limits, RenderParams, SessionParams, View};
+use std::sync::Arc;
 
 /// Settings of one frame, ready for the render loop.
 #[derive(Clone, Debug)]
@@ -18,6 +19,9 @@ pub struct Resolved {
     pub view: View,
     /// The per-scene precomputation the frame's GI method needs (`None`: none).
     pub precompute: Option<PrecomputeKey>,
+    /// The claim on it that keeps it building while the session or request holds these
+    /// settings.
+    pub demand: Option<Arc<Demand>>,
 }
 
 /// The renderer's own field names, as paths of the request's `render` object.
@@ -144,6 +148,7 @@ pub fn resolve(
     Ok(Resolved {
         settings,
         view: params.view,
+        demand: precompute.as_ref().map(|key| Arc::new(entry.demand(key))),
         precompute,
     })
 }

@@ -16,13 +16,52 @@ use lightcast_protocol::{
     Bounds, CacheVariant, Camera, GiParams, Light, Limits, PrecomputeState, Precomputed, SceneInfo,
     DEFAULT_SCENE_ID,
 };
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{mpsc, Arc, Mutex, MutexGuard, Weak};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Most parameter sets of one precomputation kept per scene.
 pub const MAX_VARIANTS: usize = 8;
+
+/// Who waits for each precomputation of a scene: the holders of its [`Demand`]s and when the
+/// last of them let go.
+#[derive(Default)]
+struct Demands(Mutex<HashMap<PrecomputeKey, (usize, Instant)>>);
+
+impl Demands {
+    /// Whether nobody has held a demand for `key` for `grace` (a key never demanded, such as
+    /// a comparison's BVH, is not unwanted).
+    fn unwanted(&self, key: &PrecomputeKey, grace: Duration) -> bool {
+        lock(&self.0)
+            .get(key)
+            .is_some_and(|(holders, since)| *holders == 0 && since.elapsed() >= grace)
+    }
+}
+
+/// A session's or a waiting request's claim on a precomputation of a scene: while one is
+/// held (and for `--unwanted-precompute-secs` after the last is dropped: a one-shot render
+/// answered 503 while it builds is retried by its client, a reloaded viewer asks again) the
+/// build goes on.
+pub struct Demand {
+    demands: Arc<Demands>,
+    key: PrecomputeKey,
+}
+
+impl Drop for Demand {
+    fn drop(&mut self) {
+        if let Some((holders, since)) = lock(&self.demands.0).get_mut(&self.key) {
+            *holders = holders.saturating_sub(1);
+            *since = Instant::now();
+        }
+    }
+}
+
+impl std::fmt::Debug for Demand {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Demand({})", self.key)
+    }
+}
 
 /// Locks a mutex, recovering the data if a panicking thread poisoned it (every critical
 /// section here leaves the data consistent).
@@ -102,6 +141,10 @@ pub struct SceneEntry {
     /// (`None`: the server's own scenes, or auth off); the token itself is never kept.
     owner: Option<String>,
     variants: Mutex<Vec<Variant>>,
+    demands: Arc<Demands>,
+    /// The demand for the default method's set, queued when the scene is added: kept while
+    /// the scene is, so that a first viewer finds it ready.
+    default_demand: Mutex<Option<Demand>>,
     sessions: AtomicU64,
     budget: Arc<MemoryBudget>,
     /// The scene's texture bytes and triangles, taken from the server's budgets while it is
@@ -169,6 +212,8 @@ impl SceneEntry {
             scene: Arc::new(scene),
             load_ms,
             variants: Mutex::new(Vec::new()),
+            demands: Arc::default(),
+            default_demand: Mutex::new(None),
             sessions: AtomicU64::new(0),
             budget: Arc::clone(budget),
             _held: [texture_held, triangles_held],
@@ -384,12 +429,37 @@ impl SceneEntry {
         }
     }
 
-    /// Marks the scene in use until the lease is dropped.
+    /// Forgets precomputation `key`, cancelled because nobody waits for it (its units go back
+    /// to the budget; a later request queues it afresh).
+    fn drop_cancelled(&self, key: &PrecomputeKey) {
+        tracing::info!(scene = %self.id, kind = key.kind, params = %key, "precomputation cancelled: nobody waits for it");
+        lock(&self.variants).retain(|v| v.key != *key);
+    }
+
+    /// A claim on precomputation `key` of this scene, held by whoever waits for it.
+    pub fn demand(&self, key: &PrecomputeKey) -> Demand {
+        let mut demands = lock(&self.demands.0);
+        let (holders, _) = demands
+            .entry(key.clone())
+            .or_insert_with(|| (0, Instant::now()));
+        *holders += 1;
+        Demand {
+            demands: Arc::clone(&self.demands),
+            key: key.clone(),
+        }
+    }
+
+    /// Whether nobody has waited for `key` for `grace`.
+    fn unwanted(&self, key: &PrecomputeKey, grace: Duration) -> bool {
+        self.demands.unwanted(key, grace)
+    }
+
     /// Whether the `caller` token may delete the scene: any caller where it has no owner.
     pub fn owned_by(&self, caller: Option<&str>) -> bool {
         owner_allows(self.owner.as_deref(), caller)
     }
 
+    /// Marks the scene in use until the lease is dropped.
     pub fn lease(self: &Arc<Self>) -> SceneLease {
         self.sessions.fetch_add(1, Ordering::Relaxed);
         SceneLease(Arc::clone(self))
@@ -461,8 +531,9 @@ impl SceneRegistry {
     /// Starts the precompute worker (one thread; a precomputation may use rayon, and `gpu`
     /// where it can).
     pub fn new(store: Store, limits: &Limits, gpu: Option<GpuContext>) -> Arc<Self> {
+        let grace = Duration::from_secs(limits.unwanted_precompute_secs);
         Self::with_worker(limits, move |entry, key| {
-            precompute(&store, gpu.as_ref(), entry, key)
+            precompute(&store, gpu.as_ref(), entry, key, grace)
         })
     }
 
@@ -550,6 +621,7 @@ impl SceneRegistry {
         // The default method's precomputation starts at once, so its first frame need not
         // wait for it.
         if let Ok(Some(key)) = entry.precompute_key(&GiParams::default()) {
+            *lock(&entry.default_demand) = Some(entry.demand(&key));
             self.precomputed(&entry, &key);
         }
         Ok(entry)
@@ -672,15 +744,17 @@ fn precompute(
     gpu: Option<&GpuContext>,
     scene: &Arc<SceneEntry>,
     key: &PrecomputeKey,
+    grace: Duration,
 ) {
     let update = |f: &mut dyn FnMut(&mut Variant)| scene.update_variant(key, f);
-    // Held by nobody but this worker: the scene was deleted (and no request renders it any
-    // more), or it was a one-shot render's upload whose request has ended.
-    let cancelled = || Arc::strong_count(scene) == 1;
+    // Held by nobody but this worker (the scene was deleted and no request renders it any
+    // more, or it was a one-shot render's upload whose request has ended), or nobody has
+    // waited for it for `grace`: its session was deleted, its one-shot gave up.
+    let cancelled = || Arc::strong_count(scene) == 1 || scene.unwanted(key, grace);
     let entry = match precompute::entries().find(|e| e.kind == key.kind) {
         Some(entry) if !cancelled() => entry,
         _ => {
-            update(&mut |v| v.fail("cancelled: nothing uses the scene any more".into()));
+            scene.drop_cancelled(key);
             return;
         }
     };
@@ -729,6 +803,7 @@ fn precompute(
                 v.data = data.take();
             });
         }
+        Err(_) if cancelled() => scene.drop_cancelled(key),
         Err(e) => {
             tracing::warn!(scene = %scene.id, kind = key.kind, "{} failed: {e}", entry.label);
             update(&mut |v| {

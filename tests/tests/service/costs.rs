@@ -208,3 +208,80 @@ async fn the_value_a_refusal_names_is_accepted_and_the_next_is_not() {
     assert_eq!(session["params"]["render"]["gi"]["spp"], 1, "{session}");
     server.stop().await;
 }
+
+/// The surfel-links set of `surfel_count` surfels in a scene's info, if listed.
+fn surfel_set(scene: &Value, surfel_count: u32) -> Option<Value> {
+    scene["precomputed"].as_array()?.iter().find_map(|s| {
+        (s["kind"] == "surfel_links" && s["params"]["surfel_count"] == json!(surfel_count as f64))
+            .then(|| s.clone())
+    })
+}
+
+/// Polls the default scene until `done` holds for its surfel set (`None`: not listed).
+async fn wait_for_set(
+    server: &TestServer,
+    surfel_count: u32,
+    what: &str,
+    done: impl Fn(Option<&Value>) -> bool,
+) {
+    let give_up = Instant::now() + Duration::from_secs(60);
+    loop {
+        let scene = server.get_json("/v1/scenes/default").await;
+        let set = surfel_set(&scene, surfel_count);
+        if done(set.as_ref()) {
+            return;
+        }
+        assert!(Instant::now() < give_up, "{what}: {set:?}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_precomputation_nobody_waits_for_is_cancelled_and_built_again_when_asked() {
+    let server = TestServer::start(&["--unwanted-precompute-secs", "1"]).await;
+    assert_eq!(
+        server.get_json("/v1/server").await["limits"]["unwanted_precompute_secs"],
+        1
+    );
+    // About 13 s of link rays on 2 cores: long enough to be cancelled in the middle.
+    let surfels = 4096;
+    let params = json!({"render": {"width": 32, "height": 24,
+                                   "gi": {"method": "surfels", "surfel_count": surfels}}});
+    let created = server.create_session(params.clone(), None).await;
+    // Its first frame (direct light while the set builds) queues the set.
+    let mut stream = server.connect(&created).await;
+    stream.next_frame(&mut Vec::new()).await;
+    wait_for_set(&server, surfels, "the session's set starts", |s| {
+        s.is_some_and(|s| s["state"] == "running")
+    })
+    .await;
+    drop(stream);
+    let session = format!("/v1/sessions/{}", created.session.id);
+    assert_eq!(server.delete(&session).await.status(), 204);
+    // Nobody needs it now: a second after, it is cancelled at its next check and forgotten.
+    wait_for_set(
+        &server,
+        surfels,
+        "the deleted session's set is cancelled",
+        |s| {
+            assert!(
+                s.is_none_or(|s| s["state"] != "ready"),
+                "it finished instead of being cancelled: {s:?}"
+            );
+            s.is_none()
+        },
+    )
+    .await;
+    // Asked for again, it is built afresh.
+    let again = server.create_session(params, None).await;
+    let mut stream = server.connect(&again).await;
+    stream.next_frame(&mut Vec::new()).await;
+    wait_for_set(&server, surfels, "a new session queues it again", |s| {
+        s.is_some_and(|s| s["state"] == "queued" || s["state"] == "running")
+    })
+    .await;
+    drop(stream);
+    let session = format!("/v1/sessions/{}", again.session.id);
+    assert_eq!(server.delete(&session).await.status(), 204);
+    server.stop().await;
+}

@@ -83,24 +83,28 @@ pub const ENTRY: MethodEntry = MethodEntry {
             get: |g| g.surfel_links,
             set: |g, v| g.surfel_links = v,
             cheaper: Cheaper::Lower,
+            choices: &[],
         },
         Knob {
             field: "bounces",
             get: |g| g.bounces,
             set: |g, v| g.bounces = v,
             cheaper: Cheaper::Lower,
+            choices: &[],
         },
         Knob {
             field: "sh_bands",
             get: |g| g.sh_bands,
             set: |g, v| g.sh_bands = v,
             cheaper: Cheaper::Lower,
+            choices: &[],
         },
         Knob {
             field: "surfel_count",
             get: |g| g.surfel_count,
             set: |g, v| g.surfel_count = v,
             cheaper: Cheaper::Lower,
+            choices: &[],
         },
     ],
     downscales: true,
@@ -183,6 +187,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         get: |g| g.surfel_count,
         set: |g, v| g.surfel_count = v,
         cheaper: Cheaper::Lower,
+        choices: &[],
     }],
     build: |scene, key, env| {
         let params = SurfelParams {

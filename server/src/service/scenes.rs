@@ -17,8 +17,9 @@ use lightcast_protocol::{
     DEFAULT_SCENE_ID,
 };
 use std::collections::{BTreeMap, HashMap};
+use std::sync::atomic::AtomicBool;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{mpsc, Arc, Mutex, MutexGuard, Weak};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, Weak};
 use std::time::{Duration, Instant};
 
 /// Most parameter sets of one precomputation kept per scene.
@@ -479,6 +480,13 @@ impl Drop for SceneLease {
     }
 }
 
+impl Drop for SceneRegistry {
+    /// Ends the workers (a job running finishes first).
+    fn drop(&mut self) {
+        self.jobs.close();
+    }
+}
+
 /// What people call precomputation `key` (`light caches`).
 pub fn precompute_label(key: &PrecomputeKey) -> &'static str {
     precompute::entries()
@@ -506,7 +514,72 @@ pub fn precompute_failed(scene: &SceneEntry, key: &PrecomputeKey, error: &str) -
 /// A queued precomputation. The queue holds its scene weakly: a scene deleted, or a one-shot
 /// render's upload whose request has ended, is skipped and its memory freed at once instead
 /// of waiting in the queue.
-type Job = (Weak<SceneEntry>, PrecomputeKey);
+struct Job {
+    scene: Weak<SceneEntry>,
+    key: PrecomputeKey,
+    /// Its estimated seconds on 2 cores (`PrecomputeEntry::cost`).
+    estimated: f64,
+    queued: Instant,
+}
+
+/// Precomputations estimated at most this many seconds also run on a second worker, so that
+/// a long build (a scene's surfel links, up to `--max-precompute-cost`) never holds up the
+/// light caches and BVHs of every other scene and client.
+const QUICK_JOB_SECONDS: f64 = 10.0;
+
+/// The queue of precomputations and its two workers: the general one takes any job, the
+/// quick one only jobs estimated at most [`QUICK_JOB_SECONDS`]. Each takes the job whose
+/// estimate less its time waited is smallest: short jobs first, and a long one that has
+/// waited as long as it will take goes before newer short ones.
+#[derive(Default)]
+struct JobQueue {
+    jobs: Mutex<Vec<Job>>,
+    changed: Condvar,
+    closed: AtomicBool,
+}
+
+impl JobQueue {
+    /// Queues `job` unless [`MAX_QUEUED_JOBS`] wait already.
+    fn push(&self, job: Job) -> bool {
+        let mut jobs = lock(&self.jobs);
+        if jobs.len() >= MAX_QUEUED_JOBS {
+            return false;
+        }
+        jobs.push(job);
+        self.changed.notify_all();
+        true
+    }
+
+    /// The next job estimated at most `max_seconds`, waiting for one; `None` once closed.
+    fn next(&self, max_seconds: f64) -> Option<Job> {
+        let mut jobs = lock(&self.jobs);
+        loop {
+            if self.closed.load(Ordering::Acquire) {
+                return None;
+            }
+            let priority = |j: &Job| j.estimated - j.queued.elapsed().as_secs_f64();
+            let best = jobs
+                .iter()
+                .enumerate()
+                .filter(|(_, j)| j.estimated <= max_seconds)
+                .min_by(|(_, a), (_, b)| priority(a).total_cmp(&priority(b)))
+                .map(|(i, _)| i);
+            if let Some(i) = best {
+                return Some(jobs.swap_remove(i));
+            }
+            jobs = self
+                .changed
+                .wait(jobs)
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+        }
+    }
+
+    fn close(&self) {
+        self.closed.store(true, Ordering::Release);
+        let _guard = lock(&self.jobs);
+        self.changed.notify_all();
+    }
+}
 
 /// Whether `caller` may delete a scene whose owner digest is `owner` (`None`: anyone).
 pub fn owner_allows(owner: Option<&str>, caller: Option<&str>) -> bool {
@@ -518,56 +591,67 @@ pub fn owner_allows(owner: Option<&str>, caller: Option<&str>) -> bool {
 /// Precomputations waiting at most; beyond them a request is refused for now.
 const MAX_QUEUED_JOBS: usize = 32;
 
-/// All scenes, plus the worker thread that runs their GI methods' precomputations.
+/// All scenes, plus the worker threads that run their GI methods' precomputations.
 pub struct SceneRegistry {
     scenes: Mutex<BTreeMap<String, Arc<SceneEntry>>>,
-    jobs: Mutex<mpsc::SyncSender<Job>>,
+    jobs: Arc<JobQueue>,
     max_scenes: usize,
     budget: Arc<MemoryBudget>,
     quotas: TokenQuotas,
 }
 
 impl SceneRegistry {
-    /// Starts the precompute worker (one thread; a precomputation may use rayon, and `gpu`
-    /// where it can).
+    /// Starts the precompute workers (two threads, see [`JobQueue`]; a precomputation may use
+    /// rayon, and `gpu` where it can).
     pub fn new(store: Store, limits: &Limits, gpu: Option<GpuContext>) -> Arc<Self> {
         let grace = Duration::from_secs(limits.unwanted_precompute_secs);
-        Self::with_worker(limits, move |entry, key| {
+        Self::with_workers(limits, Some(QUICK_JOB_SECONDS), move |entry, key| {
             precompute(&store, gpu.as_ref(), entry, key, grace)
         })
     }
 
-    /// [`SceneRegistry::new`] with `work` run on the worker thread for each queued job.
-    fn with_worker(
+    /// [`SceneRegistry::new`] with `work` run on a worker thread for each queued job, plus a
+    /// second worker for jobs estimated at most `quick` seconds.
+    fn with_workers(
         limits: &Limits,
-        mut work: impl FnMut(&Arc<SceneEntry>, &PrecomputeKey) + Send + 'static,
+        quick: Option<f64>,
+        work: impl Fn(&Arc<SceneEntry>, &PrecomputeKey) + Send + Sync + 'static,
     ) -> Arc<Self> {
-        let (tx, rx) = mpsc::sync_channel::<Job>(MAX_QUEUED_JOBS);
-        std::thread::Builder::new()
-            .name("precompute".into())
-            .spawn(move || {
-                for (entry, key) in rx {
-                    let Some(entry) = entry.upgrade() else {
-                        continue;
-                    };
-                    // A bug in one scene's precomputation must not stop every later scene's.
-                    let run = || work(&entry, &key);
-                    if std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).is_err() {
-                        tracing::error!(scene = %entry.id, kind = key.kind, "a precomputation panicked");
-                        entry.update_variant(&key, &mut |v| {
-                            v.fail(
-                                "the precomputation failed on an internal error (see the \
-                                 server log)"
-                                    .into(),
-                            );
-                        });
+        let jobs = Arc::new(JobQueue::default());
+        let work = Arc::new(work);
+        let lanes = [("precompute", f64::INFINITY)]
+            .into_iter()
+            .chain(quick.map(|q| ("precompute-quick", q)));
+        for (name, max_seconds) in lanes {
+            let (jobs, work) = (Arc::clone(&jobs), Arc::clone(&work));
+            std::thread::Builder::new()
+                .name(name.into())
+                .spawn(move || {
+                    while let Some(job) = jobs.next(max_seconds) {
+                        let Some(entry) = job.scene.upgrade() else {
+                            continue;
+                        };
+                        let key = job.key;
+                        // A bug in one scene's precomputation must not stop every later
+                        // scene's.
+                        let run = || work(&entry, &key);
+                        if std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).is_err() {
+                            tracing::error!(scene = %entry.id, kind = key.kind, "a precomputation panicked");
+                            entry.update_variant(&key, &mut |v| {
+                                v.fail(
+                                    "the precomputation failed on an internal error (see the \
+                                     server log)"
+                                        .into(),
+                                );
+                            });
+                        }
                     }
-                }
-            })
-            .expect("spawning the precompute thread");
+                })
+                .expect("spawning a precompute thread");
+        }
         Arc::new(Self {
             scenes: Mutex::new(BTreeMap::new()),
-            jobs: Mutex::new(tx),
+            jobs,
             max_scenes: limits.max_scenes as usize,
             budget: Arc::new(MemoryBudget::new(limits)),
             quotas: TokenQuotas::new(limits),
@@ -712,13 +796,16 @@ impl SceneRegistry {
             Ok(held) => held,
             Err(e) => return Now::Failed(e.body.message),
         };
-        match lock(&self.jobs).try_send((Arc::downgrade(scene), key.clone())) {
-            Ok(()) => {}
-            Err(mpsc::TrySendError::Full(_)) => return Now::Busy,
-            Err(mpsc::TrySendError::Disconnected(_)) => {
-                tracing::error!("the precompute thread has stopped");
-                return Now::Failed("the precompute thread has stopped".into());
-            }
+        let mut cost = crate::gi::cost::Cost::default();
+        (entry.cost)(key, &scene.facts, &mut cost);
+        let job = Job {
+            scene: Arc::downgrade(scene),
+            key: key.clone(),
+            estimated: cost.seconds(1.0),
+            queued: Instant::now(),
+        };
+        if !self.jobs.push(job) {
+            return Now::Busy;
         }
         variants.push(Variant {
             key: key.clone(),
@@ -820,6 +907,7 @@ mod tests {
     use crate::gi::lightskin::cache_key;
     use crate::gi::lightskin::caches::{min_distance_for, CacheParams};
     use crate::scene::procedural;
+    use std::sync::mpsc;
     use std::time::Duration;
 
     fn limits(max_scenes: u32) -> Limits {
@@ -855,9 +943,10 @@ mod tests {
     fn gated() -> (Arc<SceneRegistry>, mpsc::Receiver<String>, mpsc::Sender<()>) {
         let (seen_tx, seen) = mpsc::channel();
         let (go, go_rx) = mpsc::channel::<()>();
-        let registry = SceneRegistry::with_worker(&limits(4), move |entry, _| {
+        let go_rx = Mutex::new(go_rx);
+        let registry = SceneRegistry::with_workers(&limits(4), None, move |entry, _| {
             let _ = seen_tx.send(entry.id.clone());
-            let _ = go_rx.recv();
+            let _ = lock(&go_rx).recv();
         });
         (registry, seen, go)
     }
@@ -866,7 +955,7 @@ mod tests {
 
     /// A registry under `limits` whose worker does nothing.
     fn idle(limits: &Limits) -> Arc<SceneRegistry> {
-        SceneRegistry::with_worker(limits, |_, _| {})
+        SceneRegistry::with_workers(limits, None, |_, _| {})
     }
 
     #[test]
@@ -1042,6 +1131,78 @@ mod tests {
     }
 
     #[test]
+    fn the_queue_serves_short_jobs_first_and_a_long_one_once_it_has_waited_its_length() {
+        let queue = JobQueue::default();
+        let job = |estimated: f64, waited: f64| Job {
+            scene: Weak::new(),
+            key: params(estimated as f32),
+            estimated,
+            queued: Instant::now() - Duration::from_secs_f64(waited),
+        };
+        assert!(queue.push(job(500.0, 0.0)));
+        assert!(queue.push(job(3.0, 0.0)));
+        assert!(queue.push(job(20.0, 0.0)));
+        let next = |max| queue.next(max).map(|j| j.estimated);
+        assert_eq!(next(f64::INFINITY), Some(3.0));
+        // The quick lane never takes a long job.
+        assert!(queue.push(job(1.0, 0.0)));
+        assert_eq!(next(QUICK_JOB_SECONDS), Some(1.0));
+        assert_eq!(next(f64::INFINITY), Some(20.0));
+        // A long job that has waited as long as it takes goes before a new short one.
+        assert!(queue.push(job(600.0, 700.0)));
+        assert!(queue.push(job(2.0, 0.0)));
+        assert_eq!(next(f64::INFINITY), Some(600.0));
+        queue.close();
+        assert_eq!(next(f64::INFINITY), None, "closed");
+    }
+
+    #[test]
+    fn a_long_precomputation_does_not_hold_up_short_ones() {
+        let (started_tx, started) = mpsc::channel();
+        let (release, release_rx) = mpsc::channel::<()>();
+        let release_rx = Mutex::new(release_rx);
+        let registry = SceneRegistry::with_workers(&limits(4), Some(QUICK_JOB_SECONDS), {
+            move |_, key| {
+                let _ = started_tx.send(key.kind);
+                if key.kind == crate::gi::surfels::SURFEL_LINKS {
+                    let _ = lock(&release_rx).recv();
+                }
+            }
+        });
+        let entry = registry
+            .detached(procedural::cornell_box(), 0.0)
+            .expect("fits");
+        let surfels = GiParams {
+            method: lightcast_protocol::GiMethod::Surfels,
+            surfel_count: 262_144,
+            surfel_links: 16,
+            ..GiParams::default()
+        };
+        let long = entry
+            .precompute_key(&surfels)
+            .expect("within the budgets")
+            .expect("surfels precompute");
+        let mut cost = crate::gi::cost::Cost::default();
+        (crate::gi::surfels::PRECOMPUTE.cost)(&long, &entry.facts, &mut cost);
+        assert!(cost.seconds(1.0) > QUICK_JOB_SECONDS, "{cost:?}");
+        assert!(matches!(registry.precomputed(&entry, &long), Now::Pending));
+        assert_eq!(
+            started.recv_timeout(WAIT),
+            Ok(crate::gi::surfels::SURFEL_LINKS)
+        );
+        // The general worker is busy with it; the light caches run on the quick one.
+        assert!(matches!(
+            registry.precomputed(&entry, &params(1.0)),
+            Now::Pending
+        ));
+        assert_eq!(
+            started.recv_timeout(WAIT),
+            Ok(lightcast_protocol::LIGHT_CACHES)
+        );
+        drop(release);
+    }
+
+    #[test]
     fn jobs_of_scenes_gone_from_every_holder_are_skipped() {
         let (registry, seen, go) = gated();
         let kept = registry
@@ -1065,7 +1226,7 @@ mod tests {
     #[test]
     fn a_panicking_precomputation_fails_its_variant_and_the_worker_goes_on() {
         let (done_tx, done) = mpsc::channel();
-        let registry = SceneRegistry::with_worker(&limits(4), move |entry, p| {
+        let registry = SceneRegistry::with_workers(&limits(4), None, move |entry, p| {
             assert!(p != &params(1.0), "a bug in the precomputation");
             let _ = done_tx.send(entry.id.clone());
         });
@@ -1074,12 +1235,13 @@ mod tests {
             .expect("fits");
         registry.precomputed(&entry, &params(1.0));
         registry.precomputed(&entry, &params(2.0));
-        assert_eq!(done.recv_timeout(WAIT).as_deref(), Ok(entry.id.as_str()));
-        assert_eq!(state(&entry, &params(1.0)), Some(PrecomputeState::Failed));
-        match registry.precomputed(&entry, &params(1.0)) {
+        // The jobs run cheapest first: the panic may come before or after the other job.
+        match settled(&registry, &entry, &params(1.0)) {
             Now::Failed(e) => assert!(e.contains("internal error"), "{e}"),
             _ => panic!("the panicked variant must read as failed"),
         }
+        assert_eq!(done.recv_timeout(WAIT).as_deref(), Ok(entry.id.as_str()));
+        assert_eq!(state(&entry, &params(1.0)), Some(PrecomputeState::Failed));
         // The failed set gave its estimate back; the other still holds its own.
         let second = (crate::gi::lightskin::PRECOMPUTE.estimate)(&params(2.0), &entry.facts);
         assert_eq!(registry.budget().caches.used(), second);

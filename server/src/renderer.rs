@@ -369,6 +369,12 @@ enum Reading {
 
 impl PendingFrame {
     /// Waits for the GPU to finish the frame and reads it back.
+    /// Waits until the frame's GPU work has finished, reading nothing back (a chunk of a
+    /// longer render whose results stay on the GPU).
+    pub fn wait_submitted(self) -> Result<(), GpuError> {
+        self.ctx.wait_for(self.submission.as_ref())
+    }
+
     pub fn wait(self) -> Result<Frame, GpuError> {
         let started = std::time::Instant::now();
         let output = match &self.output {

@@ -99,6 +99,35 @@ pub fn request_seconds(
     (frame_cost(gi, shape, set_units).ns() + compared) * 1e-9 / limits.adapter_speed
 }
 
+/// Estimated seconds of adapter work one submission of a chunked render may take: on a GPU
+/// ~100 ms keeps the other sessions' frames flowing between chunks; on a CPU adapter ~1 s
+/// stays well below the ~2.8 s after which lavapipe silently cuts a dispatch short.
+fn chunk_seconds(limits: &Limits) -> f64 {
+    if limits.adapter_speed > 1.0 {
+        0.1
+    } else {
+        1.0
+    }
+}
+
+/// Samples per submission of a one-shot's path tracing (its own frame with the `reference`,
+/// its comparison with `compare_spp`) when more of them than that would exceed
+/// [`chunk_seconds`]; `None` when every path-traced render fits in one submission.
+pub fn chunk_spp(
+    gi: &GiParams,
+    shape: FrameShape,
+    compare_spp: Option<u32>,
+    limits: &Limits,
+) -> Option<u32> {
+    let own = (gi.method == GiMethod::Reference).then_some(gi.spp);
+    let most = own.into_iter().chain(compare_spp).max()?;
+    let mut one_sample = Cost::default();
+    (crate::gi::entry(GiMethod::Reference).1.cost)(&truth(gi, 1), &shape, &mut one_sample);
+    let per_chunk = chunk_seconds(limits) * 1e9 * limits.adapter_speed / one_sample.ns();
+    let step = (per_chunk.floor() as u32).max(1);
+    (step < most).then_some(step)
+}
+
 /// The range `/v1/server` describes for `field` of `method`.
 fn range(method: GiMethod, field: &str, limits: &Limits) -> Option<(u32, u32)> {
     let info = crate::gi::describe_all(limits)

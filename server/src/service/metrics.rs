@@ -25,6 +25,7 @@ pub const GPU_FRAME_MS: &str = "lightcast_gpu_frame_ms";
 pub const READBACK_MS: &str = "lightcast_readback_ms";
 pub const ENCODE_MS: &str = "lightcast_encode_ms";
 pub const RENDERS: &str = "lightcast_oneshot_renders_total";
+pub const RENDERS_ABANDONED: &str = "lightcast_oneshot_renders_abandoned_total";
 /// Open HTTP/WebSocket connections, and those refused by `reason` (`too_many_connections`).
 pub const CONNECTIONS: &str = "lightcast_connections";
 pub const CONNECTIONS_REFUSED: &str = "lightcast_connections_refused_total";
@@ -127,4 +128,8 @@ fn describe() {
         );
     }
     describe_counter!(RENDERS, "One-shot renders");
+    describe_counter!(
+        RENDERS_ABANDONED,
+        "Chunked one-shot renders stopped between chunks because their client had gone"
+    );
 }

@@ -44,7 +44,49 @@ pub struct OneShot {
     pub queued: Instant,
     /// Render the same view with this method and `spp` samples too, and compare.
     pub compare: Option<(GiMethod, u32)>,
+    /// Samples per submission of the request's path-traced renders (its own frame with the
+    /// `reference`, its comparison): a longer one is accumulated over several turns of the
+    /// loop, the sessions due served between them, and stops when nobody waits any more.
+    pub chunk_spp: Option<u32>,
+    chunks: Chunks,
 }
+
+impl OneShot {
+    pub fn new(
+        scene: Arc<SceneEntry>,
+        resolved: Resolved,
+        reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
+        compare: Option<(GiMethod, u32)>,
+        chunk_spp: Option<u32>,
+    ) -> Self {
+        Self {
+            scene,
+            resolved,
+            reply,
+            queued: Instant::now(),
+            compare,
+            chunk_spp,
+            chunks: Chunks::default(),
+        }
+    }
+}
+
+/// How far a chunked one-shot is: samples accumulated ahead of its final submission (in image
+/// histories of its own), and the chunk still on the GPU.
+#[derive(Default)]
+struct Chunks {
+    /// How long it waited for its first turn.
+    queue_ms: Option<f64>,
+    histories: Option<(u64, u64)>,
+    own: u32,
+    compared: u32,
+    in_flight: Option<PendingFrame>,
+}
+
+/// Image histories of chunked one-shots: one pair per request, apart from the sessions' (a
+/// hash of their ids) by their top bit.
+static NEXT_ONE_SHOT_HISTORY: std::sync::atomic::AtomicU64 =
+    std::sync::atomic::AtomicU64::new(1 << 63);
 
 /// A rendered frame: the image of the requested view plus what was measured.
 pub struct Rendered {
@@ -319,18 +361,50 @@ impl Loop {
     }
 
     /// Submits a one-shot render (and the render it is compared with, unless cached); the
-    /// readback thread waits for them and replies.
-    fn one_shot(&mut self, job: OneShot) {
-        let queue_ms = job.queued.elapsed().as_secs_f64() * 1e3;
+    /// readback thread waits for them and replies. A chunked one (see [`OneShot::chunk_spp`])
+    /// first submits one chunk of its path tracing per call and goes back to the front of the
+    /// queue.
+    fn one_shot(&mut self, mut job: OneShot) {
         if job.reply.is_closed() {
+            // Nobody waits for it any more (its request timed out or was dropped): it stops
+            // here, between chunks, and its accumulations go back to the tracer's pool.
+            if job.chunks.histories.is_some() {
+                metrics::counter!(super::metrics::RENDERS_ABANDONED).increment(1);
+                tracing::info!(
+                    scene = %job.scene.id,
+                    samples = job.chunks.own + job.chunks.compared,
+                    "one-shot render stopped between chunks: nobody waits for it any more"
+                );
+            }
             return;
+        }
+        let queue_ms = *job
+            .chunks
+            .queue_ms
+            .get_or_insert_with(|| job.queued.elapsed().as_secs_f64() * 1e3);
+        match self.next_chunk(&mut job) {
+            Some(Ok(())) => {
+                self.one_shots.push_front(Box::new(job));
+                return;
+            }
+            Some(Err(e)) => {
+                let _ = job.reply.send(Err(e));
+                return;
+            }
+            None => {}
+        }
+        if let Some(previous) = job.chunks.in_flight.take() {
+            if let Err(e) = previous.wait_submitted() {
+                let _ = job.reply.send(Err(ApiError::internal(e.to_string())));
+                return;
+            }
         }
         metrics::counter!(super::metrics::RENDERS).increment(1);
         let compare = match job.compare {
             None => Ok(None),
             Some((method, spp)) => self.comparison(&job, method, spp).map(Some),
         };
-        let mut resolved = job.resolved.clone();
+        let (mut resolved, expected) = self.own_settings(&job, job.resolved.settings.gi.spp);
         resolved.settings.capture_hdr |= compare.as_ref().is_ok_and(Option::is_some);
         let submitted = compare.and_then(|c| Ok((c, self.submit(&job.scene, &resolved)?)));
         let (compare, submitted) = match submitted {
@@ -346,6 +420,7 @@ impl Loop {
                 reply: job.reply,
                 queue_ms,
                 compare,
+                expected,
             },
         };
         if let Err(mpsc::SendError(job)) = self.readback.send(readback) {
@@ -353,14 +428,90 @@ impl Loop {
         }
     }
 
-    /// The frame a one-shot render is compared with: `method` with `spp` samples at the same
-    /// view, from the cache or submitted now.
-    fn comparison(
-        &mut self,
+    /// The own frame's settings with `spp` samples after what its chunks accumulated, and
+    /// the samples per pixel its image must then hold (`None`: not chunked).
+    fn own_settings(&self, job: &OneShot, spp: u32) -> (Resolved, Option<u32>) {
+        let mut resolved = job.resolved.clone();
+        let traced = resolved.settings.gi.method == GiMethod::Reference;
+        match job.chunks.histories {
+            Some((own, _)) if traced => {
+                resolved.settings.history = Some(own);
+                resolved.settings.gi.spp = spp.saturating_sub(job.chunks.own).max(1);
+                (resolved, Some(spp))
+            }
+            _ => (resolved, None),
+        }
+    }
+
+    /// Submits the next chunk of a chunked one-shot's path tracing, if more than its final
+    /// submission is left: its comparison's first, then its own frame's. `None` when the
+    /// final submission is next.
+    fn next_chunk(&mut self, job: &mut OneShot) -> Option<Result<(), ApiError>> {
+        let step = job.chunk_spp?;
+        let own_total = if job.resolved.settings.gi.method == GiMethod::Reference {
+            job.resolved.settings.gi.spp
+        } else {
+            0
+        };
+        let compare_total = match job.compare {
+            Some((method, spp)) => match self.truth(job, method, spp) {
+                Ok((_, key)) if self.comparisons.contains(key) => 0,
+                Ok(_) => spp,
+                Err(e) => return Some(Err(e)),
+            },
+            None => 0,
+        };
+        // The last chunk of each is left to the final submission, which reads them back.
+        let compare_next = job.chunks.compared + step < compare_total;
+        if !compare_next && job.chunks.own + step >= own_total {
+            return None;
+        }
+        let (own_history, compare_history) = *job.chunks.histories.get_or_insert_with(|| {
+            let first = NEXT_ONE_SHOT_HISTORY.fetch_add(2, std::sync::atomic::Ordering::Relaxed);
+            (first, first + 1)
+        });
+        // One chunk at a time on the GPU: the sessions' frames submitted since the last one
+        // run before the next.
+        if let Some(previous) = job.chunks.in_flight.take() {
+            if let Err(e) = previous.wait_submitted() {
+                return Some(Err(ApiError::internal(e.to_string())));
+            }
+        }
+        let mut resolved = match (compare_next, job.compare) {
+            (true, Some((method, spp))) => match self.truth(job, method, spp) {
+                Ok((truth, _)) => truth,
+                Err(e) => return Some(Err(e)),
+            },
+            _ => job.resolved.clone(),
+        };
+        resolved.settings.history = Some(if compare_next {
+            compare_history
+        } else {
+            own_history
+        });
+        resolved.settings.gi.spp = step;
+        resolved.settings.capture_hdr = false;
+        let submitted = match self.submit(&job.scene, &resolved) {
+            Ok(s) => s,
+            Err(e) => return Some(Err(e)),
+        };
+        job.chunks.in_flight = Some(submitted.pending);
+        if compare_next {
+            job.chunks.compared += step;
+        } else {
+            job.chunks.own += step;
+        }
+        Some(Ok(()))
+    }
+
+    /// The settings of the render a one-shot is compared with (`method` with `spp` samples
+    /// at the same view), and their key in the comparison cache.
+    fn truth(
+        &self,
         job: &OneShot,
         method: GiMethod,
         spp: u32,
-    ) -> Result<Comparand, ApiError> {
+    ) -> Result<(Resolved, u64), ApiError> {
         let mut truth = job.resolved.clone();
         let asked = truth.settings.gi;
         // Only what the comparison method reads, so that comparisons of one view at several
@@ -381,6 +532,24 @@ impl Loop {
             method,
             ..Default::default()
         })?;
+        let key = {
+            use std::hash::{Hash, Hasher};
+            let mut h = std::collections::hash_map::DefaultHasher::new();
+            (&job.scene.id, format!("{:?}", truth.settings)).hash(&mut h);
+            h.finish()
+        };
+        Ok((truth, key))
+    }
+
+    /// The frame a one-shot render is compared with: `method` with `spp` samples at the same
+    /// view, from the cache or submitted now (after the samples its chunks accumulated).
+    fn comparison(
+        &mut self,
+        job: &OneShot,
+        method: GiMethod,
+        spp: u32,
+    ) -> Result<Comparand, ApiError> {
+        let (mut truth, key) = self.truth(job, method, spp)?;
         // The HTTP handler waited for it; a comparison never falls back to direct light.
         if let Some(needed) = &truth.precompute {
             if !matches!(self.scenes.precomputed(&job.scene, needed), Now::Ready(_)) {
@@ -390,14 +559,13 @@ impl Loop {
                 )));
             }
         }
-        let key = {
-            use std::hash::{Hash, Hasher};
-            let mut h = std::collections::hash_map::DefaultHasher::new();
-            (&job.scene.id, format!("{:?}", truth.settings)).hash(&mut h);
-            h.finish()
-        };
-        let cached = self.comparisons.lookup(key);
-        let frame = match cached {
+        let mut expected = None;
+        if let Some((_, history)) = job.chunks.histories.filter(|_| job.chunks.compared > 0) {
+            truth.settings.history = Some(history);
+            truth.settings.gi.spp = spp.saturating_sub(job.chunks.compared).max(1);
+            expected = Some(spp);
+        }
+        let frame = match self.comparisons.lookup(key) {
             Some(frame) => ComparandFrame::Cached(frame),
             None => ComparandFrame::Pending(Box::new(self.submit(&job.scene, &truth)?.pending)),
         };
@@ -405,6 +573,7 @@ impl Loop {
             method,
             key,
             frame,
+            expected,
             cache: Arc::clone(&self.comparisons),
         })
     }
@@ -490,6 +659,8 @@ enum Destination {
         reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
         queue_ms: f64,
         compare: Option<Comparand>,
+        /// The samples per pixel a chunked render's image must hold.
+        expected: Option<u32>,
     },
 }
 
@@ -516,7 +687,26 @@ struct Comparand {
     /// Its key in the cache.
     key: u64,
     frame: ComparandFrame,
+    /// The samples per pixel a chunked comparison must hold.
+    expected: Option<u32>,
     cache: Arc<ComparisonCache>,
+}
+
+/// A chunked render's image holds fewer samples than it was given: other renders took its
+/// accumulation over (the tracer keeps a few histories at once) before it was read back.
+fn check_samples(frame: &Frame, expected: Option<u32>) -> Result<(), ApiError> {
+    let Some(expected) = expected else {
+        return Ok(());
+    };
+    let samples = frame.progress.map_or(0, |p| p.samples);
+    if samples == expected {
+        Ok(())
+    } else {
+        Err(ApiError::unavailable(format!(
+            "the path tracer's accumulation of this render was taken over by other renders \
+             ({samples} of {expected} samples kept); try again"
+        )))
+    }
 }
 
 enum ComparandFrame {
@@ -534,6 +724,7 @@ impl Comparand {
                 let frame = pending
                     .wait()
                     .map_err(|e| ApiError::internal(e.to_string()))?;
+                check_samples(&frame, self.expected)?;
                 let frame = Arc::new(
                     Truth::from_frame(frame).map_err(|e| ApiError::internal(e.to_string()))?,
                 );
@@ -551,6 +742,14 @@ impl Comparand {
 struct ComparisonCache(std::sync::Mutex<Vec<(u64, Arc<Truth>)>>);
 
 impl ComparisonCache {
+    fn contains(&self, key: u64) -> bool {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .iter()
+            .any(|(k, _)| *k == key)
+    }
+
     fn lookup(&self, key: u64) -> Option<Arc<Truth>> {
         let mut entries = self
             .0
@@ -600,14 +799,16 @@ fn readback_thread(jobs: mpsc::Receiver<ReadbackJob>, encoder: Arc<EncodePool>) 
                 reply,
                 queue_ms,
                 compare,
+                expected,
             } => {
-                let result = one_shot_result(job.frame, compare).map(|(rendered, comparison)| {
-                    OneShotResult {
-                        rendered,
-                        queue_ms,
-                        comparison,
-                    }
-                });
+                let result =
+                    one_shot_result(job.frame, compare, expected).map(|(rendered, comparison)| {
+                        OneShotResult {
+                            rendered,
+                            queue_ms,
+                            comparison,
+                        }
+                    });
                 let _ = reply.send(result);
             }
         }
@@ -618,13 +819,15 @@ fn readback_thread(jobs: mpsc::Receiver<ReadbackJob>, encoder: Arc<EncodePool>) 
 fn one_shot_result(
     frame: FrameJob,
     compare: Option<Comparand>,
+    expected: Option<u32>,
 ) -> Result<(Rendered, Option<Comparison>), ApiError> {
     let Some(compare) = compare else {
-        return Ok((frame.wait(|_| Ok(()))?, None));
+        return Ok((frame.wait(|frame| check_samples(frame, expected))?, None));
     };
     let (method, reference) = compare.wait()?;
     let mut comparison = None;
     let rendered = frame.wait(|frame| {
+        check_samples(frame, expected)?;
         let c = crate::quality::compare(frame, &reference, method)
             .map_err(|e| ApiError::internal(e.to_string()))?;
         comparison = Some(c);

@@ -151,3 +151,36 @@ fn refuses_bad_options_with_a_reason() {
         assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
     }
 }
+
+/// A long path-traced one-shot render is accumulated in chunks of samples (issue 30); when its
+/// client has gone, it stops at the next chunk instead of running to its end, and says so.
+#[test]
+fn a_chunked_render_nobody_waits_for_stops_between_chunks() {
+    let (mut child, lines) = server(
+        &["--allow-cpu-adapter"],
+        &[("LIGHTCAST_LISTEN", "127.0.0.1:0")],
+    );
+    let mut seen = Vec::new();
+    let listening = wait_for(&lines, "listening on http://", &mut seen);
+    let addr = listening
+        .rsplit("http://")
+        .next()
+        .expect("address")
+        .trim()
+        .to_string();
+    // About 8 s of estimated path tracing on lavapipe, in chunks of about 1 s.
+    let body = r#"{"render": {"width": 96, "height": 64, "gi": {"method": "reference", "spp": 120, "bounces": 4}}}"#;
+    let mut stream = TcpStream::connect(&addr).expect("connect");
+    write!(
+        stream,
+        "POST /v1/render HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("send");
+    std::thread::sleep(Duration::from_millis(500));
+    drop(stream);
+    let stopped = wait_for(&lines, "stopped between chunks", &mut seen);
+    assert!(stopped.contains("samples"), "{stopped}");
+    child.kill().expect("kill");
+    let _ = child.wait();
+}

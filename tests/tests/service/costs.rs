@@ -285,3 +285,65 @@ async fn a_precomputation_nobody_waits_for_is_cancelled_and_built_again_when_ask
     assert_eq!(server.delete(&session).await.status(), 204);
     server.stop().await;
 }
+
+async fn raw_indirect(server: &TestServer, body: &Value) -> (Vec<u8>, Value) {
+    let response = server
+        .http
+        .post(server.url("/v1/render"))
+        .json(body)
+        .send()
+        .await
+        .expect("render");
+    assert_eq!(response.status(), 200);
+    let report: Value = serde_json::from_slice(
+        response
+            .headers()
+            .get("x-lightcast-report")
+            .expect("report")
+            .as_bytes(),
+    )
+    .expect("report JSON");
+    (response.bytes().await.expect("body").to_vec(), report)
+}
+
+/// A path-traced one-shot longer than one submission (about 1 s of estimated work on a CPU
+/// adapter) is accumulated over several turns of the render loop, with the sessions' frames
+/// in between, and gives the pixels one submission would. (That one nobody waits for stops
+/// between chunks: `server/tests/integration/serve_cli.rs`, where the log is the server's.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_long_path_traced_render_is_chunked_with_the_same_pixels() {
+    // 64×48 × 64 spp × 9 rays: about 2 s estimated, chunks of about 1 s on lavapipe; taken
+    // as 1,000 times faster, the other server renders it in one submission.
+    let (chunked, whole) = (
+        TestServer::start(&[]).await,
+        TestServer::start(&["--adapter-speed", "1000"]).await,
+    );
+    let body = json!({"render": {"width": 64, "height": 48,
+                                 "gi": {"method": "reference", "spp": 64, "bounces": 4}},
+                      "format": "raw_indirect"});
+    let (a, report) = raw_indirect(&chunked, &body).await;
+    let (b, _) = raw_indirect(&whole, &body).await;
+    assert_eq!(report["samples"], 64, "{report}");
+    assert!(
+        report["estimated_seconds"]
+            .as_f64()
+            .is_some_and(|s| s > 1.0),
+        "{report}"
+    );
+    assert_eq!(a, b, "chunked and whole renders differ");
+
+    // The same with a comparison: both path-traced renders are chunked.
+    let compared = json!({"render": {"width": 64, "height": 48,
+                                     "gi": {"method": "reference", "spp": 64, "bounces": 4}},
+                          "compare_to": "reference", "compare_spp": 64});
+    let (_, report) = raw_indirect(&chunked, &compared).await;
+    let comparison = &report["comparison"];
+    assert_eq!(
+        comparison["indirect_mae"], 0.0,
+        "the same samples: {report}"
+    );
+    assert_eq!(comparison["reference_samples"], 64, "{report}");
+
+    chunked.stop().await;
+    whole.stop().await;
+}

@@ -3,7 +3,7 @@
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
-use crate::service::cost::{check_frame, request_seconds};
+use crate::service::cost::{check_frame, chunk_spp, request_seconds};
 use crate::service::encode;
 use crate::service::error::ApiError;
 use crate::service::params::{check_gi_ranges, check_quality, frame_shape, resolve};
@@ -277,13 +277,13 @@ pub async fn render(
     let (tx, rx) = tokio::sync::oneshot::channel();
     state
         .render_tx
-        .send(Command::Render(Box::new(OneShot {
-            scene: Arc::clone(&entry),
-            resolved: resolved.clone(),
-            reply: tx,
-            queued: Instant::now(),
+        .send(Command::Render(Box::new(OneShot::new(
+            Arc::clone(&entry),
+            resolved.clone(),
+            tx,
             compare,
-        })))
+            chunk_spp(&req.render.gi, shape, compare_spp, &state.limits),
+        ))))
         .map_err(|_| ApiError::unavailable("the render loop has stopped"))?;
     let result = rx
         .await

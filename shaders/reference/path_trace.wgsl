@@ -26,7 +26,8 @@ struct TraceParams {
     glossy_exponent: f32,
     // 1: add the emission of the surfaces a path reaches (emissive surfaces as area lights).
     emitters: u32,
-    pad1: u32,
+    // First row of this dispatch's band of the image (a sample is traced in bands of rows).
+    row_offset: u32,
 }
 
 @group(0) @binding(0) var<storage, read> params: TraceParams;
@@ -175,14 +176,15 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= params.width || id.y >= params.height {
+    let row = id.y + params.row_offset;
+    if id.x >= params.width || row >= params.height {
         return;
     }
-    let pixel = id.y * params.width + id.x;
+    let pixel = row * params.width + id.x;
     // The pixel centre, as rasterisation samples it.
     let ndc = vec2<f32>(
         (f32(id.x) + 0.5) / f32(params.width) * 2.0 - 1.0,
-        1.0 - (f32(id.y) + 0.5) / f32(params.height) * 2.0,
+        1.0 - (f32(row) + 0.5) / f32(params.height) * 2.0,
     );
     let far = params.inv_view_proj * vec4<f32>(ndc, 1.0, 1.0);
     let dir = normalize(far.xyz / far.w - params.camera_position);

@@ -392,6 +392,45 @@ fn the_same_request_gives_the_same_pixels_and_another_seed_others() {
     assert_ne!(first, render(2));
 }
 
+/// A sample is traced in bands of rows, each one dispatch of at most `BAND_RAYS` rays (issue
+/// 30: lavapipe silently cuts a dispatch of more than ~2.8 s short): bands of two rows, and
+/// of rows that do not divide the image, add up to exactly the image one dispatch per sample
+/// makes.
+#[test]
+fn bands_of_rows_add_up_to_the_whole_image() {
+    let p = plates();
+    let settings = ReferenceSettings {
+        bounces: 2,
+        ..ReferenceSettings::default()
+    };
+    let (width, height) = (24, 21);
+    let render = |band_rays: Option<u64>| {
+        let tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
+        let mut tracer = match band_rays {
+            Some(rays) => tracer.with_band_rays(rays),
+            None => tracer,
+        };
+        converge(
+            &mut tracer,
+            (width, height),
+            &p.camera,
+            &p.light,
+            &settings,
+            3,
+        )
+    };
+    let whole = render(None);
+    let rays_per_row = u64::from(width) * (1 + 2 * 2);
+    for rows in [2, 5] {
+        let banded = render(Some(rays_per_row * rows));
+        assert_eq!(banded.indirect, whole.indirect, "bands of {rows} rows");
+    }
+    assert!(
+        whole.indirect.iter().any(|p| p[0] > 0.0),
+        "the plates are lit"
+    );
+}
+
 #[test]
 fn accumulation_restarts_when_the_camera_moves() {
     let p = plates();

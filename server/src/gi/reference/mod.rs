@@ -58,6 +58,9 @@ pub const MAX_BOUNCES: u32 = 16;
 pub const MAX_SAMPLES_PER_CALL: u32 = 1024;
 /// Image histories (sessions) whose accumulations a scene's tracer keeps at once.
 const MAX_HISTORIES: usize = 4;
+/// Rays one dispatch traces at most (a band of rows of one sample): about 0.6 s on lavapipe
+/// with 2 cores, well below the ~2.8 s after which it silently cuts a dispatch short.
+pub const BAND_RAYS: u64 = 1 << 19;
 /// The history of [`PathTracer::accumulate`]'s callers (bench, tests).
 const DIRECT_HISTORY: u64 = u64::MAX;
 
@@ -224,7 +227,8 @@ pub struct TraceParams {
     pub glossy_exponent: f32,
     /// 1: a path adds the emission of the surfaces it reaches (`GiSettings::emitters`).
     pub emitters: u32,
-    pub pad1: u32,
+    /// First row of this dispatch's band of the image.
+    pub row_offset: u32,
 }
 
 /// Mirrors `SurfaceGpu` in `shaders/reference/surfaces.wgsl`: a material as the reference
@@ -475,6 +479,8 @@ pub struct PathTracer {
     /// Accumulations of the most recently used histories, most recent first.
     accumulations: Vec<Accumulation>,
     resolve: resolve::ResolvePass,
+    /// Rays per dispatch at most ([`BAND_RAYS`]).
+    band_rays: u64,
 }
 
 /// Per-pixel sums of radiance (rgb) and squared luminance (w) for one key.
@@ -602,8 +608,16 @@ impl PathTracer {
             bounds: scene.bounds,
             accumulations: Vec::new(),
             resolve: resolve::ResolvePass::new(device),
+            band_rays: BAND_RAYS,
             ctx,
         })
+    }
+
+    /// The same tracer with bands of at most `rays` rays per dispatch (tests show the bands
+    /// add up to the whole image).
+    pub fn with_band_rays(mut self, rays: u64) -> Self {
+        self.band_rays = rays.max(1);
+        self
     }
 
     /// Samples per pixel accumulated by [`Self::accumulate`] for its last key.
@@ -744,12 +758,25 @@ impl PathTracer {
             ray_epsilon: 1e-4 * scale,
             glossy_exponent: settings.glossy_exponent.unwrap_or(0.0),
             emitters: u32::from(settings.emitters),
-            pad1: 0,
+            row_offset: 0,
         };
+        // Each sample in bands of rows of at most `band_rays` rays (a camera ray, then a bounce
+        // and a shadow ray per bounce), as many as the parameter slots hold.
+        let rays_per_row = u64::from(width) * u64::from(1 + 2 * settings.bounces);
+        let wanted = u64::from(height)
+            .div_ceil((self.band_rays / rays_per_row).max(1))
+            .max(1);
+        let bands = wanted.min(u64::from(MAX_SAMPLES_PER_CALL / samples.max(1)).max(1)) as u32;
+        let rows = height.div_ceil(bands).next_multiple_of(passes::TILE);
+        let bands = height.div_ceil(rows);
+        let first = *done;
         let slots: Vec<TraceParams> = (0..samples)
-            .map(|i| TraceParams {
-                sample_index: *done + i,
-                ..base
+            .flat_map(|i| {
+                (0..bands).map(move |b| TraceParams {
+                    sample_index: first + i,
+                    row_offset: b * rows,
+                    ..base
+                })
             })
             .collect();
         self.params.write(&self.ctx.queue, &slots);
@@ -766,14 +793,11 @@ impl PathTracer {
         let mut pass = passes::begin_compute(encoder, "reference path trace");
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(1, &self.scene_group, &[]);
-        // One dispatch per sample, each reading its own parameter slot.
-        for i in 0..samples {
-            pass.set_bind_group(0, &group, &[ParamSlots::offset(i)]);
-            pass.dispatch_workgroups(
-                width.div_ceil(passes::TILE),
-                height.div_ceil(passes::TILE),
-                1,
-            );
+        // One dispatch per band of each sample, each reading its own parameter slot.
+        for (slot, params) in slots.iter().enumerate() {
+            pass.set_bind_group(0, &group, &[ParamSlots::offset(slot as u32)]);
+            let band = rows.min(height - params.row_offset);
+            pass.dispatch_workgroups(width.div_ceil(passes::TILE), band.div_ceil(passes::TILE), 1);
         }
         drop(pass);
         *done += samples;
@@ -956,7 +980,7 @@ mod tests {
                 ("ray_epsilon", offset_of!(TraceParams, ray_epsilon)),
                 ("glossy_exponent", offset_of!(TraceParams, glossy_exponent)),
                 ("emitters", offset_of!(TraceParams, emitters)),
-                ("pad1", offset_of!(TraceParams, pad1)),
+                ("row_offset", offset_of!(TraceParams, row_offset)),
             ],
         );
         assert_struct(

@@ -14,7 +14,8 @@
 # - with --tests: chromium, and nodejs + npm where Node.js is missing, for the browser viewer's
 #   test (Debian's Chromium driven by playwright-core, which never downloads a browser), then
 #   `npm ci` in client/web for playwright-core at the version its package-lock.json pins.
-#   Also python3-venv where `python3 -m venv` cannot work, for deploy/ci/check.sh's tools, and
+#   Also python3-venv where `python3 -m venv` cannot work, for deploy/ci/check.sh's tools and
+#   schemathesis (tests/requirements.txt, into target/test-tools/venv, for the OpenAPI test), and
 #   nginx for the test of three replicas behind a proxy (the chart's router's rule) and of the
 #   client over TLS, and openssl for that test's private CA.
 # Checked, not installed: Rust (cargo at least the workspace's `rust-version` in Cargo.toml, from
@@ -92,6 +93,15 @@ if $tests; then
   if [ -n "$node_needs" ] && ! version_at_least "$node_version" "$node_needs"; then
     echo "setup: Node.js $node_version is older than the $node_needs the viewer test's playwright-core needs; install a newer Node.js (https://nodejs.org, or Debian's backports) and run again" >&2
     exit 1
+  fi
+  # schemathesis for the OpenAPI property test, pinned in tests/requirements.txt.
+  tools="$root/target/test-tools"
+  if ! cmp -s "$root/tests/requirements.txt" "$tools/venv/.installed-requirements.txt" 2>/dev/null; then
+    echo "setup: installing tests/requirements.txt (schemathesis) into $tools/venv" >&2
+    rm -rf "$tools/venv"
+    python3 -m venv "$tools/venv"
+    "$tools/venv/bin/pip" install --quiet --disable-pip-version-check -r "$root/tests/requirements.txt"
+    cp "$root/tests/requirements.txt" "$tools/venv/.installed-requirements.txt"
   fi
   stamp="$web/node_modules/.installed-package-lock.json"
   if ! cmp -s "$web/package-lock.json" "$stamp"; then

@@ -7,6 +7,7 @@ mod costs;
 mod hardening;
 mod routing;
 mod scene_store;
+mod schemathesis;
 mod streaming;
 mod video;
 mod viewer;

@@ -404,7 +404,7 @@ impl Loop {
             None => Ok(None),
             Some((method, spp)) => self.comparison(&job, method, spp).map(Some),
         };
-        let (mut resolved, expected) = self.own_settings(&job, job.resolved.settings.gi.spp);
+        let (mut resolved, expected) = self.own_settings(&job);
         resolved.settings.capture_hdr |= compare.as_ref().is_ok_and(Option::is_some);
         let submitted = compare.and_then(|c| Ok((c, self.submit(&job.scene, &resolved)?)));
         let (compare, submitted) = match submitted {
@@ -428,10 +428,11 @@ impl Loop {
         }
     }
 
-    /// The own frame's settings with `spp` samples after what its chunks accumulated, and
+    /// The own frame's final settings (its samples after those its chunks accumulated), and
     /// the samples per pixel its image must then hold (`None`: not chunked).
-    fn own_settings(&self, job: &OneShot, spp: u32) -> (Resolved, Option<u32>) {
+    fn own_settings(&self, job: &OneShot) -> (Resolved, Option<u32>) {
         let mut resolved = job.resolved.clone();
+        let spp = resolved.settings.gi.spp;
         let traced = resolved.settings.gi.method == GiMethod::Reference;
         match job.chunks.histories {
             Some((own, _)) if traced => {

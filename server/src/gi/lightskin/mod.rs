@@ -89,9 +89,9 @@ pub const ENTRY: MethodEntry = MethodEntry {
 /// (N_VS view samples per texel) and VAL draw, cache lighting (C × VALs, every RSM texel for
 /// `lightskin`), proxy occlusion (C²) and the per-pixel interpolation. Weights in reference
 /// ns per item, measured on the Cornell box (6,596 caches, 64×48): 16 per cache·VAL
-/// (val_count 512 … 16,384, LightSkin RSM 64² … 256²), 4.5 per texel·view sample, 300 per
-/// texel for BRSM's cumulative sums and draw (RSM 1024² and 2048²), 13 per cache pair, 1 µs
-/// per interpolated pixel.
+/// (val_count 512 … 16,384, LightSkin RSM 64² … 256²), 4.5 per texel·view sample, 200 per
+/// texel for BRSM's cumulative sums and draw (RSM 1024² and 2048², besides the RSM's own
+/// 100), 13 per cache pair, 1 µs per interpolated pixel.
 fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     cost::rsm(gi, shape, cost);
     let caches = shape.set_units as f64;
@@ -102,7 +102,7 @@ fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
             texels * f64::from(gi.view_samples),
             4.5,
         );
-        cost.add("VAL selection (faces × rsm_size²)", texels, 300.0);
+        cost.add("VAL selection (faces × rsm_size²)", texels, 200.0);
         cost.add(
             "cache lighting (caches × val_count)",
             caches * f64::from(gi.val_count),

@@ -934,11 +934,15 @@ pub struct Limits {
     /// One-shot renders queued or running at once (429 beyond).
     #[serde(default)]
     pub max_queued_renders: u32,
-    /// Estimated seconds of adapter work one request may buy: a one-shot render with its
-    /// comparison, or one frame of a session (400 naming the parameter to lower, and the
-    /// value that fits, beyond). Estimates are the GI methods' cost formulas.
+    /// Estimated seconds of adapter work one one-shot render may buy, its path tracing (a
+    /// `reference` frame, a comparison) accumulated in chunks (400 naming the parameter to
+    /// lower, and the value that fits, beyond). Estimates are the GI methods' cost formulas.
     #[serde(default)]
     pub max_request_seconds: f64,
+    /// Estimated seconds of adapter work one submission may take while every other session
+    /// waits: a session's frame, a one-shot's frame but for its path tracing (400 beyond).
+    #[serde(default)]
+    pub max_frame_seconds: f64,
     /// How many times faster than the reference adapter (lavapipe on 2 CPU cores, where the
     /// cost formulas were measured) this server's adapter is taken to be.
     #[serde(default)]

@@ -195,11 +195,15 @@ pub struct LimitArgs {
     /// One-shot renders queued or running at once.
     #[arg(long, env = "LIGHTCAST_MAX_QUEUED_RENDERS", default_value_t = 16)]
     pub max_queued_renders: u32,
-    /// Estimated seconds of adapter work one request may buy: a one-shot render (with its
-    /// comparison render) or one frame of a session. Costlier requests are refused with the
-    /// parameter to lower and the value that fits.
+    /// Estimated seconds of adapter work one one-shot render may buy (with its comparison
+    /// render; path tracing runs in chunks). Costlier requests are refused with the parameter
+    /// to lower and the value that fits.
     #[arg(long, env = "LIGHTCAST_MAX_REQUEST_COST", default_value_t = 10.0)]
     pub max_request_cost: f64,
+    /// Estimated seconds of adapter work one submission may take while every other session
+    /// waits: a session's frame, or a one-shot's frame but for its path tracing.
+    #[arg(long, env = "LIGHTCAST_MAX_FRAME_COST", default_value_t = 2.0)]
+    pub max_frame_cost: f64,
     /// How many times faster than the reference adapter (lavapipe on 2 CPU cores) this one
     /// runs the GI methods' cost formulas: `auto` is 1 on a CPU adapter and 256 on a GPU (an
     /// H200 ran the compute-bound stages about 450 times faster, the raster ones less).
@@ -364,6 +368,7 @@ impl LimitArgs {
         )?;
         for (flag, seconds) in [
             ("max-request-cost", self.max_request_cost),
+            ("max-frame-cost", self.max_frame_cost),
             ("max-precompute-cost", self.max_precompute_cost),
         ] {
             if !(seconds.is_finite() && seconds > 0.0) {
@@ -411,6 +416,7 @@ impl LimitArgs {
             max_uploads: self.max_uploads,
             max_queued_renders: self.max_queued_renders,
             max_request_seconds: self.max_request_cost,
+            max_frame_seconds: self.max_frame_cost,
             // Known once the adapter is: see [`AdapterSpeed::resolve`].
             adapter_speed: 1.0,
             max_precompute_seconds: self.max_precompute_cost,

@@ -6,8 +6,10 @@
 //!
 //! The estimates are the methods' own formulas (`gi::cost`, each method's `cost`) in
 //! reference nanoseconds; `--adapter-speed` says how many times faster than the reference
-//! (lavapipe on 2 cores) this adapter is, and `--max-request-cost` how many estimated seconds
-//! one request may take on it. Precomputations run on the CPU and are held to
+//! (lavapipe on 2 cores) this adapter is, `--max-frame-cost` how many estimated seconds one
+//! submission (a session's frame, a one-shot's frame but for its path tracing) may take on it
+//! while every other session waits, and `--max-request-cost` how many a one-shot may take in
+//! all, its path tracing in chunks. Precomputations run on the CPU and are held to
 //! `--max-precompute-cost` seconds of the reference's 2 cores.
 
 use super::error::ApiError;
@@ -56,6 +58,19 @@ impl AdapterSpeed {
 type CostOf<'a> = &'a dyn Fn(&GiParams) -> Cost;
 
 const PRECOMPUTE_FLAG: &str = "--max-precompute-cost";
+const FRAME_FLAG: &str = "--max-frame-cost";
+
+/// How a frame's work reaches the GPU, which decides the limits it is held to.
+#[derive(Clone, Copy, Debug)]
+pub enum Submission {
+    /// A session's frame: one submission per turn of the render loop, within
+    /// `--max-frame-cost`.
+    SessionFrame,
+    /// A one-shot render: its path tracing (a `reference` frame, the comparison at
+    /// `compare_spp`) in chunks (see [`chunk_spp`]), the whole within `--max-request-cost`;
+    /// any other frame is one submission within `--max-frame-cost` as well.
+    OneShot { compare_spp: Option<u32> },
+}
 
 /// How much one request may cost, in reference ns.
 fn request_budget_ns(limits: &Limits) -> f64 {
@@ -227,24 +242,42 @@ pub fn check_frame(
     gi: &GiParams,
     shape: FrameShape,
     set_units: &dyn Fn(&GiParams) -> u64,
-    compare_spp: Option<u32>,
+    submission: Submission,
     limits: &Limits,
 ) -> Result<(), ApiError> {
     let budget = request_budget_ns(limits);
     let speed = limits.adapter_speed;
     let own = |g: &GiParams| frame_cost(g, shape, set_units);
-    let compared = compare_spp.map(|spp| frame_cost(&truth(gi, spp), shape, set_units));
-    let cost = own(gi);
-    let compared_ns = compared.as_ref().map_or(0.0, Cost::ns);
-    if cost.ns() + compared_ns <= budget {
-        return Ok(());
-    }
     let method = crate::gi::entry(gi.method).1;
     let mut knobs = method.knobs.to_vec();
     if method.downscales {
         knobs.push(cost::DOWNSCALE_KNOB);
     }
     let knobs = &knobs[..];
+    let (compare_spp, chunked) = match submission {
+        Submission::SessionFrame => (None, false),
+        Submission::OneShot { compare_spp } => (compare_spp, gi.method == GiMethod::Reference),
+    };
+    let cost = own(gi);
+    // A frame submitted at once holds up every other session's: --max-frame-cost.
+    let frame_budget = limits.max_frame_seconds * 1e9 * speed;
+    if !chunked && cost.ns() > frame_budget {
+        return Err(refusal(
+            "this frame",
+            gi,
+            &cost,
+            frame_budget,
+            knobs,
+            &own,
+            limits,
+            (FRAME_FLAG, speed, "width"),
+        ));
+    }
+    let compared = compare_spp.map(|spp| frame_cost(&truth(gi, spp), shape, set_units));
+    let compared_ns = compared.as_ref().map_or(0.0, Cost::ns);
+    if cost.ns() + compared_ns <= budget {
+        return Ok(());
+    }
     let flags = ("--max-request-cost", speed, "width");
     let (Some(spp), Some(compared)) = (compare_spp, compared) else {
         return Err(refusal(
@@ -350,9 +383,12 @@ pub fn check_precompute(
 mod tests {
     use super::*;
 
+    const ONE_SHOT: Submission = Submission::OneShot { compare_spp: None };
+
     fn limits(seconds: f64) -> Limits {
         let mut l = crate::service::config::tests::default_limits();
         l.max_request_seconds = seconds;
+        l.max_frame_seconds = seconds;
         l.adapter_speed = 1.0;
         l
     }
@@ -381,7 +417,8 @@ mod tests {
             bounces: 16,
             ..GiParams::default()
         };
-        let e = check_frame(&reference, shape(32, 32), &none, None, &limits).expect_err("refused");
+        let e =
+            check_frame(&reference, shape(32, 32), &none, ONE_SHOT, &limits).expect_err("refused");
         assert_eq!(
             e.body.field.as_deref(),
             Some("gi.spp"),
@@ -400,8 +437,8 @@ mod tests {
             spp,
             ..reference.clone()
         };
-        assert!(check_frame(&at(fits), shape(32, 32), &none, None, &limits).is_ok());
-        assert!(check_frame(&at(fits + 1), shape(32, 32), &none, None, &limits).is_err());
+        assert!(check_frame(&at(fits), shape(32, 32), &none, ONE_SHOT, &limits).is_ok());
+        assert!(check_frame(&at(fits + 1), shape(32, 32), &none, ONE_SHOT, &limits).is_err());
 
         for visibility in [
             lightcast_protocol::ClusteredVisibility::Cssm,
@@ -416,9 +453,57 @@ mod tests {
                 visibility,
                 ..GiParams::default()
             };
-            let e =
-                check_frame(&clustered, shape(32, 32), &none, None, &limits).expect_err("refused");
+            let e = check_frame(&clustered, shape(32, 32), &none, ONE_SHOT, &limits)
+                .expect_err("refused");
             assert!(e.body.field.is_some(), "{}", e.body.message);
+        }
+    }
+
+    #[test]
+    fn a_frame_submitted_at_once_is_held_to_the_frame_limit_and_path_tracing_to_the_request_limit()
+    {
+        let mut limits = limits(10.0);
+        limits.max_frame_seconds = 2.0;
+        let none = |_: &GiParams| 0;
+        // About 4 s of rays: in chunks as a one-shot, but one submission as a session frame.
+        let reference = GiParams {
+            method: GiMethod::Reference,
+            spp: 100,
+            bounces: 16,
+            ..GiParams::default()
+        };
+        check_frame(&reference, shape(32, 32), &none, ONE_SHOT, &limits).expect("chunked");
+        let e = check_frame(
+            &reference,
+            shape(32, 32),
+            &none,
+            Submission::SessionFrame,
+            &limits,
+        )
+        .expect_err("one submission");
+        assert_eq!(e.body.field.as_deref(), Some("gi.spp"));
+        assert!(
+            e.body.message.contains("--max-frame-cost"),
+            "{}",
+            e.body.message
+        );
+        // A BRSM frame of about 7 s is one submission either way.
+        let brsm = GiParams {
+            val_count: 65_536,
+            rsm_size: 128,
+            view_samples: 32,
+            ..GiParams::default()
+        };
+        let caches = |_: &GiParams| 6596;
+        for submission in [ONE_SHOT, Submission::SessionFrame] {
+            let e = check_frame(&brsm, shape(32, 32), &caches, submission, &limits)
+                .expect_err("over the frame limit");
+            assert_eq!(
+                e.body.field.as_deref(),
+                Some("gi.val_count"),
+                "{}",
+                e.body.message
+            );
         }
     }
 
@@ -427,10 +512,27 @@ mod tests {
         let limits = limits(10.0);
         let none = |_: &GiParams| 0;
         let brsm = GiParams::default();
-        check_frame(&brsm, shape(64, 48), &none, None, &limits).expect("a small frame");
-        check_frame(&brsm, shape(64, 48), &none, Some(16), &limits).expect("a cheap comparison");
-        let e = check_frame(&brsm, shape(64, 48), &none, Some(256_000), &limits)
-            .expect_err("an expensive comparison");
+        check_frame(&brsm, shape(64, 48), &none, ONE_SHOT, &limits).expect("a small frame");
+        check_frame(
+            &brsm,
+            shape(64, 48),
+            &none,
+            Submission::OneShot {
+                compare_spp: Some(16),
+            },
+            &limits,
+        )
+        .expect("a cheap comparison");
+        let e = check_frame(
+            &brsm,
+            shape(64, 48),
+            &none,
+            Submission::OneShot {
+                compare_spp: Some(256_000),
+            },
+            &limits,
+        )
+        .expect_err("an expensive comparison");
         assert_eq!(
             e.body.field.as_deref(),
             Some("compare_spp"),

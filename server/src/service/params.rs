@@ -138,13 +138,6 @@ pub fn resolve(
     if let Some(key) = &precompute {
         entry.check_precompute_cost(g, key, limits)?;
     }
-    super::cost::check_frame(
-        g,
-        frame_shape(&settings, entry),
-        &|g| entry.estimated_set_units(g),
-        None,
-        limits,
-    )?;
     Ok(Resolved {
         settings,
         view: params.view,
@@ -269,7 +262,17 @@ pub fn resolve_session(
             format!("{} is outside 0.1..={}", params.fps_cap, limits.max_fps),
         ));
     }
-    resolve(&params.render, entry, limits, max_texture).map_err(|e| e.within("render"))
+    let resolved =
+        resolve(&params.render, entry, limits, max_texture).map_err(|e| e.within("render"))?;
+    super::cost::check_frame(
+        &params.render.gi,
+        frame_shape(&resolved.settings, entry),
+        &|g| entry.estimated_set_units(g),
+        super::cost::Submission::SessionFrame,
+        limits,
+    )
+    .map_err(|e| e.within("render"))?;
+    Ok(resolved)
 }
 
 /// Checks a one-shot render's JPEG quality.

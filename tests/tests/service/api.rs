@@ -1457,7 +1457,8 @@ async fn requests_get_the_servers_defaults_for_what_they_leave_out() {
     assert_eq!(patched["params"]["render"]["gi"]["val_count"], 300);
     server.stop().await;
 
-    let server = TestServer::start(&["--defaults", "gpu"]).await;
+    // The paper's settings cost about 5 s a frame on lavapipe: over the default frame limit.
+    let server = TestServer::start(&["--defaults", "gpu", "--max-frame-cost", "60"]).await;
     assert_eq!(
         server.get_json("/v1/server").await["defaults"]["profile"],
         "gpu"

@@ -3,7 +3,7 @@
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
-use crate::service::cost::{check_frame, chunk_spp, request_seconds};
+use crate::service::cost::{check_frame, chunk_spp, request_seconds, Submission};
 use crate::service::encode;
 use crate::service::error::ApiError;
 use crate::service::params::{check_gi_ranges, check_quality, frame_shape, resolve};
@@ -219,23 +219,20 @@ pub async fn render(
     let shape = frame_shape(&resolved.settings, &entry);
     let set_units = |g: &lightcast_protocol::GiParams| entry.estimated_set_units(g);
     let compare_spp = compare.map(|(_, spp)| spp);
-    if compare_spp.is_some() {
-        // The render and the comparison render together, within --max-request-cost.
-        check_frame(
-            &req.render.gi,
-            shape,
-            &set_units,
-            compare_spp,
-            &state.limits,
-        )
-        .map_err(|e| {
-            if e.body.field.as_deref() == Some("compare_spp") {
-                e
-            } else {
-                e.within("render")
-            }
-        })?;
-    }
+    check_frame(
+        &req.render.gi,
+        shape,
+        &set_units,
+        Submission::OneShot { compare_spp },
+        &state.limits,
+    )
+    .map_err(|e| {
+        if e.body.field.as_deref() == Some("compare_spp") {
+            e
+        } else {
+            e.within("render")
+        }
+    })?;
     resolved.settings.capture_hdr |= raw;
     let compared = match compare {
         Some((method, _)) => entry.precompute_key(&lightcast_protocol::GiParams {

@@ -201,9 +201,10 @@ pub struct LimitArgs {
     #[arg(long, env = "LIGHTCAST_MAX_REQUEST_COST", default_value_t = 10.0)]
     pub max_request_cost: f64,
     /// Estimated seconds of adapter work one submission may take while every other session
-    /// waits: a session's frame, or a one-shot's frame but for its path tracing.
-    #[arg(long, env = "LIGHTCAST_MAX_FRAME_COST", default_value_t = 2.0)]
-    pub max_frame_cost: f64,
+    /// waits: a session's frame, or a one-shot's frame but for its path tracing. `auto`: 2 s
+    /// on a CPU adapter, 0.1 s on a GPU.
+    #[arg(long, env = "LIGHTCAST_MAX_FRAME_COST", default_value = "auto")]
+    pub max_frame_cost: crate::service::cost::FrameCost,
     /// How many times faster than the reference adapter (lavapipe on 2 CPU cores) this one
     /// runs the GI methods' cost formulas: `auto` is 1 on a CPU adapter and 256 on a GPU (an
     /// H200 ran the compute-bound stages about 450 times faster, the raster ones less).
@@ -368,7 +369,6 @@ impl LimitArgs {
         )?;
         for (flag, seconds) in [
             ("max-request-cost", self.max_request_cost),
-            ("max-frame-cost", self.max_frame_cost),
             ("max-precompute-cost", self.max_precompute_cost),
         ] {
             if !(seconds.is_finite() && seconds > 0.0) {
@@ -416,7 +416,8 @@ impl LimitArgs {
             max_uploads: self.max_uploads,
             max_queued_renders: self.max_queued_renders,
             max_request_seconds: self.max_request_cost,
-            max_frame_seconds: self.max_frame_cost,
+            // Known once the adapter is: see [`FrameCost::resolve`].
+            max_frame_seconds: 0.0,
             // Known once the adapter is: see [`AdapterSpeed::resolve`].
             adapter_speed: 1.0,
             max_precompute_seconds: self.max_precompute_cost,

@@ -43,6 +43,41 @@ impl std::str::FromStr for AdapterSpeed {
     }
 }
 
+/// `--max-frame-cost`: `auto`, or seconds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FrameCost {
+    Auto,
+    Seconds(f64),
+}
+
+impl std::str::FromStr for FrameCost {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        match s.parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(Self::Seconds(v)),
+            _ => Err(format!(
+                "'{s}' is neither auto nor a positive number of seconds"
+            )),
+        }
+    }
+}
+
+impl FrameCost {
+    /// The limit on an adapter (`is_cpu`: a software one): lavapipe's frames may take up to
+    /// 2 s (it is slow at everything, and cuts a dispatch of ~2.8 s short), a GPU's 0.1 s.
+    pub fn resolve(self, is_cpu: bool) -> f64 {
+        match self {
+            Self::Seconds(v) => v,
+            Self::Auto if is_cpu => 2.0,
+            Self::Auto => 0.1,
+        }
+    }
+}
+
 impl AdapterSpeed {
     /// The speed of an adapter (`is_cpu`: a software one).
     pub fn resolve(self, is_cpu: bool) -> f64 {

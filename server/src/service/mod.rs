@@ -83,15 +83,18 @@ impl Service {
             .map_err(|e| ServeError::Task(e.to_string()))??;
         let adapter = crate::gpu::context::AdapterSummary(&ctx.info).to_string();
         log(&format!("adapter: {adapter}"));
-        limits.adapter_speed = args
-            .limits
-            .adapter_speed
-            .resolve(ctx.info.device_type == wgpu::DeviceType::Cpu);
+        let is_cpu = ctx.info.device_type == wgpu::DeviceType::Cpu;
+        limits.adapter_speed = args.limits.adapter_speed.resolve(is_cpu);
+        limits.max_frame_seconds = args.limits.max_frame_cost.resolve(is_cpu);
         log(&format!(
-            "request cost: at most {} s of estimated adapter work per request or frame \
-             (--max-request-cost), the adapter taken as {}× the reference lavapipe \
-             (--adapter-speed); precomputations at most {} s (--max-precompute-cost)",
-            limits.max_request_seconds, limits.adapter_speed, limits.max_precompute_seconds
+            "request cost: at most {} s of estimated adapter work per frame \
+             (--max-frame-cost) and {} s per one-shot render (--max-request-cost), the \
+             adapter taken as {}× the reference lavapipe (--adapter-speed); precomputations \
+             at most {} s (--max-precompute-cost)",
+            limits.max_frame_seconds,
+            limits.max_request_seconds,
+            limits.adapter_speed,
+            limits.max_precompute_seconds
         ));
         // A validation error is a bug in a pass, not something to take every session down
         // for: log it and count it instead of wgpu's default panic.

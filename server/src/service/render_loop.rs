@@ -36,6 +36,56 @@ const IDLE_WAIT: Duration = Duration::from_millis(50);
 /// frame, 3840×2160, so two of those fit), the newest always kept.
 const COMPARISON_CACHE_BYTES: usize = 256 << 20;
 
+/// A frame that took longer than this from reaching the readback thread to being handed on
+/// is heavy: the next is not submitted behind it (see [`InFlight`]).
+const HEAVY_FRAME: Duration = Duration::from_millis(100);
+
+/// The frames handed to the readback thread and not finished yet, and whether the last one
+/// was heavy. Double buffering (one frame read back while the next renders) pays where frames
+/// take milliseconds; behind a heavy frame (lavapipe's take up to `--max-frame-cost`) a second
+/// queued one only makes whatever comes next wait for both: a session's first frame of a new
+/// method, a newcomer's tiny render after a stream ended (issue 31: 1.3 s after an 800×450
+/// stream, with two in flight). So after a heavy frame the loop submits the next only once the
+/// readback thread is idle, and nothing waits behind work it no longer needs.
+#[derive(Default)]
+struct InFlight {
+    /// (frames in flight, whether the last finished one was heavy).
+    state: std::sync::Mutex<(usize, bool)>,
+    idle: std::sync::Condvar,
+}
+
+impl InFlight {
+    fn lock(&self) -> std::sync::MutexGuard<'_, (usize, bool)> {
+        self.state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    fn sent(&self) {
+        self.lock().0 += 1;
+    }
+
+    /// A frame was handed on after `took` on the readback thread.
+    fn done(&self, took: Duration) {
+        let mut state = self.lock();
+        state.0 = state.0.saturating_sub(1);
+        state.1 = took > HEAVY_FRAME;
+        self.idle.notify_all();
+    }
+
+    /// Returns once the next frame may be submitted: at once after a light frame, else when
+    /// nothing is in flight.
+    fn wait_turn(&self) {
+        let mut state = self.lock();
+        while state.1 && state.0 > 0 {
+            state = self
+                .idle
+                .wait(state)
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+        }
+    }
+}
+
 /// A one-shot render: the frame, read back and handed over unencoded.
 pub struct OneShot {
     pub scene: Arc<SceneEntry>,
@@ -185,6 +235,7 @@ struct Loop {
     one_shot_turn: bool,
     /// Session frames waiting for the GPU, to the readback thread.
     readback: mpsc::SyncSender<ReadbackJob>,
+    in_flight: Arc<InFlight>,
     /// Comparison renders by a hash of what they rendered (filled by the readback thread).
     comparisons: Arc<ComparisonCache>,
 }
@@ -201,15 +252,18 @@ pub fn spawn(
     // which it hands over once the readback thread is free. Deeper queues only made the
     // frames wait longer on lavapipe (where the "GPU" shares the CPU).
     let (readback, readback_rx) = mpsc::sync_channel(0);
+    let in_flight = Arc::new(InFlight::default());
+    let finished = Arc::clone(&in_flight);
     let readback_thread = std::thread::Builder::new()
         .name("readback".into())
-        .spawn(move || readback_thread(readback_rx, encoder))
+        .spawn(move || readback_thread(readback_rx, encoder, &finished))
         .expect("spawning the readback thread");
     let handle = std::thread::Builder::new()
         .name("render-loop".into())
         .spawn(move || {
             let mut l = Loop {
                 readback,
+                in_flight,
                 ctx,
                 scenes,
                 sessions,
@@ -306,6 +360,7 @@ impl Loop {
         scene: &Arc<SceneEntry>,
         resolved: &Resolved,
     ) -> Result<Submitted, ApiError> {
+        self.in_flight.wait_turn();
         let mut settings = resolved.settings.clone();
         let (data, gi_pending) = match &resolved.precompute {
             None => (None, false),
@@ -423,9 +478,7 @@ impl Loop {
                 expected,
             },
         };
-        if let Err(mpsc::SendError(job)) = self.readback.send(readback) {
-            job.fail(ApiError::internal("the readback thread has stopped"));
-        }
+        self.hand_over(readback);
     }
 
     /// The own frame's final settings (its samples after those its chunks accumulated), and
@@ -579,6 +632,15 @@ impl Loop {
         })
     }
 
+    /// Hands a submitted frame to the readback thread.
+    fn hand_over(&self, job: ReadbackJob) {
+        self.in_flight.sent();
+        if let Err(mpsc::SendError(job)) = self.readback.send(job) {
+            self.in_flight.done(Duration::ZERO);
+            job.fail(ApiError::internal("the readback thread has stopped"));
+        }
+    }
+
     fn session_frame(&mut self, session: &Arc<Session>, mut plan: FramePlan) {
         let render_start_us = unix_us();
         // A progressive method keeps refining this session's image while nothing changes.
@@ -597,9 +659,7 @@ impl Loop {
                         render_start_us,
                     },
                 };
-                if let Err(mpsc::SendError(job)) = self.readback.send(job) {
-                    job.fail(ApiError::internal("the readback thread has stopped"));
-                }
+                self.hand_over(job);
             }
             Err(e) => session.frame_failed(e.body),
         }
@@ -785,33 +845,46 @@ impl ComparisonCache {
 
 /// Waits for frames in submission order: session frames go to the encoder pool, one-shot
 /// renders (compared first if asked) to their requests.
-fn readback_thread(jobs: mpsc::Receiver<ReadbackJob>, encoder: Arc<EncodePool>) {
+fn readback_thread(
+    jobs: mpsc::Receiver<ReadbackJob>,
+    encoder: Arc<EncodePool>,
+    in_flight: &InFlight,
+) {
     for job in jobs {
-        match job.target {
-            Destination::Session {
-                session,
-                plan,
-                render_start_us,
-            } => match job.frame.wait(|_| Ok(())) {
-                Ok(r) => deliver(&session, &plan, r, render_start_us, &encoder),
-                Err(e) => session.frame_failed(e.body),
-            },
-            Destination::OneShot {
-                reply,
-                queue_ms,
-                compare,
-                expected,
-            } => {
-                let result =
-                    one_shot_result(job.frame, compare, expected).map(|(rendered, comparison)| {
-                        OneShotResult {
-                            rendered,
-                            queue_ms,
-                            comparison,
-                        }
-                    });
-                let _ = reply.send(result);
-            }
+        let started = Instant::now();
+        read_back(job, &encoder);
+        in_flight.done(started.elapsed());
+    }
+}
+
+/// Waits for one frame and hands it on.
+fn read_back(job: ReadbackJob, encoder: &EncodePool) {
+    match job.target {
+        Destination::Session {
+            session,
+            plan,
+            render_start_us,
+        } => match job.frame.wait(|_| Ok(())) {
+            // A session that has ended is not encoded for.
+            Ok(_) if session.is_closed() => {}
+            Ok(r) => deliver(&session, &plan, r, render_start_us, encoder),
+            Err(e) => session.frame_failed(e.body),
+        },
+        Destination::OneShot {
+            reply,
+            queue_ms,
+            compare,
+            expected,
+        } => {
+            let result =
+                one_shot_result(job.frame, compare, expected).map(|(rendered, comparison)| {
+                    OneShotResult {
+                        rendered,
+                        queue_ms,
+                        comparison,
+                    }
+                });
+            let _ = reply.send(result);
         }
     }
 }
@@ -1003,6 +1076,36 @@ fn history_id(session_id: &str) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Light frames are double-buffered; after a heavy one the next waits until nothing is in
+    /// flight (issue 31), and the readback thread's finishing the frame lets it go.
+    #[test]
+    fn after_a_heavy_frame_the_next_waits_for_the_readback_to_be_idle() {
+        let in_flight = Arc::new(InFlight::default());
+        in_flight.sent();
+        in_flight.wait_turn();
+        in_flight.sent();
+        in_flight.done(HEAVY_FRAME * 2);
+        let (tx, rx) = mpsc::channel();
+        let waiter = {
+            let in_flight = Arc::clone(&in_flight);
+            std::thread::spawn(move || {
+                in_flight.wait_turn();
+                tx.send(()).expect("the test waits");
+            })
+        };
+        assert!(
+            rx.recv_timeout(Duration::from_millis(200)).is_err(),
+            "a frame is still in flight behind a heavy one"
+        );
+        in_flight.done(Duration::ZERO);
+        rx.recv_timeout(Duration::from_secs(60))
+            .expect("the turn comes once the readback is idle");
+        waiter.join().expect("joins");
+        // Light again: frames in flight do not hold the next back.
+        in_flight.sent();
+        in_flight.wait_turn();
+    }
 
     #[test]
     fn evicts_idle_renderers_and_the_least_recently_used_beyond_the_limit() {

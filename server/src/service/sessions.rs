@@ -466,6 +466,11 @@ impl Session {
         self.closed.send_replace(Some(reason.to_string()));
     }
 
+    /// Whether the session has ended (its socket was asked to close).
+    pub fn is_closed(&self) -> bool {
+        self.closed.borrow().is_some()
+    }
+
     pub fn closed(&self) -> watch::Receiver<Option<String>> {
         self.closed.subscribe()
     }

@@ -111,7 +111,7 @@ pub struct DriveOptions {
     pub motion: Motion,
     /// Camera messages per second (0: none).
     pub input_hz: f64,
-    /// Stop after this many frames.
+    /// Stop after this many frames inside the measuring window.
     pub max_frames: Option<u64>,
     /// Write every frame's image here.
     pub save_dir: Option<PathBuf>,
@@ -143,6 +143,46 @@ pub struct DriveResult {
     /// The longest wait between two frames inside the measuring window (from its start for
     /// the first): how long the stream stalled, e.g. behind another client's work.
     pub longest_gap: Duration,
+}
+
+impl DriveResult {
+    /// Why a run received no frame, from what the server reported for its session; `None`
+    /// when frames arrived. A summary of zeros alone reads as a broken client.
+    pub fn no_frames_reason(&self) -> Option<String> {
+        if self.frames > 0 {
+            return None;
+        }
+        let mut reason = format!("no frame arrived within {:.1} s", self.window.as_secs_f64());
+        match &self.server_stats {
+            None => reason.push_str("; the session's counters could not be read"),
+            Some(s) if s.frames_rendered == 0 => reason.push_str(
+                "; the server has not finished a frame for the session yet (a CPU adapter \
+                 builds a GI method's pipelines on its first frame: try --gi none, a smaller \
+                 --width/--height, or a longer --duration)",
+            ),
+            Some(s) => {
+                reason.push_str(&format!(
+                    "; the server rendered {} and sent {} frames for the session",
+                    s.frames_rendered, s.frames_sent
+                ));
+                if !s.last_stages.is_empty() {
+                    let gpu: f64 = s.last_stages.iter().map(|st| st.ms).sum();
+                    reason.push_str(&format!(", its last one in {gpu:.1} GPU ms"));
+                }
+            }
+        }
+        if let Some(e) = self
+            .server_stats
+            .as_ref()
+            .and_then(|s| s.last_error.as_ref())
+        {
+            reason.push_str(&format!("; its last error: {}: {}", e.error, e.message));
+        }
+        if let Some(e) = self.errors.first() {
+            reason.push_str(&format!("; {e}"));
+        }
+        Some(reason)
+    }
 }
 
 fn extension(h: &FrameHeader) -> &'static str {
@@ -189,7 +229,6 @@ pub async fn drive(
     let mut next_input: u64 = 1;
     // (input id, when it was sent), oldest first.
     let mut pending: VecDeque<(u64, Instant)> = VecDeque::new();
-    let mut received: u64 = 0;
     let mut last_frame = opts.measure_from.max(Instant::now());
     loop {
         tokio::select! {
@@ -219,7 +258,6 @@ pub async fn drive(
                 Incoming::Event(_) => {}
                 Incoming::Frame { header, payload, wire_bytes } => {
                     let now = Instant::now();
-                    received += 1;
                     result.first_frame.get_or_insert(started.elapsed());
                     while let Some(&(id, sent)) = pending.front() {
                         if id > header.input_id {
@@ -259,7 +297,7 @@ pub async fn drive(
                     }
                     result.last_header = Some(header);
                     on_frame();
-                    if opts.max_frames.is_some_and(|max| received >= max) {
+                    if opts.max_frames.is_some_and(|max| result.frames >= max) {
                         break;
                     }
                 }

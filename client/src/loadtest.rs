@@ -26,6 +26,11 @@ pub struct LoadtestCmd {
     /// Seconds measured after ramp-up (at most 600).
     #[arg(long, default_value_t = 10.0)]
     duration: f64,
+    /// End each session once it has received this many frames after ramp-up (or at
+    /// `--duration`, whichever comes first): a test that needs some frames on a slow machine
+    /// waits for them instead of guessing a duration.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    frames: Option<u64>,
     /// Seconds over which the sessions are opened (not measured).
     #[arg(long, default_value_t = 1.0)]
     ramp: f64,
@@ -74,6 +79,8 @@ pub struct LoadReport {
     pub split: FrameSplit,
     pub failed_sessions: u32,
     pub errors: Vec<String>,
+    /// Why no frame arrived at all (`null` when frames did).
+    pub no_frames: Option<String>,
 }
 
 fn is_loopback(url: &str) -> bool {
@@ -143,7 +150,7 @@ fn markdown(reports: &[LoadReport]) -> String {
     for r in reports {
         let l = &r.input_to_frame_ms;
         out.push_str(&format!(
-            "| {} | {}×{} | {:?} | {:.1} | {:.1} | {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {:.0} | {} |\n",
+            "| {} | {}×{} | {} | {:.1} | {:.1} | {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {:.0} | {} |\n",
             r.sessions, r.width, r.height, r.gi, r.fps_min, r.fps_median, r.fps_total,
             l.p50, l.p95, l.p99, r.split.gpu_ms, r.split.readback_ms, r.split.encode_ms,
             r.split.server_ms, r.split.network_ms, r.dropped, r.throttled,
@@ -163,9 +170,9 @@ async fn run_one(
     let params = crate::session_params(
         cmd.render
             .params(Some(&scene.default_camera), Some(&scene.default_light)),
-        cmd.fps_cap,
+        Some(cmd.fps_cap),
         cmd.codec,
-        cmd.quality,
+        Some(cmd.quality),
     );
     let start = Instant::now();
     let ramp = Duration::from_secs_f64(cmd.ramp);
@@ -196,7 +203,7 @@ async fn run_one(
                 degrees_per_second: cmd.orbit_degrees_per_second,
             },
             input_hz: cmd.input_hz,
-            max_frames: None,
+            max_frames: cmd.frames,
             save_dir: None,
             video_out: None,
             measure_from,
@@ -328,20 +335,34 @@ fn summarise(
         split,
         failed_sessions: sessions - results.len() as u32,
         errors,
+        no_frames: (frames == 0)
+            .then(|| results.iter().find_map(DriveResult::no_frames_reason))
+            .flatten(),
     }
 }
 
 fn print_table(r: &LoadReport) {
     println!(
-        "{} sessions of {}×{} ({:?}) for {:.1} s against {}",
+        "{} sessions of {}×{} ({}) for {:.1} s against {}",
         r.sessions, r.width, r.height, r.gi, r.seconds, r.server
     );
-    let row = |name: &str, p: &Percentiles| {
-        println!("{name:<16} p50 {:>8.1} ms  p95 {:>8.1} ms  p99 {:>8.1} ms  max {:>8.1} ms  ({} samples)", p.p50, p.p95, p.p99, p.max, p.samples)
+    let row = |name: &str, p: &Percentiles, none: &str| {
+        if p.samples == 0 {
+            println!("{name:<16} {none}");
+        } else {
+            println!("{name:<16} p50 {:>8.1} ms  p95 {:>8.1} ms  p99 {:>8.1} ms  max {:>8.1} ms  ({} samples)", p.p50, p.p95, p.p99, p.max, p.samples);
+        }
     };
-    row("connect", &r.connect_ms);
-    row("first frame", &r.first_frame_ms);
-    row("input→frame", &r.input_to_frame_ms);
+    row("connect", &r.connect_ms, "no session connected");
+    row("first frame", &r.first_frame_ms, "no frames");
+    row(
+        "input→frame",
+        &r.input_to_frame_ms,
+        "no frame answered a camera move",
+    );
+    if let Some(reason) = &r.no_frames {
+        println!("no frames: {reason}");
+    }
     println!(
         "fps per client: min {:.1}, median {:.1}; total {:.1}",
         r.fps_min, r.fps_median, r.fps_total
@@ -365,7 +386,50 @@ fn print_table(r: &LoadReport) {
 
 #[cfg(test)]
 mod tests {
-    use super::is_loopback;
+    use super::*;
+
+    fn rendered() -> Rendered {
+        Rendered {
+            width: 64,
+            height: 48,
+            gi: lightcast_protocol::GiMethod::Brsm,
+        }
+    }
+
+    #[test]
+    fn a_test_without_frames_says_why() {
+        let idle = DriveResult {
+            window: Duration::from_secs(3),
+            server_stats: Some(lightcast_protocol::SessionStats::default()),
+            ..DriveResult::default()
+        };
+        let report = summarise("http://127.0.0.1:1", &rendered(), 1, &[idle], Vec::new());
+        let reason = report.no_frames.expect("a reason");
+        assert!(
+            reason.contains("no frame arrived within 3.0 s")
+                && reason.contains("has not finished a frame"),
+            "{reason}"
+        );
+        let rendering = DriveResult {
+            frames: 2,
+            window: Duration::from_secs(3),
+            ..DriveResult::default()
+        };
+        let report = summarise(
+            "http://127.0.0.1:1",
+            &rendered(),
+            1,
+            &[rendering],
+            Vec::new(),
+        );
+        assert!(report.no_frames.is_none());
+    }
+
+    #[test]
+    fn methods_are_named_as_requests_name_them() {
+        let report = summarise("http://127.0.0.1:1", &rendered(), 1, &[], Vec::new());
+        assert!(markdown(&[report]).contains("| 64×48 | brsm |"));
+    }
 
     #[test]
     fn only_loopback_servers_pass_without_allow_remote() {

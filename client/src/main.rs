@@ -91,12 +91,27 @@ struct RenderCmd {
     /// Also render the same view with the path-traced reference and print the errors against
     /// it (MAE, RMSE, relative MAE and bias of the indirect light; PSNR of the final image).
     #[arg(long, value_enum)]
-    compare_to: Option<GiMethod>,
+    compare_to: Option<CompareTo>,
     /// Samples per pixel of the comparison's reference (server default 256).
     #[arg(long)]
     compare_spp: Option<u32>,
     #[command(flatten)]
     render: RenderFlags,
+}
+
+/// What `render --compare-to` measures against: the server compares only with its
+/// path-traced reference (the truth), so that is the one choice offered.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CompareTo {
+    Reference,
+}
+
+impl From<CompareTo> for GiMethod {
+    fn from(c: CompareTo) -> Self {
+        match c {
+            CompareTo::Reference => GiMethod::Reference,
+        }
+    }
 }
 
 fn parse_format(s: &str) -> Result<ImageFormat, String> {
@@ -125,15 +140,15 @@ struct StreamCmd {
     /// Camera messages per second while replaying a path.
     #[arg(long, default_value_t = 30.0)]
     input_hz: f64,
-    /// Most frames per second the server sends.
-    #[arg(long, default_value_t = 30.0)]
-    fps_cap: f32,
+    /// Most frames per second the server sends (default the server's, 30).
+    #[arg(long)]
+    fps_cap: Option<f32>,
     /// Frame codec: jpeg, png, or h264 (video).
     #[arg(long, value_enum, default_value = "jpeg")]
     codec: Codec,
-    /// JPEG quality 1–100.
-    #[arg(long, default_value_t = 85)]
-    quality: u8,
+    /// JPEG quality 1–100 (default the server's).
+    #[arg(long)]
+    quality: Option<u8>,
     /// With `--codec h264`: target bitrate in kbit/s (100–200000; default the server's).
     #[arg(long)]
     bitrate_kbps: Option<u32>,
@@ -141,19 +156,27 @@ struct StreamCmd {
     render: RenderFlags,
 }
 
-/// Session parameters for streaming commands.
+/// Session parameters for streaming commands: a continuous stream without stills, and only
+/// what was asked for besides (the server fills in its defaults).
 pub fn session_params(
     render: serde_json::Value,
-    fps_cap: f32,
+    fps_cap: Option<f32>,
     codec: Codec,
-    quality: u8,
+    quality: Option<u8>,
 ) -> serde_json::Value {
-    serde_json::json!({
+    let mut params = serde_json::json!({
         "render": render,
-        "fps_cap": fps_cap,
         "mode": StreamMode::Continuous,
-        "encoding": {"codec": codec, "quality": quality, "moving_quality": quality, "still_after_ms": 0},
-    })
+        "encoding": {"codec": codec, "still_after_ms": 0},
+    });
+    if let Some(fps) = fps_cap {
+        params["fps_cap"] = fps.into();
+    }
+    if let Some(q) = quality {
+        params["encoding"]["quality"] = q.into();
+        params["encoding"]["moving_quality"] = q.into();
+    }
+    params
 }
 
 /// The scene's default camera and light, when the flags change part of them.
@@ -289,7 +312,7 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
         request["quality"] = q.into();
     }
     if let Some(method) = cmd.compare_to {
-        request["compare_to"] = serde_json::to_value(method)?;
+        request["compare_to"] = serde_json::to_value(GiMethod::from(method))?;
     }
     if let Some(spp) = cmd.compare_spp {
         request["compare_spp"] = spp.into();
@@ -325,12 +348,18 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
         "{:<18} {:>10.3}  ({})",
         "total", last.gpu_ms, last.timing_source
     );
+    if let Some(note) = &last.timing_note {
+        println!("note: {note}");
+    }
     println!(
         "queue {:.1} ms, encode {:.1} ms",
         last.queue_ms, last.encode_ms
     );
     if let Some(n) = last.samples {
-        println!("{n} samples per pixel");
+        match last.relative_error {
+            Some(e) => println!("{n} samples per pixel, ±{:.1} % noise", e * 100.0),
+            None => println!("{n} samples per pixel"),
+        }
     }
     if let Some(c) = &last.comparison {
         println!(
@@ -420,6 +449,7 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
         "dropped": server.frames_dropped,
         "throttled": server.frames_throttled,
         "errors": result.errors,
+        "no_frames": result.no_frames_reason(),
         "saved_to": cmd.save,
         "video": cmd.video.as_ref().map(|path| serde_json::json!({
             "path": path,
@@ -429,6 +459,13 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
     });
     if json {
         return print_json(&summary);
+    }
+    if let Some(reason) = result.no_frames_reason() {
+        println!("no frames: {reason}");
+        for e in result.errors.iter().skip(1) {
+            println!("error: {e}");
+        }
+        return Ok(());
     }
     println!(
         "{} frames in {secs:.1} s: {:.1} fps, {:.0} KiB/s, longest gap {:.0} ms",
@@ -476,5 +513,27 @@ fn main() -> std::process::ExitCode {
             eprintln!("lightcast: {e:#}");
             std::process::ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unset_stream_flags_are_left_out_of_the_session() {
+        let params = session_params(serde_json::json!({}), None, Codec::Jpeg, None);
+        assert!(params.get("fps_cap").is_none(), "{params}");
+        assert!(params["encoding"].get("quality").is_none(), "{params}");
+        assert!(
+            params["encoding"].get("moving_quality").is_none(),
+            "{params}"
+        );
+        let set = session_params(serde_json::json!({}), Some(12.0), Codec::Jpeg, Some(70));
+        assert_eq!(set["fps_cap"], 12.0);
+        assert_eq!(set["encoding"]["quality"], 70);
+        assert_eq!(set["encoding"]["moving_quality"], 70);
+        // What the client sends is a valid session for the server's own type.
+        serde_json::from_value::<lightcast_protocol::SessionParams>(params).expect("parses");
     }
 }

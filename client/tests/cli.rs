@@ -174,6 +174,18 @@ async fn render_writes_the_image_and_a_report() {
             && text.contains("PSNR"),
         "{text}"
     );
+    // Only the reference is offered to compare with (the server refuses the others), before
+    // anything is sent.
+    let other = lightcast(
+        "http://127.0.0.1:9",
+        &["render", "--out", "x.png", "--compare-to", "brsm"],
+    )
+    .await;
+    let stderr = String::from_utf8_lossy(&other.stderr);
+    assert!(
+        !other.status.success() && stderr.contains("possible values: reference"),
+        "{stderr}"
+    );
     // A parameter the server refuses: exit 1 and the server's reason with the field.
     let bad = lightcast(
         &server.base,
@@ -252,8 +264,12 @@ async fn loadtest_reports_latency_fps_and_refuses_remote_targets() {
             "loadtest",
             "--sessions",
             "3",
-            "--duration",
+            // However slow this machine is, each session waits for its frames: at most
+            // five minutes, ending at its third frame.
+            "--frames",
             "3",
+            "--duration",
+            "300",
             "--ramp",
             "0.5",
             "--input-hz",
@@ -266,10 +282,9 @@ async fn loadtest_reports_latency_fps_and_refuses_remote_targets() {
     let report = json(&lightcast(&server.base, &args).await);
     assert_eq!(report["sessions"], 3);
     assert_eq!(report["failed_sessions"], 0, "{report}");
-    assert!(
-        report["frames"].as_u64().is_some_and(|f| f >= 3),
-        "{report}"
-    );
+    assert_eq!(report["frames"], 9, "{report}");
+    assert_eq!(report["gi"], "none");
+    assert!(report["no_frames"].is_null(), "{report}");
     assert!(
         report["fps_min"].as_f64().is_some_and(|f| f > 0.0),
         "{report}"

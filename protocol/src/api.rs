@@ -281,12 +281,17 @@ pub struct GiParams {
     /// seed 004 approximates, more give multi-bounce light.
     pub bounces: u32,
     /// `reference`, `surfels`: emissive surfaces light the scene as area lights, besides the
-    /// punctual light. Turn it off where the punctual light stands in for them (a scene's
-    /// default light when it has no lights of its own, as in the Cornell box), or their light
-    /// counts twice. Comparisons of the other methods use a reference with it off.
-    pub emitters: bool,
+    /// punctual light. `null` (the default) decides by the light: on, unless the render's
+    /// light is the scene's stand-in for its emissive surfaces (its default light when it has
+    /// no punctual lights of its own, as in the Cornell box), whose light would otherwise
+    /// count twice; `true` lights with both anyway, `false` never with the surfaces.
+    /// Comparisons of the other methods use a reference with it off.
+    pub emitters: Option<bool>,
     /// `reference`: samples per pixel added each frame. Sessions keep accumulating while the
-    /// camera, light and parameters stay the same; a one-shot render takes exactly this many.
+    /// camera, light and parameters stay the same; a one-shot render takes exactly this many
+    /// when it names `spp`, and otherwise as many as half the server's request budget buys
+    /// (`max_request_seconds`; at least the default, at most `max_spp`), its report saying how
+    /// many and how noisy the image still is (`samples`, `relative_error`).
     pub spp: u32,
     /// `clustered`: N, virtual point lights fetched from the RSM at Halton positions.
     pub vpl_count: u32,
@@ -346,7 +351,7 @@ impl Default for GiParams {
             cache_distance: None,
             cache_angle: None,
             bounces: 1,
-            emitters: true,
+            emitters: None,
             spp: 4,
             vpl_count: 1024,
             cluster_count: 30,
@@ -740,6 +745,11 @@ pub struct SceneInfo {
     /// What a render uses when it names no camera or light.
     pub default_camera: Camera,
     pub default_light: Light,
+    /// Where the viewer keeps the camera while orbiting, panning and flying: a room's inside
+    /// (and, for a room open on one side, the space in front of that side), whose walls
+    /// are black from outside. Absent: anywhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_region: Option<Bounds>,
     /// Light caches: the default set first (the `light_caches` entries of `precomputed`).
     pub caches: Vec<CacheVariant>,
     /// Every precomputation of the scene (light caches, BVH) with its state, oldest first.
@@ -848,6 +858,11 @@ pub struct RenderReport {
     /// Samples per pixel of a progressive method (`reference`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub samples: Option<u32>,
+    /// How noisy a progressive method's image still is: the root-mean-square standard error
+    /// of the pixels' luminance over their mean luminance (0.05: ±5 %), as the viewer's
+    /// "N spp, ±x %" shows it. It falls as 1/√samples.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_error: Option<f64>,
     /// Errors against `compare_to`'s render, when the request asked for one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub comparison: Option<Comparison>,
@@ -856,7 +871,17 @@ pub struct RenderReport {
     /// (absent from offline renders, which have no such limit).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimated_seconds: Option<f64>,
+    /// How far `stages` can be trusted, when not fully: a CPU adapter's (lavapipe's) timestamp
+    /// queries put the work of some stages into others, so single stages may read hundredths
+    /// of a millisecond for seconds of work. The request's wall time is then the measure.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub timing_note: Option<String>,
 }
+
+/// [`RenderReport::timing_note`] on a CPU adapter that times stages with its timestamps.
+pub const CPU_TIMESTAMPS_NOTE: &str = "this CPU adapter's timestamps put the work of some \
+    stages into others: single stage times under-report (the request's wall time does not; \
+    `lightcast-server bench --stage-clock wall` times each stage by the clock)";
 
 /// The server's limits; requests beyond them are refused with `invalid_field`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]

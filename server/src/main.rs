@@ -131,6 +131,7 @@ fn serve(args: &ServeArgs) -> anyhow::Result<()> {
 }
 
 fn main() -> anyhow::Result<()> {
+    lightcast_server::gpu::context::quiet_headless_device_select();
     let cli = Cli::parse();
     // The service logs what it does; the offline commands only warnings.
     let default_filter = match cli.command {

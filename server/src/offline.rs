@@ -8,7 +8,7 @@ use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
-    default_light::{default_camera, default_light},
+    default_light::{default_camera, default_light, emitter_stand_in, emitters_for},
     Scene,
 };
 use glam::Vec3;
@@ -267,10 +267,15 @@ pub struct RenderArgs {
     /// `reference`: reflections after the visible surface (1: single-bounce light, 1 … 16).
     #[arg(long, default_value_t = 1)]
     pub bounces: u32,
-    /// `reference`, `surfels`: emissive surfaces do not light the scene (use it where the light
-    /// stands in for them, as the default light of a scene without lights of its own does).
-    #[arg(long)]
+    /// `reference`, `surfels`: emissive surfaces do not light the scene. Without this or
+    /// `--emitters` they do unless the light is the scene's stand-in for them (its default
+    /// light when it has no lights of its own, as in the Cornell box).
+    #[arg(long, conflicts_with = "emitters")]
     pub no_emitters: bool,
+    /// `reference`, `surfels`: emissive surfaces light the scene even under the light that
+    /// stands in for them (their light then counts twice).
+    #[arg(long)]
+    pub emitters: bool,
     /// `reference`: samples per pixel (1 … 1024).
     #[arg(long, default_value_t = 256)]
     pub spp: u32,
@@ -314,6 +319,9 @@ pub struct RenderReport {
     pub light: lightcast_protocol::Light,
     pub exposure_scale: f32,
     pub timing_source: crate::gpu::timing::TimingSource,
+    /// See [`lightcast_protocol::RenderReport::timing_note`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub timing_note: Option<String>,
     pub stages: Vec<crate::gpu::timing::StageTiming>,
     pub gpu_total_ms: f64,
     pub load_ms: f64,
@@ -427,12 +435,18 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         defensive: args.defensive,
         glossy_exponent: args.glossy_exponent,
         bounces: args.bounces,
-        emitters: !args.no_emitters,
+        emitters: match (args.emitters, args.no_emitters) {
+            (true, _) => Some(true),
+            (_, true) => Some(false),
+            _ => None,
+        },
         spp: args.spp,
         indirect_downscale: args.indirect_downscale,
         ..Default::default()
     };
     args.clustered.apply(&mut gi);
+    let mut gi_settings = GiSettings::from(&gi);
+    gi_settings.emitters = emitters_for(gi.emitters, emitter_stand_in(scene).as_ref(), &light);
     RenderSettings {
         width: args.width,
         height: args.height,
@@ -442,7 +456,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
         debug_view: View::Final,
-        gi: GiSettings::from(&gi),
+        gi: gi_settings,
         history: None,
         still: false,
         yuv420: false,
@@ -470,6 +484,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     debug_views::check(args.view, args.gi)?;
     let ctx = GpuContext::new(args.backend)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
+    let adapter_is_cpu = ctx.info.device_type == wgpu::DeviceType::Cpu;
     log(&format!("adapter: {adapter}"));
     let settings = settings_from_args(args, &scene);
     settings.validate(&ctx)?;
@@ -512,6 +527,9 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         light: settings.light,
         exposure_scale,
         timing_source,
+        timing_note: (adapter_is_cpu
+            && timing_source == crate::gpu::timing::TimingSource::GpuTimestamps)
+            .then(|| lightcast_protocol::CPU_TIMESTAMPS_NOTE.to_string()),
         gpu_total_ms: stages.iter().map(|t| t.ms).sum(),
         stages,
         load_ms,
@@ -547,6 +565,9 @@ impl RenderReport {
             s += &format!("{:<14} {:>8.3}\n", t.stage, t.ms);
         }
         s += &format!("{:<14} {:>8.3}\n", "total", self.gpu_total_ms);
+        if let Some(note) = &self.timing_note {
+            s += &format!("note: {note}\n");
+        }
         s
     }
 }

@@ -1,7 +1,12 @@
 // Indirect light from the VPLs (seed paper 003, §4 and §6 "Indirect Lighting"): the pixel at
-// (x, y) is lit by the VPLs i ≡ (y mod B)·B + (x mod B) (mod B²) of interleaved sampling with
-// B×B blocks, weighted by B² so that the geometry-aware blur's average over a block estimates
-// the sum over all N. Each VPL's light is weighted by its visibility (clustered/visibility.wgsl).
+// (x, y) is lit by the VPLs of its interleave class c = (y mod B)·B + (x mod B), the run
+// c·N/B² ≤ i < (c+1)·N/B² of the Halton-ordered VPLs, weighted by N over the run's length so
+// that the geometry-aware blur's average over a B×B block estimates the sum over all N. A run
+// of consecutive Halton points covers the whole RSM; the residue class i ≡ c (mod B²) that
+// this shader used before does not (those indices share their low bits, so their points
+// shared one narrow strip of the RSM) and each class lit the scene from a different strip:
+// a B-pixel pattern the blur could not hide (issue 31). Mirrors `cpu::class_vpls`. Each VPL's
+// light is weighted by its visibility (clustered/visibility.wgsl).
 
 @group(0) @binding(0) var<storage, read> params: ClusteredParams;
 @group(0) @binding(1) var<storage, read> camera: CameraUniform;
@@ -57,9 +62,13 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     let v = normalize(camera.position - r.x);
     let s = SurfaceBrdf(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb, r.exponent);
     let b = params.interleave;
-    let stride = b * b;
+    let classes = b * b;
+    let own_class = (id.y % b) * b + id.x % b;
+    // N ≥ 256 ≥ B² (the parameters' ranges): every run holds at least one VPL.
+    let first = own_class * params.vpl_count / classes;
+    let end = (own_class + 1u) * params.vpl_count / classes;
     var radiance = vec3<f32>(0.0);
-    for (var i = (id.y % b) * b + id.x % b; i < params.vpl_count; i += stride) {
+    for (var i = first; i < end; i++) {
         let vpl = vpls[i];
         if vpl.lit != 0u {
             let l = vpl_radiance(vpl, r.x, r.n, v, s);
@@ -68,7 +77,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    textureStore(interleaved_out, texel, vec4<f32>(radiance * f32(stride), 1.0));
+    textureStore(interleaved_out, texel, vec4<f32>(radiance * (f32(params.vpl_count) / f32(end - first)), 1.0));
 }
 
 // The `val-shadow` debug view: the visibility of light `shadow_light` (a VAL, or a VPL with

@@ -23,7 +23,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     var radiance = vec3<f32>(0.0);
     if position.w != 0.0 {
         let n = normalize(textureLoad(g_normal_exponent, texel, 0).xyz);
-        let caches = interpolate_caches(position.xyz);
+        let caches = interpolate_caches(position.xyz, position.xyz, n);
         if caches.total > 0.0 {
             let y = sh_eval(n);
             for (var i = 0u; i < grid.coefficients; i++) {

@@ -1,7 +1,8 @@
 // The SH caches around a point (seed 001, eq. 6): trilinear weights over the lattice's eight
 // nearest caches, leaving out those inside geometry or outside a closed scene (they see mostly
-// back faces or nothing, the paper's Fig. 7a) and renormalising. Mirrors
-// `CacheGrid::trilinear` and `cpu::irradiance`. The including pass declares `grid`,
+// back faces or nothing, the paper's Fig. 7a) and those behind the lit surface (they see its
+// other side: a wall's back would be lit from the room it closes), and renormalising. Mirrors
+// `CacheGrid::trilinear`, `CacheGrid::in_front` and `cpu::irradiance`. The including pass declares `grid`,
 // `cache_usable` and `cache_light`.
 
 // Mirrored by `GridUniform` in server/src/gi/surfels/passes.rs.
@@ -18,7 +19,11 @@ struct Interpolated {
     total: f32,
 }
 
-fn interpolate_caches(p: vec3<f32>) -> Interpolated {
+// Mirrors `grid::BEHIND_TOLERANCE`.
+const BEHIND_TOLERANCE: f32 = 1e-3;
+
+// The caches around `p` in front of the surface at `surface` with normal `n`.
+fn interpolate_caches(p: vec3<f32>, surface: vec3<f32>, n: vec3<f32>) -> Interpolated {
     var out: Interpolated;
     out.total = 0.0;
     for (var i = 0u; i < SH_COEFFICIENTS; i++) {
@@ -36,7 +41,9 @@ fn interpolate_caches(p: vec3<f32>) -> Interpolated {
         let w = wv.x * wv.y * wv.z;
         let c = min(b + o, dims - vec3<u32>(1u));
         let cache = c.x + dims.x * (c.y + dims.y * c.z);
-        if w <= 0.0 || cache_usable[cache] == 0u {
+        let cache_position = grid.origin + vec3<f32>(c) * grid.spacing;
+        let behind = dot(cache_position - surface, n) < -BEHIND_TOLERANCE * grid.spacing;
+        if w <= 0.0 || cache_usable[cache] == 0u || behind {
             continue;
         }
         out.total += w;

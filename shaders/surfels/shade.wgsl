@@ -32,7 +32,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = ne.w;
     let v = normalize(camera.position - position.xyz);
     let r = reflect(-v, n);
-    let caches = interpolate_caches(position.xyz);
+    let caches = interpolate_caches(position.xyz, position.xyz, n);
     var radiance = vec3<f32>(0.0);
     if caches.total > 0.0 {
         let diffuse = textureLoad(g_diffuse, texel, 0).rgb;

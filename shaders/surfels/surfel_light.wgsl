@@ -53,7 +53,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var indirect = vec3<f32>(0.0);
     if params.feedback != 0u {
-        indirect = irradiance_from(interpolate_caches(s.position + params.offset * s.normal), s.normal);
+        let around = interpolate_caches(s.position + params.offset * s.normal, s.position, s.normal);
+        indirect = irradiance_from(around, s.normal);
     }
     flux[k] = vec4<f32>(s.albedo * (direct + indirect) + s.emitted * f32(params.emitters), 0.0);
 }

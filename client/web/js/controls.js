@@ -5,7 +5,11 @@
 
 const DEG = Math.PI / 180;
 const MAX_PITCH = 89 * DEG;
-const ORBIT_PER_PIXEL = 0.006;
+// A drag across the whole canvas turns the orbit by half a turn, whatever the canvas's size
+// (a fixed rate per pixel turned a large canvas's short drag into most of a turn).
+const ORBIT_PER_CANVAS = Math.PI;
+// How far inside its camera region the camera stays, as a share of the region's size.
+const REGION_MARGIN = 0.02;
 const ZOOM_PER_WHEEL_UNIT = 0.0015;
 const FLY_FRACTION_PER_SECOND = 0.35;
 
@@ -43,6 +47,7 @@ export class Controls {
     this.orbit = null;
     this.light = null;
     this.sceneSize = 1;
+    this.region = null;
     this.pointers = new Map();
     this.keys = new Set();
     this.lastFly = null;
@@ -77,6 +82,41 @@ export class Controls {
 
   setSceneSize(size) {
     this.sceneSize = size > 0 ? size : 1;
+  }
+
+  /** Keeps the camera inside `region` ({min, max}; a scene's `camera_region`), or anywhere
+   * when it is null. */
+  setRegion(region) {
+    if (!region) {
+      this.region = null;
+      return;
+    }
+    const margin = [0, 1, 2].map((i) => (region.max[i] - region.min[i]) * REGION_MARGIN);
+    this.region = {
+      min: region.min.map((v, i) => v + margin[i]),
+      max: region.max.map((v, i) => v - margin[i]),
+    };
+  }
+
+  /** The camera moved back inside the region: the orbit keeps its target and takes the
+   * clamped position's distance and angles. */
+  keepInRegion() {
+    if (!this.region || !this.orbit) return;
+    const position = this.camera().position;
+    const clamped = position.map((v, i) => clamp(v, this.region.min[i], this.region.max[i]));
+    if (clamped.every((v, i) => v === position[i])) return;
+    const offset = sub(clamped, this.orbit.target);
+    const radius = length(offset);
+    if (radius < this.sceneSize * 1e-3) return;
+    this.orbit.radius = radius;
+    this.orbit.yaw = Math.atan2(offset[0], offset[2]);
+    this.orbit.pitch = clamp(Math.asin(clamp(offset[1] / radius, -1, 1)), -MAX_PITCH, MAX_PITCH);
+  }
+
+  /** Sends the camera after a change, kept inside the region. */
+  moved() {
+    this.keepInRegion();
+    this.onCamera(this.camera());
   }
 
   camera() {
@@ -131,9 +171,10 @@ export class Controls {
     } else if (p.button === 2 || p.button === 1 || p.shift) {
       this.pan(dx, dy);
     } else {
-      this.orbit.yaw -= dx * ORBIT_PER_PIXEL;
-      this.orbit.pitch = clamp(this.orbit.pitch + dy * ORBIT_PER_PIXEL, -MAX_PITCH, MAX_PITCH);
-      this.onCamera(this.camera());
+      const perPixel = ORBIT_PER_CANVAS / (this.canvas.clientWidth || 1);
+      this.orbit.yaw -= dx * perPixel;
+      this.orbit.pitch = clamp(this.orbit.pitch + dy * perPixel, -MAX_PITCH, MAX_PITCH);
+      this.moved();
     }
   }
 
@@ -152,12 +193,12 @@ export class Controls {
     const { right, up } = this.basis();
     const wpp = this.worldPerPixel(this.orbit.radius);
     this.orbit.target = add(this.orbit.target, add(scale(right, -dx * wpp), scale(up, dy * wpp)));
-    this.onCamera(this.camera());
+    this.moved();
   }
 
   zoom(factor) {
     this.orbit.radius = clamp(this.orbit.radius * factor, this.sceneSize * 0.01, this.sceneSize * 20);
-    this.onCamera(this.camera());
+    this.moved();
   }
 
   wheel(e) {
@@ -218,7 +259,7 @@ export class Controls {
     if (this.keys.has('q')) step = sub(step, [0, 1, 0]);
     if (length(step) > 0) {
       this.orbit.target = add(this.orbit.target, scale(normalize(step), speed));
-      this.onCamera(this.camera());
+      this.moved();
     }
     requestAnimationFrame((t) => this.fly(t));
   }

@@ -237,6 +237,7 @@ async function useScene(id, render) {
   state.scene = scene;
   const [min, max] = [scene.bounds.min, scene.bounds.max];
   controls.setSceneSize(Math.hypot(max[0] - min[0], max[1] - min[1], max[2] - min[2]));
+  controls.setRegion(scene.camera_region || null);
   controls.setCamera(render.camera || scene.default_camera);
   state.light = structuredClone(render.light || scene.default_light);
   controls.setLight(state.light);

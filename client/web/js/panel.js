@@ -142,6 +142,8 @@ export class Panel {
       if (document.activeElement === control && control.type === 'number') continue;
       const value = valueAt(params, control.dataset.field);
       if (control.type === 'checkbox') {
+        // `null` leaves the choice to the server (e.g. `emitters`: by the light in use).
+        control.indeterminate = value === null || value === undefined;
         control.checked = Boolean(value);
       } else if (control.tagName === 'SELECT' && value !== undefined && ![...control.options].some((o) => o.value === String(value))) {
         control.append(new Option(String(value), String(value)));

@@ -347,6 +347,32 @@ async function main() {
       });
     });
 
+    // Issue 31: a drag across half the canvas turned the default camera out of the room,
+    // where every wall is seen from behind, black. Half a canvas is now a quarter turn, and
+    // the camera stays in the scene's camera region.
+    await step('a long drag keeps the camera where the room is seen from inside', async () => {
+      const scene = await api('GET', '/v1/scenes/default');
+      const region = scene.camera_region;
+      assert.ok(region, 'the built-in Cornell box has a camera region');
+      await page.screenshot({ path: path.join(artifacts, 'drag-before.png') });
+      const before = await snapshot(page);
+      const box = await page.locator('#frame').boundingBox();
+      const [x, y] = [box.x + box.width * 0.25, box.y + box.height / 2];
+      await changeAfter(page, async () => {
+        await page.mouse.move(x, y);
+        await page.mouse.down();
+        for (let i = 1; i <= 10; i++) await page.mouse.move(x + (i * box.width) / 20, y);
+        await page.mouse.up();
+      }, 'the long drag');
+      const { position } = (await pageSession(page)).params.render.camera;
+      position.forEach((v, i) => assert.ok(v >= region.min[i] && v <= region.max[i],
+        `camera ${JSON.stringify(position)} left the region ${JSON.stringify(region)}`));
+      const after = await snapshot(page);
+      await page.screenshot({ path: path.join(artifacts, 'drag-after.png') });
+      assert.ok(after.mean > 0.5 * before.mean,
+        `the view went dark: mean grey ${before.mean.toFixed(1)} → ${after.mean.toFixed(1)}`);
+    });
+
     await step('shift-drag pans: the camera target moves', async () => {
       const before = (await pageSession(page)).params.render.camera.target;
       const box = await page.locator('#frame').boundingBox();

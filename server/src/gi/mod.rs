@@ -119,7 +119,9 @@ impl From<&lightcast_protocol::GiParams> for GiSettings {
             occlusion: p.occlusion,
             glossy_exponent: p.glossy_exponent,
             bounces: p.bounces,
-            emitters: p.emitters,
+            // `null` decides by the render's light, which the scene resolves
+            // (`default_light::emitters_for`); without a scene, on.
+            emitters: p.emitters.unwrap_or(true),
             spp: p.spp,
             vpl_count: p.vpl_count,
             cluster_count: p.cluster_count,
@@ -383,8 +385,9 @@ pub(crate) fn emitters_param(d: &lightcast_protocol::GiParams) -> lightcast_prot
         max: None,
         choices: Vec::new(),
         description: "Emissive surfaces light the scene as area lights besides the punctual \
-                      light; off where the light stands in for them (a scene's default light \
-                      without lights of its own), or their light counts twice"
+                      light; null (the default): on unless the light is the scene's stand-in \
+                      for them (its default light when it has no lights of its own), whose \
+                      light would count twice"
             .into(),
     }
 }

@@ -28,6 +28,29 @@ impl BackendChoice {
     }
 }
 
+/// Switches off Mesa's Vulkan device-select layer on a machine without a display. The layer
+/// asks Wayland and X for the default GPU; with neither, libwayland prints "error:
+/// XDG_RUNTIME_DIR is invalid or not set in the environment." at every instance, which reads
+/// like a failure in the server's first log lines. wgpu picks the adapter itself (high
+/// performance first), so nothing is lost; a user who steers the layer
+/// (`MESA_VK_DEVICE_SELECT`, `NODEVICE_SELECT`) or has a display keeps it. It sets an
+/// environment variable: call it before any other thread starts.
+pub fn quiet_headless_device_select() {
+    const DISPLAY_OR_CHOICE: &[&str] = &[
+        "XDG_RUNTIME_DIR",
+        "WAYLAND_DISPLAY",
+        "DISPLAY",
+        "MESA_VK_DEVICE_SELECT",
+        "NODEVICE_SELECT",
+    ];
+    if DISPLAY_OR_CHOICE
+        .iter()
+        .all(|name| std::env::var_os(name).is_none())
+    {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
+}
+
 /// Where Debian and Ubuntu install lavapipe's ICD file (one per architecture).
 const LAVAPIPE_ICD_DIRS: &[&str] = &["/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d"];
 

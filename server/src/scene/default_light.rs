@@ -33,6 +33,25 @@ pub fn default_light(scene: &Scene) -> Light {
     }
 }
 
+/// The scene's default light when it stands in for the scene's emissive surfaces (the scene
+/// says its light does, or it has no punctual light of its own and some emissive
+/// triangles): a render with that light and its emitters both would count their light twice.
+pub fn emitter_stand_in(scene: &Scene) -> Option<Light> {
+    if scene.lights_stand_in_for_emitters {
+        scene.lights.first().cloned()
+    } else if scene.lights.is_empty() {
+        emitter_spot(scene)
+    } else {
+        None
+    }
+}
+
+/// Whether emissive surfaces light a render (`render.gi.emitters`): as `asked`, else on
+/// unless `light` is the scene's `stand_in` for them ([`emitter_stand_in`]).
+pub fn emitters_for(asked: Option<bool>, stand_in: Option<&Light>, light: &Light) -> bool {
+    asked.unwrap_or_else(|| stand_in != Some(light))
+}
+
 /// A wide spot light at the area-weighted centroid of the emissive triangles, aimed at the
 /// scene centre (straight down when the emitter sits at the centre).
 fn emitter_spot(scene: &Scene) -> Option<Light> {

@@ -132,6 +132,13 @@ pub struct Scene {
     pub lights: Vec<Light>,
     pub cameras: Vec<Camera>,
     pub bounds: Aabb,
+    /// The punctual lights stand in for the emissive surfaces (the Cornell box's spot for its
+    /// lamp): lighting with both counts that light twice. A scene without lights of its own
+    /// gets such a stand-in as its default light (`default_light::emitter_stand_in`).
+    pub lights_stand_in_for_emitters: bool,
+    /// Where a viewer keeps the camera: a room seen from inside or through an opening, whose
+    /// walls are black from outside. `None`: anywhere (an object is orbited freely).
+    pub camera_region: Option<Aabb>,
 }
 
 impl Scene {
@@ -229,6 +236,8 @@ impl Scene {
             lights,
             cameras,
             bounds: Aabb { min, max },
+            lights_stand_in_for_emitters: false,
+            camera_region: None,
         })
     }
 

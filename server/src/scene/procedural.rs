@@ -10,7 +10,7 @@
 //! All geometry is Y up, in metres, with counter-clockwise winding seen from the side the
 //! normal points to.
 
-use super::{Material, Scene, SceneError, Vertex};
+use super::{Aabb, Material, Scene, SceneError, Vertex};
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
 
@@ -456,8 +456,17 @@ pub fn cornell_box() -> Scene {
         target: [0.0, h, 0.0],
         fov_y_degrees: 40.0,
     };
-    mesh.into_scene("cornell".to_owned(), materials, vec![light], vec![camera])
-        .expect("the built-in Cornell box is a valid scene")
+    let mut scene = mesh
+        .into_scene("cornell".to_owned(), materials, vec![light], vec![camera])
+        .expect("the built-in Cornell box is a valid scene");
+    scene.lights_stand_in_for_emitters = true;
+    // Inside the room, or in front of its open side (up to five times the default camera's
+    // distance): from anywhere else some wall is seen from behind, black.
+    scene.camera_region = Some(Aabb {
+        min: Vec3::new(-h, 0.0, -h),
+        max: Vec3::new(h, ROOM, h + 5.0 * 2.9),
+    });
+    scene
 }
 
 // ---------------------------------------------------------------------------------------------

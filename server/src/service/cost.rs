@@ -149,6 +149,39 @@ pub fn request_seconds(
     (frame_cost(gi, shape, set_units).ns() + compared) * 1e-9 / limits.adapter_speed
 }
 
+/// The samples per pixel of a one-shot `reference` whose request names none: as many as half
+/// the request budget buys (its comparison included), at least `floor` (the default) and at
+/// most `max_spp`. A fixed default was either noise (4 spp) or far over the deadline on a CPU
+/// adapter; half leaves room for the rest of the request. Costs grow with spp, so a
+/// bisection finds it.
+pub fn one_shot_spp(
+    gi: &GiParams,
+    shape: FrameShape,
+    set_units: &dyn Fn(&GiParams) -> u64,
+    compare_spp: Option<u32>,
+    limits: &Limits,
+    floor: u32,
+) -> u32 {
+    let budget = 0.5 * limits.max_request_seconds;
+    let fits = |spp: u32| {
+        let g = GiParams { spp, ..gi.clone() };
+        request_seconds(&g, shape, set_units, compare_spp, limits) <= budget
+    };
+    let (mut lo, mut hi) = (floor.clamp(1, limits.max_spp.max(1)), limits.max_spp.max(1));
+    if !fits(lo) {
+        return lo;
+    }
+    while lo < hi {
+        let mid = lo + (hi - lo).div_ceil(2);
+        if fits(mid) {
+            lo = mid;
+        } else {
+            hi = mid - 1;
+        }
+    }
+    lo
+}
+
 /// Estimated seconds of adapter work one submission of a chunked render may take: on a GPU
 /// ~100 ms keeps the other sessions' frames flowing between chunks; on a CPU adapter ~1 s
 /// stays well below the ~2.8 s after which lavapipe silently cuts a dispatch short.
@@ -438,6 +471,38 @@ mod tests {
             set_units: 0,
             all_bounces: true,
         }
+    }
+
+    #[test]
+    fn a_one_shot_reference_takes_the_samples_half_the_budget_buys() {
+        let none = |_: &GiParams| 0;
+        let reference = GiParams {
+            method: GiMethod::Reference,
+            ..GiParams::default()
+        };
+        let limits = limits(10.0);
+        let spp = one_shot_spp(&reference, shape(320, 240), &none, None, &limits, 4);
+        let seconds = |spp: u32| {
+            let g = GiParams {
+                spp,
+                ..reference.clone()
+            };
+            request_seconds(&g, shape(320, 240), &none, None, &limits)
+        };
+        assert!(spp > 4 && spp < limits.max_spp, "{spp}");
+        assert!(seconds(spp) <= 5.0 && seconds(spp + 1) > 5.0, "{spp}");
+        // A comparison shares the budget; a tiny frame gets the most the server allows; a
+        // frame where even the default is over budget keeps the default (and is refused or
+        // chunked as any other).
+        assert!(one_shot_spp(&reference, shape(320, 240), &none, Some(256), &limits, 4) < spp);
+        assert_eq!(
+            one_shot_spp(&reference, shape(2, 2), &none, None, &limits, 4),
+            limits.max_spp
+        );
+        assert_eq!(
+            one_shot_spp(&reference, shape(3840, 2160), &none, None, &limits, 4),
+            4
+        );
     }
 
     /// The repros: a 32×32 reference render with 256 spp and 16 bounces, and a 32×32

@@ -28,12 +28,18 @@ fn software_render() -> RenderParams {
     RenderParams {
         shadow_map_size: 1024,
         gi: GiParams {
-            rsm_size: 128,
+            rsm_size: SOFTWARE_RSM_SIZE,
             view_samples: 32,
             val_count: 512,
             indirect_downscale: 2,
             surfel_count: 8192,
             surfel_links: 64,
+            // A session's `reference` frame at the viewer's software size (800×450) is ~1.3 s
+            // per sample here: one sample per frame keeps it within the 2 s frame limit
+            // (4 were refused, and switching the viewer to `reference` failed). One-shots
+            // that name no `spp` take what their budget buys (`cost::one_shot_spp`).
+            spp: 1,
+            interleave: SOFTWARE_INTERLEAVE,
             // `clustered`'s 30 paraboloid maps at 256² take ~0.7 s a frame on lavapipe; at
             // 64² the GI stages of a 128×96 frame take ~90 ms (`bench --gi clustered`).
             paraboloid_size: 64,
@@ -42,6 +48,19 @@ fn software_render() -> RenderParams {
         ..gpu
     }
 }
+
+/// The software profile's RSM side. 128² put `lightskin`'s frame on the Cornell box (every
+/// texel a VAL lighting every cache) at 2.08 s estimated, over a CPU adapter's 2 s frame limit,
+/// so a newcomer's one-shot of it was refused (issue 31); 112² is 1.7 s, and BRSM's frames at
+/// the defaults take the same time within noise (1.0–1.2 s for `curl -d '{}'` here).
+pub const SOFTWARE_RSM_SIZE: u32 = 112;
+
+/// `clustered`'s interleave block side in the software profile, whose indirect light is at
+/// half resolution: 4×4 blocks there cover the 8×8 pixels of the paper's blocks at full
+/// resolution (seed 003 §6: 8×8 with 1,024 VPLs). With 8×8 blocks at half resolution (16×16
+/// pixels, 16 VPLs per class) the blur left the blocks visible (issue 31); 4×4 costs ~65 ms
+/// more at 320×240 on lavapipe (345 → 410 ms a frame).
+pub const SOFTWARE_INTERLEAVE: u32 = 4;
 
 /// The share of the canvas a viewer streams at on a software adapter (a quarter of the
 /// pixels); GPUs stream at full resolution.
@@ -207,7 +226,43 @@ mod tests {
             .expect("valid");
         assert_eq!(session.fps_cap, 5.0);
         assert_eq!(session.render.gi.indirect_downscale, 1);
-        assert_eq!(session.render.gi.rsm_size, 128);
+        assert_eq!(session.render.gi.rsm_size, SOFTWARE_RSM_SIZE);
+    }
+
+    /// Every method's frame at the software defaults fits a CPU adapter's frame limit on the
+    /// default scene, at the viewer's size and at a newcomer's 320×240: none is refused
+    /// before the user changes anything (issue 31: `lightskin` was, at 2.08 s).
+    #[test]
+    fn every_method_fits_a_cpu_adapters_frame_at_the_software_defaults() {
+        use crate::service::cost::{AdapterSpeed, FrameCost};
+        let mut limits = crate::service::config::tests::default_limits();
+        limits.adapter_speed = AdapterSpeed::Auto.resolve(true);
+        limits.max_frame_seconds = FrameCost::Auto.resolve(true);
+        let store = tempfile::tempdir().expect("tempdir");
+        let scenes = crate::service::scenes::SceneRegistry::new(
+            crate::gi::precompute::Store::new(store.path()),
+            &limits,
+            None,
+        );
+        let entry = scenes
+            .detached(crate::scene::procedural::cornell_box(), 0.0)
+            .expect("the Cornell box");
+        for &method in GiMethod::ALL {
+            for (width, height) in [(800, 450), (320, 240)] {
+                let mut params = SessionParams {
+                    render: software_render(),
+                    ..SessionParams::default()
+                };
+                params.render.width = width;
+                params.render.height = height;
+                params.render.gi.method = method;
+                if let Err(e) =
+                    crate::service::params::resolve_session(&params, &entry, &limits, 16_384)
+                {
+                    panic!("{method} at {width}×{height}: {}", e.body.message);
+                }
+            }
+        }
     }
 
     #[test]

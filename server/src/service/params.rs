@@ -8,6 +8,7 @@ use crate::gi::precompute::PrecomputeKey;
 use crate::gi::GiSettings;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
+use crate::scene::default_light::emitters_for;
 use crate::service::video::{VideoConfig, VideoError};
 use lightcast_protocol::{Encoding, GiParams, Limits, RenderParams, SessionParams, View};
 use std::sync::Arc;
@@ -112,6 +113,12 @@ pub fn resolve(
         ViewError::Gpu(g) => ApiError::internal(g.to_string()),
     })?;
     let precompute = entry.precompute_key(g)?;
+    let light = params
+        .light
+        .clone()
+        .unwrap_or_else(|| entry.default_light.clone());
+    let mut gi = GiSettings::from(g);
+    gi.emitters = emitters_for(g.emitters, entry.emitter_stand_in.as_ref(), &light);
     let settings = RenderSettings {
         width: params.width,
         height: params.height,
@@ -119,15 +126,12 @@ pub fn resolve(
             .camera
             .clone()
             .unwrap_or_else(|| entry.default_camera.clone()),
-        light: params
-            .light
-            .clone()
-            .unwrap_or_else(|| entry.default_light.clone()),
+        light,
         exposure,
         shadow_map_size: params.shadow_map_size,
         capture_hdr: params.view.reads_indirect(),
         debug_view: params.view,
-        gi: GiSettings::from(g),
+        gi,
         history: None,
         still: false,
         yuv420: false,

@@ -410,6 +410,7 @@ mod tests {
             cameras: Vec::new(),
             default_camera: camera,
             default_light: light,
+            camera_region: None,
             caches: Vec::new(),
             precomputed: Vec::new(),
             sessions: 0,

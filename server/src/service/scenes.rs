@@ -10,7 +10,7 @@ use crate::gi::precompute::{
     Store, UnitBudget,
 };
 use crate::gpu::GpuContext;
-use crate::scene::default_light::{default_camera, default_light};
+use crate::scene::default_light::{default_camera, default_light, emitter_stand_in};
 use crate::scene::Scene;
 use lightcast_protocol::{
     Bounds, CacheVariant, Camera, GiParams, Light, Limits, PrecomputeState, Precomputed, SceneInfo,
@@ -134,6 +134,9 @@ pub struct SceneEntry {
     pub scene: Arc<Scene>,
     pub default_camera: Camera,
     pub default_light: Light,
+    /// The default light when it stands in for the scene's emissive surfaces
+    /// ([`emitter_stand_in`]): `render.gi.emitters` `null` turns them off under it.
+    pub emitter_stand_in: Option<Light>,
     /// Summed once: checking a request's precomputation parameters against them happens per
     /// message.
     facts: SceneFacts,
@@ -209,6 +212,7 @@ impl SceneEntry {
             owner,
             default_camera: default_camera(&scene),
             default_light: default_light(&scene),
+            emitter_stand_in: emitter_stand_in(&scene),
             facts: SceneFacts::of(&scene),
             scene: Arc::new(scene),
             load_ms,
@@ -241,6 +245,10 @@ impl SceneEntry {
             cameras: s.cameras.clone(),
             default_camera: self.default_camera.clone(),
             default_light: self.default_light.clone(),
+            camera_region: s.camera_region.map(|r| Bounds {
+                min: r.min.into(),
+                max: r.max.into(),
+            }),
             caches: precomputed
                 .iter()
                 .filter_map(CacheVariant::from_precomputed)

@@ -341,13 +341,24 @@ pub fn shade_visible<'a>(
         .sum()
 }
 
-/// The interleave class of pixel (x, y) with `b`×`b` blocks: it is lit by the VPLs whose
-/// index is this modulo b².
+/// The interleave class of pixel (x, y) with `b`×`b` blocks: it is lit by the VPLs of
+/// [`class_vpls`].
 pub fn interleave_class(x: u32, y: u32, b: u32) -> u32 {
     (y % b) * b + x % b
 }
 
-/// The interleaved shading of a pixel: its class's VPLs, times b².
+/// The VPLs (indices into the Halton-ordered list of `vpl_count`) that light interleave class
+/// `class` of `b`×`b` blocks: the run `class·N/b² .. (class+1)·N/b²`. Consecutive Halton
+/// points cover the whole RSM; the indices of one residue class modulo b² share their low
+/// bits and so one strip of it (see `shaders/clustered/indirect.wgsl`).
+pub fn class_vpls(class: u32, b: u32, vpl_count: u32) -> std::ops::Range<usize> {
+    let classes = b * b;
+    let first = class * vpl_count / classes;
+    let end = (class + 1) * vpl_count / classes;
+    first as usize..end as usize
+}
+
+/// The interleaved shading of a pixel: its class's VPLs, times N over their number.
 pub fn shade_interleaved(
     s: &RefSurface,
     viewer: Vec3,
@@ -367,9 +378,10 @@ pub fn shade_interleaved_visible(
     b: u32,
     visibility: impl Fn(usize) -> f32,
 ) -> Vec3 {
-    let stride = (b * b) as usize;
-    let own = vpls.iter().enumerate().skip(class as usize).step_by(stride);
-    shade_visible(s, viewer, own, visibility) * stride as f32
+    let run = class_vpls(class, b, vpls.len() as u32);
+    let weight = vpls.len() as f32 / run.len().max(1) as f32;
+    let own = vpls.iter().enumerate().skip(run.start).take(run.len());
+    shade_visible(s, viewer, own, visibility) * weight
 }
 
 /// A G-buffer texel as the blur reads it: position (w = 1 where covered) and normal.
@@ -535,12 +547,23 @@ mod tests {
         );
     }
 
-    /// Summed over the b² interleave classes, the interleaved shading is b² times the full
-    /// sum: the blur's average over a block estimates all N VPLs.
+    /// The b² interleave classes' runs partition the VPLs, and where every VPL lights a pixel
+    /// alike the average of the classes' shading over a block is the full sum: the blur's
+    /// average over a block estimates all N VPLs (unbiased when the runs' means agree, which
+    /// runs of Halton points make likely).
     #[test]
     fn interleave_classes_partition_the_vpls() {
+        for (b, n) in [(3, 37), (8, 1024), (16, 256), (16, 1000)] {
+            let mut covered: Vec<usize> = (0..b * b).flat_map(|c| class_vpls(c, b, n)).collect();
+            assert!(
+                (0..b * b).all(|c| !class_vpls(c, b, n).is_empty()),
+                "{b}, {n}"
+            );
+            covered.sort_unstable();
+            assert_eq!(covered, (0..n as usize).collect::<Vec<_>>(), "{b}, {n}");
+        }
         let vpls: Vec<RefVpl> = (0..37)
-            .map(|i| vpl(Vec3::new(i as f32 * 0.1, 1.0, 0.0), -Vec3::Y))
+            .map(|_| vpl(Vec3::new(0.3, 1.0, 0.0), -Vec3::Y))
             .collect();
         let s = RefSurface {
             position: Vec3::ZERO,

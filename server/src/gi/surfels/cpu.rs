@@ -24,14 +24,21 @@ pub fn usable(set: &SurfelSet, cache: usize) -> bool {
     set.links.visible[cache] >= MIN_VISIBLE && !set.links.inside[cache]
 }
 
-/// The SH radiance of the usable caches around `p`, summed with their trilinear weights, and
-/// the sum of those weights (0 where none is usable).
-fn interpolate(set: &SurfelSet, cache_light: &[Vec3], p: Vec3) -> (Vec<Vec3>, f32) {
+/// The SH radiance of the usable caches around `p` in front of the surface at `surface` with
+/// normal `n` ([`super::grid::CacheGrid::in_front`]), summed with their trilinear weights,
+/// and the sum of those weights (0 where none is usable).
+fn interpolate(
+    set: &SurfelSet,
+    cache_light: &[Vec3],
+    p: Vec3,
+    surface: Vec3,
+    n: Vec3,
+) -> (Vec<Vec3>, f32) {
     let count = sh::coefficient_count(set.links.bands);
     let mut radiance = vec![Vec3::ZERO; count];
     let mut total = 0.0;
     for (cache, w) in set.grid.trilinear(p) {
-        if w <= 0.0 || !usable(set, cache) {
+        if w <= 0.0 || !usable(set, cache) || !set.grid.in_front(cache, surface, n) {
             continue;
         }
         total += w;
@@ -57,10 +64,11 @@ fn lobe_integral(set: &SurfelSet, radiance: &[Vec3], total: f32, zonal: &[f32], 
         / total
 }
 
-/// The irradiance on a surface at `p` with normal `n` from `cache_light` (`bands²` RGB
-/// coefficients per cache), interpolated over the caches around `p` that see the scene.
-pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Vec3 {
-    let (radiance, total) = interpolate(set, cache_light, p);
+/// The irradiance on a surface at `surface` with normal `n` from `cache_light` (`bands²` RGB
+/// coefficients per cache), interpolated at `p` over the caches around it that see the scene
+/// and lie in front of the surface (`p` is the surface point, or a point off it).
+pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, surface: Vec3, n: Vec3) -> Vec3 {
+    let (radiance, total) = interpolate(set, cache_light, p, surface, n);
     if total <= 0.0 {
         return Vec3::ZERO;
     }
@@ -70,7 +78,7 @@ pub fn irradiance(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Ve
 /// The caches' SH radiance at `p` evaluated along `n`, L(n) = Σ L_i·y_i(n) / Σ w (debug view
 /// `cache-sh`, `shaders/surfels/cache_sh_view.wgsl`); zero where no usable cache is around.
 pub fn radiance_along(set: &SurfelSet, cache_light: &[Vec3], p: Vec3, n: Vec3) -> Vec3 {
-    let (radiance, total) = interpolate(set, cache_light, p);
+    let (radiance, total) = interpolate(set, cache_light, p, p, n);
     if total <= 0.0 {
         return Vec3::ZERO;
     }
@@ -97,11 +105,11 @@ pub struct ShadedPoint {
 /// scaled by (k+2)/(k+1)·max(n·r, 0) to our direct light's lobe, clamped at 0 against SH
 /// ringing.
 pub fn shade(set: &SurfelSet, cache_light: &[Vec3], s: &ShadedPoint) -> Vec3 {
-    let (radiance, total) = interpolate(set, cache_light, s.position);
+    let n = s.normal.normalize();
+    let (radiance, total) = interpolate(set, cache_light, s.position, s.position, n);
     if total <= 0.0 {
         return Vec3::ZERO;
     }
-    let n = s.normal.normalize();
     let e = lobe_integral(set, &radiance, total, &sh::COSINE_ZONAL, n);
     let r = (2.0 * n.dot(s.to_viewer) * n - s.to_viewer).normalize();
     let k = s.exponent;
@@ -135,7 +143,13 @@ pub fn frame(
             let indirect = if cache_light.is_empty() {
                 Vec3::ZERO
             } else {
-                irradiance(set, cache_light, s.position + offset * s.normal, s.normal)
+                irradiance(
+                    set,
+                    cache_light,
+                    s.position + offset * s.normal,
+                    s.position,
+                    s.normal,
+                )
             };
             albedo[k] * (direct[k] + indirect) + emitted[k]
         })
@@ -220,7 +234,8 @@ mod tests {
             })
             .collect();
         for n in [Vec3::X, -Vec3::Y, Vec3::new(0.6, 0.0, 0.8)] {
-            let e = irradiance(&set, &light, Vec3::new(0.1, 0.2, -0.3), n);
+            let p = Vec3::new(0.1, 0.2, -0.3);
+            let e = irradiance(&set, &light, p, p, n);
             assert!(
                 (e - Vec3::splat(PI * 0.5)).abs().max_element() < 1e-4,
                 "{n}: {e}"

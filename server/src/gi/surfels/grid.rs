@@ -98,6 +98,16 @@ impl CacheGrid {
         self.origin + cell.as_vec3() * self.spacing
     }
 
+    /// Whether cache `cache` may light a surface at `surface` with normal `n`: it lies on the
+    /// side the normal faces (up to [`BEHIND_TOLERANCE`] spacings behind, for caches in the
+    /// surface's plane). A cache behind the surface sees its other side: interpolating it
+    /// would light the back of a wall from the room the wall closes (seed 001 places caches
+    /// to see the surfaces they light; eq. 6 sums the caches around a point with no regard to
+    /// which side they are on). Mirrored in `shaders/surfels/caches.wgsl`.
+    pub fn in_front(&self, cache: usize, surface: Vec3, n: Vec3) -> bool {
+        (self.position(cache) - surface).dot(n) >= -BEHIND_TOLERANCE * self.spacing
+    }
+
     /// The eight caches around `p` with their trilinear weights (the per-pixel interpolation
     /// of the shading pass); points outside the lattice take its border cells.
     pub fn trilinear(&self, p: Vec3) -> [(usize, f32); 8] {
@@ -117,6 +127,10 @@ impl CacheGrid {
         })
     }
 }
+
+/// How far (in cache spacings) a cache may lie behind a surface and still light it: rounding
+/// only, so caches in the surface's own plane stay in.
+pub const BEHIND_TOLERANCE: f32 = 1e-3;
 
 /// Caches along an axis of `extent`: enough to span it with at least [`MIN_MARGIN`] to spare
 /// on both sides.

@@ -81,7 +81,7 @@ pub struct Tree {
 pub enum HierarchyError {
     #[error("there are no surfels to cluster")]
     Empty,
-    #[error("cancelled: the scene was deleted")]
+    #[error("cancelled: the scene was deleted, or nobody waits for the set any more")]
     Cancelled,
     #[error("surfel {index} has a non-finite position or normal, or an area that is not > 0")]
     InvalidLeaf { index: usize },

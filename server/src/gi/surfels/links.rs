@@ -57,7 +57,7 @@ pub enum LinkError {
     Bands(u32),
     #[error("links per cache must be at least 1")]
     NoLinks,
-    #[error("cancelled: the scene was deleted")]
+    #[error("cancelled: the scene was deleted, or nobody waits for the set any more")]
     Cancelled,
     #[error("tracing the link rays on the GPU failed: {0}")]
     Gpu(String),

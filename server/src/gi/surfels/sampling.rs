@@ -63,7 +63,7 @@ pub enum SamplingError {
     NoArea,
     #[error("at least one surfel is needed")]
     NoSurfels,
-    #[error("cancelled: the scene was deleted")]
+    #[error("cancelled: the scene was deleted, or nobody waits for the set any more")]
     Cancelled,
 }
 

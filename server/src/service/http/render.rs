@@ -3,7 +3,8 @@
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
-use crate::service::cost::{check_frame, chunk_spp, request_seconds, Submission};
+use crate::gpu::timing::TimingSource;
+use crate::service::cost::{check_frame, chunk_spp, one_shot_spp, request_seconds, Submission};
 use crate::service::encode;
 use crate::service::error::ApiError;
 use crate::service::params::{check_gi_ranges, check_quality, frame_shape, resolve};
@@ -29,16 +30,17 @@ async fn read_request(
     state: &Arc<AppState>,
     caller: &Caller,
     request: Request,
-) -> Result<(RenderRequest, Option<Arc<SceneEntry>>), ApiError> {
+) -> Result<(RenderRequest, bool, Option<Arc<SceneEntry>>), ApiError> {
     if !is_multipart(&request) {
         let body = read_body(request, &state.limits).await?;
-        return Ok((state.defaults.parse(&body)?, None));
+        return Ok((state.defaults.parse(&body)?, names_spp(&body), None));
     }
     let _upload = state.admission.upload(caller.0.as_deref())?;
     let multipart = Multipart::from_request(request, state)
         .await
         .map_err(|e| ApiError::bad_request("malformed_multipart", e.body_text()))?;
     let mut req = None;
+    let mut spp_named = false;
     let mut files = Vec::new();
     for (part, file) in read_multipart(multipart).await? {
         if part == "request" {
@@ -54,6 +56,7 @@ async fn read_request(
                 ));
             }
             req = Some(state.defaults.parse::<RenderRequest>(&file.bytes)?);
+            spp_named = names_spp(&file.bytes);
         } else {
             files.push(file);
         }
@@ -72,7 +75,16 @@ async fn read_request(
     let entry = state
         .scenes
         .detached(scene, started.elapsed().as_secs_f64() * 1e3)?;
-    Ok((req, Some(entry)))
+    Ok((req, spp_named, Some(entry)))
+}
+
+/// Whether a request body sets `render.gi.spp` itself (else a one-shot `reference` takes
+/// [`one_shot_spp`]).
+fn names_spp(body: &[u8]) -> bool {
+    serde_json::from_slice::<serde_json::Value>(body)
+        .ok()
+        .and_then(|v| v.pointer("/render/gi/spp").map(|spp| !spp.is_null()))
+        .unwrap_or(false)
 }
 
 /// Waits until the precomputation `key` a frame needs is ready (or failed), within the
@@ -164,7 +176,7 @@ pub async fn render(
             .saturating_sub(Duration::from_millis(50));
     // Held until the answer is made: the queue of renders and their frames stay bounded.
     let _render = state.admission.render(caller.0.as_deref())?;
-    let (mut req, uploaded) = read_request(&state, &caller, request).await?;
+    let (mut req, spp_named, uploaded) = read_request(&state, &caller, request).await?;
     let entry = match uploaded {
         Some(e) => e,
         None => super::scenes::scene(&state, &req.render.scene).await?,
@@ -219,6 +231,18 @@ pub async fn render(
     let shape = frame_shape(&resolved.settings, &entry);
     let set_units = |g: &lightcast_protocol::GiParams| entry.estimated_set_units(g);
     let compare_spp = compare.map(|(_, spp)| spp);
+    if !spp_named && req.render.gi.method == lightcast_protocol::GiMethod::Reference {
+        let spp = one_shot_spp(
+            &req.render.gi,
+            shape,
+            &set_units,
+            compare_spp,
+            &state.limits,
+            req.render.gi.spp,
+        );
+        req.render.gi.spp = spp;
+        resolved.settings.gi.spp = spp;
+    }
     check_frame(
         &req.render.gi,
         shape,
@@ -324,8 +348,14 @@ pub async fn render(
         camera: resolved.settings.camera,
         light: resolved.settings.light,
         samples: rendered.progress.map(|p| p.samples),
+        relative_error: rendered
+            .progress
+            .map(|p| f64::from(p.relative_standard_error)),
         comparison: result.comparison,
         estimated_seconds: Some(estimated_seconds),
+        timing_note: (state.adapter_is_cpu
+            && rendered.timing_source == TimingSource::GpuTimestamps)
+            .then(|| lightcast_protocol::CPU_TIMESTAMPS_NOTE.to_string()),
     };
     let report_json =
         ascii_json(&serde_json::to_string(&report).map_err(|e| ApiError::internal(e.to_string()))?);

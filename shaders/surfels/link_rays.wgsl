@@ -1,5 +1,5 @@
 // Visibility of the surfels from a batch of caches: V of eq. 3 (seed 001), one shadow ray per
-// cache and surfel, one bit each. Prefixed by `reference/bvh.wgsl` (group 1, the scene's BVH).
+// cache and surfel, one bit each. Prefixed by `bvh.wgsl` (group 1, the scene's BVH).
 // CPU port: the `occluded` test in `links::cache_links`, which this replaces on a GPU.
 
 // Mirrored by `LinkRayParams` in server/src/gi/surfels/link_rays.rs.

@@ -21,6 +21,7 @@
 //! The renderer, the service and the clients need no other change.
 
 pub mod clustered;
+pub mod common;
 pub mod cost;
 pub mod lightskin;
 pub mod none;

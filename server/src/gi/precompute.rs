@@ -109,7 +109,7 @@ pub struct SceneFacts {
 impl SceneFacts {
     pub fn of(scene: &Scene) -> Self {
         Self {
-            surface_area: super::lightskin::caches::surface_area(scene),
+            surface_area: super::common::triangles::surface_area(scene),
             radius: scene.bounds.radius(),
             triangles: scene.triangle_count() as u64,
             extent: scene.bounds.max - scene.bounds.min,

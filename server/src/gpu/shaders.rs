@@ -159,7 +159,7 @@ pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
         wgsl!("brdf.wgsl"),
         wgsl!("lights.wgsl"),
         wgsl!("material_model.wgsl"),
-        wgsl!("reference/bvh.wgsl"),
+        wgsl!("bvh.wgsl"),
         wgsl!("reference/surfaces.wgsl"),
         wgsl!("reference/path_trace.wgsl"),
     ],
@@ -174,10 +174,7 @@ pub const REFERENCE_RESOLVE: ShaderSource = ShaderSource {
 /// Nearest hits of a list of rays, to test the BVH traversal against the CPU.
 pub const REFERENCE_BVH_TEST: ShaderSource = ShaderSource {
     name: "reference_bvh_test",
-    files: &[
-        wgsl!("reference/bvh.wgsl"),
-        wgsl!("reference/bvh_test.wgsl"),
-    ],
+    files: &[wgsl!("bvh.wgsl"), wgsl!("bvh_test.wgsl")],
 };
 
 /// VPL generation and k-means clustering of `clustered` (`gi::clustered`).
@@ -286,7 +283,7 @@ pub const SURFEL_CACHE_SH_VIEW: ShaderSource = ShaderSource {
 /// Eq. 3's visibility rays of the surfels' links, from caches to surfels (precomputation).
 pub const SURFEL_LINK_RAYS: ShaderSource = ShaderSource {
     name: "surfel_link_rays",
-    files: &[wgsl!("reference/bvh.wgsl"), wgsl!("surfels/link_rays.wgsl")],
+    files: &[wgsl!("bvh.wgsl"), wgsl!("surfels/link_rays.wgsl")],
 };
 
 /// Every pass module; tests validate each with naga.

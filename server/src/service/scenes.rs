@@ -1293,7 +1293,7 @@ mod tests {
             panic!("the BVH must build");
         };
         let built = data
-            .downcast_ref::<crate::gi::reference::bvh::SceneBvh>()
+            .downcast_ref::<crate::gi::common::bvh::SceneBvh>()
             .expect("a BVH");
         assert_eq!(
             built.triangles.len(),

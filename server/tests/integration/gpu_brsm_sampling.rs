@@ -5,6 +5,7 @@
 use crate::support::*;
 use glam::Vec3;
 use lightcast_protocol::{Light, LightKind};
+use lightcast_server::gi::common::halton::halton;
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::sampling::SamplingReadback;
 use lightcast_server::gi::lightskin::LightSkin;
@@ -55,16 +56,6 @@ fn run(scene: &Scene, light: Light, sampling: GiSettings) -> (RenderSettings, Sa
         .expect("readback")
         .expect("sampling ran");
     (s, readback)
-}
-
-fn halton(mut i: u32, base: u32) -> f32 {
-    let (mut f, mut r) = (1.0f32, 0.0f32);
-    while i > 0 {
-        f /= base as f32;
-        r += f * (i % base) as f32;
-        i /= base;
-    }
-    r
 }
 
 /// Every covered texel's disk area (eq. 1) and flux, the flux derived independently of the

@@ -6,7 +6,7 @@
 use super::support::{self, brdf, floor_corners, hit_plane, plain_material, quad};
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
-use lightcast_server::gi::reference::bvh::SceneBvh;
+use lightcast_server::gi::common::bvh::SceneBvh;
 use lightcast_server::gi::reference::{
     luminance, PathTracer, ReferenceImage, ReferenceSettings, SurfaceGpu,
 };

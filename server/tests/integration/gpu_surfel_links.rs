@@ -3,8 +3,8 @@
 
 use crate::support::*;
 use glam::Vec3;
+use lightcast_server::gi::common::bvh::SceneBvh;
 use lightcast_server::gi::precompute::{BuildEnv, Store};
-use lightcast_server::gi::reference::bvh::SceneBvh;
 use lightcast_server::gi::surfels::link_rays::LinkRays;
 use lightcast_server::gi::surfels::links::{self, RayDevice, Senders};
 use lightcast_server::gi::surfels::{self, SurfelParams, SurfelSet};

@@ -178,7 +178,8 @@ async fn hostile_uploads_and_cache_distances_are_refused_before_they_take_memory
     // A distance just above the smallest the format's own cap allows (what the server used
     // to suggest for a far too small one) makes ~2 million caches: refused by the per-set
     // budget before anything is queued, with a distance that fits.
-    use lightcast_server::gi::lightskin::caches::{min_distance_for, surface_area, MAX_CACHES};
+    use lightcast_server::gi::common::triangles::surface_area;
+    use lightcast_server::gi::lightskin::caches::{min_distance_for, MAX_CACHES};
     let area = surface_area(&lightcast_server::scene::procedural::cornell_box());
     let old_minimum = f64::from(min_distance_for(area, MAX_CACHES));
     for distance in [1e-6, old_minimum * 1.01] {

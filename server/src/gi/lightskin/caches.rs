@@ -20,6 +20,7 @@
 //! split into fixed chunks whose results are concatenated in order, floating-point sums run
 //! sequentially in a fixed order, and every sort has a total order with an index tie-break.
 
+use crate::gi::common::triangles::{surface_area, triangle, triangle_area, triangle_normal};
 use crate::scene::material::{split, DiffuseGlossy};
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
@@ -360,27 +361,6 @@ pub fn precompute(
 // Scene helpers
 // ---------------------------------------------------------------------------------------------
 
-fn triangle(scene: &Scene, t: usize) -> [u32; 3] {
-    [
-        scene.indices[3 * t],
-        scene.indices[3 * t + 1],
-        scene.indices[3 * t + 2],
-    ]
-}
-
-pub(crate) fn triangle_area(scene: &Scene, t: usize) -> f64 {
-    let [a, b, c] = triangle(scene, t).map(|i| Vec3::from(scene.vertices[i as usize].position));
-    let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
-    0.5 * (b - a).cross(c - a).length()
-}
-
-/// Total triangle area, summed sequentially so the result does not depend on thread count.
-pub fn surface_area(scene: &Scene) -> f64 {
-    (0..scene.triangle_count())
-        .map(|t| triangle_area(scene, t))
-        .sum()
-}
-
 /// The paper's BRDF parameters per material, with base colour textures folded in as their mean
 /// linear colour (caches represent whole surface patches, so a per-texel value is not needed).
 /// The split is linear in the base colour, so scaling the base colour first is exact for the
@@ -524,21 +504,6 @@ fn bisect(
         stack.push(([p, m, r], depth + 1));
     }
     pieces
-}
-
-/// Geometric normal of a triangle, flipped to agree with its vertex normals when those say
-/// otherwise (assets whose winding disagrees with their shading normals). `None` without area.
-pub(crate) fn triangle_normal(scene: &Scene, t: usize) -> Option<(Vec3, [Vec3; 3])> {
-    let idx = triangle(scene, t);
-    let corners = idx.map(|i| Vec3::from(scene.vertices[i as usize].position));
-    let n = (corners[1] - corners[0])
-        .cross(corners[2] - corners[0])
-        .try_normalize()?;
-    let shading: Vec3 = idx
-        .iter()
-        .map(|&i| Vec3::from(scene.vertices[i as usize].normal))
-        .sum();
-    Some((if shading.dot(n) < 0.0 { -n } else { n }, corners))
 }
 
 /// Step 1: area-weighted surface samples with geometric triangle normals (flat per triangle, so

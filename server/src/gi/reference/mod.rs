@@ -2,7 +2,7 @@
 //! against (issue 10).
 //!
 //! Compute shaders only (no ray-tracing hardware, so it runs on lavapipe): a BVH built per scene
-//! on the CPU ([`bvh`]) is traversed in WGSL (`shaders/reference/`). For every pixel it
+//! on the CPU ([`bvh`], shared with the surfels' link rays) is traversed in WGSL (`shaders/bvh.wgsl`, `shaders/reference/`). For every pixel it
 //! estimates the indirect radiance leaving the surface point the pixel centre sees towards the
 //! camera — the quantity the other methods write into their indirect buffer — with the same
 //! BRDF (diffuse + normalised Phong lobe, eq. 3–4 of seed 004), punctual light and emitters, but
@@ -27,9 +27,9 @@
 //! renders start afresh. As a frame's method it adds `spp` samples, then [`resolve`] writes
 //! the mean into the indirect buffer with the convergence sums the frame header reports.
 
-pub mod bvh;
 pub mod resolve;
 
+use super::common::bvh;
 use super::cost::{Cheaper, Cost, FrameShape, Knob};
 use super::precompute::{
     BudgetPool, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, UnitBudget,

@@ -219,9 +219,9 @@ mod tests {
         let f = |p: Vec3| 2.0 * p.x - p.y + 0.5 * p.z + 1.0;
         for k in 0..200 {
             let u = Vec3::new(
-                crate::gi::clustered::cpu::halton(k + 1, 2),
-                crate::gi::clustered::cpu::halton(k + 1, 3),
-                crate::gi::clustered::cpu::halton(k + 1, 5),
+                crate::gi::common::halton::halton(k + 1, 2),
+                crate::gi::common::halton::halton(k + 1, 3),
+                crate::gi::common::halton::halton(k + 1, 5),
             );
             let p = u * Vec3::new(1.0, 2.0, 3.0);
             let w = g.trilinear(p);

@@ -1,6 +1,6 @@
 //! Eq. 3's visibility V on the GPU (`shaders/surfels/link_rays.wgsl`): one shadow ray from
-//! every cache to every surfel, through the reference tracer's BVH (`shaders/reference/bvh.wgsl`
-//! and [`crate::gi::reference::bvh::SceneBvh`]). These rays are almost all of the links' cost (3.5·10⁸ of them for the
+//! every cache to every surfel, through the reference tracer's BVH (`shaders/bvh.wgsl`
+//! and [`crate::gi::common::bvh::SceneBvh`]). These rays are almost all of the links' cost (3.5·10⁸ of them for the
 //! Cornell box at the defaults); the rest of [`super::links`] (the weights, the cut, the SH
 //! coefficients) stays on the CPU and reads the bits back.
 //!
@@ -38,7 +38,7 @@ bind_group! {
 }
 
 bind_group! {
-    /// Group 1 of `shaders/surfels/link_rays.wgsl`: the scene's BVH (`reference/bvh.wgsl`).
+    /// Group 1 of `shaders/surfels/link_rays.wgsl`: the scene's BVH (`bvh.wgsl`).
     pub struct BvhResources as BVH_GROUP("surfel link bvh", wgpu::ShaderStages::COMPUTE) {
         bvh_nodes: bind::STORAGE,
         bvh_triangles: bind::STORAGE,

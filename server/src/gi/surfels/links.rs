@@ -21,7 +21,7 @@ use super::hierarchy::Tree;
 use super::link_rays::LinkRays;
 use super::sampling::Surfel;
 use super::sh;
-use crate::gi::reference::bvh::SceneBvh;
+use crate::gi::common::bvh::SceneBvh;
 use crate::gpu::GpuContext;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -219,7 +219,7 @@ fn sees_mostly_back_faces(senders: &Senders, p: Vec3) -> bool {
         };
         hits += 1;
         let facing =
-            crate::gi::lightskin::caches::triangle_normal(senders.scene, hit.triangle as usize);
+            crate::gi::common::triangles::triangle_normal(senders.scene, hit.triangle as usize);
         if facing.is_some_and(|(n, _)| n.dot(dir) > 0.0) {
             back += 1;
         }

@@ -28,12 +28,12 @@ pub mod sampling;
 pub mod sh;
 pub mod store;
 
+use crate::gi::common::bvh::SceneBvh;
 use crate::gi::cost::{Cheaper, Cost, FrameShape, Knob};
 use crate::gi::precompute::{
     BudgetPool, BuildEnv, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts,
     UnitBudget,
 };
-use crate::gi::reference::bvh::SceneBvh;
 use crate::gi::{
     DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
@@ -942,7 +942,7 @@ mod tests {
         assert_eq!(n, 3000);
         assert_eq!(set.tree.children.len(), n - 1);
         let root = 2 * n - 2;
-        let area = crate::gi::lightskin::caches::surface_area(&scene);
+        let area = crate::gi::common::triangles::surface_area(&scene);
         let root_area = f64::from(set.tree.area[root]);
         assert!(
             ((root_area - area) / area).abs() < 1e-4,

@@ -17,8 +17,8 @@
 //! The output is the same whatever the thread count: chunks are concatenated in order and
 //! every step reads only the previous step's positions.
 
-use crate::gi::clustered::cpu::halton;
-use crate::gi::lightskin::caches::{triangle_area, triangle_normal};
+use crate::gi::common::halton::halton;
+use crate::gi::common::triangles::{triangle_area, triangle_normal};
 use crate::gi::precompute::Progress;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
@@ -335,7 +335,7 @@ mod tests {
     #[test]
     fn surfels_cover_exactly_the_scene_area() {
         let scene = procedural::cornell_box();
-        let area = crate::gi::lightskin::caches::surface_area(&scene);
+        let area = crate::gi::common::triangles::surface_area(&scene);
         let s = sample(&scene, 5000, RELAX_STEPS, &mut none(), &|| false).expect("surfels");
         assert_eq!(s.surfels.len(), 5000);
         assert!(

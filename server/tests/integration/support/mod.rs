@@ -17,7 +17,7 @@ pub fn gpu() -> GpuContext {
 /// Hands the renderer the scene's BVH for `reference` frames, as the service's precompute
 /// worker does.
 pub fn set_bvh(renderer: &mut Renderer) {
-    let bvh = lightcast_server::gi::reference::bvh::SceneBvh::build(renderer.scene()).expect("bvh");
+    let bvh = lightcast_server::gi::common::bvh::SceneBvh::build(renderer.scene()).expect("bvh");
     let data: lightcast_server::gi::precompute::SceneData = std::sync::Arc::new(bvh);
     renderer
         .set_scene_data(lightcast_server::gi::GiMethod::Reference, &data)

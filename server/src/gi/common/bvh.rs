@@ -2,7 +2,7 @@
 //!
 //! Built on the CPU with `obvhs` (PLOC with reinsertion: a well-kept builder made for GPU
 //! traversal, and faster than a hand-written binned SAH), then flattened into 32-byte nodes the
-//! WGSL traversal (`shaders/reference/bvh.wgsl`) reads. Triangles are stored in leaf order so a
+//! WGSL traversal (`shaders/bvh.wgsl`) reads. Triangles are stored in leaf order so a
 //! leaf's triangles are contiguous. [`SceneBvh::intersect`] is the CPU port of that traversal
 //! and [`SceneBvh::intersect_brute_force`] the independent check it is tested against. Both
 //! are geometry only: the WGSL traversal also skips hits on alpha-masked texels, which needs
@@ -12,7 +12,7 @@ use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 
-/// Mirrors `BvhNode` in `shaders/reference/bvh.wgsl`. An inner node (`prim_count` 0) has its
+/// Mirrors `BvhNode` in `shaders/bvh.wgsl`. An inner node (`prim_count` 0) has its
 /// children at `first_index` and `first_index + 1`; a leaf's triangles are
 /// `first_index .. first_index + prim_count` of [`SceneBvh::triangles`].
 #[repr(C)]

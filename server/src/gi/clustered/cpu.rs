@@ -9,7 +9,7 @@
 //!
 //! Nothing here depends on the GPU.
 
-pub use crate::gi::common::halton::halton;
+use crate::gi::common::halton::halton;
 use crate::scene::material::DiffuseGlossy;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;

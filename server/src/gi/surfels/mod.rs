@@ -54,8 +54,6 @@ use sampling::{SamplingError, Surfel};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
-/// n_S by default (the paper's "32k").
-pub const DEFAULT_SURFELS: u32 = 32 * 1024;
 /// Fewest surfels a request may ask for.
 pub const MIN_SURFELS: u32 = 1024;
 /// Fewest and most links per cache a request may ask for.
@@ -275,11 +273,6 @@ fn surfel_key(params: &SurfelParams) -> PrecomputeKey {
 /// goes to 128k).
 pub const MAX_SURFELS: u32 = 256 * 1024;
 
-/// n_L by default (the paper's).
-pub const DEFAULT_LINKS: u32 = 128;
-/// SH bands by default (9 coefficients).
-pub const DEFAULT_BANDS: u32 = 3;
-
 /// What the precomputation is built from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfelParams {
@@ -295,12 +288,16 @@ pub struct SurfelParams {
 }
 
 impl Default for SurfelParams {
+    /// The protocol's defaults (`GiParams`: the paper's 32k surfels and 128 links, 3 bands), so
+    /// the service, the offline tools and the bench cannot disagree (issue 32: they were
+    /// written twice).
     fn default() -> Self {
+        let g = lightcast_protocol::GiParams::default();
         Self {
-            surfels: DEFAULT_SURFELS,
-            cache_spacing: None,
-            links: DEFAULT_LINKS,
-            bands: DEFAULT_BANDS,
+            surfels: g.surfel_count,
+            cache_spacing: g.surfel_cache_spacing,
+            links: g.surfel_links,
+            bands: g.sh_bands,
         }
     }
 }

@@ -1,5 +1,6 @@
 //! The offline `render` command, run as a user would run the binary.
 
+use crate::support::not_exercised;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -425,7 +426,7 @@ fn gi_methods_and_debug_views_write_images() {
 fn a_broken_vulkan_driver_falls_back_to_lavapipe() {
     let installed = lightcast_server::gpu::context::lavapipe_icd().is_some();
     if !installed {
-        eprintln!("lavapipe is not installed here: the fallback cannot be exercised");
+        not_exercised("lavapipe is not installed here: the fallback cannot be exercised");
         return;
     }
     let broken = out_dir().join("broken_icd.json");

@@ -3,6 +3,7 @@
 //! front of PATH (everything else real), on a machine the script has already set up, so it
 //! installs nothing here.
 
+use crate::support::not_exercised;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -58,7 +59,7 @@ fn set_up_already() -> bool {
     let (ok, stderr) = run_setup(&dir, &[]);
     std::fs::remove_dir_all(&dir).ok();
     if !ok || stderr.contains("installing") {
-        eprintln!("deploy/setup-debian.sh has work to do on this machine: checks not exercised");
+        not_exercised("deploy/setup-debian.sh has work to do on this machine");
         return false;
     }
     true

@@ -527,9 +527,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         light: settings.light,
         exposure_scale,
         timing_source,
-        timing_note: (adapter_is_cpu
-            && timing_source == crate::gpu::timing::TimingSource::GpuTimestamps)
-            .then(|| lightcast_protocol::CPU_TIMESTAMPS_NOTE.to_string()),
+        timing_note: timing_source.note(adapter_is_cpu),
         gpu_total_ms: stages.iter().map(|t| t.ms).sum(),
         stages,
         load_ms,

@@ -64,16 +64,18 @@ export class Controls {
   }
 
   setCamera(camera) {
-    const offset = sub(camera.position, camera.target);
+    this.orbit = { target: [...camera.target], fov: camera.fov_y_degrees };
+    this.orbitTo(camera.position);
+  }
+
+  /** Radius and angles of the orbit that puts the camera at `position` about its target. */
+  orbitTo(position) {
+    const offset = sub(position, this.orbit.target);
     const radius = length(offset) || this.sceneSize;
-    this.orbit = {
-      target: [...camera.target],
-      radius,
-      yaw: Math.atan2(offset[0], offset[2]),
-      // Clamped so that a camera looking straight down keeps a usable right vector.
-      pitch: clamp(Math.asin(clamp(offset[1] / radius, -1, 1)), -MAX_PITCH, MAX_PITCH),
-      fov: camera.fov_y_degrees,
-    };
+    this.orbit.radius = radius;
+    this.orbit.yaw = Math.atan2(offset[0], offset[2]);
+    // Clamped so that a camera looking straight down keeps a usable right vector.
+    this.orbit.pitch = clamp(Math.asin(clamp(offset[1] / radius, -1, 1)), -MAX_PITCH, MAX_PITCH);
   }
 
   setLight(light) {
@@ -105,12 +107,9 @@ export class Controls {
     const position = this.camera().position;
     const clamped = position.map((v, i) => clamp(v, this.region.min[i], this.region.max[i]));
     if (clamped.every((v, i) => v === position[i])) return;
-    const offset = sub(clamped, this.orbit.target);
-    const radius = length(offset);
-    if (radius < this.sceneSize * 1e-3) return;
-    this.orbit.radius = radius;
-    this.orbit.yaw = Math.atan2(offset[0], offset[2]);
-    this.orbit.pitch = clamp(Math.asin(clamp(offset[1] / radius, -1, 1)), -MAX_PITCH, MAX_PITCH);
+    // A camera clamped onto its target would have no view direction.
+    if (length(sub(clamped, this.orbit.target)) < this.sceneSize * 1e-3) return;
+    this.orbitTo(clamped);
   }
 
   /** Sends the camera after a change, kept inside the region. */

@@ -17,6 +17,15 @@ pub enum TimingSource {
     CpuWallClock,
 }
 
+impl TimingSource {
+    /// What a report says of its stage times on an adapter (`is_cpu`: a software one), when
+    /// they cannot be trusted one by one ([`lightcast_protocol::CPU_TIMESTAMPS_NOTE`]).
+    pub fn note(self, is_cpu: bool) -> Option<String> {
+        (is_cpu && self == Self::GpuTimestamps)
+            .then(|| lightcast_protocol::CPU_TIMESTAMPS_NOTE.to_string())
+    }
+}
+
 /// Time one stage took.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct StageTiming {

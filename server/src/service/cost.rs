@@ -29,17 +29,22 @@ pub enum AdapterSpeed {
 /// lower ratio keeps raster-heavy requests within their limit there too.
 pub const GPU_SPEED: f64 = 256.0;
 
+/// `auto` (`None`) or a positive finite number, as the `auto`-able flags take it.
+fn auto_or_positive(s: &str, what: &str) -> Result<Option<f64>, String> {
+    if s == "auto" {
+        return Ok(None);
+    }
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(Some(v)),
+        _ => Err(format!("'{s}' is neither auto nor {what}")),
+    }
+}
+
 impl std::str::FromStr for AdapterSpeed {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        if s == "auto" {
-            return Ok(Self::Auto);
-        }
-        match s.parse::<f64>() {
-            Ok(v) if v.is_finite() && v > 0.0 => Ok(Self::Times(v)),
-            _ => Err(format!("'{s}' is neither auto nor a positive number")),
-        }
+        Ok(auto_or_positive(s, "a positive number")?.map_or(Self::Auto, Self::Times))
     }
 }
 
@@ -54,15 +59,7 @@ impl std::str::FromStr for FrameCost {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        if s == "auto" {
-            return Ok(Self::Auto);
-        }
-        match s.parse::<f64>() {
-            Ok(v) if v.is_finite() && v > 0.0 => Ok(Self::Seconds(v)),
-            _ => Err(format!(
-                "'{s}' is neither auto nor a positive number of seconds"
-            )),
-        }
+        Ok(auto_or_positive(s, "a positive number of seconds")?.map_or(Self::Auto, Self::Seconds))
     }
 }
 
@@ -152,8 +149,8 @@ pub fn request_seconds(
 /// The samples per pixel of a one-shot `reference` whose request names none: as many as half
 /// the request budget buys (its comparison included), at least `floor` (the default) and at
 /// most `max_spp`. A fixed default was either noise (4 spp) or far over the deadline on a CPU
-/// adapter; half leaves room for the rest of the request. Costs grow with spp, so a
-/// bisection finds it.
+/// adapter; half leaves room for the rest of the request. The reference's own `spp` knob
+/// finds it, as a refusal's fitting value is found.
 pub fn one_shot_spp(
     gi: &GiParams,
     shape: FrameShape,
@@ -162,24 +159,19 @@ pub fn one_shot_spp(
     limits: &Limits,
     floor: u32,
 ) -> u32 {
-    let budget = 0.5 * limits.max_request_seconds;
-    let fits = |spp: u32| {
-        let g = GiParams { spp, ..gi.clone() };
-        request_seconds(&g, shape, set_units, compare_spp, limits) <= budget
+    let most = limits.max_spp.max(1);
+    let floor = floor.clamp(1, most);
+    let knobs = crate::gi::entry(GiMethod::Reference).1.knobs;
+    let Some(knob) = knobs.iter().find(|k| k.field == "spp") else {
+        return floor;
     };
-    let (mut lo, mut hi) = (floor.clamp(1, limits.max_spp.max(1)), limits.max_spp.max(1));
-    if !fits(lo) {
-        return lo;
-    }
-    while lo < hi {
-        let mid = lo + (hi - lo).div_ceil(2);
-        if fits(mid) {
-            lo = mid;
-        } else {
-            hi = mid - 1;
-        }
-    }
-    lo
+    let cost_of = |g: &GiParams| request_seconds(g, shape, set_units, compare_spp, limits) * 1e9;
+    let budget_ns = 0.5 * limits.max_request_seconds * 1e9;
+    let start = GiParams {
+        spp: most,
+        ..gi.clone()
+    };
+    cost::fitting_value(&start, knob, (floor, most), budget_ns, &cost_of).unwrap_or(floor)
 }
 
 /// Estimated seconds of adapter work one submission of a chunked render may take: on a GPU

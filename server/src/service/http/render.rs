@@ -3,7 +3,6 @@
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
-use crate::gpu::timing::TimingSource;
 use crate::service::cost::{check_frame, chunk_spp, one_shot_spp, request_seconds, Submission};
 use crate::service::encode;
 use crate::service::error::ApiError;
@@ -353,9 +352,7 @@ pub async fn render(
             .map(|p| f64::from(p.relative_standard_error)),
         comparison: result.comparison,
         estimated_seconds: Some(estimated_seconds),
-        timing_note: (state.adapter_is_cpu
-            && rendered.timing_source == TimingSource::GpuTimestamps)
-            .then(|| lightcast_protocol::CPU_TIMESTAMPS_NOTE.to_string()),
+        timing_note: rendered.timing_source.note(state.adapter_is_cpu),
     };
     let report_json =
         ascii_json(&serde_json::to_string(&report).map_err(|e| ApiError::internal(e.to_string()))?);

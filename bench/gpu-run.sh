@@ -102,7 +102,7 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
   # Seed 001 (issue 12): surfels over n_S, n_L and SH bands around 32k / 128 / 3, error at one
   # and three bounces, on the Cornell box and the street (the precomputation runs on the CPU).
   if $quick; then
-    surfel_runs=("procedural:cornell|--width 160 --height 90 --sweep-surfels 1024,2048 --sweep-links 16 --sweep-bands 3 --surfels 2048 --surfel-links 16 --surfel-cache-spacing 0.5 --frames 2 --warmup 1 --reference-spp 16")
+    surfel_runs=("procedural:cornell|--width 160 --height 90 --sweep-surfels 1024,2048 --sweep-links 16 --sweep-bands 3 --gi-param surfel_count=2048 --gi-param surfel_links=16 --gi-param surfel_cache_spacing=0.5 --frames 2 --warmup 1 --reference-spp 16")
   else
     surfel_runs=("procedural:cornell|--width 1920 --height 1080 --reference-spp 1024"
       "$scene|--width 1920 --height 1080 --reference-spp 256")

@@ -63,8 +63,8 @@ loop() {
 
 viewer() { "$cli" stream --duration 20 "${small[@]}" --gi none --fps-cap 10; }
 gi_viewer() {
-  "$cli" stream --duration 15 "${small[@]}" --gi brsm --rsm-size 64 --vals 256 \
-    --view-samples 32 --fps-cap 4
+  "$cli" stream --duration 15 "${small[@]}" --gi brsm --gi-param rsm_size=64 \
+    --gi-param val_count=256 --gi-param view_samples=32 --fps-cap 4
 }
 burst() { "$cli" loadtest --sessions 4 --duration 10 --ramp 1 "${small[@]}" --gi none --fps-cap 10; }
 vanishing() { timeout -s KILL 3 "$cli" stream --duration 30 "${small[@]}" --gi none || true; }

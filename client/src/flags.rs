@@ -1,9 +1,7 @@
 //! Camera, light and GI flags shared by `render`, `stream` and `loadtest`; the same names as the
 //! offline `lightcast-server render`.
 
-use lightcast_protocol::{
-    parse_vec3, Camera, ClusteredFlags, GiMethod, GiParams, Light, LightKind, View,
-};
+use lightcast_protocol::{parse_vec3, Camera, GiMethod, Light, LightKind, View};
 
 /// What to render. Unset options are left out of the request, so the server's defaults apply
 /// (`lightcast-server` on a CPU adapter picks smaller GI settings than on a GPU; `/v1/server`
@@ -52,51 +50,11 @@ pub struct RenderFlags {
     /// Indirect light method (server default brsm).
     #[arg(long, value_enum)]
     pub gi: Option<GiMethod>,
-    /// RSM side per light face (server default 1024 on a GPU).
-    #[arg(long)]
-    pub rsm_size: Option<u32>,
-    /// N_VS: view samples of the BRSM importance (server default 512 on a GPU).
-    #[arg(long)]
-    pub view_samples: Option<u32>,
-    /// N_sVAL: VALs selected per frame (BRSM; server default 8192 on a GPU).
-    #[arg(long)]
-    pub vals: Option<u32>,
-    /// Uniform part α of BRSM's selection pdf (server default 0.3).
-    #[arg(long)]
-    pub defensive: Option<f32>,
-    /// Do not dim proxy lights hidden behind other caches.
-    #[arg(long)]
-    pub no_occlusion: bool,
-    /// Phong exponent k for every material; default: each material's own.
-    #[arg(long)]
-    pub glossy_exponent: Option<f32>,
-    /// Light-cache distance d_eps (scene units); default: the scene's.
-    #[arg(long)]
-    pub cache_distance: Option<f32>,
-    /// Light-cache angle theta_eps in degrees.
-    #[arg(long)]
-    pub cache_angle: Option<f32>,
-    /// `--gi reference`: reflections after the visible surface (1: single bounce; the default).
-    #[arg(long)]
-    pub bounces: Option<u32>,
-    /// `--gi reference` and `surfels`: emissive surfaces do not light the scene (where the
-    /// light stands in for them, as a scene's default light without lights of its own does).
-    #[arg(long)]
-    pub no_emitters: bool,
-    /// `--gi reference`: samples per pixel per frame (a render takes exactly this many;
-    /// server default 4).
-    #[arg(long)]
-    pub spp: Option<u32>,
-    /// Indirect light at 1/N of the output's width and height (1, 2 or 4; server default 1 on
-    /// a GPU, 2 on a CPU adapter).
-    #[arg(long)]
-    pub indirect_downscale: Option<u32>,
-    #[command(flatten)]
-    pub clustered: ClusteredFlags,
-    /// Any GI parameter by its name in `/v1/server`'s `gi_methods`, as NAME=VALUE (a JSON
-    /// value: `surfel_count=65536`, `visibility=off`); repeatable, applied after the flags
-    /// above. Every method's parameters are reachable this way, including methods added
-    /// after this client.
+    /// A GI parameter by its name in `/v1/server`'s `gi_methods` (the README's table lists
+    /// every method's), as NAME=VALUE: `rsm_size=256`, `surfel_count=65536`,
+    /// `visibility=off`, `emitters=false`. VALUE is JSON (a number, true/false, null), else a
+    /// name; repeatable. The server checks each against the method's table and names the
+    /// field it refuses (`render.gi.NAME`), so methods added after this client work too.
     #[arg(long = "gi-param", value_name = "NAME=VALUE", value_parser = parse_gi_param)]
     pub gi_params: Vec<(String, serde_json::Value)>,
     /// The final frame or a debug view (default final).
@@ -153,21 +111,6 @@ impl RenderFlags {
         };
         let mut gi = serde_json::Map::new();
         put(&mut gi, "method", self.gi);
-        put(&mut gi, "rsm_size", self.rsm_size);
-        put(&mut gi, "view_samples", self.view_samples);
-        put(&mut gi, "val_count", self.vals);
-        put(&mut gi, "defensive", self.defensive);
-        put(&mut gi, "occlusion", self.no_occlusion.then_some(false));
-        put(&mut gi, "glossy_exponent", self.glossy_exponent);
-        put(&mut gi, "cache_distance", self.cache_distance);
-        put(&mut gi, "cache_angle", self.cache_angle);
-        put(&mut gi, "bounces", self.bounces);
-        put(&mut gi, "emitters", self.no_emitters.then_some(false));
-        put(&mut gi, "spp", self.spp);
-        put(&mut gi, "indirect_downscale", self.indirect_downscale);
-        for (name, value) in self.clustered.given() {
-            gi.insert(name.to_string(), value);
-        }
         for (name, value) in &self.gi_params {
             gi.insert(name.clone(), value.clone());
         }
@@ -199,34 +142,17 @@ impl RenderFlags {
     }
 }
 
-/// `gi` with the named fields replaced by the values.
-fn with_params(gi: &GiParams, params: &[(String, serde_json::Value)]) -> Result<GiParams, String> {
-    let mut value = serde_json::to_value(gi).map_err(|e| e.to_string())?;
-    let known = value.as_object().map(|o| o.len()).unwrap_or(0);
-    for (name, v) in params {
-        value[name.as_str()] = v.clone();
-    }
-    if value.as_object().map_or(0, |o| o.len()) != known {
-        let names: Vec<String> = serde_json::to_value(GiParams::default())
-            .ok()
-            .and_then(|v| v.as_object().map(|o| o.keys().cloned().collect()))
-            .unwrap_or_default();
-        return Err(format!("unknown GI parameter; known: {}", names.join(", ")));
-    }
-    serde_json::from_value(value).map_err(|e| e.to_string())
-}
-
-/// `NAME=VALUE` of `--gi-param`: VALUE is read as JSON, else taken as a string; the pair must
-/// name a GI parameter and fit its type.
+/// `NAME=VALUE` of `--gi-param`: VALUE is read as JSON, else taken as a string. The server
+/// checks the name and value against the methods' tables (this client knows none of them).
 fn parse_gi_param(s: &str) -> Result<(String, serde_json::Value), String> {
     let (name, raw) = s
         .split_once('=')
         .ok_or_else(|| format!("'{s}' is not NAME=VALUE"))?;
+    if name.is_empty() || name == "method" {
+        return Err(format!("'{s}': name a GI parameter (the method is --gi's)"));
+    }
     let value = serde_json::from_str(raw).unwrap_or_else(|_| serde_json::Value::String(raw.into()));
-    let pair = (name.to_string(), value);
-    with_params(&GiParams::default(), std::slice::from_ref(&pair))
-        .map_err(|e| format!("{name}: {e}"))?;
-    Ok(pair)
+    Ok((name.to_string(), value))
 }
 
 #[cfg(test)]
@@ -234,7 +160,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn gi_params_by_name_are_checked_when_parsed_and_applied_over_the_flags() {
+    fn gi_params_are_name_value_pairs_with_json_values() {
         assert_eq!(
             parse_gi_param("vpl_count=4096"),
             Ok(("vpl_count".into(), serde_json::json!(4096)))
@@ -243,23 +169,12 @@ mod tests {
             parse_gi_param("visibility=off"),
             Ok(("visibility".into(), serde_json::json!("off")))
         );
-        assert!(parse_gi_param("cache_distance=null").is_ok());
-        let unknown = parse_gi_param("vpls=4").expect_err("not a GI parameter");
-        assert!(
-            unknown.starts_with("vpls: unknown GI parameter; known: "),
-            "{unknown}"
+        assert_eq!(
+            parse_gi_param("cache_distance=null"),
+            Ok(("cache_distance".into(), serde_json::Value::Null))
         );
-        assert!(unknown.contains("vpl_count"), "{unknown}");
-        assert!(parse_gi_param("vpl_count=many").is_err(), "wrong type");
         assert!(parse_gi_param("vpl_count").is_err(), "no value");
-        let gi = with_params(
-            &GiParams::default(),
-            &[
-                ("rsm_size".into(), serde_json::json!(64)),
-                ("method".into(), serde_json::json!("clustered")),
-            ],
-        )
-        .expect("valid");
-        assert_eq!((gi.rsm_size, gi.method), (64, GiMethod::Clustered));
+        assert!(parse_gi_param("=4").is_err(), "no name");
+        assert!(parse_gi_param("method=brsm").is_err(), "--gi's");
     }
 }

@@ -35,12 +35,12 @@ const SMALL: &[&str] = &[
     "48",
     "--shadow-map-size",
     "256",
-    "--rsm-size",
-    "32",
-    "--vals",
-    "256",
-    "--view-samples",
-    "64",
+    "--gi-param",
+    "rsm_size=32",
+    "--gi-param",
+    "val_count=256",
+    "--gi-param",
+    "view_samples=64",
 ];
 
 fn with<'a>(head: &[&'a str], tail: &[&'a str]) -> Vec<&'a str> {

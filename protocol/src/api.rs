@@ -7,6 +7,7 @@
 
 use crate::{Camera, Light};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use utoipa::ToSchema;
 
 /// The id of the scene the server loads at start (the built-in Cornell box).
@@ -114,39 +115,10 @@ pub struct GiParamInfo {
     /// The accepted values of a `choice`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub choices: Vec<String>,
+    /// The unit of a number (`texels`, `scene units`), when it has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
     pub description: String,
-}
-
-/// `clustered`: how each VPL's visibility is found.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[serde(rename_all = "snake_case")]
-pub enum ClusteredVisibility {
-    /// Every VPL sees every point (the paper's "without visibility" baseline, Figure 10).
-    Off,
-    /// The paper's method (§4.1–4.2): one paraboloid depth map per VAL, convolution soft
-    /// shadow maps give each VPL the fractional visibility of its VAL.
-    #[default]
-    Cssm,
-    /// Instant radiosity with one hard-shadow paraboloid map per VPL: exact from-point
-    /// visibility up to the map's resolution, the baseline clustering is measured against
-    /// (Figure 10's "instant radiosity"; for small N).
-    #[cfg_attr(feature = "clap", value(name = "vpl_shadows"))]
-    VplShadows,
-}
-
-impl ClusteredVisibility {
-    /// Every choice, as `/v1/server` lists them.
-    pub const ALL: &'static [ClusteredVisibility] = &[Self::Off, Self::Cssm, Self::VplShadows];
-
-    /// The name requests use.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Off => "off",
-            Self::Cssm => "cssm",
-            Self::VplShadows => "vpl_shadows",
-        }
-    }
 }
 
 /// A GI method as `/v1/server` describes it.
@@ -249,128 +221,65 @@ impl View {
     }
 }
 
-/// Parameters of the GI methods, tagged by `method`: each method reads the fields
-/// `/v1/server` lists for it (`gi_methods`) and ignores the others, so switching methods keeps
-/// every other method's settings. Defaults are the seed paper's evaluation settings.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
-#[serde(default)]
+/// Parameters of the GI methods, tagged by `method`: every other field is a parameter one or
+/// more methods read, named and bounded by their tables (`/v1/server`'s `gi_methods` lists
+/// each method's, with its default, range and unit), so switching methods keeps every other
+/// method's settings. The protocol names no method's parameters: the server's methods own
+/// them, checks every field against them and fills the ones a request leaves out.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct GiParams {
+    #[serde(default)]
     pub method: GiMethod,
-    /// RSM side per light face in texels (16 … the server's limit).
-    pub rsm_size: u32,
-    /// N_VS: view samples for the importance estimate (BRSM).
-    pub view_samples: u32,
-    /// N_sVAL: VALs drawn per frame (BRSM).
-    pub val_count: u32,
-    /// Weight α in [0, 1] of a uniform part mixed into the BRSM selection pdf; 0 is the
-    /// paper's plain importance sampling.
-    pub defensive: f32,
-    /// Dim proxy lights hidden behind other caches (the paper's double projection).
-    pub occlusion: bool,
-    /// Phong exponent k (eq. 3–4) for every material, in direct and indirect shading alike;
-    /// `null` keeps the materials' own. At most 10000.
-    pub glossy_exponent: Option<f32>,
-    /// Light caches: largest distance d_eps between a surface point and its cache, in scene
-    /// units; `null` derives it from the scene's surface area. A value other than the scene's
-    /// default starts a precomputation of its own.
-    pub cache_distance: Option<f32>,
-    /// Light caches: largest angle theta_eps between surface and cache normals, in degrees;
-    /// `null` for the default (30°).
-    pub cache_angle: Option<f32>,
-    /// `reference`: reflections after the surface a pixel sees; 1 is the single-bounce light
-    /// seed 004 approximates, more give multi-bounce light.
-    pub bounces: u32,
-    /// `reference`, `surfels`: emissive surfaces light the scene as area lights, besides the
-    /// punctual light. `null` (the default) decides by the light: on, unless the render's
-    /// light is the scene's stand-in for its emissive surfaces (its default light when it has
-    /// no punctual lights of its own, as in the Cornell box), whose light would otherwise
-    /// count twice; `true` lights with both anyway, `false` never with the surfaces.
-    /// Comparisons of the other methods use a reference with it off.
-    pub emitters: Option<bool>,
-    /// `reference`: samples per pixel added each frame. Sessions keep accumulating while the
-    /// camera, light and parameters stay the same; a one-shot render takes exactly this many
-    /// when it names `spp`, and otherwise as many as half the server's request budget buys
-    /// (`max_request_seconds`; at least the default, at most `max_spp`), its report saying how
-    /// many and how noisy the image still is (`samples`, `relative_error`).
-    pub spp: u32,
-    /// `clustered`: N, virtual point lights fetched from the RSM at Halton positions.
-    pub vpl_count: u32,
-    /// `clustered`: M, virtual area lights (k-means clusters of the VPLs).
-    pub cluster_count: u32,
-    /// `clustered`: k-means iterations per frame, each restarted from the same seeds (§5.2).
-    pub kmeans_iterations: u32,
-    /// `clustered`: w_x, weight of the VPL–centre distance (in units of the scene's extent)
-    /// in the clustering distance of §5.1.
-    pub cluster_position_weight: f32,
-    /// `clustered`: w_α, weight of the angle (radians) between VPL and centre normals.
-    pub cluster_normal_weight: f32,
-    /// `clustered`: side of the interleaved-sampling block; each pixel is lit by
-    /// N / interleave² VPLs before the geometry-aware blur.
-    pub interleave: u32,
-    /// `clustered`: the blur's largest distance between a pixel's and a neighbour's surface
-    /// points, as a fraction of the scene's extent.
-    pub blur_distance: f32,
-    /// `clustered`: the blur's smallest cosine between a pixel's and a neighbour's normals.
-    pub blur_normal: f32,
-    /// `clustered`: how each VPL's visibility is found.
-    pub visibility: ClusteredVisibility,
-    /// `clustered`: side in texels of each paraboloid depth map (one per VAL with `cssm`,
-    /// one per VPL with `vpl_shadows`); a power of two.
-    pub paraboloid_size: u32,
-    /// `clustered`: K, Fourier terms of the convolution soft shadow maps (§4.1).
-    pub fourier_terms: u32,
-    /// `clustered`: the light whose shadow the `val-shadow` view shows: a VAL's index, or a
-    /// VPL's with `vpl_shadows`.
-    pub shadow_light: u32,
-    /// `lightskin`, `brsm`, `clustered` (the `reference` is always full resolution): indirect
-    /// light is computed at 1/n of the output's width and height (1, 2 or 4) and brought back
-    /// with an edge-aware upsample; 1 is full resolution.
-    pub indirect_downscale: u32,
-    /// `surfels`: n_S, surfels of equal area over every triangle. Another value starts a
-    /// precomputation of its own.
-    pub surfel_count: u32,
-    /// `surfels`: distance between neighbouring SH caches in scene units; `null` derives it
-    /// from the scene's extent (about 8,192 caches).
-    pub surfel_cache_spacing: Option<f32>,
-    /// `surfels`: n_L, links from every cache to the hierarchy nodes that light it most.
-    pub surfel_links: u32,
-    /// `surfels`: SH bands l of the links and caches (l² coefficients).
-    pub sh_bands: u32,
+    /// The parameters by name (`rsm_size`), as JSON values.
+    #[serde(flatten)]
+    pub values: BTreeMap<String, serde_json::Value>,
 }
 
-impl Default for GiParams {
-    fn default() -> Self {
+impl GiParams {
+    /// `method` with every parameter at its default.
+    pub fn new(method: GiMethod) -> Self {
         Self {
-            method: GiMethod::Brsm,
-            rsm_size: 1024,
-            view_samples: 512,
-            val_count: 8192,
-            defensive: 0.3,
-            occlusion: true,
-            glossy_exponent: None,
-            cache_distance: None,
-            cache_angle: None,
-            bounces: 1,
-            emitters: None,
-            spp: 4,
-            vpl_count: 1024,
-            cluster_count: 30,
-            kmeans_iterations: 4,
-            cluster_position_weight: 0.7,
-            cluster_normal_weight: 0.3,
-            interleave: 8,
-            blur_distance: 0.1,
-            blur_normal: 0.8,
-            visibility: ClusteredVisibility::Cssm,
-            paraboloid_size: 256,
-            fourier_terms: 4,
-            shadow_light: 0,
-            indirect_downscale: 1,
-            surfel_count: 32 * 1024,
-            surfel_cache_spacing: None,
-            surfel_links: 128,
-            sh_bands: 3,
+            method,
+            values: BTreeMap::new(),
         }
+    }
+
+    /// With parameter `name` set to `value`.
+    pub fn with(mut self, name: &str, value: impl Into<serde_json::Value>) -> Self {
+        self.set(name, value);
+        self
+    }
+
+    /// Sets parameter `name` to `value`.
+    pub fn set(&mut self, name: &str, value: impl Into<serde_json::Value>) {
+        self.values.insert(name.to_string(), value.into());
+    }
+
+    /// The value of parameter `name` if the parameters name it.
+    pub fn get(&self, name: &str) -> Option<&serde_json::Value> {
+        self.values.get(name)
+    }
+}
+
+impl utoipa::PartialSchema for GiParams {
+    /// `method` and any parameters; the server's `openapi` command adds every registered
+    /// parameter with its bounds to this schema.
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::schema::{AdditionalProperties, ObjectBuilder};
+        ObjectBuilder::new()
+            .property("method", GiMethod::schema())
+            .additional_properties(Some(AdditionalProperties::FreeForm(true)))
+            .description(Some(
+                "Parameters of the GI methods, tagged by `method`; every other field is a \
+                 parameter of one or more methods (see `/v1/server`'s `gi_methods`).",
+            ))
+            .into()
+    }
+}
+
+impl ToSchema for GiParams {
+    fn name() -> std::borrow::Cow<'static, str> {
+        "GiParams".into()
     }
 }
 
@@ -1062,106 +971,4 @@ pub struct RenderDefaults {
     pub render: RenderParams,
     /// The share of the viewer's canvas (in device pixels) a new viewer streams at.
     pub viewer_scale: f32,
-}
-
-/// The `clustered` parameters as command-line flags, shared by `lightcast-server render` and
-/// the `lightcast` client so both spell them alike. Unset flags keep the defaults (the
-/// protocol's offline, the server's for the client).
-#[cfg(feature = "clap")]
-#[derive(Clone, Debug, Default, PartialEq, clap::Args)]
-pub struct ClusteredFlags {
-    /// `--gi clustered`: N, VPLs fetched from the RSM at Halton positions (256 … 65536;
-    /// default 1024).
-    #[arg(long)]
-    pub vpls: Option<u32>,
-    /// `--gi clustered`: M, virtual area lights (k-means clusters of the VPLs; 1 … 256;
-    /// default 30).
-    #[arg(long)]
-    pub clusters: Option<u32>,
-    /// `--gi clustered`: k-means iterations per frame (0 … 64; default 4).
-    #[arg(long)]
-    pub kmeans_iterations: Option<u32>,
-    /// `--gi clustered`: w_x, weight of the distance (per scene extent) in the clustering
-    /// (default 0.7).
-    #[arg(long)]
-    pub cluster_position_weight: Option<f32>,
-    /// `--gi clustered`: w_α, weight of the angle between normals (per radian; default 0.3).
-    #[arg(long)]
-    pub cluster_normal_weight: Option<f32>,
-    /// `--gi clustered`: interleaved-sampling block side B (N/B² VPLs per pixel; 1 … 16;
-    /// default 8).
-    #[arg(long)]
-    pub interleave: Option<u32>,
-    /// `--gi clustered`: blur distance threshold, a fraction of the scene extent (default 0.1).
-    #[arg(long)]
-    pub blur_distance: Option<f32>,
-    /// `--gi clustered`: blur normal threshold (smallest cosine; default 0.8).
-    #[arg(long, allow_negative_numbers = true)]
-    pub blur_normal: Option<f32>,
-    /// `--gi clustered`: VPL visibility (`cssm`: soft shadows per VAL, the paper's method
-    /// and the default; `off`: none; `vpl_shadows`: a hard shadow map per VPL).
-    #[arg(long, value_enum)]
-    pub visibility: Option<ClusteredVisibility>,
-    /// `--gi clustered`: side of each paraboloid depth map in texels (a power of two, 16 …
-    /// 1024; default 256).
-    #[arg(long)]
-    pub paraboloid_size: Option<u32>,
-    /// `--gi clustered`: K, Fourier terms of the soft shadow maps (1 … 4; default 4).
-    #[arg(long)]
-    pub fourier_terms: Option<u32>,
-    /// `--gi clustered`: the VAL (with `vpl_shadows` the VPL) whose shadow `--view
-    /// val-shadow` shows (default 0).
-    #[arg(long)]
-    pub shadow_light: Option<u32>,
-}
-
-#[cfg(feature = "clap")]
-impl ClusteredFlags {
-    /// The flags given, by their `GiParams` field names.
-    pub fn given(&self) -> Vec<(&'static str, serde_json::Value)> {
-        let number = |v: Option<f32>| v.map(|v| serde_json::Value::from(f64::from(v)));
-        [
-            ("vpl_count", self.vpls.map(Into::into)),
-            ("cluster_count", self.clusters.map(Into::into)),
-            ("kmeans_iterations", self.kmeans_iterations.map(Into::into)),
-            (
-                "cluster_position_weight",
-                number(self.cluster_position_weight),
-            ),
-            ("cluster_normal_weight", number(self.cluster_normal_weight)),
-            ("interleave", self.interleave.map(Into::into)),
-            ("blur_distance", number(self.blur_distance)),
-            ("blur_normal", number(self.blur_normal)),
-            (
-                "visibility",
-                self.visibility.map(|v| serde_json::Value::from(v.name())),
-            ),
-            ("paraboloid_size", self.paraboloid_size.map(Into::into)),
-            ("fourier_terms", self.fourier_terms.map(Into::into)),
-            ("shadow_light", self.shadow_light.map(Into::into)),
-        ]
-        .into_iter()
-        .filter_map(|(name, v)| Some((name, v?)))
-        .collect()
-    }
-
-    /// Sets the `clustered` fields of `gi` the flags give.
-    pub fn apply(&self, gi: &mut GiParams) {
-        let set = |field: &mut f32, v: Option<f32>| *field = v.unwrap_or(*field);
-        gi.vpl_count = self.vpls.unwrap_or(gi.vpl_count);
-        gi.cluster_count = self.clusters.unwrap_or(gi.cluster_count);
-        gi.kmeans_iterations = self.kmeans_iterations.unwrap_or(gi.kmeans_iterations);
-        set(
-            &mut gi.cluster_position_weight,
-            self.cluster_position_weight,
-        );
-        set(&mut gi.cluster_normal_weight, self.cluster_normal_weight);
-        gi.interleave = self.interleave.unwrap_or(gi.interleave);
-        set(&mut gi.blur_distance, self.blur_distance);
-        set(&mut gi.blur_normal, self.blur_normal);
-        gi.visibility = self.visibility.unwrap_or(gi.visibility);
-        gi.paraboloid_size = self.paraboloid_size.unwrap_or(gi.paraboloid_size);
-        gi.fourier_terms = self.fourier_terms.unwrap_or(gi.fourier_terms);
-        gi.shadow_light = self.shadow_light.unwrap_or(gi.shadow_light);
-    }
 }

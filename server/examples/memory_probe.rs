@@ -18,7 +18,7 @@
 //! (`passes::PARAMS_BINDING`).
 use lightcast_server::gi::lightskin::caches;
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::gpu::{BackendChoice, GpuContext};
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::renderer::{RenderSettings, Renderer};
@@ -171,13 +171,10 @@ fn main() -> anyhow::Result<()> {
                 shadow_map_size: 256,
                 capture_hdr: false,
                 debug_view: lightcast_protocol::View::Final,
-                gi: GiSettings {
-                    method,
-                    rsm_size: 32,
-                    view_samples: 64,
-                    val_count: 256,
-                    ..GiSettings::default()
-                },
+                gi: GiParams::new(method)
+                    .with("rsm_size", 32)
+                    .with("view_samples", 64)
+                    .with("val_count", 256),
                 history: None,
                 still: false,
                 yuv420: false,

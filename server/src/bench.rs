@@ -9,16 +9,19 @@
 //! the indirect light at the same camera, light and size, and every configuration's indirect
 //! buffer is also compared with it: the error against the truth, not only against LightSkin.
 
+use crate::gi::clustered::params::{CLUSTER_COUNT, VISIBILITY};
+use crate::gi::lightskin::params::{VAL_COUNT, VIEW_SAMPLES};
 use crate::gi::reference::luminance;
-use crate::gi::{lightskin::LightSkin, GiMethod, GiSettings};
+use crate::gi::{lightskin::LightSkin, GiMethod};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
-use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
+use crate::offline::{ExposureArg, GiArgs, DEFAULT_SCENE};
 use crate::quality::{errors, final_errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light},
     Scene,
 };
+use lightcast_protocol::GiParams;
 use lightcast_protocol::Stage;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -50,7 +53,7 @@ pub struct BenchArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [256, 512])]
     pub view_samples: Vec<u32>,
     /// Weight α of the uniform part of BRSM's selection pdf (0 = the paper's plain BRSM).
-    #[arg(long, default_value_t = crate::gi::DEFAULT_DEFENSIVE)]
+    #[arg(long, default_value_t = crate::gi::lightskin::params::DEFAULT_DEFENSIVE as f32)]
     pub defensive: f32,
     /// Phong exponent k for every material, for LightSkin and BRSM alike (default: each
     /// material's own).
@@ -85,7 +88,7 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 5)]
     pub warmup: u32,
     #[command(flatten)]
-    pub caches: CacheArgs,
+    pub caches: GiArgs,
     #[command(flatten)]
     pub surfels: crate::bench_surfels::SurfelSweep,
     #[command(flatten)]
@@ -318,7 +321,7 @@ pub(crate) fn render_reference(
         bounces,
         seed: 0,
         glossy_exponent: args.glossy_exponent,
-        emitters: settings.gi.reference_emitters(),
+        emitters: crate::gi::reference_emitters(&settings.gi),
     };
     // Small calls keep each submission short (lavapipe drops long ones) and show progress.
     let per_call = 4;
@@ -422,42 +425,36 @@ pub struct MethodRow {
 
 /// The settings each method is tried at in the equal-time comparison, cheapest first
 /// (`surfels` is left out: each setting is a precomputation of its own).
-fn ladders(base: &GiSettings) -> Vec<(GiSettings, String)> {
+fn ladders(base: &GiParams) -> Vec<(GiParams, String)> {
+    let as_method = |method| {
+        let mut gi = base.clone();
+        gi.method = method;
+        gi
+    };
     let lightskin = [64, 128, 256].map(|rsm_size| {
         (
-            GiSettings {
-                method: GiMethod::Lightskin,
-                rsm_size,
-                ..*base
-            },
+            as_method(GiMethod::Lightskin).with("rsm_size", rsm_size),
             format!("RSM {rsm_size}²"),
         )
     });
     let brsm = [512, 2048, 8192].map(|val_count| {
         (
-            GiSettings {
-                method: GiMethod::Brsm,
-                rsm_size: 256,
-                val_count,
-                ..*base
-            },
+            as_method(GiMethod::Brsm)
+                .with("rsm_size", 256)
+                .with("val_count", val_count),
             format!(
                 "RSM 256², {val_count} VALs, {} view samples",
-                base.view_samples
+                VIEW_SAMPLES.u32(base)
             ),
         )
     });
     let clustered = [256, 1024, 4096].map(|vpl_count| {
         (
-            GiSettings {
-                method: GiMethod::Clustered,
-                vpl_count,
-                ..*base
-            },
+            as_method(GiMethod::Clustered).with("vpl_count", vpl_count),
             format!(
                 "{vpl_count} VPLs, {} VALs, {}",
-                base.cluster_count,
-                base.visibility.name()
+                CLUSTER_COUNT.u32(base),
+                VISIBILITY.value(base).as_str().unwrap_or_default()
             ),
         )
     });
@@ -487,17 +484,15 @@ pub(crate) fn equal_time(
         .gi::<crate::gi::lightskin::LightSkin>()?
         .set_caches(&caches)
         .map_err(crate::renderer::RenderError::from)?;
-    let ladder: Vec<_> = ladders(&GiSettings {
-        bounces: 1,
-        ..base.gi
-    })
-    .into_iter()
-    .filter(|(gi, _)| gi.method != skip)
-    .collect();
+    let ladder: Vec<_> = ladders(&base.gi.clone().with("bounces", 1))
+        .into_iter()
+        .filter(|(gi, _)| gi.method != skip)
+        .collect();
     let total = ladder.len() as u64 * u64::from(args.warmup + args.frames);
     let mut done = 0;
     for (gi, setting) in ladder {
-        let label = format!("{:?} {setting}: frames", gi.method);
+        let method = gi.method;
+        let label = format!("{method:?} {setting}: frames");
         let settings = RenderSettings { gi, ..base.clone() };
         let timed = time_config(
             renderer,
@@ -511,7 +506,7 @@ pub(crate) fn equal_time(
             },
         )?;
         out.push(MethodRow {
-            method: gi.method,
+            method,
             setting,
             gi: timed.gi,
             vs_reference: errors(truth, &timed.indirect, args.width as usize),
@@ -585,7 +580,7 @@ pub(crate) fn time_moving_light(
 
 /// The frame every configuration of a bench renders: the scene's camera and light at the
 /// bench's size and exposure, a 2048² shadow map, indirect light by `gi`.
-pub(crate) fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiSettings) -> RenderSettings {
+pub(crate) fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiParams) -> RenderSettings {
     RenderSettings {
         width: args.width,
         height: args.height,
@@ -634,7 +629,7 @@ pub fn run(
     ));
     let ctx = open_adapter(args, log)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
-    let base = base_settings(args, &scene, GiSettings::default());
+    let base = base_settings(args, &scene, GiParams::default());
     let (name, triangles, cache_count) = (
         scene.name.clone(),
         scene.triangle_count(),
@@ -675,37 +670,37 @@ pub fn run(
     let mut rows = Vec::new();
     for &rsm_size in &args.rsm_sizes {
         // LightSkin first: every BRSM configuration is compared with it.
-        let lightskin = GiSettings {
-            method: GiMethod::Lightskin,
-            rsm_size,
-            occlusion: args.occlusion,
-            glossy_exponent: args.glossy_exponent,
-            indirect_downscale: args.indirect_downscale,
-            ..GiSettings::default()
+        let mut shared = GiParams::new(GiMethod::Lightskin)
+            .with("rsm_size", rsm_size)
+            .with("occlusion", args.occlusion)
+            .with("indirect_downscale", args.indirect_downscale);
+        if let Some(k) = args.glossy_exponent {
+            shared.set("glossy_exponent", k);
+        }
+        let brsm = |&(val_count, view_samples): &(u32, u32)| {
+            let mut gi = shared
+                .clone()
+                .with("val_count", val_count)
+                .with("view_samples", view_samples)
+                .with("defensive", args.defensive);
+            gi.method = GiMethod::Brsm;
+            gi
         };
-        let configs = std::iter::once(lightskin).chain(brsm_configs.iter().map(
-            |&(val_count, view_samples)| GiSettings {
-                method: GiMethod::Brsm,
-                rsm_size,
-                val_count,
-                view_samples,
-                defensive: args.defensive,
-                occlusion: args.occlusion,
-                glossy_exponent: args.glossy_exponent,
-                indirect_downscale: args.indirect_downscale,
-                ..GiSettings::default()
-            },
-        ));
+        let configs = std::iter::once(shared.clone()).chain(brsm_configs.iter().map(brsm));
         let mut baseline: Option<(Vec<[f32; 4]>, f64, f64)> = None;
         for gi in configs {
             let label = match gi.method {
                 GiMethod::Brsm => format!(
                     "brsm rsm {rsm_size}² vals {} vs {}",
-                    gi.val_count, gi.view_samples
+                    VAL_COUNT.u32(&gi),
+                    VIEW_SAMPLES.u32(&gi)
                 ),
                 _ => format!("lightskin rsm {rsm_size}²"),
             } + ": frames";
-            let settings = RenderSettings { gi, ..base.clone() };
+            let settings = RenderSettings {
+                gi: gi.clone(),
+                ..base.clone()
+            };
             let timed = time_config(
                 &mut renderer,
                 &settings,
@@ -735,8 +730,8 @@ pub fn run(
             rows.push(BenchRow {
                 method: gi.method,
                 rsm_size,
-                val_count: brsm.then_some(gi.val_count),
-                view_samples: brsm.then_some(gi.view_samples),
+                val_count: brsm.then(|| VAL_COUNT.u32(&gi)),
+                view_samples: brsm.then(|| VIEW_SAMPLES.u32(&gi)),
                 fps: 1e3 / timed.frame.median_ms,
                 mad: difference,
                 mad_relative: if *reference_mean > 0.0 {

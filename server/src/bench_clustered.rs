@@ -18,15 +18,18 @@
 use crate::bench::{
     render_reference, time_moving_light, BenchArgs, BenchError, MethodRow, StageStats,
 };
+use crate::gi::clustered::params::{Settings, CLUSTER_COUNT, PARABOLOID_SIZE};
 use crate::gi::clustered::passes::AtlasLayout;
+use crate::gi::clustered::Visibility;
 use crate::gi::clustered::MAX_VISIBILITY_BYTES;
-use crate::gi::{GiMethod, GiSettings};
+use crate::gi::common::params::RSM_SIZE;
+use crate::gi::GiMethod;
 use crate::gpu::context::AdapterSummary;
 use crate::offline::DEFAULT_SCENE;
 use crate::quality::{errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::Scene;
-use lightcast_protocol::ClusteredVisibility;
+use lightcast_protocol::GiParams;
 use std::collections::BTreeMap;
 
 /// The sweep's lists (`bench --gi clustered`).
@@ -54,7 +57,7 @@ pub struct ClusteredSweep {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ClusteredRow {
     pub vpls: u32,
-    pub visibility: ClusteredVisibility,
+    pub visibility: Visibility,
     /// M (`cssm` only).
     pub clusters: Option<u32>,
     pub paraboloid_size: Option<u32>,
@@ -88,10 +91,10 @@ pub struct ClusteredReport {
 
 /// The largest map side up to `requested` (halving it) whose maps fit the server's budget, so
 /// that large VAL counts still run; the row reports the side it used.
-fn fitting_map_size(visibility: ClusteredVisibility, requested: u32, vpls: u32, vals: u32) -> u32 {
+fn fitting_map_size(visibility: Visibility, requested: u32, vpls: u32, vals: u32) -> u32 {
     let fits = |size: u32| AtlasLayout::of(visibility, size, vpls, vals).fits();
     let mut size = requested;
-    while size > crate::gi::clustered::MIN_PARABOLOID_SIZE && !fits(size) {
+    while size > crate::gi::clustered::params::MIN_PARABOLOID_SIZE && !fits(size) {
         size /= 2;
     }
     size
@@ -99,40 +102,43 @@ fn fitting_map_size(visibility: ClusteredVisibility, requested: u32, vpls: u32, 
 
 /// The settings of every row, in order: per N, visibility off, the per-VPL baseline where
 /// asked for, then CSSM at every M (M ≤ N); maps as large as asked for where they fit.
-pub fn configurations(base: &GiSettings, sweep: &ClusteredSweep) -> Vec<GiSettings> {
+pub fn configurations(base: &GiParams, sweep: &ClusteredSweep) -> Vec<GiParams> {
     let mut out = Vec::new();
+    let (base_clusters, base_size) = (CLUSTER_COUNT.u32(base), PARABOLOID_SIZE.u32(base));
     for &vpl_count in &sweep.sweep_vpls {
-        let at = |visibility, cluster_count, requested| GiSettings {
-            method: GiMethod::Clustered,
-            vpl_count,
-            cluster_count,
-            visibility,
-            paraboloid_size: fitting_map_size(visibility, requested, vpl_count, cluster_count),
-            ..*base
+        let at = |visibility: Visibility, cluster_count, requested| {
+            let mut gi = base
+                .clone()
+                .with("vpl_count", vpl_count)
+                .with("cluster_count", cluster_count)
+                .with("visibility", visibility.name())
+                .with(
+                    "paraboloid_size",
+                    fitting_map_size(visibility, requested, vpl_count, cluster_count),
+                );
+            gi.method = GiMethod::Clustered;
+            gi
         };
-        out.push(at(
-            ClusteredVisibility::Off,
-            base.cluster_count,
-            base.paraboloid_size,
-        ));
+        out.push(at(Visibility::Off, base_clusters, base_size));
         if sweep.baseline_vpls.contains(&vpl_count) {
             out.push(at(
-                ClusteredVisibility::VplShadows,
-                base.cluster_count,
+                Visibility::VplShadows,
+                base_clusters,
                 sweep.baseline_paraboloid_size,
             ));
         }
         for &m in sweep.sweep_clusters.iter().filter(|&&m| m <= vpl_count) {
-            out.push(at(ClusteredVisibility::Cssm, m, sweep.paraboloid_size));
+            out.push(at(Visibility::Cssm, m, sweep.paraboloid_size));
         }
     }
     out
 }
 
 /// Checks every configuration as a request would be checked, before the long steps start.
-fn validate(configs: &[GiSettings]) -> Result<(), BenchError> {
-    for g in configs {
-        (crate::gi::clustered::ENTRY.validate)(g, 6).map_err(|e| {
+fn validate(configs: &[GiParams]) -> Result<(), BenchError> {
+    for gi in configs {
+        let g = typed(gi)?;
+        (crate::gi::clustered::ENTRY.validate)(gi, 6).map_err(|e| {
             let atlas = AtlasLayout::of(
                 g.visibility,
                 g.paraboloid_size,
@@ -151,6 +157,11 @@ fn validate(configs: &[GiSettings]) -> Result<(), BenchError> {
         })?;
     }
     Ok(())
+}
+
+/// A configuration's parameters as `clustered` reads them.
+fn typed(gi: &GiParams) -> Result<Settings, BenchError> {
+    Settings::of(gi).map_err(|e| BenchError::Clustered(e.to_string()))
 }
 
 /// Runs the clustered evaluation, reporting progress through `progress(done, total, label)`.
@@ -181,17 +192,15 @@ pub fn run(
         scene: spec.to_string(),
         error,
     })?;
-    let base = crate::bench::base_settings(
-        args,
-        &scene,
-        GiSettings {
-            method: GiMethod::Clustered,
-            glossy_exponent: args.glossy_exponent,
-            indirect_downscale: args.indirect_downscale,
-            rsm_size: args.rsm_sizes.first().copied().unwrap_or(1024),
-            ..GiSettings::default()
-        },
-    );
+    let base = crate::bench::base_settings(args, &scene, {
+        let mut gi = GiParams::new(GiMethod::Clustered)
+            .with("indirect_downscale", args.indirect_downscale)
+            .with("rsm_size", args.rsm_sizes.first().copied().unwrap_or(1024));
+        if let Some(k) = args.glossy_exponent {
+            gi.set("glossy_exponent", k);
+        }
+        gi
+    });
     let configs = configurations(&base.gi, sweep);
     validate(&configs)?;
     log(&format!(
@@ -199,7 +208,7 @@ pub fn run(
         scene.name,
         scene.triangle_count(),
         configs.len(),
-        base.gi.rsm_size
+        RSM_SIZE.u32(&base.gi)
     ));
     let ctx = crate::bench::open_adapter(args, log)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
@@ -215,12 +224,13 @@ pub fn run(
     let timing_source = renderer.timing_source();
     let mut rows: Vec<ClusteredRow> = Vec::new();
     let mut exact: Option<(u32, Vec<[f32; 3]>)> = None;
-    for (i, gi) in configs.iter().enumerate() {
+    for (i, params) in configs.iter().enumerate() {
+        let gi = typed(params)?;
         let what = format!(
             "{} VPLs, {}{} ({} of {})",
             gi.vpl_count,
             gi.visibility.name(),
-            if gi.visibility == ClusteredVisibility::Cssm {
+            if gi.visibility == Visibility::Cssm {
                 format!(", {} VALs", gi.cluster_count)
             } else {
                 String::new()
@@ -229,31 +239,30 @@ pub fn run(
             configs.len()
         );
         let settings = RenderSettings {
-            gi: *gi,
+            gi: params.clone(),
             ..base.clone()
         };
         let timed = time_moving_light(&mut renderer, &settings, args, &what, progress)?;
         let rgb: Vec<[f32; 3]> = timed.indirect.iter().map(|p| [p[0], p[1], p[2]]).collect();
         let vs_reference = errors(truth, &timed.indirect, args.width as usize);
-        if gi.visibility == ClusteredVisibility::VplShadows {
+        if gi.visibility == Visibility::VplShadows {
             exact = Some((gi.vpl_count, rgb));
         }
         let vs_vpl_shadows = exact
             .as_ref()
-            .filter(|(n, _)| *n == gi.vpl_count && gi.visibility != ClusteredVisibility::VplShadows)
+            .filter(|(n, _)| *n == gi.vpl_count && gi.visibility != Visibility::VplShadows)
             .map(|(_, image)| errors(image, &timed.indirect, args.width as usize));
         log(&format!(
             "{what}: GI {:.2} ms, error against the reference {:.2} %",
             timed.gi.median_ms,
             vs_reference.mae_relative * 100.0
         ));
-        let cssm = gi.visibility == ClusteredVisibility::Cssm;
+        let cssm = gi.visibility == Visibility::Cssm;
         rows.push(ClusteredRow {
             vpls: gi.vpl_count,
             visibility: gi.visibility,
             clusters: cssm.then_some(gi.cluster_count),
-            paraboloid_size: (gi.visibility != ClusteredVisibility::Off)
-                .then_some(gi.paraboloid_size),
+            paraboloid_size: (gi.visibility != Visibility::Off).then_some(gi.paraboloid_size),
             fps: 1e3 / timed.frame.median_ms,
             stages: timed.stages,
             gi: timed.gi,
@@ -385,26 +394,28 @@ mod tests {
             paraboloid_size: 256,
             baseline_paraboloid_size: 128,
         };
-        let sizes: Vec<u32> = configurations(&GiSettings::default(), &big)
+        let base = GiParams::new(GiMethod::Clustered);
+        let sizes: Vec<u32> = configurations(&base, &big)
             .iter()
-            .map(|g| g.paraboloid_size)
+            .map(|g| PARABOLOID_SIZE.u32(g))
             .collect();
-        assert_eq!(sizes, vec![GiSettings::default().paraboloid_size, 256, 128]);
-        assert!(validate(&configurations(&GiSettings::default(), &big)).is_ok());
-        let got: Vec<(u32, ClusteredVisibility, u32, u32)> =
-            configurations(&GiSettings::default(), &sweep)
-                .iter()
-                .map(|g| {
-                    (
-                        g.vpl_count,
-                        g.visibility,
-                        g.cluster_count,
-                        g.paraboloid_size,
-                    )
-                })
-                .collect();
-        use ClusteredVisibility::*;
-        let d = GiSettings::default();
+        assert_eq!(sizes, vec![PARABOLOID_SIZE.u32(&base), 256, 128]);
+        assert!(validate(&configurations(&base, &big)).is_ok());
+        let got: Vec<(u32, Visibility, u32, u32)> = configurations(&base, &sweep)
+            .iter()
+            .map(|g| {
+                let visibility = serde_json::from_value(VISIBILITY.value(g).into_owned());
+                (
+                    VPL_COUNT.u32(g),
+                    visibility.expect("a visibility"),
+                    CLUSTER_COUNT.u32(g),
+                    PARABOLOID_SIZE.u32(g),
+                )
+            })
+            .collect();
+        use crate::gi::clustered::params::{VISIBILITY, VPL_COUNT};
+        use Visibility::*;
+        let d = typed(&base).expect("the defaults");
         assert_eq!(
             got,
             vec![
@@ -417,7 +428,7 @@ mod tests {
             ]
         );
         assert!(
-            validate(&configurations(&GiSettings::default(), &sweep)).is_err(),
+            validate(&configurations(&base, &sweep)).is_err(),
             "512 VALs"
         );
     }

@@ -6,8 +6,8 @@
 use crate::bench::{BenchReport, BenchRow};
 use crate::bench_clustered::ClusteredReport;
 use crate::bench_surfels::{SurfelReport, SurfelRow, Varied};
+use crate::gi::clustered::Visibility;
 use crate::gi::GiMethod;
-use lightcast_protocol::ClusteredVisibility;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -353,7 +353,7 @@ pub fn write_clustered_plots(
         report
             .rows
             .iter()
-            .filter(move |r| r.vpls == n && r.visibility == ClusteredVisibility::Cssm)
+            .filter(move |r| r.vpls == n && r.visibility == Visibility::Cssm)
     };
     let m_range = |n: u32| {
         let xs: Vec<f64> = cssm(n)
@@ -381,7 +381,7 @@ pub fn write_clustered_plots(
         for r in report
             .rows
             .iter()
-            .filter(|r| r.vpls == n && r.visibility != ClusteredVisibility::Cssm)
+            .filter(|r| r.vpls == n && r.visibility != Visibility::Cssm)
         {
             let y = r.vs_reference.mae_relative * 100.0;
             by_reference.push((

@@ -12,9 +12,9 @@
 
 use crate::bench::{stats, StageStats};
 use crate::debug_views::Image;
-use crate::gi::{GiMethod, GiSettings};
+use crate::gi::GiMethod;
 use crate::gpu::{context::AdapterSummary, timing::TimingSource, BackendChoice, GpuContext};
-use crate::offline::{CacheArgs, ExposureArg, DEFAULT_SCENE};
+use crate::offline::{ExposureArg, GiArgs, DEFAULT_SCENE};
 use crate::passes::exposure::Exposure;
 use crate::passes::yuv420::{Yuv420, Yuv420Layout};
 use crate::quality::{flip_mean, psnr};
@@ -117,7 +117,7 @@ pub struct StreamBenchArgs {
     #[arg(long)]
     pub markdown: Option<PathBuf>,
     #[command(flatten)]
-    pub caches: CacheArgs,
+    pub caches: GiArgs,
     #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
     pub backend: BackendChoice,
 }
@@ -1009,9 +1009,10 @@ pub fn run(
     let ctx = GpuContext::new(args.backend)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
     log(&format!("adapter: {adapter}"));
+    let gi = args.caches.gi(args.gi);
     let data = args
         .caches
-        .precompute(args.gi, &scene, Some(&ctx), log)?
+        .precompute(&gi, &scene, Some(&ctx), log)?
         .map(|b| b.data);
     let base = RenderSettings {
         width: TARGET_SIZE.width,
@@ -1022,10 +1023,7 @@ pub fn run(
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
         debug_view: lightcast_protocol::View::Final,
-        gi: GiSettings {
-            method: args.gi,
-            ..GiSettings::default()
-        },
+        gi,
         history: None,
         still: false,
         yuv420: false,

@@ -1,8 +1,9 @@
 //! `lightcast-server bench --gi surfels`: seed 001's evaluation (its Figure 8 and timing
 //! table) on our scenes.
 //!
-//! The sweep varies one parameter at a time around a centre (`--surfels`, `--surfel-links`,
-//! `--sh-bands`, by default 32,768 surfels, 128 links and 3 bands): every surfel count of
+//! The sweep varies one parameter at a time around a centre (`--gi-param`'s `surfel_count`,
+//! `surfel_links` and `sh_bands`, by default the table's 32,768 surfels, 128 links and 3
+//! bands): every surfel count of
 //! `--sweep-surfels`, every link count of `--sweep-links` and every band count of
 //! `--sweep-bands`, the others at the centre. For each configuration it reports
 //!
@@ -17,12 +18,13 @@
 use crate::bench::{render_reference, BenchArgs, BenchError, MethodRow, StageStats, Timed};
 use crate::gi::precompute::{BuildEnv, Store};
 use crate::gi::surfels::{self, SurfelParams, Surfels};
-use crate::gi::{GiMethod, GiSettings};
+use crate::gi::GiMethod;
 use crate::gpu::context::AdapterSummary;
 use crate::offline::DEFAULT_SCENE;
 use crate::quality::{errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::Scene;
+use lightcast_protocol::GiParams;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -164,30 +166,29 @@ pub fn run(
         scene: spec.to_string(),
         error,
     })?;
-    let defaults = SurfelParams::default();
+    let named = surfels::Settings::of(&args.caches.gi(GiMethod::Surfels))
+        .map_err(|e| BenchError::Surfels(e.to_string()))?;
     let extent = scene.bounds.max - scene.bounds.min;
-    let spacing = args
-        .caches
+    let spacing = named
         .surfel_cache_spacing
         .unwrap_or_else(|| surfels::grid::CacheGrid::default_spacing(extent));
     let centre = SurfelParams {
-        surfels: args.caches.surfels.unwrap_or(defaults.surfels),
+        surfels: named.surfel_count,
         cache_spacing: Some(spacing),
-        links: args.caches.surfel_links.unwrap_or(defaults.links),
-        bands: args.caches.sh_bands.unwrap_or(defaults.bands),
+        links: named.surfel_links,
+        bands: named.sh_bands,
     };
     let configs = configurations(centre, &args.surfels);
     // Every configuration is checked as a request would be before the long steps start.
     let facts = crate::gi::precompute::SceneFacts::of(&scene);
     for (_, p) in &configs {
-        let gi = lightcast_protocol::GiParams {
-            method: GiMethod::Surfels,
-            surfel_count: p.surfels,
-            surfel_cache_spacing: p.cache_spacing,
-            surfel_links: p.links,
-            sh_bands: p.bands,
-            ..Default::default()
-        };
+        let mut gi = GiParams::new(GiMethod::Surfels)
+            .with("surfel_count", p.surfels)
+            .with("surfel_links", p.links)
+            .with("sh_bands", p.bands);
+        if let Some(spacing) = p.cache_spacing {
+            gi.set("surfel_cache_spacing", spacing);
+        }
         (surfels::PRECOMPUTE.key)(&gi, &facts).map_err(|e| {
             BenchError::Surfels(format!(
                 "{} surfels, {} links, {} bands: {e}",
@@ -206,17 +207,15 @@ pub fn run(
     ));
     let ctx = crate::bench::open_adapter(args, log)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
-    let base = crate::bench::base_settings(
-        args,
-        &scene,
-        GiSettings {
-            method: GiMethod::Surfels,
-            glossy_exponent: args.glossy_exponent,
-            indirect_downscale: args.indirect_downscale,
-            emitters: args.emitters,
-            ..GiSettings::default()
-        },
-    );
+    let base = crate::bench::base_settings(args, &scene, {
+        let mut gi = GiParams::new(GiMethod::Surfels)
+            .with("indirect_downscale", args.indirect_downscale)
+            .with("emitters", args.emitters);
+        if let Some(k) = args.glossy_exponent {
+            gi.set("glossy_exponent", k);
+        }
+        gi
+    });
     let mut references = Vec::new();
     let mut truths = Vec::new();
     for &bounces in &args.surfels.bounces {
@@ -274,7 +273,7 @@ pub fn run(
         let mut errors_by_bounce = Vec::new();
         for (&bounces, truth) in args.surfels.bounces.iter().zip(&truths) {
             let mut s = base.clone();
-            s.gi.bounces = bounces;
+            s.gi.set("bounces", bounces);
             s.capture_hdr = true;
             let frame = renderer.render(&s)?;
             let indirect = frame.indirect.unwrap_or_default();
@@ -309,9 +308,9 @@ pub fn run(
                 ))?;
         // The other methods light from the punctual light alone: measure them against the
         // same sources.
-        let without_emitters = if base.gi.emitters {
+        let without_emitters = if args.emitters {
             let mut s = base.clone();
-            s.gi.emitters = false;
+            s.gi.set("emitters", false);
             render_reference(renderer.context(), &scene, &s, args, 1, progress)?.indirect
         } else {
             truths[single].clone()

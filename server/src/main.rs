@@ -35,6 +35,9 @@ enum Command {
     Openapi,
     /// Print the AsyncAPI document of the session WebSocket (the same as GET /asyncapi.json).
     Asyncapi,
+    /// Print every GI method's parameters (name, methods, type, defaults, range, unit,
+    /// meaning) as a markdown table: the README's, from the methods' tables.
+    GiParams,
     /// Render one frame of a scene to a PNG file (no network) and print per-pass GPU times.
     Render(RenderArgs),
     /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
@@ -160,6 +163,7 @@ fn main() -> anyhow::Result<()> {
         Command::Serve(args) => serve(&args)?,
         Command::Openapi => println!("{}", service::http::openapi_document()?),
         Command::Asyncapi => println!("{}", service::http::asyncapi::asyncapi_document()?),
+        Command::GiParams => print!("{}", lightcast_server::gi::params::markdown_table()),
         Command::Render(args) => {
             let mut log = |line: &str| eprintln!("{line}");
             let report = offline::render(&args, &mut log).context("render failed")?;

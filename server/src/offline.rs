@@ -1,9 +1,11 @@
 //! The offline `render` command: one frame of a scene to an image file, no network.
 
 use crate::debug_views::{self, View};
+use crate::gi::common::params::EMITTERS;
 use crate::gi::lightskin::caches::CacheSet;
 use crate::gi::precompute::{self, BuildEnv, Built, Progress, SceneFacts, Store};
-use crate::gi::{GiMethod, GiSettings};
+use crate::gi::reference::params::SPP;
+use crate::gi::GiMethod;
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderSettings, Renderer};
@@ -12,11 +14,15 @@ use crate::scene::{
     Scene,
 };
 use glam::Vec3;
-use lightcast_protocol::{Camera, LightKind};
+use lightcast_protocol::{Camera, GiParams, LightKind};
 use std::path::PathBuf;
 use std::str::FromStr;
 use std::sync::Arc;
 use std::time::Instant;
+
+/// The reference's samples per pixel of an offline render that names no `spp`: one image to
+/// keep, not a frame of a stream (the table's default adds 4 a frame).
+pub const OFFLINE_SPP: u32 = 256;
 
 /// The default scene when none is named: the built-in Cornell box.
 pub const DEFAULT_SCENE: &str = "procedural:cornell";
@@ -66,65 +72,68 @@ impl From<LightTypeArg> for LightKind {
     }
 }
 
-/// Light-cache options shared by `render` and `bench`.
-#[derive(Clone, Debug, clap::Args)]
-pub struct CacheArgs {
-    /// Light caches: largest distance d_eps between a surface point and its cache, in scene
-    /// units. Default: derived from the scene's surface area (about 6,000 caches on flat
-    /// geometry; more where small or differently facing faces each need their own, e.g.
-    /// 11,563 on `street?blocks=40&detail=4`).
-    #[arg(long)]
-    pub cache_distance: Option<f32>,
-    /// Light caches: largest angle theta_eps between surface and cache normals, in degrees.
-    #[arg(long)]
-    pub cache_angle: Option<f32>,
-    /// Where precomputed light caches are kept (env LIGHTCAST_CACHE_DIR; default: the user's
-    /// cache directory).
+/// GI parameters by name and the precomputation store, shared by `render`, `bench` and
+/// `bench-stream`.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct GiArgs {
+    /// A GI parameter by its `render.gi` name, e.g. `--gi-param rsm_size=256` or
+    /// `--gi-param visibility=vpl_shadows` (repeatable). The value is JSON (a number,
+    /// `true`/`false`, `null`) or else a name. Every method's parameters, with their ranges and
+    /// defaults, are in the README's table and `/v1/server`; those the method does not read are
+    /// ignored.
+    #[arg(long = "gi-param", value_name = "NAME=VALUE", value_parser = parse_gi_param)]
+    pub gi_params: Vec<(String, serde_json::Value)>,
+    /// Where precomputed light caches and surfel sets are kept (env LIGHTCAST_CACHE_DIR;
+    /// default: the user's cache directory).
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
-    /// `surfels`: n_S, surfels over every triangle (1024 … 262144; default 32768).
-    #[arg(long)]
-    pub surfels: Option<u32>,
-    /// `surfels`: distance between SH caches in scene units (default: about 8,192 caches
-    /// over the scene's bounds).
-    #[arg(long)]
-    pub surfel_cache_spacing: Option<f32>,
-    /// `surfels`: n_L, links per cache (16 … 512; default 128).
-    #[arg(long)]
-    pub surfel_links: Option<u32>,
-    /// `surfels`: SH bands of links and caches (2 … 4; default 3).
-    #[arg(long)]
-    pub sh_bands: Option<u32>,
 }
 
-impl CacheArgs {
-    /// Builds what frames of `method` precompute per scene (loading it from the store where
-    /// it is there, using `gpu` where the build can), logging progress and how long it took;
-    /// `None` for methods without.
+/// `NAME=VALUE` of `--gi-param`: a parameter some method has, and a value of its type.
+pub fn parse_gi_param(s: &str) -> Result<(String, serde_json::Value), String> {
+    let (name, value) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?} is not NAME=VALUE"))?;
+    let param = crate::gi::params::find(name).ok_or_else(|| {
+        let names: Vec<&str> = crate::gi::params::all().iter().map(|p| p.name).collect();
+        format!(
+            "no GI parameter {name:?}; the parameters are {}",
+            names.join(", ")
+        )
+    })?;
+    let value = serde_json::from_str(value).unwrap_or_else(|_| value.into());
+    param
+        .check(&value, true, None)
+        .map_err(|reason| format!("{name}: {reason}"))?;
+    Ok((name.to_string(), value))
+}
+
+impl GiArgs {
+    /// `method` with the named parameters.
+    pub fn gi(&self, method: GiMethod) -> GiParams {
+        let mut gi = GiParams::new(method);
+        for (name, value) in &self.gi_params {
+            gi.set(name, value.clone());
+        }
+        gi
+    }
+
+    /// Builds what frames of `gi` precompute per scene (loading it from the store where it is
+    /// there, using `gpu` where the build can), logging progress and how long it took; `None`
+    /// for methods without.
     pub fn precompute(
         &self,
-        method: GiMethod,
+        gi: &GiParams,
         scene: &Scene,
         gpu: Option<&GpuContext>,
         log: &mut dyn FnMut(&str),
     ) -> Result<Option<Built>, PrecomputeError> {
-        let Some(entry) = precompute::entry_for(method) else {
+        let Some(entry) = precompute::entry_for(gi.method) else {
             return Ok(None);
         };
-        let d = lightcast_protocol::GiParams::default();
-        let gi = lightcast_protocol::GiParams {
-            method,
-            cache_distance: self.cache_distance,
-            cache_angle: self.cache_angle,
-            surfel_count: self.surfels.unwrap_or(d.surfel_count),
-            surfel_cache_spacing: self.surfel_cache_spacing,
-            surfel_links: self.surfel_links.unwrap_or(d.surfel_links),
-            sh_bands: self.sh_bands.unwrap_or(d.sh_bands),
-            ..d
-        };
-        let key = (entry.key)(&gi, &SceneFacts::of(scene)).map_err(|e| PrecomputeError {
+        let key = (entry.key)(gi, &SceneFacts::of(scene)).map_err(|e| PrecomputeError {
             what: entry.label,
-            message: format!("--{}: {}", e.field.replace('_', "-"), e.reason),
+            message: format!("--gi-param {}: {}", e.field, e.reason),
         })?;
         let store = Store::new(self.cache_dir.clone().unwrap_or_else(Store::default_dir));
         let started = Instant::now();
@@ -166,13 +175,13 @@ impl CacheArgs {
         Ok(Some(built))
     }
 
-    /// The scene's light caches (see [`Self::precompute`]).
+    /// The scene's light caches for the named parameters (see [`Self::precompute`]).
     pub fn load(
         &self,
         scene: &Scene,
         log: &mut dyn FnMut(&str),
     ) -> Result<Arc<CacheSet>, PrecomputeError> {
-        let built = self.precompute(GiMethod::Lightskin, scene, None, log)?;
+        let built = self.precompute(&self.gi(GiMethod::Lightskin), scene, None, log)?;
         built
             .and_then(|b| b.data.downcast::<CacheSet>().ok())
             .ok_or_else(|| PrecomputeError {
@@ -248,49 +257,8 @@ pub struct RenderArgs {
     /// into virtual area lights).
     #[arg(long, value_enum, default_value = "brsm")]
     pub gi: GiMethod,
-    /// RSM side per light face in texels (16 … 4096; a point light's six faces share 4096²).
-    #[arg(long, default_value_t = GiSettings::default().rsm_size)]
-    pub rsm_size: u32,
-    /// N_VS: view samples for the BRSM importance estimate (1 … 4096).
-    #[arg(long, default_value_t = GiSettings::default().view_samples)]
-    pub view_samples: u32,
-    /// N_sVAL: VALs selected per frame by BRSM (1 … 1048576).
-    #[arg(long, default_value_t = GiSettings::default().val_count)]
-    pub vals: u32,
-    /// Weight α of the uniform part mixed into BRSM's VAL selection (0 = the paper's plain
-    /// importance sampling; bounds the weight of rarely drawn VALs).
-    #[arg(long, default_value_t = crate::gi::DEFAULT_DEFENSIVE)]
-    pub defensive: f32,
-    /// Turn off the occlusion of proxy lights by other caches (double projection).
-    #[arg(long)]
-    pub no_occlusion: bool,
-    /// `reference`: reflections after the visible surface (1: single-bounce light, 1 … 16).
-    #[arg(long, default_value_t = 1)]
-    pub bounces: u32,
-    /// `reference`, `surfels`: emissive surfaces do not light the scene. Without this or
-    /// `--emitters` they do unless the light is the scene's stand-in for them (its default
-    /// light when it has no lights of its own, as in the Cornell box).
-    #[arg(long, conflicts_with = "emitters")]
-    pub no_emitters: bool,
-    /// `reference`, `surfels`: emissive surfaces light the scene even under the light that
-    /// stands in for them (their light then counts twice).
-    #[arg(long)]
-    pub emitters: bool,
-    /// `reference`: samples per pixel (1 … 1024).
-    #[arg(long, default_value_t = 256)]
-    pub spp: u32,
     #[command(flatten)]
-    pub clustered: lightcast_protocol::ClusteredFlags,
-    /// Indirect light at 1/n of the output's width and height (1, 2 or 4), upsampled with
-    /// the edges kept; 1 is full resolution.
-    #[arg(long, default_value_t = 1)]
-    pub indirect_downscale: u32,
-    /// Phong exponent k for every material (direct and indirect shading); default: each
-    /// material's own.
-    #[arg(long)]
-    pub glossy_exponent: Option<f32>,
-    #[command(flatten)]
-    pub caches: CacheArgs,
+    pub gi_args: GiArgs,
     /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
     /// importance map, selected VALs, light caches, VPL clusters, surfels by radiosity, one
     /// cache's links, the caches' SH along the normal).
@@ -309,7 +277,8 @@ pub struct RenderArgs {
 pub struct RenderReport {
     pub out: PathBuf,
     pub view: View,
-    pub gi: GiSettings,
+    /// The method and every parameter it read.
+    pub gi: GiParams,
     pub adapter: String,
     pub scene: String,
     pub triangles: usize,
@@ -426,27 +395,15 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
     if let Some(a) = args.light_outer_cone {
         light.outer_cone = a.to_radians();
     }
-    let mut gi = lightcast_protocol::GiParams {
-        method: args.gi,
-        rsm_size: args.rsm_size,
-        view_samples: args.view_samples,
-        val_count: args.vals,
-        occlusion: !args.no_occlusion,
-        defensive: args.defensive,
-        glossy_exponent: args.glossy_exponent,
-        bounces: args.bounces,
-        emitters: match (args.emitters, args.no_emitters) {
-            (true, _) => Some(true),
-            (_, true) => Some(false),
-            _ => None,
-        },
-        spp: args.spp,
-        indirect_downscale: args.indirect_downscale,
-        ..Default::default()
-    };
-    args.clustered.apply(&mut gi);
-    let mut gi_settings = GiSettings::from(&gi);
-    gi_settings.emitters = emitters_for(gi.emitters, emitter_stand_in(scene).as_ref(), &light);
+    let mut gi = args.gi_args.gi(args.gi);
+    if gi.get(SPP.name).is_none() {
+        gi.set(SPP.name, OFFLINE_SPP);
+    }
+    let asked = gi.get(EMITTERS.name).and_then(serde_json::Value::as_bool);
+    gi.set(
+        EMITTERS.name,
+        emitters_for(asked, emitter_stand_in(scene).as_ref(), &light),
+    );
     RenderSettings {
         width: args.width,
         height: args.height,
@@ -456,7 +413,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
         debug_view: View::Final,
-        gi: gi_settings,
+        gi,
         history: None,
         still: false,
         yuv420: false,
@@ -490,8 +447,8 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     settings.validate(&ctx)?;
     let setup_start = Instant::now();
     let data = args
-        .caches
-        .precompute(args.gi, &scene, Some(&ctx), log)?
+        .gi_args
+        .precompute(&settings.gi, &scene, Some(&ctx), log)?
         .map(|b| b.data);
     let mut renderer = Renderer::new(ctx, scene);
     if let Some(data) = &data {
@@ -517,7 +474,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     Ok(RenderReport {
         out: args.out.clone(),
         view: args.view,
-        gi: settings.gi,
+        gi: crate::gi::params::resolved(&settings.gi),
         adapter,
         scene: scene.name.clone(),
         triangles: scene.triangle_count(),

@@ -3,9 +3,10 @@
 //!
 //! No async runtime is involved; the offline `render` command and tests drive it directly.
 
+use crate::gi::common::params::{glossy_exponent, indirect_downscale};
 use crate::gi::{
-    self, DebugCapture, DebugData, FrameInputs, GiError, GiSettings, Method, ProgressBuffer,
-    ProgressSums, SceneResources,
+    self, DebugCapture, DebugData, FrameInputs, GiError, Method, ProgressBuffer, ProgressSums,
+    SceneResources,
 };
 use crate::gpu::{
     readback::{PendingMap, PendingRows, TextureReadback},
@@ -26,7 +27,7 @@ use crate::passes::{
 };
 use crate::scene::Scene;
 use glam::Vec3;
-use lightcast_protocol::{Camera, Light, Stage, View};
+use lightcast_protocol::{Camera, GiParams, Light, Stage, View};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -36,8 +37,6 @@ pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
 /// Most shadow-map texels over all faces (a point light's six faces share this budget): 256 MiB
 /// of depth.
 pub const MAX_SHADOW_TEXELS: u64 = 8192 * 8192;
-/// Largest Phong exponent accepted (a mirror-like lobe; beyond it the lobe is a single texel).
-pub const MAX_GLOSSY_EXPONENT: f32 = 10_000.0;
 /// Most output pixels: the frame's targets take about 76 bytes per pixel (4.7 GiB at this size;
 /// 6 of them the video planes and their read-back copies).
 pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
@@ -64,7 +63,7 @@ pub struct RenderSettings {
     /// Also read back what this debug view shows (see [`Frame::debug`]); `Final`: nothing.
     pub debug_view: View,
     /// Indirect light: method and parameters.
-    pub gi: GiSettings,
+    pub gi: GiParams,
     /// The image history a progressive GI method may continue (a session's id); `None`
     /// starts afresh, so equal settings give equal pixels.
     pub history: Option<u64>,
@@ -221,7 +220,11 @@ impl RenderSettings {
         }
         // Powers of two: a reduced pixel covers whole output pixels at every size the API
         // allows in steps of 2 (H.264's even sizes), and the documented choices are 1, 2, 4.
-        let downscale = self.gi.indirect_downscale;
+        for p in gi::params::of(self.gi.method) {
+            p.check(&p.value(&self.gi), true, None)
+                .map_err(|reason| invalid(p.name, reason))?;
+        }
+        let downscale = indirect_downscale(&self.gi);
         if !(downscale.is_power_of_two() && downscale <= MAX_DOWNSCALE) {
             return Err(invalid(
                 "indirect_downscale",
@@ -231,14 +234,6 @@ impl RenderSettings {
         let faces = LightUniform::face_count(self.light.kind);
         (gi::entry(self.gi.method).1.validate)(&self.gi, faces)
             .map_err(|e| invalid(e.field, e.reason))?;
-        if let Some(k) = self.gi.glossy_exponent {
-            if !(k.is_finite() && k > 0.0 && k <= MAX_GLOSSY_EXPONENT) {
-                return Err(invalid(
-                    "glossy_exponent",
-                    format!("{k} is outside (0, {MAX_GLOSSY_EXPONENT}]"),
-                ));
-            }
-        }
         if let Exposure::Manual(s) = self.exposure {
             if !(s.is_finite() && s > 0.0) {
                 return Err(invalid(
@@ -724,11 +719,7 @@ impl Renderer {
         let faces = LightUniform::face_count(settings.light.kind);
         self.ensure_shadow_map(settings.shadow_map_size, faces)?;
         let (method_index, _) = gi::entry(settings.gi.method);
-        let downscale = if gi::entry(settings.gi.method).1.downscales {
-            settings.gi.indirect_downscale
-        } else {
-            1
-        };
+        let downscale = indirect_downscale(&settings.gi);
         self.ensure_reduced(downscale)?;
         // Created before the targets are borrowed below.
         self.method_at(method_index)?;
@@ -741,7 +732,7 @@ impl Renderer {
             &settings.camera,
             width as f32 / height as f32,
             bounds,
-            settings.gi.glossy_exponent,
+            glossy_exponent(&settings.gi),
         );
         let light = LightUniform::new(&settings.light, bounds, settings.shadow_map_size);
         let queue = &self.shared.ctx.queue;

@@ -90,7 +90,7 @@ export class Panel {
         if (built.has(p.name)) continue;
         const label = document.createElement('label');
         label.dataset.giParam = p.name;
-        label.title = p.description;
+        label.title = p.unit ? `${p.description} (${p.unit})` : p.description;
         const control = document.createElement(p.kind === 'choice' ? 'select' : 'input');
         control.dataset.field = `render.gi.${p.name}`;
         control.dataset.kind = KINDS[p.kind] || 'string';

@@ -11,6 +11,8 @@
 //! on that adapter; a GPU's is a configured ratio, not a measurement (the service's
 //! `--adapter-speed`).
 
+use super::common::params::{indirect_downscale, INDIRECT_DOWNSCALE, RSM_SIZE};
+use super::params::Param;
 use lightcast_protocol::GiParams;
 
 /// One term of a cost: what is counted and its estimated reference nanoseconds.
@@ -90,13 +92,13 @@ impl FrameShape {
 
     /// The pixels a method that computes indirect light at `gi.indirect_downscale` shades.
     pub fn reduced_pixels(&self, gi: &GiParams) -> f64 {
-        let d = gi.indirect_downscale.max(1);
+        let d = indirect_downscale(gi).max(1);
         f64::from(self.width.div_ceil(d)) * f64::from(self.height.div_ceil(d))
     }
 
     /// Texels of an RSM of side `gi.rsm_size` over every light face.
     pub fn rsm_texels(&self, gi: &GiParams) -> f64 {
-        f64::from(self.light_faces) * f64::from(gi.rsm_size).powi(2)
+        f64::from(self.light_faces) * f64::from(RSM_SIZE.u32(gi)).powi(2)
     }
 }
 
@@ -145,20 +147,40 @@ pub enum Cheaper {
 /// would fit. Its range is the one `/v1/server` describes for it.
 #[derive(Clone, Copy)]
 pub struct Knob {
-    /// The field under `render.gi`.
-    pub field: &'static str,
-    pub get: fn(&GiParams) -> u32,
-    pub set: fn(&mut GiParams, u32),
+    /// The parameter (an integer).
+    pub param: &'static Param,
     pub cheaper: Cheaper,
     /// The values it takes, where not every integer of its range is one (ascending).
     pub choices: &'static [u32],
 }
 
+impl Knob {
+    /// A parameter that costs less the lower it is, over every integer of its range.
+    pub const fn lower(param: &'static Param) -> Self {
+        Self {
+            param,
+            cheaper: Cheaper::Lower,
+            choices: &[],
+        }
+    }
+
+    /// The field under `render.gi`.
+    pub fn field(&self) -> &'static str {
+        self.param.name
+    }
+
+    pub fn get(&self, gi: &GiParams) -> u32 {
+        self.param.u32(gi)
+    }
+
+    pub fn set(&self, gi: &mut GiParams, value: u32) {
+        gi.set(self.param.name, value);
+    }
+}
+
 /// `indirect_downscale`, for the methods the renderer runs at a reduced resolution.
 pub const DOWNSCALE_KNOB: Knob = Knob {
-    field: "indirect_downscale",
-    get: |g| g.indirect_downscale,
-    set: |g, v| g.indirect_downscale = v,
+    param: &INDIRECT_DOWNSCALE,
     cheaper: Cheaper::Higher,
     choices: &[1, 2, 4],
 };
@@ -172,10 +194,10 @@ pub fn fitting_value(
     budget_ns: f64,
     cost_of: &dyn Fn(&GiParams) -> f64,
 ) -> Option<u32> {
-    let current = (knob.get)(gi).clamp(min, max);
+    let current = knob.get(gi).clamp(min, max);
     let fits = |v: u32| {
         let mut g = gi.clone();
-        (knob.set)(&mut g, v);
+        knob.set(&mut g, v);
         cost_of(&g) <= budget_ns
     };
     if fits(current) {
@@ -248,58 +270,33 @@ mod tests {
 
     #[test]
     fn the_fitting_value_is_the_largest_that_fits_and_its_neighbour_does_not() {
-        let knob = Knob {
-            field: "spp",
-            get: |g| g.spp,
-            set: |g, v| g.spp = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        };
-        let cost_of = |g: &GiParams| f64::from(g.spp) * 7.0;
-        let gi = GiParams {
-            spp: 200,
-            ..GiParams::default()
-        };
+        use crate::gi::clustered::params::INTERLEAVE;
+        use crate::gi::reference::params::SPP;
+        use lightcast_protocol::GiMethod;
+        let knob = Knob::lower(&SPP);
+        let cost_of = |g: &GiParams| f64::from(SPP.u32(g)) * 7.0;
+        let gi = GiParams::new(GiMethod::Reference).with("spp", 200);
         for budget in [7.0, 8.0, 700.0, 1399.0, 1400.0] {
             let v = fitting_value(&gi, &knob, (1, 256), budget, &cost_of).expect("fits");
-            assert!(
-                cost_of(&GiParams {
-                    spp: v,
-                    ..gi.clone()
-                }) <= budget
-            );
-            assert!(
-                cost_of(&GiParams {
-                    spp: v + 1,
-                    ..gi.clone()
-                }) > budget
-                    || v == 200
-            );
+            assert!(cost_of(&gi.clone().with("spp", v)) <= budget);
+            assert!(cost_of(&gi.clone().with("spp", v + 1)) > budget || v == 200);
         }
         assert_eq!(fitting_value(&gi, &knob, (1, 256), 6.0, &cost_of), None);
         // A knob that is cheaper when larger searches upwards.
         let interleave = Knob {
-            field: "interleave",
-            get: |g| g.interleave,
-            set: |g, v| g.interleave = v,
+            param: &INTERLEAVE,
             cheaper: Cheaper::Higher,
             choices: &[],
         };
-        let per_block = |g: &GiParams| 4096.0 / f64::from(g.interleave).powi(2);
-        let gi = GiParams {
-            interleave: 1,
-            ..GiParams::default()
-        };
+        let per_block = |g: &GiParams| 4096.0 / f64::from(INTERLEAVE.u32(g)).powi(2);
+        let gi = GiParams::new(GiMethod::Clustered).with("interleave", 1);
         assert_eq!(
             fitting_value(&gi, &interleave, (1, 16), 300.0, &per_block),
             Some(4)
         );
         // A knob with choices only ever names one of them.
-        let reduced = |g: &GiParams| 4096.0 / f64::from(g.indirect_downscale).powi(2);
-        let full = GiParams {
-            indirect_downscale: 1,
-            ..GiParams::default()
-        };
+        let reduced = |g: &GiParams| 4096.0 / f64::from(INDIRECT_DOWNSCALE.u32(g)).powi(2);
+        let full = GiParams::new(GiMethod::Clustered).with("indirect_downscale", 1);
         let fit = |budget| fitting_value(&full, &DOWNSCALE_KNOB, (1, 4), budget, &reduced);
         assert_eq!(fit(5000.0), Some(1));
         assert_eq!(fit(1024.0), Some(2));

@@ -1,37 +1,30 @@
 //! `none`: direct light only. Its one stage clears the indirect buffer, which the direct-light
 //! pass adds in (the buffer is shared by every method, so it may hold an earlier frame's light).
 
-use super::{
-    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
-};
+use super::params::MethodTable;
+use super::{FrameInputs, GiError, Method, MethodEntry, ProgressBuffer};
 use crate::gpu::timing::FrameStages;
-use lightcast_protocol::{GiMethod, GiMethodInfo, Stage};
+use lightcast_protocol::{GiMethod, Stage};
 use std::any::{Any, TypeId};
 
 pub struct NoIndirect;
 
 pub const ENTRY: MethodEntry = MethodEntry {
-    methods: &[GiMethod::None],
+    tables: &[MethodTable {
+        method: GiMethod::None,
+        summary: "Direct light only.",
+        progressive: false,
+        params: &[],
+    }],
     type_id: TypeId::of::<NoIndirect>,
-    validate,
+    validate: |_, _| Ok(()),
+    check_table: |_| Ok(()),
     create: |_| Ok(Box::new(NoIndirect)),
-    describe: |_| {
-        vec![GiMethodInfo {
-            method: GiMethod::None,
-            summary: "Direct light only.".into(),
-            progressive: false,
-            parameters: Vec::new(),
-        }]
-    },
     precompute: None,
     cost: |_, _, _| {},
     knobs: &[],
     downscales: false,
 };
-
-fn validate(_: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {
-    Ok(())
-}
 
 impl Method for NoIndirect {
     fn encode(

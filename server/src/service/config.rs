@@ -619,10 +619,7 @@ pub(crate) mod tests {
             .limits(0)
             .expect("default limits are valid");
         for &m in GiMethod::ALL {
-            let serving = crate::gi::REGISTRY
-                .iter()
-                .filter(|e| e.methods.contains(&m))
-                .count();
+            let serving = crate::gi::REGISTRY.iter().filter(|e| e.serves(m)).count();
             assert_eq!(serving, 1, "{m:?}");
         }
         let described = crate::gi::describe_all(&limits);

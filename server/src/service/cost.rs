@@ -15,6 +15,7 @@
 use super::error::ApiError;
 use crate::gi::cost::{self, Cost, FrameShape, Knob};
 use crate::gi::precompute::{PrecomputeEntry, PrecomputeKey, SceneFacts};
+use crate::gi::reference::params::SPP;
 use lightcast_protocol::{GiMethod, GiParams, Limits};
 
 /// `--adapter-speed`: `auto`, or how many times faster than the reference this adapter is.
@@ -124,11 +125,9 @@ pub fn frame_cost(gi: &GiParams, shape: FrameShape, set_units: &dyn Fn(&GiParams
 
 /// The GI parameters of the render a one-shot of `gi` is compared with.
 fn truth(gi: &GiParams, spp: u32) -> GiParams {
-    GiParams {
-        method: GiMethod::Reference,
-        spp,
-        ..gi.clone()
-    }
+    let mut truth = gi.clone().with(SPP.name, spp);
+    truth.method = GiMethod::Reference;
+    truth
 }
 
 /// The estimated seconds on this server's adapter of a frame of `gi` and, with `compare_spp`,
@@ -162,15 +161,12 @@ pub fn one_shot_spp(
     let most = limits.max_spp.max(1);
     let floor = floor.clamp(1, most);
     let knobs = crate::gi::entry(GiMethod::Reference).1.knobs;
-    let Some(knob) = knobs.iter().find(|k| k.field == "spp") else {
+    let Some(knob) = knobs.iter().find(|k| k.field() == SPP.name) else {
         return floor;
     };
     let cost_of = |g: &GiParams| request_seconds(g, shape, set_units, compare_spp, limits) * 1e9;
     let budget_ns = 0.5 * limits.max_request_seconds * 1e9;
-    let start = GiParams {
-        spp: most,
-        ..gi.clone()
-    };
+    let start = gi.clone().with(SPP.name, most);
     cost::fitting_value(&start, knob, (floor, most), budget_ns, &cost_of).unwrap_or(floor)
 }
 
@@ -194,7 +190,7 @@ pub fn chunk_spp(
     compare_spp: Option<u32>,
     limits: &Limits,
 ) -> Option<u32> {
-    let own = (gi.method == GiMethod::Reference).then_some(gi.spp);
+    let own = (gi.method == GiMethod::Reference).then(|| SPP.u32(gi));
     let most = own.into_iter().chain(compare_spp).max()?;
     let mut one_sample = Cost::default();
     (crate::gi::entry(GiMethod::Reference).1.cost)(&truth(gi, 1), &shape, &mut one_sample);
@@ -249,9 +245,9 @@ fn fitting_knob(
 ) -> Option<(&'static str, u32)> {
     let ns = |g: &GiParams| cost_of(g).ns();
     knobs.iter().find_map(|knob| {
-        let range = range(gi.method, knob.field, limits)?;
+        let range = range(gi.method, knob.field(), limits)?;
         let value = cost::fitting_value(gi, knob, range, budget_ns, &ns)?;
-        Some((knob.field, value))
+        Some((knob.field(), value))
     })
 }
 
@@ -273,7 +269,7 @@ fn refusal(
         Some((field, value)) => {
             let verb = if knobs
                 .iter()
-                .find(|k| k.field == field)
+                .find(|k| k.field() == field)
                 .is_some_and(|k| k.cheaper == cost::Cheaper::Higher)
             {
                 "at least"
@@ -356,7 +352,7 @@ pub fn check_frame(
         let reference = crate::gi::entry(GiMethod::Reference).1.knobs;
         let spp_knob: Vec<Knob> = reference
             .iter()
-            .filter(|k| k.field == "spp")
+            .filter(|k| k.field() == "spp")
             .copied()
             .collect();
         let of_truth = |g: &GiParams| frame_cost(g, shape, set_units);
@@ -468,17 +464,11 @@ mod tests {
     #[test]
     fn a_one_shot_reference_takes_the_samples_half_the_budget_buys() {
         let none = |_: &GiParams| 0;
-        let reference = GiParams {
-            method: GiMethod::Reference,
-            ..GiParams::default()
-        };
+        let reference = GiParams::new(GiMethod::Reference);
         let limits = limits(10.0);
         let spp = one_shot_spp(&reference, shape(320, 240), &none, None, &limits, 4);
         let seconds = |spp: u32| {
-            let g = GiParams {
-                spp,
-                ..reference.clone()
-            };
+            let g = reference.clone().with("spp", spp);
             request_seconds(&g, shape(320, 240), &none, None, &limits)
         };
         assert!(spp > 4 && spp < limits.max_spp, "{spp}");
@@ -503,12 +493,9 @@ mod tests {
     fn the_repros_are_refused_naming_a_value_that_fits() {
         let limits = limits(10.0);
         let none = |_: &GiParams| 0;
-        let reference = GiParams {
-            method: GiMethod::Reference,
-            spp: 256,
-            bounces: 16,
-            ..GiParams::default()
-        };
+        let reference = GiParams::new(GiMethod::Reference)
+            .with("spp", 256)
+            .with("bounces", 16);
         let e =
             check_frame(&reference, shape(32, 32), &none, ONE_SHOT, &limits).expect_err("refused");
         assert_eq!(
@@ -525,26 +512,20 @@ mod tests {
             .and_then(|v| v.split(' ').next())
             .and_then(|v| v.parse().ok())
             .expect("a value");
-        let at = |spp| GiParams {
-            spp,
-            ..reference.clone()
-        };
+        let at = |spp| reference.clone().with("spp", spp);
         assert!(check_frame(&at(fits), shape(32, 32), &none, ONE_SHOT, &limits).is_ok());
         assert!(check_frame(&at(fits + 1), shape(32, 32), &none, ONE_SHOT, &limits).is_err());
 
         for visibility in [
-            lightcast_protocol::ClusteredVisibility::Cssm,
-            lightcast_protocol::ClusteredVisibility::VplShadows,
+            crate::gi::clustered::Visibility::Cssm,
+            crate::gi::clustered::Visibility::VplShadows,
         ] {
-            let clustered = GiParams {
-                method: GiMethod::Clustered,
-                vpl_count: 65_536,
-                interleave: 1,
-                cluster_count: 256,
-                kmeans_iterations: 64,
-                visibility,
-                ..GiParams::default()
-            };
+            let clustered = GiParams::new(GiMethod::Clustered)
+                .with("vpl_count", 65_536)
+                .with("interleave", 1)
+                .with("cluster_count", 256)
+                .with("kmeans_iterations", 64)
+                .with("visibility", visibility.name());
             let e = check_frame(&clustered, shape(32, 32), &none, ONE_SHOT, &limits)
                 .expect_err("refused");
             assert!(e.body.field.is_some(), "{}", e.body.message);
@@ -558,12 +539,9 @@ mod tests {
         limits.max_frame_seconds = 2.0;
         let none = |_: &GiParams| 0;
         // About 4 s of rays: in chunks as a one-shot, but one submission as a session frame.
-        let reference = GiParams {
-            method: GiMethod::Reference,
-            spp: 100,
-            bounces: 16,
-            ..GiParams::default()
-        };
+        let reference = GiParams::new(GiMethod::Reference)
+            .with("spp", 100)
+            .with("bounces", 16);
         check_frame(&reference, shape(32, 32), &none, ONE_SHOT, &limits).expect("chunked");
         let e = check_frame(
             &reference,
@@ -580,12 +558,10 @@ mod tests {
             e.body.message
         );
         // A BRSM frame of about 7 s is one submission either way.
-        let brsm = GiParams {
-            val_count: 65_536,
-            rsm_size: 128,
-            view_samples: 32,
-            ..GiParams::default()
-        };
+        let brsm = GiParams::default()
+            .with("val_count", 65_536)
+            .with("rsm_size", 128)
+            .with("view_samples", 32);
         let caches = |_: &GiParams| 6596;
         for submission in [ONE_SHOT, Submission::SessionFrame] {
             let e = check_frame(&brsm, shape(32, 32), &caches, submission, &limits)

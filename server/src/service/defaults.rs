@@ -5,7 +5,9 @@
 //! merge patch's `null` restores them.
 
 use super::error::{from_value, parse_json, ApiError};
-use lightcast_protocol::{DefaultsProfile, GiParams, RenderDefaults, RenderParams};
+use crate::gi::common::params::{INDIRECT_DOWNSCALE, RSM_SIZE};
+use crate::gi::lightskin::params::{VAL_COUNT, VIEW_SAMPLES};
+use lightcast_protocol::{DefaultsProfile, RenderDefaults, RenderParams};
 use serde_json::Value;
 
 /// `--defaults`: which profile, or `auto` to choose by the adapter.
@@ -17,50 +19,20 @@ pub enum DefaultsChoice {
     Software,
 }
 
-/// The software profile's render defaults, measured on lavapipe with 2 cores
-/// (`bench/first-minute.sh`, `bench/results/first-minute-lavapipe-*.md`): the README's
-/// `POST /v1/render -d '{}'` in 0.54 s instead of 3.2 s with the protocol's defaults, and
-/// about 2 GI frames a second in a viewer-sized stream instead of 0.25. `surfels` gets a
-/// quarter of the surfels and half the links: its precomputation on the Cornell box takes
-/// 34 s instead of about 2 minutes on 2 cores (once per parameter set: it is stored).
-fn software_render() -> RenderParams {
-    let gpu = RenderParams::default();
-    RenderParams {
-        shadow_map_size: 1024,
-        gi: GiParams {
-            rsm_size: SOFTWARE_RSM_SIZE,
-            view_samples: 32,
-            val_count: 512,
-            indirect_downscale: 2,
-            surfel_count: 8192,
-            surfel_links: 64,
-            // A session's `reference` frame at the viewer's software size (800×450) is ~1.3 s
-            // per sample here: one sample per frame keeps it within the 2 s frame limit
-            // (4 were refused, and switching the viewer to `reference` failed). One-shots
-            // that name no `spp` take what their budget buys (`cost::one_shot_spp`).
-            spp: 1,
-            interleave: SOFTWARE_INTERLEAVE,
-            // `clustered`'s 30 paraboloid maps at 256² take ~0.7 s a frame on lavapipe; at
-            // 64² the GI stages of a 128×96 frame take ~90 ms (`bench --gi clustered`).
-            paraboloid_size: 64,
-            ..gpu.gi
-        },
-        ..gpu
+/// The render defaults of a profile: every GI parameter at its table's default, in the
+/// software profile at its software default where the table gives one (measured on lavapipe
+/// with 2 cores, `bench/first-minute.sh`, `bench/results/first-minute-lavapipe-*.md`: the
+/// README's `POST /v1/render -d '{}'` in about 0.5 s instead of 3.2 s with the GPU's, and
+/// about 2 GI frames a second in a viewer-sized stream instead of 0.25; each row says why its
+/// value), and a 1024² shadow map.
+fn render_defaults(software: bool) -> RenderParams {
+    let mut render = RenderParams::default();
+    render.gi.values = crate::gi::params::defaults(software);
+    if software {
+        render.shadow_map_size = 1024;
     }
+    render
 }
-
-/// The software profile's RSM side. 128² put `lightskin`'s frame on the Cornell box (every
-/// texel a VAL lighting every cache) at 2.08 s estimated, over a CPU adapter's 2 s frame limit,
-/// so a newcomer's one-shot of it was refused (issue 31); 112² is 1.7 s, and BRSM's frames at
-/// the defaults take the same time within noise (1.0–1.2 s for `curl -d '{}'` here).
-pub const SOFTWARE_RSM_SIZE: u32 = 112;
-
-/// `clustered`'s interleave block side in the software profile, whose indirect light is at
-/// half resolution: 4×4 blocks there cover the 8×8 pixels of the paper's blocks at full
-/// resolution (seed 003 §6: 8×8 with 1,024 VPLs). With 8×8 blocks at half resolution (16×16
-/// pixels, 16 VPLs per class) the blur left the blocks visible (issue 31); 4×4 costs ~65 ms
-/// more at 320×240 on lavapipe (345 → 410 ms a frame).
-pub const SOFTWARE_INTERLEAVE: u32 = 4;
 
 /// The share of the canvas a viewer streams at on a software adapter (a quarter of the
 /// pixels); GPUs stream at full resolution.
@@ -89,8 +61,8 @@ impl Defaults {
             DefaultsChoice::Software => (DefaultsProfile::Software, "--defaults software".into()),
         };
         let (render, viewer_scale) = match profile {
-            DefaultsProfile::Gpu => (RenderParams::default(), 1.0),
-            DefaultsProfile::Software => (software_render(), SOFTWARE_VIEWER_SCALE),
+            DefaultsProfile::Gpu => (render_defaults(false), 1.0),
+            DefaultsProfile::Software => (render_defaults(true), SOFTWARE_VIEWER_SCALE),
         };
         Self {
             render: serde_json::to_value(&render).unwrap_or(Value::Null),
@@ -120,10 +92,10 @@ impl Defaults {
             r.height,
             r.shadow_map_size,
             g.method,
-            g.rsm_size,
-            g.view_samples,
-            g.val_count,
-            g.indirect_downscale,
+            RSM_SIZE.u32(g),
+            VIEW_SAMPLES.u32(g),
+            VAL_COUNT.u32(g),
+            INDIRECT_DOWNSCALE.u32(g),
         )
     }
 
@@ -192,10 +164,10 @@ mod tests {
         assert!(cpu.info.reason.contains("llvmpipe"), "{}", cpu.info.reason);
         let gpu = Defaults::choose(DefaultsChoice::Auto, "H100", false);
         assert_eq!(gpu.info.profile, DefaultsProfile::Gpu);
-        assert_eq!(gpu.info.render, RenderParams::default());
+        assert_eq!(gpu.info.render, render_defaults(false));
         assert_eq!(gpu.info.viewer_scale, 1.0);
         let forced = Defaults::choose(DefaultsChoice::Gpu, "llvmpipe", true);
-        assert_eq!(forced.info.render, RenderParams::default());
+        assert_eq!(forced.info.render, render_defaults(false));
         let forced = Defaults::choose(DefaultsChoice::Software, "H100", false);
         assert_eq!(forced.info.profile, DefaultsProfile::Software);
         assert!(
@@ -218,15 +190,16 @@ mod tests {
         assert_eq!(set.render.width, 320);
         assert_eq!(set.render.height, d.info.render.height);
         assert_eq!(set.render.gi.method, GiMethod::Lightskin);
-        assert_eq!(set.render.gi.rsm_size, 1024, "an explicit value wins");
-        assert_eq!(set.render.gi.val_count, d.info.render.gi.val_count);
-        assert_eq!(set.render.gi.indirect_downscale, 2);
+        let gi = &set.render.gi;
+        assert_eq!(RSM_SIZE.u32(gi), 1024, "an explicit value wins");
+        assert_eq!(VAL_COUNT.u32(gi), VAL_COUNT.u32(&d.info.render.gi));
+        assert_eq!(INDIRECT_DOWNSCALE.u32(gi), 2);
         let session: SessionParams = d
             .parse(br#"{"fps_cap": 5, "render": {"gi": {"indirect_downscale": 1}}}"#)
             .expect("valid");
         assert_eq!(session.fps_cap, 5.0);
-        assert_eq!(session.render.gi.indirect_downscale, 1);
-        assert_eq!(session.render.gi.rsm_size, SOFTWARE_RSM_SIZE);
+        assert_eq!(INDIRECT_DOWNSCALE.u32(&session.render.gi), 1);
+        assert_eq!(RSM_SIZE.u32(&session.render.gi), 112);
     }
 
     /// Every method's frame at the software defaults fits a CPU adapter's frame limit on the
@@ -250,7 +223,7 @@ mod tests {
         for &method in GiMethod::ALL {
             for (width, height) in [(800, 450), (320, 240)] {
                 let mut params = SessionParams {
-                    render: software_render(),
+                    render: render_defaults(true),
                     ..SessionParams::default()
                 };
                 params.render.width = width;
@@ -269,9 +242,11 @@ mod tests {
     fn bad_fields_are_named_as_sent() {
         let d = software();
         let e = d
-            .parse::<RenderRequest>(br#"{"render": {"gi": {"rsm_sise": 1}}}"#)
+            .parse::<RenderRequest>(br#"{"render": {"widht": 1}}"#)
             .expect_err("unknown field");
-        assert_eq!(e.body.field.as_deref(), Some("render.gi.rsm_sise"));
+        assert_eq!(e.body.field.as_deref(), Some("render.widht"));
+        // `render.gi`'s fields are the methods' tables' business: `params::resolve` refuses
+        // a misspelt one (`render.gi.rsm_sise`, see `gi::params::check_request`).
         let e = d
             .parse::<RenderRequest>(br#"{"render": []}"#)
             .expect_err("not an object");

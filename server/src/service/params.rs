@@ -4,8 +4,8 @@
 use super::error::ApiError;
 use super::scenes::{Demand, SceneEntry};
 use crate::debug_views::{self, ViewError};
+use crate::gi::common::params::EMITTERS;
 use crate::gi::precompute::PrecomputeKey;
-use crate::gi::GiSettings;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
 use crate::scene::default_light::emitters_for;
@@ -25,32 +25,12 @@ pub struct Resolved {
     pub demand: Option<Arc<Demand>>,
 }
 
-/// The renderer's own field names, as paths of the request's `render` object.
+/// The renderer's own field names, as paths of the request's `render` object: a GI
+/// parameter's under `gi`.
 fn request_field(renderer_field: &str) -> String {
     match renderer_field {
-        "rsm_size"
-        | "view_samples"
-        | "val_count"
-        | "jitter"
-        | "defensive"
-        | "glossy_exponent"
-        | "bounces"
-        | "spp"
-        | "vpl_count"
-        | "cluster_count"
-        | "kmeans_iterations"
-        | "cluster_position_weight"
-        | "cluster_normal_weight"
-        | "interleave"
-        | "blur_distance"
-        | "blur_normal"
-        | "paraboloid_size"
-        | "fourier_terms"
-        | "shadow_light"
-        | "indirect_downscale" => {
-            format!("gi.{renderer_field}")
-        }
         "light.cone" => "light.outer_cone".to_string(),
+        name if crate::gi::params::find(name).is_some() => format!("gi.{name}"),
         other => other.to_string(),
     }
 }
@@ -117,8 +97,12 @@ pub fn resolve(
         .light
         .clone()
         .unwrap_or_else(|| entry.default_light.clone());
-    let mut gi = GiSettings::from(g);
-    gi.emitters = emitters_for(g.emitters, entry.emitter_stand_in.as_ref(), &light);
+    let mut gi = g.clone();
+    let asked = g.get(EMITTERS.name).and_then(serde_json::Value::as_bool);
+    gi.set(
+        EMITTERS.name,
+        emitters_for(asked, entry.emitter_stand_in.as_ref(), &light),
+    );
     let settings = RenderSettings {
         width: params.width,
         height: params.height,
@@ -150,39 +134,11 @@ pub fn resolve(
     })
 }
 
-/// Checks the numbers the frame's GI method reads against the ranges `/v1/server` describes
-/// for it (this server's limits), so every method's limits are enforced from its own
-/// description.
+/// Checks a request's GI parameters against the methods' tables and this server's limits
+/// (see [`crate::gi::params::check_request`]).
 pub fn check_gi_ranges(g: &GiParams, limits: &Limits) -> Result<(), ApiError> {
-    let Some(method) = crate::gi::describe_all(limits)
-        .into_iter()
-        .find(|d| d.method == g.method)
-    else {
-        return Err(ApiError::internal(format!(
-            "GI method {} is not described",
-            g.method
-        )));
-    };
-    let values = serde_json::to_value(g).map_err(|e| ApiError::internal(e.to_string()))?;
-    for p in &method.parameters {
-        let Some(v) = values.get(&p.name).and_then(serde_json::Value::as_f64) else {
-            continue;
-        };
-        let (min, max) = (p.min.unwrap_or(f64::MIN), p.max.unwrap_or(f64::MAX));
-        if !(min..=max).contains(&v) {
-            let range = match (p.min, p.max) {
-                (Some(a), Some(b)) => format!("{a}..={b}"),
-                (Some(a), None) => format!("≥ {a}"),
-                (None, Some(b)) => format!("≤ {b}"),
-                (None, None) => unreachable!("an unbounded range contains every number"),
-            };
-            return Err(ApiError::field(
-                format!("gi.{}", p.name),
-                format!("{v} is outside this server's range {range}"),
-            ));
-        }
-    }
-    Ok(())
+    crate::gi::params::check_request(g, limits)
+        .map_err(|r| ApiError::field(format!("gi.{}", r.field), r.reason))
 }
 
 /// A renderer error as the API reports it.

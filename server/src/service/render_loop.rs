@@ -9,7 +9,9 @@ use super::scenes::{precompute_failed, precompute_label, Now, SceneEntry, SceneR
 use super::sessions::{unix_us, FramePlan, Session, SessionRegistry};
 use super::video::VideoConfig;
 use crate::debug_views::{self, Image};
+use crate::gi::common::params::{BOUNCES, GLOSSY_EXPONENT};
 use crate::gi::precompute::{PrecomputeKey, SceneData};
+use crate::gi::reference::params::SPP;
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::passes::yuv420::Yuv420;
@@ -485,12 +487,15 @@ impl Loop {
     /// the samples per pixel its image must then hold (`None`: not chunked).
     fn own_settings(&self, job: &OneShot) -> (Resolved, Option<u32>) {
         let mut resolved = job.resolved.clone();
-        let spp = resolved.settings.gi.spp;
+        let spp = SPP.u32(&resolved.settings.gi);
         let traced = resolved.settings.gi.method == GiMethod::Reference;
         match job.chunks.histories {
             Some((own, _)) if traced => {
                 resolved.settings.history = Some(own);
-                resolved.settings.gi.spp = spp.saturating_sub(job.chunks.own).max(1);
+                resolved
+                    .settings
+                    .gi
+                    .set(SPP.name, spp.saturating_sub(job.chunks.own).max(1));
                 (resolved, Some(spp))
             }
             _ => (resolved, None),
@@ -503,7 +508,7 @@ impl Loop {
     fn next_chunk(&mut self, job: &mut OneShot) -> Option<Result<(), ApiError>> {
         let step = job.chunk_spp?;
         let own_total = if job.resolved.settings.gi.method == GiMethod::Reference {
-            job.resolved.settings.gi.spp
+            SPP.u32(&job.resolved.settings.gi)
         } else {
             0
         };
@@ -543,7 +548,7 @@ impl Loop {
         } else {
             own_history
         });
-        resolved.settings.gi.spp = step;
+        resolved.settings.gi.set(SPP.name, step);
         resolved.settings.capture_hdr = false;
         let submitted = match self.submit(&job.scene, &resolved) {
             Ok(s) => s,
@@ -567,25 +572,24 @@ impl Loop {
         spp: u32,
     ) -> Result<(Resolved, u64), ApiError> {
         let mut truth = job.resolved.clone();
-        let asked = truth.settings.gi;
+        let asked = &job.resolved.settings.gi;
         // Only what the comparison method reads, so that comparisons of one view at several
         // BRSM settings share one cached reference render (the key hashes these settings).
-        truth.settings.gi = crate::gi::GiSettings {
-            method,
-            spp,
-            bounces: asked.bounces,
-            emitters: asked.reference_emitters(),
-            glossy_exponent: asked.glossy_exponent,
-            ..crate::gi::GiSettings::default()
-        };
+        let mut gi = lightcast_protocol::GiParams::new(method)
+            .with("spp", spp)
+            .with("bounces", BOUNCES.u32(asked))
+            .with("emitters", crate::gi::reference_emitters(asked));
+        if let Some(k) = asked.get(GLOSSY_EXPONENT.name) {
+            gi.set(GLOSSY_EXPONENT.name, k.clone());
+        }
+        truth.settings.gi = gi;
         truth.settings.capture_hdr = true;
         truth.settings.history = None;
         truth.settings.debug_view = View::Final;
         truth.view = View::Final;
-        truth.precompute = job.scene.precompute_key(&lightcast_protocol::GiParams {
-            method,
-            ..Default::default()
-        })?;
+        truth.precompute = job
+            .scene
+            .precompute_key(&lightcast_protocol::GiParams::new(method))?;
         let key = {
             use std::hash::{Hash, Hasher};
             let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -616,7 +620,10 @@ impl Loop {
         let mut expected = None;
         if let Some((_, history)) = job.chunks.histories.filter(|_| job.chunks.compared > 0) {
             truth.settings.history = Some(history);
-            truth.settings.gi.spp = spp.saturating_sub(job.chunks.compared).max(1);
+            truth
+                .settings
+                .gi
+                .set(SPP.name, spp.saturating_sub(job.chunks.compared).max(1));
             expected = Some(spp);
         }
         let frame = match self.comparisons.lookup(key) {

@@ -934,10 +934,7 @@ mod tests {
 
     /// The light caches a brsm frame asks for with `cache_distance`.
     fn key_for(entry: &SceneEntry, d_eps: f32) -> Result<Option<PrecomputeKey>, ApiError> {
-        entry.precompute_key(&GiParams {
-            cache_distance: Some(d_eps),
-            ..GiParams::default()
-        })
+        entry.precompute_key(&GiParams::default().with("cache_distance", Some(d_eps)))
     }
 
     fn state(entry: &SceneEntry, p: &PrecomputeKey) -> Option<PrecomputeState> {
@@ -1180,12 +1177,9 @@ mod tests {
         let entry = registry
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
-        let surfels = GiParams {
-            method: lightcast_protocol::GiMethod::Surfels,
-            surfel_count: 262_144,
-            surfel_links: 16,
-            ..GiParams::default()
-        };
+        let surfels = GiParams::new(lightcast_protocol::GiMethod::Surfels)
+            .with("surfel_count", 262_144)
+            .with("surfel_links", 16);
         let long = entry
             .precompute_key(&surfels)
             .expect("within the budgets")
@@ -1275,19 +1269,13 @@ mod tests {
         let entry = registry
             .insert(procedural::cornell_box(), "t".into(), None, 0.0, None)
             .expect("fits");
-        let reference = GiParams {
-            method: lightcast_protocol::GiMethod::Reference,
-            ..GiParams::default()
-        };
+        let reference = GiParams::new(lightcast_protocol::GiMethod::Reference);
         let bvh = entry
             .precompute_key(&reference)
             .expect("valid")
             .expect("the reference needs its BVH");
         assert_eq!(bvh.kind, "bvh");
-        let none = GiParams {
-            method: lightcast_protocol::GiMethod::None,
-            ..GiParams::default()
-        };
+        let none = GiParams::new(lightcast_protocol::GiMethod::None);
         assert_eq!(entry.precompute_key(&none).expect("valid"), None);
         let Now::Ready(data) = settled(&registry, &entry, &bvh) else {
             panic!("the BVH must build");

@@ -8,7 +8,7 @@
 use super::support;
 use lightcast_server::gi::lightskin::caches;
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::renderer::Renderer;
 use lightcast_server::scene::{default_light, procedural};
 
@@ -59,13 +59,10 @@ fn measure_in_child() {
             default_light::default_light(&scene),
         );
         settings.capture_hdr = false;
-        settings.gi = GiSettings {
-            method,
-            rsm_size: 32,
-            view_samples: 64,
-            val_count: 256,
-            ..GiSettings::default()
-        };
+        settings.gi = GiParams::new(method)
+            .with("rsm_size", 32)
+            .with("view_samples", 64)
+            .with("val_count", 256);
         let started = std::time::Instant::now();
         let mut before = 0;
         for i in 0..WARM_UP + FRAMES {

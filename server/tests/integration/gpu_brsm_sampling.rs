@@ -9,7 +9,7 @@ use lightcast_server::gi::common::halton::halton;
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::sampling::SamplingReadback;
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::passes::frame_uniforms::light_faces;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -18,19 +18,15 @@ use lightcast_server::scene::{procedural, Scene};
 const W: u32 = 64;
 const H: u32 = 48;
 
-fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiSettings {
-    GiSettings {
-        method: GiMethod::Brsm,
-        rsm_size,
-        view_samples,
-        val_count,
-        jitter: 0.5,
-        defensive: 0.0,
-        uniform_importance: false,
-        occlusion: false,
-        glossy_exponent: None,
-        ..GiSettings::default()
-    }
+fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiParams {
+    GiParams::new(GiMethod::Brsm)
+        .with("rsm_size", rsm_size)
+        .with("view_samples", view_samples)
+        .with("val_count", val_count)
+        .with("jitter", 0.5)
+        .with("defensive", 0.0)
+        .with("uniform_importance", false)
+        .with("occlusion", false)
 }
 
 fn renderer_with_caches(scene: &Scene) -> Renderer {
@@ -44,7 +40,7 @@ fn renderer_with_caches(scene: &Scene) -> Renderer {
     renderer
 }
 
-fn run(scene: &Scene, light: Light, sampling: GiSettings) -> (RenderSettings, SamplingReadback) {
+fn run(scene: &Scene, light: Light, sampling: GiParams) -> (RenderSettings, SamplingReadback) {
     let mut s = settings(W, H, default_camera(scene), light);
     s.gi = sampling;
     let mut renderer = renderer_with_caches(scene);
@@ -279,7 +275,7 @@ fn defensive_mixture_draws_by_the_mixed_pdf_and_reaches_unimportant_vals() {
     let scene = procedural::cornell_box();
     let light = default_light(&scene);
     let mut s = sampling(32, 64, 4096);
-    s.defensive = 0.25;
+    s.set("defensive", 0.25);
     let (_, rb) = run(&scene, light, s);
     check_importance_sums_and_selection(&rb, 4096, 0.25);
     // Every texel has P ≥ α/M = 0.25/1024, so 4,096 stratified draws reach each one.
@@ -294,7 +290,7 @@ fn defensive_mixture_draws_by_the_mixed_pdf_and_reaches_unimportant_vals() {
 fn uniform_importance_with_one_draw_per_texel_selects_every_val_exactly_once() {
     let scene = procedural::cornell_box();
     let mut s = sampling(16, 32, 16 * 16);
-    s.uniform_importance = true;
+    s.set("uniform_importance", true);
     let (_, rb) = run(&scene, default_light(&scene), s);
     // Every texel is drawn exactly once with weight 1: the estimator then sums each VAL once,
     // like LightSkin's full accumulation (uncovered texels carry no flux).

@@ -10,7 +10,7 @@ use lightcast_server::gi::lightskin::cpu::{
     RefSurface, RefVal,
 };
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::{load_gltf, procedural, Scene};
@@ -18,19 +18,14 @@ use lightcast_server::scene::{load_gltf, procedural, Scene};
 const W: u32 = 64;
 const H: u32 = 48;
 
-fn gi(method: GiMethod, rsm_size: u32, val_count: u32) -> GiSettings {
-    GiSettings {
-        method,
-        rsm_size,
-        view_samples: 64,
-        val_count,
-        jitter: 0.5,
-        defensive: lightcast_server::gi::DEFAULT_DEFENSIVE,
-        uniform_importance: false,
-        occlusion: false,
-        glossy_exponent: None,
-        ..GiSettings::default()
-    }
+fn gi(method: GiMethod, rsm_size: u32, val_count: u32) -> GiParams {
+    GiParams::new(method)
+        .with("rsm_size", rsm_size)
+        .with("view_samples", 64)
+        .with("val_count", val_count)
+        .with("jitter", 0.5)
+        .with("uniform_importance", false)
+        .with("occlusion", false)
 }
 
 struct Run {
@@ -41,17 +36,17 @@ struct Run {
     frame: Frame,
 }
 
-fn run(gi: GiSettings) -> Run {
+fn run(gi: GiParams) -> Run {
     run_scene(procedural::cornell_box(), 0.3, gi)
 }
 
-fn run_scene(scene: Scene, d_eps: f32, gi: GiSettings) -> Run {
+fn run_scene(scene: Scene, d_eps: f32, gi: GiParams) -> Run {
     run_with(scene, d_eps, gi, true)
 }
 
 /// `triangle_ids: false` makes the renderer use provoking vertices even where the adapter
 /// has primitive indices.
-fn run_with(scene: Scene, d_eps: f32, gi: GiSettings, triangle_ids: bool) -> Run {
+fn run_with(scene: Scene, d_eps: f32, gi: GiParams, triangle_ids: bool) -> Run {
     let params = CacheParams {
         d_eps,
         ..CacheParams::for_scene(&scene)
@@ -108,7 +103,12 @@ fn proxies(l: &CacheLighting) -> ProxyLights {
 
 /// Relative differences of GPU proxies against the CPU reference, one per cache and quantity.
 fn proxy_errors(run: &Run, vals: &[RefVal]) -> Vec<f32> {
-    proxy_errors_with(run, vals, run.settings.gi.glossy_exponent)
+    let k = run
+        .settings
+        .gi
+        .get("glossy_exponent")
+        .and_then(|k| k.as_f64());
+    proxy_errors_with(run, vals, k.map(|k| k as f32))
 }
 
 /// As [`proxy_errors`], the reference using `glossy_exponent` in place of the materials'.
@@ -169,10 +169,7 @@ fn brsm_cache_lighting_matches_the_cpu_reference() {
 
 #[test]
 fn a_glossy_exponent_override_matches_the_cpu_reference_with_that_exponent() {
-    let run = run(GiSettings {
-        glossy_exponent: Some(80.0),
-        ..gi(GiMethod::Brsm, 32, 2048)
-    });
+    let run = run((gi(GiMethod::Brsm, 32, 2048)).with("glossy_exponent", Some(80.0)));
     let sampling = run
         .renderer
         .gi_if_created::<LightSkin>()
@@ -196,9 +193,9 @@ fn a_glossy_exponent_override_matches_the_cpu_reference_with_that_exponent() {
 /// as an occluder disk.
 fn occlusion_runs(d_eps: f32) -> (Vec<CacheLighting>, Vec<CacheLighting>, Vec<OccluderDisk>) {
     let mut settings = gi(GiMethod::Brsm, 32, 1024);
-    settings.occlusion = false;
-    let open = run_scene(procedural::cornell_box(), d_eps, settings);
-    settings.occlusion = true;
+    settings.set("occlusion", false);
+    let open = run_scene(procedural::cornell_box(), d_eps, settings.clone());
+    settings.set("occlusion", true);
     let occluded = run_scene(procedural::cornell_box(), d_eps, settings);
     let read = |run: &Run| {
         run.renderer
@@ -310,7 +307,7 @@ fn check_interpolation(triangle_ids: bool) {
     );
     let scene = load_gltf(std::path::Path::new(path)).expect("cornell-box.glb");
     let mut settings = gi(GiMethod::Brsm, 32, 2048);
-    settings.view_samples = 128;
+    settings.set("view_samples", 128);
     let run = run_with(scene, 0.15, settings, triangle_ids);
     let blend = run.renderer.triangle_ids();
     assert!(triangle_ids || !blend, "provoking vertices were asked for");
@@ -420,7 +417,7 @@ fn brsm_with_uniform_importance_and_one_draw_per_texel_equals_lightskin() {
     let rsm = 24;
     let lightskin = run(gi(GiMethod::Lightskin, rsm, 1));
     let mut uniform = gi(GiMethod::Brsm, rsm, rsm * rsm);
-    uniform.uniform_importance = true;
+    uniform.set("uniform_importance", true);
     let brsm = run(uniform);
     let (a, b) = (
         lightskin.frame.indirect.expect("indirect"),
@@ -443,7 +440,7 @@ fn brsm_with_uniform_importance_and_one_draw_per_texel_equals_lightskin() {
 #[test]
 fn indirect_light_brightens_what_direct_light_misses() {
     let with_gi = run(gi(GiMethod::Brsm, 32, 1024));
-    let without = run(GiSettings::off());
+    let without = run(GiParams::new(GiMethod::None));
     // Luminance of covered pixels (background excluded).
     let lum = |f: &Frame| {
         f.hdr
@@ -497,10 +494,7 @@ fn chunked_dispatches_give_the_unchunked_results() {
         .set_caches(&caches)
         .expect("caches fit");
     let mut settings = settings(W, H, default_camera(&scene), default_light(&scene));
-    settings.gi = GiSettings {
-        view_samples: 4096,
-        ..gi(GiMethod::Brsm, 256, 16_384)
-    };
+    settings.gi = (gi(GiMethod::Brsm, 256, 16_384)).with("view_samples", 4096);
     renderer.render(&settings).expect("render");
     let sampling = renderer
         .gi_if_created::<LightSkin>()

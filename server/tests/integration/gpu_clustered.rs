@@ -6,11 +6,13 @@
 
 use crate::support::*;
 use glam::Vec3;
-use lightcast_protocol::{ClusteredVisibility, Light, LightKind};
+use lightcast_protocol::{Light, LightKind};
 use lightcast_server::gi::clustered::cpu::{self, RefCluster, RefVpl, Weights};
+use lightcast_server::gi::clustered::params::{Settings as ClusteredSettings, INTERLEAVE};
 use lightcast_server::gi::clustered::passes::{Vpl, NO_VAL};
+use lightcast_server::gi::clustered::Visibility as ClusteredVisibility;
 use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
-use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -22,27 +24,29 @@ const H: u32 = 36;
 
 /// `clustered` without visibility: the shading these tests check against the CPU has none
 /// (`gpu_clustered_visibility` checks it).
-fn clustered(vpl_count: u32, cluster_count: u32, iterations: u32, interleave: u32) -> GiSettings {
-    GiSettings {
-        method: GiMethod::Clustered,
-        visibility: ClusteredVisibility::Off,
-        rsm_size: 64,
-        vpl_count,
-        cluster_count,
-        kmeans_iterations: iterations,
-        interleave,
-        ..GiSettings::default()
-    }
+fn clustered(vpl_count: u32, cluster_count: u32, iterations: u32, interleave: u32) -> GiParams {
+    GiParams::new(GiMethod::Clustered)
+        .with("visibility", ClusteredVisibility::Off.name())
+        .with("rsm_size", 64)
+        .with("vpl_count", vpl_count)
+        .with("cluster_count", cluster_count)
+        .with("kmeans_iterations", iterations)
+        .with("interleave", interleave)
 }
 
-fn run(scene: &Scene, gi: GiSettings) -> (RenderSettings, ClusteredReadback, Vec<[f32; 4]>) {
+/// `gi` as `clustered` reads it.
+fn typed(gi: &GiParams) -> ClusteredSettings {
+    ClusteredSettings::of(gi).expect("clustered settings")
+}
+
+fn run(scene: &Scene, gi: GiParams) -> (RenderSettings, ClusteredReadback, Vec<[f32; 4]>) {
     run_lit(scene, default_light(scene), gi)
 }
 
 fn run_lit(
     scene: &Scene,
     light: Light,
-    gi: GiSettings,
+    gi: GiParams,
 ) -> (RenderSettings, ClusteredReadback, Vec<[f32; 4]>) {
     let mut s = settings(W, H, default_camera(scene), light);
     s.gi = gi;
@@ -159,8 +163,8 @@ fn vpls_and_one_kmeans_iteration_match_the_cpu() {
     );
 
     let w = Weights {
-        position: s.gi.cluster_position_weight / rb.extent,
-        normal: s.gi.cluster_normal_weight,
+        position: typed(&s.gi).cluster_position_weight / rb.extent,
+        normal: typed(&s.gi).cluster_normal_weight,
     };
     let seeds = cpu::seed(&vpls, m);
     let first = cpu::assign(&vpls, &seeds, w);
@@ -265,8 +269,8 @@ fn restarting_from_the_same_seeds_loses_no_clusters_over_a_light_sweep() {
             .expect("a frame");
         let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
         let w = Weights {
-            position: s.gi.cluster_position_weight / rb.extent,
-            normal: s.gi.cluster_normal_weight,
+            position: typed(&s.gi).cluster_position_weight / rb.extent,
+            normal: typed(&s.gi).cluster_normal_weight,
         };
         let start = start.unwrap_or_else(|| cpu::seed(&vpls, m));
         let (_, cpu_vals) = cpu::cluster_from(&vpls, start, iterations, w);
@@ -417,19 +421,19 @@ fn interleaved_shading_and_blur_match_the_cpu() {
             // rasterised and the ray-cast position (up to ~1e-3 at grazing angles) decides,
             // are left out.
             let centre = texels[(y * W + x) as usize].expect("in the window");
-            let max_distance = s.gi.blur_distance * rb.extent;
+            let max_distance = typed(&s.gi).blur_distance * rb.extent;
             let borderline = window.clone().any(|q| {
                 let t = texels[q as usize].expect("checked");
                 let d = Vec3::from_slice(&t.position[..3])
                     .distance(Vec3::from_slice(&centre.position[..3]));
                 (d - max_distance).abs() < 1e-2 * max_distance
-                    || (t.normal.dot(centre.normal) - s.gi.blur_normal).abs() < 1e-3
+                    || (t.normal.dot(centre.normal) - typed(&s.gi).blur_normal).abs() < 1e-3
             });
             let rejects = window.clone().any(|q| {
                 let t = texels[q as usize].expect("checked");
                 Vec3::from_slice(&t.position[..3]).distance(Vec3::from_slice(&centre.position[..3]))
                     > max_distance
-                    || t.normal.dot(centre.normal) < s.gi.blur_normal
+                    || t.normal.dot(centre.normal) < typed(&s.gi).blur_normal
             });
             if borderline {
                 continue;
@@ -452,7 +456,7 @@ fn interleaved_shading_and_blur_match_the_cpu() {
                 y,
                 b,
                 max_distance,
-                s.gi.blur_normal,
+                typed(&s.gi).blur_normal,
             );
             let got = Vec3::from_slice(&indirect[(y * W + x) as usize][..3]);
             // The indirect buffer is f16: 2⁻¹¹ relative, steps of 2⁻²⁴ below 2⁻¹⁴.
@@ -483,15 +487,11 @@ fn clustered_error_against_the_reference_is_finite_and_below_none() {
     let s = settings(W, H, default_camera(&scene), default_light(&scene));
     let mut renderer = Renderer::new(gpu(), scene.clone());
     set_bvh(&mut renderer);
-    let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
-    let reference = indirect(GiSettings {
-        method: GiMethod::Reference,
-        spp: 64,
-        ..GiSettings::default()
-    });
+    let mut indirect = |gi: GiParams| indirect_with(&mut renderer, &s, gi);
+    let reference = indirect(GiParams::new(GiMethod::Reference).with("spp", 64));
     let truth: Vec<[f32; 3]> = reference.iter().map(|p| [p[0], p[1], p[2]]).collect();
     let ours = errors(&truth, &indirect(clustered(1024, 30, 4, 8)), W as usize);
-    let none = errors(&truth, &indirect(GiSettings::off()), W as usize);
+    let none = errors(&truth, &indirect(GiParams::new(GiMethod::None)), W as usize);
     eprintln!("clustered vs reference: {ours:?}\nnone vs reference: {none:?}");
     assert!(ours.mae.is_finite() && ours.rmse.is_finite());
     assert!(
@@ -524,12 +524,13 @@ fn the_interleave_pattern_is_hidden_on_a_flat_wall() {
     };
     let s = settings(w, h, camera, default_light(&scene));
     let mut renderer = Renderer::new(gpu(), scene.clone());
-    let software = |interleave: u32| GiSettings {
-        indirect_downscale: 2,
-        ..clustered(1024, 30, 4, interleave)
-    };
+    let software =
+        |interleave: u32| (clustered(1024, 30, 4, interleave)).with("indirect_downscale", 2);
     let full = indirect_with(&mut renderer, &s, software(1));
-    let b = lightcast_server::service::defaults::SOFTWARE_INTERLEAVE;
+    let b = INTERLEAVE
+        .software_default()
+        .as_u64()
+        .expect("a whole number") as u32;
     let interleaved = indirect_with(&mut renderer, &s, software(b));
     let (lw, lh) = (w / 2, h / 2);
     let back_wall = |x: u32, y: u32| {

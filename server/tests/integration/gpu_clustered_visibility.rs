@@ -6,12 +6,13 @@
 
 use crate::support::*;
 use glam::Vec3;
-use lightcast_protocol::ClusteredVisibility;
 use lightcast_server::gi::clustered::cpu::{self, RefVpl};
 use lightcast_server::gi::clustered::cpu_visibility::{self as cv, CssmMaps, MapLight};
+use lightcast_server::gi::clustered::params::Settings as ClusteredSettings;
 use lightcast_server::gi::clustered::passes::{Val, NO_VAL};
+use lightcast_server::gi::clustered::Visibility as ClusteredVisibility;
 use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
-use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -20,20 +21,17 @@ use lightcast_server::scene::{procedural, Scene};
 const W: u32 = 48;
 const H: u32 = 36;
 
-fn clustered(visibility: ClusteredVisibility, vpls: u32, vals: u32, map: u32) -> GiSettings {
-    GiSettings {
-        method: GiMethod::Clustered,
-        rsm_size: 64,
-        vpl_count: vpls,
-        cluster_count: vals,
-        interleave: 4,
-        visibility,
-        paraboloid_size: map,
-        ..GiSettings::default()
-    }
+fn clustered(visibility: ClusteredVisibility, vpls: u32, vals: u32, map: u32) -> GiParams {
+    GiParams::new(GiMethod::Clustered)
+        .with("rsm_size", 64)
+        .with("vpl_count", vpls)
+        .with("cluster_count", vals)
+        .with("interleave", 4)
+        .with("visibility", visibility.name())
+        .with("paraboloid_size", map)
 }
 
-fn run(scene: &Scene, gi: GiSettings) -> (RenderSettings, ClusteredReadback) {
+fn run(scene: &Scene, gi: GiParams) -> (RenderSettings, ClusteredReadback) {
     let mut s = settings(W, H, default_camera(scene), default_light(scene));
     s.gi = gi;
     let mut renderer = Renderer::new(gpu(), scene.clone());
@@ -194,7 +192,15 @@ fn shading_with_visibility_matches_the_cpu() {
                         let j = rb.mapping[i];
                         assert_ne!(j, NO_VAL, "a lit VPL has a VAL");
                         let light = lights[j as usize].expect("a VAL with VPLs");
-                        maps.visibility(j, &light, p, n, s.gi.fourier_terms)
+                        maps.visibility(
+                            j,
+                            &light,
+                            p,
+                            n,
+                            ClusteredSettings::of(&s.gi)
+                                .expect("clustered")
+                                .fourier_terms,
+                        )
                     }
                 };
                 let class = cpu::interleave_class(x, y, b);
@@ -301,7 +307,7 @@ fn visibility_error_falls_with_the_val_count() {
     let scene = procedural::cornell_box();
     let s = settings(W, H, default_camera(&scene), default_light(&scene));
     let mut renderer = Renderer::new(gpu(), scene.clone());
-    let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
+    let mut indirect = |gi: GiParams| indirect_with(&mut renderer, &s, gi);
     let n = 256;
     let mut run = |visibility, vals| indirect(clustered(visibility, n, vals, 32));
     let off = run(ClusteredVisibility::Off, 30);
@@ -365,19 +371,14 @@ fn error_against_the_reference_falls_with_the_val_count() {
     let s = settings(w, h, default_camera(&scene), corner);
     let mut renderer = Renderer::new(gpu(), scene.clone());
     set_bvh(&mut renderer);
-    let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
-    let truth = rgb(&indirect(GiSettings {
-        method: GiMethod::Reference,
-        spp: 256,
-        emitters: false,
-        ..GiSettings::default()
-    }));
-    let mut run = |visibility, vals| {
-        indirect(GiSettings {
-            rsm_size: 128,
-            ..clustered(visibility, 256, vals, 64)
-        })
-    };
+    let mut indirect = |gi: GiParams| indirect_with(&mut renderer, &s, gi);
+    let truth = rgb(&indirect(
+        GiParams::new(GiMethod::Reference)
+            .with("spp", 256)
+            .with("emitters", false),
+    ));
+    let mut run =
+        |visibility, vals| indirect((clustered(visibility, 256, vals, 64)).with("rsm_size", 128));
     let error = |image: &[[f32; 4]]| errors(&truth, image, w as usize).block_mae_relative;
     let e_off = error(&run(ClusteredVisibility::Off, 30));
     let e_exact = error(&run(ClusteredVisibility::VplShadows, 30));
@@ -414,10 +415,7 @@ fn the_light_shadow_view_shows_the_chosen_lights_visibility() {
     let mut shown = Vec::new();
     for light in [2, 5] {
         let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
-        s.gi = GiSettings {
-            shadow_light: light,
-            ..clustered(ClusteredVisibility::Cssm, 256, 8, 32)
-        };
+        s.gi = (clustered(ClusteredVisibility::Cssm, 256, 8, 32)).with("shadow_light", light);
         s.debug_view = lightcast_protocol::View::ValShadow;
         let mut renderer = Renderer::new(gpu(), scene.clone());
         let frame = renderer.render(&s).expect("render");
@@ -447,7 +445,15 @@ fn the_light_shadow_view_shows_the_chosen_lights_visibility() {
                 let faces = n.dot(to_light) > 1e-3 && val.normal.dot(to_light) < -1e-3;
                 match view.texels[(y * W + x) as usize] {
                     LightShadowTexel::Visibility(v) if faces => {
-                        let want = maps.visibility(light, &val, p, n, s.gi.fourier_terms);
+                        let want = maps.visibility(
+                            light,
+                            &val,
+                            p,
+                            n,
+                            ClusteredSettings::of(&s.gi)
+                                .expect("clustered")
+                                .fourier_terms,
+                        );
                         // The blocker search's cut-off (2 % blockers) can fall between the
                         // GPU's f16 basis and the CPU's f32 one: a few pixels may differ.
                         if (v - want).abs() >= 0.03 {
@@ -570,7 +576,7 @@ fn a_small_light_step_changes_the_shadows_no_more_than_the_light() {
             area: v.area,
         })
         .collect();
-    let d = GiSettings::default();
+    let d = ClusteredSettings::of(&GiParams::new(GiMethod::Clustered)).expect("defaults");
     let w = cpu::Weights {
         position: d.cluster_position_weight / second.extent,
         normal: d.cluster_normal_weight,

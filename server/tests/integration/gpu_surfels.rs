@@ -14,7 +14,7 @@ use lightcast_server::gi::surfels::SurfelView;
 use lightcast_server::gi::surfels::{
     self, pull_flux, CacheLight, SurfelParams, SurfelSet, Surfels,
 };
-use lightcast_server::gi::{GiMethod, GiSettings};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -48,11 +48,7 @@ fn surfel_set(scene: &Scene, params: &SurfelParams) -> SurfelSet {
 fn settings_for(scene: &Scene, bounces: u32) -> RenderSettings {
     let mut s = settings(W, H, default_camera(scene), default_light(scene));
     s.shadow_map_size = 512;
-    s.gi = GiSettings {
-        method: GiMethod::Surfels,
-        bounces,
-        ..GiSettings::default()
-    };
+    s.gi = GiParams::new(GiMethod::Surfels).with("bounces", bounces);
     s
 }
 
@@ -201,7 +197,7 @@ fn one_bounce_matches_the_cpu_from_surfel_light_to_cache_lighting() {
 
     // 4. With `emitters` off the emissive surfels keep only the light they reflect.
     let mut dark = s.clone();
-    dark.gi.emitters = false;
+    dark.gi.set("emitters", false);
     renderer.render(&dark).expect("render");
     let surfels = renderer.gi_if_created::<Surfels>().expect("created");
     let without = vec3s(&surfels.read_flux().expect("readback").expect("set"));
@@ -480,18 +476,11 @@ fn the_back_of_a_wall_gets_no_light_from_the_room_behind_it() {
     let mean = |pixels: &[[f32; 4]]| {
         pixels.iter().map(|p| p[0] + p[1] + p[2]).sum::<f32>() / (3 * pixels.len()) as f32
     };
-    let surfels = GiSettings {
-        method: GiMethod::Surfels,
-        bounces: 1,
-        ..GiSettings::default()
-    };
-    let reference = GiSettings {
-        method: GiMethod::Reference,
-        spp: 16,
-        bounces: 1,
-        ..GiSettings::default()
-    };
-    let lit_room = mean(&indirect_with(&mut renderer, &inside, surfels));
+    let surfels = GiParams::new(GiMethod::Surfels).with("bounces", 1);
+    let reference = GiParams::new(GiMethod::Reference)
+        .with("spp", 16)
+        .with("bounces", 1);
+    let lit_room = mean(&indirect_with(&mut renderer, &inside, surfels.clone()));
     let truth = mean(&indirect_with(&mut renderer, &outside, reference));
     let ours = mean(&indirect_with(&mut renderer, &outside, surfels));
     eprintln!("indirect: room {lit_room}, outside: reference {truth}, surfels {ours}");
@@ -526,24 +515,19 @@ fn error_against_the_reference_is_small_at_one_and_three_bounces() {
     set_bvh(&mut renderer);
     for bounces in [1, 3] {
         let s = settings_for(&scene, bounces);
-        let mut indirect = |gi: GiSettings| indirect_with(&mut renderer, &s, gi);
-        let reference = indirect(GiSettings {
-            method: GiMethod::Reference,
-            spp: 64,
-            bounces,
-            ..GiSettings::default()
-        });
+        let mut indirect = |gi: GiParams| indirect_with(&mut renderer, &s, gi);
+        let reference = indirect(
+            GiParams::new(GiMethod::Reference)
+                .with("spp", 64)
+                .with("bounces", bounces),
+        );
         let truth: Vec<[f32; 3]> = reference.iter().map(|p| [p[0], p[1], p[2]]).collect();
         let ours = errors(
             &truth,
-            &indirect(GiSettings {
-                method: GiMethod::Surfels,
-                bounces,
-                ..GiSettings::default()
-            }),
+            &indirect(GiParams::new(GiMethod::Surfels).with("bounces", bounces)),
             W as usize,
         );
-        let none = errors(&truth, &indirect(GiSettings::off()), W as usize);
+        let none = errors(&truth, &indirect(GiParams::new(GiMethod::None)), W as usize);
         eprintln!("{bounces} bounces: surfels vs reference {ours:?}\nnone vs reference {none:?}");
         assert!(ours.mae.is_finite() && ours.rmse.is_finite());
         assert!(
@@ -573,11 +557,7 @@ fn error_against_the_reference_falls_as_links_and_surfels_grow() {
     let reference = indirect_with(
         &mut renderer,
         &s,
-        GiSettings {
-            method: GiMethod::Reference,
-            spp: 256,
-            ..GiSettings::default()
-        },
+        GiParams::new(GiMethod::Reference).with("spp", 256),
     );
     let truth: Vec<[f32; 3]> = reference.iter().map(|p| [p[0], p[1], p[2]]).collect();
     let mut measured = Vec::new();

@@ -214,15 +214,24 @@ fn bad_input_is_reported_precisely_without_panicking() {
             vec!["--out".into(), "/nonexistent-dir/x.png".into()],
             "nonexistent-dir",
         ),
-        (vec!["--vals".into(), "0".into()], "val_count"),
-        (vec!["--rsm-size".into(), "5".into()], "rsm_size"),
+        (vec!["--gi-param".into(), "val_count=0".into()], "val_count"),
+        (vec!["--gi-param".into(), "rsm_size=5".into()], "rsm_size"),
         (
-            vec!["--view-samples".into(), "100000".into()],
+            vec!["--gi-param".into(), "view_samples=100000".into()],
             "view_samples",
         ),
-        (vec!["--cache-distance".into(), "nan".into()], "d_eps"),
-        (vec!["--cache-distance".into(), "0.00001".into()], "d_eps"),
-        (vec!["--cache-angle".into(), "120".into()], "theta_eps"),
+        (
+            vec!["--gi-param".into(), "cache_distance=nan".into()],
+            "cache_distance",
+        ),
+        (
+            vec!["--gi-param".into(), "cache_distance=0.00001".into()],
+            "d_eps",
+        ),
+        (
+            vec!["--gi-param".into(), "cache_angle=120".into()],
+            "cache_angle",
+        ),
         (
             vec![
                 "--gi".into(),
@@ -237,8 +246,8 @@ fn bad_input_is_reported_precisely_without_panicking() {
             vec![
                 "--gi".into(),
                 "clustered".into(),
-                "--vpls".into(),
-                "100".into(),
+                "--gi-param".into(),
+                "vpl_count=100".into(),
             ],
             "vpl_count",
         ),
@@ -246,8 +255,8 @@ fn bad_input_is_reported_precisely_without_panicking() {
             vec![
                 "--gi".into(),
                 "clustered".into(),
-                "--visibility".into(),
-                "soft".into(),
+                "--gi-param".into(),
+                "visibility=soft".into(),
             ],
             "soft",
         ),
@@ -297,7 +306,7 @@ fn bad_input_is_reported_precisely_without_panicking() {
 /// its stages run and indirect light brightens the image.
 #[test]
 fn clustered_renders_with_its_flags() {
-    let common = ["--rsm-size", "32", "--exposure", "1"];
+    let common = ["--gi-param", "rsm_size=32", "--exposure", "1"];
     let (none, _, _) = render_ok(
         "clustered-none.png",
         &[&common[..], &["--gi", "none"]].concat(),
@@ -305,16 +314,16 @@ fn clustered_renders_with_its_flags() {
     let flags = [
         "--gi",
         "clustered",
-        "--vpls",
-        "512",
-        "--clusters",
-        "8",
-        "--kmeans-iterations",
-        "2",
-        "--interleave",
-        "4",
-        "--paraboloid-size",
-        "32",
+        "--gi-param",
+        "vpl_count=512",
+        "--gi-param",
+        "cluster_count=8",
+        "--gi-param",
+        "kmeans_iterations=2",
+        "--gi-param",
+        "interleave=4",
+        "--gi-param",
+        "paraboloid_size=32",
         "--json",
     ];
     let (lit, stdout, _) = render_ok("clustered.png", &[&common[..], &flags[..]].concat());
@@ -367,12 +376,12 @@ fn clustered_renders_with_its_flags() {
 #[test]
 fn gi_methods_and_debug_views_write_images() {
     let small = [
-        "--rsm-size",
-        "32",
-        "--vals",
-        "256",
-        "--view-samples",
-        "32",
+        "--gi-param",
+        "rsm_size=32",
+        "--gi-param",
+        "val_count=256",
+        "--gi-param",
+        "view_samples=32",
         "--exposure",
         "1",
     ];

@@ -10,7 +10,7 @@ use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiSettings, DEFAULT_DEFENSIVE};
+use lightcast_server::gi::{GiMethod, GiParams};
 use lightcast_server::renderer::{Frame, Renderer};
 use lightcast_server::scene::{procedural, Scene};
 
@@ -80,40 +80,31 @@ fn scaled(scene: &Scene, s: f32) -> Scene {
 /// depends on the unit: with eq. 11's importance the BRSM buffers differed by 1.4 % (×0.01) and
 /// 1.6 % (×1000), and by 0.02 % with the clamp removed. Uniform importance still runs the
 /// whole BRSM path (cumulative sums, selection, weighted cache lighting) scale for scale.
-fn methods() -> [GiSettings; 5] {
-    let gi = |method| GiSettings {
-        method,
-        rsm_size: 64,
-        view_samples: 256,
-        val_count: 1024,
-        jitter: 0.5,
-        defensive: DEFAULT_DEFENSIVE,
-        uniform_importance: method == GiMethod::Brsm,
-        occlusion: true,
-        glossy_exponent: None,
-        ..GiSettings::default()
+fn methods() -> [GiParams; 5] {
+    let gi = |method| {
+        GiParams::new(method)
+            .with("rsm_size", 64)
+            .with("view_samples", 256)
+            .with("val_count", 1024)
+            .with("jitter", 0.5)
+            .with("uniform_importance", method == GiMethod::Brsm)
+            .with("occlusion", true)
     };
     [
-        GiSettings::off(),
+        GiParams::new(GiMethod::None),
         gi(GiMethod::Lightskin),
         gi(GiMethod::Brsm),
         // The same random numbers at every scale (the seed and sample indices are equal), so
         // paths differ only where a rounded coordinate flips a hit; two bounces test the ray
         // offsets of the second surface too.
-        GiSettings {
-            method: GiMethod::Reference,
-            bounces: 2,
-            spp: 8,
-            ..GiSettings::default()
-        },
+        GiParams::new(GiMethod::Reference)
+            .with("bounces", 2)
+            .with("spp", 8),
         // Δx and the blur distance are in units of the scene's extent, and a VPL's disk area
         // bounds its form factor: no length constant.
-        GiSettings {
-            method: GiMethod::Clustered,
-            rsm_size: 64,
-            vpl_count: 1024,
-            ..GiSettings::default()
-        },
+        GiParams::new(GiMethod::Clustered)
+            .with("rsm_size", 64)
+            .with("vpl_count", 1024),
     ]
 }
 

@@ -1491,8 +1491,12 @@ async fn requests_get_the_servers_defaults_for_what_they_leave_out() {
         .create_session(json!({"render": {"gi": {"rsm_size": 64}}}), None)
         .await;
     let gi = &created.session.params.render.gi;
-    assert_eq!(gi.rsm_size, 64, "a set field is used as sent");
-    assert_eq!((gi.val_count, gi.indirect_downscale), (512, 2));
+    let number = |name: &str| gi.get(name).and_then(Value::as_u64);
+    assert_eq!(number("rsm_size"), Some(64), "a set field is used as sent");
+    assert_eq!(
+        (number("val_count"), number("indirect_downscale")),
+        (Some(512), Some(2))
+    );
     assert_eq!(created.session.params.render.shadow_map_size, 1024);
     let path = format!("/v1/sessions/{}", created.session.id);
     let patched: Value = server
@@ -1517,10 +1521,23 @@ async fn requests_get_the_servers_defaults_for_what_they_leave_out() {
         "gpu"
     );
     let created = server.create_session(json!({}), None).await;
+    let render = &created.session.params.render;
     assert_eq!(
-        created.session.params.render,
+        lightcast_protocol::RenderParams {
+            gi: lightcast_protocol::GiParams::default(),
+            ..render.clone()
+        },
         lightcast_protocol::RenderParams::default()
     );
+    // Every parameter of every method at its table's default, as `/v1/server` describes it.
+    let info = server.get_json("/v1/server").await;
+    for m in info["gi_methods"].as_array().expect("gi_methods") {
+        for p in m["parameters"].as_array().expect("parameters") {
+            let name = p["name"].as_str().expect("a name");
+            assert_eq!(render.gi.get(name), Some(&p["default"]), "{name}");
+        }
+    }
+    assert_eq!(render.gi.get("rsm_size"), Some(&json!(1024)));
     server.stop().await;
 }
 

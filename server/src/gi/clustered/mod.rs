@@ -14,11 +14,12 @@
 
 pub mod cpu;
 pub mod cpu_visibility;
+pub mod params;
 pub mod passes;
 
 use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
 use super::{
-    DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
+    DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
 use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap, TextureReadback};
@@ -29,10 +30,9 @@ use crate::passes::{
     rsm::{max_rsm_size, Rsm, RsmFace, RsmPass},
     Target,
 };
-use lightcast_protocol::{
-    ClusteredVisibility, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, GiParams, Limits, Stage,
-    View,
-};
+use lightcast_protocol::{GiParams, Stage, View};
+use params::Settings;
+pub use params::Visibility;
 use passes::{
     AtlasLayout, BlurResources, ClusterBuffers, ClusteredParams, ClusteringPass, ImagePass,
     IndirectResources, Val, VisibilityPass, VisibilityTargets, Vpl, BLUR_GROUP, INDIRECT_GROUP,
@@ -40,67 +40,28 @@ use passes::{
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
-/// Fewest VPLs (the issue's lower bound: at least four per pixel with 8×8 interleaving).
-pub const MIN_VPL_COUNT: u32 = 256;
-/// Most VPLs: 3 MiB of VPLs and mapping, and N/B² VPLs per pixel.
-pub const MAX_VPL_COUNT: u32 = 65_536;
-/// Most VALs: each will own a paraboloid depth map and its Fourier basis textures.
-pub const MAX_CLUSTER_COUNT: u32 = 256;
-/// Most k-means iterations per frame (each costs O(N·M)).
-pub const MAX_KMEANS_ITERATIONS: u32 = 64;
-/// Largest interleaving block side (the blur reads B² pixels per pixel).
-pub const MAX_INTERLEAVE: u32 = 16;
-/// Smallest and largest side of a paraboloid map.
-pub const MIN_PARABOLOID_SIZE: u32 = 16;
-pub const MAX_PARABOLOID_SIZE: u32 = 1024;
 /// Most bytes of paraboloid maps and CSSM basis a frame may hold: 30 VALs at 256² take
 /// 75 MiB, 256 VALs fit at 128², 1,024 hard-shadow VPLs at 256².
 pub const MAX_VISIBILITY_BYTES: u64 = 256 << 20;
 
 pub const ENTRY: MethodEntry = MethodEntry {
-    methods: &[GiMethod::Clustered],
+    tables: &[params::TABLE],
     type_id: TypeId::of::<Clustered>,
     validate,
+    check_table: |gi| Settings::of(gi).map(drop),
     create: |r| Ok(Box::new(Clustered::new(r))),
-    describe,
     precompute: None,
     cost,
     knobs: &[
+        Knob::lower(&params::VPL_COUNT),
         Knob {
-            field: "vpl_count",
-            get: |g| g.vpl_count,
-            set: |g, v| g.vpl_count = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "interleave",
-            get: |g| g.interleave,
-            set: |g, v| g.interleave = v,
+            param: &params::INTERLEAVE,
             cheaper: Cheaper::Higher,
             choices: &[],
         },
-        Knob {
-            field: "paraboloid_size",
-            get: |g| g.paraboloid_size,
-            set: |g, v| g.paraboloid_size = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "cluster_count",
-            get: |g| g.cluster_count,
-            set: |g, v| g.cluster_count = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "kmeans_iterations",
-            get: |g| g.kmeans_iterations,
-            set: |g, v| g.kmeans_iterations = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
+        Knob::lower(&params::PARABOLOID_SIZE),
+        Knob::lower(&params::CLUSTER_COUNT),
+        Knob::lower(&params::KMEANS_ITERATIONS),
     ],
     downscales: true,
 };
@@ -114,21 +75,24 @@ pub const ENTRY: MethodEntry = MethodEntry {
 /// Fourier basis), 30 per blur tap.
 fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     cost::rsm(gi, shape, cost);
-    let (n, m) = (f64::from(gi.vpl_count), f64::from(gi.cluster_count));
     let pixels = shape.reduced_pixels(gi);
+    let Ok(gi) = Settings::of(gi) else {
+        return;
+    };
+    let (n, m) = (f64::from(gi.vpl_count), f64::from(gi.cluster_count));
     let block = f64::from(gi.interleave.max(1)).powi(2);
     let texels = f64::from(gi.paraboloid_size).powi(2);
     let (shade_ns, maps, texel_ns) = match gi.visibility {
-        ClusteredVisibility::Cssm => (140.0, m, 650.0),
-        ClusteredVisibility::VplShadows => (90.0, n, 330.0),
-        ClusteredVisibility::Off => (50.0, 0.0, 0.0),
+        Visibility::Cssm => (140.0, m, 650.0),
+        Visibility::VplShadows => (90.0, n, 330.0),
+        Visibility::Off => (50.0, 0.0, 0.0),
     };
     cost.add(
         "VPL shading (pixels × vpl_count / interleave²)",
         pixels * n / block,
         shade_ns,
     );
-    if gi.visibility != ClusteredVisibility::VplShadows {
+    if gi.visibility != Visibility::VplShadows {
         cost.add(
             "k-means (vpl_count × cluster_count × (2 × kmeans_iterations + 2))",
             n * m * f64::from(2 * gi.kmeans_iterations + 2),
@@ -148,30 +112,12 @@ fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     cost.add("blur (pixels × interleave²)", pixels * block, 30.0);
 }
 
-fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
+/// What the table's ranges cannot say: the RSM within the light's faces, the weights not
+/// both zero, the maps a power of two within their memory, the shown light one that exists.
+fn validate(gi: &GiParams, faces: u32) -> Result<(), InvalidSetting> {
+    let g = Settings::of(gi)?;
     let range = InvalidSetting::check_range;
-    let unit = |field, v: f32, lo: f32| {
-        if (lo..=1.0).contains(&v) {
-            Ok(())
-        } else {
-            Err(InvalidSetting::new(
-                field,
-                format!("{v} is outside [{lo}, 1]"),
-            ))
-        }
-    };
     range("rsm_size", g.rsm_size, 16, max_rsm_size(faces))?;
-    range("vpl_count", g.vpl_count, MIN_VPL_COUNT, MAX_VPL_COUNT)?;
-    range("cluster_count", g.cluster_count, 1, MAX_CLUSTER_COUNT)?;
-    range(
-        "kmeans_iterations",
-        g.kmeans_iterations,
-        0,
-        MAX_KMEANS_ITERATIONS,
-    )?;
-    range("interleave", g.interleave, 1, MAX_INTERLEAVE)?;
-    unit("cluster_position_weight", g.cluster_position_weight, 0.0)?;
-    unit("cluster_normal_weight", g.cluster_normal_weight, 0.0)?;
     if g.cluster_position_weight + g.cluster_normal_weight <= 0.0 {
         return Err(InvalidSetting::new(
             "cluster_position_weight",
@@ -179,14 +125,6 @@ fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
              would be 0",
         ));
     }
-    unit("blur_distance", g.blur_distance, 0.0)?;
-    unit("blur_normal", g.blur_normal, -1.0)?;
-    range(
-        "paraboloid_size",
-        g.paraboloid_size,
-        MIN_PARABOLOID_SIZE,
-        MAX_PARABOLOID_SIZE,
-    )?;
     if !g.paraboloid_size.is_power_of_two() {
         return Err(InvalidSetting::new(
             "paraboloid_size",
@@ -196,14 +134,8 @@ fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
             ),
         ));
     }
-    range(
-        "fourier_terms",
-        g.fourier_terms,
-        1,
-        passes::FOURIER_MAX_TERMS,
-    )?;
     let lights = match g.visibility {
-        ClusteredVisibility::VplShadows => g.vpl_count,
+        Visibility::VplShadows => g.vpl_count,
         _ => g.cluster_count,
     };
     range("shadow_light", g.shadow_light, 0, lights - 1)?;
@@ -214,7 +146,7 @@ fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
         g.cluster_count,
     );
     let count = match g.visibility {
-        ClusteredVisibility::VplShadows => format!("{} VPLs", g.vpl_count),
+        Visibility::VplShadows => format!("{} VPLs", g.vpl_count),
         _ => format!("{} VALs", g.cluster_count),
     };
     let side = atlas.tallest_side();
@@ -233,139 +165,6 @@ fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
         ));
     }
     Ok(())
-}
-
-fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
-    let d = lightcast_protocol::GiParams::default();
-    let param =
-        |name: &str, kind, default: serde_json::Value, range: (f64, f64), text: &str| GiParamInfo {
-            name: name.into(),
-            kind,
-            default,
-            min: Some(range.0),
-            max: Some(range.1),
-            choices: Vec::new(),
-            description: text.into(),
-        };
-    let int = GiParamKind::Integer;
-    let num = GiParamKind::Number;
-    vec![GiMethodInfo {
-        method: GiMethod::Clustered,
-        summary: "Clustered visibility (seed 003, §4-6): N VPLs from the RSM, k-means into M \
-                  virtual area lights, one paraboloid convolution soft shadow map per VAL, \
-                  interleaved shading and a geometry-aware blur"
-            .into(),
-        progressive: false,
-        parameters: vec![
-            param(
-                "rsm_size",
-                int,
-                d.rsm_size.into(),
-                (16.0, limits.max_rsm_size.into()),
-                "RSM side per light face in texels; the VPLs are fetched from it",
-            ),
-            param(
-                "vpl_count",
-                int,
-                d.vpl_count.into(),
-                (MIN_VPL_COUNT.into(), MAX_VPL_COUNT.into()),
-                "N: virtual point lights fetched from the RSM at Halton positions (§6)",
-            ),
-            param(
-                "cluster_count",
-                int,
-                d.cluster_count.into(),
-                (1.0, MAX_CLUSTER_COUNT.into()),
-                "M: virtual area lights, k-means clusters of the VPLs (§5)",
-            ),
-            param(
-                "kmeans_iterations",
-                int,
-                d.kmeans_iterations.into(),
-                (0.0, MAX_KMEANS_ITERATIONS.into()),
-                "k-means iterations per frame, restarted every frame from the same seeds, VPL k \
-                 for cluster k (§5.2)",
-            ),
-            param(
-                "cluster_position_weight",
-                num,
-                f64::from(d.cluster_position_weight).into(),
-                (0.0, 1.0),
-                "w_x of the clustering distance (§5.1), per scene extent (bounding-box \
-                 diagonal)",
-            ),
-            param(
-                "cluster_normal_weight",
-                num,
-                f64::from(d.cluster_normal_weight).into(),
-                (0.0, 1.0),
-                "w_alpha of the clustering distance (§5.1), per radian between normals",
-            ),
-            param(
-                "interleave",
-                int,
-                d.interleave.into(),
-                (1.0, MAX_INTERLEAVE.into()),
-                "Interleaved-sampling block side B: each pixel shades N/B^2 VPLs (§6)",
-            ),
-            param(
-                "blur_distance",
-                num,
-                f64::from(d.blur_distance).into(),
-                (0.0, 1.0),
-                "Geometry-aware blur: largest distance between blurred surface points, as a \
-                 fraction of the scene extent (§6: 10 %)",
-            ),
-            param(
-                "blur_normal",
-                num,
-                f64::from(d.blur_normal).into(),
-                (-1.0, 1.0),
-                "Geometry-aware blur: smallest cosine between blurred normals (§6: 0.8)",
-            ),
-            GiParamInfo {
-                name: "visibility".into(),
-                kind: GiParamKind::Choice,
-                default: d.visibility.name().into(),
-                min: None,
-                max: None,
-                choices: ClusteredVisibility::ALL
-                    .iter()
-                    .map(|v| v.name().to_string())
-                    .collect(),
-                description: "VPL visibility: cssm (each VPL shares its VAL's soft shadow \
-                              from a paraboloid convolution soft shadow map, §4.1-4.2), \
-                              vpl_shadows (a hard-shadow paraboloid map per VPL: instant \
-                              radiosity, Figure 10's baseline) or off (every VPL sees every \
-                              point)"
-                    .into(),
-            },
-            param(
-                "paraboloid_size",
-                int,
-                d.paraboloid_size.into(),
-                (MIN_PARABOLOID_SIZE.into(), MAX_PARABOLOID_SIZE.into()),
-                "Side of each paraboloid depth map in texels, a power of two; with the map \
-                 count (M for cssm, N for vpl_shadows) within 256 MiB",
-            ),
-            param(
-                "fourier_terms",
-                int,
-                d.fourier_terms.into(),
-                (1.0, passes::FOURIER_MAX_TERMS.into()),
-                "K: Fourier terms of the convolution soft shadow maps (§4.1); fewer terms \
-                 soften every shadow",
-            ),
-            param(
-                "shadow_light",
-                int,
-                d.shadow_light.into(),
-                (0.0, f64::from(MAX_VPL_COUNT - 1)),
-                "The light whose shadow the val-shadow view shows: a VAL below \
-                 cluster_count, or with vpl_shadows a VPL below vpl_count",
-            ),
-        ],
-    }]
 }
 
 /// What the `clusters` and `vpls` debug views show of a frame: every VPL's RSM texel,
@@ -518,9 +317,9 @@ impl FrameTargets {
         device: &wgpu::Device,
         visibility_pass: &VisibilityPass,
         frame: &FrameInputs,
+        g: &Settings,
         faces: u32,
     ) -> Prepared<'_> {
-        let g = frame.settings;
         if !self
             .rsm
             .as_ref()
@@ -597,7 +396,7 @@ pub struct Clustered {
     /// Whether the last frame ran (the buffers hold its results).
     encoded: bool,
     /// The last frame's visibility.
-    visibility_mode: ClusteredVisibility,
+    visibility_mode: Visibility,
     /// VALs the next frame's k-means starts from instead of the seeds (once).
     next_start: Option<Vec<Val>>,
 }
@@ -659,7 +458,7 @@ impl Clustered {
             targets: FrameTargets::default(),
             extent: (r.scene.bounds.radius() * 2.0).max(f32::MIN_POSITIVE),
             encoded: false,
-            visibility_mode: ClusteredVisibility::default(),
+            visibility_mode: Visibility::default(),
             next_start: None,
         }
     }
@@ -732,7 +531,7 @@ impl Method for Clustered {
         stages: &mut FrameStages,
     ) -> Result<Option<ProgressBuffer>, GiError> {
         let r = frame.resources;
-        let g = frame.settings;
+        let g = &Settings::of(frame.settings)?;
         let faces = light_faces(frame.light, &r.scene.bounds);
         let device = &r.ctx.device;
         let Prepared {
@@ -742,7 +541,7 @@ impl Method for Clustered {
             interleaved,
         } = self
             .targets
-            .prepare(device, &self.visibility, frame, faces.len() as u32);
+            .prepare(device, &self.visibility, frame, g, faces.len() as u32);
         let queue = &r.ctx.queue;
         let rsm_faces: Vec<RsmFace> = faces.iter().map(|f| RsmFace::new(f, g.rsm_size)).collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
@@ -787,8 +586,8 @@ impl Method for Clustered {
         let clustering_group = self.clustering.bind(device, &self.params, rsm, buffers);
         // The maps' lights: the VALs, or every VPL for the hard-shadow baseline.
         let centres = match g.visibility {
-            ClusteredVisibility::VplShadows => &buffers.vpls,
-            ClusteredVisibility::Off | ClusteredVisibility::Cssm => &buffers.vals,
+            Visibility::VplShadows => &buffers.vpls,
+            Visibility::Off | Visibility::Cssm => &buffers.vals,
         };
         let gb = frame.gbuffer;
         let indirect_resources = IndirectResources {
@@ -825,7 +624,7 @@ impl Method for Clustered {
                 .encode_vpls(e, &clustering_group, g.vpl_count)
         })?;
         // Per-VPL shadows need no VALs: the baseline's cost leaves clustering out.
-        if g.visibility != ClusteredVisibility::VplShadows {
+        if g.visibility != Visibility::VplShadows {
             stages.stage(Stage::Clustering, |e| {
                 self.clustering.encode_clustering(
                     e,
@@ -835,7 +634,7 @@ impl Method for Clustered {
                 )
             })?;
         }
-        if g.visibility != ClusteredVisibility::Off {
+        if g.visibility != Visibility::Off {
             stages.stage(Stage::ParaboloidMaps, |e| {
                 self.visibility.encode_maps(
                     device,
@@ -847,7 +646,7 @@ impl Method for Clustered {
                 )
             })?;
         }
-        if g.visibility == ClusteredVisibility::Cssm {
+        if g.visibility == Visibility::Cssm {
             stages.stage(Stage::CssmBasis, |e| {
                 self.visibility.encode_basis(e, visibility)
             })?;
@@ -880,7 +679,7 @@ impl Method for Clustered {
             View::Clusters | View::Vpls => {
                 let (rsm, buffers) = (t.rsm.as_ref()?, t.buffers.as_ref()?);
                 // The per-VPL baseline skips the clustering: its mapping is stale.
-                let own_lights = self.visibility_mode == ClusteredVisibility::VplShadows;
+                let own_lights = self.visibility_mode == Visibility::VplShadows;
                 ClusteredCapture::Clusters {
                     rsm_width: rsm.width(),
                     rsm_height: rsm.height(),

@@ -4,13 +4,13 @@
 //! geometry-aware blur (two [`ImagePass`]es), with the buffers between them
 //! ([`ClusterBuffers`]).
 
+use super::Visibility;
 use crate::gpu::shaders::{self, ShaderSource};
 use crate::passes::bind::BindKind;
 use crate::passes::bind::{self, bind_group, BindGroupDesc};
 use crate::passes::scene_buffers::SceneBuffers;
 use crate::passes::{self, rsm::Rsm, Target, INDIRECT_FORMAT};
 use bytemuck::{Pod, Zeroable};
-use lightcast_protocol::ClusteredVisibility;
 
 /// Format of the interleaved shading before the blur: values are B² times a pixel's share
 /// of the light, beyond f16's range for bright lights.
@@ -52,11 +52,11 @@ pub struct ClusteredParams {
 }
 
 /// `params.visibility` of `shaders/clustered/paraboloid.wgsl`.
-pub fn visibility_code(v: ClusteredVisibility) -> u32 {
+pub fn visibility_code(v: Visibility) -> u32 {
     match v {
-        ClusteredVisibility::Off => 0,
-        ClusteredVisibility::Cssm => 1,
-        ClusteredVisibility::VplShadows => 2,
+        Visibility::Off => 0,
+        Visibility::Cssm => 1,
+        Visibility::VplShadows => 2,
     }
 }
 
@@ -99,11 +99,11 @@ impl AtlasLayout {
 
     /// The atlas of a frame's settings: one map per VAL for `cssm`, per VPL for
     /// `vpl_shadows`, and a 1×1 stand-in with visibility off (its bindings must exist).
-    pub fn of(visibility: ClusteredVisibility, map_size: u32, vpls: u32, vals: u32) -> Self {
+    pub fn of(visibility: Visibility, map_size: u32, vpls: u32, vals: u32) -> Self {
         match visibility {
-            ClusteredVisibility::Off => Self::new(1, 1, false),
-            ClusteredVisibility::Cssm => Self::new(map_size, vals, true),
-            ClusteredVisibility::VplShadows => Self::new(map_size, vpls, false),
+            Visibility::Off => Self::new(1, 1, false),
+            Visibility::Cssm => Self::new(map_size, vals, true),
+            Visibility::VplShadows => Self::new(map_size, vpls, false),
         }
     }
 
@@ -772,10 +772,10 @@ mod tests {
         let b = AtlasLayout::new(128, 1000, false);
         assert_eq!((b.columns, b.rows), (64, 16));
         assert_eq!(b.bytes(), 8192 * 2048 * 4);
-        let off = AtlasLayout::of(ClusteredVisibility::Off, 256, 1024, 30);
+        let off = AtlasLayout::of(Visibility::Off, 256, 1024, 30);
         assert_eq!((off.width(), off.height(), off.basis), (1, 1, false));
         assert_eq!(
-            AtlasLayout::of(ClusteredVisibility::VplShadows, 64, 1024, 30).tiles,
+            AtlasLayout::of(Visibility::VplShadows, 64, 1024, 30).tiles,
             1024
         );
     }

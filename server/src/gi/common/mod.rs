@@ -4,4 +4,5 @@
 
 pub mod bvh;
 pub mod halton;
+pub mod params;
 pub mod triangles;

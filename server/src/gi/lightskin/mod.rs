@@ -13,14 +13,16 @@ pub mod cpu;
 pub mod cumulative_sums;
 pub mod importance;
 pub mod indirect_light;
+pub mod params;
 pub mod proxy_occlusion;
 pub mod sampling;
 pub mod val_select;
 
-use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
+use super::common::params::glossy_exponent;
+use super::cost::{self, Cost, FrameShape, Knob};
 use super::precompute::{BudgetPool, Built, PrecomputeEntry, PrecomputeKey, SceneData, UnitBudget};
 use super::{
-    DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
+    DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
 use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap};
@@ -31,9 +33,7 @@ use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
 use cache_store::CacheStore;
 use caches::{CacheParams, CacheSet};
 use indirect_light::{CacheInputs, IndirectLightPass};
-use lightcast_protocol::{
-    GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, GiParams, Limits, Stage, View,
-};
+use lightcast_protocol::{GiMethod, GiParams, Stage, View};
 use proxy_occlusion::ProxyOcclusionPass;
 use sampling::{SamplingReadback, ValSampling};
 use std::any::{Any, TypeId};
@@ -41,46 +41,25 @@ use std::sync::Arc;
 
 /// Whether frames of `method` need the scene's light caches (precomputed per model).
 pub fn uses_light_caches(method: GiMethod) -> bool {
-    ENTRY.methods.contains(&method)
+    ENTRY.serves(method)
 }
 
 use crate::passes::rsm::max_rsm_size;
 pub use crate::passes::rsm::MAX_RSM_SIZE;
-/// Most view samples for the importance estimate.
-pub const MAX_VIEW_SAMPLES: u32 = 4096;
-/// Most VALs drawn per frame.
-pub const MAX_VAL_COUNT: u32 = 1 << 20;
+pub use params::{Settings, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};
 
 pub const ENTRY: MethodEntry = MethodEntry {
-    methods: &[GiMethod::Lightskin, GiMethod::Brsm],
+    tables: &[params::LIGHTSKIN, params::BRSM],
     type_id: TypeId::of::<LightSkin>,
     validate,
+    check_table: |gi| Settings::of(gi).map(drop),
     create: |r| Ok(Box::new(LightSkin::new(r))),
-    describe,
     precompute: Some(&PRECOMPUTE),
     cost,
     knobs: &[
-        Knob {
-            field: "val_count",
-            get: |g| g.val_count,
-            set: |g, v| g.val_count = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "view_samples",
-            get: |g| g.view_samples,
-            set: |g, v| g.view_samples = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "rsm_size",
-            get: |g| g.rsm_size,
-            set: |g, v| g.rsm_size = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
+        Knob::lower(&params::VAL_COUNT),
+        Knob::lower(&params::VIEW_SAMPLES),
+        Knob::lower(&crate::gi::common::params::RSM_SIZE),
     ],
     downscales: true,
 };
@@ -96,7 +75,12 @@ fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     cost::rsm(gi, shape, cost);
     let caches = shape.set_units as f64;
     let texels = shape.rsm_texels(gi);
-    if gi.method == GiMethod::Brsm {
+    let pixels = shape.reduced_pixels(gi);
+    let brsm = gi.method == GiMethod::Brsm;
+    let Ok(gi) = Settings::of(gi) else {
+        return;
+    };
+    if brsm {
         cost.add(
             "importance (faces × rsm_size² × view_samples)",
             texels * f64::from(gi.view_samples),
@@ -120,7 +104,7 @@ fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     }
     cost.add(
         "cache interpolation (pixels / indirect_downscale²)",
-        shape.reduced_pixels(gi),
+        pixels,
         1000.0,
     );
 }
@@ -130,6 +114,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
     kind: lightcast_protocol::LIGHT_CACHES,
     label: "light caches",
     key: |gi, facts| {
+        let gi = Settings::of(gi)?;
         let defaults = CacheParams::for_area(facts.surface_area, facts.radius);
         let params = CacheParams {
             d_eps: gi.cache_distance.unwrap_or(defaults.d_eps),
@@ -205,126 +190,10 @@ pub fn cache_params(key: &PrecomputeKey) -> CacheParams {
 }
 
 /// Checks the parameters the two methods read.
-fn validate(g: &GiSettings, faces: u32) -> Result<(), InvalidSetting> {
-    let max_rsm = max_rsm_size(faces);
-    let range = InvalidSetting::check_range;
-    range("rsm_size", g.rsm_size, 16, max_rsm)?;
-    if g.method == GiMethod::Brsm {
-        range("view_samples", g.view_samples, 1, MAX_VIEW_SAMPLES)?;
-        range("val_count", g.val_count, 1, MAX_VAL_COUNT)?;
-        if !(0.0..1.0).contains(&g.jitter) {
-            return Err(InvalidSetting::new(
-                "jitter",
-                format!("{} is outside [0, 1)", g.jitter),
-            ));
-        }
-        if !(0.0..=1.0).contains(&g.defensive) {
-            return Err(InvalidSetting::new(
-                "defensive",
-                format!("{} is outside [0, 1]", g.defensive),
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// Parameters of both methods, with the limits of a server configured with `limits`.
-fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
-    let d = lightcast_protocol::GiParams::default();
-    let int = |name: &str, default: u32, min: u32, max: u32, description: &str| GiParamInfo {
-        name: name.into(),
-        kind: GiParamKind::Integer,
-        default: default.into(),
-        min: Some(min.into()),
-        max: Some(max.into()),
-        choices: Vec::new(),
-        description: description.into(),
-    };
-    let shared = [
-        int(
-            "rsm_size",
-            d.rsm_size,
-            16,
-            limits.max_rsm_size,
-            "RSM side per light face in texels; every texel is a virtual area light (VAL)",
-        ),
-        GiParamInfo {
-            name: "occlusion".into(),
-            kind: GiParamKind::Boolean,
-            default: d.occlusion.into(),
-            min: None,
-            max: None,
-            choices: Vec::new(),
-            description: "Dim proxy lights hidden behind other caches (double projection)".into(),
-        },
-        GiParamInfo {
-            name: "cache_distance".into(),
-            kind: GiParamKind::OptionalNumber,
-            default: serde_json::Value::Null,
-            min: Some(0.0),
-            max: None,
-            choices: Vec::new(),
-            description: "Light caches: largest distance d_eps from a surface point to its \
-                          cache, in scene units (null: from the scene's surface area)"
-                .into(),
-        },
-        GiParamInfo {
-            name: "cache_angle".into(),
-            kind: GiParamKind::OptionalNumber,
-            default: serde_json::Value::Null,
-            min: Some(0.0),
-            max: Some(90.0),
-            choices: Vec::new(),
-            description: "Light caches: largest angle theta_eps between surface and cache \
-                          normals in degrees (null: 30)"
-                .into(),
-        },
-    ];
-    let brsm = [
-        int(
-            "val_count",
-            d.val_count,
-            1,
-            limits.max_val_count,
-            "N_sVAL: VALs drawn from the importance distribution per frame (eq. 13)",
-        ),
-        int(
-            "view_samples",
-            d.view_samples,
-            1,
-            limits.max_view_samples,
-            "N_VS: view samples estimating each VAL's importance (eq. 10-11)",
-        ),
-        GiParamInfo {
-            name: "defensive".into(),
-            kind: GiParamKind::Number,
-            default: f64::from(d.defensive).into(),
-            min: Some(0.0),
-            max: Some(1.0),
-            choices: Vec::new(),
-            description: "Weight alpha of a uniform pdf mixed into the selection pdf (0: the \
-                          paper's plain importance sampling)"
-                .into(),
-        },
-    ];
-    vec![
-        GiMethodInfo {
-            method: GiMethod::Lightskin,
-            summary: "LightSkin (seed 004, eq. 3-9): every RSM texel lights every light \
-                      cache; caches are interpolated per pixel"
-                .into(),
-            progressive: false,
-            parameters: shared.to_vec(),
-        },
-        GiMethodInfo {
-            method: GiMethod::Brsm,
-            summary: "Bidirectional RSM (seed 004, eq. 10-15): LightSkin fed by an \
-                      importance-sampled subset of the RSM texels"
-                .into(),
-            progressive: false,
-            parameters: shared.iter().chain(&brsm).cloned().collect(),
-        },
-    ]
+/// What the tables cannot say: the RSM within the light's faces.
+fn validate(gi: &GiParams, faces: u32) -> Result<(), InvalidSetting> {
+    let g = Settings::of(gi)?;
+    InvalidSetting::check_range("rsm_size", g.rsm_size, 16, max_rsm_size(faces))
 }
 
 impl DebugCapture for sampling::SamplingCapture {
@@ -437,7 +306,8 @@ impl Method for LightSkin {
             )
         })?;
         let r = frame.resources;
-        let gi = frame.settings;
+        let method = frame.settings.method;
+        let gi = &Settings::of(frame.settings)?;
         let queue = &r.ctx.queue;
         let device = &r.ctx.device;
         self.sampling.prepare(
@@ -446,7 +316,7 @@ impl Method for LightSkin {
             &light_faces(frame.light, &r.scene.bounds),
             gi,
         );
-        let source = match gi.method {
+        let source = match method {
             GiMethod::Brsm => ValSource::Selected {
                 count: gi.val_count,
             },
@@ -458,7 +328,7 @@ impl Method for LightSkin {
             caches.count,
             self.sampling.rsm(),
             source,
-            gi.glossy_exponent,
+            glossy_exponent(frame.settings),
         );
         let occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
         self.indirect_pass
@@ -489,7 +359,7 @@ impl Method for LightSkin {
         self.sampled = true;
         let sampling = &self.sampling;
         stages.stage(Stage::Rsm, |e| sampling.encode_rsm(e, &r.scene_buffers))?;
-        if gi.method == GiMethod::Brsm {
+        if method == GiMethod::Brsm {
             stages.stage(Stage::Importance, |e| sampling.encode_importance(e, gi))?;
             stages.stage(Stage::CumulativeSums, |e| {
                 sampling.encode_cumulative_sums(e)

@@ -2,12 +2,12 @@
 //! sums → selection of N_sVAL VALs with their weights (eq. 13–15). Owns the passes and the
 //! buffers between them.
 
+use super::Settings;
 use super::{
     cumulative_sums::CumulativeSumsPass,
     importance::{ImportanceParams, ImportancePass, ViewSample},
     val_select::{SelectionBuffers, Val, ValSelectPass},
 };
-use crate::gi::GiSettings;
 use crate::gpu::readback::{stage_buffer, PendingMap, TextureReadback};
 use crate::gpu::{GpuContext, GpuError};
 use crate::passes::{
@@ -108,7 +108,7 @@ impl ValSampling {
         ctx: &GpuContext,
         gbuffer: &GBuffer,
         faces: &[LightFace],
-        settings: &GiSettings,
+        settings: &Settings,
     ) {
         let key = Key {
             rsm_size: settings.rsm_size,
@@ -163,7 +163,7 @@ impl ValSampling {
         ctx: &GpuContext,
         gbuffer: &GBuffer,
         key: Key,
-        settings: &GiSettings,
+        settings: &Settings,
     ) -> Resources {
         let device = &ctx.device;
         let rsm = Rsm::new(device, settings.rsm_size, key.faces);
@@ -230,7 +230,7 @@ impl ValSampling {
         self.rsm_pass.encode(encoder, &self.res().rsm, scene);
     }
 
-    pub fn encode_importance(&self, encoder: &mut wgpu::CommandEncoder, settings: &GiSettings) {
+    pub fn encode_importance(&self, encoder: &mut wgpu::CommandEncoder, settings: &Settings) {
         let res = self.res();
         self.importance_pass.encode(
             encoder,
@@ -246,7 +246,7 @@ impl ValSampling {
             .encode(encoder, &res.sums_group, res.rsm.width());
     }
 
-    pub fn encode_selection(&self, encoder: &mut wgpu::CommandEncoder, settings: &GiSettings) {
+    pub fn encode_selection(&self, encoder: &mut wgpu::CommandEncoder, settings: &Settings) {
         self.select_pass
             .encode(encoder, &self.res().select_group, settings.val_count);
     }
@@ -367,7 +367,7 @@ impl SamplingCapture {
     }
 }
 
-fn importance_params(rsm: &Rsm, settings: &GiSettings) -> ImportanceParams {
+fn importance_params(rsm: &Rsm, settings: &Settings) -> ImportanceParams {
     ImportanceParams {
         rsm_width: rsm.width(),
         rsm_height: rsm.height(),

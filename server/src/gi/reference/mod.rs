@@ -27,16 +27,16 @@
 //! renders start afresh. As a frame's method it adds `spp` samples, then [`resolve`] writes
 //! the mean into the indirect buffer with the convergence sums the frame header reports.
 
+pub mod params;
 pub mod resolve;
 
 use super::common::bvh;
-use super::cost::{Cheaper, Cost, FrameShape, Knob};
+use super::common::params::{emitters, glossy_exponent, BOUNCES};
+use super::cost::{Cost, FrameShape, Knob};
 use super::precompute::{
     BudgetPool, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, UnitBudget,
 };
-use super::{
-    FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry, ProgressBuffer,
-};
+use super::{FrameInputs, GiError, InvalidSetting, Method, MethodEntry, ProgressBuffer};
 use crate::gpu::{readback::read_buffer, shaders, timing::FrameStages, GpuContext, GpuError};
 use crate::passes::bind::{self, bind_group};
 use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
@@ -44,15 +44,12 @@ use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::{self, ParamSlots};
 use crate::scene::{material, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
-use lightcast_protocol::{
-    Camera, GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, GiParams, Light, Limits, Stage,
-};
+use lightcast_protocol::{Camera, GiParams, Light, Stage};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
-/// Most bounces a path may take.
-pub const MAX_BOUNCES: u32 = 16;
+pub use crate::gi::common::params::MAX_BOUNCES;
 /// Samples per pixel one frame or [`PathTracer::accumulate`] call adds at most (one dispatch
 /// each).
 pub const MAX_SAMPLES_PER_CALL: u32 = 1024;
@@ -65,28 +62,16 @@ pub const BAND_RAYS: u64 = 1 << 19;
 const DIRECT_HISTORY: u64 = u64::MAX;
 
 pub const ENTRY: MethodEntry = MethodEntry {
-    methods: &[GiMethod::Reference],
+    tables: &[params::TABLE],
     type_id: TypeId::of::<Reference>,
-    validate,
+    validate: |gi, _| params::Settings::of(gi).map(drop),
+    check_table: |gi| params::Settings::of(gi).map(drop),
     create: |r| Ok(Box::new(Reference::new(r)?)),
-    describe,
     precompute: Some(&PRECOMPUTE),
     cost,
     knobs: &[
-        Knob {
-            field: "spp",
-            get: |g| g.spp,
-            set: |g, v| g.spp = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "bounces",
-            get: |g| g.bounces,
-            set: |g, v| g.bounces = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
+        Knob::lower(&params::SPP),
+        Knob::lower(&crate::gi::common::params::BOUNCES),
     ],
     downscales: false,
 };
@@ -96,7 +81,8 @@ pub const ENTRY: MethodEntry = MethodEntry {
 /// (1.2 µs on the 1,090-triangle Cornell box, measured at 32² with 16 … 256 spp and 2 … 16
 /// bounces); paths that leave the scene early make the real cost lower, never higher.
 fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
-    let rays = shape.pixels() * f64::from(gi.spp) * f64::from(1 + 2 * gi.bounces);
+    let (spp, bounces) = (params::SPP.u32(gi), BOUNCES.u32(gi));
+    let rays = shape.pixels() * f64::from(spp) * f64::from(1 + 2 * bounces);
     let depth = (shape.triangles.max(2) as f64).log2().max(10.0);
     cost.add(
         "path tracing (pixels × spp × (1 + 2 × bounces) rays)",
@@ -156,10 +142,6 @@ pub fn bvh_key() -> PrecomputeKey {
     }
 }
 
-fn validate(g: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {
-    check_counts(g.bounces, g.spp)
-}
-
 fn check_counts(bounces: u32, spp: u32) -> Result<(), InvalidSetting> {
     if !(1..=MAX_BOUNCES).contains(&bounces) {
         return Err(InvalidSetting::new(
@@ -176,42 +158,6 @@ fn check_counts(bounces: u32, spp: u32) -> Result<(), InvalidSetting> {
     Ok(())
 }
 
-fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
-    let d = lightcast_protocol::GiParams::default();
-    vec![GiMethodInfo {
-        method: GiMethod::Reference,
-        summary: "Path-traced reference: the converged indirect light (exact visibility, \
-                  the same BRDF and light), accumulated while nothing changes"
-            .into(),
-        progressive: true,
-        parameters: vec![
-            GiParamInfo {
-                name: "bounces".into(),
-                kind: GiParamKind::Integer,
-                default: d.bounces.into(),
-                min: Some(1.0),
-                max: Some(limits.max_bounces.into()),
-                choices: Vec::new(),
-                description: "Reflections after the visible surface (1: the single bounce \
-                              seed 004 approximates)"
-                    .into(),
-            },
-            super::emitters_param(&d),
-            GiParamInfo {
-                name: "spp".into(),
-                kind: GiParamKind::Integer,
-                default: d.spp.into(),
-                min: Some(1.0),
-                max: Some(limits.max_spp.into()),
-                choices: Vec::new(),
-                description: "Samples per pixel added each frame (a one-shot render takes \
-                              exactly this many)"
-                    .into(),
-            },
-        ],
-    }]
-}
-
 /// Mirrors `TraceParams` in `shaders/reference/path_trace.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -225,7 +171,7 @@ pub struct TraceParams {
     pub seed: u32,
     pub ray_epsilon: f32,
     pub glossy_exponent: f32,
-    /// 1: a path adds the emission of the surfaces it reaches (`GiSettings::emitters`).
+    /// 1: a path adds the emission of the surfaces it reaches (`render.gi.emitters`).
     pub emitters: u32,
     /// First row of this dispatch's band of the image.
     pub row_offset: u32,
@@ -821,7 +767,8 @@ impl PathTracer {
         frame: &FrameInputs,
         stages: &mut FrameStages,
     ) -> Result<Option<ProgressBuffer>, GiError> {
-        let g = frame.settings;
+        let gi = frame.settings;
+        let g = params::Settings::of(gi)?;
         check_counts(g.bounces, g.spp)?;
         let key = AccumKey {
             history: frame.history,
@@ -832,8 +779,8 @@ impl PathTracer {
             settings: ReferenceSettings {
                 bounces: g.bounces,
                 seed: 0,
-                glossy_exponent: g.glossy_exponent,
-                emitters: g.emitters,
+                glossy_exponent: glossy_exponent(gi),
+                emitters: emitters(gi),
             },
         };
         stages.stage(Stage::PathTrace, |e| {

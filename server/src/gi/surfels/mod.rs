@@ -23,19 +23,21 @@ pub mod grid;
 pub mod hierarchy;
 pub mod link_rays;
 pub mod links;
+pub mod params;
 pub mod passes;
 pub mod sampling;
 pub mod sh;
 pub mod store;
 
 use crate::gi::common::bvh::SceneBvh;
-use crate::gi::cost::{Cheaper, Cost, FrameShape, Knob};
+use crate::gi::common::params::{emitters, BOUNCES};
+use crate::gi::cost::{Cost, FrameShape, Knob};
 use crate::gi::precompute::{
     BudgetPool, BuildEnv, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts,
     UnitBudget,
 };
 use crate::gi::{
-    DebugCapture, DebugData, FrameInputs, GiError, GiSettings, InvalidSetting, Method, MethodEntry,
+    DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
 use crate::gpu::readback::{stage_buffer, PendingMap};
@@ -45,65 +47,34 @@ use crate::scene::Scene;
 use glam::Vec3;
 use grid::{CacheGrid, GridError};
 use hierarchy::{ClusterWeights, HierarchyError, Leaf, Tree};
-use lightcast_protocol::{
-    GiMethod, GiMethodInfo, GiParamInfo, GiParamKind, GiParams, Light, Limits, Stage, View,
-};
+use lightcast_protocol::{GiMethod, GiParams, Light, Stage, View};
 use links::{LinkError, SurfelLinks};
-use passes::{Bounce, SurfelBuffers, SurfelPasses, MAX_GPU_BANDS};
+pub use params::{Settings, LINK_RANGE, MAX_SURFELS, MIN_BANDS, MIN_SURFELS};
+use passes::{Bounce, SurfelBuffers, SurfelPasses};
 use sampling::{SamplingError, Surfel};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
-/// Fewest surfels a request may ask for.
-pub const MIN_SURFELS: u32 = 1024;
-/// Fewest and most links per cache a request may ask for.
-pub const LINK_RANGE: (u32, u32) = (16, 512);
 /// Most bytes of link coefficients a request may make: wgpu's default storage binding size,
 /// which every adapter the server accepts offers (larger GPUs bind more, but a request must
 /// not depend on the machine it lands on).
 pub const MAX_LINK_BYTES: u64 = 128 << 20;
-/// Fewest SH bands a request may ask for (the most is [`MAX_GPU_BANDS`]).
-pub const MIN_BANDS: u32 = 2;
 /// Image histories (sessions) whose bounces a scene's surfels keep at once.
 const MAX_HISTORIES: usize = 4;
 
 pub const ENTRY: MethodEntry = MethodEntry {
-    methods: &[GiMethod::Surfels],
+    tables: &[params::TABLE],
     type_id: TypeId::of::<Surfels>,
-    validate,
+    validate: |gi, _| Settings::of(gi).map(drop),
+    check_table: |gi| Settings::of(gi).map(drop),
     create: |r| Ok(Box::new(Surfels::new(r))),
-    describe,
     precompute: Some(&PRECOMPUTE),
     cost,
     knobs: &[
-        Knob {
-            field: "surfel_links",
-            get: |g| g.surfel_links,
-            set: |g, v| g.surfel_links = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "bounces",
-            get: |g| g.bounces,
-            set: |g, v| g.bounces = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "sh_bands",
-            get: |g| g.sh_bands,
-            set: |g, v| g.sh_bands = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
-        Knob {
-            field: "surfel_count",
-            get: |g| g.surfel_count,
-            set: |g, v| g.surfel_count = v,
-            cheaper: Cheaper::Lower,
-            choices: &[],
-        },
+        Knob::lower(&params::SURFEL_LINKS),
+        Knob::lower(&BOUNCES),
+        Knob::lower(&params::SH_BANDS),
+        Knob::lower(&params::SURFEL_COUNT),
     ],
     downscales: true,
 };
@@ -116,6 +87,10 @@ pub const ENTRY: MethodEntry = MethodEntry {
 /// paper-grid bench's wall-clock stages gave up to 50 at 32,768 surfels), 1.5 µs per surfel,
 /// 100 per pixel·coefficient.
 fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
+    let pixels = shape.reduced_pixels(gi);
+    let Ok(gi) = Settings::of(gi) else {
+        return;
+    };
     let steps = f64::from(if shape.all_bounces {
         gi.bounces.max(1)
     } else {
@@ -134,7 +109,7 @@ fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     );
     cost.add(
         "SH shading (pixels × sh_bands²)",
-        shape.reduced_pixels(gi) * coefficients,
+        pixels * coefficients,
         100.0,
     );
 }
@@ -180,13 +155,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
             310.0,
         );
     },
-    knobs: &[Knob {
-        field: "surfel_count",
-        get: |g| g.surfel_count,
-        set: |g, v| g.surfel_count = v,
-        cheaper: Cheaper::Lower,
-        choices: &[],
-    }],
+    knobs: &[Knob::lower(&params::SURFEL_COUNT)],
     build: |scene, key, env| {
         let params = SurfelParams {
             surfels: key.param("surfel_count").unwrap_or(0.0) as u32,
@@ -207,24 +176,11 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
 
 /// The precomputation's parameters of a request, checked, with the default spacing resolved
 /// for the scene.
-fn surfel_params(
-    gi: &lightcast_protocol::GiParams,
-    facts: &SceneFacts,
-) -> Result<SurfelParams, InvalidSetting> {
-    let range = InvalidSetting::check_range;
-    range("surfel_count", gi.surfel_count, MIN_SURFELS, MAX_SURFELS)?;
-    range("surfel_links", gi.surfel_links, LINK_RANGE.0, LINK_RANGE.1)?;
-    range("sh_bands", gi.sh_bands, MIN_BANDS, MAX_GPU_BANDS)?;
-    let spacing = match gi.surfel_cache_spacing {
-        Some(s) if !(s.is_finite() && s > 0.0) => {
-            return Err(InvalidSetting::new(
-                "surfel_cache_spacing",
-                format!("{s} must be a positive number"),
-            ))
-        }
-        Some(s) => s,
-        None => CacheGrid::default_spacing(facts.extent),
-    };
+fn surfel_params(gi: &GiParams, facts: &SceneFacts) -> Result<SurfelParams, InvalidSetting> {
+    let gi = Settings::of(gi)?;
+    let spacing = gi
+        .surfel_cache_spacing
+        .unwrap_or_else(|| CacheGrid::default_spacing(facts.extent));
     // The lattice's own limits (at most `grid::MAX_CACHES`) before anything is queued.
     let grid = CacheGrid::new(Vec3::ZERO, facts.extent, spacing)
         .map_err(|e| InvalidSetting::new("surfel_cache_spacing", e.to_string()))?;
@@ -269,9 +225,6 @@ fn surfel_key(params: &SurfelParams) -> PrecomputeKey {
         ],
     }
 }
-/// The most surfels the exact clustering is run on (node ids and memory stay small; the paper
-/// goes to 128k).
-pub const MAX_SURFELS: u32 = 256 * 1024;
 
 /// What the precomputation is built from.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -288,16 +241,15 @@ pub struct SurfelParams {
 }
 
 impl Default for SurfelParams {
-    /// The protocol's defaults (`GiParams`: the paper's 32k surfels and 128 links, 3 bands), so
-    /// the service, the offline tools and the bench cannot disagree (issue 32: they were
-    /// written twice).
+    /// The table's defaults (the paper's 32k surfels and 128 links, 3 bands), so the service,
+    /// the offline tools and the bench cannot disagree (issue 32: they were written twice).
     fn default() -> Self {
-        let g = lightcast_protocol::GiParams::default();
+        let none = GiParams::new(GiMethod::Surfels);
         Self {
-            surfels: g.surfel_count,
-            cache_spacing: g.surfel_cache_spacing,
-            links: g.surfel_links,
-            bands: g.sh_bands,
+            surfels: params::SURFEL_COUNT.u32(&none),
+            cache_spacing: None,
+            links: params::SURFEL_LINKS.u32(&none),
+            bands: params::SH_BANDS.u32(&none),
         }
     }
 }
@@ -424,75 +376,6 @@ pub fn precompute(
         grid,
         links,
     })
-}
-
-fn validate(g: &GiSettings, _faces: u32) -> Result<(), InvalidSetting> {
-    InvalidSetting::check_range("bounces", g.bounces, 1, crate::gi::reference::MAX_BOUNCES)
-}
-
-fn describe(limits: &Limits) -> Vec<GiMethodInfo> {
-    let d = lightcast_protocol::GiParams::default();
-    let int = |name: &str, default: u32, min: u32, max: u32, text: &str| GiParamInfo {
-        name: name.into(),
-        kind: GiParamKind::Integer,
-        default: default.into(),
-        min: Some(min.into()),
-        max: Some(max.into()),
-        choices: Vec::new(),
-        description: text.into(),
-    };
-    vec![GiMethodInfo {
-        method: GiMethod::Surfels,
-        summary: "Surfels (seed 001): surfels lit by the light and by the previous bounce, \
-                  flux pulled up a hierarchy, SH caches lit over precomputed links and \
-                  interpolated per pixel; multi-bounce, one bounce more per frame"
-            .into(),
-        progressive: false,
-        parameters: vec![
-            int(
-                "bounces",
-                d.bounces,
-                1,
-                limits.max_bounces,
-                "Bounces of indirect light (1: single bounce, as the other methods); a \
-                 session adds one per frame while the light stays put, a render and a \
-                 session's still compute all",
-            ),
-            super::emitters_param(&d),
-            int(
-                "surfel_count",
-                d.surfel_count,
-                MIN_SURFELS,
-                MAX_SURFELS,
-                "n_S: surfels of equal area over every triangle (a precomputation per value)",
-            ),
-            GiParamInfo {
-                name: "surfel_cache_spacing".into(),
-                kind: GiParamKind::OptionalNumber,
-                default: serde_json::Value::Null,
-                min: Some(0.0),
-                max: None,
-                choices: Vec::new(),
-                description: "Distance between neighbouring SH caches in scene units (null: \
-                              about 8,192 caches over the scene's bounds)"
-                    .into(),
-            },
-            int(
-                "surfel_links",
-                d.surfel_links,
-                LINK_RANGE.0,
-                LINK_RANGE.1,
-                "n_L: links from every cache to the hierarchy nodes that light it most",
-            ),
-            int(
-                "sh_bands",
-                d.sh_bands,
-                MIN_BANDS,
-                MAX_GPU_BANDS,
-                "SH bands l of the links and caches (l² coefficients)",
-            ),
-        ],
-    }]
 }
 
 /// What a history's caches were lit by: a change restarts its bounces.
@@ -747,12 +630,12 @@ impl Surfels {
         stages: &mut FrameStages,
     ) -> Result<(), GiError> {
         let r = frame.resources;
-        let wanted = frame.settings.bounces.max(1);
+        let wanted = Settings::of(frame.settings)?.bounces.max(1);
         let lit_by = LitBy {
             light: frame.light.clone(),
             shadow_map_size: frame.shadow.size,
             bounces: wanted,
-            emitters: frame.settings.emitters,
+            emitters: emitters(frame.settings),
         };
         // A render, and a session's still, show every bounce.
         let one_shot = frame.history.is_none() || frame.still;
@@ -784,7 +667,7 @@ impl Surfels {
                         light: &r.light,
                         shadow: frame.shadow,
                         previous: previous.map(|i| &history.buffers[i]),
-                        emitters: frame.settings.emitters,
+                        emitters: emitters(frame.settings),
                     },
                 )
             })?;
@@ -989,12 +872,11 @@ mod tests {
     #[test]
     fn link_coefficients_beyond_one_binding_are_refused_before_precomputing() {
         let facts = SceneFacts::of(&procedural::cornell_box());
-        let gi = |links, bands| lightcast_protocol::GiParams {
-            method: GiMethod::Surfels,
-            surfel_cache_spacing: Some(0.05),
-            surfel_links: links,
-            sh_bands: bands,
-            ..Default::default()
+        let gi = |links: u32, bands: u32| {
+            GiParams::new(GiMethod::Surfels)
+                .with("surfel_cache_spacing", 0.05)
+                .with("surfel_links", links)
+                .with("sh_bands", bands)
         };
         // Some 80,000 caches 0.05 apart: 64 links × 9 coefficients × 4 bytes each exceed
         // 128 MiB, 32 links or 4 coefficients do not.

@@ -56,7 +56,7 @@ pub struct LightParams {
     pub surfel_count: u32,
     pub feedback: u32,
     pub offset: f32,
-    /// 1: add the surfels' emission (`GiSettings::emitters`).
+    /// 1: add the surfels' emission (`render.gi.emitters`).
     pub emitters: u32,
 }
 

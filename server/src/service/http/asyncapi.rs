@@ -6,20 +6,19 @@
 //! references resolve unchanged, and marked as OpenAPI 3.1 schemas. Built by hand because no
 //! maintained Rust crate generates AsyncAPI 3 from serde/utoipa types.
 
-use super::{ApiDoc, ApiError};
+use super::ApiError;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use lightcast_protocol::frame::FRAME_VERSION;
 use lightcast_protocol::{Stage, API_VERSION};
 use serde_json::{json, Value};
-use utoipa::OpenApi;
 
 /// How the message schemas are written (AsyncAPI's `schemaFormat`).
 const SCHEMA_FORMAT: &str = "application/vnd.oai.openapi+json;version=3.1.0";
 
 /// The AsyncAPI document of a session's WebSocket.
 pub fn asyncapi_value() -> Result<Value, serde_json::Error> {
-    let openapi = serde_json::to_value(ApiDoc::openapi())?;
+    let openapi = super::openapi_value()?;
     let schemas = openapi
         .pointer("/components/schemas")
         .cloned()

@@ -490,9 +490,24 @@ pub async fn openapi_json() -> Response {
     }
 }
 
+/// The OpenAPI document: the protocol's types, with `render.gi`'s parameters from the GI
+/// methods' tables (the protocol names none of them).
+pub fn openapi_value() -> Result<serde_json::Value, serde_json::Error> {
+    let mut doc = serde_json::to_value(ApiDoc::openapi())?;
+    if let Some(serde_json::Value::Object(schema)) = doc.pointer_mut("/components/schemas/GiParams")
+    {
+        if let Some(serde_json::Value::Object(props)) = schema.get_mut("properties") {
+            props.extend(crate::gi::params::openapi_properties());
+        }
+        // Every parameter is listed now; the server refuses any other field.
+        schema.insert("additionalProperties".into(), false.into());
+    }
+    Ok(doc)
+}
+
 /// The OpenAPI document, pretty-printed.
 pub fn openapi_document() -> Result<String, serde_json::Error> {
-    ApiDoc::openapi().to_pretty_json()
+    serde_json::to_string_pretty(&openapi_value()?)
 }
 
 /// The service's router.

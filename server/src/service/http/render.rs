@@ -3,6 +3,7 @@
 use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_scene_files};
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
+use crate::gi::reference::params::SPP;
 use crate::service::cost::{check_frame, chunk_spp, one_shot_spp, request_seconds, Submission};
 use crate::service::encode;
 use crate::service::error::ApiError;
@@ -202,11 +203,9 @@ pub async fn render(
             let spp = req.compare_spp.unwrap_or(DEFAULT_COMPARE_SPP);
             // The comparison render's parameters, checked like any reference render's; its
             // sample count is the request's `compare_spp`.
-            let truth = lightcast_protocol::GiParams {
-                method: lightcast_protocol::GiMethod::Reference,
-                spp,
-                ..req.render.gi.clone()
-            };
+            let mut truth = req.render.gi.clone();
+            truth.method = lightcast_protocol::GiMethod::Reference;
+            truth.set(SPP.name, spp);
             check_gi_ranges(&truth, &state.limits).map_err(|mut e| {
                 if e.body.field.as_deref() == Some("gi.spp") {
                     e.body.field = Some("compare_spp".into());
@@ -237,10 +236,10 @@ pub async fn render(
             &set_units,
             compare_spp,
             &state.limits,
-            req.render.gi.spp,
+            SPP.u32(&req.render.gi),
         );
-        req.render.gi.spp = spp;
-        resolved.settings.gi.spp = spp;
+        req.render.gi.set(SPP.name, spp);
+        resolved.settings.gi.set(SPP.name, spp);
     }
     check_frame(
         &req.render.gi,
@@ -258,10 +257,7 @@ pub async fn render(
     })?;
     resolved.settings.capture_hdr |= raw;
     let compared = match compare {
-        Some((method, _)) => entry.precompute_key(&lightcast_protocol::GiParams {
-            method,
-            ..Default::default()
-        })?,
+        Some((method, _)) => entry.precompute_key(&lightcast_protocol::GiParams::new(method))?,
         None => None,
     };
     // Both are queued before either is waited for, so they are built back to back.

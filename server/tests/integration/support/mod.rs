@@ -76,7 +76,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         shadow_map_size: 256,
         capture_hdr: true,
         debug_view: lightcast_protocol::View::Final,
-        gi: lightcast_server::gi::GiSettings::off(),
+        gi: lightcast_server::gi::GiParams::new(lightcast_server::gi::GiMethod::None),
         history: None,
         still: false,
         yuv420: false,
@@ -87,7 +87,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
 pub fn indirect_with(
     renderer: &mut Renderer,
     settings: &RenderSettings,
-    gi: lightcast_server::gi::GiSettings,
+    gi: lightcast_server::gi::GiParams,
 ) -> Vec<[f32; 4]> {
     let s = RenderSettings {
         gi,

@@ -1,0 +1,93 @@
+//! The parameters several methods read, each written once (see [`crate::gi::params`]); a
+//! method lists the ones it reads in its own table.
+
+use crate::gi::params::{Default, Param};
+use lightcast_protocol::GiParams;
+
+/// The reflective shadow map's side (`lightskin`, `brsm`, `clustered`). The software profile's
+/// 112²: at 128² `lightskin`'s frame on the Cornell box (every texel a VAL lighting every
+/// cache) was estimated at 2.08 s, over a CPU adapter's 2 s frame limit, so a newcomer's
+/// one-shot of it was refused (issue 31); at 112² it is 1.7 s, and BRSM's frames at the
+/// defaults take the same time within noise (1.0–1.2 s for `curl -d '{}'` on lavapipe).
+pub const RSM_SIZE: Param = Param::integer(
+    "rsm_size",
+    1024,
+    (16, crate::passes::rsm::MAX_RSM_SIZE),
+    "RSM side per light face; every texel is a virtual light (a VAL for LightSkin and BRSM, \
+     a VPL candidate for clustered)",
+)
+.limit(|l| l.max_rsm_size.into())
+.software(Default::Int(112))
+.unit("texels");
+
+/// Largest Phong exponent accepted (a mirror-like lobe; beyond it the lobe is a single texel).
+pub const MAX_GLOSSY_EXPONENT: f32 = 10_000.0;
+
+/// Every frame's: the materials' Phong exponent, in direct and indirect shading alike.
+pub const GLOSSY_EXPONENT: Param = Param::optional_number(
+    "glossy_exponent",
+    (0.0, MAX_GLOSSY_EXPONENT as f64),
+    "Phong exponent k (seed 004, eq. 3-4) for every material, in direct and indirect shading \
+     alike; null keeps the materials' own",
+)
+.above_min();
+
+/// The frame's glossy exponent override (`None`: the materials' own).
+pub fn glossy_exponent(gi: &GiParams) -> Option<f32> {
+    gi.get(GLOSSY_EXPONENT.name)
+        .and_then(serde_json::Value::as_f64)
+        .map(|k| k as f32)
+}
+
+/// The renderer's, for the methods that approximate (`MethodEntry::downscales`). The software
+/// profile's 2: a quarter of the pixels, about 2 GI frames a second in a viewer-sized stream
+/// on lavapipe instead of 0.25 (`bench/first-minute.sh`).
+pub const INDIRECT_DOWNSCALE: Param = Param::integer(
+    "indirect_downscale",
+    1,
+    (1, crate::passes::indirect_resolution::MAX_DOWNSCALE),
+    "Indirect light at 1/n of the output's width and height (n is 1, 2 or 4), brought back \
+     with an edge-aware (joint bilateral) upsample; 1: full resolution",
+)
+.software(Default::Int(2));
+
+/// The frame's indirect downscale (1 for a method that does not downscale, whatever it says).
+pub fn indirect_downscale(gi: &GiParams) -> u32 {
+    if crate::gi::entry(gi.method).1.downscales {
+        INDIRECT_DOWNSCALE.u32(gi)
+    } else {
+        1
+    }
+}
+
+/// Most bounces a multi-bounce method computes.
+pub const MAX_BOUNCES: u32 = 16;
+
+/// `reference` and `surfels`: reflections after the visible surface.
+pub const BOUNCES: Param = Param::integer(
+    "bounces",
+    1,
+    (1, MAX_BOUNCES),
+    "Reflections after the visible surface (1: the single bounce seed 004 approximates); \
+     surfels add one per frame while the light stays put, a render and a session's still \
+     compute all",
+)
+.limit(|l| l.max_bounces.into());
+
+/// `reference` and `surfels`: emissive surfaces as area lights.
+pub const EMITTERS: Param = Param::boolean(
+    "emitters",
+    true,
+    "Emissive surfaces light the scene as area lights besides the punctual light; null (the \
+     default): on unless the light is the scene's stand-in for them (its default light when \
+     it has no lights of its own), whose light would count twice",
+)
+.or_null();
+
+/// Whether the frame's emissive surfaces light the scene: `null` is resolved by the service
+/// from the scene (`default_light::emitters_for`); without a scene, on.
+pub fn emitters(gi: &GiParams) -> bool {
+    gi.get(EMITTERS.name)
+        .and_then(serde_json::Value::as_bool)
+        .unwrap_or(true)
+}

@@ -1,0 +1,655 @@
+//! Parameter tables: every GI parameter is written once, as a [`Param`] in the folder of the
+//! method that reads it (or here and in [`common`] for those several methods share), and
+//! everything else is derived from its row: the request's validation with the field's full
+//! path, `/v1/server`'s description, the OpenAPI bounds, both CLIs' `--gi-param`, the software
+//! profile's defaults and the README's table.
+//!
+//! A method reads its parameters as a typed struct ([`read`]), deserialised from its table's
+//! values; the struct and the table are tied by a test over the registry (a field the table
+//! lacks, or a row the struct lacks, fails to deserialise).
+
+use super::common::params as common;
+use super::InvalidSetting;
+use lightcast_protocol::{GiMethod, GiParamInfo, GiParamKind, GiParams, Limits};
+use serde::de::DeserializeOwned;
+use serde_json::{Map, Value};
+
+/// What values a parameter takes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Kind {
+    /// A whole number within the range.
+    Integer,
+    /// A finite number within the range.
+    Number,
+    Boolean,
+    /// One of these names.
+    Choice(&'static [&'static str]),
+}
+
+/// A value a table can hold in a `const`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Default {
+    Int(u32),
+    Float(f64),
+    Bool(bool),
+    Name(&'static str),
+    /// `null`: the parameter's documentation says what the server derives instead.
+    Null,
+}
+
+impl Default {
+    pub fn json(self) -> Value {
+        match self {
+            Self::Int(v) => v.into(),
+            Self::Float(v) => v.into(),
+            Self::Bool(v) => v.into(),
+            Self::Name(v) => v.into(),
+            Self::Null => Value::Null,
+        }
+    }
+}
+
+/// One row of a method's parameter table: a field of `render.gi`.
+#[derive(Clone, Copy, Debug)]
+pub struct Param {
+    /// The field's name in `render.gi` (its wire name; `--gi-param NAME=…`).
+    pub name: &'static str,
+    pub kind: Kind,
+    /// Whether `null` is accepted (what the server does then is in `doc`).
+    pub nullable: bool,
+    pub default: Default,
+    /// The default of the software profile (CPU adapters, see `service::defaults`), where it
+    /// differs.
+    pub software: Option<Default>,
+    /// Smallest value (numbers).
+    pub min: f64,
+    /// Largest value any server accepts (numbers): the renderer's own limit.
+    pub max: f64,
+    /// `min` itself is outside the range.
+    pub min_exclusive: bool,
+    /// `max` itself is outside the range.
+    pub max_exclusive: bool,
+    /// This server's largest value where the operator configures it (within `max`).
+    pub limit: Option<fn(&Limits) -> f64>,
+    /// The unit of a number, for people (`texels`, `scene units`); empty for none.
+    pub unit: &'static str,
+    pub doc: &'static str,
+}
+
+impl Param {
+    const fn new(name: &'static str, kind: Kind, default: Default, doc: &'static str) -> Self {
+        Self {
+            name,
+            kind,
+            nullable: false,
+            default,
+            software: None,
+            min: f64::NEG_INFINITY,
+            max: f64::INFINITY,
+            min_exclusive: false,
+            max_exclusive: false,
+            limit: None,
+            unit: "",
+            doc,
+        }
+    }
+
+    /// A whole number in `min..=max`.
+    pub const fn integer(
+        name: &'static str,
+        default: u32,
+        (min, max): (u32, u32),
+        doc: &'static str,
+    ) -> Self {
+        let mut p = Self::new(name, Kind::Integer, Default::Int(default), doc);
+        p.min = min as f64;
+        p.max = max as f64;
+        p
+    }
+
+    /// A number in `min..=max`.
+    pub const fn number(
+        name: &'static str,
+        default: f64,
+        (min, max): (f64, f64),
+        doc: &'static str,
+    ) -> Self {
+        let mut p = Self::new(name, Kind::Number, Default::Float(default), doc);
+        p.min = min;
+        p.max = max;
+        p
+    }
+
+    /// A number or `null` (its default), in `min..=max`.
+    pub const fn optional_number(
+        name: &'static str,
+        (min, max): (f64, f64),
+        doc: &'static str,
+    ) -> Self {
+        let mut p = Self::number(name, 0.0, (min, max), doc);
+        p.default = Default::Null;
+        p.nullable = true;
+        p
+    }
+
+    pub const fn boolean(name: &'static str, default: bool, doc: &'static str) -> Self {
+        Self::new(name, Kind::Boolean, Default::Bool(default), doc)
+    }
+
+    /// One of `choices`.
+    pub const fn choice(
+        name: &'static str,
+        default: &'static str,
+        choices: &'static [&'static str],
+        doc: &'static str,
+    ) -> Self {
+        Self::new(name, Kind::Choice(choices), Default::Name(default), doc)
+    }
+
+    /// `null` accepted, and the default.
+    pub const fn or_null(mut self) -> Self {
+        self.nullable = true;
+        self.default = Default::Null;
+        self
+    }
+
+    /// The software profile's default.
+    pub const fn software(mut self, value: Default) -> Self {
+        self.software = Some(value);
+        self
+    }
+
+    /// The range is `(min, max]`.
+    pub const fn above_min(mut self) -> Self {
+        self.min_exclusive = true;
+        self
+    }
+
+    /// The range is `[min, max)`.
+    pub const fn below_max(mut self) -> Self {
+        self.max_exclusive = true;
+        self
+    }
+
+    /// This server's largest value, from its limits.
+    pub const fn limit(mut self, limit: fn(&Limits) -> f64) -> Self {
+        self.limit = Some(limit);
+        self
+    }
+
+    pub const fn unit(mut self, unit: &'static str) -> Self {
+        self.unit = unit;
+        self
+    }
+
+    /// The software profile's default (the default where the table gives none).
+    pub fn software_default(&self) -> Value {
+        self.software.unwrap_or(self.default).json()
+    }
+
+    /// The largest value on a server with `limits` (the renderer's own without).
+    pub fn max_on(&self, limits: Option<&Limits>) -> f64 {
+        match (self.limit, limits) {
+            (Some(limit), Some(limits)) => limit(limits).min(self.max),
+            _ => self.max,
+        }
+    }
+
+    /// Whether the parameter is a number with a range.
+    fn ranged(&self) -> bool {
+        matches!(self.kind, Kind::Integer | Kind::Number)
+    }
+
+    /// Checks `value`'s type and, with `range`, that it is within the range on a server with
+    /// `limits` (the renderer's own range without).
+    pub fn check(&self, value: &Value, range: bool, limits: Option<&Limits>) -> Result<(), String> {
+        if value.is_null() {
+            return if self.nullable {
+                Ok(())
+            } else {
+                Err(format!("must be {}, not null", self.kind_words()))
+            };
+        }
+        let number = match (self.kind, value) {
+            (Kind::Integer, Value::Number(n))
+                if n.as_u64().is_some_and(|v| v <= u32::MAX as u64) =>
+            {
+                n.as_f64()
+            }
+            (Kind::Number, Value::Number(n)) => n.as_f64(),
+            (Kind::Boolean, Value::Bool(_)) => None,
+            (Kind::Choice(choices), Value::String(s)) => {
+                return if choices.contains(&s.as_str()) {
+                    Ok(())
+                } else {
+                    Err(format!("{s:?} is not one of {}", choices.join(", ")))
+                };
+            }
+            _ => return Err(format!("must be {}, not {value}", self.kind_words())),
+        };
+        let (Some(v), true) = (number, range) else {
+            return Ok(());
+        };
+        let max = self.max_on(limits);
+        let above = if self.max_exclusive {
+            v >= max
+        } else {
+            v > max
+        };
+        let below = if self.min_exclusive {
+            v <= self.min
+        } else {
+            v < self.min
+        };
+        if below || above {
+            let server = if limits.is_some() {
+                "this server's "
+            } else {
+                ""
+            };
+            return Err(format!(
+                "{v} is outside {server}range {}",
+                self.range_words(max)
+            ));
+        }
+        Ok(())
+    }
+
+    /// `[min, max]` with its open ends.
+    fn range_words(&self, max: f64) -> String {
+        let start = if self.min_exclusive { "(" } else { "[" };
+        let end = if self.max_exclusive || !max.is_finite() {
+            ")"
+        } else {
+            "]"
+        };
+        let max = if max.is_finite() {
+            max.to_string()
+        } else {
+            "∞".into()
+        };
+        format!("{start}{}, {max}{end}", self.min)
+    }
+
+    fn kind_words(&self) -> String {
+        let what = match self.kind {
+            Kind::Integer => "a whole number",
+            Kind::Number => "a number",
+            Kind::Boolean => "true or false",
+            Kind::Choice(_) => "one of its names (a string)",
+        };
+        if self.nullable {
+            format!("{what} or null")
+        } else {
+            what.to_string()
+        }
+    }
+
+    /// The value `gi` gives the parameter, else its default.
+    pub fn value<'a>(&self, gi: &'a GiParams) -> std::borrow::Cow<'a, Value> {
+        gi.get(self.name)
+            .map(std::borrow::Cow::Borrowed)
+            .unwrap_or_else(|| std::borrow::Cow::Owned(self.default.json()))
+    }
+
+    /// An integer's value in `gi`, its default where `gi` has none or not a whole number
+    /// (requests are checked before anything reads them; this is for estimates).
+    pub fn u32(&self, gi: &GiParams) -> u32 {
+        let fallback = match self.default {
+            Default::Int(v) => v,
+            _ => 0,
+        };
+        self.value(gi)
+            .as_u64()
+            .and_then(|v| u32::try_from(v).ok())
+            .unwrap_or(fallback)
+    }
+
+    /// A boolean's value in `gi` (as [`Param::u32`]).
+    pub fn bool(&self, gi: &GiParams) -> bool {
+        self.value(gi)
+            .as_bool()
+            .unwrap_or(self.default == Default::Bool(true))
+    }
+
+    /// `/v1/server`'s description of the parameter on a server with `limits`.
+    pub fn info(&self, limits: &Limits) -> GiParamInfo {
+        let kind = match self.kind {
+            Kind::Integer => GiParamKind::Integer,
+            Kind::Number if self.nullable => GiParamKind::OptionalNumber,
+            Kind::Number => GiParamKind::Number,
+            Kind::Boolean => GiParamKind::Boolean,
+            Kind::Choice(_) => GiParamKind::Choice,
+        };
+        let bound = |v: f64| (self.ranged() && v.is_finite()).then_some(v);
+        GiParamInfo {
+            name: self.name.into(),
+            kind,
+            default: self.default.json(),
+            min: bound(self.min),
+            max: bound(self.max_on(Some(limits))),
+            choices: match self.kind {
+                Kind::Choice(c) => c.iter().map(|c| c.to_string()).collect(),
+                _ => Vec::new(),
+            },
+            unit: (!self.unit.is_empty()).then(|| self.unit.to_string()),
+            description: self.doc.into(),
+        }
+    }
+}
+
+/// One method's table and what `/v1/server` says of it.
+#[derive(Debug)]
+pub struct MethodTable {
+    pub method: GiMethod,
+    /// One line for people, naming the paper and equations.
+    pub summary: &'static str,
+    /// Frames refine while nothing changes.
+    pub progressive: bool,
+    /// The parameters the method reads, besides the frame's ([`frame_params`]).
+    pub params: &'static [&'static Param],
+}
+
+/// The method's parameters as `T`: each of `table`'s, from `gi` or its default, checked
+/// against its type and the renderer's range (the service has checked this server's range).
+pub fn read<T: DeserializeOwned>(table: &[&Param], gi: &GiParams) -> Result<T, InvalidSetting> {
+    let mut values = Map::new();
+    for p in table {
+        let value = p.value(gi);
+        p.check(&value, true, None)
+            .map_err(|reason| InvalidSetting::new(p.name, reason))?;
+        values.insert(p.name.to_string(), value.into_owned());
+    }
+    serde_json::from_value(Value::Object(values)).map_err(|e| {
+        InvalidSetting::new(
+            "method",
+            format!("{}'s parameters do not match its table: {e}", gi.method),
+        )
+    })
+}
+
+/// The parameters of every frame, whatever its method: the renderer's own.
+pub fn frame_params(method: GiMethod) -> Vec<&'static Param> {
+    let mut params = vec![&common::GLOSSY_EXPONENT];
+    if super::entry(method).1.downscales {
+        params.push(&common::INDIRECT_DOWNSCALE);
+    }
+    params
+}
+
+/// Every parameter `method` reads: its table's, then the frame's.
+pub fn of(method: GiMethod) -> Vec<&'static Param> {
+    let table = super::table(method);
+    let mut params: Vec<&'static Param> = table.params.to_vec();
+    params.extend(frame_params(method));
+    params
+}
+
+/// Every parameter of every registered method, each once, in registry order.
+pub fn all() -> Vec<&'static Param> {
+    let mut all: Vec<&'static Param> = Vec::new();
+    for &method in GiMethod::ALL {
+        for p in of(method) {
+            if !all.iter().any(|q| q.name == p.name) {
+                all.push(p);
+            }
+        }
+    }
+    all
+}
+
+/// `gi` with every parameter its method reads, at its value or default (and no other): what
+/// a report says the frame was rendered with.
+pub fn resolved(gi: &GiParams) -> GiParams {
+    let mut out = GiParams::new(gi.method);
+    for p in of(gi.method) {
+        out.set(p.name, p.value(gi).into_owned());
+    }
+    out
+}
+
+/// The row of parameter `name`, if a method has it.
+pub fn find(name: &str) -> Option<&'static Param> {
+    all().into_iter().find(|p| p.name == name)
+}
+
+/// Why a request's `gi` is refused: the field under `gi` and the reason.
+#[derive(Debug, PartialEq)]
+pub struct Refusal {
+    pub field: String,
+    pub reason: String,
+}
+
+/// Checks a request's GI parameters on a server with `limits`: every field must be a
+/// parameter of some method and of its type (so a misspelt name is an error, not a silently
+/// ignored value), and the frame's method's own must be within this server's range; the
+/// other methods' are kept for when the client switches to them.
+pub fn check_request(gi: &GiParams, limits: &Limits) -> Result<(), Refusal> {
+    let own = of(gi.method);
+    for (name, value) in &gi.values {
+        let Some(param) = find(name) else {
+            return Err(Refusal {
+                field: name.clone(),
+                reason: format!(
+                    "unknown GI parameter; {} reads {}",
+                    gi.method,
+                    own.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
+                ),
+            });
+        };
+        let range = own.iter().any(|p| p.name == param.name);
+        param
+            .check(value, range, Some(limits))
+            .map_err(|reason| Refusal {
+                field: name.clone(),
+                reason,
+            })?;
+    }
+    Ok(())
+}
+
+/// Every parameter at its default (`software`: the software profile's), as `render.gi`'s
+/// fields besides `method`.
+pub fn defaults(software: bool) -> std::collections::BTreeMap<String, Value> {
+    all()
+        .into_iter()
+        .map(|p| {
+            let d = if software {
+                p.software_default()
+            } else {
+                p.default.json()
+            };
+            (p.name.to_string(), d)
+        })
+        .collect()
+}
+
+/// The README's parameter table, derived from the tables (a test keeps the README's copy).
+pub fn markdown_table() -> String {
+    let mut s = String::from(
+        "| parameter | methods | type | default | software default | range | unit | meaning |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    );
+    for p in all() {
+        let methods: Vec<&str> = GiMethod::ALL
+            .iter()
+            .filter(|&&m| of(m).iter().any(|q| q.name == p.name))
+            .map(|m| m.name())
+            .collect();
+        let kind = match p.kind {
+            Kind::Integer => "integer".to_string(),
+            Kind::Number => "number".to_string(),
+            Kind::Boolean => "boolean".to_string(),
+            Kind::Choice(c) => c.join(" \\| "),
+        };
+        let kind = if p.nullable {
+            format!("{kind} or null")
+        } else {
+            kind
+        };
+        let show = |d: Default| match d.json() {
+            Value::String(s) => s,
+            v => v.to_string(),
+        };
+        let range = if p.ranged() {
+            let server = if p.limit.is_some() {
+                " (server limit)"
+            } else {
+                ""
+            };
+            format!("{}{server}", p.range_words(p.max))
+        } else {
+            String::new()
+        };
+        s += &format!(
+            "| `{}` | {} | {kind} | {} | {} | {range} | {} | {} |\n",
+            p.name,
+            methods.join(", "),
+            show(p.default),
+            p.software.map(show).unwrap_or_default(),
+            p.unit,
+            p.doc.replace('|', "\\|"),
+        );
+    }
+    s
+}
+
+/// The OpenAPI schema of `render.gi`: `method` and every parameter with its type, default and
+/// the range any server accepts (a server's own limits are in `/v1/server`).
+pub fn openapi_properties() -> Map<String, Value> {
+    let mut props = Map::new();
+    for p in all() {
+        let mut schema = Map::new();
+        let ty = match p.kind {
+            Kind::Integer => "integer",
+            Kind::Number => "number",
+            Kind::Boolean => "boolean",
+            Kind::Choice(choices) => {
+                schema.insert("enum".into(), choices.to_vec().into());
+                "string"
+            }
+        };
+        schema.insert(
+            "type".into(),
+            if p.nullable {
+                Value::from(vec![ty, "null"])
+            } else {
+                ty.into()
+            },
+        );
+        // Whole numbers are written as such (`16`, not `16.0`).
+        let bound = |v: f64| -> Value {
+            if p.kind == Kind::Integer {
+                (v as u64).into()
+            } else {
+                v.into()
+            }
+        };
+        if p.ranged() {
+            if p.min.is_finite() {
+                let key = if p.min_exclusive {
+                    "exclusiveMinimum"
+                } else {
+                    "minimum"
+                };
+                schema.insert(key.into(), bound(p.min));
+            }
+            if p.max.is_finite() {
+                let key = if p.max_exclusive {
+                    "exclusiveMaximum"
+                } else {
+                    "maximum"
+                };
+                schema.insert(key.into(), bound(p.max));
+            }
+        }
+        if p.kind == Kind::Integer {
+            schema.insert("format".into(), "int32".into());
+        }
+        schema.insert("default".into(), p.default.json());
+        let unit = if p.unit.is_empty() {
+            String::new()
+        } else {
+            format!(" Unit: {}.", p.unit)
+        };
+        schema.insert("description".into(), format!("{}.{unit}", p.doc).into());
+        props.insert(p.name.to_string(), Value::Object(schema));
+    }
+    props
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every method's struct reads its table's defaults: a row the struct lacks or a field
+    /// the table lacks fails here. A name means one parameter wherever it appears.
+    #[test]
+    fn every_table_matches_its_method_and_names_each_parameter_once() {
+        for &method in GiMethod::ALL {
+            (super::super::entry(method).1.check_table)(&GiParams::new(method))
+                .unwrap_or_else(|e| panic!("{method}: {e}"));
+            for p in of(method) {
+                let first = find(p.name).expect("listed");
+                assert!(
+                    std::ptr::eq(first, p),
+                    "{method}: {} is defined twice",
+                    p.name
+                );
+                assert!(!p.doc.is_empty(), "{}", p.name);
+                p.check(&p.default.json(), true, None)
+                    .unwrap_or_else(|e| panic!("{}'s default: {e}", p.name));
+                if let Some(s) = p.software {
+                    p.check(&s.json(), true, None)
+                        .unwrap_or_else(|e| panic!("{}'s software default: {e}", p.name));
+                }
+            }
+        }
+    }
+
+    /// The README's parameter table is the tables' (`lightcast-server gi-params` prints it).
+    #[test]
+    fn the_readme_lists_the_parameters_of_the_tables() {
+        let readme = include_str!("../../../README.md");
+        let (begin, end) = ("<!-- gi-params:begin -->\n", "<!-- gi-params:end -->");
+        let start = readme.find(begin).expect("the README marks its table") + begin.len();
+        let len = readme[start..].find(end).expect("and its end");
+        let table = markdown_table();
+        assert!(
+            readme[start..start + len] == table,
+            "the README's GI parameter table is stale; replace it with \
+             `lightcast-server gi-params`:\n{table}"
+        );
+    }
+
+    #[test]
+    fn requests_are_checked_by_type_everywhere_and_by_range_for_their_method() {
+        let limits = crate::service::config::tests::default_limits();
+        let ok = GiParams::new(GiMethod::Brsm).with("rsm_size", 64);
+        assert_eq!(check_request(&ok, &limits), Ok(()));
+        let unknown = GiParams::new(GiMethod::Brsm).with("rsm_sise", 64);
+        let e = check_request(&unknown, &limits).expect_err("unknown");
+        assert_eq!(e.field, "rsm_sise");
+        assert!(e.reason.contains("rsm_size"), "{}", e.reason);
+        let typed = GiParams::new(GiMethod::Brsm).with("vpl_count", "many");
+        assert_eq!(
+            check_request(&typed, &limits).expect_err("type").field,
+            "vpl_count"
+        );
+        let other = GiParams::new(GiMethod::Brsm).with("vpl_count", 1u32 << 30);
+        assert_eq!(
+            check_request(&other, &limits),
+            Ok(()),
+            "another method's range"
+        );
+        let own = GiParams::new(GiMethod::Clustered).with("vpl_count", 1u32 << 30);
+        assert!(check_request(&own, &limits).is_err());
+        let big = GiParams::new(GiMethod::Brsm).with("rsm_size", limits.max_rsm_size + 1);
+        let e = check_request(&big, &limits).expect_err("beyond the server's limit");
+        assert!(e.reason.contains("this server's"), "{}", e.reason);
+        let float = GiParams::new(GiMethod::Brsm).with("rsm_size", 64.5);
+        assert!(check_request(&float, &limits).is_err());
+        let null = GiParams::new(GiMethod::Reference).with("spp", Value::Null);
+        assert!(check_request(&null, &limits).is_err());
+    }
+}

@@ -392,7 +392,7 @@ mod tests {
         Rendered {
             width: 64,
             height: 48,
-            gi: lightcast_protocol::GiMethod::Brsm,
+            gi: lightcast_protocol::GiMethod::new("brsm"),
         }
     }
 

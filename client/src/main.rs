@@ -109,7 +109,7 @@ enum CompareTo {
 impl From<CompareTo> for GiMethod {
     fn from(c: CompareTo) -> Self {
         match c {
-            CompareTo::Reference => GiMethod::Reference,
+            CompareTo::Reference => GiMethod::new("reference"),
         }
     }
 }

@@ -25,62 +25,124 @@ pub struct ErrorBody {
     pub message: String,
 }
 
-/// How indirect light is computed.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[serde(rename_all = "lowercase")]
-pub enum GiMethod {
-    /// Direct light only.
-    None,
-    /// LightSkin: every RSM texel is a VAL (eq. 3–7 of the seed paper).
-    Lightskin,
-    /// BRSM: an importance-sampled subset of VALs (eq. 10–15).
-    #[default]
-    Brsm,
-    /// A progressive path tracer: the converged indirect light the other methods approximate.
-    Reference,
-    /// VPLs from the RSM clustered into virtual area lights (seed paper 003, §4–6).
-    Clustered,
-    /// Surfels, a flux hierarchy, precomputed SH links and SH caches with progressive
-    /// multi-bounce (seed paper 001).
-    Surfels,
+/// How indirect light is computed: a GI method's name (`brsm`, `reference`), one of those the
+/// server lists in `/v1/server`'s `gi_methods`. The protocol names no method (the server's
+/// registry does): a name is 1 to [`GiMethod::MAX_LEN`] lowercase ASCII letters, digits and
+/// underscores, and the server refuses one it does not have, naming `render.gi.method`. Held
+/// inline, so it is `Copy` and a method module can name itself in a `const`.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct GiMethod {
+    len: u8,
+    bytes: [u8; GiMethod::MAX_LEN],
 }
 
 impl GiMethod {
-    /// Every method, in the order `/v1/server` describes them.
-    pub const ALL: &'static [GiMethod] = &[
-        Self::None,
-        Self::Lightskin,
-        Self::Brsm,
-        Self::Reference,
-        Self::Clustered,
-        Self::Surfels,
-    ];
+    /// Longest method name.
+    pub const MAX_LEN: usize = 31;
 
-    /// The name requests use.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::None => "none",
-            Self::Lightskin => "lightskin",
-            Self::Brsm => "brsm",
-            Self::Reference => "reference",
-            Self::Clustered => "clustered",
-            Self::Surfels => "surfels",
+    /// The method named `name`; a name that is not one fails to compile in a `const`.
+    pub const fn new(name: &str) -> Self {
+        match Self::check(name) {
+            Ok(method) => method,
+            Err(_) => panic!("a GI method's name is 1 to 31 of a-z, 0-9 and _"),
         }
     }
 
-    /// Whether the method lights the scene from emissive surfaces (area lights), as
-    /// `render.gi.emitters` asks. The others light it from the punctual light only, so a
-    /// comparison measures them against a reference with `emitters` off: the same light
-    /// sources.
-    pub fn lights_from_emitters(self) -> bool {
-        matches!(self, Self::Reference | Self::Surfels)
+    /// The method named `name`, if it is a valid name (whether the server has it is the
+    /// server's to say).
+    pub fn parse(name: &str) -> Result<Self, String> {
+        Self::check(name).map_err(|()| {
+            format!(
+                "{name:?} is not a GI method's name (1 to {} of a-z, 0-9 and _)",
+                Self::MAX_LEN
+            )
+        })
+    }
+
+    const fn check(name: &str) -> Result<Self, ()> {
+        let b = name.as_bytes();
+        if b.is_empty() || b.len() > Self::MAX_LEN {
+            return Err(());
+        }
+        let mut bytes = [0u8; Self::MAX_LEN];
+        let mut i = 0;
+        while i < b.len() {
+            if !matches!(b[i], b'a'..=b'z' | b'0'..=b'9' | b'_') {
+                return Err(());
+            }
+            bytes[i] = b[i];
+            i += 1;
+        }
+        Ok(Self {
+            len: b.len() as u8,
+            bytes,
+        })
+    }
+
+    /// The name requests use.
+    pub fn name(&self) -> &str {
+        // Only ASCII is ever stored (`check`).
+        std::str::from_utf8(&self.bytes[..usize::from(self.len)]).unwrap_or_default()
+    }
+}
+
+impl Default for GiMethod {
+    /// `brsm`, the server's default method (seed 004's, and the one its defaults describe).
+    fn default() -> Self {
+        Self::new("brsm")
     }
 }
 
 impl std::fmt::Display for GiMethod {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
+    }
+}
+
+impl std::fmt::Debug for GiMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for GiMethod {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::parse(s)
+    }
+}
+
+impl Serialize for GiMethod {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for GiMethod {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = std::borrow::Cow::<'de, str>::deserialize(d)?;
+        Self::parse(&name).map_err(serde::de::Error::custom)
+    }
+}
+
+impl utoipa::PartialSchema for GiMethod {
+    /// A name; the server's `openapi` command lists its methods as the schema's `enum`.
+    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
+        use utoipa::openapi::schema::{ObjectBuilder, Type};
+        ObjectBuilder::new()
+            .schema_type(Type::String)
+            .pattern(Some("^[a-z0-9_]{1,31}$"))
+            .description(Some(
+                "A GI method's name, one of `/v1/server`'s `gi_methods` (how indirect light is \
+                 computed).",
+            ))
+            .into()
+    }
+}
+
+impl ToSchema for GiMethod {
+    fn name() -> std::borrow::Cow<'static, str> {
+        "GiMethod".into()
     }
 }
 
@@ -112,6 +174,12 @@ pub struct GiParamInfo {
     /// Largest accepted value on this server (numbers).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max: Option<f64>,
+    /// `min` itself is refused (the range is open there).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub min_exclusive: bool,
+    /// `max` itself is refused (the range is open there).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub max_exclusive: bool,
     /// The accepted values of a `choice`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub choices: Vec<String>,
@@ -267,7 +335,10 @@ impl utoipa::PartialSchema for GiParams {
     fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
         use utoipa::openapi::schema::{AdditionalProperties, ObjectBuilder};
         ObjectBuilder::new()
-            .property("method", GiMethod::schema())
+            .property(
+                "method",
+                utoipa::openapi::Ref::from_schema_name(<GiMethod as ToSchema>::name()),
+            )
             .additional_properties(Some(AdditionalProperties::FreeForm(true)))
             .description(Some(
                 "Parameters of the GI methods, tagged by `method`; every other field is a \

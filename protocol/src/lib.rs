@@ -116,7 +116,30 @@ mod tests {
         let params: SessionParams =
             serde_json::from_str(r#"{"render":{"gi":{"method":"none","future_knob":1}}}"#)
                 .expect("nested unknown fields are tolerated");
-        assert_eq!(params.render.gi.method, GiMethod::None);
+        assert_eq!(params.render.gi.method, GiMethod::new("none"));
+    }
+
+    /// A method is any well-formed name on the wire (the server knows which it has); names
+    /// that could not be one are refused as they are read.
+    #[test]
+    fn gi_methods_are_names_read_and_written_as_strings() {
+        let m: GiMethod = serde_json::from_str(r#""rsm_gather""#).expect("a name");
+        assert_eq!(
+            (m.name(), m.to_string()),
+            ("rsm_gather", "rsm_gather".into())
+        );
+        assert_eq!(serde_json::to_string(&m).expect("json"), r#""rsm_gather""#);
+        assert_eq!(m, GiMethod::new("rsm_gather"));
+        for bad in [
+            r#""""#,
+            r#""BRSM""#,
+            r#""a-b""#,
+            r#""0123456789012345678901234567890123""#,
+            "3",
+        ] {
+            assert!(serde_json::from_str::<GiMethod>(bad).is_err(), "{bad}");
+        }
+        assert_eq!(GiMethod::default().name(), "brsm");
     }
 
     #[test]

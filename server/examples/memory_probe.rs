@@ -18,7 +18,7 @@
 //! (`passes::PARAMS_BINDING`).
 use lightcast_server::gi::lightskin::caches;
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::gpu::{BackendChoice, GpuContext};
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::renderer::{RenderSettings, Renderer};
@@ -158,9 +158,9 @@ fn main() -> anyhow::Result<()> {
         "none" | "lightskin" | "brsm" => {
             let scene = procedural::cornell_box();
             let method = match mode {
-                "lightskin" => GiMethod::Lightskin,
-                "brsm" => GiMethod::Brsm,
-                _ => GiMethod::None,
+                "lightskin" => lightcast_server::gi::lightskin::LIGHTSKIN,
+                "brsm" => lightcast_server::gi::lightskin::BRSM,
+                _ => lightcast_server::gi::none::NONE,
             };
             let settings = RenderSettings {
                 width: 32,

@@ -34,7 +34,7 @@ pub struct BenchArgs {
     /// `crate::bench_surfels`) or `clustered` (seed 003: VPL and VAL counts against per-VPL
     /// shadows and no visibility, see `crate::bench_clustered`; its RSM is the first of
     /// `--rsm-sizes`).
-    #[arg(long, value_enum, default_value = "brsm")]
+    #[arg(long, default_value = "brsm", value_parser = crate::gi::parse_method)]
     pub gi: GiMethod,
     /// Scene: a .gltf/.glb file or a procedural scene (see `render --help`).
     #[arg(long)]
@@ -433,13 +433,13 @@ fn ladders(base: &GiParams) -> Vec<(GiParams, String)> {
     };
     let lightskin = [64, 128, 256].map(|rsm_size| {
         (
-            as_method(GiMethod::Lightskin).with("rsm_size", rsm_size),
+            as_method(crate::gi::lightskin::LIGHTSKIN).with("rsm_size", rsm_size),
             format!("RSM {rsm_size}²"),
         )
     });
     let brsm = [512, 2048, 8192].map(|val_count| {
         (
-            as_method(GiMethod::Brsm)
+            as_method(crate::gi::lightskin::BRSM)
                 .with("rsm_size", 256)
                 .with("val_count", val_count),
             format!(
@@ -450,7 +450,7 @@ fn ladders(base: &GiParams) -> Vec<(GiParams, String)> {
     });
     let clustered = [256, 1024, 4096].map(|vpl_count| {
         (
-            as_method(GiMethod::Clustered).with("vpl_count", vpl_count),
+            as_method(crate::gi::clustered::CLUSTERED).with("vpl_count", vpl_count),
             format!(
                 "{vpl_count} VPLs, {} VALs, {}",
                 CLUSTER_COUNT.u32(base),
@@ -513,7 +513,11 @@ pub(crate) fn equal_time(
             nearest_equal_time: false,
         });
     }
-    for method in [GiMethod::Lightskin, GiMethod::Brsm, GiMethod::Clustered] {
+    for method in [
+        crate::gi::lightskin::LIGHTSKIN,
+        crate::gi::lightskin::BRSM,
+        crate::gi::clustered::CLUSTERED,
+    ] {
         if method == skip {
             continue;
         }
@@ -670,7 +674,7 @@ pub fn run(
     let mut rows = Vec::new();
     for &rsm_size in &args.rsm_sizes {
         // LightSkin first: every BRSM configuration is compared with it.
-        let mut shared = GiParams::new(GiMethod::Lightskin)
+        let mut shared = GiParams::new(crate::gi::lightskin::LIGHTSKIN)
             .with("rsm_size", rsm_size)
             .with("occlusion", args.occlusion)
             .with("indirect_downscale", args.indirect_downscale);
@@ -683,14 +687,14 @@ pub fn run(
                 .with("val_count", val_count)
                 .with("view_samples", view_samples)
                 .with("defensive", args.defensive);
-            gi.method = GiMethod::Brsm;
+            gi.method = crate::gi::lightskin::BRSM;
             gi
         };
         let configs = std::iter::once(shared.clone()).chain(brsm_configs.iter().map(brsm));
         let mut baseline: Option<(Vec<[f32; 4]>, f64, f64)> = None;
         for gi in configs {
             let label = match gi.method {
-                GiMethod::Brsm => format!(
+                crate::gi::lightskin::BRSM => format!(
                     "brsm rsm {rsm_size}² vals {} vs {}",
                     VAL_COUNT.u32(&gi),
                     VIEW_SAMPLES.u32(&gi)
@@ -717,7 +721,7 @@ pub fn run(
                 (timed.indirect.clone(), mean, timed.frame.median_ms)
             });
             let (difference, _) = mad(reference, &timed.indirect);
-            let brsm = gi.method == GiMethod::Brsm;
+            let brsm = gi.method == crate::gi::lightskin::BRSM;
             let finals = truth.as_ref().map(|r| {
                 final_errors(
                     &timed.hdr,

@@ -23,7 +23,7 @@ use crate::gi::clustered::passes::AtlasLayout;
 use crate::gi::clustered::Visibility;
 use crate::gi::clustered::MAX_VISIBILITY_BYTES;
 use crate::gi::common::params::RSM_SIZE;
-use crate::gi::GiMethod;
+
 use crate::gpu::context::AdapterSummary;
 use crate::offline::DEFAULT_SCENE;
 use crate::quality::{errors, ErrorStats};
@@ -116,7 +116,7 @@ pub fn configurations(base: &GiParams, sweep: &ClusteredSweep) -> Vec<GiParams> 
                     "paraboloid_size",
                     fitting_map_size(visibility, requested, vpl_count, cluster_count),
                 );
-            gi.method = GiMethod::Clustered;
+            gi.method = crate::gi::clustered::CLUSTERED;
             gi
         };
         out.push(at(Visibility::Off, base_clusters, base_size));
@@ -193,7 +193,7 @@ pub fn run(
         error,
     })?;
     let base = crate::bench::base_settings(args, &scene, {
-        let mut gi = GiParams::new(GiMethod::Clustered)
+        let mut gi = GiParams::new(crate::gi::clustered::CLUSTERED)
             .with("indirect_downscale", args.indirect_downscale)
             .with("rsm_size", args.rsm_sizes.first().copied().unwrap_or(1024));
         if let Some(k) = args.glossy_exponent {
@@ -278,7 +278,7 @@ pub fn run(
             .filter_map(|r| Some((r, r.clusters?)))
             .min_by_key(|(r, m)| (r.vpls.abs_diff(1024), m.abs_diff(30)))
             .map(|(r, m)| MethodRow {
-                method: GiMethod::Clustered,
+                method: crate::gi::clustered::CLUSTERED,
                 setting: format!("{} VPLs, {m} VALs, cssm", r.vpls),
                 gi: r.gi,
                 vs_reference: r.vs_reference,
@@ -394,7 +394,7 @@ mod tests {
             paraboloid_size: 256,
             baseline_paraboloid_size: 128,
         };
-        let base = GiParams::new(GiMethod::Clustered);
+        let base = GiParams::new(crate::gi::clustered::CLUSTERED);
         let sizes: Vec<u32> = configurations(&base, &big)
             .iter()
             .map(|g| PARABOLOID_SIZE.u32(g))

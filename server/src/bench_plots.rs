@@ -7,7 +7,6 @@ use crate::bench::{BenchReport, BenchRow};
 use crate::bench_clustered::ClusteredReport;
 use crate::bench_surfels::{SurfelReport, SurfelRow, Varied};
 use crate::gi::clustered::Visibility;
-use crate::gi::GiMethod;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -65,7 +64,7 @@ fn ensure_font() -> Result<(), PlotError> {
 
 fn label(row: &BenchRow) -> String {
     match row.method {
-        GiMethod::Brsm => format!(
+        crate::gi::lightskin::BRSM => format!(
             "BRSM {} VALs, {} view samples",
             row.val_count.unwrap_or(0),
             row.view_samples.unwrap_or(0)
@@ -238,7 +237,7 @@ pub fn write_plots(report: &BenchReport, prefix: &Path) -> Result<Vec<PathBuf>, 
             &lines_by(
                 report,
                 |r| {
-                    (r.method == GiMethod::Brsm).then(|| {
+                    (r.method == crate::gi::lightskin::BRSM).then(|| {
                         format!(
                             "RSM {}², {} view samples",
                             r.rsm_size,
@@ -466,7 +465,13 @@ mod tests {
     use crate::bench::StageStats;
     use crate::gpu::timing::TimingSource;
 
-    fn row(method: GiMethod, rsm_size: u32, vals: Option<u32>, fps: f64, mad: f64) -> BenchRow {
+    fn row(
+        method: crate::gi::GiMethod,
+        rsm_size: u32,
+        vals: Option<u32>,
+        fps: f64,
+        mad: f64,
+    ) -> BenchRow {
         let stats = StageStats {
             median_ms: 1000.0 / fps,
             p95_ms: 1000.0 / fps,
@@ -502,9 +507,15 @@ mod tests {
             .iter()
             .flat_map(|&s| {
                 [
-                    row(GiMethod::Lightskin, s, None, 1e5 / f64::from(s), 0.0),
-                    row(GiMethod::Brsm, s, Some(2048), 500.0, 0.1),
-                    row(GiMethod::Brsm, s, Some(8192), 300.0, 0.05),
+                    row(
+                        crate::gi::lightskin::LIGHTSKIN,
+                        s,
+                        None,
+                        1e5 / f64::from(s),
+                        0.0,
+                    ),
+                    row(crate::gi::lightskin::BRSM, s, Some(2048), 500.0, 0.1),
+                    row(crate::gi::lightskin::BRSM, s, Some(8192), 300.0, 0.05),
                 ]
             })
             .collect();
@@ -535,7 +546,7 @@ mod tests {
         // By VAL count: one BRSM line per RSM size, two points each.
         let by_vals = lines_by(
             &report,
-            |r| (r.method == GiMethod::Brsm).then(|| r.rsm_size.to_string()),
+            |r| (r.method == crate::gi::lightskin::BRSM).then(|| r.rsm_size.to_string()),
             |r| f64::from(r.val_count.unwrap_or(1)).log2(),
             |r| r.fps,
         );

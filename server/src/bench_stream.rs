@@ -75,7 +75,7 @@ pub struct StreamBenchArgs {
     pub dolly_per_second: f32,
     /// Indirect light (default `none`: direct light only, which a software adapter renders
     /// at 1080p in seconds; the codecs see the frames whatever lit them).
-    #[arg(long, value_enum, default_value = "none")]
+    #[arg(long, default_value = "none", value_parser = crate::gi::parse_method)]
     pub gi: GiMethod,
     /// Side of the shadow map per light face.
     #[arg(long, default_value_t = 2048)]
@@ -1464,7 +1464,7 @@ mod tests {
             timing_source: TimingSource::CpuWallClock,
             scene: "test".into(),
             triangles: 0,
-            gi: GiMethod::None,
+            gi: crate::gi::none::NONE,
             shadow_map_size: 256,
             exposure: "auto".into(),
             frames: 1,

@@ -18,7 +18,7 @@
 use crate::bench::{render_reference, BenchArgs, BenchError, MethodRow, StageStats, Timed};
 use crate::gi::precompute::{BuildEnv, Store};
 use crate::gi::surfels::{self, SurfelParams, Surfels};
-use crate::gi::GiMethod;
+
 use crate::gpu::context::AdapterSummary;
 use crate::offline::DEFAULT_SCENE;
 use crate::quality::{errors, ErrorStats};
@@ -166,7 +166,7 @@ pub fn run(
         scene: spec.to_string(),
         error,
     })?;
-    let named = surfels::Settings::of(&args.caches.gi(GiMethod::Surfels))
+    let named = surfels::Settings::of(&args.caches.gi(crate::gi::surfels::SURFELS))
         .map_err(|e| BenchError::Surfels(e.to_string()))?;
     let extent = scene.bounds.max - scene.bounds.min;
     let spacing = named
@@ -182,7 +182,7 @@ pub fn run(
     // Every configuration is checked as a request would be before the long steps start.
     let facts = crate::gi::precompute::SceneFacts::of(&scene);
     for (_, p) in &configs {
-        let mut gi = GiParams::new(GiMethod::Surfels)
+        let mut gi = GiParams::new(crate::gi::surfels::SURFELS)
             .with("surfel_count", p.surfels)
             .with("surfel_links", p.links)
             .with("sh_bands", p.bands);
@@ -208,7 +208,7 @@ pub fn run(
     let ctx = crate::bench::open_adapter(args, log)?;
     let adapter = AdapterSummary(&ctx.info).to_string();
     let base = crate::bench::base_settings(args, &scene, {
-        let mut gi = GiParams::new(GiMethod::Surfels)
+        let mut gi = GiParams::new(crate::gi::surfels::SURFELS)
             .with("indirect_downscale", args.indirect_downscale)
             .with("emitters", args.emitters);
         if let Some(k) = args.glossy_exponent {
@@ -372,7 +372,7 @@ fn compare_methods(
         .find(|e| e.bounces == 1)
         .ok_or(BenchError::Surfels("no single-bounce error".into()))?;
     let centre = MethodRow {
-        method: GiMethod::Surfels,
+        method: crate::gi::surfels::SURFELS,
         setting: format!(
             "{} surfels, {} links, {} bands",
             centre.surfels, centre.links, centre.bands

@@ -42,18 +42,18 @@ pub enum ViewError {
 
 /// Refuses a view the GI method does not produce, before anything is rendered.
 pub fn check(view: View, method: GiMethod) -> Result<(), ViewError> {
-    if view.needs_gi() && method == GiMethod::None {
+    if view.needs_gi() && method == crate::gi::none::NONE {
         return Err(ViewError::NeedsGi { view });
     }
     if view.needs_clustered() {
-        return if method == GiMethod::Clustered {
+        return if method == crate::gi::clustered::CLUSTERED {
             Ok(())
         } else {
             Err(ViewError::NeedsClustered { view })
         };
     }
     if view.needs_surfels() {
-        return if method == GiMethod::Surfels {
+        return if method == crate::gi::surfels::SURFELS {
             Ok(())
         } else {
             Err(ViewError::NeedsSurfels { view })
@@ -62,7 +62,7 @@ pub fn check(view: View, method: GiMethod) -> Result<(), ViewError> {
     if view.needs_gi() && view != View::Indirect && !uses_light_caches(method) {
         return Err(ViewError::NeedsLightCaches { view });
     }
-    if view.needs_brsm() && method != GiMethod::Brsm {
+    if view.needs_brsm() && method != crate::gi::lightskin::BRSM {
         return Err(ViewError::NeedsBrsm { view });
     }
     Ok(())
@@ -618,14 +618,14 @@ mod tests {
 
     #[test]
     fn the_clusters_view_needs_clustered_and_clustered_has_no_light_caches() {
-        assert!(check(View::Clusters, GiMethod::Clustered).is_ok());
-        assert!(check(View::Indirect, GiMethod::Clustered).is_ok());
+        assert!(check(View::Clusters, crate::gi::clustered::CLUSTERED).is_ok());
+        assert!(check(View::Indirect, crate::gi::clustered::CLUSTERED).is_ok());
         assert!(matches!(
-            check(View::Clusters, GiMethod::Brsm),
+            check(View::Clusters, crate::gi::lightskin::BRSM),
             Err(ViewError::NeedsClustered { .. })
         ));
         assert!(matches!(
-            check(View::Caches, GiMethod::Clustered),
+            check(View::Caches, crate::gi::clustered::CLUSTERED),
             Err(ViewError::NeedsLightCaches { .. })
         ));
     }
@@ -633,17 +633,21 @@ mod tests {
     #[test]
     fn the_surfel_views_need_surfels_and_surfels_has_no_light_caches() {
         for view in [View::Surfels, View::SurfelLinks, View::CacheSh] {
-            assert!(check(view, GiMethod::Surfels).is_ok());
-            for other in [GiMethod::Brsm, GiMethod::Clustered, GiMethod::Reference] {
+            assert!(check(view, crate::gi::surfels::SURFELS).is_ok());
+            for other in [
+                crate::gi::lightskin::BRSM,
+                crate::gi::clustered::CLUSTERED,
+                crate::gi::reference::REFERENCE,
+            ] {
                 assert!(matches!(
                     check(view, other),
                     Err(ViewError::NeedsSurfels { .. })
                 ));
             }
         }
-        assert!(check(View::Indirect, GiMethod::Surfels).is_ok());
+        assert!(check(View::Indirect, crate::gi::surfels::SURFELS).is_ok());
         assert!(matches!(
-            check(View::Caches, GiMethod::Surfels),
+            check(View::Caches, crate::gi::surfels::SURFELS),
             Err(ViewError::NeedsLightCaches { .. })
         ));
         assert!(View::CacheSh.reads_indirect() && View::Indirect.reads_indirect());

@@ -6,7 +6,6 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 use lightcast_server::bench::{self, BenchArgs};
 use lightcast_server::bench_stream::{self, StreamBenchArgs};
-use lightcast_server::gi::GiMethod;
 use lightcast_server::offline::{self, RenderArgs};
 use lightcast_server::service::{self, config::LogFormat, ServeArgs};
 use lightcast_server::{bench_clustered, bench_surfels};
@@ -189,7 +188,7 @@ fn main() -> anyhow::Result<()> {
                 );
             }
             let (markdown, json) = match args.gi {
-                GiMethod::Surfels => {
+                lightcast_server::gi::surfels::SURFELS => {
                     let report = with_progress(|log, progress| {
                         bench_surfels::run(&args, log, progress).context("bench failed")
                     })?;
@@ -199,7 +198,7 @@ fn main() -> anyhow::Result<()> {
                     })?;
                     (report.markdown(), serde_json::to_string_pretty(&report)?)
                 }
-                GiMethod::Clustered => {
+                lightcast_server::gi::clustered::CLUSTERED => {
                     let report = with_progress(|log, progress| {
                         bench_clustered::run(&args, log, progress).context("bench failed")
                     })?;
@@ -209,7 +208,8 @@ fn main() -> anyhow::Result<()> {
                     })?;
                     (report.markdown(), serde_json::to_string_pretty(&report)?)
                 }
-                GiMethod::Brsm | GiMethod::Lightskin => {
+                lightcast_server::gi::lightskin::BRSM
+                | lightcast_server::gi::lightskin::LIGHTSKIN => {
                     let report = with_progress(|log, progress| {
                         bench::run(&args, log, progress).context("bench failed")
                     })?;

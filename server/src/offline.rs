@@ -89,7 +89,8 @@ pub struct GiArgs {
     pub cache_dir: Option<PathBuf>,
 }
 
-/// `NAME=VALUE` of `--gi-param`: a parameter some method has, and a value of its type.
+/// `NAME=VALUE` of `--gi-param`: a parameter some method has, and a value of its type (its
+/// range is checked when the frame's method reads it).
 pub fn parse_gi_param(s: &str) -> Result<(String, serde_json::Value), String> {
     let (name, value) = s
         .split_once('=')
@@ -103,7 +104,7 @@ pub fn parse_gi_param(s: &str) -> Result<(String, serde_json::Value), String> {
     })?;
     let value = serde_json::from_str(value).unwrap_or_else(|_| value.into());
     param
-        .check(&value, true, None)
+        .check(&value, false, None)
         .map_err(|reason| format!("{name}: {reason}"))?;
     Ok((name.to_string(), value))
 }
@@ -181,7 +182,7 @@ impl GiArgs {
         scene: &Scene,
         log: &mut dyn FnMut(&str),
     ) -> Result<Arc<CacheSet>, PrecomputeError> {
-        let built = self.precompute(&self.gi(GiMethod::Lightskin), scene, None, log)?;
+        let built = self.precompute(&self.gi(crate::gi::lightskin::LIGHTSKIN), scene, None, log)?;
         built
             .and_then(|b| b.data.downcast::<CacheSet>().ok())
             .ok_or_else(|| PrecomputeError {
@@ -252,10 +253,9 @@ pub struct RenderArgs {
     /// Shadow map side in texels (per cube face for point lights).
     #[arg(long, default_value_t = 2048)]
     pub shadow_map_size: u32,
-    /// Indirect light: `none`, `lightskin` (every RSM texel is a VAL), `brsm`
-    /// (importance-sampled VALs), `reference` (path traced) or `clustered` (VPLs clustered
-    /// into virtual area lights).
-    #[arg(long, value_enum, default_value = "brsm")]
+    /// Indirect light: a registered GI method (`none`, `lightskin`, `brsm`, `reference`,
+    /// `clustered`, `surfels`; the README's GI section describes each).
+    #[arg(long, default_value = "brsm", value_parser = crate::gi::parse_method)]
     pub gi: GiMethod,
     #[command(flatten)]
     pub gi_args: GiArgs,

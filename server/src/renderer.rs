@@ -220,6 +220,7 @@ impl RenderSettings {
         }
         // Powers of two: a reduced pixel covers whole output pixels at every size the API
         // allows in steps of 2 (H.264's even sizes), and the documented choices are 1, 2, 4.
+        gi::check_method(self.gi.method).map_err(|e| invalid(e.field, e.reason))?;
         for p in gi::params::of(self.gi.method) {
             p.check(&p.value(&self.gi), true, None)
                 .map_err(|reason| invalid(p.name, reason))?;

@@ -104,8 +104,9 @@ export class Panel {
         } else {
           control.type = 'number';
           control.step = p.kind === 'integer' ? '1' : 'any';
-          if (p.min !== undefined) control.min = String(p.min);
-          if (p.max !== undefined) control.max = String(p.max);
+          // An open end (`min_exclusive`: the bound itself is refused) is left to the server.
+          if (p.min !== undefined && !p.min_exclusive) control.min = String(p.min);
+          if (p.max !== undefined && !p.max_exclusive) control.max = String(p.max);
           if (p.default === null) control.placeholder = 'default';
           label.append(`${p.name} `, control);
         }

@@ -272,10 +272,9 @@ mod tests {
     fn the_fitting_value_is_the_largest_that_fits_and_its_neighbour_does_not() {
         use crate::gi::clustered::params::INTERLEAVE;
         use crate::gi::reference::params::SPP;
-        use lightcast_protocol::GiMethod;
         let knob = Knob::lower(&SPP);
         let cost_of = |g: &GiParams| f64::from(SPP.u32(g)) * 7.0;
-        let gi = GiParams::new(GiMethod::Reference).with("spp", 200);
+        let gi = GiParams::new(crate::gi::reference::REFERENCE).with("spp", 200);
         for budget in [7.0, 8.0, 700.0, 1399.0, 1400.0] {
             let v = fitting_value(&gi, &knob, (1, 256), budget, &cost_of).expect("fits");
             assert!(cost_of(&gi.clone().with("spp", v)) <= budget);
@@ -289,14 +288,14 @@ mod tests {
             choices: &[],
         };
         let per_block = |g: &GiParams| 4096.0 / f64::from(INTERLEAVE.u32(g)).powi(2);
-        let gi = GiParams::new(GiMethod::Clustered).with("interleave", 1);
+        let gi = GiParams::new(crate::gi::clustered::CLUSTERED).with("interleave", 1);
         assert_eq!(
             fitting_value(&gi, &interleave, (1, 16), 300.0, &per_block),
             Some(4)
         );
         // A knob with choices only ever names one of them.
         let reduced = |g: &GiParams| 4096.0 / f64::from(INDIRECT_DOWNSCALE.u32(g)).powi(2);
-        let full = GiParams::new(GiMethod::Clustered).with("indirect_downscale", 1);
+        let full = GiParams::new(crate::gi::clustered::CLUSTERED).with("indirect_downscale", 1);
         let fit = |budget| fitting_value(&full, &DOWNSCALE_KNOB, (1, 4), budget, &reduced);
         assert_eq!(fit(5000.0), Some(1));
         assert_eq!(fit(1024.0), Some(2));

@@ -44,7 +44,17 @@ pub use lightcast_protocol::{GiMethod, GiParams};
 /// only when the method lights from them too and `emitters` is on, so that both see the same
 /// light sources.
 pub fn reference_emitters(gi: &GiParams) -> bool {
-    common::params::emitters(gi) && gi.method.lights_from_emitters()
+    common::params::emitters(gi) && lights_from_emitters(gi.method)
+}
+
+/// Whether `method` lights the scene from emissive surfaces (area lights), as
+/// `render.gi.emitters` asks: the methods whose table has that parameter. The others light it
+/// from the punctual light only, so a comparison measures them against a reference with
+/// `emitters` off: the same light sources.
+pub fn lights_from_emitters(method: GiMethod) -> bool {
+    params::of(method)
+        .iter()
+        .any(|p| p.name == common::params::EMITTERS.name)
 }
 
 /// A setting a method cannot use, naming its field (as the renderer's settings name it).
@@ -257,13 +267,45 @@ pub const REGISTRY: &[MethodEntry] = &[
     surfels::ENTRY,
 ];
 
-/// The registry entry serving `method` and its index.
-pub fn entry(method: GiMethod) -> (usize, &'static MethodEntry) {
+/// Every registered method, in registry order (the order `/v1/server` lists them).
+pub fn methods() -> impl Iterator<Item = GiMethod> {
     REGISTRY
         .iter()
-        .enumerate()
-        .find(|(_, e)| e.serves(method))
-        .unwrap_or_else(|| panic!("GI method {method:?} is not registered in gi::REGISTRY"))
+        .flat_map(|e| e.tables.iter().map(|t| t.method))
+}
+
+/// The registry entry serving `method` and its index, if it is registered.
+pub fn find(method: GiMethod) -> Option<(usize, &'static MethodEntry)> {
+    REGISTRY.iter().enumerate().find(|(_, e)| e.serves(method))
+}
+
+/// Whether `method` is registered; else why not, listing those that are (what a request
+/// naming it is refused with).
+pub fn check_method(method: GiMethod) -> Result<(), InvalidSetting> {
+    if find(method).is_some() {
+        return Ok(());
+    }
+    let known: Vec<String> = methods().map(|m| m.to_string()).collect();
+    Err(InvalidSetting::new(
+        "method",
+        format!(
+            "this server has no GI method {method}; its methods are {}",
+            known.join(", ")
+        ),
+    ))
+}
+
+/// A registered method by name, for command-line flags (`--gi`).
+pub fn parse_method(name: &str) -> Result<GiMethod, String> {
+    let method = GiMethod::parse(name)?;
+    check_method(method).map_err(|e| e.reason)?;
+    Ok(method)
+}
+
+/// The registry entry serving `method` and its index. Requests are checked first
+/// ([`check_method`]): an unregistered method here is a bug.
+pub fn entry(method: GiMethod) -> (usize, &'static MethodEntry) {
+    find(method).unwrap_or_else(|| panic!("GI method {method} is not registered in gi::REGISTRY"))
 }
 
 /// The parameter table of `method`.
@@ -280,9 +322,8 @@ pub fn table(method: GiMethod) -> &'static params::MethodTable {
 /// server configured with `limits`: each method's parameters, then the frame's
 /// ([`params::frame_params`]).
 pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
-    GiMethod::ALL
-        .iter()
-        .map(|&method| {
+    methods()
+        .map(|method| {
             let t = table(method);
             GiMethodInfo {
                 method,

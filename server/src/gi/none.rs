@@ -7,11 +7,14 @@ use crate::gpu::timing::FrameStages;
 use lightcast_protocol::{GiMethod, Stage};
 use std::any::{Any, TypeId};
 
+/// The method's name.
+pub const NONE: GiMethod = GiMethod::new("none");
+
 pub struct NoIndirect;
 
 pub const ENTRY: MethodEntry = MethodEntry {
     tables: &[MethodTable {
-        method: GiMethod::None,
+        method: crate::gi::none::NONE,
         summary: "Direct light only.",
         progressive: false,
         params: &[],

@@ -328,6 +328,8 @@ impl Param {
             default: self.default.json(),
             min: bound(self.min),
             max: bound(self.max_on(Some(limits))),
+            min_exclusive: self.ranged() && self.min_exclusive,
+            max_exclusive: self.ranged() && self.max_exclusive,
             choices: match self.kind {
                 Kind::Choice(c) => c.iter().map(|c| c.to_string()).collect(),
                 _ => Vec::new(),
@@ -353,9 +355,23 @@ pub struct MethodTable {
 /// The method's parameters as `T`: each of `table`'s, from `gi` or its default, checked
 /// against its type and the renderer's range (the service has checked this server's range).
 pub fn read<T: DeserializeOwned>(table: &[&Param], gi: &GiParams) -> Result<T, InvalidSetting> {
+    read_for(table, table, gi)
+}
+
+/// As [`read`] for a struct two methods share (`lightskin`'s and `brsm`'s): the rows of
+/// `table` that the frame's method reads (`own`) from `gi`, the others at their defaults.
+pub fn read_for<T: DeserializeOwned>(
+    table: &[&Param],
+    own: &[&Param],
+    gi: &GiParams,
+) -> Result<T, InvalidSetting> {
     let mut values = Map::new();
     for p in table {
-        let value = p.value(gi);
+        let value = if own.iter().any(|o| o.name == p.name) {
+            p.value(gi)
+        } else {
+            std::borrow::Cow::Owned(p.default.json())
+        };
         p.check(&value, true, None)
             .map_err(|reason| InvalidSetting::new(p.name, reason))?;
         values.insert(p.name.to_string(), value.into_owned());
@@ -388,7 +404,7 @@ pub fn of(method: GiMethod) -> Vec<&'static Param> {
 /// Every parameter of every registered method, each once, in registry order.
 pub fn all() -> Vec<&'static Param> {
     let mut all: Vec<&'static Param> = Vec::new();
-    for &method in GiMethod::ALL {
+    for method in super::methods() {
         for p in of(method) {
             if !all.iter().any(|q| q.name == p.name) {
                 all.push(p);
@@ -398,12 +414,18 @@ pub fn all() -> Vec<&'static Param> {
     all
 }
 
-/// `gi` with every parameter its method reads, at its value or default (and no other): what
-/// a report says the frame was rendered with.
+/// `gi` with every parameter its method reads, at its value or default (and no other), a
+/// number written as one (`80` as `80.0`): what a report says the frame was rendered with,
+/// and a key equal requests share.
 pub fn resolved(gi: &GiParams) -> GiParams {
     let mut out = GiParams::new(gi.method);
     for p in of(gi.method) {
-        out.set(p.name, p.value(gi).into_owned());
+        let value = p.value(gi).into_owned();
+        let value = match (p.kind, value.as_f64()) {
+            (Kind::Number, Some(v)) => v.into(),
+            _ => value,
+        };
+        out.set(p.name, value);
     }
     out
 }
@@ -425,6 +447,10 @@ pub struct Refusal {
 /// ignored value), and the frame's method's own must be within this server's range; the
 /// other methods' are kept for when the client switches to them.
 pub fn check_request(gi: &GiParams, limits: &Limits) -> Result<(), Refusal> {
+    super::check_method(gi.method).map_err(|e| Refusal {
+        field: e.field.to_string(),
+        reason: e.reason,
+    })?;
     let own = of(gi.method);
     for (name, value) in &gi.values {
         let Some(param) = find(name) else {
@@ -471,10 +497,9 @@ pub fn markdown_table() -> String {
          |---|---|---|---|---|---|---|---|\n",
     );
     for p in all() {
-        let methods: Vec<&str> = GiMethod::ALL
-            .iter()
-            .filter(|&&m| of(m).iter().any(|q| q.name == p.name))
-            .map(|m| m.name())
+        let methods: Vec<String> = super::methods()
+            .filter(|&m| of(m).iter().any(|q| q.name == p.name))
+            .map(|m| m.to_string())
             .collect();
         let kind = match p.kind {
             Kind::Integer => "integer".to_string(),
@@ -586,7 +611,7 @@ mod tests {
     /// the table lacks fails here. A name means one parameter wherever it appears.
     #[test]
     fn every_table_matches_its_method_and_names_each_parameter_once() {
-        for &method in GiMethod::ALL {
+        for method in super::super::methods() {
             (super::super::entry(method).1.check_table)(&GiParams::new(method))
                 .unwrap_or_else(|e| panic!("{method}: {e}"));
             for p in of(method) {
@@ -607,6 +632,44 @@ mod tests {
         }
     }
 
+    /// The defaults are the ones the protocol's flat `GiParams` had before the tables (the
+    /// paper's evaluation settings) and the software profile's measured ones; `jitter` and
+    /// `uniform_importance` were the renderer's fixed 0.5 and false.
+    #[test]
+    fn the_defaults_are_the_papers_and_the_measured_software_ones() {
+        let gpu = serde_json::json!({
+            "rsm_size": 1024, "view_samples": 512, "val_count": 8192, "defensive": 0.3,
+            "occlusion": true, "glossy_exponent": null, "cache_distance": null,
+            "cache_angle": null, "bounces": 1, "emitters": null, "spp": 4, "vpl_count": 1024,
+            "cluster_count": 30, "kmeans_iterations": 4, "cluster_position_weight": 0.7,
+            "cluster_normal_weight": 0.3, "interleave": 8, "blur_distance": 0.1,
+            "blur_normal": 0.8, "visibility": "cssm", "paraboloid_size": 256,
+            "fourier_terms": 4, "shadow_light": 0, "indirect_downscale": 1,
+            "surfel_count": 32768, "surfel_cache_spacing": null, "surfel_links": 128,
+            "sh_bands": 3, "jitter": 0.5, "uniform_importance": false
+        });
+        assert_eq!(serde_json::to_value(defaults(false)).expect("json"), gpu);
+        let mut software = gpu;
+        for (name, value) in [
+            ("rsm_size", 112),
+            ("view_samples", 32),
+            ("val_count", 512),
+            ("indirect_downscale", 2),
+            ("surfel_count", 8192),
+            ("surfel_links", 64),
+            ("spp", 1),
+            ("interleave", 4),
+            ("paraboloid_size", 64),
+        ] {
+            software[name] = value.into();
+        }
+        assert_eq!(
+            serde_json::to_value(defaults(true)).expect("json"),
+            software
+        );
+        assert_eq!(GiMethod::default(), crate::gi::lightskin::BRSM);
+    }
+
     /// The README's parameter table is the tables' (`lightcast-server gi-params` prints it).
     #[test]
     fn the_readme_lists_the_parameters_of_the_tables() {
@@ -625,31 +688,45 @@ mod tests {
     #[test]
     fn requests_are_checked_by_type_everywhere_and_by_range_for_their_method() {
         let limits = crate::service::config::tests::default_limits();
-        let ok = GiParams::new(GiMethod::Brsm).with("rsm_size", 64);
+        let ok = GiParams::new(crate::gi::lightskin::BRSM).with("rsm_size", 64);
         assert_eq!(check_request(&ok, &limits), Ok(()));
-        let unknown = GiParams::new(GiMethod::Brsm).with("rsm_sise", 64);
+        let unknown = GiParams::new(crate::gi::lightskin::BRSM).with("rsm_sise", 64);
         let e = check_request(&unknown, &limits).expect_err("unknown");
         assert_eq!(e.field, "rsm_sise");
         assert!(e.reason.contains("rsm_size"), "{}", e.reason);
-        let typed = GiParams::new(GiMethod::Brsm).with("vpl_count", "many");
+        let typed = GiParams::new(crate::gi::lightskin::BRSM).with("vpl_count", "many");
         assert_eq!(
             check_request(&typed, &limits).expect_err("type").field,
             "vpl_count"
         );
-        let other = GiParams::new(GiMethod::Brsm).with("vpl_count", 1u32 << 30);
+        let other = GiParams::new(crate::gi::lightskin::BRSM).with("vpl_count", 1u32 << 30);
         assert_eq!(
             check_request(&other, &limits),
             Ok(()),
             "another method's range"
         );
-        let own = GiParams::new(GiMethod::Clustered).with("vpl_count", 1u32 << 30);
+        let own = GiParams::new(crate::gi::clustered::CLUSTERED).with("vpl_count", 1u32 << 30);
         assert!(check_request(&own, &limits).is_err());
-        let big = GiParams::new(GiMethod::Brsm).with("rsm_size", limits.max_rsm_size + 1);
+        let big =
+            GiParams::new(crate::gi::lightskin::BRSM).with("rsm_size", limits.max_rsm_size + 1);
         let e = check_request(&big, &limits).expect_err("beyond the server's limit");
         assert!(e.reason.contains("this server's"), "{}", e.reason);
-        let float = GiParams::new(GiMethod::Brsm).with("rsm_size", 64.5);
+        let unknown = GiParams::new(GiMethod::new("fancy"));
+        let e = check_request(&unknown, &limits).expect_err("no such method");
+        assert_eq!(e.field, "method");
+        assert!(e.reason.contains("clustered"), "{}", e.reason);
+        let float = GiParams::new(crate::gi::lightskin::BRSM).with("rsm_size", 64.5);
         assert!(check_request(&float, &limits).is_err());
-        let null = GiParams::new(GiMethod::Reference).with("spp", Value::Null);
+        let null = GiParams::new(crate::gi::reference::REFERENCE).with("spp", Value::Null);
+        // Renderer-side reads check the renderer's range of the method's own parameters.
+        let low = GiParams::new(crate::gi::lightskin::BRSM).with("val_count", 0);
+        let e = crate::gi::lightskin::Settings::of(&low).expect_err("out of range");
+        assert_eq!(e.field, "val_count");
+        let lightskin = GiParams::new(crate::gi::lightskin::LIGHTSKIN).with("val_count", 0);
+        crate::gi::lightskin::Settings::of(&lightskin).expect("brsm's parameter is not read");
+        let angle = GiParams::new(crate::gi::lightskin::LIGHTSKIN).with("cache_angle", 120);
+        let e = crate::gi::lightskin::Settings::of(&angle).expect_err("out of range");
+        assert_eq!(e.field, "cache_angle");
         assert!(check_request(&null, &limits).is_err());
     }
 }

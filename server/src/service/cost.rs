@@ -126,7 +126,7 @@ pub fn frame_cost(gi: &GiParams, shape: FrameShape, set_units: &dyn Fn(&GiParams
 /// The GI parameters of the render a one-shot of `gi` is compared with.
 fn truth(gi: &GiParams, spp: u32) -> GiParams {
     let mut truth = gi.clone().with(SPP.name, spp);
-    truth.method = GiMethod::Reference;
+    truth.method = crate::gi::reference::REFERENCE;
     truth
 }
 
@@ -160,7 +160,7 @@ pub fn one_shot_spp(
 ) -> u32 {
     let most = limits.max_spp.max(1);
     let floor = floor.clamp(1, most);
-    let knobs = crate::gi::entry(GiMethod::Reference).1.knobs;
+    let knobs = crate::gi::entry(crate::gi::reference::REFERENCE).1.knobs;
     let Some(knob) = knobs.iter().find(|k| k.field() == SPP.name) else {
         return floor;
     };
@@ -190,10 +190,14 @@ pub fn chunk_spp(
     compare_spp: Option<u32>,
     limits: &Limits,
 ) -> Option<u32> {
-    let own = (gi.method == GiMethod::Reference).then(|| SPP.u32(gi));
+    let own = (gi.method == crate::gi::reference::REFERENCE).then(|| SPP.u32(gi));
     let most = own.into_iter().chain(compare_spp).max()?;
     let mut one_sample = Cost::default();
-    (crate::gi::entry(GiMethod::Reference).1.cost)(&truth(gi, 1), &shape, &mut one_sample);
+    (crate::gi::entry(crate::gi::reference::REFERENCE).1.cost)(
+        &truth(gi, 1),
+        &shape,
+        &mut one_sample,
+    );
     let per_chunk = chunk_seconds(limits) * 1e9 * limits.adapter_speed / one_sample.ns();
     let step = (per_chunk.floor() as u32).max(1);
     (step < most).then_some(step)
@@ -312,7 +316,9 @@ pub fn check_frame(
     let knobs = &knobs[..];
     let (compare_spp, chunked) = match submission {
         Submission::SessionFrame => (None, false),
-        Submission::OneShot { compare_spp } => (compare_spp, gi.method == GiMethod::Reference),
+        Submission::OneShot { compare_spp } => {
+            (compare_spp, gi.method == crate::gi::reference::REFERENCE)
+        }
     };
     let cost = own(gi);
     // A frame submitted at once holds up every other session's: --max-frame-cost.
@@ -349,7 +355,7 @@ pub fn check_frame(
     };
     // The larger of the two frames is the one to make cheaper.
     if compared.ns() >= cost.ns() {
-        let reference = crate::gi::entry(GiMethod::Reference).1.knobs;
+        let reference = crate::gi::entry(crate::gi::reference::REFERENCE).1.knobs;
         let spp_knob: Vec<Knob> = reference
             .iter()
             .filter(|k| k.field() == "spp")
@@ -464,7 +470,7 @@ mod tests {
     #[test]
     fn a_one_shot_reference_takes_the_samples_half_the_budget_buys() {
         let none = |_: &GiParams| 0;
-        let reference = GiParams::new(GiMethod::Reference);
+        let reference = GiParams::new(crate::gi::reference::REFERENCE);
         let limits = limits(10.0);
         let spp = one_shot_spp(&reference, shape(320, 240), &none, None, &limits, 4);
         let seconds = |spp: u32| {
@@ -493,7 +499,7 @@ mod tests {
     fn the_repros_are_refused_naming_a_value_that_fits() {
         let limits = limits(10.0);
         let none = |_: &GiParams| 0;
-        let reference = GiParams::new(GiMethod::Reference)
+        let reference = GiParams::new(crate::gi::reference::REFERENCE)
             .with("spp", 256)
             .with("bounces", 16);
         let e =
@@ -520,7 +526,7 @@ mod tests {
             crate::gi::clustered::Visibility::Cssm,
             crate::gi::clustered::Visibility::VplShadows,
         ] {
-            let clustered = GiParams::new(GiMethod::Clustered)
+            let clustered = GiParams::new(crate::gi::clustered::CLUSTERED)
                 .with("vpl_count", 65_536)
                 .with("interleave", 1)
                 .with("cluster_count", 256)
@@ -539,7 +545,7 @@ mod tests {
         limits.max_frame_seconds = 2.0;
         let none = |_: &GiParams| 0;
         // About 4 s of rays: in chunks as a one-shot, but one submission as a session frame.
-        let reference = GiParams::new(GiMethod::Reference)
+        let reference = GiParams::new(crate::gi::reference::REFERENCE)
             .with("spp", 100)
             .with("bounces", 16);
         check_frame(&reference, shape(32, 32), &none, ONE_SHOT, &limits).expect("chunked");

@@ -151,7 +151,7 @@ fn fill(target: &mut Value, defaults: &Value) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lightcast_protocol::{GiMethod, RenderRequest, SessionParams};
+    use lightcast_protocol::{RenderRequest, SessionParams};
 
     fn software() -> Defaults {
         Defaults::choose(DefaultsChoice::Auto, "llvmpipe", true)
@@ -189,7 +189,7 @@ mod tests {
             .expect("valid");
         assert_eq!(set.render.width, 320);
         assert_eq!(set.render.height, d.info.render.height);
-        assert_eq!(set.render.gi.method, GiMethod::Lightskin);
+        assert_eq!(set.render.gi.method, crate::gi::lightskin::LIGHTSKIN);
         let gi = &set.render.gi;
         assert_eq!(RSM_SIZE.u32(gi), 1024, "an explicit value wins");
         assert_eq!(VAL_COUNT.u32(gi), VAL_COUNT.u32(&d.info.render.gi));
@@ -220,7 +220,7 @@ mod tests {
         let entry = scenes
             .detached(crate::scene::procedural::cornell_box(), 0.0)
             .expect("the Cornell box");
-        for &method in GiMethod::ALL {
+        for method in crate::gi::methods() {
             for (width, height) in [(800, 450), (320, 240)] {
                 let mut params = SessionParams {
                     render: render_defaults(true),

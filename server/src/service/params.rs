@@ -30,6 +30,7 @@ pub struct Resolved {
 fn request_field(renderer_field: &str) -> String {
     match renderer_field {
         "light.cone" => "light.outer_cone".to_string(),
+        "method" => "gi.method".to_string(),
         name if crate::gi::params::find(name).is_some() => format!("gi.{name}"),
         other => other.to_string(),
     }

@@ -373,7 +373,7 @@ impl Loop {
             },
         };
         if gi_pending {
-            settings.gi.method = lightcast_protocol::GiMethod::None;
+            settings.gi.method = crate::gi::none::NONE;
         }
         let view = if gi_pending {
             View::Final
@@ -488,7 +488,7 @@ impl Loop {
     fn own_settings(&self, job: &OneShot) -> (Resolved, Option<u32>) {
         let mut resolved = job.resolved.clone();
         let spp = SPP.u32(&resolved.settings.gi);
-        let traced = resolved.settings.gi.method == GiMethod::Reference;
+        let traced = resolved.settings.gi.method == crate::gi::reference::REFERENCE;
         match job.chunks.histories {
             Some((own, _)) if traced => {
                 resolved.settings.history = Some(own);
@@ -507,7 +507,7 @@ impl Loop {
     /// final submission is next.
     fn next_chunk(&mut self, job: &mut OneShot) -> Option<Result<(), ApiError>> {
         let step = job.chunk_spp?;
-        let own_total = if job.resolved.settings.gi.method == GiMethod::Reference {
+        let own_total = if job.resolved.settings.gi.method == crate::gi::reference::REFERENCE {
             SPP.u32(&job.resolved.settings.gi)
         } else {
             0
@@ -593,7 +593,10 @@ impl Loop {
         let key = {
             use std::hash::{Hash, Hasher};
             let mut h = std::collections::hash_map::DefaultHasher::new();
-            (&job.scene.id, format!("{:?}", truth.settings)).hash(&mut h);
+            // The parameters as the reference reads them, so `80` and `80.0` share a render.
+            let mut settings = truth.settings.clone();
+            settings.gi = crate::gi::params::resolved(&settings.gi);
+            (&job.scene.id, format!("{settings:?}")).hash(&mut h);
             h.finish()
         };
         Ok((truth, key))

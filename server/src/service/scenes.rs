@@ -1177,7 +1177,7 @@ mod tests {
         let entry = registry
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
-        let surfels = GiParams::new(lightcast_protocol::GiMethod::Surfels)
+        let surfels = GiParams::new(crate::gi::surfels::SURFELS)
             .with("surfel_count", 262_144)
             .with("surfel_links", 16);
         let long = entry
@@ -1269,13 +1269,13 @@ mod tests {
         let entry = registry
             .insert(procedural::cornell_box(), "t".into(), None, 0.0, None)
             .expect("fits");
-        let reference = GiParams::new(lightcast_protocol::GiMethod::Reference);
+        let reference = GiParams::new(crate::gi::reference::REFERENCE);
         let bvh = entry
             .precompute_key(&reference)
             .expect("valid")
             .expect("the reference needs its BVH");
         assert_eq!(bvh.kind, "bvh");
-        let none = GiParams::new(lightcast_protocol::GiMethod::None);
+        let none = GiParams::new(crate::gi::none::NONE);
         assert_eq!(entry.precompute_key(&none).expect("valid"), None);
         let Now::Ready(data) = settled(&registry, &entry, &bvh) else {
             panic!("the BVH must build");

@@ -8,7 +8,7 @@
 use super::support;
 use lightcast_server::gi::lightskin::caches;
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::renderer::Renderer;
 use lightcast_server::scene::{default_light, procedural};
 
@@ -51,7 +51,11 @@ fn measure_in_child() {
         .expect("LightSkin is registered")
         .set_caches(&set)
         .expect("caches fit the scene");
-    for method in [GiMethod::None, GiMethod::Lightskin, GiMethod::Brsm] {
+    for method in [
+        lightcast_server::gi::none::NONE,
+        lightcast_server::gi::lightskin::LIGHTSKIN,
+        lightcast_server::gi::lightskin::BRSM,
+    ] {
         let mut settings = support::settings(
             32,
             32,

@@ -9,7 +9,7 @@ use lightcast_server::gi::common::halton::halton;
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::sampling::SamplingReadback;
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::passes::frame_uniforms::light_faces;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -19,7 +19,7 @@ const W: u32 = 64;
 const H: u32 = 48;
 
 fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiParams {
-    GiParams::new(GiMethod::Brsm)
+    GiParams::new(lightcast_server::gi::lightskin::BRSM)
         .with("rsm_size", rsm_size)
         .with("view_samples", view_samples)
         .with("val_count", val_count)

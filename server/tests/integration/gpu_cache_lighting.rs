@@ -155,7 +155,7 @@ fn assert_small(mut errors: Vec<f32>, median_limit: f32, p99_limit: f32) {
 
 #[test]
 fn brsm_cache_lighting_matches_the_cpu_reference() {
-    let run = run(gi(GiMethod::Brsm, 32, 2048));
+    let run = run(gi(lightcast_server::gi::lightskin::BRSM, 32, 2048));
     let sampling = run
         .renderer
         .gi_if_created::<LightSkin>()
@@ -169,7 +169,9 @@ fn brsm_cache_lighting_matches_the_cpu_reference() {
 
 #[test]
 fn a_glossy_exponent_override_matches_the_cpu_reference_with_that_exponent() {
-    let run = run((gi(GiMethod::Brsm, 32, 2048)).with("glossy_exponent", Some(80.0)));
+    let run =
+        run((gi(lightcast_server::gi::lightskin::BRSM, 32, 2048))
+            .with("glossy_exponent", Some(80.0)));
     let sampling = run
         .renderer
         .gi_if_created::<LightSkin>()
@@ -192,7 +194,7 @@ fn a_glossy_exponent_override_matches_the_cpu_reference_with_that_exponent() {
 /// The same frame without and with occlusion: proxy lights before, after, and every cache
 /// as an occluder disk.
 fn occlusion_runs(d_eps: f32) -> (Vec<CacheLighting>, Vec<CacheLighting>, Vec<OccluderDisk>) {
-    let mut settings = gi(GiMethod::Brsm, 32, 1024);
+    let mut settings = gi(lightcast_server::gi::lightskin::BRSM, 32, 1024);
     settings.set("occlusion", false);
     let open = run_scene(procedural::cornell_box(), d_eps, settings.clone());
     settings.set("occlusion", true);
@@ -263,7 +265,7 @@ fn proxy_occlusion_matches_the_cpu_double_projection() {
 
 #[test]
 fn lightskin_cache_lighting_matches_the_cpu_reference_over_every_texel() {
-    let run = run(gi(GiMethod::Lightskin, 24, 1));
+    let run = run(gi(lightcast_server::gi::lightskin::LIGHTSKIN, 24, 1));
     let sampling = run
         .renderer
         .gi_if_created::<LightSkin>()
@@ -306,7 +308,7 @@ fn check_interpolation(triangle_ids: bool) {
         "/../tests/data/cornell-box/cornell-box.glb"
     );
     let scene = load_gltf(std::path::Path::new(path)).expect("cornell-box.glb");
-    let mut settings = gi(GiMethod::Brsm, 32, 2048);
+    let mut settings = gi(lightcast_server::gi::lightskin::BRSM, 32, 2048);
     settings.set("view_samples", 128);
     let run = run_with(scene, 0.15, settings, triangle_ids);
     let blend = run.renderer.triangle_ids();
@@ -415,8 +417,8 @@ fn check_interpolation(triangle_ids: bool) {
 #[test]
 fn brsm_with_uniform_importance_and_one_draw_per_texel_equals_lightskin() {
     let rsm = 24;
-    let lightskin = run(gi(GiMethod::Lightskin, rsm, 1));
-    let mut uniform = gi(GiMethod::Brsm, rsm, rsm * rsm);
+    let lightskin = run(gi(lightcast_server::gi::lightskin::LIGHTSKIN, rsm, 1));
+    let mut uniform = gi(lightcast_server::gi::lightskin::BRSM, rsm, rsm * rsm);
     uniform.set("uniform_importance", true);
     let brsm = run(uniform);
     let (a, b) = (
@@ -439,8 +441,8 @@ fn brsm_with_uniform_importance_and_one_draw_per_texel_equals_lightskin() {
 
 #[test]
 fn indirect_light_brightens_what_direct_light_misses() {
-    let with_gi = run(gi(GiMethod::Brsm, 32, 1024));
-    let without = run(GiParams::new(GiMethod::None));
+    let with_gi = run(gi(lightcast_server::gi::lightskin::BRSM, 32, 1024));
+    let without = run(GiParams::new(lightcast_server::gi::none::NONE));
     // Luminance of covered pixels (background excluded).
     let lum = |f: &Frame| {
         f.hdr
@@ -494,7 +496,8 @@ fn chunked_dispatches_give_the_unchunked_results() {
         .set_caches(&caches)
         .expect("caches fit");
     let mut settings = settings(W, H, default_camera(&scene), default_light(&scene));
-    settings.gi = (gi(GiMethod::Brsm, 256, 16_384)).with("view_samples", 4096);
+    settings.gi =
+        (gi(lightcast_server::gi::lightskin::BRSM, 256, 16_384)).with("view_samples", 4096);
     renderer.render(&settings).expect("render");
     let sampling = renderer
         .gi_if_created::<LightSkin>()
@@ -597,16 +600,16 @@ fn frames_of_sizes_served_in_turn_match_fresh_renderers() {
     };
 
     let mut shared = renderer();
-    let first = at(W, H, 0.0, GiMethod::Brsm);
+    let first = at(W, H, 0.0, lightcast_server::gi::lightskin::BRSM);
     shared.render(&first).expect("render");
     // Four other sizes without GI evict the first size's targets.
     for k in 1..=4 {
         shared
-            .render(&at(W + 8 * k, H, 0.0, GiMethod::None))
+            .render(&at(W + 8 * k, H, 0.0, lightcast_server::gi::none::NONE))
             .expect("render");
     }
-    let moved = at(W, H, 0.4, GiMethod::Brsm);
-    let mut other = at(W + 16, H + 8, 0.0, GiMethod::Brsm);
+    let moved = at(W, H, 0.4, lightcast_server::gi::lightskin::BRSM);
+    let mut other = at(W + 16, H + 8, 0.0, lightcast_server::gi::lightskin::BRSM);
     other.shadow_map_size *= 2;
     for s in [&moved, &other, &moved, &other] {
         let got = shared.render(s).expect("render").rgba8;

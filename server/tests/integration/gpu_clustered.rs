@@ -12,7 +12,7 @@ use lightcast_server::gi::clustered::params::{Settings as ClusteredSettings, INT
 use lightcast_server::gi::clustered::passes::{Vpl, NO_VAL};
 use lightcast_server::gi::clustered::Visibility as ClusteredVisibility;
 use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -25,7 +25,7 @@ const H: u32 = 36;
 /// `clustered` without visibility: the shading these tests check against the CPU has none
 /// (`gpu_clustered_visibility` checks it).
 fn clustered(vpl_count: u32, cluster_count: u32, iterations: u32, interleave: u32) -> GiParams {
-    GiParams::new(GiMethod::Clustered)
+    GiParams::new(lightcast_server::gi::clustered::CLUSTERED)
         .with("visibility", ClusteredVisibility::Off.name())
         .with("rsm_size", 64)
         .with("vpl_count", vpl_count)
@@ -488,10 +488,15 @@ fn clustered_error_against_the_reference_is_finite_and_below_none() {
     let mut renderer = Renderer::new(gpu(), scene.clone());
     set_bvh(&mut renderer);
     let mut indirect = |gi: GiParams| indirect_with(&mut renderer, &s, gi);
-    let reference = indirect(GiParams::new(GiMethod::Reference).with("spp", 64));
+    let reference =
+        indirect(GiParams::new(lightcast_server::gi::reference::REFERENCE).with("spp", 64));
     let truth: Vec<[f32; 3]> = reference.iter().map(|p| [p[0], p[1], p[2]]).collect();
     let ours = errors(&truth, &indirect(clustered(1024, 30, 4, 8)), W as usize);
-    let none = errors(&truth, &indirect(GiParams::new(GiMethod::None)), W as usize);
+    let none = errors(
+        &truth,
+        &indirect(GiParams::new(lightcast_server::gi::none::NONE)),
+        W as usize,
+    );
     eprintln!("clustered vs reference: {ours:?}\nnone vs reference: {none:?}");
     assert!(ours.mae.is_finite() && ours.rmse.is_finite());
     assert!(

@@ -12,7 +12,7 @@ use lightcast_server::gi::clustered::params::Settings as ClusteredSettings;
 use lightcast_server::gi::clustered::passes::{Val, NO_VAL};
 use lightcast_server::gi::clustered::Visibility as ClusteredVisibility;
 use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -22,7 +22,7 @@ const W: u32 = 48;
 const H: u32 = 36;
 
 fn clustered(visibility: ClusteredVisibility, vpls: u32, vals: u32, map: u32) -> GiParams {
-    GiParams::new(GiMethod::Clustered)
+    GiParams::new(lightcast_server::gi::clustered::CLUSTERED)
         .with("rsm_size", 64)
         .with("vpl_count", vpls)
         .with("cluster_count", vals)
@@ -373,7 +373,7 @@ fn error_against_the_reference_falls_with_the_val_count() {
     set_bvh(&mut renderer);
     let mut indirect = |gi: GiParams| indirect_with(&mut renderer, &s, gi);
     let truth = rgb(&indirect(
-        GiParams::new(GiMethod::Reference)
+        GiParams::new(lightcast_server::gi::reference::REFERENCE)
             .with("spp", 256)
             .with("emitters", false),
     ));
@@ -576,7 +576,8 @@ fn a_small_light_step_changes_the_shadows_no_more_than_the_light() {
             area: v.area,
         })
         .collect();
-    let d = ClusteredSettings::of(&GiParams::new(GiMethod::Clustered)).expect("defaults");
+    let d = ClusteredSettings::of(&GiParams::new(lightcast_server::gi::clustered::CLUSTERED))
+        .expect("defaults");
     let w = cpu::Weights {
         position: d.cluster_position_weight / second.extent,
         normal: d.cluster_normal_weight,

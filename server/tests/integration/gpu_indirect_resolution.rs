@@ -8,7 +8,7 @@ use glam::Vec3;
 use lightcast_protocol::Camera;
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::gpu::readback::TextureReadback;
 use lightcast_server::gpu::GpuContext;
 use lightcast_server::passes::frame_uniforms::CameraUniform;
@@ -386,7 +386,7 @@ fn upsample_keeps_light_on_its_own_side_of_edges_and_keeps_texture_detail() {
 fn cornell_indirect(renderer: &mut Renderer, downscale: u32) -> (Vec<[f32; 4]>, Vec<[u8; 4]>) {
     let scene = procedural::cornell_box();
     let mut s = settings(128, 96, default_camera(&scene), default_light(&scene));
-    s.gi = GiParams::new(GiMethod::Brsm)
+    s.gi = GiParams::new(lightcast_server::gi::lightskin::BRSM)
         .with("rsm_size", 64)
         .with("view_samples", 64)
         .with("val_count", 1024)

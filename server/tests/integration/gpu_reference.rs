@@ -458,14 +458,14 @@ fn accumulation_restarts_when_the_camera_moves() {
 /// the CPU resolve's.
 #[test]
 fn reference_frames_accumulate_per_history_and_match_the_tracer() {
-    use lightcast_server::gi::{GiMethod, GiParams};
+    use lightcast_server::gi::GiParams;
     use lightcast_server::renderer::Renderer;
     let p = plates();
     let (w, h) = (16, 12);
     let mut renderer = Renderer::new(support::gpu(), p.scene.clone());
     support::set_bvh(&mut renderer);
     let mut settings = support::settings(w, h, p.camera.clone(), p.light.clone());
-    settings.gi = GiParams::new(GiMethod::Reference).with("spp", 8);
+    settings.gi = GiParams::new(lightcast_server::gi::reference::REFERENCE).with("spp", 8);
     let mut frame_of = |history| {
         let mut s = settings.clone();
         s.history = history;

@@ -14,7 +14,7 @@ use lightcast_server::gi::surfels::SurfelView;
 use lightcast_server::gi::surfels::{
     self, pull_flux, CacheLight, SurfelParams, SurfelSet, Surfels,
 };
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -48,7 +48,7 @@ fn surfel_set(scene: &Scene, params: &SurfelParams) -> SurfelSet {
 fn settings_for(scene: &Scene, bounces: u32) -> RenderSettings {
     let mut s = settings(W, H, default_camera(scene), default_light(scene));
     s.shadow_map_size = 512;
-    s.gi = GiParams::new(GiMethod::Surfels).with("bounces", bounces);
+    s.gi = GiParams::new(lightcast_server::gi::surfels::SURFELS).with("bounces", bounces);
     s
 }
 
@@ -476,8 +476,8 @@ fn the_back_of_a_wall_gets_no_light_from_the_room_behind_it() {
     let mean = |pixels: &[[f32; 4]]| {
         pixels.iter().map(|p| p[0] + p[1] + p[2]).sum::<f32>() / (3 * pixels.len()) as f32
     };
-    let surfels = GiParams::new(GiMethod::Surfels).with("bounces", 1);
-    let reference = GiParams::new(GiMethod::Reference)
+    let surfels = GiParams::new(lightcast_server::gi::surfels::SURFELS).with("bounces", 1);
+    let reference = GiParams::new(lightcast_server::gi::reference::REFERENCE)
         .with("spp", 16)
         .with("bounces", 1);
     let lit_room = mean(&indirect_with(&mut renderer, &inside, surfels.clone()));
@@ -517,17 +517,23 @@ fn error_against_the_reference_is_small_at_one_and_three_bounces() {
         let s = settings_for(&scene, bounces);
         let mut indirect = |gi: GiParams| indirect_with(&mut renderer, &s, gi);
         let reference = indirect(
-            GiParams::new(GiMethod::Reference)
+            GiParams::new(lightcast_server::gi::reference::REFERENCE)
                 .with("spp", 64)
                 .with("bounces", bounces),
         );
         let truth: Vec<[f32; 3]> = reference.iter().map(|p| [p[0], p[1], p[2]]).collect();
         let ours = errors(
             &truth,
-            &indirect(GiParams::new(GiMethod::Surfels).with("bounces", bounces)),
+            &indirect(
+                GiParams::new(lightcast_server::gi::surfels::SURFELS).with("bounces", bounces),
+            ),
             W as usize,
         );
-        let none = errors(&truth, &indirect(GiParams::new(GiMethod::None)), W as usize);
+        let none = errors(
+            &truth,
+            &indirect(GiParams::new(lightcast_server::gi::none::NONE)),
+            W as usize,
+        );
         eprintln!("{bounces} bounces: surfels vs reference {ours:?}\nnone vs reference {none:?}");
         assert!(ours.mae.is_finite() && ours.rmse.is_finite());
         assert!(
@@ -557,7 +563,7 @@ fn error_against_the_reference_falls_as_links_and_surfels_grow() {
     let reference = indirect_with(
         &mut renderer,
         &s,
-        GiParams::new(GiMethod::Reference).with("spp", 256),
+        GiParams::new(lightcast_server::gi::reference::REFERENCE).with("spp", 256),
     );
     let truth: Vec<[f32; 3]> = reference.iter().map(|p| [p[0], p[1], p[2]]).collect();
     let mut measured = Vec::new();

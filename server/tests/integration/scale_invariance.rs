@@ -10,7 +10,7 @@ use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::gi::GiParams;
 use lightcast_server::renderer::{Frame, Renderer};
 use lightcast_server::scene::{procedural, Scene};
 
@@ -87,22 +87,25 @@ fn methods() -> [GiParams; 5] {
             .with("view_samples", 256)
             .with("val_count", 1024)
             .with("jitter", 0.5)
-            .with("uniform_importance", method == GiMethod::Brsm)
+            .with(
+                "uniform_importance",
+                method == lightcast_server::gi::lightskin::BRSM,
+            )
             .with("occlusion", true)
     };
     [
-        GiParams::new(GiMethod::None),
-        gi(GiMethod::Lightskin),
-        gi(GiMethod::Brsm),
+        GiParams::new(lightcast_server::gi::none::NONE),
+        gi(lightcast_server::gi::lightskin::LIGHTSKIN),
+        gi(lightcast_server::gi::lightskin::BRSM),
         // The same random numbers at every scale (the seed and sample indices are equal), so
         // paths differ only where a rounded coordinate flips a hit; two bounces test the ray
         // offsets of the second surface too.
-        GiParams::new(GiMethod::Reference)
+        GiParams::new(lightcast_server::gi::reference::REFERENCE)
             .with("bounces", 2)
             .with("spp", 8),
         // Δx and the blur distance are in units of the scene's extent, and a VPL's disk area
         // bounds its form factor: no length constant.
-        GiParams::new(GiMethod::Clustered)
+        GiParams::new(lightcast_server::gi::clustered::CLUSTERED)
             .with("rsm_size", 64)
             .with("vpl_count", 1024),
     ]
@@ -163,7 +166,7 @@ fn cornell_box_scaled_by_a_hundredth_and_a_thousand_renders_the_same_for_every_m
         );
         for ((gi, frame), want) in methods().iter().zip(&frames).zip(&reference) {
             let mut buffers = vec![("hdr", frame.hdr.as_ref(), want.hdr.as_ref())];
-            if gi.method != GiMethod::None {
+            if gi.method != lightcast_server::gi::none::NONE {
                 buffers.push(("indirect", frame.indirect.as_ref(), want.indirect.as_ref()));
             }
             for (name, got, want) in buffers {
@@ -171,7 +174,7 @@ fn cornell_box_scaled_by_a_hundredth_and_a_thousand_renders_the_same_for_every_m
                 let error = relative_mae(got, want);
                 eprintln!("×{s} {:?} {name}: relative MAE {error:.5}", gi.method);
                 // NaN fails too.
-                let tolerance = if gi.method == GiMethod::Reference {
+                let tolerance = if gi.method == lightcast_server::gi::reference::REFERENCE {
                     REFERENCE_TOLERANCE
                 } else {
                     TOLERANCE
@@ -213,7 +216,9 @@ fn power_of_two_scales_give_identical_pixels_without_gi_with_the_reference_and_c
         for ((gi, frame), want) in methods().iter().zip(&frames).zip(&unscaled) {
             if !matches!(
                 gi.method,
-                GiMethod::None | GiMethod::Reference | GiMethod::Clustered
+                lightcast_server::gi::none::NONE
+                    | lightcast_server::gi::reference::REFERENCE
+                    | lightcast_server::gi::clustered::CLUSTERED
             ) {
                 continue;
             }

@@ -718,6 +718,30 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             "invalid_field",
             Some("render.gi.rsm_size"),
         ),
+        case(
+            "PATCH",
+            &session,
+            r#"{"render":{"gi":{"rsm_sise":64}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.rsm_sise"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"fancy"}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.method"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"Fancy-1"}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.method"),
+        ),
         case("PATCH", &session, "[1,2,3]", 400, "malformed_json", None),
         case(
             "PATCH",
@@ -1538,6 +1562,7 @@ async fn requests_get_the_servers_defaults_for_what_they_leave_out() {
         }
     }
     assert_eq!(render.gi.get("rsm_size"), Some(&json!(1024)));
+    assert_eq!(render.gi.method.name(), "brsm");
     server.stop().await;
 }
 

@@ -33,6 +33,9 @@ use crate::passes::{
 use lightcast_protocol::{GiParams, Stage, View};
 use params::Settings;
 pub use params::Visibility;
+
+/// The method's name.
+pub const CLUSTERED: lightcast_protocol::GiMethod = lightcast_protocol::GiMethod::new("clustered");
 use passes::{
     AtlasLayout, BlurResources, ClusterBuffers, ClusteredParams, ClusteringPass, ImagePass,
     IndirectResources, Val, VisibilityPass, VisibilityTargets, Vpl, BLUR_GROUP, INDIRECT_GROUP,

@@ -4,7 +4,7 @@ use super::passes::FOURIER_MAX_TERMS;
 use crate::gi::common::params::RSM_SIZE;
 use crate::gi::params::{read, Default, MethodTable, Param};
 use crate::gi::InvalidSetting;
-use lightcast_protocol::{GiMethod, GiParams};
+use lightcast_protocol::GiParams;
 use serde::Deserialize;
 
 /// Fewest VPLs (the issue's lower bound: at least four per pixel with 8×8 interleaving).
@@ -125,7 +125,7 @@ pub const SHADOW_LIGHT: Param = Param::integer(
 );
 
 pub const TABLE: MethodTable = MethodTable {
-    method: GiMethod::Clustered,
+    method: crate::gi::clustered::CLUSTERED,
     summary: "Clustered visibility (seed 003, §4-6): N VPLs from the RSM, k-means into M \
               virtual area lights, one paraboloid convolution soft shadow map per VAL, \
               interleaved shading and a geometry-aware blur",

@@ -39,6 +39,11 @@ use sampling::{SamplingReadback, ValSampling};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
+/// LightSkin: every RSM texel is a VAL (eq. 3–7).
+pub const LIGHTSKIN: GiMethod = GiMethod::new("lightskin");
+/// BRSM: an importance-sampled subset of the VALs (eq. 10–15).
+pub const BRSM: GiMethod = GiMethod::new("brsm");
+
 /// Whether frames of `method` need the scene's light caches (precomputed per model).
 pub fn uses_light_caches(method: GiMethod) -> bool {
     ENTRY.serves(method)
@@ -76,7 +81,7 @@ fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     let caches = shape.set_units as f64;
     let texels = shape.rsm_texels(gi);
     let pixels = shape.reduced_pixels(gi);
-    let brsm = gi.method == GiMethod::Brsm;
+    let brsm = gi.method == crate::gi::lightskin::BRSM;
     let Ok(gi) = Settings::of(gi) else {
         return;
     };
@@ -317,7 +322,7 @@ impl Method for LightSkin {
             gi,
         );
         let source = match method {
-            GiMethod::Brsm => ValSource::Selected {
+            crate::gi::lightskin::BRSM => ValSource::Selected {
                 count: gi.val_count,
             },
             _ => ValSource::EveryTexel,
@@ -359,7 +364,7 @@ impl Method for LightSkin {
         self.sampled = true;
         let sampling = &self.sampling;
         stages.stage(Stage::Rsm, |e| sampling.encode_rsm(e, &r.scene_buffers))?;
-        if method == GiMethod::Brsm {
+        if method == crate::gi::lightskin::BRSM {
             stages.stage(Stage::Importance, |e| sampling.encode_importance(e, gi))?;
             stages.stage(Stage::CumulativeSums, |e| {
                 sampling.encode_cumulative_sums(e)

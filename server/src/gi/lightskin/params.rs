@@ -1,9 +1,9 @@
 //! The parameter tables of `lightskin` and `brsm` (seed 004) and the struct both read them as.
 
 use crate::gi::common::params::RSM_SIZE;
-use crate::gi::params::{read, Default, MethodTable, Param};
+use crate::gi::params::{read_for, Default, MethodTable, Param};
 use crate::gi::InvalidSetting;
-use lightcast_protocol::{GiMethod, GiParams};
+use lightcast_protocol::GiParams;
 use serde::Deserialize;
 
 /// Most view samples for the importance estimate.
@@ -87,7 +87,7 @@ pub const UNIFORM_IMPORTANCE: Param = Param::boolean(
 );
 
 pub const LIGHTSKIN: MethodTable = MethodTable {
-    method: GiMethod::Lightskin,
+    method: crate::gi::lightskin::LIGHTSKIN,
     summary: "LightSkin (seed 004, eq. 3-9): every RSM texel lights every light cache; caches \
               are interpolated per pixel",
     progressive: false,
@@ -95,7 +95,7 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
 };
 
 pub const BRSM: MethodTable = MethodTable {
-    method: GiMethod::Brsm,
+    method: crate::gi::lightskin::BRSM,
     summary: "Bidirectional RSM (seed 004, eq. 10-15): LightSkin fed by an importance-sampled \
               subset of the RSM texels",
     progressive: false,
@@ -113,7 +113,7 @@ pub const BRSM: MethodTable = MethodTable {
 };
 
 /// The parameters of both methods, as [`BRSM`]'s table (a superset of [`LIGHTSKIN`]'s)
-/// describes them; `lightskin` leaves the sampling ones at what the request says.
+/// describes them; `lightskin` leaves the sampling ones at their defaults.
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Settings {
@@ -130,6 +130,11 @@ pub struct Settings {
 
 impl Settings {
     pub fn of(gi: &GiParams) -> Result<Self, InvalidSetting> {
-        read(BRSM.params, gi)
+        let own = if gi.method == super::LIGHTSKIN {
+            LIGHTSKIN.params
+        } else {
+            BRSM.params
+        };
+        read_for(BRSM.params, own, gi)
     }
 }

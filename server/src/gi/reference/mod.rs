@@ -44,12 +44,15 @@ use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::{self, ParamSlots};
 use crate::scene::{material, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
-use lightcast_protocol::{Camera, GiParams, Light, Stage};
+use lightcast_protocol::{Camera, GiMethod, GiParams, Light, Stage};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
 pub use crate::gi::common::params::MAX_BOUNCES;
+
+/// The method's name.
+pub const REFERENCE: GiMethod = GiMethod::new("reference");
 /// Samples per pixel one frame or [`PathTracer::accumulate`] call adds at most (one dispatch
 /// each).
 pub const MAX_SAMPLES_PER_CALL: u32 = 1024;

@@ -4,7 +4,7 @@ use super::MAX_SAMPLES_PER_CALL;
 use crate::gi::common::params::{BOUNCES, EMITTERS};
 use crate::gi::params::{read, Default, MethodTable, Param};
 use crate::gi::InvalidSetting;
-use lightcast_protocol::{GiMethod, GiParams};
+use lightcast_protocol::GiParams;
 use serde::Deserialize;
 
 /// The software profile's 1: a session's frame at the viewer's software size (800×450) is
@@ -24,7 +24,7 @@ pub const SPP: Param = Param::integer(
 .unit("samples");
 
 pub const TABLE: MethodTable = MethodTable {
-    method: GiMethod::Reference,
+    method: crate::gi::reference::REFERENCE,
     summary: "Path-traced reference: the converged indirect light (exact visibility, the same \
               BRDF and light), accumulated while nothing changes",
     progressive: true,

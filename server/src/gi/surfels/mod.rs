@@ -50,6 +50,9 @@ use hierarchy::{ClusterWeights, HierarchyError, Leaf, Tree};
 use lightcast_protocol::{GiMethod, GiParams, Light, Stage, View};
 use links::{LinkError, SurfelLinks};
 pub use params::{Settings, LINK_RANGE, MAX_SURFELS, MIN_BANDS, MIN_SURFELS};
+
+/// The method's name.
+pub const SURFELS: GiMethod = GiMethod::new("surfels");
 use passes::{Bounce, SurfelBuffers, SurfelPasses};
 use sampling::{SamplingError, Surfel};
 use std::any::{Any, TypeId};
@@ -244,7 +247,7 @@ impl Default for SurfelParams {
     /// The table's defaults (the paper's 32k surfels and 128 links, 3 bands), so the service,
     /// the offline tools and the bench cannot disagree (issue 32: they were written twice).
     fn default() -> Self {
-        let none = GiParams::new(GiMethod::Surfels);
+        let none = GiParams::new(crate::gi::surfels::SURFELS);
         Self {
             surfels: params::SURFEL_COUNT.u32(&none),
             cache_spacing: None,
@@ -873,7 +876,7 @@ mod tests {
     fn link_coefficients_beyond_one_binding_are_refused_before_precomputing() {
         let facts = SceneFacts::of(&procedural::cornell_box());
         let gi = |links: u32, bands: u32| {
-            GiParams::new(GiMethod::Surfels)
+            GiParams::new(crate::gi::surfels::SURFELS)
                 .with("surfel_cache_spacing", 0.05)
                 .with("surfel_links", links)
                 .with("sh_bands", bands)

@@ -4,7 +4,7 @@ use super::passes::MAX_GPU_BANDS;
 use crate::gi::common::params::{BOUNCES, EMITTERS};
 use crate::gi::params::{read, Default, MethodTable, Param};
 use crate::gi::InvalidSetting;
-use lightcast_protocol::{GiMethod, GiParams};
+use lightcast_protocol::GiParams;
 use serde::Deserialize;
 
 /// Fewest surfels a request may ask for.
@@ -55,7 +55,7 @@ pub const SH_BANDS: Param = Param::integer(
 );
 
 pub const TABLE: MethodTable = MethodTable {
-    method: GiMethod::Surfels,
+    method: crate::gi::surfels::SURFELS,
     summary: "Surfels (seed 001): surfels lit by the light and by the previous bounce, flux \
               pulled up a hierarchy, SH caches lit over precomputed links and interpolated \
               per pixel; multi-bounce, one bounce more per frame",

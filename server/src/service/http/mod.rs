@@ -502,6 +502,11 @@ pub fn openapi_value() -> Result<serde_json::Value, serde_json::Error> {
         // Every parameter is listed now; the server refuses any other field.
         schema.insert("additionalProperties".into(), false.into());
     }
+    if let Some(serde_json::Value::Object(schema)) = doc.pointer_mut("/components/schemas/GiMethod")
+    {
+        let methods: Vec<String> = crate::gi::methods().map(|m| m.to_string()).collect();
+        schema.insert("enum".into(), methods.into());
+    }
     Ok(doc)
 }
 

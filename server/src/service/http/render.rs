@@ -189,9 +189,7 @@ pub async fn render(
             "raw buffers are of the final frame; use view 'final'",
         ));
     }
-    if req.format == ImageFormat::RawIndirect
-        && req.render.gi.method == lightcast_protocol::GiMethod::None
-    {
+    if req.format == ImageFormat::RawIndirect && req.render.gi.method == crate::gi::none::NONE {
         return Err(ApiError::field(
             "format",
             "raw_indirect needs GI; set render.gi.method to anything but none",
@@ -199,12 +197,12 @@ pub async fn render(
     }
     let compare = match req.compare_to {
         None => None,
-        Some(lightcast_protocol::GiMethod::Reference) => {
+        Some(crate::gi::reference::REFERENCE) => {
             let spp = req.compare_spp.unwrap_or(DEFAULT_COMPARE_SPP);
             // The comparison render's parameters, checked like any reference render's; its
             // sample count is the request's `compare_spp`.
             let mut truth = req.render.gi.clone();
-            truth.method = lightcast_protocol::GiMethod::Reference;
+            truth.method = crate::gi::reference::REFERENCE;
             truth.set(SPP.name, spp);
             check_gi_ranges(&truth, &state.limits).map_err(|mut e| {
                 if e.body.field.as_deref() == Some("gi.spp") {
@@ -215,7 +213,7 @@ pub async fn render(
                     e.within("render")
                 }
             })?;
-            Some((lightcast_protocol::GiMethod::Reference, spp))
+            Some((crate::gi::reference::REFERENCE, spp))
         }
         Some(other) => {
             return Err(ApiError::field(
@@ -229,7 +227,7 @@ pub async fn render(
     let shape = frame_shape(&resolved.settings, &entry);
     let set_units = |g: &lightcast_protocol::GiParams| entry.estimated_set_units(g);
     let compare_spp = compare.map(|(_, spp)| spp);
-    if !spp_named && req.render.gi.method == lightcast_protocol::GiMethod::Reference {
+    if !spp_named && req.render.gi.method == crate::gi::reference::REFERENCE {
         let spp = one_shot_spp(
             &req.render.gi,
             shape,

@@ -20,7 +20,7 @@ pub fn set_bvh(renderer: &mut Renderer) {
     let bvh = lightcast_server::gi::common::bvh::SceneBvh::build(renderer.scene()).expect("bvh");
     let data: lightcast_server::gi::precompute::SceneData = std::sync::Arc::new(bvh);
     renderer
-        .set_scene_data(lightcast_server::gi::GiMethod::Reference, &data)
+        .set_scene_data(lightcast_server::gi::reference::REFERENCE, &data)
         .expect("the BVH fits the scene");
 }
 
@@ -76,7 +76,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         shadow_map_size: 256,
         capture_hdr: true,
         debug_view: lightcast_protocol::View::Final,
-        gi: lightcast_server::gi::GiParams::new(lightcast_server::gi::GiMethod::None),
+        gi: lightcast_server::gi::GiParams::new(lightcast_server::gi::none::NONE),
         history: None,
         still: false,
         yuv420: false,

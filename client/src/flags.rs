@@ -47,8 +47,8 @@ pub struct RenderFlags {
     /// Shadow map side in texels (server default 2048 on a GPU).
     #[arg(long)]
     pub shadow_map_size: Option<u32>,
-    /// Indirect light method, one of the server's (`/v1/server`'s `gi_methods`: none,
-    /// lightskin, brsm, reference, clustered, surfels, …; server default brsm).
+    /// Indirect light method, one of the server's (`/v1/server`'s `gi_methods` lists
+    /// them; server default brsm).
     #[arg(long, value_parser = GiMethod::parse)]
     pub gi: Option<GiMethod>,
     /// A GI parameter by its name in `/v1/server`'s `gi_methods` (the README's table lists

@@ -245,6 +245,8 @@ pub struct MethodEntry {
     pub cost: fn(&GiParams, &cost::FrameShape, &mut cost::Cost),
     /// The parameters that scale that cost, in the order a refusal suggests lowering them.
     pub knobs: &'static [cost::Knob],
+    /// The method's shader modules with their bind groups (`gi/<method>/shaders.rs`).
+    pub shaders: &'static [crate::passes::ShaderPass],
     /// Whether the renderer may run the method at `indirect_downscale` (the methods that
     /// approximate; not `none`, which has nothing to compute, nor the reference, which is the
     /// full-resolution truth the others are compared with).
@@ -333,4 +335,107 @@ pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
             }
         })
         .collect()
+}
+
+/// Every shader module the server runs: the shared passes', the shared GI modules' and each
+/// registered method's, with their bind groups.
+pub fn all_shaders() -> impl Iterator<Item = &'static crate::passes::ShaderPass> {
+    crate::passes::SHADERS
+        .iter()
+        .chain(common::shaders::PASSES)
+        .chain(REGISTRY.iter().flat_map(|e| e.shaders))
+}
+
+#[cfg(test)]
+mod shader_tests {
+    use super::all_shaders;
+    use crate::gpu::shaders::layout_check;
+    use std::collections::BTreeSet;
+
+    #[test]
+    fn every_pass_module_validates_with_naga() {
+        for pass in all_shaders() {
+            let source = pass.source;
+            let module = layout_check::parse(source);
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::PRIMITIVE_INDEX,
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{}: {}", source.name, e.emit_to_string(&source.source())));
+        }
+    }
+
+    #[test]
+    fn no_pass_binds_a_uniform_buffer() {
+        // lavapipe recompiles, and leaks, a shader variant per dispatch for uniform values
+        // that steer control flow; parameters are bound as storage (`passes::PARAMS_BINDING`).
+        for pass in all_shaders() {
+            let module = layout_check::parse(pass.source);
+            let uniforms: Vec<_> = module
+                .global_variables
+                .iter()
+                .filter(|(_, v)| v.space == naga::AddressSpace::Uniform)
+                .map(|(_, v)| v.name.clone().unwrap_or_default())
+                .collect();
+            assert!(
+                uniforms.is_empty(),
+                "{}: var<uniform> {uniforms:?}; use var<storage, read>",
+                pass.source.name
+            );
+        }
+    }
+
+    /// Each pipeline's bind groups, as its pass declares them, are what its WGSL declares; the
+    /// only module without them is the BVH test's (an integration-test harness).
+    #[test]
+    fn every_pass_binds_what_its_wgsl_declares() {
+        let errors: Vec<String> = all_shaders()
+            .filter_map(|p| Some((p.source, p.groups?)))
+            .flat_map(|(source, groups)| {
+                crate::passes::bind::wgsl_mismatches(source, groups)
+                    .into_iter()
+                    .map(|e| format!("{}: {e}", source.name))
+            })
+            .collect();
+        assert!(errors.is_empty(), "{}", errors.join("\n"));
+        let unchecked: Vec<&str> = all_shaders()
+            .filter(|p| p.groups.is_none())
+            .map(|p| p.source.name)
+            .collect();
+        assert_eq!(unchecked, [super::common::shaders::BVH_TEST.name]);
+        let names: Vec<&str> = all_shaders().map(|p| p.source.name).collect();
+        let unique: BTreeSet<&str> = names.iter().copied().collect();
+        assert_eq!(
+            unique.len(),
+            names.len(),
+            "a module listed twice: {names:?}"
+        );
+    }
+
+    #[test]
+    fn every_file_in_shaders_dir_belongs_to_a_pass() {
+        let root = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../shaders"));
+        // shaders/ and one level of method folders (shaders/<method>/).
+        let mut on_disk = BTreeSet::new();
+        let mut dirs = vec![root.to_path_buf()];
+        while let Some(dir) = dirs.pop() {
+            for entry in std::fs::read_dir(&dir).expect("shaders/ exists") {
+                let path = entry.expect("dir entry").path();
+                if path.is_dir() {
+                    dirs.push(path);
+                } else if path.extension().is_some_and(|e| e == "wgsl") {
+                    let relative = path.strip_prefix(root).expect("under shaders/");
+                    on_disk.insert(relative.to_string_lossy().into_owned());
+                }
+            }
+        }
+        let used: BTreeSet<String> = all_shaders()
+            .flat_map(|p| p.source.files.iter().map(|(n, _)| n.to_string()))
+            .collect();
+        assert_eq!(
+            on_disk, used,
+            "every WGSL file must be part of a validated pass"
+        );
+    }
 }

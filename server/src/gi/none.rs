@@ -26,6 +26,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     precompute: None,
     cost: |_, _, _| {},
     knobs: &[],
+    shaders: &[],
     downscales: false,
 };
 

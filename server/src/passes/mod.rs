@@ -2,16 +2,11 @@
 //!
 //! 1. [`shadow_map`]: depth from the light (1 or 6 faces).
 //! 2. [`gbuffer`]: position, normal, materials and triangle id from the camera.
-//! 3. [`rsm`]: the reflective shadow map, every texel a virtual area light (VAL).
-//! 4. [`importance`]: importance of every VAL from view samples (BRSM only).
-//! 5. [`cumulative_sums`]: cumulative importance (BRSM only).
-//! 6. [`val_select`]: N_sVAL VALs drawn from it with their weights (BRSM only).
-//! 7. [`cache_lighting`]: diffuse and glossy proxy lights per light cache.
-//! 8. [`proxy_occlusion`]: the proxies dimmed by the caches in between (double projection).
-//! 9. [`indirect_light`]: proxy lights interpolated per pixel.
+//! 3. The frame's GI method (`gi/<method>/`) fills the indirect buffer; the RSM-based ones
+//!    start with [`rsm`], the reflective shadow map, every texel a virtual light.
 //!
 //! With `gi.indirect_downscale` > 1, [`indirect_resolution`] reduces the G-buffer before the
-//! GI method's stages (3–9, or another method's) and upsamples their result after them.
+//! GI method's stages and upsamples their result after them.
 //! 10. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
 //! 11. [`exposure`]: automatic exposure from the HDR image.
 //! 12. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
@@ -32,6 +27,8 @@ pub mod scene_buffers;
 pub mod shadow_map;
 pub mod tonemap;
 pub mod yuv420;
+
+use crate::gpu::shaders::{self, ShaderSource};
 
 /// Format of the indirect-light buffer every GI method writes and direct light adds in.
 pub const INDIRECT_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
@@ -297,6 +294,59 @@ pub fn dispatch_chunked(
     pass.set_bind_group(0, bind_group, &[ParamSlots::offset(0)]);
     pass.dispatch_workgroups(groups, 1, 1);
 }
+
+/// A shader module and the bind groups of the pipeline that runs it, group i at index i. A
+/// test over every pass (the shared ones, [`SHADERS`], and each GI method's) validates the
+/// module with naga and checks the groups against its WGSL. `None`: the pipeline takes its
+/// layout from the WGSL (a test harness's).
+pub struct ShaderPass {
+    pub source: &'static ShaderSource,
+    pub groups: Option<&'static [&'static bind::BindGroupDesc]>,
+}
+
+/// The shared passes' modules with their bind groups.
+pub const SHADERS: &[ShaderPass] = &[
+    ShaderPass {
+        source: &shaders::GBUFFER,
+        groups: Some(&[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::GBUFFER_TRIANGLE_IDS,
+        groups: Some(&[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::SHADOW_MAP,
+        groups: Some(&[&shadow_map::GROUP, &scene_buffers::MATERIAL_GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::DIRECT_LIGHT,
+        groups: Some(&[&direct_light::GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::EXPOSURE,
+        groups: Some(&[&exposure::GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::TONEMAP,
+        groups: Some(&[&tonemap::GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::YUV420,
+        groups: Some(&[&yuv420::GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::GBUFFER_REDUCE,
+        groups: Some(&[&indirect_resolution::REDUCE_GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::INDIRECT_UPSAMPLE,
+        groups: Some(&[&indirect_resolution::UPSAMPLE_GROUP]),
+    },
+    ShaderPass {
+        source: &shaders::RSM,
+        groups: Some(&[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP]),
+    },
+];
 
 #[cfg(test)]
 mod tests {

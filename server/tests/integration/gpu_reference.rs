@@ -7,10 +7,11 @@ use super::support::{self, brdf, floor_corners, hit_plane, plain_material, quad}
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gi::common::bvh::SceneBvh;
+use lightcast_server::gi::common::shaders;
 use lightcast_server::gi::reference::{
     luminance, PathTracer, ReferenceImage, ReferenceSettings, SurfaceGpu,
 };
-use lightcast_server::gpu::{readback::map_read, shaders, GpuContext};
+use lightcast_server::gpu::{readback::map_read, GpuContext};
 use lightcast_server::scene::{material, Material, Scene, Texture, Vertex};
 use wgpu::util::DeviceExt;
 
@@ -82,7 +83,7 @@ fn gpu_hits(ctx: &GpuContext, bvh: &SceneBvh, rays: &[(Vec3, Vec3)]) -> Vec<[f32
         bytemuck::cast_slice(&bvh.triangles),
         wgpu::BufferUsages::empty(),
     );
-    let module = shaders::REFERENCE_BVH_TEST.create_module(device);
+    let module = shaders::BVH_TEST.create_module(device);
     let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("bvh test"),
         layout: None,

@@ -16,6 +16,7 @@ pub mod cpu;
 pub mod cpu_visibility;
 pub mod params;
 pub mod passes;
+pub mod shaders;
 
 use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
 use super::{
@@ -66,6 +67,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::CLUSTER_COUNT),
         Knob::lower(&params::KMEANS_ITERATIONS),
     ],
+    shaders: shaders::PASSES,
     downscales: true,
 };
 
@@ -443,21 +445,16 @@ impl Clustered {
             indirect: ImagePass::new(
                 device,
                 &INDIRECT_GROUP,
-                &crate::gpu::shaders::CLUSTERED_INDIRECT,
+                &shaders::CLUSTERED_INDIRECT,
                 "shade",
             ),
             light_shadow: ImagePass::new(
                 device,
                 &INDIRECT_GROUP,
-                &crate::gpu::shaders::CLUSTERED_INDIRECT,
+                &shaders::CLUSTERED_INDIRECT,
                 "light_shadow",
             ),
-            blur: ImagePass::new(
-                device,
-                &BLUR_GROUP,
-                &crate::gpu::shaders::GEOMETRY_BLUR,
-                "blur",
-            ),
+            blur: ImagePass::new(device, &BLUR_GROUP, &shaders::GEOMETRY_BLUR, "blur"),
             targets: FrameTargets::default(),
             extent: (r.scene.bounds.radius() * 2.0).max(f32::MIN_POSITIVE),
             encoded: false,

@@ -5,7 +5,7 @@
 //! ([`ClusterBuffers`]).
 
 use super::Visibility;
-use crate::gpu::shaders::{self, ShaderSource};
+use crate::gpu::shaders::ShaderSource;
 use crate::passes::bind::BindKind;
 use crate::passes::bind::{self, bind_group, BindGroupDesc};
 use crate::passes::scene_buffers::SceneBuffers;
@@ -325,7 +325,7 @@ pub struct ClusteringPass {
 impl ClusteringPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let layout = CLUSTERING_GROUP.layout(device);
-        let module = shaders::CLUSTERING.create_module(device);
+        let module = super::shaders::CLUSTERING.create_module(device);
         let pipeline =
             |entry: &str| passes::compute_pipeline(device, entry, &layout, &module, entry);
         Self {
@@ -499,7 +499,7 @@ pub struct VisibilityPass {
 impl VisibilityPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let maps_layout = MAPS_GROUP.layout(device);
-        let module = shaders::PARABOLOID_MAPS.create_module(device);
+        let module = super::shaders::PARABOLOID_MAPS.create_module(device);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("paraboloid maps"),
             bind_group_layouts: &[Some(&maps_layout)],
@@ -543,14 +543,14 @@ impl VisibilityPass {
                 device,
                 "cssm basis",
                 &basis_layout,
-                &shaders::CSSM_BASIS.create_module(device),
+                &super::shaders::CSSM_BASIS.create_module(device),
                 "basis",
             ),
             mips: passes::compute_pipeline(
                 device,
                 "cssm mips",
                 &mips_layout,
-                &shaders::CSSM_MIPS.create_module(device),
+                &super::shaders::CSSM_MIPS.create_module(device),
                 "downsample",
             ),
             maps_layout,
@@ -665,7 +665,8 @@ pub fn interleaved_target(device: &wgpu::Device, width: u32, height: u32) -> Tar
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, CLUSTERING, PARABOLOID_MAPS};
+    use crate::gi::clustered::shaders::{CLUSTERING, PARABOLOID_MAPS};
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

@@ -5,4 +5,5 @@
 pub mod bvh;
 pub mod halton;
 pub mod params;
+pub mod shaders;
 pub mod triangles;

@@ -1,7 +1,6 @@
 //! Cache lighting (`shaders/cache_lighting.wgsl`): the diffuse and glossy proxy lights of every
 //! light cache from the VALs (eq. 3–7 for LightSkin, eq. 13–15 for the BRSM subset).
 
-use crate::gpu::shaders;
 use crate::passes::bind::{self, bind_group};
 use crate::passes::rsm::Rsm;
 use bytemuck::{Pod, Zeroable};
@@ -96,7 +95,7 @@ impl CacheLightingPass {
             crate::passes::MAX_CHUNKS,
         );
         let layout = GROUP.layout(device);
-        let module = shaders::CACHE_LIGHTING.create_module(device);
+        let module = super::shaders::CACHE_LIGHTING.create_module(device);
         Self {
             accumulate: crate::passes::compute_pipeline(
                 device,
@@ -197,7 +196,8 @@ impl CacheLightingPass {
 mod tests {
     use super::*;
     use crate::gi::lightskin::caches::LightCache;
-    use crate::gpu::shaders::{layout_check::assert_struct, CACHE_LIGHTING};
+    use crate::gi::lightskin::shaders::CACHE_LIGHTING;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

@@ -1,7 +1,6 @@
 //! Cumulative sums of the importance map (`shaders/cumulative_sums.wgsl`): down each column,
 //! then across the column totals.
 
-use crate::gpu::shaders;
 use crate::passes::bind::{self, bind_group};
 use bytemuck::{Pod, Zeroable};
 
@@ -35,7 +34,7 @@ pub struct CumulativeSumsPass {
 impl CumulativeSumsPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let layout = GROUP.layout(device);
-        let module = shaders::CUMULATIVE_SUMS.create_module(device);
+        let module = super::shaders::CUMULATIVE_SUMS.create_module(device);
         Self {
             columns: crate::passes::compute_pipeline(
                 device,
@@ -104,7 +103,8 @@ impl CumulativeSumsPass {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, CUMULATIVE_SUMS};
+    use crate::gi::lightskin::shaders::CUMULATIVE_SUMS;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

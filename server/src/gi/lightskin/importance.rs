@@ -1,7 +1,6 @@
 //! VAL importance (`shaders/importance.wgsl`, eq. 10–11): view samples gathered from the
 //! G-buffer at Halton positions, then one importance value per RSM texel.
 
-use crate::gpu::shaders;
 use crate::passes::bind::{self, bind_group};
 use crate::passes::{gbuffer::GBuffer, rsm::Rsm};
 use bytemuck::{Pod, Zeroable};
@@ -59,7 +58,7 @@ impl ImportancePass {
             crate::passes::MAX_CHUNKS,
         );
         let layout = GROUP.layout(device);
-        let module = shaders::IMPORTANCE.create_module(device);
+        let module = super::shaders::IMPORTANCE.create_module(device);
         Self {
             gather: crate::passes::compute_pipeline(
                 device,
@@ -154,7 +153,8 @@ impl ImportancePass {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, IMPORTANCE};
+    use crate::gi::lightskin::shaders::IMPORTANCE;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

@@ -1,7 +1,6 @@
 //! Indirect light per pixel (`shaders/indirect_light.wgsl`): interpolation of the proxy
 //! lights of the pixel's 16 light caches (eq. 8–9), into the indirect target.
 
-use crate::gpu::shaders;
 use crate::passes::bind::{self, bind_group, BindKind};
 use crate::passes::{gbuffer::GBuffer, Target, INDIRECT_FORMAT};
 use bytemuck::{Pod, Zeroable};
@@ -55,7 +54,7 @@ pub struct IndirectLightPass {
 impl IndirectLightPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let layout = GROUP.layout(device);
-        let module = shaders::INDIRECT_LIGHT.create_module(device);
+        let module = super::shaders::INDIRECT_LIGHT.create_module(device);
         let params = crate::passes::params_buffer(
             device,
             "indirect params",
@@ -132,7 +131,8 @@ impl IndirectLightPass {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, INDIRECT_LIGHT};
+    use crate::gi::lightskin::shaders::INDIRECT_LIGHT;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

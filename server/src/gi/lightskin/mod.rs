@@ -16,6 +16,7 @@ pub mod indirect_light;
 pub mod params;
 pub mod proxy_occlusion;
 pub mod sampling;
+pub mod shaders;
 pub mod val_select;
 
 use super::common::params::glossy_exponent;
@@ -66,6 +67,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::VIEW_SAMPLES),
         Knob::lower(&crate::gi::common::params::RSM_SIZE),
     ],
+    shaders: shaders::PASSES,
     downscales: true,
 };
 

@@ -2,7 +2,6 @@
 //! each proxy's bounding sphere and the other caches' disks onto the target cache's unit disk;
 //! the covered fraction dims the proxy.
 
-use crate::gpu::shaders;
 use crate::passes::bind::{self, bind_group};
 use bytemuck::{Pod, Zeroable};
 
@@ -43,7 +42,7 @@ impl ProxyOcclusionPass {
             crate::passes::MAX_CHUNKS,
         );
         let layout = GROUP.layout(device);
-        let module = shaders::PROXY_OCCLUSION.create_module(device);
+        let module = super::shaders::PROXY_OCCLUSION.create_module(device);
         Self {
             accumulate: crate::passes::compute_pipeline(
                 device,
@@ -119,7 +118,8 @@ impl ProxyOcclusionPass {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, PROXY_OCCLUSION};
+    use crate::gi::lightskin::shaders::PROXY_OCCLUSION;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

@@ -1,7 +1,6 @@
 //! VAL selection (`shaders/val_select.wgsl`): N_sVAL stratified draws from the importance
 //! distribution by binary search on the cumulative sums, each with its Monte Carlo weight.
 
-use crate::gpu::shaders;
 use crate::passes::bind::{self, bind_group};
 use crate::passes::rsm::Rsm;
 use bytemuck::{Pod, Zeroable};
@@ -67,7 +66,7 @@ pub struct SelectionBuffers<'a> {
 impl ValSelectPass {
     pub fn new(device: &wgpu::Device) -> Self {
         let layout = GROUP.layout(device);
-        let module = shaders::VAL_SELECT.create_module(device);
+        let module = super::shaders::VAL_SELECT.create_module(device);
         Self {
             pipeline: crate::passes::compute_pipeline(
                 device,
@@ -143,7 +142,8 @@ impl ValSelectPass {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, VAL_SELECT};
+    use crate::gi::lightskin::shaders::VAL_SELECT;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

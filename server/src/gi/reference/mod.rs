@@ -29,6 +29,7 @@
 
 pub mod params;
 pub mod resolve;
+pub mod shaders;
 
 use super::common::bvh;
 use super::common::params::{emitters, glossy_exponent, BOUNCES};
@@ -37,7 +38,7 @@ use super::precompute::{
     BudgetPool, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, UnitBudget,
 };
 use super::{FrameInputs, GiError, InvalidSetting, Method, MethodEntry, ProgressBuffer};
-use crate::gpu::{readback::read_buffer, shaders, timing::FrameStages, GpuContext, GpuError};
+use crate::gpu::{readback::read_buffer, timing::FrameStages, GpuContext, GpuError};
 use crate::passes::bind::{self, bind_group};
 use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
 use crate::passes::scene_buffers::MaterialGpu;
@@ -76,6 +77,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::SPP),
         Knob::lower(&crate::gi::common::params::BOUNCES),
     ],
+    shaders: shaders::PASSES,
     downscales: false,
 };
 
@@ -910,7 +912,8 @@ pub fn luminance(c: [f32; 3]) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, REFERENCE_PATH_TRACE};
+    use crate::gi::reference::shaders::REFERENCE_PATH_TRACE;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

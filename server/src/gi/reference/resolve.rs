@@ -4,7 +4,6 @@
 //! the frame instead of waiting.
 
 use crate::gi::ProgressSums;
-use crate::gpu::shaders;
 use crate::passes::bind::{self, bind_group};
 use crate::passes::{self, gbuffer::GBuffer, Target, INDIRECT_FORMAT, TILE};
 use bytemuck::{Pod, Zeroable};
@@ -54,7 +53,7 @@ fn partials_buffer(device: &wgpu::Device, groups: u64) -> wgpu::Buffer {
 impl ResolvePass {
     pub fn new(device: &wgpu::Device) -> Self {
         let layout = GROUP.layout(device);
-        let module = shaders::REFERENCE_RESOLVE.create_module(device);
+        let module = super::shaders::REFERENCE_RESOLVE.create_module(device);
         Self {
             resolve: passes::compute_pipeline(
                 device,
@@ -138,7 +137,8 @@ impl ResolvePass {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, REFERENCE_RESOLVE};
+    use crate::gi::reference::shaders::REFERENCE_RESOLVE;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

@@ -10,7 +10,7 @@
 
 use super::links::Senders;
 use crate::gpu::readback::PendingMap;
-use crate::gpu::{shaders, GpuContext, GpuError};
+use crate::gpu::{GpuContext, GpuError};
 use crate::passes::bind::{self, bind_group};
 use crate::passes::{compute_pipeline_with_constants, params_buffer};
 use bytemuck::{Pod, Zeroable};
@@ -168,7 +168,7 @@ impl LinkRays {
             device,
             "surfel link rays",
             &[&ray_layout, &bvh_layout],
-            &shaders::SURFEL_LINK_RAYS.create_module(device),
+            &super::shaders::SURFEL_LINK_RAYS.create_module(device),
             "main",
             &[("ALPHA_TESTED", 0.0)],
         );
@@ -296,7 +296,8 @@ impl LinkRays {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{layout_check::assert_struct, SURFEL_LINK_RAYS};
+    use crate::gi::surfels::shaders::SURFEL_LINK_RAYS;
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

@@ -27,6 +27,7 @@ pub mod params;
 pub mod passes;
 pub mod sampling;
 pub mod sh;
+pub mod shaders;
 pub mod store;
 
 use crate::gi::common::bvh::SceneBvh;
@@ -79,6 +80,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::SH_BANDS),
         Knob::lower(&params::SURFEL_COUNT),
     ],
+    shaders: shaders::PASSES,
     downscales: true,
 };
 

@@ -388,11 +388,11 @@ impl SurfelPasses {
         let sh_view_layout = SH_VIEW_GROUP.layout(device);
         let params = |label| params_buffer(device, label, 16);
         Self {
-            light: pipeline(&shaders::SURFEL_LIGHT, &light_layout),
-            pull: pipeline(&shaders::SURFEL_PULL, &pull_layout),
-            cache: pipeline(&shaders::SURFEL_CACHE_LIGHT, &cache_layout),
-            shade: pipeline(&shaders::SURFEL_SHADE, &shade_layout),
-            sh_view: pipeline(&shaders::SURFEL_CACHE_SH_VIEW, &sh_view_layout),
+            light: pipeline(&super::shaders::SURFEL_LIGHT, &light_layout),
+            pull: pipeline(&super::shaders::SURFEL_PULL, &pull_layout),
+            cache: pipeline(&super::shaders::SURFEL_CACHE_LIGHT, &cache_layout),
+            shade: pipeline(&super::shaders::SURFEL_SHADE, &shade_layout),
+            sh_view: pipeline(&super::shaders::SURFEL_CACHE_SH_VIEW, &sh_view_layout),
             light_layout,
             pull_layout,
             cache_layout,
@@ -609,9 +609,8 @@ pub fn sh_view_buffer(device: &wgpu::Device, width: u32, height: u32) -> wgpu::B
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gpu::shaders::{
-        layout_check::assert_struct, SURFEL_CACHE_LIGHT, SURFEL_LIGHT, SURFEL_PULL,
-    };
+    use crate::gi::surfels::shaders::{SURFEL_CACHE_LIGHT, SURFEL_LIGHT, SURFEL_PULL};
+    use crate::gpu::shaders::layout_check::assert_struct;
     use std::mem::{offset_of, size_of};
 
     #[test]

@@ -1,0 +1,82 @@
+//! The WGSL modules of LightSkin and BRSM (`shaders/`), each the concatenation of its files.
+
+use crate::gpu::shaders::{wgsl, ShaderSource};
+use crate::passes::ShaderPass;
+
+pub const IMPORTANCE: ShaderSource = ShaderSource {
+    name: "importance",
+    files: &[
+        wgsl!("halton.wgsl"),
+        wgsl!("lightskin/view_samples.wgsl"),
+        wgsl!("lightskin/importance.wgsl"),
+    ],
+};
+
+pub const CUMULATIVE_SUMS: ShaderSource = ShaderSource {
+    name: "cumulative_sums",
+    files: &[wgsl!("lightskin/cumulative_sums.wgsl")],
+};
+
+pub const VAL_SELECT: ShaderSource = ShaderSource {
+    name: "val_select",
+    files: &[
+        wgsl!("lightskin/vals.wgsl"),
+        wgsl!("lightskin/val_select.wgsl"),
+    ],
+};
+
+pub const CACHE_LIGHTING: ShaderSource = ShaderSource {
+    name: "cache_lighting",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("lightskin/vals.wgsl"),
+        wgsl!("lightskin/light_caches.wgsl"),
+        wgsl!("lightskin/cache_lighting.wgsl"),
+    ],
+};
+
+pub const INDIRECT_LIGHT: ShaderSource = ShaderSource {
+    name: "indirect_light",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("lightskin/light_caches.wgsl"),
+        wgsl!("lightskin/indirect_light.wgsl"),
+    ],
+};
+
+pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
+    name: "proxy_occlusion",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("lightskin/light_caches.wgsl"),
+        wgsl!("lightskin/proxy_occlusion.wgsl"),
+    ],
+};
+
+/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
+pub const PASSES: &[ShaderPass] = &[
+    ShaderPass {
+        source: &IMPORTANCE,
+        groups: Some(&[&super::importance::GROUP]),
+    },
+    ShaderPass {
+        source: &CUMULATIVE_SUMS,
+        groups: Some(&[&super::cumulative_sums::GROUP]),
+    },
+    ShaderPass {
+        source: &VAL_SELECT,
+        groups: Some(&[&super::val_select::GROUP]),
+    },
+    ShaderPass {
+        source: &CACHE_LIGHTING,
+        groups: Some(&[&super::cache_lighting::GROUP]),
+    },
+    ShaderPass {
+        source: &INDIRECT_LIGHT,
+        groups: Some(&[&super::indirect_light::GROUP]),
+    },
+    ShaderPass {
+        source: &PROXY_OCCLUSION,
+        groups: Some(&[&super::proxy_occlusion::GROUP]),
+    },
+];

@@ -30,7 +30,7 @@ pub struct ErrorBody {
 /// registry does): a name is 1 to [`GiMethod::MAX_LEN`] lowercase ASCII letters, digits and
 /// underscores, and the server refuses one it does not have, naming `render.gi.method`. Held
 /// inline, so it is `Copy` and a method module can name itself in a `const`.
-#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
 pub struct GiMethod {
     len: u8,
     bytes: [u8; GiMethod::MAX_LEN],

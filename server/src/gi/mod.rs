@@ -12,14 +12,16 @@
 //! - [`surfels`]: surfels, a flux hierarchy, precomputed SH links and SH caches with
 //!   progressive multi-bounce (seed paper 001).
 //!
-//! Adding a method: a module implementing [`Method`] and an entry in [`REGISTRY`] whose
-//! `tables` hold its parameter table ([`params`]: every row written once, from which the
-//! request checks, `/v1/server`, the OpenAPI schema, `--gi-param`, the viewer's panel, the
-//! software defaults and the README's table are derived), whose `precompute`, if the method
-//! needs per-scene data, is built off the render loop with progress (see [`precompute`]),
-//! and whose `cost` estimates a frame from its parameters (see [`cost`]); and, for now, a
-//! [`GiMethod`] variant in the protocol (issue 32 opens that list, the debug views and the
-//! stage names next).
+//! Adding a method: a module implementing [`Method`] that names itself in a `const`
+//! [`GiMethod`], and an entry in [`REGISTRY`] whose `tables` hold its parameter table
+//! ([`params`]: every row written once, from which the request checks, `/v1/server`, the
+//! OpenAPI schema, `--gi-param`, the viewer's panel, the software defaults and the README's
+//! table are derived), whose `shaders` list its WGSL modules with their bind groups (every
+//! one is validated with naga by the `shader_tests` below), whose `precompute`, if the method needs
+//! per-scene data, is built off the render loop with progress (see [`precompute`]), and
+//! whose `cost` estimates a frame from its parameters (see [`cost`]). Its debug views and
+//! stage names are still listed centrally (`debug_views`, the protocol's `View` and `Stage`;
+//! issue 32 moves them next).
 
 pub mod clustered;
 pub mod common;
@@ -320,7 +322,7 @@ pub fn table(method: GiMethod) -> &'static params::MethodTable {
         .unwrap_or_else(|| panic!("GI method {method:?} has no table"))
 }
 
-/// Descriptions of every registered method, in the protocol's order, with the limits of a
+/// Descriptions of every registered method, in registry order, with the limits of a
 /// server configured with `limits`: each method's parameters, then the frame's
 /// ([`params::frame_params`]).
 pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
@@ -337,8 +339,8 @@ pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
         .collect()
 }
 
-/// Every shader module the server runs: the shared passes', the shared GI modules' and each
-/// registered method's, with their bind groups.
+/// Every shader module: the shared passes', the shared GI modules' (and the BVH test
+/// harness's) and each registered method's, with their bind groups.
 pub fn all_shaders() -> impl Iterator<Item = &'static crate::passes::ShaderPass> {
     crate::passes::SHADERS
         .iter()

@@ -2,8 +2,9 @@
 //! under their WGSL variable names and produces both halves from that one list: a
 //! [`BindGroupDesc`] constant, which makes the layout, and a struct with one field per
 //! binding, whose `bind` makes the bind group. Binding numbers are never written in Rust, and a
-//! missing, extra or misnamed resource does not compile. `gpu::shaders`' tests check every
-//! pass's descriptions against naga's reflection of its WGSL (`wgsl_mismatches`).
+//! missing, extra or misnamed resource does not compile. A test over every pass
+//! (`gi::shader_tests`, through [`super::ShaderPass`]) checks its descriptions against naga's
+//! reflection of its WGSL (`wgsl_mismatches`).
 //!
 //! ```ignore
 //! bind_group! {

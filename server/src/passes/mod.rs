@@ -4,13 +4,13 @@
 //! 2. [`gbuffer`]: position, normal, materials and triangle id from the camera.
 //! 3. The frame's GI method (`gi/<method>/`) fills the indirect buffer; the RSM-based ones
 //!    start with [`rsm`], the reflective shadow map, every texel a virtual light.
+//! 4. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
+//! 5. [`exposure`]: automatic exposure from the HDR image.
+//! 6. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
+//! 7. [`yuv420`]: for video, the 8-bit output as Y'CbCr 4:2:0 (read back instead of RGBA).
 //!
 //! With `gi.indirect_downscale` > 1, [`indirect_resolution`] reduces the G-buffer before the
 //! GI method's stages and upsamples their result after them.
-//! 10. [`direct_light`]: emission + direct light with PCF shadows + indirect, into HDR.
-//! 11. [`exposure`]: automatic exposure from the HDR image.
-//! 12. [`tonemap`]: exposure, filmic curve, sRGB into the 8-bit output.
-//! 13. [`yuv420`]: for video, the 8-bit output as Y'CbCr 4:2:0 (read back instead of RGBA).
 //!
 //! [`frame_uniforms`] holds the uniforms they share and [`scene_buffers`] the scene geometry
 //! and materials. Every pass, here and in `gi/`, declares each bind group once with

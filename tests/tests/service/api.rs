@@ -727,6 +727,14 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             Some("render.gi.rsm_sise"),
         ),
         case(
+            "PATCH",
+            &session,
+            r#"{"render":{"gi":{"method":"fancy"}}}"#,
+            400,
+            "invalid_field",
+            Some("render.gi.method"),
+        ),
+        case(
             "POST",
             "/v1/render",
             r#"{"render":{"gi":{"method":"fancy"}}}"#,

@@ -296,9 +296,12 @@ async function main() {
     await step('the stream is H.264, decoded with WebCodecs', async () => {
       assert.equal(await page.$eval('body', (b) => b.dataset.decodesH264), 'true', 'the page found an H.264 decoder');
       assert.equal((await pageSession(page)).params.encoding.codec, 'h264', 'the session streams h264');
-      await page.waitForFunction(() => document.getElementById('frame').dataset.codec === 'h264',
-        null, { timeout: PATIENCE_MS });
-      const info = await page.$eval('#frame-info', (e) => e.textContent);
+      // Read with the codec in one look: a PNG still may follow the H.264 frames once input
+      // rests (under load it once did between two separate reads).
+      const info = await (await page.waitForFunction(() => {
+        const text = document.getElementById('frame-info').textContent;
+        return document.getElementById('frame').dataset.codec === 'h264' && /H\.264/.test(text) && text;
+      }, null, { timeout: PATIENCE_MS })).jsonValue();
       assert.match(info, /H\.264.*target \d+\.\d Mbit\/s \(auto\)/, `the frame line names the codec and the automatic bitrate: '${info}'`);
       assert.equal((await pageSession(page)).params.encoding.bitrate_kbps, null, 'the bitrate is automatic by default');
       // A bitrate typed in the panel is the session's; emptying the field makes it automatic again.

@@ -304,48 +304,49 @@ pub struct ShaderPass {
     pub groups: Option<&'static [&'static bind::BindGroupDesc]>,
 }
 
+impl ShaderPass {
+    /// `source` run by a pipeline with `groups`.
+    pub const fn new(
+        source: &'static ShaderSource,
+        groups: &'static [&'static bind::BindGroupDesc],
+    ) -> Self {
+        Self {
+            source,
+            groups: Some(groups),
+        }
+    }
+}
+
 /// The shared passes' modules with their bind groups.
 pub const SHADERS: &[ShaderPass] = &[
-    ShaderPass {
-        source: &shaders::GBUFFER,
-        groups: Some(&[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::GBUFFER_TRIANGLE_IDS,
-        groups: Some(&[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::SHADOW_MAP,
-        groups: Some(&[&shadow_map::GROUP, &scene_buffers::MATERIAL_GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::DIRECT_LIGHT,
-        groups: Some(&[&direct_light::GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::EXPOSURE,
-        groups: Some(&[&exposure::GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::TONEMAP,
-        groups: Some(&[&tonemap::GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::YUV420,
-        groups: Some(&[&yuv420::GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::GBUFFER_REDUCE,
-        groups: Some(&[&indirect_resolution::REDUCE_GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::INDIRECT_UPSAMPLE,
-        groups: Some(&[&indirect_resolution::UPSAMPLE_GROUP]),
-    },
-    ShaderPass {
-        source: &shaders::RSM,
-        groups: Some(&[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP]),
-    },
+    ShaderPass::new(
+        &shaders::GBUFFER,
+        &[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP],
+    ),
+    ShaderPass::new(
+        &shaders::GBUFFER_TRIANGLE_IDS,
+        &[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP],
+    ),
+    ShaderPass::new(
+        &shaders::SHADOW_MAP,
+        &[&shadow_map::GROUP, &scene_buffers::MATERIAL_GROUP],
+    ),
+    ShaderPass::new(&shaders::DIRECT_LIGHT, &[&direct_light::GROUP]),
+    ShaderPass::new(&shaders::EXPOSURE, &[&exposure::GROUP]),
+    ShaderPass::new(&shaders::TONEMAP, &[&tonemap::GROUP]),
+    ShaderPass::new(&shaders::YUV420, &[&yuv420::GROUP]),
+    ShaderPass::new(
+        &shaders::GBUFFER_REDUCE,
+        &[&indirect_resolution::REDUCE_GROUP],
+    ),
+    ShaderPass::new(
+        &shaders::INDIRECT_UPSAMPLE,
+        &[&indirect_resolution::UPSAMPLE_GROUP],
+    ),
+    ShaderPass::new(
+        &shaders::RSM,
+        &[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP],
+    ),
 ];
 
 #[cfg(test)]

@@ -79,7 +79,7 @@ pub fn resolve(
         limits.max_shadow_map_size,
     )?;
     let g = &params.gi;
-    check_gi_ranges(g, limits)?;
+    check_gi(g, limits)?;
     let exposure = match params.exposure {
         None => Exposure::Auto,
         Some(s) if s.is_finite() && s > 0.0 => Exposure::Manual(s),
@@ -137,7 +137,7 @@ pub fn resolve(
 
 /// Checks a request's GI parameters against the methods' tables and this server's limits
 /// (see [`crate::gi::params::check_request`]).
-pub fn check_gi_ranges(g: &GiParams, limits: &Limits) -> Result<(), ApiError> {
+pub fn check_gi(g: &GiParams, limits: &Limits) -> Result<(), ApiError> {
     crate::gi::params::check_request(g, limits)
         .map_err(|r| ApiError::field(format!("gi.{}", r.field), r.reason))
 }

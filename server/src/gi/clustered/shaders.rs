@@ -62,28 +62,10 @@ pub const GEOMETRY_BLUR: ShaderSource = ShaderSource {
 
 /// Every module with its pipeline's bind groups (see [`ShaderPass`]).
 pub const PASSES: &[ShaderPass] = &[
-    ShaderPass {
-        source: &CLUSTERING,
-        groups: Some(&[&super::passes::CLUSTERING_GROUP]),
-    },
-    ShaderPass {
-        source: &CLUSTERED_INDIRECT,
-        groups: Some(&[&super::passes::INDIRECT_GROUP]),
-    },
-    ShaderPass {
-        source: &PARABOLOID_MAPS,
-        groups: Some(&[&super::passes::MAPS_GROUP]),
-    },
-    ShaderPass {
-        source: &CSSM_BASIS,
-        groups: Some(&[&super::passes::BASIS_GROUP]),
-    },
-    ShaderPass {
-        source: &CSSM_MIPS,
-        groups: Some(&[&super::passes::MIPS_GROUP]),
-    },
-    ShaderPass {
-        source: &GEOMETRY_BLUR,
-        groups: Some(&[&super::passes::BLUR_GROUP]),
-    },
+    ShaderPass::new(&CLUSTERING, &[&super::passes::CLUSTERING_GROUP]),
+    ShaderPass::new(&CLUSTERED_INDIRECT, &[&super::passes::INDIRECT_GROUP]),
+    ShaderPass::new(&PARABOLOID_MAPS, &[&super::passes::MAPS_GROUP]),
+    ShaderPass::new(&CSSM_BASIS, &[&super::passes::BASIS_GROUP]),
+    ShaderPass::new(&CSSM_MIPS, &[&super::passes::MIPS_GROUP]),
+    ShaderPass::new(&GEOMETRY_BLUR, &[&super::passes::BLUR_GROUP]),
 ];

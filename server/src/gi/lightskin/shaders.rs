@@ -55,28 +55,10 @@ pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
 
 /// Every module with its pipeline's bind groups (see [`ShaderPass`]).
 pub const PASSES: &[ShaderPass] = &[
-    ShaderPass {
-        source: &IMPORTANCE,
-        groups: Some(&[&super::importance::GROUP]),
-    },
-    ShaderPass {
-        source: &CUMULATIVE_SUMS,
-        groups: Some(&[&super::cumulative_sums::GROUP]),
-    },
-    ShaderPass {
-        source: &VAL_SELECT,
-        groups: Some(&[&super::val_select::GROUP]),
-    },
-    ShaderPass {
-        source: &CACHE_LIGHTING,
-        groups: Some(&[&super::cache_lighting::GROUP]),
-    },
-    ShaderPass {
-        source: &INDIRECT_LIGHT,
-        groups: Some(&[&super::indirect_light::GROUP]),
-    },
-    ShaderPass {
-        source: &PROXY_OCCLUSION,
-        groups: Some(&[&super::proxy_occlusion::GROUP]),
-    },
+    ShaderPass::new(&IMPORTANCE, &[&super::importance::GROUP]),
+    ShaderPass::new(&CUMULATIVE_SUMS, &[&super::cumulative_sums::GROUP]),
+    ShaderPass::new(&VAL_SELECT, &[&super::val_select::GROUP]),
+    ShaderPass::new(&CACHE_LIGHTING, &[&super::cache_lighting::GROUP]),
+    ShaderPass::new(&INDIRECT_LIGHT, &[&super::indirect_light::GROUP]),
+    ShaderPass::new(&PROXY_OCCLUSION, &[&super::proxy_occlusion::GROUP]),
 ];

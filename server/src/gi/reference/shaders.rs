@@ -25,12 +25,9 @@ pub const REFERENCE_RESOLVE: ShaderSource = ShaderSource {
 
 /// Every module with its pipeline's bind groups (see [`ShaderPass`]).
 pub const PASSES: &[ShaderPass] = &[
-    ShaderPass {
-        source: &REFERENCE_PATH_TRACE,
-        groups: Some(&[&super::PASS_GROUP, &super::SCENE_GROUP]),
-    },
-    ShaderPass {
-        source: &REFERENCE_RESOLVE,
-        groups: Some(&[&super::resolve::GROUP]),
-    },
+    ShaderPass::new(
+        &REFERENCE_PATH_TRACE,
+        &[&super::PASS_GROUP, &super::SCENE_GROUP],
+    ),
+    ShaderPass::new(&REFERENCE_RESOLVE, &[&super::resolve::GROUP]),
 ];

@@ -57,28 +57,13 @@ pub const SURFEL_LINK_RAYS: ShaderSource = ShaderSource {
 
 /// Every module with its pipeline's bind groups (see [`ShaderPass`]).
 pub const PASSES: &[ShaderPass] = &[
-    ShaderPass {
-        source: &SURFEL_LIGHT,
-        groups: Some(&[&super::passes::LIGHT_GROUP]),
-    },
-    ShaderPass {
-        source: &SURFEL_PULL,
-        groups: Some(&[&super::passes::PULL_GROUP]),
-    },
-    ShaderPass {
-        source: &SURFEL_CACHE_LIGHT,
-        groups: Some(&[&super::passes::CACHE_LIGHT_GROUP]),
-    },
-    ShaderPass {
-        source: &SURFEL_SHADE,
-        groups: Some(&[&super::passes::SHADE_GROUP]),
-    },
-    ShaderPass {
-        source: &SURFEL_CACHE_SH_VIEW,
-        groups: Some(&[&super::passes::SH_VIEW_GROUP]),
-    },
-    ShaderPass {
-        source: &SURFEL_LINK_RAYS,
-        groups: Some(&[&super::link_rays::RAY_GROUP, &super::link_rays::BVH_GROUP]),
-    },
+    ShaderPass::new(&SURFEL_LIGHT, &[&super::passes::LIGHT_GROUP]),
+    ShaderPass::new(&SURFEL_PULL, &[&super::passes::PULL_GROUP]),
+    ShaderPass::new(&SURFEL_CACHE_LIGHT, &[&super::passes::CACHE_LIGHT_GROUP]),
+    ShaderPass::new(&SURFEL_SHADE, &[&super::passes::SHADE_GROUP]),
+    ShaderPass::new(&SURFEL_CACHE_SH_VIEW, &[&super::passes::SH_VIEW_GROUP]),
+    ShaderPass::new(
+        &SURFEL_LINK_RAYS,
+        &[&super::link_rays::RAY_GROUP, &super::link_rays::BVH_GROUP],
+    ),
 ];

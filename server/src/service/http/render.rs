@@ -7,7 +7,7 @@ use crate::gi::reference::params::SPP;
 use crate::service::cost::{check_frame, chunk_spp, one_shot_spp, request_seconds, Submission};
 use crate::service::encode;
 use crate::service::error::ApiError;
-use crate::service::params::{check_gi_ranges, check_quality, frame_shape, resolve};
+use crate::service::params::{check_gi, check_quality, frame_shape, resolve};
 use crate::service::render_loop::{Command, OneShot};
 use crate::service::scenes::{precompute_failed, precompute_label, Now, SceneEntry};
 use axum::extract::{FromRequest, Multipart, Request, State};
@@ -204,7 +204,7 @@ pub async fn render(
             let mut truth = req.render.gi.clone();
             truth.method = crate::gi::reference::REFERENCE;
             truth.set(SPP.name, spp);
-            check_gi_ranges(&truth, &state.limits).map_err(|mut e| {
+            check_gi(&truth, &state.limits).map_err(|mut e| {
                 if e.body.field.as_deref() == Some("gi.spp") {
                     e.body.field = Some("compare_spp".into());
                     e.body.message = e.body.message.replacen("gi.spp", "compare_spp", 1);

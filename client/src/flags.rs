@@ -58,8 +58,9 @@ pub struct RenderFlags {
     /// field it refuses (`render.gi.NAME`), so methods added after this client work too.
     #[arg(long = "gi-param", value_name = "NAME=VALUE", value_parser = parse_gi_param)]
     pub gi_params: Vec<(String, serde_json::Value)>,
-    /// The final frame or a debug view (default final).
-    #[arg(long, value_enum)]
+    /// `final` or a debug view the GI method draws (default final; `GET /v1/server` lists
+    /// each method's views, and the server refuses one its method does not draw).
+    #[arg(long)]
     pub view: Option<View>,
 }
 

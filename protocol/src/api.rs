@@ -5,7 +5,7 @@
 //! unknown fields in requests, so a misspelt parameter is an error that names it rather than a
 //! silently ignored value.
 
-use crate::{Camera, Light};
+use crate::{Camera, GiMethod, Light, View};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use utoipa::ToSchema;
@@ -23,127 +23,6 @@ pub struct ErrorBody {
     pub field: Option<String>,
     /// What went wrong, for people.
     pub message: String,
-}
-
-/// How indirect light is computed: a GI method's name (`brsm`, `reference`), one of those the
-/// server lists in `/v1/server`'s `gi_methods`. The protocol names no method (the server's
-/// registry does): a name is 1 to [`GiMethod::MAX_LEN`] lowercase ASCII letters, digits and
-/// underscores, and the server refuses one it does not have, naming `render.gi.method`. Held
-/// inline, so it is `Copy` and a method module can name itself in a `const`.
-#[derive(Clone, Copy, PartialEq, Eq, Hash)]
-pub struct GiMethod {
-    len: u8,
-    bytes: [u8; GiMethod::MAX_LEN],
-}
-
-impl GiMethod {
-    /// Longest method name.
-    pub const MAX_LEN: usize = 31;
-
-    /// The method named `name`; a name that is not one fails to compile in a `const`.
-    pub const fn new(name: &str) -> Self {
-        match Self::check(name) {
-            Ok(method) => method,
-            Err(_) => panic!("a GI method's name is 1 to 31 of a-z, 0-9 and _"),
-        }
-    }
-
-    /// The method named `name`, if it is a valid name (whether the server has it is the
-    /// server's to say).
-    pub fn parse(name: &str) -> Result<Self, String> {
-        Self::check(name).map_err(|()| {
-            format!(
-                "{name:?} is not a GI method's name (1 to {} of a-z, 0-9 and _)",
-                Self::MAX_LEN
-            )
-        })
-    }
-
-    const fn check(name: &str) -> Result<Self, ()> {
-        let b = name.as_bytes();
-        if b.is_empty() || b.len() > Self::MAX_LEN {
-            return Err(());
-        }
-        let mut bytes = [0u8; Self::MAX_LEN];
-        let mut i = 0;
-        while i < b.len() {
-            if !matches!(b[i], b'a'..=b'z' | b'0'..=b'9' | b'_') {
-                return Err(());
-            }
-            bytes[i] = b[i];
-            i += 1;
-        }
-        Ok(Self {
-            len: b.len() as u8,
-            bytes,
-        })
-    }
-
-    /// The name requests use.
-    pub fn name(&self) -> &str {
-        // Only ASCII is ever stored (`check`).
-        std::str::from_utf8(&self.bytes[..usize::from(self.len)]).unwrap_or_default()
-    }
-}
-
-impl Default for GiMethod {
-    /// `brsm`, the server's default method (seed 004's, and the one its defaults describe).
-    fn default() -> Self {
-        Self::new("brsm")
-    }
-}
-
-impl std::fmt::Display for GiMethod {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::fmt::Debug for GiMethod {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-impl std::str::FromStr for GiMethod {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Self::parse(s)
-    }
-}
-
-impl Serialize for GiMethod {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(self.name())
-    }
-}
-
-impl<'de> Deserialize<'de> for GiMethod {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let name = std::borrow::Cow::<'de, str>::deserialize(d)?;
-        Self::parse(&name).map_err(serde::de::Error::custom)
-    }
-}
-
-impl utoipa::PartialSchema for GiMethod {
-    /// A name; the server's `openapi` command lists its methods as the schema's `enum`.
-    fn schema() -> utoipa::openapi::RefOr<utoipa::openapi::schema::Schema> {
-        use utoipa::openapi::schema::{ObjectBuilder, Type};
-        ObjectBuilder::new()
-            .schema_type(Type::String)
-            .pattern(Some("^[a-z0-9_]{1,31}$"))
-            .description(Some(
-                "A GI method's name, one of `/v1/server`'s `gi_methods` (how indirect light is \
-                 computed).",
-            ))
-            .into()
-    }
-}
-
-impl ToSchema for GiMethod {
-    fn name() -> std::borrow::Cow<'static, str> {
-        "GiMethod".into()
-    }
 }
 
 /// The type of a GI parameter, for clients that build their controls from `/v1/server`.
@@ -199,94 +78,17 @@ pub struct GiMethodInfo {
     pub progressive: bool,
     /// The fields of `render.gi` this method reads; the others are accepted and ignored.
     pub parameters: Vec<GiParamInfo>,
+    /// The debug views the method draws, besides `final` (which every method shows).
+    #[serde(default)]
+    pub views: Vec<ViewInfo>,
 }
 
-/// Which image a frame shows: the final frame or one of the GI debug views.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[serde(rename_all = "kebab-case")]
-pub enum View {
-    /// The tone-mapped frame.
-    #[default]
-    Final,
-    /// Indirect light only, at the frame's exposure.
-    Indirect,
-    /// The reflective shadow map's flux (all light faces side by side).
-    RsmFlux,
-    /// The VAL importance map of eq. 10 (log scale); needs `brsm`.
-    Importance,
-    /// The RSM flux darkened, with the selected VALs marked; needs `brsm`.
-    SelectedVals,
-    /// The frame darkened, with every light cache drawn in the colour of its diffuse proxy light.
-    Caches,
-    /// The RSM's VPLs, each in the colour of the VAL it is clustered into; needs `clustered`.
-    Clusters,
-    /// The frame at a third of its brightness with every lit VPL as a dot at its surface
-    /// point in the colour of its flux; needs `clustered`.
-    Vpls,
-    /// The visibility of one light at every pixel's surface, white where it sees the light
-    /// and black in its shadow: the soft shadow of VAL `shadow_light` (`cssm`), the hard
-    /// shadow of VPL `shadow_light` (`vpl_shadows`), white everywhere with visibility off.
-    /// Needs `clustered`.
-    ValShadow,
-    /// Every surfel facing the camera as a disc of its projected size in the colour of its
-    /// radiosity, on black; needs `surfels`.
-    Surfels,
-    /// The hierarchy cut of one cache's links: on black, the surfels under each linked node in
-    /// that node's colour (the others dark grey) and the cache as a white cross; the cache is
-    /// the one nearest the surface at the image's centre. Needs `surfels`.
-    SurfelLinks,
-    /// The caches' SH radiance interpolated at each pixel's surface point and evaluated along
-    /// its normal (what the caches say arrives from straight above the surface); needs
-    /// `surfels`.
-    CacheSh,
-}
-
-impl std::fmt::Display for View {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Self::Final => "final",
-            Self::Indirect => "indirect",
-            Self::RsmFlux => "rsm-flux",
-            Self::Importance => "importance",
-            Self::SelectedVals => "selected-vals",
-            Self::Caches => "caches",
-            Self::Clusters => "clusters",
-            Self::Vpls => "vpls",
-            Self::ValShadow => "val-shadow",
-            Self::Surfels => "surfels",
-            Self::SurfelLinks => "surfel-links",
-            Self::CacheSh => "cache-sh",
-        })
-    }
-}
-
-impl View {
-    /// Whether the view shows a stage only BRSM runs (importance, selection).
-    pub fn needs_brsm(self) -> bool {
-        matches!(self, Self::Importance | Self::SelectedVals)
-    }
-
-    /// Whether the view shows the VPLs, clusters or shadows only `clustered` makes.
-    pub fn needs_clustered(self) -> bool {
-        matches!(self, Self::Clusters | Self::Vpls | Self::ValShadow)
-    }
-
-    /// Whether the view shows the surfels, their links or their caches only `surfels` makes.
-    pub fn needs_surfels(self) -> bool {
-        matches!(self, Self::Surfels | Self::SurfelLinks | Self::CacheSh)
-    }
-
-    /// Whether the view is made from the frame's indirect-light buffer, which the frame
-    /// must then read back.
-    pub fn reads_indirect(self) -> bool {
-        matches!(self, Self::Indirect | Self::CacheSh)
-    }
-
-    /// Whether the view shows GI data (any method but `none`).
-    pub fn needs_gi(self) -> bool {
-        self != Self::Final
-    }
+/// A debug view as `/v1/server` describes it (`render.view`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ViewInfo {
+    pub view: View,
+    /// What the image shows, for people.
+    pub summary: String,
 }
 
 /// Parameters of the GI methods, tagged by `method`: every other field is a parameter one or
@@ -385,7 +187,7 @@ impl Default for RenderParams {
             exposure: None,
             shadow_map_size: 2048,
             gi: GiParams::default(),
-            view: View::Final,
+            view: View::FINAL,
         }
     }
 }

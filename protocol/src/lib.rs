@@ -9,10 +9,12 @@ use utoipa::ToSchema;
 
 pub mod api;
 pub mod frame;
+mod names;
 pub mod stream;
 
 pub use api::*;
 pub use frame::{FrameHeader, FrameHeaderError, Stage, STAGE_NAMES};
+pub use names::{GiMethod, View};
 pub use stream::{ClientMessage, ServerEvent};
 
 /// Parses three comma-separated finite numbers, e.g. `1.5,2,-3` (command-line vectors of the

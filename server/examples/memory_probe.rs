@@ -170,7 +170,7 @@ fn main() -> anyhow::Result<()> {
                 exposure: Exposure::Auto,
                 shadow_map_size: 256,
                 capture_hdr: false,
-                debug_view: lightcast_protocol::View::Final,
+                debug_view: lightcast_protocol::View::FINAL,
                 gi: GiParams::new(method)
                     .with("rsm_size", 32)
                     .with("view_samples", 64)

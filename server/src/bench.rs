@@ -11,10 +11,10 @@
 
 use crate::gi::clustered::params::{CLUSTER_COUNT, VISIBILITY};
 use crate::gi::lightskin::params::{VAL_COUNT, VIEW_SAMPLES};
-use crate::gi::reference::luminance;
 use crate::gi::{lightskin::LightSkin, GiMethod};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::offline::{ExposureArg, GiArgs, DEFAULT_SCENE};
+use crate::passes::tonemap::luminance;
 use crate::quality::{errors, final_errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
@@ -593,7 +593,7 @@ pub(crate) fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiParams) -> Re
         exposure: args.exposure.0,
         shadow_map_size: 2048,
         capture_hdr: false,
-        debug_view: lightcast_protocol::View::Final,
+        debug_view: lightcast_protocol::View::FINAL,
         gi,
         history: None,
         still: false,

@@ -1022,7 +1022,7 @@ pub fn run(
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
-        debug_view: lightcast_protocol::View::Final,
+        debug_view: lightcast_protocol::View::FINAL,
         gi,
         history: None,
         still: false,

@@ -37,6 +37,9 @@ enum Command {
     /// Print every GI method's parameters (name, methods, type, defaults, range, unit,
     /// meaning) as a markdown table: the README's, from the methods' tables.
     GiParams,
+    /// Print every debug view (name, methods that draw it, what it shows) as a markdown
+    /// table: the README's, from the methods' tables.
+    GiViews,
     /// Render one frame of a scene to a PNG file (no network) and print per-pass GPU times.
     Render(RenderArgs),
     /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
@@ -163,6 +166,7 @@ fn main() -> anyhow::Result<()> {
         Command::Openapi => println!("{}", service::http::openapi_document()?),
         Command::Asyncapi => println!("{}", service::http::asyncapi::asyncapi_document()?),
         Command::GiParams => print!("{}", lightcast_server::gi::params::markdown_table()),
+        Command::GiViews => print!("{}", lightcast_server::gi::views::markdown_table()),
         Command::Render(args) => {
             let mut log = |line: &str| eprintln!("{line}");
             let report = offline::render(&args, &mut log).context("render failed")?;

@@ -253,16 +253,15 @@ pub struct RenderArgs {
     /// Shadow map side in texels (per cube face for point lights).
     #[arg(long, default_value_t = 2048)]
     pub shadow_map_size: u32,
-    /// Indirect light: a registered GI method (`none`, `lightskin`, `brsm`, `reference`,
-    /// `clustered`, `surfels`; the README's GI section describes each).
+    /// Indirect light: a registered GI method (an unknown one is refused with the list; the
+    /// README's GI section describes each).
     #[arg(long, default_value = "brsm", value_parser = crate::gi::parse_method)]
     pub gi: GiMethod,
     #[command(flatten)]
     pub gi_args: GiArgs,
-    /// Which image to write: the final frame or a debug view (indirect light only, RSM flux,
-    /// importance map, selected VALs, light caches, VPL clusters, surfels by radiosity, one
-    /// cache's links, the caches' SH along the normal).
-    #[arg(long, value_enum, default_value = "final")]
+    /// Which image to write: `final` or a debug view the GI method draws (an unknown one is
+    /// refused with the list; `/v1/server` describes each method's).
+    #[arg(long, default_value = "final", value_parser = crate::gi::views::parse)]
     pub view: View,
     /// wgpu backend.
     #[arg(long, value_enum, env = "LIGHTCAST_BACKEND", default_value = "auto")]
@@ -312,16 +311,17 @@ pub enum OfflineError {
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
     Render(#[from] crate::renderer::RenderError),
-    #[error("--view {view} needs global illumination; use a --gi other than none")]
-    ViewNeedsGi { view: View },
-    #[error("--view {view} shows light-cache data; use --gi lightskin or --gi brsm")]
-    ViewNeedsLightCaches { view: View },
-    #[error("--view {view} shows a BRSM stage; use --gi brsm")]
-    ViewNeedsBrsm { view: View },
-    #[error("--view {view} shows the VPL clusters; use --gi clustered")]
-    ViewNeedsClustered { view: View },
-    #[error("--view {view} shows the surfels' data; use --gi surfels")]
-    ViewNeedsSurfels { view: View },
+    #[error(
+        "--view {view} is drawn by --gi {}, not by --gi {method}",
+        or_gi(drawn_by)
+    )]
+    ViewNotDrawn {
+        view: View,
+        method: GiMethod,
+        drawn_by: Vec<GiMethod>,
+    },
+    #[error("--view: {0}")]
+    View(debug_views::ViewError),
     #[error("writing {path}: {error}")]
     Write {
         path: PathBuf,
@@ -329,18 +329,25 @@ pub enum OfflineError {
     },
 }
 
+fn or_gi(methods: &[GiMethod]) -> String {
+    let names: Vec<&str> = methods.iter().map(GiMethod::name).collect();
+    names.join(" or --gi ")
+}
+
 impl From<debug_views::ViewError> for OfflineError {
     /// The same refusals as the service's, in terms of the command-line flags.
     fn from(e: debug_views::ViewError) -> Self {
         match e {
-            debug_views::ViewError::NeedsGi { view } => Self::ViewNeedsGi { view },
-            debug_views::ViewError::NeedsLightCaches { view } => {
-                Self::ViewNeedsLightCaches { view }
-            }
-            debug_views::ViewError::NeedsBrsm { view } => Self::ViewNeedsBrsm { view },
-            debug_views::ViewError::NeedsClustered { view } => Self::ViewNeedsClustered { view },
-            debug_views::ViewError::NeedsSurfels { view } => Self::ViewNeedsSurfels { view },
-            debug_views::ViewError::Gpu(g) => Self::Gpu(g),
+            debug_views::ViewError::NotDrawn {
+                view,
+                method,
+                drawn_by,
+            } => Self::ViewNotDrawn {
+                view,
+                method,
+                drawn_by,
+            },
+            e => Self::View(e),
         }
     }
 }
@@ -412,7 +419,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
-        debug_view: View::Final,
+        debug_view: View::FINAL,
         gi,
         history: None,
         still: false,
@@ -456,7 +463,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     }
     let setup_ms = setup_start.elapsed().as_secs_f64() * 1e3;
     let mut settings = settings;
-    settings.capture_hdr = args.view.reads_indirect();
+    settings.capture_hdr = debug_views::reads_indirect(args.view);
     settings.debug_view = args.view;
     let frame = renderer.render(&settings)?;
     let exposure_scale = frame.exposure_scale;

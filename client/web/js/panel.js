@@ -44,6 +44,8 @@ export class Panel {
     this.outputs = new Map([...root.querySelectorAll('[data-output-for]')].map((o) => [o.dataset.outputFor, o]));
     /** Per GI method: the names of the parameters it reads. */
     this.methodParams = new Map();
+    /** Per GI method: the debug views it draws (besides `final`). */
+    this.methodViews = new Map();
     this.summaries = new Map();
     for (const control of root.querySelectorAll('[data-field]')) this.wire(control);
   }
@@ -57,7 +59,15 @@ export class Panel {
         this.markError(control.dataset.field, error);
         return;
       }
-      this.onPatch(patchFor(control.dataset.field, value), control.dataset.field);
+      const patch = patchFor(control.dataset.field, value);
+      // A method that does not draw the current debug view switches back to the final frame
+      // (the server would refuse the method with that view).
+      const view = this.control('render.view');
+      if (control.dataset.field === 'render.gi.method' && view && view.value !== 'final'
+          && !(this.methodViews.get(value) || new Set()).has(view.value)) {
+        patch.render.view = 'final';
+      }
+      this.onPatch(patch, control.dataset.field);
     });
   }
 
@@ -71,8 +81,9 @@ export class Panel {
   }
 
   /**
-   * Builds the method list and every method's parameter controls from the server's
-   * description (`gi_methods` of `GET /v1/server`); only the current method's are shown.
+   * Builds the method list, every method's parameter controls and the view menu from the
+   * server's description (`gi_methods` of `GET /v1/server`); only the current method's
+   * parameters are shown and only its views can be picked.
    */
   applyGiMethods(methods) {
     const select = this.control('render.gi.method');
@@ -116,6 +127,18 @@ export class Panel {
       }
     }
     this.giParamLabels = built;
+    const views = this.control('render.view');
+    const listed = new Set([...views.options].map((o) => o.value));
+    for (const m of methods) {
+      this.methodViews.set(m.method, new Set((m.views || []).map((v) => v.view)));
+      for (const v of m.views || []) {
+        if (listed.has(v.view)) continue;
+        const option = new Option(v.view, v.view);
+        option.title = v.summary;
+        views.append(option);
+        listed.add(v.view);
+      }
+    }
   }
 
   /** Offers only the stream codecs both the server and this page handle. */
@@ -127,10 +150,14 @@ export class Panel {
     }
   }
 
-  /** Shows the parameters of `method` and hides the others'. */
+  /** Shows the parameters of `method` and hides the others'; offers only its views. */
   showMethod(method) {
     const names = this.methodParams.get(method) || new Set();
     for (const [name, label] of this.giParamLabels || []) label.hidden = !names.has(name);
+    const views = this.methodViews.get(method) || new Set();
+    for (const option of this.control('render.view').options) {
+      option.disabled = option.value !== 'final' && !views.has(option.value);
+    }
     const summary = this.root.querySelector('#gi-method-summary');
     if (summary) summary.textContent = this.summaries.get(method) || '';
   }

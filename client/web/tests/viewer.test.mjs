@@ -490,9 +490,30 @@ async function main() {
     });
 
     await step('a debug view shows', async () => {
+      // The menu is the server's: final plus every method's views, only the current method's enabled.
+      const server = await api('GET', '/v1/server');
+      const expected = ['final', ...new Set(server.gi_methods.flatMap((m) => m.views.map((v) => v.view)))];
+      const options = await page.$$eval('[data-field="render.view"] option', (os) => os.map((o) => [o.value, o.disabled]));
+      assert.deepEqual(options.map(([v]) => v).sort(), expected.sort(), 'the view menu lists the server\'s views');
+      const brsm = server.gi_methods.find((m) => m.method === 'brsm').views.map((v) => v.view);
+      for (const [view, disabled] of options) {
+        assert.equal(disabled, view !== 'final' && !brsm.includes(view), `${view} is offered only if brsm draws it`);
+      }
       const diff = await changeAfter(page, () => page.selectOption('[data-field="render.view"]', 'rsm-flux'), 'the RSM flux view');
       assert.ok(diff > 4, `the RSM flux view looks like the frame: ${diff.toFixed(2)}`);
-      await page.selectOption('[data-field="render.view"]', 'final');
+      // A method that does not draw the view brings the final frame back instead of being refused.
+      await page.selectOption('[data-field="render.gi.method"]', 'clustered');
+      for (let i = 0; ; i++) {
+        const render = (await pageSession(page)).params.render;
+        if (render.gi.method === 'clustered') {
+          assert.equal(render.view, 'final', 'the view went back to final');
+          break;
+        }
+        assert.ok(i < 100, 'the method switch never reached the session');
+        await new Promise((r) => setTimeout(r, 100));
+      }
+      await page.selectOption('[data-field="render.gi.method"]', 'brsm');
+      await page.waitForSelector('[data-field="render.gi.view_samples"]', { state: 'visible', timeout: PATIENCE_MS });
     });
 
     await step('a rejected parameter is shown, naming the field', async () => {

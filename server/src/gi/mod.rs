@@ -32,11 +32,12 @@ pub mod params;
 pub mod precompute;
 pub mod reference;
 pub mod surfels;
+pub mod views;
 
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{gbuffer::GBuffer, scene_buffers::SceneBuffers, Target};
 use crate::scene::Scene;
-use lightcast_protocol::{Camera, GiMethodInfo, Light, Limits, View};
+use lightcast_protocol::{Camera, GiMethodInfo, Light, Limits, View, ViewInfo};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
@@ -334,6 +335,14 @@ pub fn describe_all(limits: &Limits) -> Vec<GiMethodInfo> {
                 summary: t.summary.into(),
                 progressive: t.progressive,
                 parameters: params::of(method).iter().map(|p| p.info(limits)).collect(),
+                views: t
+                    .views
+                    .iter()
+                    .map(|v| ViewInfo {
+                        view: v.name,
+                        summary: v.summary.into(),
+                    })
+                    .collect(),
             }
         })
         .collect()

@@ -18,6 +18,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         summary: "Direct light only.",
         progressive: false,
         params: &[],
+        views: &[],
     }],
     type_id: TypeId::of::<NoIndirect>,
     validate: |_, _| Ok(()),

@@ -350,6 +350,8 @@ pub struct MethodTable {
     pub progressive: bool,
     /// The parameters the method reads, besides the frame's ([`frame_params`]).
     pub params: &'static [&'static Param],
+    /// The debug views the method draws besides `final` (see [`super::views`]).
+    pub views: &'static [&'static super::views::DebugView],
 }
 
 /// The method's parameters as `T`: each of `table`'s, from `gi` or its default, checked

@@ -61,6 +61,11 @@ impl TonemapPass {
     }
 }
 
+/// Rec. 709 luminance, as `luminance` in `shaders/reference/path_trace.wgsl`.
+pub fn luminance(c: [f32; 3]) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}
+
 /// CPU port of `shaders/tonemap.wgsl` for one linear colour: exposure, ACES fit, sRGB, 8 bits.
 /// Used by debug views that tone-map buffers read back from the GPU, and by tests.
 pub fn tonemap_cpu(linear: [f32; 3], exposure: f32) -> [u8; 3] {

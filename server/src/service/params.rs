@@ -3,7 +3,7 @@
 
 use super::error::ApiError;
 use super::scenes::{Demand, SceneEntry};
-use crate::debug_views::{self, ViewError};
+use crate::debug_views;
 use crate::gi::common::params::EMITTERS;
 use crate::gi::precompute::PrecomputeKey;
 use crate::passes::exposure::Exposure;
@@ -85,14 +85,8 @@ pub fn resolve(
         Some(s) if s.is_finite() && s > 0.0 => Exposure::Manual(s),
         Some(s) => return Err(ApiError::field("exposure", format!("{s} must be > 0"))),
     };
-    debug_views::check(params.view, g.method).map_err(|e| match e {
-        ViewError::NeedsGi { .. }
-        | ViewError::NeedsLightCaches { .. }
-        | ViewError::NeedsBrsm { .. }
-        | ViewError::NeedsClustered { .. }
-        | ViewError::NeedsSurfels { .. } => ApiError::field("view", e.to_string()),
-        ViewError::Gpu(g) => ApiError::internal(g.to_string()),
-    })?;
+    debug_views::check(params.view, g.method)
+        .map_err(|e| ApiError::field("view", e.to_string()))?;
     let precompute = entry.precompute_key(g)?;
     let light = params
         .light
@@ -114,7 +108,7 @@ pub fn resolve(
         light,
         exposure,
         shadow_map_size: params.shadow_map_size,
-        capture_hdr: params.view.reads_indirect(),
+        capture_hdr: debug_views::reads_indirect(params.view),
         debug_view: params.view,
         gi,
         history: None,

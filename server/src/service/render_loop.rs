@@ -376,13 +376,13 @@ impl Loop {
             settings.gi.method = crate::gi::none::NONE;
         }
         let view = if gi_pending {
-            View::Final
+            View::FINAL
         } else {
             resolved.view
         };
         // Debug views are composed on the CPU from RGBA; only the final view goes to video
         // as planes converted on the GPU.
-        settings.yuv420 &= view == View::Final;
+        settings.yuv420 &= view == View::FINAL;
         let renderer_key = (
             scene.id.clone(),
             data.as_ref()
@@ -585,8 +585,8 @@ impl Loop {
         truth.settings.gi = gi;
         truth.settings.capture_hdr = true;
         truth.settings.history = None;
-        truth.settings.debug_view = View::Final;
-        truth.view = View::Final;
+        truth.settings.debug_view = View::FINAL;
+        truth.view = View::FINAL;
         truth.precompute = job
             .scene
             .precompute_key(&lightcast_protocol::GiParams::new(method))?;
@@ -930,7 +930,7 @@ fn finish(
 ) -> Result<Rendered, ApiError> {
     record_metrics(&frame);
     let hdr = frame.hdr.take();
-    let indirect = if view.reads_indirect() {
+    let indirect = if debug_views::reads_indirect(view) {
         frame.indirect.clone()
     } else {
         frame.indirect.take()

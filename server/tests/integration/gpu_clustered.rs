@@ -328,7 +328,7 @@ fn the_clusters_view_shows_the_frames_mapping() {
     let scene = procedural::cornell_box();
     let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
     s.gi = clustered(256, 8, 2, 8);
-    s.debug_view = lightcast_protocol::View::Clusters;
+    s.debug_view = lightcast_server::gi::clustered::views::CLUSTERS.name;
     let mut renderer = Renderer::new(gpu(), scene.clone());
     let frame = renderer.render(&s).expect("render");
     let debug = frame.debug.expect("debug data");

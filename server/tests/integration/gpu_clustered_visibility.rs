@@ -416,7 +416,7 @@ fn the_light_shadow_view_shows_the_chosen_lights_visibility() {
     for light in [2, 5] {
         let mut s = settings(W, H, default_camera(&scene), default_light(&scene));
         s.gi = (clustered(ClusteredVisibility::Cssm, 256, 8, 32)).with("shadow_light", light);
-        s.debug_view = lightcast_protocol::View::ValShadow;
+        s.debug_view = lightcast_server::gi::clustered::views::VAL_SHADOW.name;
         let mut renderer = Renderer::new(gpu(), scene.clone());
         let frame = renderer.render(&s).expect("render");
         let debug = frame.debug.expect("debug data");

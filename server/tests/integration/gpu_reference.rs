@@ -8,10 +8,9 @@ use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gi::common::bvh::SceneBvh;
 use lightcast_server::gi::common::shaders;
-use lightcast_server::gi::reference::{
-    luminance, PathTracer, ReferenceImage, ReferenceSettings, SurfaceGpu,
-};
+use lightcast_server::gi::reference::{PathTracer, ReferenceImage, ReferenceSettings, SurfaceGpu};
 use lightcast_server::gpu::{readback::map_read, GpuContext};
+use lightcast_server::passes::tonemap::luminance;
 use lightcast_server::scene::{material, Material, Scene, Texture, Vertex};
 use wgpu::util::DeviceExt;
 

@@ -5,11 +5,15 @@
 
 use crate::support::*;
 use glam::Vec3;
-use lightcast_server::debug_views::{centre_cache, compose, index_colour, View};
+use lightcast_server::debug_views::compose;
+use lightcast_server::gi::common::views::index_colour;
 use lightcast_server::gi::precompute::SceneData;
 use lightcast_server::gi::precompute::{BuildEnv, Store};
 use lightcast_server::gi::surfels::cpu::{self, ShadedPoint};
 use lightcast_server::gi::surfels::passes::surfel_materials;
+use lightcast_server::gi::surfels::views::{
+    centre_cache, CACHE_SH, SURFEL_LINKS, SURFEL_RADIOSITY,
+};
 use lightcast_server::gi::surfels::SurfelView;
 use lightcast_server::gi::surfels::{
     self, pull_flux, CacheLight, SurfelParams, SurfelSet, Surfels,
@@ -373,7 +377,7 @@ fn debug_views_show_the_caches_sh_the_surfels_and_one_caches_links() {
         mut renderer,
     } = setup(&SMALL);
     let mut s = settings_for(&scene, 2);
-    s.debug_view = View::CacheSh;
+    s.debug_view = CACHE_SH.name;
     let frame = renderer.render(&s).expect("render");
     let Some(SurfelView::CacheSh {
         width,
@@ -392,11 +396,11 @@ fn debug_views_show_the_caches_sh_the_surfels_and_one_caches_links() {
         cpu::radiance_along(&set, &light, surface.position, surface.normal)
     });
     let data: SceneData = std::sync::Arc::new(set.clone());
-    let image = compose(View::CacheSh, frame, &s.camera, &scene.bounds, Some(&data))
+    let image = compose(CACHE_SH.name, frame, &s.camera, &scene.bounds, Some(&data))
         .expect("cache-sh composes");
     assert_eq!((image.width, image.height), (W, H));
 
-    s.debug_view = View::Surfels;
+    s.debug_view = SURFEL_RADIOSITY.name;
     let frame = renderer.render(&s).expect("render");
     let Some(SurfelView::Radiosity(radiosity)) = frame
         .debug
@@ -414,7 +418,7 @@ fn debug_views_show_the_caches_sh_the_surfels_and_one_caches_links() {
     assert_eq!(radiosity.len(), set.surfels.len());
     assert_eq!(radiosity[..], vec3s(&flux[..set.surfels.len()])[..]);
     let image = compose(
-        View::Surfels,
+        SURFEL_RADIOSITY.name,
         frame.clone(),
         &s.camera,
         &scene.bounds,
@@ -432,7 +436,7 @@ fn debug_views_show_the_caches_sh_the_surfels_and_one_caches_links() {
     let cache = centre_cache(&set, &s.camera).expect("the box has usable caches");
     assert!(cpu::usable(&set, cache));
     let image = compose(
-        View::SurfelLinks,
+        SURFEL_LINKS.name,
         frame,
         &s.camera,
         &scene.bounds,

@@ -17,6 +17,7 @@ pub mod cpu_visibility;
 pub mod params;
 pub mod passes;
 pub mod shaders;
+pub mod views;
 
 use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
 use super::{
@@ -656,7 +657,7 @@ impl Method for Clustered {
                 .encode(e, &indirect_group, frame.width, frame.height)
         })?;
         // The view's pass runs after the blur has read the interleaved texture it overwrites.
-        let shadow_group = (frame.debug_view == View::ValShadow)
+        let shadow_group = (frame.debug_view == views::VAL_SHADOW.name)
             .then(|| indirect_resources.bind(device, &self.light_shadow.layout));
         stages.stage(Stage::GeometryBlur, |e| {
             self.blur.encode(e, &blur_group, frame.width, frame.height);
@@ -676,7 +677,7 @@ impl Method for Clustered {
     ) -> Option<Box<dyn DebugCapture>> {
         let t = &self.targets;
         let capture = match view {
-            View::Clusters | View::Vpls => {
+            v if v == views::CLUSTERS.name || v == views::VPLS.name => {
                 let (rsm, buffers) = (t.rsm.as_ref()?, t.buffers.as_ref()?);
                 // The per-VPL baseline skips the clustering: its mapping is stale.
                 let own_lights = self.visibility_mode == Visibility::VplShadows;
@@ -687,7 +688,7 @@ impl Method for Clustered {
                     mapping: (!own_lights).then(|| stage_buffer(device, encoder, &buffers.mapping)),
                 }
             }
-            View::ValShadow => {
+            v if v == views::VAL_SHADOW.name => {
                 let target = &t.interleaved.first()?.target.texture;
                 let size = target.size();
                 let readback =

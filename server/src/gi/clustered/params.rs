@@ -145,6 +145,7 @@ pub const TABLE: MethodTable = MethodTable {
         &FOURIER_TERMS,
         &SHADOW_LIGHT,
     ],
+    views: super::views::VIEWS,
 };
 
 /// How each VPL's visibility is found (`visibility`).

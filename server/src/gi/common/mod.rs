@@ -7,3 +7,4 @@ pub mod halton;
 pub mod params;
 pub mod shaders;
 pub mod triangles;
+pub mod views;

@@ -18,6 +18,7 @@ pub mod proxy_occlusion;
 pub mod sampling;
 pub mod shaders;
 pub mod val_select;
+pub mod views;
 
 use super::common::params::glossy_exponent;
 use super::cost::{self, Cost, FrameShape, Knob};
@@ -396,19 +397,23 @@ impl Method for LightSkin {
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
     ) -> Option<Box<dyn DebugCapture>> {
-        match view {
-            View::RsmFlux | View::Importance | View::SelectedVals => {
-                Some(Box::new(self.sampling.capture(device, encoder)))
-            }
-            View::Caches => {
-                let caches = self.caches.as_ref()?;
-                Some(Box::new(LightingCapture {
-                    staged: stage_buffer(device, encoder, &caches.lighting),
-                    count: caches.count as usize,
-                }))
-            }
-            _ => None,
+        if [
+            views::RSM_FLUX.name,
+            views::IMPORTANCE.name,
+            views::SELECTED_VALS.name,
+        ]
+        .contains(&view)
+        {
+            return Some(Box::new(self.sampling.capture(device, encoder)));
         }
+        if view == views::CACHES.name {
+            let caches = self.caches.as_ref()?;
+            return Some(Box::new(LightingCapture {
+                staged: stage_buffer(device, encoder, &caches.lighting),
+                count: caches.count as usize,
+            }));
+        }
+        None
     }
 
     fn retain_targets(&mut self, live: &[&GBuffer]) {

@@ -92,6 +92,7 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
               are interpolated per pixel",
     progressive: false,
     params: &[&RSM_SIZE, &OCCLUSION, &CACHE_DISTANCE, &CACHE_ANGLE],
+    views: super::views::LIGHTSKIN_VIEWS,
 };
 
 pub const BRSM: MethodTable = MethodTable {
@@ -110,6 +111,7 @@ pub const BRSM: MethodTable = MethodTable {
         &JITTER,
         &UNIFORM_IMPORTANCE,
     ],
+    views: super::views::BRSM_VIEWS,
 };
 
 /// The parameters of both methods, as [`BRSM`]'s table (a superset of [`LIGHTSKIN`]'s)

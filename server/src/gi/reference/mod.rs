@@ -42,6 +42,7 @@ use crate::gpu::{readback::read_buffer, timing::FrameStages, GpuContext, GpuErro
 use crate::passes::bind::{self, bind_group};
 use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
 use crate::passes::scene_buffers::MaterialGpu;
+use crate::passes::tonemap::luminance;
 use crate::passes::{self, ParamSlots};
 use crate::scene::{material, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
@@ -902,11 +903,6 @@ fn resolve(width: u32, height: u32, samples: u32, sums: &[[f32; 4]]) -> Referenc
         indirect,
         relative_standard_error,
     }
-}
-
-/// Rec. 709 luminance, as `luminance` in `path_trace.wgsl`.
-pub fn luminance(c: [f32; 3]) -> f32 {
-    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
 }
 
 #[cfg(test)]

@@ -29,6 +29,7 @@ pub const TABLE: MethodTable = MethodTable {
               BRDF and light), accumulated while nothing changes",
     progressive: true,
     params: &[&BOUNCES, &EMITTERS, &SPP],
+    views: &[&crate::gi::common::views::INDIRECT],
 };
 
 /// The reference's parameters, as [`TABLE`] describes them.

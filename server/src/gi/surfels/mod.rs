@@ -29,6 +29,7 @@ pub mod sampling;
 pub mod sh;
 pub mod shaders;
 pub mod store;
+pub mod views;
 
 use crate::gi::common::bvh::SceneBvh;
 use crate::gi::common::params::{emitters, BOUNCES};
@@ -535,14 +536,14 @@ impl Method for Surfels {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Option<Box<dyn DebugCapture>> {
         let staged = match view {
-            View::Surfels => {
+            v if v == views::SURFEL_RADIOSITY.name => {
                 let set = self.set.as_ref()?;
                 SurfelCapture::Radiosity {
                     surfels: set.surfel_count as usize,
                     staged: stage_buffer(device, encoder, &set.flux),
                 }
             }
-            View::CacheSh => {
+            v if v == views::CACHE_SH.name => {
                 let (width, height, buffer) = self.sh_view.as_ref()?;
                 SurfelCapture::CacheSh {
                     width: *width,
@@ -694,7 +695,7 @@ impl Surfels {
                 frame.indirect,
                 (frame.width, frame.height),
             );
-            if frame.debug_view == View::CacheSh {
+            if frame.debug_view == views::CACHE_SH.name {
                 let size = (frame.width, frame.height);
                 if !matches!(&self.sh_view, Some((w, h, _)) if (*w, *h) == size) {
                     let buffer = passes::sh_view_buffer(device, size.0, size.1);

@@ -68,6 +68,7 @@ pub const TABLE: MethodTable = MethodTable {
         &SURFEL_LINKS,
         &SH_BANDS,
     ],
+    views: super::views::VIEWS,
 };
 
 /// `surfels`' parameters, as [`TABLE`] describes them.

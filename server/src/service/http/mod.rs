@@ -490,8 +490,8 @@ pub async fn openapi_json() -> Response {
     }
 }
 
-/// The OpenAPI document: the protocol's types, with `render.gi`'s parameters from the GI
-/// methods' tables (the protocol names none of them).
+/// The OpenAPI document: the protocol's types, with `render.gi`'s parameters, the method
+/// names and the view names from the GI methods' tables (the protocol names none of them).
 pub fn openapi_value() -> Result<serde_json::Value, serde_json::Error> {
     let mut doc = serde_json::to_value(ApiDoc::openapi())?;
     if let Some(serde_json::Value::Object(schema)) = doc.pointer_mut("/components/schemas/GiParams")
@@ -506,6 +506,13 @@ pub fn openapi_value() -> Result<serde_json::Value, serde_json::Error> {
     {
         let methods: Vec<String> = crate::gi::methods().map(|m| m.to_string()).collect();
         schema.insert("enum".into(), methods.into());
+    }
+    if let Some(serde_json::Value::Object(schema)) = doc.pointer_mut("/components/schemas/View") {
+        let views: Vec<String> = crate::gi::views::names()
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        schema.insert("enum".into(), views.into());
     }
     Ok(doc)
 }

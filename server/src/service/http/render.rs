@@ -183,7 +183,7 @@ pub async fn render(
     };
     let quality = check_quality(req.quality)?;
     let raw = matches!(req.format, ImageFormat::RawFinal | ImageFormat::RawIndirect);
-    if raw && req.render.view != lightcast_protocol::View::Final {
+    if raw && req.render.view != lightcast_protocol::View::FINAL {
         return Err(ApiError::field(
             "format",
             "raw buffers are of the final frame; use view 'final'",

@@ -75,7 +75,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         exposure: Exposure::Manual(1.0),
         shadow_map_size: 256,
         capture_hdr: true,
-        debug_view: lightcast_protocol::View::Final,
+        debug_view: lightcast_protocol::View::FINAL,
         gi: lightcast_server::gi::GiParams::new(lightcast_server::gi::none::NONE),
         history: None,
         still: false,

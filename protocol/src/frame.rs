@@ -20,7 +20,7 @@
 //!     56    4  f32 readback ms (waiting for the GPU copy to be mapped)
 //!     60    4  f32 GPU ms of all stages
 //!     64    4  payload length in bytes
-//!     68  8·N  per stage: u16 index into STAGE_NAMES, u16 zero, f32 GPU ms
+//!     68  8·N  per stage: u16 index into `/v1/server`'s `stages`, u16 zero, f32 GPU ms
 //! 68+8N    4  samples per pixel accumulated so far (progressive methods: `reference`; else 0)
 //! 72+8N    4  f32 relative standard error of that accumulation (0 when not progressive)
 //! ```
@@ -36,141 +36,6 @@ const FIXED_LEN: usize = 68;
 const STAGE_LEN: usize = 8;
 /// Bytes of the fields appended after the stage list (samples, relative error).
 const PROGRESS_LEN: usize = 8;
-
-/// Declares [`Stage`] and [`STAGE_NAMES`] from one list, so a stage's wire index, its
-/// variant and its name cannot drift apart.
-macro_rules! stages {
-    ($($(#[$doc:meta])* $variant:ident => $name:literal,)*) => {
-        /// A pipeline stage. Frame headers refer to it by its index in [`STAGE_NAMES`]; new
-        /// stages are appended so that the indices of older ones never change.
-        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-        pub enum Stage {
-            $($(#[$doc])* $variant,)*
-        }
-
-        /// Names of the pipeline stages, indexed by [`Stage::index`].
-        pub const STAGE_NAMES: &[&str] = &[$($name,)*];
-
-        impl Stage {
-            /// Every stage, in index order.
-            pub const ALL: &'static [Stage] = &[$(Stage::$variant,)*];
-
-            /// The name reports, metrics and `/v1/server` use.
-            pub const fn name(self) -> &'static str {
-                match self {
-                    $(Stage::$variant => $name,)*
-                }
-            }
-        }
-    };
-}
-
-stages! {
-    /// Depth from the light (1 or 6 faces).
-    ShadowMap => "shadow_map",
-    /// Position, normal, material and triangle id from the camera.
-    Gbuffer => "gbuffer",
-    /// The reflective shadow map (`lightskin`, `brsm`, `clustered`).
-    Rsm => "rsm",
-    /// Importance of every RSM texel from the view samples (`brsm`).
-    Importance => "importance",
-    /// Cumulative importance (`brsm`).
-    CumulativeSums => "cumulative_sums",
-    /// VALs drawn from the importance (`brsm`).
-    ValSelect => "val_select",
-    /// Proxy lights per light cache (`lightskin`, `brsm`).
-    CacheLighting => "cache_lighting",
-    /// Proxies dimmed by the caches in between (`lightskin`, `brsm`).
-    ProxyOcclusion => "proxy_occlusion",
-    /// Proxy lights interpolated per pixel (`lightskin`, `brsm`).
-    IndirectLight => "indirect_light",
-    /// The indirect buffer cleared (`none`).
-    IndirectClear => "indirect_clear",
-    /// Emission, direct light with shadows, plus the indirect buffer.
-    DirectLight => "direct_light",
-    /// Automatic exposure.
-    Exposure => "exposure",
-    /// Tone curve into the 8-bit output.
-    Tonemap => "tonemap",
-    /// Copies of the results into the read-back buffers.
-    ReadbackCopy => "readback_copy",
-    /// Path-traced samples added to the accumulation (`reference`).
-    PathTrace => "path_trace",
-    /// The accumulated mean written to the indirect buffer (`reference`).
-    ReferenceResolve => "reference_resolve",
-    /// N VPLs fetched from the RSM at Halton positions (`clustered`).
-    VplGeneration => "vpl_generation",
-    /// k-means of the VPLs into M VALs, the final mapping and each VAL's area (`clustered`).
-    Clustering => "clustering",
-    /// Interleaved shading of every pixel by its share of the VPLs (`clustered`).
-    ClusteredIndirect => "clustered_indirect",
-    /// Geometry-aware blur of the interleaved shading (`clustered`).
-    GeometryBlur => "geometry_blur",
-    /// The G-buffer reduced for indirect light at a lower resolution (`indirect_downscale`).
-    GbufferReduce => "gbuffer_reduce",
-    /// Indirect light brought back to the output's resolution (`indirect_downscale`).
-    IndirectUpsample => "indirect_upsample",
-    /// Every surfel's radiosity from the light, its emission and the previous bounce
-    /// (`surfels`, per bounce a frame adds). Index 22 was `surfel_bounce` (this and the next
-    /// two together) until 2026-11-27.
-    SurfelLight => "surfel_light",
-    /// Per-pixel indirect light from the SH caches (`surfels`).
-    SurfelShade => "surfel_shade",
-    /// One paraboloid depth map per VAL (`cssm`) or per VPL (`vpl_shadows`) (`clustered`).
-    ParaboloidMaps => "paraboloid_maps",
-    /// The depth maps' Fourier basis textures and their mip chains (`clustered`, `cssm`).
-    CssmBasis => "cssm_basis",
-    /// The 8-bit output converted to Y'CbCr 4:2:0 for the video encoder (`h264` streams).
-    Yuv420 => "yuv420",
-    /// Surfel flux pulled up the hierarchy, one dispatch per level (`surfels`).
-    SurfelPull => "surfel_pull",
-    /// Every SH cache's radiance over its links, eq. 4 (`surfels`).
-    SurfelCacheLight => "surfel_cache_light",
-}
-
-impl Stage {
-    /// Index in [`STAGE_NAMES`], as frame headers carry it.
-    pub fn index(self) -> u16 {
-        self as u16
-    }
-
-    /// The stage of a frame header's index.
-    pub fn from_index(index: u16) -> Option<Self> {
-        Self::ALL.get(usize::from(index)).copied()
-    }
-
-    /// Whether the stage belongs to the frame's GI method rather than to the stages every
-    /// frame runs (shadow map, G-buffer, direct light, exposure, tone map, readback).
-    pub fn is_gi(self) -> bool {
-        !matches!(
-            self,
-            Self::ShadowMap
-                | Self::Gbuffer
-                | Self::DirectLight
-                | Self::Exposure
-                | Self::Tonemap
-                | Self::Yuv420
-                | Self::ReadbackCopy
-        )
-    }
-
-    /// The stage of a name in [`STAGE_NAMES`].
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.iter().copied().find(|s| s.name() == name)
-    }
-}
-
-impl serde::Serialize for Stage {
-    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        serializer.serialize_str(self.name())
-    }
-}
-
-impl std::fmt::Display for Stage {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(self.name())
-    }
-}
 
 pub const FLAG_STILL: u8 = 1;
 pub const FLAG_GI_PENDING: u8 = 2;
@@ -194,7 +59,7 @@ pub struct FrameHeader {
     pub readback_ms: f32,
     pub gpu_ms: f32,
     pub payload_len: u32,
-    /// (index into [`STAGE_NAMES`], GPU ms).
+    /// (index into `/v1/server`'s `stages`, GPU ms).
     pub stages: Vec<(u16, f32)>,
     /// Samples per pixel a progressive method has accumulated for this image (0: the method
     /// is not progressive).
@@ -221,15 +86,6 @@ pub enum FrameHeaderError {
 }
 
 impl FrameHeader {
-    pub fn stage_name(index: u16) -> &'static str {
-        Stage::from_index(index).map_or("unknown", Stage::name)
-    }
-
-    /// Index of a stage name in [`STAGE_NAMES`].
-    pub fn stage_index(name: &str) -> Option<u16> {
-        Stage::from_name(name).map(Stage::index)
-    }
-
     pub fn header_len(&self) -> usize {
         FIXED_LEN + STAGE_LEN * self.stages.len().min(usize::from(u8::MAX)) + PROGRESS_LEN
     }
@@ -346,34 +202,6 @@ impl FrameHeader {
 mod tests {
     use super::*;
 
-    /// Clients index stages by number: the indices of the first format must never move.
-    #[test]
-    fn stage_indices_of_the_first_format_never_move() {
-        let first = [
-            "shadow_map",
-            "gbuffer",
-            "rsm",
-            "importance",
-            "cumulative_sums",
-            "val_select",
-            "cache_lighting",
-            "proxy_occlusion",
-            "indirect_light",
-            "indirect_clear",
-            "direct_light",
-            "exposure",
-            "tonemap",
-            "readback_copy",
-        ];
-        for (i, name) in first.iter().enumerate() {
-            assert_eq!(FrameHeader::stage_index(name), Some(i as u16), "{name}");
-        }
-        for &stage in Stage::ALL {
-            assert_eq!(Stage::from_index(stage.index()), Some(stage));
-            assert_eq!(STAGE_NAMES[usize::from(stage.index())], stage.name());
-        }
-    }
-
     /// A header of a server from before the progress fields still decodes, as 0 samples.
     #[test]
     fn headers_without_progress_fields_decode() {
@@ -403,10 +231,7 @@ mod tests {
             readback_ms: 0.25,
             gpu_ms: 3.75,
             payload_len: 5,
-            stages: vec![
-                (0, 0.5),
-                (FrameHeader::stage_index("tonemap").unwrap(), 0.125),
-            ],
+            stages: vec![(0, 0.5), (12, 0.125)],
             samples: 96,
             relative_error: 0.03125,
         }
@@ -428,7 +253,7 @@ mod tests {
         let (back, payload) = FrameHeader::decode(&bytes).expect("decodes");
         assert_eq!(back, h);
         assert_eq!(payload, b"image");
-        assert_eq!(FrameHeader::stage_name(back.stages[1].0), "tonemap");
+        assert_eq!(back.stages[1], (12, 0.125));
     }
 
     #[test]

@@ -13,7 +13,7 @@ mod names;
 pub mod stream;
 
 pub use api::*;
-pub use frame::{FrameHeader, FrameHeaderError, Stage, STAGE_NAMES};
+pub use frame::{FrameHeader, FrameHeaderError};
 pub use names::{GiMethod, View};
 pub use stream::{ClientMessage, ServerEvent};
 

@@ -22,7 +22,6 @@ use crate::scene::{
     Scene,
 };
 use lightcast_protocol::GiParams;
-use lightcast_protocol::Stage;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -379,11 +378,11 @@ pub(crate) fn time_config(
         }
         let mut gi_ms = 0.0;
         for t in &frame.timings {
-            if t.stage == Stage::ReadbackCopy {
+            if t.stage == crate::passes::stages::READBACK_COPY {
                 continue;
             }
             per_stage.entry(t.stage.to_string()).or_default().push(t.ms);
-            if t.stage.is_gi() {
+            if crate::passes::stages::is_gi(t.stage) {
                 gi_ms += t.ms;
             }
         }
@@ -392,7 +391,7 @@ pub(crate) fn time_config(
             frame
                 .timings
                 .iter()
-                .filter(|t| t.stage != Stage::ReadbackCopy)
+                .filter(|t| t.stage != crate::passes::stages::READBACK_COPY)
                 .map(|t| t.ms)
                 .sum(),
         );

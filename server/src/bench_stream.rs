@@ -13,6 +13,7 @@
 use crate::bench::{stats, StageStats};
 use crate::debug_views::Image;
 use crate::gi::GiMethod;
+use crate::gpu::timing::Stage;
 use crate::gpu::{context::AdapterSummary, timing::TimingSource, BackendChoice, GpuContext};
 use crate::offline::{ExposureArg, GiArgs, DEFAULT_SCENE};
 use crate::passes::exposure::Exposure;
@@ -25,7 +26,7 @@ use crate::scene::{
 };
 use crate::service::encode::{self, EncodeError};
 use crate::service::video::{EncoderKind, VideoConfig, VideoEncoder, VideoError};
-use lightcast_protocol::{Camera, Codec, Encoding, Stage};
+use lightcast_protocol::{Camera, Codec, Encoding};
 use openh264::decoder::Decoder;
 use openh264::formats::YUVSource;
 use rayon::prelude::*;
@@ -802,7 +803,8 @@ struct ReadbackTimes {
 impl ReadbackTimes {
     fn add(&mut self, frame: &Frame, bytes: usize) {
         self.bytes = bytes;
-        self.copy.push(stage_ms(frame, Stage::ReadbackCopy));
+        self.copy
+            .push(stage_ms(frame, crate::passes::stages::READBACK_COPY));
         self.frame.push(frame.total_ms());
         self.wait.push(frame.readback_ms);
     }
@@ -872,7 +874,7 @@ fn measure_size(
                 error,
             })?;
         }
-        conversion.push(stage_ms(&video, Stage::Yuv420));
+        conversion.push(stage_ms(&video, crate::passes::stages::YUV420));
         let image = Image {
             width: frame.width,
             height: frame.height,

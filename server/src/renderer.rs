@@ -27,7 +27,7 @@ use crate::passes::{
 };
 use crate::scene::Scene;
 use glam::Vec3;
-use lightcast_protocol::{Camera, GiParams, Light, Stage, View};
+use lightcast_protocol::{Camera, GiParams, Light, View};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -758,11 +758,11 @@ impl Renderer {
         let set = free_set(&self.shared.ctx, &sized.readbacks)?;
         let lease = SetLease(Arc::clone(&set.busy));
         let mut stages = self.timer.begin(&self.shared.ctx);
-        stages.stage(Stage::ShadowMap, |e| {
+        stages.stage(crate::passes::stages::SHADOW_MAP, |e| {
             self.shadow_pass
                 .encode(e, shadow_map, &self.shared.scene_buffers)
         })?;
-        stages.stage(Stage::Gbuffer, |e| {
+        stages.stage(crate::passes::stages::GBUFFER, |e| {
             self.gbuffer_pass
                 .encode(e, &sized.gbuffer, &self.shared.scene_buffers)
         })?;
@@ -771,7 +771,7 @@ impl Renderer {
         if let Some(r) = reduced {
             self.resolution_pass
                 .prepare(queue, r, settings.camera.fov_y_degrees, height);
-            stages.stage(Stage::GbufferReduce, |e| {
+            stages.stage(crate::passes::stages::GBUFFER_REDUCE, |e| {
                 self.resolution_pass.encode_reduce(e, r)
             })?;
         }
@@ -794,30 +794,30 @@ impl Renderer {
         };
         let progress: Option<ProgressBuffer> = method.encode(&frame, &mut stages)?;
         if let Some(r) = reduced {
-            stages.stage(Stage::IndirectUpsample, |e| {
+            stages.stage(crate::passes::stages::INDIRECT_UPSAMPLE, |e| {
                 self.resolution_pass.encode_upsample(e, r, width, height)
             })?;
         }
-        stages.stage(Stage::DirectLight, |e| {
+        stages.stage(crate::passes::stages::DIRECT_LIGHT, |e| {
             self.direct_pass
                 .encode(e, &direct_bind_group, width, height)
         })?;
         if settings.exposure == Exposure::Auto {
-            stages.stage(Stage::Exposure, |e| {
+            stages.stage(crate::passes::stages::EXPOSURE, |e| {
                 self.exposure_pass
                     .encode(e, &sized.exposure, settings.exposure)
             })?;
         }
-        stages.stage(Stage::Tonemap, |e| {
+        stages.stage(crate::passes::stages::TONEMAP, |e| {
             self.tonemap_pass.encode(e, &sized.tonemap, width, height)
         })?;
         if settings.yuv420 {
-            stages.stage(Stage::Yuv420, |e| {
+            stages.stage(crate::passes::stages::YUV420, |e| {
                 self.yuv420_pass.encode(e, &sized.yuv420);
             })?;
         }
         let mut debug = None;
-        stages.stage(Stage::ReadbackCopy, |e| {
+        stages.stage(crate::passes::stages::READBACK_COPY, |e| {
             debug = method.capture_debug(settings.debug_view, &self.shared.ctx.device, e);
             if settings.yuv420 {
                 e.copy_buffer_to_buffer(&sized.yuv420.planes, 0, &set.yuv420, 0, None);

@@ -179,7 +179,7 @@ pub struct ReceivedFrame {
 
 impl ReceivedFrame {
     pub fn stage(&self, name: &str) -> Option<f32> {
-        let index = FrameHeader::stage_index(name)?;
+        let index = lightcast_server::gi::stages::index_of(name)?;
         self.header
             .stages
             .iter()

@@ -18,10 +18,10 @@
 //! OpenAPI schema, `--gi-param`, the viewer's panel, the software defaults and the README's
 //! table are derived), whose `shaders` list its WGSL modules with their bind groups (every
 //! one is validated with naga by the `shader_tests` below), whose `precompute`, if the method needs
-//! per-scene data, is built off the render loop with progress (see [`precompute`]), and
-//! whose `cost` estimates a frame from its parameters (see [`cost`]). Its debug views and
-//! stage names are still listed centrally (`debug_views`, the protocol's `View` and `Stage`;
-//! issue 32 moves them next).
+//! per-scene data, is built off the render loop with progress (see [`precompute`]), whose
+//! `cost` estimates a frame from its parameters (see [`cost`]) and whose `stages` name its
+//! stages with their frame-header indices (see [`stages`]). Its table lists its debug views
+//! with their drawing code (`gi/<method>/views.rs`, see [`views`]).
 
 pub mod clustered;
 pub mod common;
@@ -31,6 +31,7 @@ pub mod none;
 pub mod params;
 pub mod precompute;
 pub mod reference;
+pub mod stages;
 pub mod surfels;
 pub mod views;
 
@@ -250,6 +251,9 @@ pub struct MethodEntry {
     pub knobs: &'static [cost::Knob],
     /// The method's shader modules with their bind groups (`gi/<method>/shaders.rs`).
     pub shaders: &'static [crate::passes::ShaderPass],
+    /// The method's own stages (`gi/<method>/stages.rs`; the shared ones are
+    /// `passes::stages`'), with the indices frame headers carry (see [`stages`]).
+    pub stages: &'static [crate::gpu::timing::Stage],
     /// Whether the renderer may run the method at `indirect_downscale` (the methods that
     /// approximate; not `none`, which has nothing to compute, nor the reference, which is the
     /// full-resolution truth the others are compared with).

@@ -3,12 +3,15 @@
 
 use super::params::MethodTable;
 use super::{FrameInputs, GiError, Method, MethodEntry, ProgressBuffer};
-use crate::gpu::timing::FrameStages;
-use lightcast_protocol::{GiMethod, Stage};
+use crate::gpu::timing::{FrameStages, Stage};
+use lightcast_protocol::GiMethod;
 use std::any::{Any, TypeId};
 
 /// The method's name.
 pub const NONE: GiMethod = GiMethod::new("none");
+
+/// The indirect buffer cleared.
+pub const INDIRECT_CLEAR: Stage = Stage::new(9, "indirect_clear");
 
 pub struct NoIndirect;
 
@@ -28,6 +31,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     cost: |_, _, _| {},
     knobs: &[],
     shaders: &[],
+    stages: &[INDIRECT_CLEAR],
     downscales: false,
 };
 
@@ -37,7 +41,7 @@ impl Method for NoIndirect {
         frame: &FrameInputs,
         stages: &mut FrameStages,
     ) -> Result<Option<ProgressBuffer>, GiError> {
-        stages.stage(Stage::IndirectClear, |e| {
+        stages.stage(INDIRECT_CLEAR, |e| {
             e.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("clear indirect"),
                 color_attachments: &[Some(crate::passes::cleared_attachment(

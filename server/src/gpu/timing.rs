@@ -6,8 +6,45 @@
 //! by the CPU until the GPU is idle, which is slower and says so in [`TimingSource`].
 
 use super::{GpuContext, GpuError};
-use lightcast_protocol::Stage;
 use std::time::Instant;
+
+/// A pipeline stage: the index frame headers carry and the name reports, metrics and
+/// `/v1/server` use. The shared passes declare theirs in `passes::stages`, each GI method its
+/// own (`gi/<method>/stages.rs`); the registry (`gi::stages`) checks that no two share an index
+/// or a name and that the indices run 0..N without a gap. An index never changes once
+/// released: a new stage takes the next free one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Stage {
+    index: u16,
+    name: &'static str,
+}
+
+impl Stage {
+    pub const fn new(index: u16, name: &'static str) -> Self {
+        Self { index, name }
+    }
+
+    /// The index frame headers carry (into `/v1/server`'s `stages`).
+    pub const fn index(self) -> u16 {
+        self.index
+    }
+
+    pub const fn name(self) -> &'static str {
+        self.name
+    }
+}
+
+impl serde::Serialize for Stage {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.name)
+    }
+}
+
+impl std::fmt::Display for Stage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name)
+    }
+}
 
 /// Where the stage times came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -273,22 +310,18 @@ mod tests {
     #[test]
     fn a_repeated_stage_reports_its_sum_where_it_first_ran() {
         let t = |stage, ms| StageTiming { stage, ms };
+        let [first, light, pull, shade] = [0, 1, 2, 3].map(|i| Stage::new(i, "stage"));
         let frame = vec![
-            t(Stage::ShadowMap, 1.0),
-            t(Stage::SurfelLight, 2.0),
-            t(Stage::SurfelPull, 0.5),
-            t(Stage::SurfelLight, 3.0),
-            t(Stage::SurfelPull, 0.25),
-            t(Stage::SurfelShade, 4.0),
+            t(first, 1.0),
+            t(light, 2.0),
+            t(pull, 0.5),
+            t(light, 3.0),
+            t(pull, 0.25),
+            t(shade, 4.0),
         ];
         assert_eq!(
             sum_repeated(frame),
-            vec![
-                t(Stage::ShadowMap, 1.0),
-                t(Stage::SurfelLight, 5.0),
-                t(Stage::SurfelPull, 0.75),
-                t(Stage::SurfelShade, 4.0),
-            ]
+            vec![t(first, 1.0), t(light, 5.0), t(pull, 0.75), t(shade, 4.0)]
         );
     }
 }

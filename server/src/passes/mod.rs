@@ -25,6 +25,7 @@ pub mod indirect_resolution;
 pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;
+pub mod stages;
 pub mod tonemap;
 pub mod yuv420;
 

@@ -8,7 +8,7 @@
 //! fresh seeds. Driven through `TestRunner` rather than the `proptest!` macro so the budget and
 //! the seed come from the environment and the cases run are counted and printed.
 
-use lightcast_protocol::{ClientMessage, FrameHeader, RenderRequest, SessionParams, Stage};
+use lightcast_protocol::{ClientMessage, FrameHeader, RenderRequest, SessionParams};
 use lightcast_server::gi::precompute::Store;
 use lightcast_server::scene::gltf_loader::{load_gltf_slice, LoadLimits};
 use lightcast_server::scene::Scene;
@@ -285,7 +285,10 @@ fn json_requests_and_messages_never_panic() {
 // ---- Frame header -------------------------------------------------------------------------
 
 fn frame_header() -> impl Strategy<Value = FrameHeader> {
-    let stage = (0..Stage::ALL.len() as u16, any::<f32>());
+    let stage = (
+        0..lightcast_server::gi::stages::all().len() as u16,
+        any::<f32>(),
+    );
     (
         (any::<u64>(), any::<u64>(), any::<u64>(), any::<u64>()),
         (

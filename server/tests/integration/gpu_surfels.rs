@@ -255,12 +255,12 @@ fn bounces_follow_the_cpu_in_one_render_and_one_per_session_frame() {
     let three = settings_for(&scene, 3);
     let frame = renderer.render(&three).expect("render");
     // The paper's per-stage rows, each once: the three bounces' times are summed.
-    use lightcast_protocol::Stage;
+
     for stage in [
-        Stage::SurfelLight,
-        Stage::SurfelPull,
-        Stage::SurfelCacheLight,
-        Stage::SurfelShade,
+        lightcast_server::gi::surfels::stages::SURFEL_LIGHT,
+        lightcast_server::gi::surfels::stages::SURFEL_PULL,
+        lightcast_server::gi::surfels::stages::SURFEL_CACHE_LIGHT,
+        lightcast_server::gi::surfels::stages::SURFEL_SHADE,
     ] {
         let times = frame.timings.iter().filter(|t| t.stage == stage).count();
         assert_eq!(times, 1, "{stage} in {:?}", frame.timings);
@@ -284,7 +284,7 @@ fn bounces_follow_the_cpu_in_one_render_and_one_per_session_frame() {
         let bounced = frame
             .timings
             .iter()
-            .any(|t| t.stage == Stage::SurfelCacheLight);
+            .any(|t| t.stage == lightcast_server::gi::surfels::stages::SURFEL_CACHE_LIGHT);
         assert_eq!(bounced, frame_index <= 3, "frame {frame_index}");
     }
     let session = cache_light(&renderer, Some(7));

@@ -2,7 +2,7 @@
 //! rendered frame: the GPU's planes must match the CPU's conversion of the same frame's RGBA.
 
 use crate::support::*;
-use lightcast_protocol::Stage;
+
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::passes::yuv420::Yuv420;
 use lightcast_server::renderer::Renderer;
@@ -30,7 +30,10 @@ fn gpu_planes_match_the_cpu_conversion_of_the_same_frame() {
     let video = renderer.render(&settings).expect("video frame");
     assert!(video.rgba8.is_empty(), "a video frame reads back no RGBA");
     assert!(
-        video.timings.iter().any(|t| t.stage == Stage::Yuv420),
+        video
+            .timings
+            .iter()
+            .any(|t| t.stage == lightcast_server::passes::stages::YUV420),
         "the conversion is timed as its own stage"
     );
     let gpu = video.yuv420.expect("planes");

@@ -17,6 +17,7 @@ pub mod cpu_visibility;
 pub mod params;
 pub mod passes;
 pub mod shaders;
+pub mod stages;
 pub mod views;
 
 use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
@@ -32,7 +33,7 @@ use crate::passes::{
     rsm::{max_rsm_size, Rsm, RsmFace, RsmPass},
     Target,
 };
-use lightcast_protocol::{GiParams, Stage, View};
+use lightcast_protocol::{GiParams, View};
 use params::Settings;
 pub use params::Visibility;
 
@@ -69,6 +70,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::KMEANS_ITERATIONS),
     ],
     shaders: shaders::PASSES,
+    stages: stages::ALL,
     downscales: true,
 };
 
@@ -617,16 +619,16 @@ impl Method for Clustered {
         .bind(device, &self.blur.layout);
         self.encoded = true;
         self.visibility_mode = g.visibility;
-        stages.stage(Stage::Rsm, |e| {
+        stages.stage(crate::passes::stages::RSM, |e| {
             self.rsm_pass.encode(e, rsm, &r.scene_buffers)
         })?;
-        stages.stage(Stage::VplGeneration, |e| {
+        stages.stage(stages::VPL_GENERATION, |e| {
             self.clustering
                 .encode_vpls(e, &clustering_group, g.vpl_count)
         })?;
         // Per-VPL shadows need no VALs: the baseline's cost leaves clustering out.
         if g.visibility != Visibility::VplShadows {
-            stages.stage(Stage::Clustering, |e| {
+            stages.stage(stages::CLUSTERING, |e| {
                 self.clustering.encode_clustering(
                     e,
                     &clustering_group,
@@ -636,7 +638,7 @@ impl Method for Clustered {
             })?;
         }
         if g.visibility != Visibility::Off {
-            stages.stage(Stage::ParaboloidMaps, |e| {
+            stages.stage(stages::PARABOLOID_MAPS, |e| {
                 self.visibility.encode_maps(
                     device,
                     e,
@@ -648,18 +650,18 @@ impl Method for Clustered {
             })?;
         }
         if g.visibility == Visibility::Cssm {
-            stages.stage(Stage::CssmBasis, |e| {
+            stages.stage(stages::CSSM_BASIS, |e| {
                 self.visibility.encode_basis(e, visibility)
             })?;
         }
-        stages.stage(Stage::ClusteredIndirect, |e| {
+        stages.stage(stages::CLUSTERED_INDIRECT, |e| {
             self.indirect
                 .encode(e, &indirect_group, frame.width, frame.height)
         })?;
         // The view's pass runs after the blur has read the interleaved texture it overwrites.
         let shadow_group = (frame.debug_view == views::VAL_SHADOW.name)
             .then(|| indirect_resources.bind(device, &self.light_shadow.layout));
-        stages.stage(Stage::GeometryBlur, |e| {
+        stages.stage(stages::GEOMETRY_BLUR, |e| {
             self.blur.encode(e, &blur_group, frame.width, frame.height);
             if let Some(group) = &shadow_group {
                 self.light_shadow

@@ -17,6 +17,7 @@ pub mod params;
 pub mod proxy_occlusion;
 pub mod sampling;
 pub mod shaders;
+pub mod stages;
 pub mod val_select;
 pub mod views;
 
@@ -35,7 +36,7 @@ use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
 use cache_store::CacheStore;
 use caches::{CacheParams, CacheSet};
 use indirect_light::{CacheInputs, IndirectLightPass};
-use lightcast_protocol::{GiMethod, GiParams, Stage, View};
+use lightcast_protocol::{GiMethod, GiParams, View};
 use proxy_occlusion::ProxyOcclusionPass;
 use sampling::{SamplingReadback, ValSampling};
 use std::any::{Any, TypeId};
@@ -69,6 +70,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&crate::gi::common::params::RSM_SIZE),
     ],
     shaders: shaders::PASSES,
+    stages: stages::ALL,
     downscales: true,
 };
 
@@ -366,25 +368,27 @@ impl Method for LightSkin {
         );
         self.sampled = true;
         let sampling = &self.sampling;
-        stages.stage(Stage::Rsm, |e| sampling.encode_rsm(e, &r.scene_buffers))?;
+        stages.stage(crate::passes::stages::RSM, |e| {
+            sampling.encode_rsm(e, &r.scene_buffers)
+        })?;
         if method == crate::gi::lightskin::BRSM {
-            stages.stage(Stage::Importance, |e| sampling.encode_importance(e, gi))?;
-            stages.stage(Stage::CumulativeSums, |e| {
+            stages.stage(stages::IMPORTANCE, |e| sampling.encode_importance(e, gi))?;
+            stages.stage(stages::CUMULATIVE_SUMS, |e| {
                 sampling.encode_cumulative_sums(e)
             })?;
-            stages.stage(Stage::ValSelect, |e| sampling.encode_selection(e, gi))?;
+            stages.stage(stages::VAL_SELECT, |e| sampling.encode_selection(e, gi))?;
         }
-        stages.stage(Stage::CacheLighting, |e| {
+        stages.stage(stages::CACHE_LIGHTING, |e| {
             self.cache_pass
                 .encode(e, &lighting_group, caches.count, lighting_chunks)
         })?;
         if gi.occlusion {
-            stages.stage(Stage::ProxyOcclusion, |e| {
+            stages.stage(stages::PROXY_OCCLUSION, |e| {
                 self.occlusion_pass
                     .encode(e, &occlusion_group, caches.count, occlusion_chunks)
             })?;
         }
-        stages.stage(Stage::IndirectLight, |e| {
+        stages.stage(stages::INDIRECT_LIGHT, |e| {
             self.indirect_pass
                 .encode(e, &indirect_group, frame.width, frame.height)
         })?;

@@ -30,6 +30,7 @@
 pub mod params;
 pub mod resolve;
 pub mod shaders;
+pub mod stages;
 
 use super::common::bvh;
 use super::common::params::{emitters, glossy_exponent, BOUNCES};
@@ -46,7 +47,7 @@ use crate::passes::tonemap::luminance;
 use crate::passes::{self, ParamSlots};
 use crate::scene::{material, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
-use lightcast_protocol::{Camera, GiMethod, GiParams, Light, Stage};
+use lightcast_protocol::{Camera, GiMethod, GiParams, Light};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -79,6 +80,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&crate::gi::common::params::BOUNCES),
     ],
     shaders: shaders::PASSES,
+    stages: stages::ALL,
     downscales: false,
 };
 
@@ -789,7 +791,7 @@ impl PathTracer {
                 emitters: emitters(gi),
             },
         };
-        stages.stage(Stage::PathTrace, |e| {
+        stages.stage(stages::PATH_TRACE, |e| {
             self.ensure_accumulation(e, key);
             self.encode_samples(e, g.spp);
         })?;
@@ -805,7 +807,7 @@ impl PathTracer {
             frame.gbuffer,
             frame.indirect,
         );
-        stages.stage(Stage::ReferenceResolve, |e| {
+        stages.stage(stages::REFERENCE_RESOLVE, |e| {
             self.resolve.encode(e, &group, frame.width, frame.height)
         })?;
         Ok(Some(ProgressBuffer {

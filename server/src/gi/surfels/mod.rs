@@ -28,6 +28,7 @@ pub mod passes;
 pub mod sampling;
 pub mod sh;
 pub mod shaders;
+pub mod stages;
 pub mod store;
 pub mod views;
 
@@ -49,7 +50,7 @@ use crate::scene::Scene;
 use glam::Vec3;
 use grid::{CacheGrid, GridError};
 use hierarchy::{ClusterWeights, HierarchyError, Leaf, Tree};
-use lightcast_protocol::{GiMethod, GiParams, Light, Stage, View};
+use lightcast_protocol::{GiMethod, GiParams, Light, View};
 use links::{LinkError, SurfelLinks};
 pub use params::{Settings, LINK_RANGE, MAX_SURFELS, MIN_BANDS, MIN_SURFELS};
 
@@ -82,6 +83,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::SURFEL_COUNT),
     ],
     shaders: shaders::PASSES,
+    stages: stages::ALL,
     downscales: true,
 };
 
@@ -664,7 +666,7 @@ impl Surfels {
             } else {
                 0
             };
-            stages.stage(Stage::SurfelLight, |e| {
+            stages.stage(stages::SURFEL_LIGHT, |e| {
                 passes.encode_light(
                     device,
                     e,
@@ -677,14 +679,14 @@ impl Surfels {
                     },
                 )
             })?;
-            stages.stage(Stage::SurfelPull, |e| passes.encode_pull(device, e, set))?;
-            stages.stage(Stage::SurfelCacheLight, |e| {
+            stages.stage(stages::SURFEL_PULL, |e| passes.encode_pull(device, e, set))?;
+            stages.stage(stages::SURFEL_CACHE_LIGHT, |e| {
                 passes.encode_cache_light(device, e, set, &history.buffers[target])
             })?;
             history.latest = target;
             history.done += 1;
         }
-        stages.stage(Stage::SurfelShade, |e| {
+        stages.stage(stages::SURFEL_SHADE, |e| {
             passes.encode_shade(
                 device,
                 e,

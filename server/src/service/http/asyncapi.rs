@@ -10,7 +10,7 @@ use super::ApiError;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use lightcast_protocol::frame::FRAME_VERSION;
-use lightcast_protocol::{Stage, API_VERSION};
+use lightcast_protocol::API_VERSION;
 use serde_json::{json, Value};
 
 /// How the message schemas are written (AsyncAPI's `schemaFormat`).
@@ -23,7 +23,7 @@ pub fn asyncapi_value() -> Result<Value, serde_json::Error> {
         .pointer("/components/schemas")
         .cloned()
         .unwrap_or_else(|| json!({}));
-    let stages: Vec<String> = Stage::ALL
+    let stages: Vec<String> = crate::gi::stages::all()
         .iter()
         .map(|s| format!("{} {}", s.index(), s.name()))
         .collect();

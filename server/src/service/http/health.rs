@@ -74,7 +74,7 @@ pub async fn server_info(State(state): State<Arc<AppState>>) -> Json<ServerInfo>
         timing_source: state.timing_source.clone(),
         auth: state.auth_enabled(),
         limits: state.limits.clone(),
-        stages: lightcast_protocol::STAGE_NAMES
+        stages: crate::gi::stages::names()
             .iter()
             .map(|s| s.to_string())
             .collect(),

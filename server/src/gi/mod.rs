@@ -367,6 +367,18 @@ mod shader_tests {
     use crate::gpu::shaders::layout_check;
     use std::collections::BTreeSet;
 
+    /// The build script validated every module the registry lists (and only those): a
+    /// declaration its scan of the `shaders.rs` files misses fails here.
+    #[test]
+    fn the_build_validated_every_module() {
+        let validated: BTreeSet<&str> =
+            include_str!(concat!(env!("OUT_DIR"), "/validated_shaders.txt"))
+                .lines()
+                .collect();
+        let listed: BTreeSet<&str> = all_shaders().map(|p| p.source.name).collect();
+        assert_eq!(validated, listed);
+    }
+
     #[test]
     fn every_pass_module_validates_with_naga() {
         for pass in all_shaders() {

@@ -670,15 +670,6 @@ pub const CPU_TIMESTAMPS_NOTE: &str = "this CPU adapter's timestamps put the wor
 pub struct Limits {
     pub max_width: u32,
     pub max_height: u32,
-    pub max_rsm_size: u32,
-    pub max_val_count: u32,
-    pub max_view_samples: u32,
-    /// `reference`: most samples per pixel per frame.
-    #[serde(default)]
-    pub max_spp: u32,
-    /// `reference`: most bounces.
-    #[serde(default)]
-    pub max_bounces: u32,
     pub max_shadow_map_size: u32,
     pub max_fps: f32,
     pub max_sessions: u32,
@@ -723,17 +714,6 @@ pub struct Limits {
     /// Triangles over every scene held, degenerate ones not counted (413 beyond).
     #[serde(default)]
     pub max_total_triangles: u64,
-    /// Light caches of one parameter set, estimated from `cache_distance` and the scene's
-    /// surface area before they are built (400 naming `render.gi.cache_distance` beyond).
-    #[serde(default)]
-    pub max_caches_per_set: u64,
-    /// Light caches over every parameter set of every scene (400 beyond).
-    #[serde(default)]
-    pub max_total_caches: u64,
-    /// `surfels` links (caches × links per cache) over every parameter set of every scene,
-    /// estimated before a set is built (400 naming `render.gi.surfel_links` beyond).
-    #[serde(default)]
-    pub max_total_surfel_links: u64,
     /// Scene uploads (`.glb`/multipart bodies of `/v1/scenes` and `/v1/render`) received or
     /// loading at once (429 beyond).
     #[serde(default)]
@@ -775,6 +755,12 @@ pub struct Limits {
     /// One-shot renders of one token queued or running (429 `render_quota`).
     #[serde(default)]
     pub token_max_renders: Option<u32>,
+    /// The limits the server's GI methods declare (largest values of their parameters, such
+    /// as `max_val_count`, and the budgets of their precomputations, such as
+    /// `max_total_caches`), flattened among these fields; the OpenAPI schema lists this
+    /// server's.
+    #[serde(flatten)]
+    pub gi: BTreeMap<String, serde_json::Value>,
 }
 
 /// `GET /v1/server`: who is serving and under which limits.

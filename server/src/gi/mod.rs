@@ -27,6 +27,7 @@ pub mod clustered;
 pub mod common;
 pub mod cost;
 pub mod lightskin;
+pub mod limits;
 pub mod none;
 pub mod params;
 pub mod precompute;
@@ -254,6 +255,9 @@ pub struct MethodEntry {
     /// The method's own stages (`gi/<method>/stages.rs`; the shared ones are
     /// `passes::stages`'), with the indices frame headers carry (see [`stages`]).
     pub stages: &'static [crate::gpu::timing::Stage],
+    /// The server limits of its parameters and budgets (`gi/<method>/limits.rs`, see
+    /// [`limits`]), shared ones included.
+    pub limits: &'static [&'static limits::GiLimit],
     /// Whether the renderer may run the method at `indirect_downscale` (the methods that
     /// approximate; not `none`, which has nothing to compute, nor the reference, which is the
     /// full-resolution truth the others are compared with).

@@ -32,6 +32,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     knobs: &[],
     shaders: &[],
     stages: &[INDIRECT_CLEAR],
+    limits: &[],
     downscales: false,
 };
 

@@ -70,7 +70,7 @@ pub struct Param {
     /// `max` itself is outside the range.
     pub max_exclusive: bool,
     /// This server's largest value where the operator configures it (within `max`).
-    pub limit: Option<fn(&Limits) -> f64>,
+    pub limit: Option<&'static super::limits::GiLimit>,
     /// The unit of a number, for people (`texels`, `scene units`); empty for none.
     pub unit: &'static str,
     pub doc: &'static str,
@@ -172,7 +172,7 @@ impl Param {
     }
 
     /// This server's largest value, from its limits.
-    pub const fn limit(mut self, limit: fn(&Limits) -> f64) -> Self {
+    pub const fn limit(mut self, limit: &'static super::limits::GiLimit) -> Self {
         self.limit = Some(limit);
         self
     }
@@ -190,7 +190,7 @@ impl Param {
     /// The largest value on a server with `limits` (the renderer's own without).
     pub fn max_on(&self, limits: Option<&Limits>) -> f64 {
         match (self.limit, limits) {
-            (Some(limit), Some(limits)) => limit(limits).min(self.max),
+            (Some(limit), Some(limits)) => (limit.of(limits) as f64).min(self.max),
             _ => self.max,
         }
     }
@@ -709,8 +709,10 @@ mod tests {
         );
         let own = GiParams::new(crate::gi::clustered::CLUSTERED).with("vpl_count", 1u32 << 30);
         assert!(check_request(&own, &limits).is_err());
-        let big =
-            GiParams::new(crate::gi::lightskin::BRSM).with("rsm_size", limits.max_rsm_size + 1);
+        let big = GiParams::new(crate::gi::lightskin::BRSM).with(
+            "rsm_size",
+            crate::gi::common::limits::MAX_RSM_SIZE.of(&limits) + 1,
+        );
         let e = check_request(&big, &limits).expect_err("beyond the server's limit");
         assert!(e.reason.contains("this server's"), "{}", e.reason);
         let unknown = GiParams::new(GiMethod::new("fancy"));

@@ -10,6 +10,7 @@
 //! direct light until a frame's set is ready; offline renders build them inline. The renderer
 //! hands the finished [`SceneData`] to the method ([`super::Method::set_scene_data`]).
 
+use super::limits::GiLimit;
 use super::InvalidSetting;
 use crate::scene::Scene;
 use lightcast_protocol::GiParams;
@@ -257,17 +258,17 @@ pub struct Built {
 }
 
 /// Which of the service's memory budgets a kind's sets are counted in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug)]
 pub enum BudgetPool {
-    /// Light caches: at most `--max-caches-per-set` per set and `--max-total-caches` over
-    /// every set of every scene.
-    LightCaches,
     /// Triangles, over every scene and precomputation (`--max-total-triangles`): a set that
     /// holds a copy of every triangle of its scene (a BVH) counts them a second time.
     Triangles,
-    /// `surfels` links, caches × links per cache, over every set of every scene
-    /// (`--max-total-surfel-links`).
-    SurfelLinks,
+    /// A pool the method declares: at most `total` units over every set of every scene and
+    /// at most `per_set` in one set (both limits in its [`super::MethodEntry::limits`]).
+    Declared {
+        total: &'static GiLimit,
+        per_set: Option<&'static GiLimit>,
+    },
 }
 
 /// How a kind's sets are counted against the service's budgets: in units of its pool,

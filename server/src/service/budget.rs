@@ -1,13 +1,14 @@
 //! Budgets of what clients can make the server hold: memory (decoded texture bytes,
-//! triangles, light caches) over every scene, and per-token quotas (sessions, scenes, uploads
+//! triangles, the GI methods' precomputations in the pools they declare) over every scene, and per-token quotas (sessions, scenes, uploads
 //! in flight, queued one-shot renders). Each is a [`Pool`] taken from *before* the memory or
 //! slot is used and given back when the holder is dropped, so a refusal never comes after the
 //! allocation it guards and nothing leaks when a request ends early.
 
 use super::error::ApiError;
 use super::scenes::lock;
+use crate::gi::limits::GiLimit;
 use axum::http::StatusCode;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
@@ -98,23 +99,35 @@ pub struct MemoryBudget {
     /// Decoded texture bytes (RGBA8, after downscaling).
     pub texture_bytes: Arc<Pool>,
     pub triangles: Arc<Pool>,
-    /// Light caches over every parameter set of every scene.
-    pub caches: Arc<Pool>,
-    /// Light caches of one parameter set.
-    pub caches_per_set: u64,
-    /// `surfels` links over every parameter set of every scene.
-    pub surfel_links: Arc<Pool>,
+    /// The pools the GI methods declare for their precomputations, by the name of the limit
+    /// that sizes them (`max_total_caches`; see `gi::precompute::BudgetPool`).
+    gi: BTreeMap<&'static str, Arc<Pool>>,
+    limits: lightcast_protocol::Limits,
 }
 
 impl MemoryBudget {
     pub fn new(limits: &lightcast_protocol::Limits) -> Self {
+        let gi = crate::gi::limits::all()
+            .into_iter()
+            .map(|l| (l.name, Pool::new(l.of(limits))))
+            .collect();
         Self {
             texture_bytes: Pool::new(limits.max_total_texture_bytes),
             triangles: Pool::new(limits.max_total_triangles),
-            caches: Pool::new(limits.max_total_caches),
-            caches_per_set: limits.max_caches_per_set,
-            surfel_links: Pool::new(limits.max_total_surfel_links),
+            gi,
+            limits: limits.clone(),
         }
+    }
+
+    /// The pool a GI method's limit `total` sizes (every registered method's limit has one;
+    /// a test checks that each budget's limits are among its method's).
+    pub fn gi_pool(&self, total: &GiLimit) -> Option<&Arc<Pool>> {
+        self.gi.get(total.name)
+    }
+
+    /// The value of a GI method's limit on this server (a per-set cap).
+    pub fn gi_limit(&self, limit: &GiLimit) -> u64 {
+        limit.of(&self.limits)
     }
 }
 

@@ -1,9 +1,6 @@
 //! `lightcast-server serve` options: where to listen, limits and auth.
 
 use super::budget::fair_share;
-use crate::gi::lightskin::caches::MAX_CACHES;
-use crate::gi::lightskin::{MAX_RSM_SIZE, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};
-use crate::gi::reference::{MAX_BOUNCES, MAX_SAMPLES_PER_CALL};
 use crate::gpu::BackendChoice;
 use crate::renderer::MAX_SHADOW_MAP_SIZE;
 use crate::scene::gltf_loader::MAX_TEXTURE_SIZE;
@@ -92,18 +89,10 @@ pub struct LimitArgs {
     /// Largest frame height.
     #[arg(long, env = "LIGHTCAST_MAX_HEIGHT", default_value_t = 2160)]
     pub max_height: u32,
-    /// Largest RSM side.
-    #[arg(long, env = "LIGHTCAST_MAX_RSM_SIZE", default_value_t = 2048)]
-    pub max_rsm_size: u32,
-    /// Most VALs per frame.
-    #[arg(long, env = "LIGHTCAST_MAX_VAL_COUNT", default_value_t = 65536)]
-    pub max_val_count: u32,
-    /// Most view samples per frame.
-    #[arg(long, env = "LIGHTCAST_MAX_VIEW_SAMPLES", default_value_t = 4096)]
-    pub max_view_samples: u32,
-    /// `reference`: most samples per pixel a frame (or one-shot render) may take.
-    #[arg(long, env = "LIGHTCAST_MAX_SPP", default_value_t = 256)]
-    pub max_spp: u32,
+    /// The limits the GI methods declare (`--max-val-count`, `--max-total-caches`, …; see
+    /// `gi::limits`).
+    #[command(flatten)]
+    pub gi_limits: crate::gi::limits::GiLimitArgs,
     /// Largest shadow map side.
     #[arg(long, env = "LIGHTCAST_MAX_SHADOW_MAP_SIZE", default_value_t = 4096)]
     pub max_shadow_map_size: u32,
@@ -178,17 +167,6 @@ pub struct LimitArgs {
         default_value_t = 20_000_000
     )]
     pub max_total_triangles: u64,
-    /// Light caches of one parameter set, estimated from the cache distance and the scene's
-    /// surface area before they are built.
-    #[arg(long, env = "LIGHTCAST_MAX_CACHES_PER_SET", default_value_t = 250_000)]
-    pub max_caches_per_set: u64,
-    /// Light caches over every parameter set of every scene held.
-    #[arg(long, env = "LIGHTCAST_MAX_TOTAL_CACHES", default_value_t = 1_000_000)]
-    pub max_total_caches: u64,
-    /// `surfels` links (SH caches × links per cache, about 40 bytes each at 3 bands) over
-    /// every parameter set of every scene held.
-    #[arg(long, env = "LIGHTCAST_MAX_TOTAL_SURFEL_LINKS", default_value_t = 4 << 20)]
-    pub max_total_surfel_links: u64,
     /// Scene uploads received or loading at once (each body may take --max-upload-bytes).
     #[arg(long, env = "LIGHTCAST_MAX_UPLOADS", default_value_t = 4)]
     pub max_uploads: u32,
@@ -272,30 +250,12 @@ impl LimitArgs {
         };
         within("max-width", self.max_width.into(), 16, 16384)?;
         within("max-height", self.max_height.into(), 16, 16384)?;
-        within(
-            "max-rsm-size",
-            self.max_rsm_size.into(),
-            16,
-            MAX_RSM_SIZE.into(),
-        )?;
-        within(
-            "max-val-count",
-            self.max_val_count.into(),
-            1,
-            MAX_VAL_COUNT.into(),
-        )?;
-        within(
-            "max-view-samples",
-            self.max_view_samples.into(),
-            1,
-            MAX_VIEW_SAMPLES.into(),
-        )?;
-        within(
-            "max-spp",
-            self.max_spp.into(),
-            1,
-            MAX_SAMPLES_PER_CALL.into(),
-        )?;
+        crate::gi::limits::check(&self.gi_limits.0).map_err(|(flag, reason)| {
+            ConfigError::Invalid {
+                flag: &flag[2..],
+                reason,
+            }
+        })?;
         within(
             "max-shadow-map-size",
             self.max_shadow_map_size.into(),
@@ -347,19 +307,6 @@ impl LimitArgs {
             self.max_total_texture_bytes,
         )?;
         within("max-total-triangles", self.max_total_triangles, 1, u64::MAX)?;
-        within("max-caches-per-set", self.max_caches_per_set, 1, MAX_CACHES)?;
-        within(
-            "max-total-caches",
-            self.max_total_caches,
-            self.max_caches_per_set,
-            u64::MAX,
-        )?;
-        within(
-            "max-total-surfel-links",
-            self.max_total_surfel_links,
-            1,
-            u64::MAX,
-        )?;
         within("max-uploads", self.max_uploads.into(), 1, 1024)?;
         within(
             "max-queued-renders",
@@ -410,9 +357,6 @@ impl LimitArgs {
             max_scene_texture_bytes: self.max_scene_texture_bytes,
             max_total_texture_bytes: self.max_total_texture_bytes,
             max_total_triangles: self.max_total_triangles,
-            max_caches_per_set: self.max_caches_per_set,
-            max_total_caches: self.max_total_caches,
-            max_total_surfel_links: self.max_total_surfel_links,
             max_uploads: self.max_uploads,
             max_queued_renders: self.max_queued_renders,
             max_request_seconds: self.max_request_cost,
@@ -424,11 +368,6 @@ impl LimitArgs {
             unwanted_precompute_secs: self.unwanted_precompute_secs,
             max_width: self.max_width,
             max_height: self.max_height,
-            max_rsm_size: self.max_rsm_size,
-            max_val_count: self.max_val_count,
-            max_view_samples: self.max_view_samples,
-            max_spp: self.max_spp,
-            max_bounces: MAX_BOUNCES,
             max_shadow_map_size: self.max_shadow_map_size,
             max_fps: self.max_fps,
             max_sessions: self.max_sessions,
@@ -444,6 +383,12 @@ impl LimitArgs {
             header_timeout_ms: self.header_timeout_ms,
             max_header_bytes: self.max_header_bytes,
             max_name_bytes: crate::service::http::MAX_NAME_BYTES,
+            gi: self
+                .gi_limits
+                .0
+                .iter()
+                .map(|(name, &v)| (name.clone(), v.into()))
+                .collect(),
         })
     }
 

@@ -147,7 +147,7 @@ pub fn request_seconds(
 
 /// The samples per pixel of a one-shot `reference` whose request names none: as many as half
 /// the request budget buys (its comparison included), at least `floor` (the default) and at
-/// most `max_spp`. A fixed default was either noise (4 spp) or far over the deadline on a CPU
+/// most this server's limit of `spp`. A fixed default was either noise (4 spp) or far over the deadline on a CPU
 /// adapter; half leaves room for the rest of the request. The reference's own `spp` knob
 /// finds it, as a refusal's fitting value is found.
 pub fn one_shot_spp(
@@ -158,7 +158,7 @@ pub fn one_shot_spp(
     limits: &Limits,
     floor: u32,
 ) -> u32 {
-    let most = limits.max_spp.max(1);
+    let most = (SPP.max_on(Some(limits)) as u32).max(1);
     let floor = floor.clamp(1, most);
     let knobs = crate::gi::entry(crate::gi::reference::REFERENCE).1.knobs;
     let Some(knob) = knobs.iter().find(|k| k.field() == SPP.name) else {
@@ -444,6 +444,7 @@ pub fn check_precompute(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gi::reference::limits::MAX_SPP;
 
     const ONE_SHOT: Submission = Submission::OneShot { compare_spp: None };
 
@@ -477,7 +478,7 @@ mod tests {
             let g = reference.clone().with("spp", spp);
             request_seconds(&g, shape(320, 240), &none, None, &limits)
         };
-        assert!(spp > 4 && spp < limits.max_spp, "{spp}");
+        assert!(spp > 4 && u64::from(spp) < MAX_SPP.of(&limits), "{spp}");
         assert!(seconds(spp) <= 5.0 && seconds(spp + 1) > 5.0, "{spp}");
         // A comparison shares the budget; a tiny frame gets the most the server allows; a
         // frame where even the default is over budget keeps the default (and is refused or
@@ -485,7 +486,7 @@ mod tests {
         assert!(one_shot_spp(&reference, shape(320, 240), &none, Some(256), &limits, 4) < spp);
         assert_eq!(
             one_shot_spp(&reference, shape(2, 2), &none, None, &limits, 4),
-            limits.max_spp
+            MAX_SPP.of(&limits) as u32
         );
         assert_eq!(
             one_shot_spp(&reference, shape(3840, 2160), &none, None, &limits, 4),

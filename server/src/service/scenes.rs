@@ -349,19 +349,27 @@ impl SceneEntry {
     }
 
     /// The pool a kind's units are taken from, with its flag.
-    fn pool(&self, pool: BudgetPool) -> (&Arc<Pool>, &'static str) {
+    fn pool(&self, pool: BudgetPool) -> Result<(&Arc<Pool>, &'static str), ApiError> {
         match pool {
-            BudgetPool::LightCaches => (&self.budget.caches, "--max-total-caches"),
-            BudgetPool::Triangles => (&self.budget.triangles, "--max-total-triangles"),
-            BudgetPool::SurfelLinks => (&self.budget.surfel_links, "--max-total-surfel-links"),
+            BudgetPool::Triangles => Ok((&self.budget.triangles, "--max-total-triangles")),
+            BudgetPool::Declared { total, .. } => self
+                .budget
+                .gi_pool(total)
+                .map(|pool| (pool, total.flag))
+                .ok_or_else(|| {
+                    ApiError::internal(format!("limit {} is not a registered one", total.name))
+                }),
         }
     }
 
     /// The most units one set of the pool may hold, with its flag.
     fn per_set_limit(&self, pool: BudgetPool) -> Option<(u64, &'static str)> {
         match pool {
-            BudgetPool::LightCaches => Some((self.budget.caches_per_set, "--max-caches-per-set")),
-            BudgetPool::Triangles | BudgetPool::SurfelLinks => None,
+            BudgetPool::Declared {
+                per_set: Some(limit),
+                ..
+            } => Some((self.budget.gi_limit(limit), limit.flag)),
+            _ => None,
         }
     }
 
@@ -375,7 +383,7 @@ impl SceneEntry {
             return Ok(None);
         };
         let estimated = (entry.estimate)(key, &self.facts);
-        let (pool, flag) = self.pool(budget.pool);
+        let (pool, flag) = self.pool(budget.pool)?;
         pool.try_take(estimated).map(Some).ok_or_else(|| {
             ApiError::field(
                 format!("gi.{}", budget.field),
@@ -421,7 +429,7 @@ impl SceneEntry {
         if held {
             Ok(())
         } else {
-            let (pool, flag) = self.pool(budget.pool);
+            let (pool, flag) = self.pool(budget.pool).map_err(|e| e.body.message)?;
             Err(format!(
                 "{units} {} were made, more than the {} left of this server's {} ({flag}); \
                  {retry}",
@@ -914,6 +922,8 @@ mod tests {
     use super::*;
     use crate::gi::lightskin::cache_key;
     use crate::gi::lightskin::caches::{min_distance_for, CacheParams};
+    use crate::gi::lightskin::limits::{MAX_CACHES_PER_SET, MAX_TOTAL_CACHES};
+    use crate::gi::limits::GiLimit;
     use crate::scene::procedural;
     use std::sync::mpsc;
     use std::time::Duration;
@@ -963,6 +973,23 @@ mod tests {
         SceneRegistry::with_workers(limits, None, |_, _| {})
     }
 
+    /// `limits` with the GI limits `set`.
+    fn with_gi(mut limits: Limits, set: &[(&GiLimit, u64)]) -> Limits {
+        for (limit, value) in set {
+            limits.gi.insert(limit.name.into(), (*value).into());
+        }
+        limits
+    }
+
+    /// The light caches held over every scene.
+    fn caches_used(registry: &SceneRegistry) -> u64 {
+        registry
+            .budget()
+            .gi_pool(&MAX_TOTAL_CACHES)
+            .expect("a registered pool")
+            .used()
+    }
+
     #[test]
     fn cache_sets_beyond_the_budgets_are_refused_before_anything_is_built() {
         let registry = idle(&limits(4));
@@ -982,13 +1009,12 @@ mod tests {
             "{}",
             e.body.message
         );
-        assert_eq!(registry.budget().caches.used(), 0, "nothing taken");
+        assert_eq!(caches_used(&registry), 0, "nothing taken");
 
-        let tight = Limits {
-            max_caches_per_set: 10_000,
-            max_total_caches: 15_000,
-            ..limits(4)
-        };
+        let tight = with_gi(
+            limits(4),
+            &[(&MAX_CACHES_PER_SET, 10_000), (&MAX_TOTAL_CACHES, 15_000)],
+        );
         let registry = idle(&tight);
         let entry = registry
             .detached(procedural::cornell_box(), 0.0)
@@ -999,7 +1025,7 @@ mod tests {
             .expect("brsm needs light caches");
         assert!(key_for(&entry, smallest * 0.95).is_err());
         assert!(matches!(registry.precomputed(&entry, &p), Now::Pending));
-        let taken = registry.budget().caches.used();
+        let taken = caches_used(&registry);
         assert!((9_000..=10_000).contains(&taken), "{taken}");
         let e = key_for(&entry, smallest * 1.1).expect_err("the total is spent");
         assert_eq!(e.body.field.as_deref(), Some("gi.cache_distance"));
@@ -1016,22 +1042,15 @@ mod tests {
         // The precompute worker may still hold the queued build's handle for a moment (it
         // did under the full suite's load): the reservation goes with the last one.
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
-        while registry.budget().caches.used() != 0 && std::time::Instant::now() < deadline {
+        while caches_used(&registry) != 0 && std::time::Instant::now() < deadline {
             std::thread::sleep(std::time::Duration::from_millis(10));
         }
-        assert_eq!(
-            registry.budget().caches.used(),
-            0,
-            "given back with the scene"
-        );
+        assert_eq!(caches_used(&registry), 0, "given back with the scene");
     }
 
     #[test]
     fn built_sets_hold_their_real_count_and_are_refused_beyond_the_per_set_limit() {
-        let registry = idle(&Limits {
-            max_caches_per_set: 10_000,
-            ..limits(4)
-        });
+        let registry = idle(&with_gi(limits(4), &[(&MAX_CACHES_PER_SET, 10_000)]));
         let entry = registry
             .detached(procedural::cornell_box(), 0.0)
             .expect("fits");
@@ -1041,7 +1060,7 @@ mod tests {
             entry.hold_built(&crate::gi::lightskin::PRECOMPUTE, &p, 7),
             Ok(())
         );
-        assert_eq!(registry.budget().caches.used(), 7);
+        assert_eq!(caches_used(&registry), 7);
         let e = entry
             .hold_built(&crate::gi::lightskin::PRECOMPUTE, &p, 10_001)
             .expect_err("over");
@@ -1252,7 +1271,7 @@ mod tests {
         assert_eq!(state(&entry, &params(1.0)), Some(PrecomputeState::Failed));
         // The failed set gave its estimate back; the other still holds its own.
         let second = (crate::gi::lightskin::PRECOMPUTE.estimate)(&params(2.0), &entry.facts);
-        assert_eq!(registry.budget().caches.used(), second);
+        assert_eq!(caches_used(&registry), second);
     }
 
     /// Waits until `key` of `entry` is ready or failed.

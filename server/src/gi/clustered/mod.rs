@@ -71,6 +71,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     ],
     shaders: shaders::PASSES,
     stages: stages::ALL,
+    limits: &[&crate::gi::common::limits::MAX_RSM_SIZE],
     downscales: true,
 };
 

@@ -10,7 +10,7 @@ use crate::passes::tonemap::{luminance, tonemap_cpu};
 use glam::Vec3;
 use lightcast_protocol::View;
 
-pub const CLUSTERS: DebugView = DebugView {
+pub static CLUSTERS: DebugView = DebugView {
     name: View::new("clusters"),
     summary: "The RSM's VPLs, each in the colour of the VAL it is clustered into (seed 003's \
               Figure 9, centre).",
@@ -18,7 +18,7 @@ pub const CLUSTERS: DebugView = DebugView {
     draw: |v| Some(clusters(v.debug()?)),
 };
 
-pub const VPLS: DebugView = DebugView {
+pub static VPLS: DebugView = DebugView {
     name: View::new("vpls"),
     summary: "The frame at a third of its brightness with every lit VPL as a dot at its \
               surface point in the colour of its flux.",
@@ -26,7 +26,7 @@ pub const VPLS: DebugView = DebugView {
     draw: |v| Some(vpls(v, v.debug()?)),
 };
 
-pub const VAL_SHADOW: DebugView = DebugView {
+pub static VAL_SHADOW: DebugView = DebugView {
     name: View::new("val-shadow"),
     summary: "The visibility of one light at every pixel's surface, white where it sees the \
               light and black in its shadow, dark blue where the light and the surface face \

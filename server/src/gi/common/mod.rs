@@ -4,6 +4,7 @@
 
 pub mod bvh;
 pub mod halton;
+pub mod limits;
 pub mod params;
 pub mod shaders;
 pub mod triangles;

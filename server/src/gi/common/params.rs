@@ -16,7 +16,7 @@ pub const RSM_SIZE: Param = Param::integer(
     "RSM side per light face; every texel is a virtual light (a VAL for LightSkin and BRSM, \
      a VPL candidate for clustered)",
 )
-.limit(|l| l.max_rsm_size.into())
+.limit(&super::limits::MAX_RSM_SIZE)
 .software(Default::Int(112))
 .unit("texels");
 
@@ -72,7 +72,7 @@ pub const BOUNCES: Param = Param::integer(
      surfels add one per frame while the light stays put, a render and a session's still \
      compute all",
 )
-.limit(|l| l.max_bounces.into());
+.limit(&super::limits::MAX_BOUNCES);
 
 /// `reference` and `surfels`: emissive surfaces as area lights.
 pub const EMITTERS: Param = Param::boolean(

@@ -8,7 +8,7 @@ use glam::{Vec3, Vec4Swizzles};
 use lightcast_protocol::View;
 
 /// Indirect light alone, at the frame's exposure: every method but `none` lists it.
-pub const INDIRECT: DebugView = DebugView {
+pub static INDIRECT: DebugView = DebugView {
     name: View::new("indirect"),
     summary: "Indirect light only, at the frame's exposure.",
     reads_indirect: true,

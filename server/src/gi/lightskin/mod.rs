@@ -13,6 +13,7 @@ pub mod cpu;
 pub mod cumulative_sums;
 pub mod importance;
 pub mod indirect_light;
+pub mod limits;
 pub mod params;
 pub mod proxy_occlusion;
 pub mod sampling;
@@ -71,6 +72,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     ],
     shaders: shaders::PASSES,
     stages: stages::ALL,
+    limits: limits::LIMITS,
     downscales: true,
 };
 
@@ -142,7 +144,10 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         Ok(cache_key(&params))
     },
     budget: Some(UnitBudget {
-        pool: BudgetPool::LightCaches,
+        pool: BudgetPool::Declared {
+            total: &limits::MAX_TOTAL_CACHES,
+            per_set: Some(&limits::MAX_CACHES_PER_SET),
+        },
         unit: "light caches",
         field: "cache_distance",
         advice: |facts, allowed| {

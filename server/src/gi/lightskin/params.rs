@@ -42,7 +42,7 @@ pub const VAL_COUNT: Param = Param::integer(
     (1, MAX_VAL_COUNT),
     "N_sVAL: VALs drawn from the importance distribution per frame (eq. 13)",
 )
-.limit(|l| l.max_val_count.into())
+.limit(&super::limits::MAX_VAL_COUNT)
 .software(Default::Int(512))
 .unit("VALs");
 
@@ -52,7 +52,7 @@ pub const VIEW_SAMPLES: Param = Param::integer(
     (1, MAX_VIEW_SAMPLES),
     "N_VS: view samples estimating each VAL's importance (eq. 10-11)",
 )
-.limit(|l| l.max_view_samples.into())
+.limit(&super::limits::MAX_VIEW_SAMPLES)
 .software(Default::Int(32))
 .unit("samples");
 

@@ -11,14 +11,14 @@ use crate::passes::tonemap::{luminance, tonemap_cpu};
 use glam::Vec3;
 use lightcast_protocol::View;
 
-pub const RSM_FLUX: DebugView = DebugView {
+pub static RSM_FLUX: DebugView = DebugView {
     name: View::new("rsm-flux"),
     summary: "The reflective shadow map's flux (all light faces side by side), auto-exposed.",
     reads_indirect: false,
     draw: |v| Some(rsm_flux(v.debug()?)),
 };
 
-pub const IMPORTANCE: DebugView = DebugView {
+pub static IMPORTANCE: DebugView = DebugView {
     name: View::new("importance"),
     summary: "The VAL importance map of eq. 10 on a log scale: black is zero, white the \
               largest value, six decades below it dark grey.",
@@ -26,7 +26,7 @@ pub const IMPORTANCE: DebugView = DebugView {
     draw: |v| Some(importance(v.debug()?)),
 };
 
-pub const SELECTED_VALS: DebugView = DebugView {
+pub static SELECTED_VALS: DebugView = DebugView {
     name: View::new("selected-vals"),
     summary: "The RSM flux darkened, with every VAL drawn from the importance (eq. 11–15) \
               in magenta.",
@@ -34,7 +34,7 @@ pub const SELECTED_VALS: DebugView = DebugView {
     draw: |v| Some(selected_vals(v.debug()?)),
 };
 
-pub const CACHES: DebugView = DebugView {
+pub static CACHES: DebugView = DebugView {
     name: View::new("caches"),
     summary: "The frame darkened, with every light cache drawn in the colour of its diffuse \
               proxy light (seed 004's Figure 6 view).",

@@ -27,6 +27,7 @@
 //! renders start afresh. As a frame's method it adds `spp` samples, then [`resolve`] writes
 //! the mean into the indirect buffer with the convergence sums the frame header reports.
 
+pub mod limits;
 pub mod params;
 pub mod resolve;
 pub mod shaders;
@@ -81,6 +82,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     ],
     shaders: shaders::PASSES,
     stages: stages::ALL,
+    limits: limits::LIMITS,
     downscales: false,
 };
 

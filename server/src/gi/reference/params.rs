@@ -19,7 +19,7 @@ pub const SPP: Param = Param::integer(
      one-shot render takes exactly this many when it names spp, else as many as half the \
      server's request budget buys (its report says how many and how noisy the image is)",
 )
-.limit(|l| l.max_spp.into())
+.limit(&super::limits::MAX_SPP)
 .software(Default::Int(1))
 .unit("samples");
 

@@ -21,6 +21,7 @@
 pub mod cpu;
 pub mod grid;
 pub mod hierarchy;
+pub mod limits;
 pub mod link_rays;
 pub mod links;
 pub mod params;
@@ -84,6 +85,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     ],
     shaders: shaders::PASSES,
     stages: stages::ALL,
+    limits: limits::LIMITS,
     downscales: true,
 };
 
@@ -133,7 +135,10 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
     label: "surfel links",
     key: |gi, facts| Ok(surfel_key(&surfel_params(gi, facts)?)),
     budget: Some(UnitBudget {
-        pool: BudgetPool::SurfelLinks,
+        pool: BudgetPool::Declared {
+            total: &limits::MAX_TOTAL_SURFEL_LINKS,
+            per_set: None,
+        },
         unit: "surfel links",
         field: "surfel_links",
         advice: |_, allowed| {

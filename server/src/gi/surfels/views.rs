@@ -11,7 +11,7 @@ use crate::passes::tonemap::{luminance, tonemap_cpu};
 use glam::Vec3;
 use lightcast_protocol::{Camera, View};
 
-pub const SURFEL_RADIOSITY: DebugView = DebugView {
+pub static SURFEL_RADIOSITY: DebugView = DebugView {
     name: View::new("surfels"),
     summary: "Every surfel facing the camera as a disc of its projected size in the colour of \
               its radiosity, on black.",
@@ -24,7 +24,7 @@ pub const SURFEL_RADIOSITY: DebugView = DebugView {
     },
 };
 
-pub const SURFEL_LINKS: DebugView = DebugView {
+pub static SURFEL_LINKS: DebugView = DebugView {
     name: View::new("surfel-links"),
     summary: "The hierarchy cut of one cache's links: on black, the surfels under each linked \
               node in that node's colour (the others dark grey) and the cache as a white \
@@ -34,7 +34,7 @@ pub const SURFEL_LINKS: DebugView = DebugView {
     draw: |v| Some(surfel_links(v, v.scene_data()?)),
 };
 
-pub const CACHE_SH: DebugView = DebugView {
+pub static CACHE_SH: DebugView = DebugView {
     name: View::new("cache-sh"),
     summary: "The caches' SH radiance interpolated at each pixel's surface point and evaluated \
               along its normal, before any lobe (what the caches say arrives from straight \

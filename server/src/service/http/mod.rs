@@ -491,7 +491,8 @@ pub async fn openapi_json() -> Response {
 }
 
 /// The OpenAPI document: the protocol's types, with `render.gi`'s parameters, the method
-/// names and the view names from the GI methods' tables (the protocol names none of them).
+/// names, the view names and the methods' server limits from the GI registry (the protocol
+/// names none of them).
 pub fn openapi_value() -> Result<serde_json::Value, serde_json::Error> {
     let mut doc = serde_json::to_value(ApiDoc::openapi())?;
     if let Some(serde_json::Value::Object(schema)) = doc.pointer_mut("/components/schemas/GiParams")
@@ -506,6 +507,27 @@ pub fn openapi_value() -> Result<serde_json::Value, serde_json::Error> {
     {
         let methods: Vec<String> = crate::gi::methods().map(|m| m.to_string()).collect();
         schema.insert("enum".into(), methods.into());
+    }
+    if let Some(serde_json::Value::Object(schema)) = doc.pointer_mut("/components/schemas/Limits") {
+        // The flattened map of the methods' limits, field by field.
+        schema.remove("additionalProperties");
+        let limits = crate::gi::limits::all();
+        if let Some(serde_json::Value::Object(props)) = schema.get_mut("properties") {
+            for l in &limits {
+                props.insert(
+                    l.name.into(),
+                    serde_json::json!({
+                        "type": "integer",
+                        "format": "int64",
+                        "minimum": l.min,
+                        "description": format!("{} (`{}`)", l.doc, l.flag),
+                    }),
+                );
+            }
+        }
+        if let Some(serde_json::Value::Array(required)) = schema.get_mut("required") {
+            required.extend(limits.iter().map(|l| l.name.into()));
+        }
     }
     if let Some(serde_json::Value::Object(schema)) = doc.pointer_mut("/components/schemas/View") {
         let views: Vec<String> = crate::gi::views::names()

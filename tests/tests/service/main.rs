@@ -2,6 +2,7 @@
 //! over HTTP and WebSocket, and the browser viewer driven in headless Chromium.
 
 mod api;
+mod bad_inputs;
 mod budgets;
 mod costs;
 mod hardening;

@@ -5,7 +5,7 @@
 //! allocation it guards and nothing leaks when a request ends early.
 
 use super::error::ApiError;
-use super::scenes::lock;
+use super::sync::lock;
 use crate::gi::limits::GiLimit;
 use axum::http::StatusCode;
 use std::collections::{BTreeMap, HashMap};

@@ -205,7 +205,7 @@ impl OpenConnections {
     /// A slot for a connection from `ip`, or the refusal to answer it with.
     fn admit(self: &Arc<Self>, ip: IpAddr) -> Result<Slot, ApiError> {
         let address = client_address(ip);
-        let mut counts = super::scenes::lock(&self.counts);
+        let mut counts = super::sync::lock(&self.counts);
         let (total, per_address) = &mut *counts;
         if *total >= self.max_total {
             return Err(ApiError::new(
@@ -257,7 +257,7 @@ struct Slot {
 
 impl Drop for Slot {
     fn drop(&mut self) {
-        let mut counts = super::scenes::lock(&self.open.counts);
+        let mut counts = super::sync::lock(&self.open.counts);
         let (total, per_address) = &mut *counts;
         *total -= 1;
         if let Some(mine) = per_address.get_mut(&self.address) {

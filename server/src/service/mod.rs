@@ -22,6 +22,7 @@ pub mod routing;
 pub mod scene_store;
 pub mod scenes;
 pub mod sessions;
+pub mod sync;
 pub mod video;
 
 use crate::gi::precompute::Store;

@@ -18,11 +18,17 @@
 //! needs nothing but the directory. Entries appear by rename, so a replica never reads half a
 //! scene.
 
-use crate::service::http::scenes::UploadedFile;
 use lightcast_protocol::SceneInfo;
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
+
+/// An uploaded file: its name (from the multipart filename, or the stored one) and bytes.
+#[derive(Clone)]
+pub struct UploadedFile {
+    pub name: String,
+    pub bytes: bytes::Bytes,
+}
 
 /// The SHA-256 of `bytes`, in lowercase hex.
 fn sha256_hex(bytes: &[u8]) -> String {

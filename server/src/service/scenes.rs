@@ -5,6 +5,7 @@
 use super::budget::{over_budget, Held, MemoryBudget, Pool, Quota, TokenQuotas};
 use super::error::ApiError;
 use super::ids;
+use super::sync::lock;
 use crate::gi::precompute::{
     self, BudgetPool, BuildEnv, PrecomputeEntry, PrecomputeKey, Progress, SceneData, SceneFacts,
     Store, UnitBudget,
@@ -19,7 +20,7 @@ use lightcast_protocol::{
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::AtomicBool;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Condvar, Mutex, MutexGuard, Weak};
+use std::sync::{Arc, Condvar, Mutex, Weak};
 use std::time::{Duration, Instant};
 
 /// Most parameter sets of one precomputation kept per scene.
@@ -62,12 +63,6 @@ impl std::fmt::Debug for Demand {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Demand({})", self.key)
     }
-}
-
-/// Locks a mutex, recovering the data if a panicking thread poisoned it (every critical
-/// section here leaves the data consistent).
-pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
 }
 
 /// One precomputation of the scene (one per kind and distinct parameters in use).

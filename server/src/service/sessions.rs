@@ -6,7 +6,8 @@ use super::error::ApiError;
 use super::ids;
 use super::params::Resolved;
 use super::routing::{Owner, Routing};
-use super::scenes::{lock, SceneLease};
+use super::scenes::SceneLease;
+use super::sync::lock;
 use super::video::VideoStream;
 use lightcast_protocol::{
     ErrorBody, Limits, ServerEvent, SessionInfo, SessionParams, SessionStats, StageMs, StreamMode,

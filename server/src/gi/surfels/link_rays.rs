@@ -8,7 +8,7 @@
 //! GPU traces the next. The CPU port of the shader is the `occluded` test of
 //! `links::cache_links`, which the integration tests compare it with.
 
-use super::links::Senders;
+use super::senders::Senders;
 use crate::gpu::readback::PendingMap;
 use crate::gpu::{GpuContext, GpuError};
 use crate::passes::bind::{self, bind_group};

@@ -19,9 +19,8 @@
 
 use super::hierarchy::Tree;
 use super::link_rays::LinkRays;
-use super::sampling::Surfel;
+pub use super::senders::Senders;
 use super::sh;
-use crate::gi::common::bvh::SceneBvh;
 use crate::gpu::GpuContext;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -63,32 +62,10 @@ pub enum LinkError {
     Gpu(String),
 }
 
-/// The scene as the links see it: surfels in the hierarchy's leaf order, each of `area`.
-pub struct Senders<'a> {
-    pub surfels: &'a [Surfel],
-    pub area: f64,
-    pub tree: &'a Tree,
-    /// For visibility rays.
-    pub bvh: &'a SceneBvh,
-    /// For the facing of what the rays hit.
-    pub scene: &'a crate::scene::Scene,
-    /// Length of the scene's bounds diagonal: ray offsets are relative to it.
-    pub extent: f32,
-}
-
-impl Senders<'_> {
-    /// How far short of its surfel a link ray stops, and how near a cache a surfel counts as
-    /// at it: far above f32 rounding at the scene's coordinates, far below its features (as
-    /// the reference tracer's ray offset). The CPU and GPU rays use the same.
-    pub fn ray_offset(&self) -> f32 {
-        1e-5 * self.extent
-    }
-}
-
 /// Where the link rays are traced.
 #[derive(Clone, Copy)]
 pub enum RayDevice<'a> {
-    /// On the CPU cores, through [`SceneBvh::occluded`].
+    /// On the CPU cores, through [`crate::gi::common::bvh::SceneBvh::occluded`].
     Cpu,
     /// On the adapter ([`super::link_rays`]), falling back to the CPU where the scene does not
     /// fit its buffers.
@@ -381,6 +358,8 @@ pub fn cache_lighting(links: &SurfelLinks, node_flux: &[Vec3]) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gi::common::bvh::SceneBvh;
+    use crate::gi::surfels::sampling::Surfel;
     use crate::gi::surfels::test_scenes::{closed_box, quads};
     use crate::gi::surfels::{hierarchy, pull_flux, sampling};
     use crate::scene::Scene;

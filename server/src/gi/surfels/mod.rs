@@ -27,6 +27,7 @@ pub mod links;
 pub mod params;
 pub mod passes;
 pub mod sampling;
+pub mod senders;
 pub mod sh;
 pub mod shaders;
 pub mod stages;

@@ -6,7 +6,9 @@ use crate::scene::procedural::Spec;
 use crate::scene::Scene;
 use crate::service::budget::over_budget;
 use crate::service::error::{echo, parse_json, ApiError};
-use crate::service::scene_store::{owner_digest, plain_file_name, Recipe, SceneStore, StoredScene};
+use crate::service::scene_store::{
+    owner_digest, plain_file_name, Recipe, SceneStore, StoredScene, UploadedFile,
+};
 use crate::service::scenes::{owner_allows, triangles_over_budget, SceneEntry};
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Multipart, Path, Query, Request, State};
@@ -16,13 +18,6 @@ use http_body_util::BodyExt;
 use lightcast_protocol::{Limits, ProceduralScene, SceneInfo};
 use std::sync::Arc;
 use std::time::Instant;
-
-/// An uploaded file: its name (from the multipart filename) and bytes.
-#[derive(Clone)]
-pub struct UploadedFile {
-    pub name: String,
-    pub bytes: Bytes,
-}
 
 /// Reads every part of a multipart body: (part name, file).
 pub async fn read_multipart(

@@ -580,8 +580,8 @@ pub struct RenderRequest {
     pub compare_to: Option<GiMethod>,
     /// Samples per pixel of a `reference` comparison render (default 256; at most the
     /// server's `max_spp`). Its bounces are `render.gi.bounces`; emissive surfaces light it
-    /// only when the compared method lights from them (`surfels`, `reference`) with
-    /// `render.gi.emitters` on, so both see the same light sources.
+    /// only when the compared method lights from them (its parameters include `emitters`)
+    /// with `render.gi.emitters` on, so both see the same light sources.
     pub compare_spp: Option<u32>,
 }
 

@@ -68,7 +68,7 @@ pub struct RenderSettings {
     /// starts afresh, so equal settings give equal pixels.
     pub history: Option<u64>,
     /// A session's still: a GI method that converges by steps shows its converged result
-    /// when it can reach it within this frame (`surfels`: every bounce at once).
+    /// when it can reach it within this frame (every bounce at once).
     pub still: bool,
     /// Read the output back as Y'CbCr 4:2:0 for a video encoder ([`Frame::yuv420`]) instead
     /// of RGBA8: 1.5 instead of 4 bytes per pixel cross the bus, and the CPU skips the colour

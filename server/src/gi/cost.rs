@@ -123,8 +123,9 @@ pub fn shared(shape: &FrameShape, cost: &mut Cost) {
     );
 }
 
-/// A reflective shadow map of `gi.rsm_size` (`lightskin`, `brsm`, `clustered`): 100 reference
-/// ns per texel for its several targets (`clustered` at RSM 2048² against 64², 32×32).
+/// A reflective shadow map of `gi.rsm_size` (the RSM-based methods): 100 reference ns per
+/// texel for its several targets (measured with VPLs from an RSM of 2048² against 64², at
+/// 32×32).
 pub fn rsm(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     cost.add("RSM (faces × rsm_size²)", shape.rsm_texels(gi), 100.0);
     cost.add(

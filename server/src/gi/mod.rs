@@ -121,8 +121,8 @@ pub struct FrameInputs<'a> {
     pub light: &'a Light,
     pub settings: &'a GiParams,
     pub gbuffer: &'a GBuffer,
-    /// The frame's shadow map, rendered before the GI stages (`surfels` lights its surfels
-    /// through it).
+    /// The frame's shadow map, rendered before the GI stages (a method may light its own
+    /// samples through it).
     pub shadow: &'a crate::passes::shadow_map::ShadowMap,
     /// Indirect radiance per pixel (RGBA16F storage texture); the method writes every pixel.
     pub indirect: &'a Target,

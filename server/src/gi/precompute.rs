@@ -1,5 +1,5 @@
 //! Per-scene precomputation of GI methods: data a method builds once per scene and parameter
-//! set (LightSkin's light caches, the reference's BVH, later the surfels' links) and every
+//! set (light caches, a BVH, links) and every
 //! frame of that scene then reads.
 //!
 //! A method that needs one registers a [`PrecomputeEntry`] with its [`super::MethodEntry`]:
@@ -118,7 +118,7 @@ impl SceneFacts {
     }
 }
 
-/// File extensions of the stored kinds: LightSkin's light caches, the surfels' links. One size
+/// File extensions of the stored kinds (`lcc`: light caches, `lsl`: surfel links). One size
 /// limit covers them all.
 pub const STORED_EXTENSIONS: &[&str] = &["lcc", "lsl"];
 
@@ -324,10 +324,10 @@ pub struct BuildEnv<'a> {
     /// Called from the building thread as steps advance.
     pub progress: &'a mut dyn FnMut(Progress),
     /// True once nobody can use the result (its scene was deleted): a long build checks it
-    /// between chunks of work and gives up (the surfels' do; the light caches and the BVH run
-    /// to the end).
+    /// between chunks of work and gives up (builds of minutes do; short ones run to the
+    /// end).
     pub cancelled: &'a dyn Fn() -> bool,
-    /// The adapter, for a build that can trace or compute on it (the surfels' link rays);
+    /// The adapter, for a build that can trace or compute on it (visibility rays);
     /// without one such builds run on the CPU.
     pub gpu: Option<&'a crate::gpu::GpuContext>,
 }

@@ -195,49 +195,30 @@ mod tests {
         }
     }
 
+    /// Every method shows `final`, draws its own views and is refused the others', naming
+    /// the methods that draw them.
     #[test]
     fn a_view_is_checked_against_the_frames_method() {
-        let clustered = crate::gi::clustered::CLUSTERED;
-        let brsm = crate::gi::lightskin::BRSM;
-        let clusters = View::new("clusters");
-        assert!(check(View::FINAL, crate::gi::none::NONE).unwrap().is_none());
-        assert!(check(clusters, clustered).unwrap().is_some());
-        let err = check(clusters, brsm).unwrap_err();
-        assert!(matches!(err, ViewError::NotDrawn { .. }), "{err}");
-        assert_eq!(
-            err.to_string(),
-            "view clusters is drawn by GI method clustered, not by brsm"
-        );
-        let err = check(View::new("nonsense"), brsm).unwrap_err();
-        assert!(err.to_string().contains("rsm-flux"), "{err}");
-        assert!(matches!(
-            check(View::new("indirect"), crate::gi::none::NONE),
-            Err(ViewError::NotDrawn { .. })
-        ));
-        for view in ["surfels", "surfel-links", "cache-sh"] {
-            let view = View::new(view);
-            assert!(check(view, crate::gi::surfels::SURFELS).is_ok());
-            for other in [brsm, clustered, crate::gi::reference::REFERENCE] {
-                assert!(matches!(
-                    check(view, other),
-                    Err(ViewError::NotDrawn { .. })
-                ));
+        for method in methods() {
+            assert!(check(View::FINAL, method).unwrap().is_none());
+            for name in names().into_iter().skip(1) {
+                let own = table(method).views.iter().any(|v| v.name == name);
+                match check(name, method) {
+                    Ok(Some(v)) => assert!(own && v.name == name, "{name} for {method}"),
+                    Err(ViewError::NotDrawn { drawn_by: by, .. }) => {
+                        assert!(!own && !by.contains(&method), "{name} for {method}");
+                        assert_eq!(by, drawn_by(name));
+                    }
+                    other => panic!("{name} for {method}: {other:?}"),
+                }
             }
         }
-        // Only the light-cache methods draw their caches; importance is `brsm`'s alone.
-        let caches = View::new("caches");
-        for method in [crate::gi::surfels::SURFELS, clustered] {
-            assert!(check(caches, method).is_err());
-            assert!(check(View::new("indirect"), method).is_ok());
+        let err = check(View::new("nonsense"), GiMethod::default()).unwrap_err();
+        assert!(matches!(err, ViewError::Unknown { .. }), "{err}");
+        for name in names() {
+            assert!(err.to_string().contains(name.name()), "{err}");
         }
-        assert!(check(caches, crate::gi::lightskin::LIGHTSKIN).is_ok());
-        assert_eq!(
-            drawn_by(View::new("importance")),
-            [crate::gi::lightskin::BRSM]
-        );
-        assert!(reads_indirect(View::new("cache-sh")) && reads_indirect(View::new("indirect")));
-        assert!(!reads_indirect(View::new("surfels")) && !reads_indirect(View::FINAL));
-        assert!(parse("cache-sh").is_ok() && parse("cache_sh").is_err());
-        assert!(parse("nonsense").unwrap_err().contains("surfel-links"));
+        assert!(parse("final").is_ok() && parse("nonsense").is_err() && parse("No").is_err());
+        assert!(!reads_indirect(View::FINAL));
     }
 }

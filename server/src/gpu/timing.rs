@@ -70,9 +70,9 @@ pub struct StageTiming {
     pub ms: f64,
 }
 
-/// Most stages a frame may time, a repeated one counted each time (a `surfels` render adds up
-/// to 16 bounces of three stages); a frame that names more is a programming error caught in
-/// tests.
+/// Most stages a frame may time, a repeated one counted each time (a multi-bounce render may
+/// add up to 16 bounces of three stages); a frame that names more is a programming error
+/// caught in tests.
 const MAX_STAGES: u32 = 64;
 
 /// Query storage reused from frame to frame.

@@ -3,7 +3,7 @@
 //! computes indirect light there, and a joint bilateral upsample
 //! (`shaders/indirect_upsample.wgsl`) brings it back to the output's pixels without bleeding
 //! across edges. Indirect light is smooth, so a quarter or a sixteenth of the per-pixel work
-//! of a method (LightSkin's 48-cache interpolation, `clustered`'s VPL loop, the path tracer)
+//! of a method (a 48-cache interpolation, a loop over VPLs, a path tracer)
 //! buys most of its cost back at little error; [`upsample_cpu`] is the CPU port the tests
 //! compare with.
 

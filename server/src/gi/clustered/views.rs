@@ -97,6 +97,24 @@ pub fn light_shadow(out: (u32, u32), v: &LightShadowView) -> Image {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gi::views::{check, ViewError};
+
+    #[test]
+    fn clustered_draws_its_views_and_not_the_light_caches() {
+        let clustered = crate::gi::clustered::CLUSTERED;
+        for v in VIEWS {
+            assert!(check(v.name, clustered).unwrap().is_some(), "{}", v.name);
+        }
+        let err = check(CLUSTERS.name, crate::gi::lightskin::BRSM).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "view clusters is drawn by GI method clustered, not by brsm"
+        );
+        assert!(matches!(
+            check(crate::gi::lightskin::views::CACHES.name, clustered),
+            Err(ViewError::NotDrawn { .. })
+        ));
+    }
 
     /// Each lit VPL is a dot of its VAL's colour at its texel; unlit ones are not drawn.
     #[test]

@@ -198,8 +198,8 @@ impl SceneBvh {
     }
 
     /// Whether anything lies on the ray before `t_max`: a shadow ray, which stops at the
-    /// first hit instead of looking for the nearest (the surfels' link rays trace one per
-    /// surfel and cache).
+    /// first hit instead of looking for the nearest (visibility between two points, as a
+    /// precomputation's rays trace it).
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
         self.traverse(origin, dir, t_max, true).is_some()
     }

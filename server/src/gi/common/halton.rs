@@ -1,5 +1,5 @@
 //! The Halton sequence (radical inverses), mirrored by `shaders/halton.wgsl`: the low-discrepancy
-//! positions of `clustered`'s VPLs in the RSM and of the surfels on their triangles.
+//! positions of the methods' samples (points on triangles, texels of the RSM).
 
 /// Radical inverse of `i` in `base`: the i-th element of the Halton sequence.
 pub fn halton(mut i: u32, base: u32) -> f32 {

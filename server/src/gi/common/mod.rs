@@ -1,6 +1,7 @@
-//! What several GI methods use and none owns: the scene's BVH (the reference's path tracing,
-//! the surfels' link rays), the Halton sequence and the triangle helpers of the
-//! precomputations. Shared GPU passes live in `passes/`.
+//! What several GI methods use and none owns: the scene's BVH (path tracing, visibility rays
+//! of precomputations), the Halton sequence, the triangle helpers of the precomputations, the
+//! shared parameters, limits and shader modules, and the debug views' drawing kit. Shared GPU
+//! passes live in `passes/`.
 
 pub mod bvh;
 pub mod halton;

@@ -4,7 +4,7 @@
 use crate::gi::params::{Default, Param};
 use lightcast_protocol::GiParams;
 
-/// The reflective shadow map's side (`lightskin`, `brsm`, `clustered`). The software profile's
+/// The reflective shadow map's side (the RSM-based methods). The software profile's
 /// 112²: at 128² `lightskin`'s frame on the Cornell box (every texel a VAL lighting every
 /// cache) was estimated at 2.08 s, over a CPU adapter's 2 s frame limit, so a newcomer's
 /// one-shot of it was refused (issue 31); at 112² it is 1.7 s, and BRSM's frames at the
@@ -13,8 +13,7 @@ pub const RSM_SIZE: Param = Param::integer(
     "rsm_size",
     1024,
     (16, crate::passes::rsm::MAX_RSM_SIZE),
-    "RSM side per light face; every texel is a virtual light (a VAL for LightSkin and BRSM, \
-     a VPL candidate for clustered)",
+    "RSM side per light face; every texel is a virtual light (a VAL or a VPL candidate)",
 )
 .limit(&super::limits::MAX_RSM_SIZE)
 .software(Default::Int(112))
@@ -63,18 +62,18 @@ pub fn indirect_downscale(gi: &GiParams) -> u32 {
 /// Most bounces a multi-bounce method computes.
 pub const MAX_BOUNCES: u32 = 16;
 
-/// `reference` and `surfels`: reflections after the visible surface.
+/// Reflections after the visible surface (the multi-bounce methods).
 pub const BOUNCES: Param = Param::integer(
     "bounces",
     1,
     (1, MAX_BOUNCES),
     "Reflections after the visible surface (1: the single bounce seed 004 approximates); \
-     surfels add one per frame while the light stays put, a render and a session's still \
-     compute all",
+     progressive methods add one per frame while the light stays put, a render and a \
+     session's still compute all",
 )
 .limit(&super::limits::MAX_BOUNCES);
 
-/// `reference` and `surfels`: emissive surfaces as area lights.
+/// Emissive surfaces as area lights (the methods that light from them list it).
 pub const EMITTERS: Param = Param::boolean(
     "emitters",
     true,

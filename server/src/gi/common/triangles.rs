@@ -1,5 +1,5 @@
 //! A scene's triangles as the methods' precomputations read them: corners, areas and the
-//! geometric normal (the light caches' and the surfels' surface samples, the links' senders).
+//! geometric normal (surface samples of the precomputations).
 
 use crate::scene::Scene;
 use glam::Vec3;

@@ -109,3 +109,22 @@ fn caches_view(v: &ViewInputs, caches: &CacheSet, lighting: &[CacheLighting]) ->
     }
     overlay.image
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gi::lightskin::{BRSM, LIGHTSKIN};
+    use crate::gi::views::{check, drawn_by};
+
+    /// Both methods draw the RSM and the caches; the importance and the drawn VALs are BRSM's.
+    #[test]
+    fn brsm_adds_the_importance_views_to_lightskins() {
+        for v in LIGHTSKIN_VIEWS {
+            assert!(check(v.name, LIGHTSKIN).is_ok() && check(v.name, BRSM).is_ok());
+        }
+        for v in [&IMPORTANCE, &SELECTED_VALS] {
+            assert_eq!(drawn_by(v.name), [BRSM]);
+            assert!(check(v.name, LIGHTSKIN).is_err());
+        }
+    }
+}

@@ -2,7 +2,7 @@
 //! against (issue 10).
 //!
 //! Compute shaders only (no ray-tracing hardware, so it runs on lavapipe): a BVH built per scene
-//! on the CPU ([`bvh`], shared with the surfels' link rays) is traversed in WGSL (`shaders/bvh.wgsl`, `shaders/reference/`). For every pixel it
+//! on the CPU ([`bvh`], shared with other methods' visibility rays) is traversed in WGSL (`shaders/bvh.wgsl`, `shaders/reference/`). For every pixel it
 //! estimates the indirect radiance leaving the surface point the pixel centre sees towards the
 //! camera — the quantity the other methods write into their indirect buffer — with the same
 //! BRDF (diffuse + normalised Phong lobe, eq. 3–4 of seed 004), punctual light and emitters, but

@@ -192,6 +192,23 @@ pub fn cache_sh(out: (u32, u32), width: u32, height: u32, radiance: &[[f32; 4]])
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gi::surfels::SURFELS;
+    use crate::gi::views::{check, reads_indirect};
+
+    /// Only `surfels` draws its views; of them only `cache-sh` needs the indirect buffer read
+    /// back.
+    #[test]
+    fn surfels_draw_their_views_and_only_cache_sh_reads_the_indirect_buffer() {
+        for v in VIEWS {
+            assert!(check(v.name, SURFELS).is_ok(), "{}", v.name);
+        }
+        for other in crate::gi::methods().filter(|&m| m != SURFELS) {
+            for v in [&SURFEL_RADIOSITY, &SURFEL_LINKS, &CACHE_SH] {
+                assert!(check(v.name, other).is_err(), "{} for {other}", v.name);
+            }
+        }
+        assert!(reads_indirect(CACHE_SH.name) && !reads_indirect(SURFEL_RADIOSITY.name));
+    }
 
     /// A half-resolution view is shown at the frame's size, each value over 2×2 pixels.
     #[test]

@@ -271,7 +271,6 @@ mod tests {
 
     #[test]
     fn the_fitting_value_is_the_largest_that_fits_and_its_neighbour_does_not() {
-        use crate::gi::clustered::params::INTERLEAVE;
         use crate::gi::reference::params::SPP;
         let knob = Knob::lower(&SPP);
         let cost_of = |g: &GiParams| f64::from(SPP.u32(g)) * 7.0;
@@ -282,21 +281,23 @@ mod tests {
             assert!(cost_of(&gi.clone().with("spp", v + 1)) > budget || v == 200);
         }
         assert_eq!(fitting_value(&gi, &knob, (1, 256), 6.0, &cost_of), None);
-        // A knob that is cheaper when larger searches upwards.
-        let interleave = Knob {
-            param: &INTERLEAVE,
+        // A knob that is cheaper when larger (a block side, say) searches upwards.
+        const BLOCK: Param = Param::integer("block", 1, (1, 16), "a block's side");
+        let block = Knob {
+            param: &BLOCK,
             cheaper: Cheaper::Higher,
             choices: &[],
         };
-        let per_block = |g: &GiParams| 4096.0 / f64::from(INTERLEAVE.u32(g)).powi(2);
-        let gi = GiParams::new(crate::gi::clustered::CLUSTERED).with("interleave", 1);
+        let per_block = |g: &GiParams| 4096.0 / f64::from(BLOCK.u32(g)).powi(2);
+        let method = crate::gi::methods().next().expect("a registered method");
+        let gi = GiParams::new(method).with("block", 1);
         assert_eq!(
-            fitting_value(&gi, &interleave, (1, 16), 300.0, &per_block),
+            fitting_value(&gi, &block, (1, 16), 300.0, &per_block),
             Some(4)
         );
         // A knob with choices only ever names one of them.
         let reduced = |g: &GiParams| 4096.0 / f64::from(INDIRECT_DOWNSCALE.u32(g)).powi(2);
-        let full = GiParams::new(crate::gi::clustered::CLUSTERED).with("indirect_downscale", 1);
+        let full = GiParams::new(method).with("indirect_downscale", 1);
         let fit = |budget| fitting_value(&full, &DOWNSCALE_KNOB, (1, 4), budget, &reduced);
         assert_eq!(fit(5000.0), Some(1));
         assert_eq!(fit(1024.0), Some(2));

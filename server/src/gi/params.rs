@@ -696,19 +696,28 @@ mod tests {
         let e = check_request(&unknown, &limits).expect_err("unknown");
         assert_eq!(e.field, "rsm_sise");
         assert!(e.reason.contains("rsm_size"), "{}", e.reason);
-        let typed = GiParams::new(crate::gi::lightskin::BRSM).with("vpl_count", "many");
+        // A ranged integer parameter of some method that another method does not read: type
+        // checked for both, range checked for its own only.
+        let (owner, param, other) = crate::gi::methods()
+            .flat_map(|m| of(m).into_iter().map(move |p| (m, p)))
+            .filter(|(_, p)| matches!(p.kind, Kind::Integer) && p.max.is_finite())
+            .find_map(|(m, p)| {
+                let other = crate::gi::methods().find(|&o| !of(o).iter().any(|q| q.name == p.name));
+                other.map(|o| (m, p, o))
+            })
+            .expect("some method has a parameter another lacks");
+        let typed = GiParams::new(other).with(param.name, "many");
         assert_eq!(
             check_request(&typed, &limits).expect_err("type").field,
-            "vpl_count"
+            param.name
         );
-        let other = GiParams::new(crate::gi::lightskin::BRSM).with("vpl_count", 1u32 << 30);
+        let beyond = param.max as u64 + 1;
         assert_eq!(
-            check_request(&other, &limits),
+            check_request(&GiParams::new(other).with(param.name, beyond), &limits),
             Ok(()),
             "another method's range"
         );
-        let own = GiParams::new(crate::gi::clustered::CLUSTERED).with("vpl_count", 1u32 << 30);
-        assert!(check_request(&own, &limits).is_err());
+        assert!(check_request(&GiParams::new(owner).with(param.name, beyond), &limits).is_err());
         let big = GiParams::new(crate::gi::lightskin::BRSM).with(
             "rsm_size",
             crate::gi::common::limits::MAX_RSM_SIZE.of(&limits) + 1,
@@ -718,7 +727,9 @@ mod tests {
         let unknown = GiParams::new(GiMethod::new("fancy"));
         let e = check_request(&unknown, &limits).expect_err("no such method");
         assert_eq!(e.field, "method");
-        assert!(e.reason.contains("clustered"), "{}", e.reason);
+        for method in crate::gi::methods() {
+            assert!(e.reason.contains(method.name()), "{}", e.reason);
+        }
         let float = GiParams::new(crate::gi::lightskin::BRSM).with("rsm_size", 64.5);
         assert!(check_request(&float, &limits).is_err());
         let null = GiParams::new(crate::gi::reference::REFERENCE).with("spp", Value::Null);

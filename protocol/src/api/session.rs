@@ -1,0 +1,260 @@
+//! Sessions: what a frame renders (`render`), how it is encoded and streamed, and what
+//! `/v1/sessions` answers.
+
+use super::*;
+
+/// What to render: scene, size, camera, light and GI. Shared by sessions and one-shot renders.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(default)]
+pub struct RenderParams {
+    /// Scene id (see `/v1/scenes`).
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    /// `null`: the scene's camera, else one framing its bounds.
+    pub camera: Option<Camera>,
+    /// `null`: the scene's light (see the scene's `default_light`).
+    pub light: Option<Light>,
+    /// Linear scale before tone mapping; `null` for automatic exposure.
+    pub exposure: Option<f32>,
+    /// Shadow map side in texels (per cube face for point lights).
+    pub shadow_map_size: u32,
+    pub gi: GiParams,
+    pub view: View,
+}
+
+impl Default for RenderParams {
+    fn default() -> Self {
+        Self {
+            scene: DEFAULT_SCENE_ID.to_string(),
+            width: 960,
+            height: 540,
+            camera: None,
+            light: None,
+            exposure: None,
+            shadow_map_size: 2048,
+            gi: GiParams::default(),
+            view: View::FINAL,
+        }
+    }
+}
+
+/// Codecs of a session's frames and stills. `h264` is a video codec: a stream's frames only
+/// (each frame message one access unit), never a still.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Codec {
+    #[default]
+    Jpeg,
+    Png,
+    /// H.264 constrained baseline, Annex B byte stream (start codes; SPS and PPS in front of
+    /// every keyframe), as WebCodecs' `VideoDecoder` takes it without a `description`.
+    H264,
+}
+
+impl Codec {
+    /// The codec's byte in a frame header.
+    pub fn wire(self) -> u8 {
+        match self {
+            Self::Jpeg => 0,
+            Self::Png => 1,
+            Self::H264 => 2,
+        }
+    }
+
+    /// The codec of a frame header's byte.
+    pub fn from_wire(byte: u8) -> Option<Self> {
+        [Self::Jpeg, Self::Png, Self::H264]
+            .into_iter()
+            .find(|c| c.wire() == byte)
+    }
+
+    /// Whether frames of this codec depend on earlier ones (so none may be dropped).
+    pub fn is_video(self) -> bool {
+        self == Self::H264
+    }
+}
+
+/// How a session encodes its frames. While input keeps arriving frames use
+/// `moving_quality` (JPEG); once input has rested for `still_after_ms` one still follows in
+/// `still_codec` at `quality` (as remote-visualisation tools do). With `codec: h264` the
+/// frames are video: rate-controlled to `bitrate_kbps`, never worse than `max_qp`, with a
+/// keyframe every `keyframe_interval` frames and whenever the stream (re)connects, the size or
+/// a parameter changes, or the client sends `keyframe`. With `interactive_scale` below 1,
+/// frames while moving are rendered and encoded smaller (see [`Encoding::interactive_size`])
+/// for the client to upscale; frames at rest and stills keep the full size.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(default)]
+pub struct Encoding {
+    pub codec: Codec,
+    /// JPEG quality 1–100 at rest.
+    pub quality: u8,
+    /// JPEG quality 1–100 while the camera, light or parameters change.
+    pub moving_quality: u8,
+    /// Rest time before the high-quality still; 0 turns stills off.
+    pub still_after_ms: u32,
+    /// `png` (lossless) or `jpeg` at `quality`; not `h264`.
+    pub still_codec: Codec,
+    /// H.264: target bitrate in kbit/s (100–200,000). `null`, the default, chooses it from
+    /// the frame: [`AUTO_BITS_PER_PIXEL`] bits for every pixel of every frame at `fps_cap`
+    /// (about 3.1 Mbit/s at 1920×1080 and 30 fps; see [`Encoding::bitrate_kbps_for`]).
+    pub bitrate_kbps: Option<u32>,
+    /// H.264: the coarsest quantiser the rate control may use (10–51; lower keeps more detail
+    /// when the bitrate is tight, at the cost of exceeding it).
+    pub max_qp: u8,
+    /// H.264: frames between periodic keyframes (0: only the keyframes the stream needs).
+    pub keyframe_interval: u32,
+    /// While moving (input within the last `still_after_ms`), render and encode at this
+    /// fraction of `render.width` × `render.height` (0.25–1; 1, the default, turns it off).
+    /// Fewer pixels to shade, encode and send while the view changes; the client stretches
+    /// the frame to the full size. With `still_after_ms` 0 nothing counts as moving.
+    pub interactive_scale: f32,
+}
+
+/// The smallest side [`Encoding::interactive_size`] scales down to.
+pub const MIN_INTERACTIVE_SIDE: u32 = 16;
+
+/// The range of `encoding.bitrate_kbps`, also what an automatic bitrate is held to.
+pub const MIN_BITRATE_KBPS: u32 = 100;
+pub const MAX_BITRATE_KBPS: u32 = 200_000;
+
+/// Bits per pixel per frame of an automatic H.264 bitrate (`bitrate_kbps: null`). Chosen from
+/// `bench-stream` on the street at 1920×1080 while moving (bench/results/
+/// lavapipe-stream-codecs.md): about 3 Mbit/s at 30 fps sent under 1/5 of JPEG q70's bytes at
+/// 2 dB better PSNR, where the old fixed 8 Mbit/s sent a third of them. A fixed rate was also
+/// far too much for a small window and too little for 4K at 60 fps.
+pub const AUTO_BITS_PER_PIXEL: f64 = 0.05;
+
+impl Encoding {
+    /// The size of a frame rendered while moving, for a session of `width` × `height`: each
+    /// side times `interactive_scale`, rounded down to an even number (H.264's 4:2:0 needs
+    /// one), never below [`MIN_INTERACTIVE_SIDE`] nor above the full side.
+    pub fn interactive_size(&self, width: u32, height: u32) -> (u32, u32) {
+        let scale = |side: u32| {
+            let scaled = (side as f32 * self.interactive_scale) as u32 & !1;
+            scaled.max(MIN_INTERACTIVE_SIDE).min(side)
+        };
+        (scale(width), scale(height))
+    }
+
+    /// The H.264 target bitrate for frames of `width` × `height` at `fps`: `bitrate_kbps`
+    /// when set, else [`AUTO_BITS_PER_PIXEL`] of the pixel rate, within
+    /// [`MIN_BITRATE_KBPS`]..=[`MAX_BITRATE_KBPS`].
+    pub fn bitrate_kbps_for(&self, width: u32, height: u32, fps: f32) -> u32 {
+        self.bitrate_kbps.unwrap_or_else(|| {
+            let bits = AUTO_BITS_PER_PIXEL * f64::from(width) * f64::from(height) * f64::from(fps);
+            ((bits / 1000.0).round() as u32).clamp(MIN_BITRATE_KBPS, MAX_BITRATE_KBPS)
+        })
+    }
+}
+
+impl Default for Encoding {
+    fn default() -> Self {
+        Self {
+            codec: Codec::Jpeg,
+            quality: 90,
+            moving_quality: 70,
+            still_after_ms: 300,
+            still_codec: Codec::Png,
+            bitrate_kbps: None,
+            max_qp: 40,
+            keyframe_interval: 300,
+            interactive_scale: 1.0,
+        }
+    }
+}
+
+/// When a session renders.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum StreamMode {
+    /// A frame every tick at the fps cap, changed or not (live timings, load tests).
+    #[default]
+    Continuous,
+    /// Frames only while something changes, then one still.
+    OnChange,
+}
+
+/// Everything a session's owner can set. `POST /v1/sessions` takes it (every field
+/// optional); `PATCH /v1/sessions/{id}` and the WebSocket `update` message take a JSON merge
+/// patch of it (RFC 7396: fields present replace, `null` restores the default).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(default)]
+pub struct SessionParams {
+    pub render: RenderParams,
+    pub encoding: Encoding,
+    /// Most frames per second sent to this session.
+    pub fps_cap: f32,
+    pub mode: StreamMode,
+    pub paused: bool,
+}
+
+impl Default for SessionParams {
+    fn default() -> Self {
+        Self {
+            render: RenderParams::default(),
+            encoding: Encoding::default(),
+            fps_cap: 30.0,
+            mode: StreamMode::Continuous,
+            paused: false,
+        }
+    }
+}
+
+/// Counters of one session since it was created.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionStats {
+    /// Frames the GPU rendered for this session.
+    pub frames_rendered: u64,
+    /// Frames written to the WebSocket.
+    pub frames_sent: u64,
+    /// Encoded frames replaced in the latest-frame slot before the client took them.
+    pub frames_dropped: u64,
+    /// Ticks skipped because the client still had frames in flight (it reads too slowly).
+    pub frames_throttled: u64,
+    /// Frames acknowledged by the client.
+    pub frames_acked: u64,
+    pub bytes_sent: u64,
+    /// Render errors (e.g. a parameter the GPU cannot honour); the last one is in `last_error`.
+    pub errors: u64,
+    pub last_error: Option<ErrorBody>,
+    /// Per-stage GPU milliseconds of the last frame.
+    pub last_stages: Vec<StageMs>,
+}
+
+/// One pipeline stage's time.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct StageMs {
+    pub stage: String,
+    pub ms: f64,
+}
+
+/// A session as `GET /v1/sessions/{id}` shows it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionInfo {
+    pub id: String,
+    pub params: SessionParams,
+    /// Path of the session's WebSocket.
+    pub stream: String,
+    /// Whether a WebSocket is attached.
+    pub connected: bool,
+    pub created_unix_ms: u64,
+    pub stats: SessionStats,
+}
+
+/// A short-lived ticket that opens the session's WebSocket where headers cannot be set
+/// (browsers): `GET /v1/sessions/{id}/stream?ticket=…`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct StreamTicket {
+    pub ticket: String,
+    pub expires_in_ms: u64,
+}
+
+/// Answer to `POST /v1/sessions`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct SessionCreated {
+    pub session: SessionInfo,
+    /// Opens the WebSocket without a bearer header.
+    pub ticket: StreamTicket,
+}

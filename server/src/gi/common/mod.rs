@@ -5,6 +5,7 @@
 
 pub mod bvh;
 pub mod halton;
+pub mod kdtree;
 pub mod limits;
 pub mod params;
 pub mod shaders;

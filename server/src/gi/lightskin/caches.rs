@@ -20,6 +20,7 @@
 //! split into fixed chunks whose results are concatenated in order, floating-point sums run
 //! sequentially in a fixed order, and every sort has a total order with an index tie-break.
 
+use crate::gi::common::kdtree::KdTree;
 use crate::gi::common::triangles::{surface_area, triangle, triangle_area, triangle_normal};
 use crate::scene::material::{split, DiffuseGlossy};
 use crate::scene::Scene;
@@ -29,6 +30,9 @@ use std::time::{Duration, Instant};
 
 /// Nearest caches stored per scene vertex.
 pub const NEIGHBOURS: usize = 16;
+
+/// The nearest caches of a point, at most [`NEIGHBOURS`].
+type Nearest = crate::gi::common::kdtree::Nearest<NEIGHBOURS>;
 /// Refuse parameters that would create more caches than this (GPU buffers and the per-frame
 /// passes are sized by the cache count).
 pub const MAX_CACHES: u64 = 2_000_000;
@@ -1065,173 +1069,6 @@ fn vertex_neighbours(
     })
 }
 
-// ---------------------------------------------------------------------------------------------
-// k-d tree
-// ---------------------------------------------------------------------------------------------
-
-/// Up to `k` (≤ [`NEIGHBOURS`]) nearest candidates, sorted by (distance², id).
-struct Nearest {
-    items: [(f32, u32); NEIGHBOURS],
-    len: usize,
-    k: usize,
-}
-
-impl Nearest {
-    fn new(k: usize) -> Self {
-        Self {
-            items: [(0.0, 0); NEIGHBOURS],
-            len: 0,
-            k: k.min(NEIGHBOURS),
-        }
-    }
-
-    /// Squared search radius: the k-th distance once full, else `limit`.
-    fn bound(&self, limit: f32) -> f32 {
-        if self.len == self.k {
-            self.items[self.k - 1].0
-        } else {
-            limit
-        }
-    }
-
-    fn offer(&mut self, d2: f32, id: u32) {
-        let better = |a: (f32, u32)| d2.total_cmp(&a.0).then(id.cmp(&a.1)).is_lt();
-        if self.k == 0 || (self.len == self.k && !better(self.items[self.k - 1])) {
-            return;
-        }
-        let mut i = self.len.min(self.k - 1);
-        while i > 0 && better(self.items[i - 1]) {
-            self.items[i] = self.items[i - 1];
-            i -= 1;
-        }
-        self.items[i] = (d2, id);
-        self.len = (self.len + 1).min(self.k);
-    }
-
-    fn ids(&self) -> impl Iterator<Item = u32> + '_ {
-        self.items[..self.len].iter().map(|&(_, id)| id)
-    }
-}
-
-/// A balanced, implicit k-d tree: the node of a range is its middle element, split along the
-/// axis of largest extent. Built once per query set; queries are read-only and parallel.
-struct KdTree {
-    points: Vec<Vec3>,
-    ids: Vec<u32>,
-    axes: Vec<u8>,
-}
-
-impl KdTree {
-    fn new(points: &[Vec3]) -> Self {
-        let mut ids: Vec<u32> = (0..points.len() as u32).collect();
-        let mut axes = vec![0u8; points.len()];
-        build(points, &mut ids, &mut axes);
-        Self {
-            points: ids.iter().map(|&i| points[i as usize]).collect(),
-            ids,
-            axes,
-        }
-    }
-
-    /// Offers every point within `sqrt(limit2)` that passes `accept` to `best`.
-    fn nearest(&self, q: Vec3, limit2: f32, best: &mut Nearest, accept: &dyn Fn(u32) -> bool) {
-        self.nearest_in(0, self.ids.len(), q, limit2, best, accept);
-    }
-
-    fn nearest_in(
-        &self,
-        lo: usize,
-        hi: usize,
-        q: Vec3,
-        limit2: f32,
-        best: &mut Nearest,
-        accept: &dyn Fn(u32) -> bool,
-    ) {
-        if lo >= hi {
-            return;
-        }
-        let mid = (lo + hi) / 2;
-        let p = self.points[mid];
-        let d2 = q.distance_squared(p);
-        if d2 <= best.bound(limit2) && accept(self.ids[mid]) {
-            best.offer(d2, self.ids[mid]);
-        }
-        let axis = usize::from(self.axes[mid]);
-        let diff = q[axis] - p[axis];
-        let (near, far) = if diff < 0.0 {
-            ((lo, mid), (mid + 1, hi))
-        } else {
-            ((mid + 1, hi), (lo, mid))
-        };
-        self.nearest_in(near.0, near.1, q, limit2, best, accept);
-        if diff * diff <= best.bound(limit2) {
-            self.nearest_in(far.0, far.1, q, limit2, best, accept);
-        }
-    }
-
-    /// Calls `visit` for every point strictly within `sqrt(r2)` of `q`.
-    fn within(&self, q: Vec3, r2: f32, visit: &mut dyn FnMut(u32)) {
-        let mut stack = vec![(0, self.ids.len())];
-        while let Some((lo, hi)) = stack.pop() {
-            if lo >= hi {
-                continue;
-            }
-            let mid = (lo + hi) / 2;
-            let p = self.points[mid];
-            if q.distance_squared(p) < r2 {
-                visit(self.ids[mid]);
-            }
-            let axis = usize::from(self.axes[mid]);
-            let diff = q[axis] - p[axis];
-            if diff < 0.0 || diff * diff < r2 {
-                stack.push((lo, mid));
-            }
-            if diff >= 0.0 || diff * diff < r2 {
-                stack.push((mid + 1, hi));
-            }
-        }
-    }
-}
-
-/// Orders `ids` into an implicit k-d tree (see [`KdTree`]), recording each node's axis.
-fn build(points: &[Vec3], ids: &mut [u32], axes: &mut [u8]) {
-    if ids.len() <= 1 {
-        return;
-    }
-    let (min, max) = ids.iter().fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), &i| (lo.min(points[i as usize]), hi.max(points[i as usize])),
-    );
-    let extent = max - min;
-    let axis = if extent.x >= extent.y && extent.x >= extent.z {
-        0
-    } else if extent.y >= extent.z {
-        1
-    } else {
-        2
-    };
-    let mid = ids.len() / 2;
-    ids.select_nth_unstable_by(mid, |&a, &b| {
-        points[a as usize][axis]
-            .total_cmp(&points[b as usize][axis])
-            .then(a.cmp(&b))
-    });
-    axes[mid] = axis as u8;
-    let (left, right) = ids.split_at_mut(mid);
-    let (left_axes, right_axes) = axes.split_at_mut(mid);
-    let right = &mut right[1..];
-    let right_axes = &mut right_axes[1..];
-    if left.len() > 4096 {
-        rayon::join(
-            || build(points, left, left_axes),
-            || build(points, right, right_axes),
-        );
-    } else {
-        build(points, left, left_axes);
-        build(points, right, right_axes);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1251,44 +1088,6 @@ mod tests {
         fn point(&mut self) -> Vec3 {
             Vec3::new(self.next_f32(), self.next_f32(), self.next_f32()) * 10.0 - 5.0
         }
-    }
-
-    #[test]
-    fn kd_tree_matches_brute_force() {
-        let mut rng = SplitMix64(3);
-        let points: Vec<Vec3> = (0..2000).map(|_| rng.point()).collect();
-        let tree = KdTree::new(&points);
-        for _ in 0..200 {
-            let q = rng.point();
-            let even = |i: u32| i.is_multiple_of(2);
-            let mut best = Nearest::new(NEIGHBOURS);
-            tree.nearest(q, f32::INFINITY, &mut best, &even);
-            let mut brute: Vec<(f32, u32)> = (0..points.len() as u32)
-                .filter(|&i| even(i))
-                .map(|i| (q.distance_squared(points[i as usize]), i))
-                .collect();
-            brute.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            let expected: Vec<u32> = brute[..NEIGHBOURS].iter().map(|e| e.1).collect();
-            assert_eq!(best.ids().collect::<Vec<_>>(), expected);
-
-            let mut found = Vec::new();
-            tree.within(q, 1.5, &mut |i| found.push(i));
-            found.sort_unstable();
-            let expected: Vec<u32> = (0..points.len() as u32)
-                .filter(|&i| q.distance_squared(points[i as usize]) < 1.5)
-                .collect();
-            assert_eq!(found, expected);
-        }
-    }
-
-    #[test]
-    fn nearest_respects_radius_limit() {
-        let tree = KdTree::new(&[Vec3::ZERO, Vec3::X * 3.0]);
-        let mut best = Nearest::new(1);
-        tree.nearest(Vec3::X * 1.6, 1.0, &mut best, &|_| true);
-        assert_eq!(best.ids().count(), 0);
-        tree.nearest(Vec3::X * 2.5, 1.0, &mut best, &|_| true);
-        assert_eq!(best.ids().collect::<Vec<_>>(), vec![1]);
     }
 
     #[test]

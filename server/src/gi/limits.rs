@@ -51,14 +51,6 @@ pub fn all() -> Vec<&'static GiLimit> {
     all
 }
 
-/// Every limit at its default.
-pub fn defaults() -> BTreeMap<String, serde_json::Value> {
-    all()
-        .iter()
-        .map(|l| (l.name.to_string(), l.default.into()))
-        .collect()
-}
-
 /// Checks `values` (every limit's, by name) against the declared ranges; the error names
 /// the flag.
 pub fn check(values: &BTreeMap<String, u64>) -> Result<(), (&'static str, String)> {

@@ -48,11 +48,6 @@ pub const LIGHTSKIN: GiMethod = GiMethod::new("lightskin");
 /// BRSM: an importance-sampled subset of the VALs (eq. 10–15).
 pub const BRSM: GiMethod = GiMethod::new("brsm");
 
-/// Whether frames of `method` need the scene's light caches (precomputed per model).
-pub fn uses_light_caches(method: GiMethod) -> bool {
-    ENTRY.serves(method)
-}
-
 use crate::passes::rsm::max_rsm_size;
 pub use crate::passes::rsm::MAX_RSM_SIZE;
 pub use params::{Settings, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};

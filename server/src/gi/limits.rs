@@ -139,4 +139,25 @@ mod tests {
             all().iter().map(|l| (l.name.into(), l.default)).collect();
         assert_eq!(check(&defaults), Ok(()));
     }
+
+    /// A precomputation's pool is sized by limits its method declares (else no flag sets
+    /// them and `/v1/server` does not list them).
+    #[test]
+    fn budget_pools_are_sized_by_declared_limits() {
+        use crate::gi::precompute::BudgetPool;
+        for entry in super::super::REGISTRY {
+            let Some(budget) = entry.precompute.and_then(|p| p.budget.as_ref()) else {
+                continue;
+            };
+            if let BudgetPool::Declared { total, per_set } = budget.pool {
+                for l in std::iter::once(total).chain(per_set) {
+                    assert!(
+                        entry.limits.iter().any(|o| std::ptr::eq(*o, l)),
+                        "{} is not in its method's limits",
+                        l.name
+                    );
+                }
+            }
+        }
+    }
 }

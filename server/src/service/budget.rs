@@ -107,8 +107,14 @@ pub struct MemoryBudget {
 
 impl MemoryBudget {
     pub fn new(limits: &lightcast_protocol::Limits) -> Self {
-        let gi = crate::gi::limits::all()
-            .into_iter()
+        // One pool per total a registered precomputation is counted against.
+        let gi = crate::gi::REGISTRY
+            .iter()
+            .filter_map(|e| e.precompute?.budget.as_ref())
+            .filter_map(|b| match b.pool {
+                crate::gi::precompute::BudgetPool::Declared { total, .. } => Some(total),
+                crate::gi::precompute::BudgetPool::Triangles => None,
+            })
             .map(|l| (l.name, Pool::new(l.of(limits))))
             .collect();
         Self {
@@ -119,8 +125,8 @@ impl MemoryBudget {
         }
     }
 
-    /// The pool a GI method's limit `total` sizes (every registered method's limit has one;
-    /// a test checks that each budget's limits are among its method's).
+    /// The pool a GI method's limit `total` sizes (every total a registered precomputation
+    /// declares has one).
     pub fn gi_pool(&self, total: &GiLimit) -> Option<&Arc<Pool>> {
         self.gi.get(total.name)
     }

@@ -93,7 +93,7 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
   if ! $quick; then
     for d in 1 2; do
       cmd=("$server" bench --scene "$scene" --width 1920 --height 1080 --reference-spp 256
-        --rsm-sizes 1024 --vals 8192 --view-samples 512 --indirect-downscale "$d"
+        --rsm-sizes 1024 --vals 8192 --view-samples 512 --gi-param "indirect_downscale=$d"
         --json "$out/gpu-street-downscale-$d.json" --markdown "$out/gpu-street-downscale-$d.md")
       echo "command: ${cmd[*]}" >> "$out/environment.txt"
       "${cmd[@]}"
@@ -121,11 +121,11 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
   # no visibility as baselines (Tables 1–2, Figure 10), the other methods at equal time; the
   # paper's anchor is 800×800, 1,024 VPLs, 30 VALs (19.7 fps on a GeForce 8800 GTX).
   if $quick; then
-    clustered_runs=("procedural:cornell|--width 160 --height 90 --rsm-sizes 64 --sweep-vpls 256 --sweep-clusters 5,30 --baseline-vpls 256 --paraboloid-size 32 --baseline-paraboloid-size 32 --frames 2 --warmup 1 --reference-spp 16")
+    clustered_runs=("procedural:cornell|--width 160 --height 90 --gi-param rsm_size=64 --sweep-vpls 256 --sweep-clusters 5,30 --baseline-vpls 256 --paraboloid-size 32 --baseline-paraboloid-size 32 --frames 2 --warmup 1 --reference-spp 16")
   else
-    clustered_runs=("procedural:cornell|--width 1920 --height 1080 --rsm-sizes 1024 --reference-spp 1024 --compare-methods"
-      "procedural:cornell|--width 800 --height 800 --rsm-sizes 1024 --sweep-vpls 1024 --sweep-clusters 30 --baseline-vpls 1024 --reference-spp 256"
-      "$scene|--width 1920 --height 1080 --rsm-sizes 1024 --reference-spp 256 --compare-methods")
+    clustered_runs=("procedural:cornell|--width 1920 --height 1080 --gi-param rsm_size=1024 --reference-spp 1024 --compare-methods"
+      "procedural:cornell|--width 800 --height 800 --gi-param rsm_size=1024 --sweep-vpls 1024 --sweep-clusters 30 --baseline-vpls 1024 --reference-spp 256"
+      "$scene|--width 1920 --height 1080 --gi-param rsm_size=1024 --reference-spp 256 --compare-methods")
   fi
   for run in "${clustered_runs[@]}"; do
     s="${run%%|*}"

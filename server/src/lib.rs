@@ -5,11 +5,6 @@
 //! it behind HTTP and WebSocket.
 
 pub mod bench;
-pub mod bench_clustered;
-#[cfg(feature = "plots")]
-pub mod bench_plots;
-pub mod bench_stream;
-pub mod bench_surfels;
 pub mod debug_views;
 pub mod gi;
 pub mod gpu;

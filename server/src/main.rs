@@ -4,11 +4,10 @@
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use lightcast_server::bench::stream::{self as bench_stream, StreamBenchArgs};
 use lightcast_server::bench::{self, BenchArgs};
-use lightcast_server::bench_stream::{self, StreamBenchArgs};
 use lightcast_server::offline::{self, RenderArgs};
 use lightcast_server::service::{self, config::LogFormat, ServeArgs};
-use lightcast_server::{bench_clustered, bench_surfels};
 
 #[derive(Parser)]
 #[command(
@@ -40,31 +39,19 @@ enum Command {
     /// Print every debug view (name, methods that draw it, what it shows) as a markdown
     /// table: the README's, from the methods' tables.
     GiViews,
+    /// Print every GI method's bench sweep (what it measures, its flags and their defaults)
+    /// as a markdown table: the README's, from the methods' sweeps.
+    BenchSweeps,
     /// Render one frame of a scene to a PNG file (no network) and print per-pass GPU times.
     Render(RenderArgs),
-    /// Time LightSkin against BRSM over RSM sizes, VAL counts and view samples, and measure
-    /// BRSM's error against LightSkin (the paper's Figures 3 and 5).
+    /// A GI method's evaluation after its seed paper: its sweep's configurations timed per
+    /// stage under a moving light and measured against the path-traced reference
+    /// (`bench-sweeps` lists every method's).
     Bench(BenchArgs),
     /// Stream one camera path as JPEG and as H.264 at each size: bytes per frame and per
     /// second, encode ms, read-back bytes and GPU ms, PSNR and FLIP against the lossless
     /// frames, and issue 13's targets (input→frame latency: `bench/stream-codecs.sh`).
     BenchStream(StreamBenchArgs),
-}
-
-/// Writes a bench's plots with `write` when `--plots PREFIX` was given.
-#[cfg(feature = "plots")]
-fn write_plots(
-    prefix: Option<&std::path::Path>,
-    write: impl FnOnce(
-        &std::path::Path,
-    ) -> Result<Vec<std::path::PathBuf>, lightcast_server::bench_plots::PlotError>,
-) -> anyhow::Result<()> {
-    if let Some(prefix) = prefix {
-        for path in write(prefix)? {
-            eprintln!("wrote {}", path.display());
-        }
-    }
-    Ok(())
 }
 
 /// Runs a bench as `run(log, progress)` under a progress bar on stderr.
@@ -167,6 +154,7 @@ fn main() -> anyhow::Result<()> {
         Command::Asyncapi => println!("{}", service::http::asyncapi::asyncapi_document()?),
         Command::GiParams => print!("{}", lightcast_server::gi::params::markdown_table()),
         Command::GiViews => print!("{}", lightcast_server::gi::views::markdown_table()),
+        Command::BenchSweeps => print!("{}", lightcast_server::gi::bench::markdown_table()),
         Command::Render(args) => {
             let mut log = |line: &str| eprintln!("{line}");
             let report = offline::render(&args, &mut log).context("render failed")?;
@@ -191,40 +179,16 @@ fn main() -> anyhow::Result<()> {
                     "--plots needs a build with plots: `cargo build --release -p lightcast-server --features plots`"
                 );
             }
-            let (markdown, json) = match args.gi {
-                lightcast_server::gi::surfels::SURFELS => {
-                    let report = with_progress(|log, progress| {
-                        bench_surfels::run(&args, log, progress).context("bench failed")
-                    })?;
-                    #[cfg(feature = "plots")]
-                    write_plots(args.plots.as_deref(), |prefix| {
-                        lightcast_server::bench_plots::write_surfel_plots(&report, prefix)
-                    })?;
-                    (report.markdown(), serde_json::to_string_pretty(&report)?)
+            let report = with_progress(|log, progress| {
+                bench::run(&args, log, progress).context("bench failed")
+            })?;
+            #[cfg(feature = "plots")]
+            if let Some(prefix) = args.plots.as_deref() {
+                for path in lightcast_server::bench::plots::write_plots(&report, prefix)? {
+                    eprintln!("wrote {}", path.display());
                 }
-                lightcast_server::gi::clustered::CLUSTERED => {
-                    let report = with_progress(|log, progress| {
-                        bench_clustered::run(&args, log, progress).context("bench failed")
-                    })?;
-                    #[cfg(feature = "plots")]
-                    write_plots(args.plots.as_deref(), |prefix| {
-                        lightcast_server::bench_plots::write_clustered_plots(&report, prefix)
-                    })?;
-                    (report.markdown(), serde_json::to_string_pretty(&report)?)
-                }
-                lightcast_server::gi::lightskin::BRSM
-                | lightcast_server::gi::lightskin::LIGHTSKIN => {
-                    let report = with_progress(|log, progress| {
-                        bench::run(&args, log, progress).context("bench failed")
-                    })?;
-                    #[cfg(feature = "plots")]
-                    write_plots(args.plots.as_deref(), |prefix| {
-                        lightcast_server::bench_plots::write_plots(&report, prefix)
-                    })?;
-                    (report.markdown(), serde_json::to_string_pretty(&report)?)
-                }
-                other => return Err(bench::BenchError::NoEvaluation(other).into()),
-            };
+            }
+            let (markdown, json) = (report.markdown(), serde_json::to_string_pretty(&report)?);
             write_report(
                 &markdown,
                 &json,

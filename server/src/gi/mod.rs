@@ -20,9 +20,11 @@
 //! one is validated with naga by the `shader_tests` below), whose `precompute`, if the method needs
 //! per-scene data, is built off the render loop with progress (see [`precompute`]), whose
 //! `cost` estimates a frame from its parameters (see [`cost`]) and whose `stages` name its
-//! stages with their frame-header indices (see [`stages`]). Its table lists its debug views
-//! with their drawing code (`gi/<method>/views.rs`, see [`views`]).
+//! stages with their frame-header indices (see [`stages`]) and whose `bench` declares what
+//! `lightcast-server bench` sweeps (see [`bench`]). Its table lists its debug views with
+//! their drawing code (`gi/<method>/views.rs`, see [`views`]).
 
+pub mod bench;
 pub mod clustered;
 pub mod common;
 pub mod cost;
@@ -262,6 +264,9 @@ pub struct MethodEntry {
     /// approximate; not `none`, which has nothing to compute, nor the reference, which is the
     /// full-resolution truth the others are compared with).
     pub downscales: bool,
+    /// What `lightcast-server bench --gi <method>` measures (`gi/<method>/bench.rs`, see
+    /// [`bench`]); `None`: the method has no evaluation.
+    pub bench: Option<&'static bench::Sweep>,
 }
 
 impl MethodEntry {

@@ -34,6 +34,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: &[INDIRECT_CLEAR],
     limits: &[],
     downscales: false,
+    bench: None,
 };
 
 impl Method for NoIndirect {

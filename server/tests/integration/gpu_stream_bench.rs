@@ -2,7 +2,7 @@
 //! ways, every codec's stream decoded and measured, and the report consistent with itself.
 
 use clap::Parser;
-use lightcast_server::bench_stream::{self, Basis, CodecSetting, StreamBenchArgs};
+use lightcast_server::bench::stream::{self, Basis, CodecSetting, StreamBenchArgs};
 use lightcast_server::passes::yuv420::Yuv420Layout;
 
 #[derive(Parser)]
@@ -35,7 +35,7 @@ fn the_stream_bench_measures_every_codec_at_every_size() {
         path_file.to_str().expect("a UTF-8 path"),
     ])
     .expect("the flags parse");
-    let report = bench_stream::run(&cli.args, &mut |_| {}, &mut |_, _, _| {}).expect("runs");
+    let report = stream::run(&cli.args, &mut |_| {}, &mut |_, _, _| {}).expect("runs");
 
     let sizes: Vec<(u32, u32)> = report.sizes.iter().map(|s| (s.width, s.height)).collect();
     assert_eq!(sizes, [(64, 48), (96, 64)]);

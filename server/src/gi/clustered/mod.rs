@@ -12,6 +12,7 @@
 //! alpha-masked materials as opaque. [`passes`] holds the GPU passes; [`cpu`] is the CPU
 //! reference of their equations.
 
+pub mod bench;
 pub mod cpu;
 pub mod cpu_visibility;
 pub mod params;
@@ -73,6 +74,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: stages::ALL,
     limits: &[&crate::gi::common::limits::MAX_RSM_SIZE],
     downscales: true,
+    bench: Some(&bench::SWEEP),
 };
 
 /// One frame's stages: the RSM and VPLs, k-means (§5.1: every pass compares N VPLs with M

@@ -5,6 +5,7 @@
 //! [`proxy_occlusion`] dims hidden proxies and [`indirect_light`] interpolates them per pixel.
 //! [`cache_buffers`] holds the caches on the GPU; [`cpu`] is the CPU reference of the equations.
 
+pub mod bench;
 pub mod cache_buffers;
 pub mod cache_lighting;
 pub mod cache_store;
@@ -69,6 +70,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: true,
+    bench: Some(&bench::SWEEP),
 };
 
 /// One frame's stages (`set_units` are the light caches C): the RSM, BRSM's importance

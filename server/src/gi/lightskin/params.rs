@@ -59,7 +59,7 @@ pub const VIEW_SAMPLES: Param = Param::integer(
 pub const DEFAULT_DEFENSIVE: f64 = 0.3;
 
 /// The default α bounds the largest weight 1/(N·P) below 3.4·M/N for M RSM texels and N
-/// VALs. Chosen by measurement (`bench --defensive`, lavapipe, RSM 256², 8,192 VALs, 512 view
+/// VALs. Chosen by measurement (`bench --gi-param defensive=…`, lavapipe, RSM 256², 8,192 VALs, 512 view
 /// samples, relative mean absolute difference to LightSkin): on the procedural street α = 0
 /// gave 48 %, 0.1 gave 22 %, 0.3 gave 8.8 %; on the Cornell box 0.94 % and (α = 0.3) 0.58 %.
 pub const DEFENSIVE: Param = Param::number(

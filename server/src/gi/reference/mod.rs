@@ -84,6 +84,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: false,
+    bench: None,
 };
 
 /// One frame's paths: every pixel traces `spp` paths of a camera ray and, per bounce, a

@@ -18,6 +18,7 @@
 //! - [`sh`]: real spherical harmonics and the zonal projections of the diffuse and normalised
 //!   Phong lobes (eq. 5–8, appendix B) the links and the shading are expressed in.
 
+pub mod bench;
 pub mod cpu;
 pub mod grid;
 pub mod hierarchy;
@@ -88,6 +89,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: true,
+    bench: Some(&bench::SWEEP),
 };
 
 /// One frame's stages (`set_units` are the links, caches × `surfel_links`): per bounce the

@@ -4,7 +4,7 @@
 use super::params::MethodTable;
 use super::{FrameInputs, GiError, Method, MethodEntry, ProgressBuffer};
 use crate::gpu::timing::{FrameStages, Stage};
-use lightcast_protocol::GiMethod;
+use lightcast_protocol::{GiMethod, GiParams};
 use std::any::{Any, TypeId};
 
 /// The method's name.
@@ -22,6 +22,11 @@ pub const ENTRY: MethodEntry = MethodEntry {
         progressive: false,
         params: &[],
         views: &[],
+        testing: crate::gi::params::Testing {
+            small: |_| GiParams::new(NONE),
+            scale_tolerance: crate::gi::params::SCALE_TOLERANCE,
+            exact_at_powers_of_two: true,
+        },
     }],
     type_id: TypeId::of::<NoIndirect>,
     validate: |_, _| Ok(()),

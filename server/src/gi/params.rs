@@ -352,7 +352,33 @@ pub struct MethodTable {
     pub params: &'static [&'static Param],
     /// The debug views the method draws besides `final` (see [`super::views`]).
     pub views: &'static [&'static super::views::DebugView],
+    /// What the tests that run every method (frame memory, scale invariance) need of it.
+    pub testing: Testing,
 }
+
+/// A method's part in the tests that run every registered method.
+#[derive(Debug)]
+pub struct Testing {
+    /// A small setting for a scene with `facts`: a frame of about 100×70 pixels of the
+    /// Cornell box in well under a second on lavapipe, through every pass of the method.
+    /// Lengths in it are relative to the scene (so a scaled scene gets a scaled setting).
+    pub small: fn(&super::precompute::SceneFacts) -> GiParams,
+    /// Relative mean absolute difference allowed between frames of the Cornell box scaled by
+    /// 0.01 or 1000 and unscaled (HDR image and indirect buffer; radiance does not depend on
+    /// the length unit, so what differs comes from rounded coordinates); the method's table
+    /// says why this much.
+    pub scale_tolerance: f32,
+    /// Whether a power-of-two scale, exact in floating point, gives the very same pixels
+    /// (no length constant and nothing derived by rounding from lengths).
+    pub exact_at_powers_of_two: bool,
+}
+
+/// The tolerance of [`Testing::scale_tolerance`] for a method with no randomness that depends
+/// on a rounded coordinate: measured on lavapipe, at most 0.05 % for every such method and
+/// buffer; before ε_p of eq. 6 and the distance floors were made relative, LightSkin's
+/// indirect buffer was off by 2.9 % (×1000: ε_p·A_l outweighed the form factors) and 17 %
+/// (×0.01: the 1 cm floors), so 0.5 % separates the two with room for drivers.
+pub const SCALE_TOLERANCE: f32 = 0.005;
 
 /// The method's parameters as `T`: each of `table`'s, from `gi` or its default, checked
 /// against its type and the renderer's range (the service has checked this server's range).

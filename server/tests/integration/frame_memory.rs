@@ -6,9 +6,6 @@
 //! measurement runs in a child process that runs only this test.
 
 use super::support;
-use lightcast_server::gi::lightskin::caches;
-use lightcast_server::gi::lightskin::LightSkin;
-use lightcast_server::gi::GiParams;
 use lightcast_server::renderer::Renderer;
 use lightcast_server::scene::{default_light, procedural};
 
@@ -33,29 +30,14 @@ fn resident_kib() -> u64 {
         .expect("VmRSS in /proc/self/status")
 }
 
-/// Renders [`WARM_UP`] + [`FRAMES`] frames of 32² per GI method and prints the resident size
-/// before and after the measured frames.
+/// Renders [`WARM_UP`] + [`FRAMES`] frames of 32² per registered GI method (at its small
+/// setting, after its precomputation) and prints the resident size before and after the
+/// measured frames.
 fn measure_in_child() {
     let ctx = support::gpu();
     let scene = procedural::cornell_box();
-    // Coarse caches (a few hundred): GI frames stay cheap on lavapipe; the passes are the same.
-    let defaults = caches::CacheParams::for_scene(&scene);
-    let params = caches::CacheParams {
-        d_eps: defaults.d_eps * 4.0,
-        ..defaults
-    };
-    let set = caches::precompute(&scene, &params, &mut |_| {}).expect("caches");
     let mut renderer = Renderer::new(ctx, scene.clone());
-    renderer
-        .gi::<LightSkin>()
-        .expect("LightSkin is registered")
-        .set_caches(&set)
-        .expect("caches fit the scene");
-    for method in [
-        lightcast_server::gi::none::NONE,
-        lightcast_server::gi::lightskin::LIGHTSKIN,
-        lightcast_server::gi::lightskin::BRSM,
-    ] {
+    for method in lightcast_server::gi::methods() {
         let mut settings = support::settings(
             32,
             32,
@@ -63,10 +45,8 @@ fn measure_in_child() {
             default_light::default_light(&scene),
         );
         settings.capture_hdr = false;
-        settings.gi = GiParams::new(method)
-            .with("rsm_size", 32)
-            .with("view_samples", 64)
-            .with("val_count", 256);
+        settings.gi = support::small(method, &scene);
+        support::precompute(&mut renderer, &settings.gi);
         let started = std::time::Instant::now();
         let mut before = 0;
         for i in 0..WARM_UP + FRAMES {
@@ -75,8 +55,8 @@ fn measure_in_child() {
             }
             renderer.render(&settings).expect("frame");
         }
-        println!("frame-memory {method:?} {before} {}", resident_kib());
-        eprintln!("{method:?}: {:.1} s", started.elapsed().as_secs_f64());
+        println!("frame-memory {method} {before} {}", resident_kib());
+        eprintln!("{method}: {:.1} s", started.elapsed().as_secs_f64());
     }
 }
 
@@ -109,7 +89,7 @@ fn resident_memory_stays_flat_over_hundreds_of_frames() {
         .collect();
     assert_eq!(
         lines.len(),
-        3,
+        lightcast_server::gi::methods().count(),
         "one measurement per GI method in:\n{stdout}"
     );
     for (method, before, after) in lines {

@@ -972,3 +972,73 @@ async fn surfels_render_through_the_api_after_their_precomputation() {
     }
     server.stop().await;
 }
+
+/// Every method `/v1/server` lists, at its small setting (its table's `Testing::small`),
+/// through the API: a one-shot render runs its own stages (after its precomputation),
+/// `compare_to: reference` measures it against the truth, and each debug view it lists renders
+/// while another method's frame is refused it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_listed_method_renders_compares_and_draws_its_views() {
+    use lightcast_server::gi::{self, precompute::SceneFacts};
+    let server = TestServer::start(&[]).await;
+    let info = server.get_json("/v1/server").await;
+    let listed = info["gi_methods"].as_array().expect("gi_methods");
+    assert_eq!(listed.len(), gi::methods().count(), "{info}");
+    let facts = SceneFacts::of(&lightcast_server::scene::procedural::cornell_box());
+    for m in listed {
+        let method = gi::parse_method(m["method"].as_str().expect("a name")).expect("registered");
+        let small = (gi::table(method).testing.small)(&facts);
+        let request = json!({"render": {"width": 32, "height": 24, "gi": small},
+                             "compare_to": "reference", "compare_spp": 4});
+        let (report, _) = render(&server, &request).await;
+        let own: Vec<&str> = gi::entry(method)
+            .1
+            .stages
+            .iter()
+            .map(|s| s.name())
+            .collect();
+        assert!(
+            report
+                .stages
+                .iter()
+                .any(|s| own.contains(&s.stage.as_str())),
+            "{method}: none of {own:?} in {:?}",
+            report.stages
+        );
+        let comparison = report.comparison.expect("compared");
+        assert!(
+            comparison.indirect_mae.is_finite() && comparison.indirect_mae_relative.is_finite(),
+            "{method}: {comparison:?}"
+        );
+        let other = listed
+            .iter()
+            .find_map(|o| {
+                let other = gi::parse_method(o["method"].as_str()?).ok()?;
+                (other != method).then_some(other)
+            })
+            .expect("another method");
+        for view in m["views"].as_array().expect("views") {
+            let view = view["view"].as_str().expect("a view name");
+            let request = json!({"render": {"width": 32, "height": 24, "gi": small, "view": view}});
+            let (_, png) = render(&server, &request).await;
+            // A view may show a buffer at its own size (the RSM's flux at the RSM's side).
+            let image = image::load_from_memory(&png).expect("png").to_rgba8();
+            assert!(image.width() * image.height() > 0, "{method} {view}");
+            let parsed = lightcast_protocol::View::parse(view).expect("a view name");
+            let draws = gi::views::drawn_by(parsed).contains(&other);
+            if !draws {
+                let refused = json!({"render": {"width": 32, "height": 24, "view": view,
+                                                "gi": {"method": other.name()}}});
+                let resp = server
+                    .http
+                    .post(server.url("/v1/render"))
+                    .json(&refused)
+                    .send()
+                    .await
+                    .expect("request");
+                assert_eq!(resp.status(), 400, "{view} with {other}");
+            }
+        }
+    }
+    server.stop().await;
+}

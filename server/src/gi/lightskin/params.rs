@@ -1,7 +1,7 @@
 //! The parameter tables of `lightskin` and `brsm` (seed 004) and the struct both read them as.
 
 use crate::gi::common::params::RSM_SIZE;
-use crate::gi::params::{read_for, Default, MethodTable, Param};
+use crate::gi::params::{read_for, Default, MethodTable, Param, Testing, SCALE_TOLERANCE};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
 use serde::Deserialize;
@@ -93,7 +93,36 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
     progressive: false,
     params: &[&RSM_SIZE, &OCCLUSION, &CACHE_DISTANCE, &CACHE_ANGLE],
     views: super::views::LIGHTSKIN_VIEWS,
+    testing: Testing {
+        small: |facts| small(facts, crate::gi::lightskin::LIGHTSKIN),
+        scale_tolerance: SCALE_TOLERANCE,
+        // d_eps is derived (and rounded) from the surface area.
+        exact_at_powers_of_two: false,
+    },
 };
+
+/// A 64² RSM and caches four times as far apart as the default (a few hundred on the Cornell
+/// box, relative to its area so a scaled box gets scaled caches), with proxy occlusion; BRSM
+/// at 1,024 VALs from 256 view samples, drawn from uniform importance: eq. 11 clamps the
+/// squared VAL–view-sample distance to at least 1 in scene units, as the paper writes it, so
+/// its sampling pdf (not the expectation, which the 1/(N·P) weights keep) depends on the
+/// unit: with eq. 11's importance the BRSM buffers of the scaled Cornell box differed by
+/// 1.4 % (×0.01) and 1.6 % (×1000), and by 0.02 % with the clamp removed. Uniform importance
+/// still runs the whole BRSM path (cumulative sums, selection, weighted cache lighting).
+fn small(
+    facts: &crate::gi::precompute::SceneFacts,
+    method: lightcast_protocol::GiMethod,
+) -> GiParams {
+    let d_eps = super::caches::CacheParams::for_area(facts.surface_area, facts.radius).d_eps;
+    GiParams::new(method)
+        .with(RSM_SIZE.name, 64)
+        .with(OCCLUSION.name, true)
+        .with(CACHE_DISTANCE.name, 4.0 * d_eps)
+        .with(VIEW_SAMPLES.name, 256)
+        .with(VAL_COUNT.name, 1024)
+        .with(JITTER.name, 0.5)
+        .with(UNIFORM_IMPORTANCE.name, true)
+}
 
 pub const BRSM: MethodTable = MethodTable {
     method: crate::gi::lightskin::BRSM,
@@ -112,6 +141,11 @@ pub const BRSM: MethodTable = MethodTable {
         &UNIFORM_IMPORTANCE,
     ],
     views: super::views::BRSM_VIEWS,
+    testing: Testing {
+        small: |facts| small(facts, crate::gi::lightskin::BRSM),
+        scale_tolerance: SCALE_TOLERANCE,
+        exact_at_powers_of_two: false,
+    },
 };
 
 /// The parameters of both methods, as [`BRSM`]'s table (a superset of [`LIGHTSKIN`]'s)

@@ -30,6 +30,20 @@ pub const TABLE: MethodTable = MethodTable {
     progressive: true,
     params: &[&BOUNCES, &EMITTERS, &SPP],
     views: &[&crate::gi::common::views::INDIRECT],
+    // Two bounces test the ray offsets of the second surface too. The same random numbers at
+    // every scale (the seed and sample indices are equal), so paths differ only where a
+    // rounded coordinate flips a hit, and that path then carries a different 8-sample
+    // estimate: measured on lavapipe 0.9 % (×0.01) and 0.65 % (×1000) on the indirect buffer;
+    // at power-of-two scales, where no rounding differs, exactly 0.
+    testing: crate::gi::params::Testing {
+        small: |_| {
+            GiParams::new(crate::gi::reference::REFERENCE)
+                .with(BOUNCES.name, 2)
+                .with(SPP.name, 8)
+        },
+        scale_tolerance: 0.02,
+        exact_at_powers_of_two: true,
+    },
 };
 
 /// The reference's parameters, as [`TABLE`] describes them.

@@ -14,6 +14,40 @@ pub fn gpu() -> GpuContext {
     GpuContext::new(BackendChoice::Auto).expect("a GPU adapter (lavapipe in CI)")
 }
 
+/// Builds what frames of `gi` precompute per scene (in a temporary store) and hands it to the
+/// renderer, as the service's precompute worker does; nothing for a method without.
+pub fn precompute(renderer: &mut Renderer, gi: &lightcast_server::gi::GiParams) {
+    use lightcast_server::gi::precompute::{entry_for, BuildEnv, SceneFacts, Store};
+    let Some(entry) = entry_for(gi.method) else {
+        return;
+    };
+    let key = (entry.key)(gi, &SceneFacts::of(renderer.scene())).expect("a valid setting");
+    let dir = tempfile::tempdir().expect("a temporary store");
+    let store = Store::new(dir.path());
+    let ctx = renderer.context().clone();
+    let mut env = BuildEnv {
+        store: &store,
+        progress: &mut |_| {},
+        cancelled: &|| false,
+        gpu: Some(&ctx),
+    };
+    let built = (entry.build)(renderer.scene(), &key, &mut env).expect("the precomputation");
+    renderer
+        .set_scene_data(gi.method, &built.data)
+        .expect("the set fits the scene");
+}
+
+/// The small setting of `method` for `scene` (its table's [`Testing::small`]).
+///
+/// [`Testing::small`]: lightcast_server::gi::params::Testing::small
+pub fn small(
+    method: lightcast_server::gi::GiMethod,
+    scene: &Scene,
+) -> lightcast_server::gi::GiParams {
+    let facts = lightcast_server::gi::precompute::SceneFacts::of(scene);
+    (lightcast_server::gi::table(method).testing.small)(&facts)
+}
+
 /// Hands the renderer the scene's BVH for `reference` frames, as the service's precompute
 /// worker does.
 pub fn set_bvh(renderer: &mut Renderer) {

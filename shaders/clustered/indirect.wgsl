@@ -17,20 +17,9 @@
 @group(0) @binding(6) var<storage, read> vpls: array<Vpl>;
 @group(0) @binding(7) var interleaved_out: texture_storage_2d<rgba32float, write>;
 
-// L_i(x, ω_o) of §4: f_r·Φ_i·cosθ_i·cosθ_x / (π d²) for a diffusely emitting VPL, with the
-// VPL's disk area A_i added to π d² — the irradiance of a disk of area A_i on its axis,
-// Φ/(A + π d²) — which keeps the 1/d² singularity finite without a distance clamp in scene
-// units.
+// L_i(x, ω_o) of §4 (vpl_light.wgsl).
 fn vpl_radiance(vpl: Vpl, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
-    let to_vpl = vpl.position - x;
-    let d2 = dot(to_vpl, to_vpl);
-    if d2 <= 0.0 {
-        return vec3<f32>(0.0);
-    }
-    let w = to_vpl * inverseSqrt(d2);
-    let cos_x = max(dot(n, w), 0.0);
-    let cos_i = max(dot(vpl.normal, -w), 0.0);
-    return eval_brdf(s, n, w, v) * vpl.flux * (cos_i * cos_x / (vpl.area + PI * d2));
+    return vpl_light(vpl.position, vpl.normal, vpl.flux, vpl.area, x, n, v, s);
 }
 
 // The surface pixel `id` sees: its point, unit normal and Phong exponent; `covered` false

@@ -10,9 +10,9 @@
 //! Nothing here depends on the GPU.
 
 use crate::gi::common::halton::halton;
+use crate::gi::common::vpl::{vpl_light, VplLight};
 use crate::scene::material::DiffuseGlossy;
 use glam::{Vec2, Vec3};
-use std::f32::consts::PI;
 
 /// An RSM atlas as read back: per texel RGBA position (w = 1 where a surface is), normal and
 /// flux with disk area.
@@ -286,14 +286,6 @@ pub struct RefSurface {
     pub brdf: DiffuseGlossy,
 }
 
-/// f_r of `shaders/brdf.wgsl`: Lambert plus the normalised Phong lobe around the mirror
-/// direction.
-pub fn brdf(s: &DiffuseGlossy, n: Vec3, to_light: Vec3, to_viewer: Vec3) -> Vec3 {
-    let mirrored = 2.0 * n.dot(to_light) * n - to_light;
-    let cos_e = mirrored.dot(to_viewer).max(0.0);
-    s.diffuse / PI + s.glossy * (s.exponent + 2.0) / (2.0 * PI) * cos_e.powf(s.exponent)
-}
-
 /// §4's sum Σ L_i(x, ω_o) over `vpls` without visibility: f_r·Φ_i·cosθ_i·cosθ_x over
 /// A_i + π d² (the irradiance of the VPL's disk on its axis, finite at d = 0).
 pub fn shade<'a>(s: &RefSurface, viewer: Vec3, vpls: impl IntoIterator<Item = &'a RefVpl>) -> Vec3 {
@@ -311,16 +303,18 @@ pub fn shade_visible<'a>(
     vpls.into_iter()
         .filter(|(_, vpl)| vpl.lit)
         .map(|(i, vpl)| {
-            let to_vpl = vpl.position - s.position;
-            let d2 = to_vpl.length_squared();
-            if d2 <= 0.0 {
-                return Vec3::ZERO;
-            }
-            let w = to_vpl / d2.sqrt();
-            let cos_x = s.normal.dot(w).max(0.0);
-            let cos_i = vpl.normal.dot(-w).max(0.0);
-            let light =
-                brdf(&s.brdf, s.normal, w, v) * vpl.flux * (cos_i * cos_x / (vpl.area + PI * d2));
+            let light = vpl_light(
+                &VplLight {
+                    position: vpl.position,
+                    normal: vpl.normal,
+                    flux: vpl.flux,
+                    area: vpl.area,
+                },
+                s.position,
+                s.normal,
+                v,
+                &s.brdf,
+            );
             if light.max_element() > 0.0 {
                 light * visibility(i)
             } else {
@@ -425,6 +419,7 @@ pub fn blur(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f32::consts::PI;
 
     fn vpl(position: Vec3, normal: Vec3) -> RefVpl {
         RefVpl {

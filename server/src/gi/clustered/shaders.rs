@@ -19,6 +19,7 @@ pub const CLUSTERED_INDIRECT: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("vpl_light.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/paraboloid.wgsl"),
         wgsl!("clustered/visibility.wgsl"),

@@ -1,6 +1,7 @@
 //! What several GI methods use and none owns: the scene's BVH (path tracing, visibility rays
 //! of precomputations), the Halton sequence, the triangle helpers of the precomputations, the
-//! shared parameters, limits and shader modules, and the debug views' drawing kit. Shared GPU
+//! light of a virtual point light, the shared parameters, limits and shader modules, and the
+//! debug views' drawing kit. Shared GPU
 //! passes live in `passes/`.
 
 pub mod bvh;
@@ -11,3 +12,4 @@ pub mod params;
 pub mod shaders;
 pub mod triangles;
 pub mod views;
+pub mod vpl;

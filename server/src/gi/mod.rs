@@ -11,6 +11,8 @@
 //! - [`clustered`]: VPLs from the RSM clustered into virtual area lights (seed paper 003).
 //! - [`surfels`]: surfels, a flux hierarchy, precomputed SH links and SH caches with
 //!   progressive multi-bounce (seed paper 001).
+//! - [`rsm_gather`]: reflective shadow maps gathered per pixel (Dachsbacher & Stamminger
+//!   2005), the ancestor of the seed methods.
 //!
 //! Adding a method: a module implementing [`Method`] that names itself in a `const`
 //! [`GiMethod`], and an entry in [`REGISTRY`] whose `tables` hold its parameter table
@@ -34,6 +36,7 @@ pub mod none;
 pub mod params;
 pub mod precompute;
 pub mod reference;
+pub mod rsm_gather;
 pub mod stages;
 pub mod surfels;
 pub mod views;
@@ -283,6 +286,7 @@ pub const REGISTRY: &[MethodEntry] = &[
     reference::ENTRY,
     clustered::ENTRY,
     surfels::ENTRY,
+    rsm_gather::ENTRY,
 ];
 
 /// Every registered method, in registry order (the order `/v1/server` lists them).

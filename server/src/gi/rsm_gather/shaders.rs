@@ -1,0 +1,18 @@
+//! The WGSL module of `rsm_gather` (`shaders/`), the concatenation of its files.
+
+use crate::gpu::shaders::{wgsl, ShaderSource};
+use crate::passes::ShaderPass;
+
+/// Every pixel's gather of RSM texels.
+pub const GATHER: ShaderSource = ShaderSource {
+    name: "rsm_gather",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("vpl_light.wgsl"),
+        wgsl!("rsm_gather/gather.wgsl"),
+    ],
+};
+
+/// The module with its pipeline's bind group (see [`ShaderPass`]).
+pub const PASSES: &[ShaderPass] = &[ShaderPass::new(&GATHER, &[&super::passes::GATHER_GROUP])];

@@ -1,0 +1,126 @@
+// Reflective shadow maps (Dachsbacher & Stamminger 2005, §3): every pixel gathers a fixed
+// pattern of RSM texels around the texel it projects to, each a pixel light (vpl_light.wgsl),
+// weighted by the texels it stands for, without visibility. The pattern, its weights and the
+// projection are explained in server/src/gi/rsm_gather/pattern.rs, whose `gather` is the CPU
+// reference of this pass.
+
+// Mirrored by `GatherParams` in server/src/gi/rsm_gather/passes.rs.
+struct GatherParams {
+    width: u32,
+    height: u32,
+    // Side of one face of the RSM atlas, in texels.
+    rsm_size: u32,
+    faces: u32,
+    sample_count: u32,
+    // r_max in texels.
+    radius: f32,
+    // The pixel whose gather the `gather-samples` view shows.
+    probe_x: u32,
+    probe_y: u32,
+}
+
+// Mirrored by `GatherSample` in server/src/gi/rsm_gather/pattern.rs.
+struct GatherSample {
+    // ξ1·(sin 2πξ2, cos 2πξ2): the offset in units of r_max.
+    offset: vec2<f32>,
+    // 2π·ξ1/N: the texels it stands for, in units of r_max².
+    weight: f32,
+    pad0: f32,
+}
+
+@group(0) @binding(0) var<storage, read> params: GatherParams;
+@group(0) @binding(1) var<storage, read> camera: CameraUniform;
+@group(0) @binding(2) var g_position: texture_2d<f32>;
+@group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
+@group(0) @binding(4) var g_diffuse: texture_2d<f32>;
+@group(0) @binding(5) var g_glossy: texture_2d<f32>;
+@group(0) @binding(6) var rsm_position: texture_2d<f32>;
+@group(0) @binding(7) var rsm_normal: texture_2d<f32>;
+@group(0) @binding(8) var rsm_flux_area: texture_2d<f32>;
+// Each face's view-projection, as the RSM was rendered with.
+@group(0) @binding(9) var<storage, read> faces: array<mat4x4<f32>>;
+@group(0) @binding(10) var<storage, read> samples: array<GatherSample>;
+// The probe pixel's face, its texel coordinates within it, and 1 where it has a surface.
+@group(0) @binding(11) var<storage, read_write> probe: vec4<f32>;
+@group(0) @binding(12) var indirect_out: texture_storage_2d<rgba16float, write>;
+
+// Where `x` projects in face `f`: texel coordinates (clamped to the face) and whether it lies
+// inside the face's frustum (pattern.rs `project`).
+struct Projection {
+    st: vec2<f32>,
+    inside: bool,
+}
+
+fn project(f: u32, x: vec3<f32>) -> Projection {
+    let clip = faces[f] * vec4<f32>(x, 1.0);
+    let size = f32(params.rsm_size);
+    if clip.w <= 0.0 {
+        let xy = clip.xy;
+        let len = length(xy);
+        var d = vec2<f32>(0.0);
+        if len > 0.0 {
+            d = xy / len * vec2<f32>(1.0, -1.0);
+        }
+        let uv = clamp(vec2<f32>(0.5) + d * 2.0, vec2<f32>(0.0), vec2<f32>(1.0));
+        return Projection(uv * size, false);
+    }
+    let ndc = clip.xy / clip.w;
+    let inside = abs(ndc.x) <= 1.0 && abs(ndc.y) <= 1.0;
+    let uv = clamp(vec2<f32>(ndc.x * 0.5 + 0.5, 0.5 - ndc.y * 0.5), vec2<f32>(0.0), vec2<f32>(1.0));
+    return Projection(uv * size, inside);
+}
+
+@compute @workgroup_size(8, 8)
+fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= params.width || id.y >= params.height {
+        return;
+    }
+    let texel = vec2<i32>(id.xy);
+    let position = textureLoad(g_position, texel, 0);
+    let is_probe = id.x == params.probe_x && id.y == params.probe_y;
+    if position.w == 0.0 {
+        textureStore(indirect_out, texel, vec4<f32>(0.0));
+        if is_probe {
+            probe = vec4<f32>(0.0);
+        }
+        return;
+    }
+    let x = position.xyz;
+    let ne = textureLoad(g_normal_exponent, texel, 0);
+    let n = normalize(ne.xyz);
+    let v = normalize(camera.position - x);
+    let s = SurfaceBrdf(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb, ne.w);
+    // The first face whose frustum holds x, else the first face's nearest border point.
+    var face = 0u;
+    var centre = project(0u, x).st;
+    for (var f = 0u; f < params.faces; f++) {
+        let p = project(f, x);
+        if p.inside {
+            face = f;
+            centre = p.st;
+            break;
+        }
+    }
+    if is_probe {
+        probe = vec4<f32>(f32(face), centre, 1.0);
+    }
+    let size = f32(params.rsm_size);
+    let r2 = params.radius * params.radius;
+    var radiance = vec3<f32>(0.0);
+    for (var i = 0u; i < params.sample_count; i++) {
+        let sample = samples[i];
+        let p = centre + params.radius * sample.offset;
+        if p.x < 0.0 || p.y < 0.0 || p.x >= size || p.y >= size {
+            continue;
+        }
+        let t = vec2<i32>(vec2<u32>(p) + vec2<u32>(face * params.rsm_size, 0u));
+        let light_position = textureLoad(rsm_position, t, 0);
+        if light_position.w == 0.0 {
+            continue;
+        }
+        let flux_area = textureLoad(rsm_flux_area, t, 0);
+        let normal = textureLoad(rsm_normal, t, 0).xyz;
+        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, n, v, s) * (sample.weight * r2);
+    }
+    textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));
+}

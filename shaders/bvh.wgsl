@@ -1,10 +1,10 @@
 // The scene's BVH (group 1), built on the CPU by `gi::common::bvh`, and ray traversal.
-// `SceneBvh::intersect` in server/src/gi/common/bvh.rs is the CPU port of `trace`, without
+// `SceneBvh::intersect` in server/gi/src/common/bvh.rs is the CPU port of `trace`, without
 // the alpha test: hits `hit_masked(triangle, barycentrics)` rejects are skipped, and the module
 // that includes this file defines it (the path tracer's alpha masks in surfaces.wgsl; false in
 // the geometry-only traversal test).
 
-// Mirrored by `BvhNode` in server/src/gi/common/bvh.rs. An inner node (`prim_count` 0) has
+// Mirrored by `BvhNode` in server/gi/src/common/bvh.rs. An inner node (`prim_count` 0) has
 // its children at `first_index` and `first_index + 1`; a leaf's triangles are
 // `first_index .. first_index + prim_count` of `bvh_triangles`.
 struct BvhNode {

@@ -2,7 +2,7 @@
 
 const PI: f32 = 3.14159265358979;
 
-// Mirrored by `CameraUniform` in server/src/passes/frame_uniforms.rs.
+// Mirrored by `CameraUniform` in server/passes/src/passes/frame_uniforms.rs.
 struct CameraUniform {
     view_proj: mat4x4<f32>,
     position: vec3<f32>,

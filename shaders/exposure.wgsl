@@ -1,7 +1,7 @@
 // Automatic exposure: the geometric mean luminance of lit pixels is mapped to middle grey.
 // Two stages: per-tile partial sums, then one workgroup reduces the tiles.
 
-// Mirrored by `ExposureParams` in server/src/passes/exposure.rs.
+// Mirrored by `ExposureParams` in server/passes/src/passes/exposure.rs.
 struct ExposureParams {
     tile_count: u32,
     // Target for the mean luminance after exposure (middle grey).

@@ -1,7 +1,7 @@
 // The exposure chosen for a frame: written by exposure.wgsl (or the CPU for a manual exposure),
 // read by tonemap.wgsl.
 
-// Mirrored by `ExposureResult` in server/src/passes/exposure.rs.
+// Mirrored by `ExposureResult` in server/passes/src/passes/exposure.rs.
 struct ExposureResult {
     scale: f32,
     mean_log2_luminance: f32,

@@ -5,7 +5,7 @@
 // upsample knows where each sample sits; the first covered pixel stands in where the centre
 // sees background.
 
-// Mirrored by `ReduceParams` in server/src/passes/indirect_resolution.rs.
+// Mirrored by `ReduceParams` in server/passes/src/passes/indirect_resolution.rs.
 struct ReduceParams {
     factor: u32,
     pad0: u32,

@@ -5,7 +5,7 @@
 // detail finer than the reduced grid is kept by dividing each sample's radiance by its
 // material's reflectance and multiplying the blend by the pixel's own (demodulation).
 
-// Mirrored by `UpsampleParams` in server/src/passes/indirect_resolution.rs.
+// Mirrored by `UpsampleParams` in server/passes/src/passes/indirect_resolution.rs.
 struct UpsampleParams {
     factor: u32,
     // Side of a reduced pixel in scene units per unit of distance from the camera.

@@ -5,7 +5,7 @@ const LIGHT_DIRECTIONAL: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
 const LIGHT_POINT: u32 = 2u;
 
-// Mirrored by `LightUniform` in server/src/passes/frame_uniforms.rs.
+// Mirrored by `LightUniform` in server/passes/src/passes/frame_uniforms.rs.
 struct LightUniform {
     face_view_proj: array<mat4x4<f32>, 6>,
     position: vec3<f32>,

@@ -3,7 +3,7 @@
 // the texel with a sampler (materials.wgsl); the reference path tracer filters it by hand
 // (reference/surfaces.wgsl), so both share this function and cannot drift apart.
 
-// Mirrored by `MaterialGpu` in server/src/passes/scene_buffers.rs.
+// Mirrored by `MaterialGpu` in server/passes/src/passes/scene_buffers.rs.
 struct MaterialGpu {
     base_color: vec4<f32>,
     emissive: vec3<f32>,

@@ -2,7 +2,7 @@
 // with a position, a normal, the flux it reflects and its disk area (eq. 1). Faces of a point
 // light lie side by side in one atlas, so later stages treat every light as one 2D map.
 
-// Mirrored by `RsmFace` in server/src/passes/rsm.rs.
+// Mirrored by `RsmFace` in server/passes/src/passes/rsm.rs.
 struct RsmFace {
     view_proj: mat4x4<f32>,
     // The face's viewing axis (unit), for the view-space depth z of eq. 1.

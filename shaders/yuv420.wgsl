@@ -2,7 +2,7 @@
 // three planes, each row padded to a multiple of 4 bytes, packed four samples to a u32 (WGSL
 // has no byte stores). Each invocation writes one u32 of each chroma plane: four chroma
 // samples of one chroma row, i.e. the 8×2 luma block under them (four luma u32s).
-// `server/src/passes/yuv420.rs` has the CPU port and the layout.
+// `server/passes/src/passes/yuv420.rs` has the CPU port and the layout.
 
 struct YuvParams {
     width: u32,

@@ -88,15 +88,15 @@ def fail(message):
 
 def server_env_names():
     names = set()
-    for path in (ROOT / "server/src").rglob("*.rs"):
+    for path in (ROOT / "server").rglob("*.rs"):
         names.update(re.findall(r'env = "(LIGHTCAST_[A-Z0-9_]+)"', path.read_text()))
     if "LIGHTCAST_LISTEN" not in names:
-        sys.exit("check-deploy: found no LIGHTCAST_* flags in server/src; has the CLI moved?")
+        sys.exit("check-deploy: found no LIGHTCAST_* flags under server/; has the CLI moved?")
     return names
 
 
 def server_metric_names():
-    text = (ROOT / "server/src/service/metrics.rs").read_text()
+    text = (ROOT / "server/service/src/metrics.rs").read_text()
     return set(re.findall(r'pub const [A-Z_]+: &str = "([a-z_]+)";', text))
 
 

@@ -1,7 +1,7 @@
 // Paraboloid maps around a VAL's (or a VPL's) normal and the convolution soft shadow maps
 // built from them (seed paper 003, §4.1–4.2): the projection, the atlas that holds one map
 // per light, the Fourier basis of the depth test and its reconstruction. Shared by the map,
-// basis and shading passes; mirrored by server/src/gi/clustered/cpu.rs.
+// basis and shading passes; mirrored by server/gi/src/clustered/cpu.rs.
 
 const VISIBILITY_OFF: u32 = 0u;
 const VISIBILITY_CSSM: u32 = 1u;

@@ -1,7 +1,7 @@
 // Virtual point lights and the virtual area lights they are clustered into (seed paper 003,
 // §4–6), shared by the clustering, shading and blur passes.
 
-// Mirrored by `ClusteredParams` in server/src/gi/clustered/passes.rs.
+// Mirrored by `ClusteredParams` in server/gi/src/clustered/passes.rs.
 struct ClusteredParams {
     rsm_width: u32,
     rsm_height: u32,
@@ -40,7 +40,7 @@ struct ClusteredParams {
     pad2: u32,
 }
 
-// Mirrored by `Vpl` in server/src/gi/clustered/passes.rs.
+// Mirrored by `Vpl` in server/gi/src/clustered/passes.rs.
 struct Vpl {
     position: vec3<f32>,
     // Disk area of the RSM texels the VPL stands for (bounds its form factor near it).
@@ -54,7 +54,7 @@ struct Vpl {
     texel: u32,
 }
 
-// Mirrored by `Val` in server/src/gi/clustered/passes.rs. During k-means it holds a cluster
+// Mirrored by `Val` in server/gi/src/clustered/passes.rs. During k-means it holds a cluster
 // centre; after the final pass the VAL: the mean position and normal of its VPLs (§5) and
 // the area of their bounding rectangle in the plane of that normal (§6).
 struct Val {

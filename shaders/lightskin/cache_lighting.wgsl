@@ -4,7 +4,7 @@
 // workgroup memory 64 at a time. The VALs are split into chunks, one dispatch each, whose sums
 // add up in `accum`; a last dispatch turns the sums into proxy lights.
 
-// Mirrored by `CacheLightingParams` in server/src/passes/cache_lighting.rs.
+// Mirrored by `CacheLightingParams` in server/passes/src/passes/cache_lighting.rs.
 struct CacheLightingParams {
     camera: vec3<f32>,
     cache_count: u32,
@@ -36,7 +36,7 @@ struct CacheLightingParams {
 // Dimensionless, and it shrinks with the VAL as F does: a constant ε_p summed over a million
 // tiny VALs of a high-resolution RSM would outweigh their form factors and drag every proxy to
 // the mean of the whole RSM, and ε_p·A_l (length²) outweighed them in kilometre-sized scenes.
-// Mirrored by `EPS_P` in server/src/gi/lightskin/cpu.rs, which says more.
+// Mirrored by `EPS_P` in server/gi/src/lightskin/cpu.rs, which says more.
 const EPS_P: f32 = 1e-6;
 // Floors of eq. 7's denominator: a proxy at grazing incidence (or outside the glossy lobe)
 // would otherwise get an unbounded flux.
@@ -60,7 +60,7 @@ fn load_val(index: u32) -> Val {
     return Val(p.xyz, fa.a, textureLoad(rsm_normal, texel, 0).xyz, p.w, fa.rgb, index);
 }
 
-// Mirrored by `CacheAccum` in server/src/passes/cache_lighting.rs.
+// Mirrored by `CacheAccum` in server/passes/src/passes/cache_lighting.rs.
 fn cache_exponent(c: LightCache) -> f32 {
     return select(c.exponent, params.glossy_exponent, params.glossy_exponent > 0.0);
 }

@@ -2,7 +2,7 @@
 // so that VALs can be drawn by binary search (the paper's SAT step, eq. 12; a compute scan gives
 // the same two tables in one dispatch per direction).
 
-// Mirrored by `ScanParams` in server/src/passes/cumulative_sums.rs.
+// Mirrored by `ScanParams` in server/passes/src/passes/cumulative_sums.rs.
 struct ScanParams {
     width: u32,
     height: u32,

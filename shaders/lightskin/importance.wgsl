@@ -2,7 +2,7 @@
 // sees, estimated from N_VS view samples. Two entry points: gather the view samples from the
 // G-buffer, then one thread per RSM texel sums over all samples.
 
-// Mirrored by `ImportanceParams` in server/src/passes/importance.rs.
+// Mirrored by `ImportanceParams` in server/passes/src/passes/importance.rs.
 struct ImportanceParams {
     rsm_width: u32,
     rsm_height: u32,

@@ -4,7 +4,7 @@
 // the pixel's barycentric coordinates (smooth across triangles); without, the provoking
 // vertex serves the whole triangle.
 
-// Mirrored by `IndirectParams` in server/src/passes/indirect_light.rs.
+// Mirrored by `IndirectParams` in server/passes/src/passes/indirect_light.rs.
 struct IndirectParams {
     // 0 writes black (GI off).
     enabled: u32,

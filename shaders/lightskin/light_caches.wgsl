@@ -1,6 +1,6 @@
 // LightSkin light caches and the two proxy lights each one carries per frame.
 
-// Mirrored by `LightCache` in server/src/gi/caches.rs.
+// Mirrored by `LightCache` in server/gi/src/caches.rs.
 struct LightCache {
     position: vec3<f32>,
     area: f32,
@@ -12,7 +12,7 @@ struct LightCache {
     pad0: f32,
 }
 
-// Mirrored by `CacheLighting` in server/src/passes/cache_lighting.rs. Each proxy light is a
+// Mirrored by `CacheLighting` in server/passes/src/passes/cache_lighting.rs. Each proxy light is a
 // point light of the given flux at the given position; the radius is its extent (2σ of the
 // VAL positions), kept for occlusion.
 struct CacheLighting {
@@ -30,7 +30,7 @@ struct CacheLighting {
 // light) per unit of cache area A_c: (r_c/2)² for the cache's cell as a disk of radius
 // √(A_c/π). Relative to the cache distribution's own resolution, so it holds at any scene
 // scale (a floor in scene units flattened a centimetre-sized model's indirect light). Mirrored
-// by `MIN_DIST2_PER_AREA` in server/src/gi/lightskin/cpu.rs.
+// by `MIN_DIST2_PER_AREA` in server/gi/src/lightskin/cpu.rs.
 const MIN_DIST2_PER_AREA: f32 = 1.0 / (4.0 * PI);
 
 // 2(n·w)n − w: `w` mirrored about `n` (both unit, `w` pointing away from the surface).
@@ -60,7 +60,7 @@ fn unlit(flux: vec3<f32>) -> bool {
 const MIN_PROXY_SIDE: f32 = 1e-3;
 // Occluders nearer to the target than this fraction of their disk area (squared distance) sit
 // on the target itself and have no direction; mirrored by `MIN_OCCLUDER_DIST2_PER_AREA` in
-// server/src/gi/lightskin/cpu.rs.
+// server/gi/src/lightskin/cpu.rs.
 const MIN_OCCLUDER_DIST2_PER_AREA: f32 = 1e-8;
 
 struct Square {

@@ -3,7 +3,7 @@
 // occluders are split into chunks, one dispatch each, whose covered areas add up in
 // `coverage`; a last dispatch applies them.
 
-// Mirrored by `OcclusionParams` in server/src/passes/proxy_occlusion.rs.
+// Mirrored by `OcclusionParams` in server/passes/src/passes/proxy_occlusion.rs.
 struct OcclusionParams {
     cache_count: u32,
     // This dispatch's occluders: [first_occluder, end_occluder).

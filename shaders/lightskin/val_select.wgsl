@@ -7,7 +7,7 @@
 // importance would otherwise be drawn rarely with a huge weight 1/(N·P). α = 0 is the paper's
 // plain BRSM.
 
-// Mirrored by `SelectParams` in server/src/passes/val_select.rs.
+// Mirrored by `SelectParams` in server/passes/src/passes/val_select.rs.
 struct SelectParams {
     width: u32,
     height: u32,

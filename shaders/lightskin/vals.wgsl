@@ -1,6 +1,6 @@
 // A selected virtual area light, as written by val_select.wgsl and read by cache lighting.
 
-// Mirrored by `Val` in server/src/passes/val_select.rs.
+// Mirrored by `Val` in server/passes/src/passes/val_select.rs.
 struct Val {
     position: vec3<f32>,
     // Disk area A_l (eq. 1).

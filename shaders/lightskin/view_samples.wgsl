@@ -1,7 +1,7 @@
 // View samples for importance estimation (eq. 10): G-buffer positions and normals at N_VS
 // Halton-distributed pixel positions.
 
-// Mirrored by `ViewSample` in server/src/passes/importance.rs.
+// Mirrored by `ViewSample` in server/passes/src/passes/importance.rs.
 struct ViewSample {
     position: vec3<f32>,
     // 1 where the sample hit geometry, 0 on background.

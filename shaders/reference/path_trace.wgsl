@@ -10,7 +10,7 @@
 // `bounces` = 1 is the single-bounce light seed 004 approximates; more add inter-reflections
 // (seed 001).
 
-// Mirrored by `TraceParams` in server/src/gi/reference/mod.rs.
+// Mirrored by `TraceParams` in server/gi/src/reference/mod.rs.
 struct TraceParams {
     inv_view_proj: mat4x4<f32>,
     camera_position: vec3<f32>,

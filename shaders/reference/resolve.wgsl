@@ -1,8 +1,8 @@
 // The reference's accumulated sums → the frame's indirect buffer, plus the convergence sums:
-// per pixel the variance of its mean luminance, reduced over the image (server/src/gi/reference/
-// resolve.rs; the CPU twin is `resolve` in server/src/gi/reference/mod.rs).
+// per pixel the variance of its mean luminance, reduced over the image (server/gi/src/reference/
+// resolve.rs; the CPU twin is `resolve` in server/gi/src/reference/mod.rs).
 
-// Mirrored by `ResolveParams` in server/src/gi/reference/resolve.rs.
+// Mirrored by `ResolveParams` in server/gi/src/reference/resolve.rs.
 struct ResolveParams {
     width: u32,
     height: u32,
@@ -10,7 +10,7 @@ struct ResolveParams {
     partial_count: u32,
 }
 
-// Mirrored by `ProgressSums` in server/src/gi/mod.rs.
+// Mirrored by `ProgressSums` in server/gi/src/mod.rs.
 struct ProgressSums {
     variance_of_mean: f32,
     luminance: f32,

@@ -2,7 +2,7 @@
 // indices, one record per material and the texels of every base-colour texture, so that a hit
 // is shaded and alpha-tested like the G-buffer and the RSM shade and discard its fragment.
 
-// Mirrored by `SurfaceGpu` in server/src/gi/reference/mod.rs: a material as the reference
+// Mirrored by `SurfaceGpu` in server/gi/src/reference/mod.rs: a material as the reference
 // shades it.
 struct SurfaceGpu {
     // The material's factors, as the rasterising passes read them.

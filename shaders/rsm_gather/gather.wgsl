@@ -1,10 +1,10 @@
 // Reflective shadow maps (Dachsbacher & Stamminger 2005, §3): every pixel gathers a fixed
 // pattern of RSM texels around the texel it projects to, each a pixel light (vpl_light.wgsl),
 // weighted by the texels it stands for, without visibility. The pattern, its weights and the
-// projection are explained in server/src/gi/rsm_gather/pattern.rs, whose `gather` is the CPU
+// projection are explained in server/gi/src/rsm_gather/pattern.rs, whose `gather` is the CPU
 // reference of this pass.
 
-// Mirrored by `GatherParams` in server/src/gi/rsm_gather/passes.rs.
+// Mirrored by `GatherParams` in server/gi/src/rsm_gather/passes.rs.
 struct GatherParams {
     width: u32,
     height: u32,
@@ -19,7 +19,7 @@ struct GatherParams {
     probe_y: u32,
 }
 
-// Mirrored by `GatherSample` in server/src/gi/rsm_gather/pattern.rs.
+// Mirrored by `GatherSample` in server/gi/src/rsm_gather/pattern.rs.
 struct GatherSample {
     // ξ1·(sin 2πξ2, cos 2πξ2): the offset in units of r_max.
     offset: vec2<f32>,

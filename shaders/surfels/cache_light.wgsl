@@ -2,7 +2,7 @@
 // n_L links to hierarchy nodes (`links::cache_lighting` on the CPU). One thread per cache and
 // coefficient.
 
-// Mirrored by `CacheLightParams` in server/src/gi/surfels/passes.rs.
+// Mirrored by `CacheLightParams` in server/gi/src/surfels/passes.rs.
 struct CacheLightParams {
     caches: u32,
     per_cache: u32,

@@ -5,7 +5,7 @@
 // `CacheGrid::trilinear`, `CacheGrid::in_front` and `cpu::irradiance`. The including pass declares `grid`,
 // `cache_usable` and `cache_light`.
 
-// Mirrored by `GridUniform` in server/src/gi/surfels/passes.rs.
+// Mirrored by `GridUniform` in server/gi/src/surfels/passes.rs.
 struct GridUniform {
     origin: vec3<f32>,
     spacing: f32,

@@ -2,7 +2,7 @@
 // cache and surfel, one bit each. Prefixed by `bvh.wgsl` (group 1, the scene's BVH).
 // CPU port: the `occluded` test in `links::cache_links`, which this replaces on a GPU.
 
-// Mirrored by `LinkRayParams` in server/src/gi/surfels/link_rays.rs.
+// Mirrored by `LinkRayParams` in server/gi/src/surfels/link_rays.rs.
 struct LinkRayParams {
     surfels: u32,
     caches: u32,

@@ -2,7 +2,7 @@
 // the sum of its two children (seed 001, "Flux in Surfels and Hierarchy"; `pull_flux` on the
 // CPU). One dispatch per level, leaves first, so children are final before their parents.
 
-// Mirrored by `PullLevel` in server/src/gi/surfels/passes.rs.
+// Mirrored by `PullLevel` in server/gi/src/surfels/passes.rs.
 struct PullLevel {
     first: u32,
     count: u32,

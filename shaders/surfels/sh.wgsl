@@ -1,5 +1,5 @@
 // Real spherical harmonics of up to 4 bands (16 coefficients) in the convention of
-// server/src/gi/surfels/sh.rs (orthonormal, z up, no Condon–Shortley phase): `sh_eval`
+// server/gi/src/surfels/sh.rs (orthonormal, z up, no Condon–Shortley phase): `sh_eval`
 // mirrors `sh::eval` line by line, `zonal_cosine` is `sh::COSINE_ZONAL` and `zonal_phong` is
 // `sh::phong_zonal` (appendix B's recurrence, eq. 11).
 

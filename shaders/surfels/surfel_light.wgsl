@@ -4,7 +4,7 @@
 // above the surfel (one more bounce per pass). Written as the leaves of the flux array, in
 // surfel units (Φ̃ = B, see `pull_flux`). Mirrors `cpu::frame`'s first step.
 
-// Mirrored by `SurfelGpu` in server/src/gi/surfels/passes.rs.
+// Mirrored by `SurfelGpu` in server/gi/src/surfels/passes.rs.
 struct SurfelGpu {
     position: vec3<f32>,
     pad0: f32,
@@ -16,7 +16,7 @@ struct SurfelGpu {
     pad3: f32,
 }
 
-// Mirrored by `LightParams` in server/src/gi/surfels/passes.rs.
+// Mirrored by `LightParams` in server/gi/src/surfels/passes.rs.
 struct LightParams {
     surfel_count: u32,
     // 1: add the irradiance of `cache_light` (the previous bounce).

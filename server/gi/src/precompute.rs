@@ -118,9 +118,11 @@ impl SceneFacts {
     }
 }
 
-/// File extensions of the stored kinds (`lcc`: light caches, `lsl`: surfel links). One size
-/// limit covers them all.
-pub const STORED_EXTENSIONS: &[&str] = &["lcc", "lsl"];
+/// File extensions of the stored kinds (each entry's [`PrecomputeEntry::extension`]). One
+/// size limit covers them all.
+pub fn stored_extensions() -> impl Iterator<Item = &'static str> {
+    entries().filter_map(|e| e.extension)
+}
 
 /// Where precomputed sets are kept between runs: files named by a hash of everything their
 /// computation reads, so each model is precomputed once.
@@ -186,7 +188,7 @@ impl Store {
         Ok(bytes)
     }
 
-    /// Deletes the least recently used stored files of every kind ([`STORED_EXTENSIONS`])
+    /// Deletes the least recently used stored files of every kind ([`stored_extensions`])
     /// other than `keep` until the rest fit in `max_bytes`.
     pub fn evict(&self, keep: &Path) {
         let Some(max_bytes) = self.max_bytes else {
@@ -200,7 +202,7 @@ impl Store {
             .filter(|e| {
                 e.path()
                     .extension()
-                    .is_some_and(|x| STORED_EXTENSIONS.iter().any(|k| x == *k))
+                    .is_some_and(|x| stored_extensions().any(|k| x == k))
             })
             .filter_map(|e| {
                 let meta = e.metadata().ok()?;
@@ -303,6 +305,8 @@ pub struct PrecomputeEntry {
     /// Loads the set from the store or computes (and stores) it; errors are messages for the
     /// scene's info.
     pub build: BuildFn,
+    /// The extension of its files in the [`Store`] (`<key>.<extension>`); `None`: not stored.
+    pub extension: Option<&'static str>,
 }
 
 /// Feeds a store key everything about `scene`'s geometry a precomputation reads: the vertex
@@ -376,6 +380,13 @@ mod tests {
         unique.dedup();
         assert_eq!(unique.len(), kinds.len(), "{kinds:?}");
         assert!(kinds.contains(&"light_caches") && kinds.contains(&"bvh"));
+        // A stored kind's files are its own: one extension per kind.
+        let mut extensions: Vec<_> = stored_extensions().collect();
+        let count = extensions.len();
+        extensions.sort_unstable();
+        extensions.dedup();
+        assert_eq!(extensions.len(), count, "{extensions:?}");
+        assert!(extensions.contains(&"lcc") && extensions.contains(&"lsl"));
     }
 
     /// One size limit covers every stored kind: the oldest files go first, whatever their

@@ -18,6 +18,8 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// Bump whenever the file layout or the cache algorithm's output changes.
+/// Extension of the stored light-cache files (`<key>.lcc`).
+pub const EXTENSION: &str = "lcc";
 const FORMAT_VERSION: u32 = 1;
 const MAGIC: [u8; 8] = *b"LCLCACHE";
 /// Written in native byte order: a store shared with a machine of the other endianness reads
@@ -111,7 +113,7 @@ impl CacheStore {
 
     /// Path of the file for `key`.
     pub fn path(&self, key: &str) -> PathBuf {
-        self.dir.join(format!("{key}.lcc"))
+        self.dir.join(format!("{key}.{EXTENSION}"))
     }
 
     /// Loads the cache set for (scene, params) if stored and valid, else computes and stores
@@ -164,7 +166,7 @@ impl CacheStore {
 
     fn write(&self, key: &str, set: &CacheSet) -> std::io::Result<()> {
         self.store()
-            .write_atomic(&format!("{key}.lcc"), &encode(key, set))
+            .write_atomic(&format!("{key}.{EXTENSION}"), &encode(key, set))
             .map(drop)
     }
 }

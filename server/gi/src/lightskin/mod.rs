@@ -180,6 +180,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
             from_store,
         })
     },
+    extension: Some(cache_store::EXTENSION),
 };
 
 /// The key of the light caches for `params`.

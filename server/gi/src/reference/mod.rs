@@ -140,6 +140,8 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
             from_store: false,
         })
     },
+    // Built in a second or two from the scene; not worth a file.
+    extension: None,
 };
 
 /// Kind of the reference's precomputation.

@@ -188,6 +188,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
             from_store,
         })
     },
+    extension: Some(store::EXTENSION),
 };
 
 /// The precomputation's parameters of a request, checked, with the default spacing resolved

@@ -18,6 +18,8 @@ use glam::{UVec3, Vec2, Vec3};
 use sha2::{Digest, Sha256};
 use std::path::PathBuf;
 
+/// Extension of the stored surfel-set files (`<key>.lsl`).
+pub const EXTENSION: &str = "lsl";
 /// Bump whenever the layout or the precomputation's output changes.
 const FORMAT_VERSION: u32 = 1;
 const MAGIC: [u8; 8] = *b"LCSURFEL";
@@ -56,7 +58,7 @@ pub fn load_or_compute(
     env: &mut BuildEnv,
 ) -> Result<(SurfelSet, bool), SurfelError> {
     let key = key(scene, params);
-    let path = store.dir.join(format!("{key}.lsl"));
+    let path = store.dir.join(format!("{key}.{EXTENSION}"));
     match Store::read_bounded(&path, max_file_len(params)) {
         Ok(bytes) => match decode(&bytes, &key, params) {
             Ok(set) => {
@@ -69,7 +71,7 @@ pub fn load_or_compute(
         Err(e) => tracing::warn!(path = %path.display(), "cannot read a stored surfel set: {e}"),
     }
     let set = precompute(scene, params, env)?;
-    match store.write_atomic(&format!("{key}.lsl"), &encode(&key, params, &set)) {
+    match store.write_atomic(&format!("{key}.{EXTENSION}"), &encode(&key, params, &set)) {
         Ok(written) => store.evict(&written),
         Err(e) => tracing::warn!(path = %path.display(), "cannot store the surfel set: {e}"),
     }
@@ -78,7 +80,7 @@ pub fn load_or_compute(
 
 /// The path a set of `key` is stored at in `store`.
 pub fn path(store: &Store, key: &str) -> PathBuf {
-    store.dir.join(format!("{key}.lsl"))
+    store.dir.join(format!("{key}.{EXTENSION}"))
 }
 
 /// Largest valid file for `params`: every count at its maximum.

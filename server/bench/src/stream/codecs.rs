@@ -64,7 +64,12 @@ pub(super) fn planes_of(picture: &impl YUVSource, layout: Yuv420Layout) -> Resul
 
 /// Copies `cols`×`rows` bytes from `from` (rows `strides.0` apart) to `to` (rows `strides.1`
 /// apart).
-pub(super) fn copy_rows(to: &mut [u8], from: &[u8], strides: (usize, usize), (cols, rows): (usize, usize)) {
+pub(super) fn copy_rows(
+    to: &mut [u8],
+    from: &[u8],
+    strides: (usize, usize),
+    (cols, rows): (usize, usize),
+) {
     for row in 0..rows {
         to[row * strides.1..][..cols].copy_from_slice(&from[row * strides.0..][..cols]);
     }

@@ -387,14 +387,23 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
             cmd.repeat
         );
     }
+    // A debug view may be of another size than the frame (the RSM views are the RSM's).
+    let (width, height) = image_dimensions(&image).unwrap_or((last.width, last.height));
     println!(
-        "wrote {} ({}×{}, {:?})",
+        "wrote {} ({width}×{height}, {:?})",
         cmd.out.display(),
-        last.width,
-        last.height,
         last.format
     );
     Ok(())
+}
+
+/// The width and height an encoded image (PNG, JPEG) declares; `None` for raw buffers.
+fn image_dimensions(bytes: &[u8]) -> Option<(u32, u32)> {
+    image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .ok()?
+        .into_dimensions()
+        .ok()
 }
 
 async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<()> {
@@ -519,6 +528,18 @@ fn main() -> std::process::ExitCode {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The size printed is the image's own (a view of the RSM is the RSM's size, not the
+    /// frame's); raw buffers have none.
+    #[test]
+    fn written_images_report_their_own_size() {
+        let mut png = Vec::new();
+        image::RgbImage::new(7, 3)
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .expect("encodes");
+        assert_eq!(image_dimensions(&png), Some((7, 3)));
+        assert_eq!(image_dimensions(&[0u8; 64]), None);
+    }
 
     #[test]
     fn unset_stream_flags_are_left_out_of_the_session() {

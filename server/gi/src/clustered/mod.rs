@@ -26,7 +26,9 @@ use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
-use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap, TextureReadback};
+use crate::gpu::readback::{
+    read_buffer, read_rgba_texture, stage_buffer, PendingMap, TextureReadback,
+};
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::{
     frame_uniforms::light_faces,
@@ -502,27 +504,17 @@ impl Clustered {
             ctx.queue.submit([encoder.finish()]);
             readback.read(ctx)
         };
-        let read_texture = |t: &wgpu::Texture, bytes: u32| -> Result<Vec<[f32; 4]>, GpuError> {
-            let raw = read_raw(t, bytes)?;
-            Ok(if bytes == 8 {
-                bytemuck::pod_collect_to_vec::<u8, half::f16>(&raw)
-                    .chunks_exact(4)
-                    .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
-                    .collect()
-            } else {
-                bytemuck::pod_collect_to_vec(&raw)
-            })
-        };
+        let read_texture = |t: &wgpu::Texture| read_rgba_texture(ctx, t);
         Ok(Some(ClusteredReadback {
             rsm_width: rsm.width(),
             rsm_height: rsm.height(),
-            rsm_position: read_texture(&rsm.position.texture, 16)?,
-            rsm_normal: read_texture(&rsm.normal.texture, 8)?,
-            rsm_flux_area: read_texture(&rsm.flux_area.texture, 16)?,
+            rsm_position: read_texture(&rsm.position.texture)?,
+            rsm_normal: read_texture(&rsm.normal.texture)?,
+            rsm_flux_area: read_texture(&rsm.flux_area.texture)?,
             vpls: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.vpls)?),
             vals: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.vals)?),
             mapping: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.mapping)?),
-            interleaved: read_texture(&interleaved.target.texture, 16)?,
+            interleaved: read_texture(&interleaved.target.texture)?,
             atlas: visibility.layout,
             maps: bytemuck::pod_collect_to_vec(&read_raw(&visibility.depth.texture, 4)?),
             extent: self.extent,

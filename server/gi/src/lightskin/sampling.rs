@@ -327,14 +327,7 @@ impl SamplingCapture {
         let mut decoded = Vec::with_capacity(3);
         for (rows, bytes_per_texel) in rsm {
             let bytes = rows.finish()?;
-            decoded.push(if bytes_per_texel == 8 {
-                bytemuck::pod_collect_to_vec::<u8, half::f16>(&bytes)
-                    .chunks_exact(4)
-                    .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
-                    .collect()
-            } else {
-                bytemuck::pod_collect_to_vec(&bytes)
-            });
+            decoded.push(crate::gpu::readback::rgba_f32(&bytes, bytes_per_texel));
         }
         let [samples, importance, column_sums, row_sums, vals] = maps;
         let floats = |map: PendingMap, n: usize| -> Result<Vec<f32>, GpuError> {

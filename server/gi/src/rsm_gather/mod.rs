@@ -23,7 +23,9 @@ use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
-use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap, TextureReadback};
+use crate::gpu::readback::{
+    read_buffer, read_rgba_texture, stage_buffer, PendingMap, TextureReadback,
+};
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::rsm::{max_rsm_size, Rsm, RsmFace, RsmPass};
 use crate::passes::{frame_uniforms::light_faces, Target};
@@ -201,31 +203,14 @@ impl RsmGather {
             return Ok(None);
         };
         let ctx = &self.ctx;
-        let read = |t: &Target, bytes: u32| -> Result<Vec<[f32; 4]>, GpuError> {
-            let readback =
-                TextureReadback::new(&ctx.device, "rsm gather", rsm.width(), rsm.height(), bytes);
-            let mut encoder = ctx
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-            readback.encode_copy(&mut encoder, &t.texture);
-            ctx.queue.submit([encoder.finish()]);
-            let raw = readback.read(ctx)?;
-            Ok(if bytes == 8 {
-                bytemuck::pod_collect_to_vec::<u8, half::f16>(&raw)
-                    .chunks_exact(4)
-                    .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
-                    .collect()
-            } else {
-                bytemuck::pod_collect_to_vec(&raw)
-            })
-        };
+        let read = |t: &Target| read_rgba_texture(ctx, &t.texture);
         let probe: [f32; 4] = bytemuck::pod_read_unaligned(&read_buffer(ctx, &self.probe)?[..16]);
         Ok(Some(GatherReadback {
             rsm_size: rsm.size,
             faces: rsm.faces,
-            rsm_position: read(&rsm.position, 16)?,
-            rsm_normal: read(&rsm.normal, 8)?,
-            rsm_flux_area: read(&rsm.flux_area, 16)?,
+            rsm_position: read(&rsm.position)?,
+            rsm_normal: read(&rsm.normal)?,
+            rsm_flux_area: read(&rsm.flux_area)?,
             face_view_proj: faces.clone(),
             samples: self.samples.clone(),
             probe: read_probe(probe),

@@ -191,6 +191,45 @@ pub fn map_read(ctx: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuE
     pending.finish()
 }
 
+/// RGBA texels read back as f32: 16 bytes per texel (`Rgba32Float`) as they are, 8
+/// (`Rgba16Float`) widened from f16.
+pub fn rgba_f32(bytes: &[u8], bytes_per_texel: u32) -> Vec<[f32; 4]> {
+    if bytes_per_texel == 8 {
+        bytemuck::pod_collect_to_vec::<u8, half::f16>(bytes)
+            .chunks_exact(4)
+            .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
+            .collect()
+    } else {
+        bytemuck::pod_collect_to_vec(bytes)
+    }
+}
+
+/// Copies a whole RGBA float texture (`Rgba32Float` or `Rgba16Float`, `COPY_SRC`) and reads
+/// it as f32 (blocking: for tests and debugging, not the frame loop).
+pub fn read_rgba_texture(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+) -> Result<Vec<[f32; 4]>, GpuError> {
+    let bytes_per_texel = match texture.format() {
+        wgpu::TextureFormat::Rgba16Float => 8,
+        _ => 16,
+    };
+    let size = texture.size();
+    let readback = TextureReadback::new(
+        &ctx.device,
+        "rgba readback",
+        size.width,
+        size.height,
+        bytes_per_texel,
+    );
+    let mut encoder = ctx
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+    readback.encode_copy(&mut encoder, texture);
+    ctx.queue.submit([encoder.finish()]);
+    Ok(rgba_f32(&readback.read(ctx)?, bytes_per_texel))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -333,17 +333,7 @@ impl FrameTargets {
         g: &Settings,
         faces: u32,
     ) -> Prepared<'_> {
-        if !self
-            .rsm
-            .as_ref()
-            .is_some_and(|r| r.size == g.rsm_size && r.faces == faces)
-        {
-            // Release the old RSM before allocating the new one.
-            self.rsm = None;
-        }
-        let rsm = self
-            .rsm
-            .get_or_insert_with(|| Rsm::new(device, g.rsm_size, faces));
+        let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, faces);
         if !self
             .buffers
             .as_ref()

@@ -230,17 +230,7 @@ impl Method for RsmGather {
         let device = &r.ctx.device;
         let queue = &r.ctx.queue;
         let face_count = faces.len() as u32;
-        if !self
-            .rsm
-            .as_ref()
-            .is_some_and(|rsm| rsm.size == g.rsm_size && rsm.faces == face_count)
-        {
-            // Release the old RSM before allocating the new one.
-            self.rsm = None;
-        }
-        let rsm = self
-            .rsm
-            .get_or_insert_with(|| Rsm::new(device, g.rsm_size, face_count));
+        let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, face_count);
         let rsm_faces: Vec<RsmFace> = faces.iter().map(|f| RsmFace::new(f, g.rsm_size)).collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let view_proj: Vec<glam::Mat4> = faces.iter().map(|f| f.view_proj).collect();

@@ -88,6 +88,23 @@ impl Rsm {
         }
     }
 
+    /// The RSM in `slot` if it has `size` and `faces`, else a new one there (the old one
+    /// released before the new one is allocated).
+    pub fn reuse_or_new<'a>(
+        slot: &'a mut Option<Rsm>,
+        device: &wgpu::Device,
+        size: u32,
+        faces: u32,
+    ) -> &'a Rsm {
+        if !slot
+            .as_ref()
+            .is_some_and(|r| r.size == size && r.faces == faces)
+        {
+            *slot = None;
+        }
+        slot.get_or_insert_with(|| Self::new(device, size, faces))
+    }
+
     pub fn width(&self) -> u32 {
         self.size * self.faces
     }

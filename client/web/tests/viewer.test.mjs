@@ -5,7 +5,8 @@
 // The server must be running (the Rust test `viewer` in tests/tests/service starts one and runs
 // this script). Environment: LIGHTCAST_URL (server), LIGHTCAST_ARTIFACTS (where the screenshot
 // and the downloaded still go; default ./test-artifacts), CHROMIUM (default /usr/bin/chromium);
-// LIGHTCAST_UPLOAD_SCENE (optional): a .glb to upload through the page;
+// LIGHTCAST_METHODS: {method: {gi, stages}} for every method the server lists (a small setting
+// and the method's stage names); LIGHTCAST_UPLOAD_SCENE (optional): a .glb to upload through the page;
 // LIGHTCAST_AUTH_URL and LIGHTCAST_AUTH_TOKEN (optional): a second server with auth on, where
 // the page must ask for the token. Exits non-zero with the failing step named.
 
@@ -29,7 +30,9 @@ async function step(name, fn) {
   process.stdout.write(`viewer test: ${name} … `);
   try {
     const result = await fn();
-    console.log(`ok (${((Date.now() - started) / 1000).toFixed(1)} s)`);
+    // A step may return a measurement to log with its time.
+    const detail = typeof result === 'string' ? `${result}, ` : '';
+    console.log(`ok (${detail}${((Date.now() - started) / 1000).toFixed(1)} s)`);
     return result;
   } catch (e) {
     console.log('FAILED');
@@ -228,39 +231,51 @@ async function withoutWebCodecs(browser) {
 }
 
 /**
- * Surfels preset from the address with small parameters (its precomputation takes seconds, not
- * the software defaults' half minute): the links precompute with progress on the scene line,
- * the method's parameters and its shading stage show, and its debug view streams.
+ * Every method `/v1/server` lists, one page each, preset from the address with the small
+ * setting its table supplies for tests (`LIGHTCAST_METHODS`, written by the Rust test from the
+ * registry: a method without one fails here): the panel shows its parameters and only its,
+ * a stage of its own shows in the timings, and each of its debug views streams.
  */
-async function surfels(browser) {
-  const context = await browser.newContext({ viewport: { width: 480, height: 360 } });
-  const page = await context.newPage();
-  const errors = [];
-  page.on('pageerror', (e) => errors.push(e.message));
-  try {
-    await step('surfels preset from the address precompute, shade and show their parameters', async () => {
-      await page.goto(`${base}/?method=surfels&scale=0.5&fps=10&gi.surfel_count=1024&gi.surfel_links=16&gi.bounces=2`);
-      await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
-      const gi = (await pageSession(page)).params.render.gi;
-      assert.deepEqual([gi.method, gi.surfel_count, gi.surfel_links, gi.bounces], ['surfels', 1024, 16, 2],
-        'the address presets the GI parameters');
-      assert.equal(await page.inputValue('[data-field="render.gi.surfel_links"]'), '16', 'the panel shows the preset');
-      assert.ok(await page.locator('[data-field="render.gi.sh_bands"]').isVisible(), 'surfels show their SH bands');
-      assert.ok(!(await page.locator('[data-field="render.gi.rsm_size"]').isVisible()), 'surfels hide RSM parameters');
-      await page.waitForFunction(() => /[\d,]+ surfel links \(/.test(document.getElementById('scene-state').textContent),
-        null, { timeout: PATIENCE_MS });
-      // Every frame shades; `surfel_light` and the other bounce stages only show in the frames that add a bounce (the
-      // first two here), too briefly to wait for.
-      await page.waitForSelector('#stage-rows tr[data-stage="surfel_shade"]', { timeout: PATIENCE_MS });
-    });
-    await step('the surfels debug view streams', async () => {
-      const diff = await changeAfter(page, () => page.selectOption('[data-field="render.view"]', 'surfels'), 'the surfels view');
-      assert.ok(diff > 4, `the surfels view looks like the frame: ${diff.toFixed(2)}`);
+async function everyMethod(browser, methods) {
+  const server = await api('GET', '/v1/server');
+  assert.deepEqual(server.gi_methods.map((m) => m.method).sort(), Object.keys(methods).sort(),
+    'the test has a setting for every method the server lists');
+  const everyParam = new Set(server.gi_methods.flatMap((m) => m.parameters.map((p) => p.name)));
+  for (const info of server.gi_methods) {
+    const { gi, stages } = methods[info.method];
+    const context = await browser.newContext({ viewport: { width: 480, height: 360 } });
+    const page = await context.newPage();
+    const errors = [];
+    page.on('pageerror', (e) => errors.push(e.message));
+    try {
+      await step(`${info.method} preset from the address shows its parameters and its stages`, async () => {
+        const preset = Object.entries(gi).filter(([k]) => k !== 'method').map(([k, v]) => `&gi.${k}=${v}`).join('');
+        await page.goto(`${base}/?method=${info.method}&scale=0.5&fps=10${preset}`);
+        await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
+        const session = (await pageSession(page)).params.render.gi;
+        for (const [k, v] of Object.entries(gi)) assert.deepEqual(session[k], v, `the address presets ${k}`);
+        const own = new Set(info.parameters.map((p) => p.name));
+        for (const name of everyParam) {
+          const shown = await page.locator(`[data-field="render.gi.${name}"]`).isVisible();
+          assert.equal(shown, own.has(name), `${name} is shown only where ${info.method} reads it`);
+        }
+        await page.waitForFunction((names) => names.some((n) => document.querySelector(`#stage-rows tr[data-stage="${n}"]`)),
+          stages, { timeout: PATIENCE_MS }).catch(() => {
+          throw new Error(`none of ${info.method}'s stages ${stages.join(', ')} showed in the timings`);
+        });
+      });
+      for (const { view } of info.views) {
+        await step(`${info.method}'s ${view} view streams`, async () => {
+          const diff = await changeAfter(page, () => page.selectOption('[data-field="render.view"]', view), `the ${view} view`);
+          assert.ok(diff > 4, `the ${view} view looks like the image before it: ${diff.toFixed(2)}`);
+          return `changed by ${diff.toFixed(1)} grey levels`;
+        });
+      }
       assert.deepEqual(errors, [], 'no page errors');
-    });
-  } finally {
-    await page.close({ runBeforeUnload: true });
-    await context.close();
+    } finally {
+      await page.close({ runBeforeUnload: true });
+      await context.close();
+    }
   }
 }
 
@@ -626,7 +641,7 @@ async function main() {
       throw new Error(`session ${id} is left after the page closed`);
     });
     await withoutWebCodecs(browser);
-    await surfels(browser);
+    await everyMethod(browser, JSON.parse(process.env.LIGHTCAST_METHODS));
     await apiPage(browser);
     if (process.env.LIGHTCAST_AUTH_URL) await withAuth(browser, process.env.LIGHTCAST_AUTH_URL, process.env.LIGHTCAST_AUTH_TOKEN);
   } catch (e) {

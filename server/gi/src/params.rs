@@ -362,7 +362,7 @@ pub struct Testing {
     /// A small setting for a scene with `facts`: a frame of about 100×70 pixels of the
     /// Cornell box in well under a second on lavapipe, through every pass of the method.
     /// Lengths in it are relative to the scene (so a scaled scene gets a scaled setting).
-    pub small: fn(&super::precompute::SceneFacts) -> GiParams,
+    pub small: fn(&super::common::scene_facts::SceneFacts) -> GiParams,
     /// Relative mean absolute difference allowed between frames of the Cornell box scaled by
     /// 0.01 or 1000 and unscaled (HDR image and indirect buffer; radiance does not depend on
     /// the length unit, so what differs comes from rounded coordinates); the method's table

@@ -10,6 +10,7 @@
 //! direct light until a frame's set is ready; offline renders build them inline. The renderer
 //! hands the finished [`SceneData`] to the method ([`super::Method::set_scene_data`]).
 
+pub use super::common::scene_facts::SceneFacts;
 use super::limits::GiLimit;
 use super::InvalidSetting;
 use crate::scene::Scene;
@@ -91,30 +92,6 @@ impl PrecomputeKey {
     /// parameters is the scene's only one and shares the scene's renderer.
     pub fn has_variants(&self) -> bool {
         !self.params.is_empty()
-    }
-}
-
-/// What the keys and size estimates of every precomputation read of a scene, summed once
-/// when the scene is added (requests are checked against them per message).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SceneFacts {
-    /// Total area of the scene's triangles, in square scene units.
-    pub surface_area: f64,
-    /// Radius of the scene's bounding sphere.
-    pub radius: f32,
-    pub triangles: u64,
-    /// Size of the scene's bounding box.
-    pub extent: glam::Vec3,
-}
-
-impl SceneFacts {
-    pub fn of(scene: &Scene) -> Self {
-        Self {
-            surface_area: super::common::triangles::surface_area(scene),
-            radius: scene.bounds.radius(),
-            triangles: scene.triangle_count() as u64,
-            extent: scene.bounds.max - scene.bounds.min,
-        }
     }
 }
 

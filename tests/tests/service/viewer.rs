@@ -16,6 +16,29 @@ fn chromium() -> PathBuf {
         .map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from)
 }
 
+/// Every registered method's small setting on the built-in scene and its stage names: the
+/// script opens a page per method `/v1/server` lists with these.
+fn method_settings() -> serde_json::Value {
+    use lightcast_server::gi::{self, precompute::SceneFacts};
+    let facts = SceneFacts::of(&lightcast_server::scene::procedural::cornell_box());
+    gi::methods()
+        .map(|method| {
+            let stages: Vec<&str> = gi::entry(method)
+                .1
+                .stages
+                .iter()
+                .map(|s| s.name())
+                .collect();
+            let gi = (gi::table(method).testing.small)(&facts);
+            (
+                method.name().to_string(),
+                serde_json::json!({"gi": gi, "stages": stages}),
+            )
+        })
+        .collect::<serde_json::Map<_, _>>()
+        .into()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
     let web = Path::new(env!("CARGO_MANIFEST_DIR")).join("../client/web");
@@ -34,6 +57,7 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
     let upload = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/cornell-box/cornell-box.glb");
     assert!(upload.exists(), "{} is missing", upload.display());
     let artifacts = Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer");
+    let methods = method_settings();
     let server = TestServer::start(&[]).await;
     let token = "viewer-test-token-0123456789";
     let auth_server = TestServer::start(&["--token", token]).await;
@@ -44,6 +68,7 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
         .env("LIGHTCAST_ARTIFACTS", &artifacts)
         .env("CHROMIUM", &browser)
         .env("LIGHTCAST_UPLOAD_SCENE", &upload)
+        .env("LIGHTCAST_METHODS", methods.to_string())
         .env("LIGHTCAST_AUTH_URL", &auth_server.base)
         .env("LIGHTCAST_AUTH_TOKEN", token)
         .kill_on_drop(true)

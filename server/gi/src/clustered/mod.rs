@@ -30,6 +30,7 @@ use crate::gpu::readback::{
     read_buffer, read_rgba_texture, stage_buffer, PendingMap, TextureReadback,
 };
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
+use crate::passes::ShaderPass;
 use crate::passes::{
     frame_uniforms::light_faces,
     gbuffer::GBuffer,
@@ -53,6 +54,16 @@ use std::sync::Arc;
 /// 75 MiB, 256 VALs fit at 128², 1,024 hard-shadow VPLs at 256².
 pub const MAX_VISIBILITY_BYTES: u64 = 256 << 20;
 
+/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
+const PASSES: &[ShaderPass] = &[
+    ShaderPass::new(&shaders::CLUSTERING, &[&passes::CLUSTERING_GROUP]),
+    ShaderPass::new(&shaders::CLUSTERED_INDIRECT, &[&passes::INDIRECT_GROUP]),
+    ShaderPass::new(&shaders::PARABOLOID_MAPS, &[&passes::MAPS_GROUP]),
+    ShaderPass::new(&shaders::CSSM_BASIS, &[&passes::BASIS_GROUP]),
+    ShaderPass::new(&shaders::CSSM_MIPS, &[&passes::MIPS_GROUP]),
+    ShaderPass::new(&shaders::GEOMETRY_BLUR, &[&passes::BLUR_GROUP]),
+];
+
 pub const ENTRY: MethodEntry = MethodEntry {
     tables: &[params::TABLE],
     type_id: TypeId::of::<Clustered>,
@@ -72,7 +83,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::CLUSTER_COUNT),
         Knob::lower(&params::KMEANS_ITERATIONS),
     ],
-    shaders: shaders::PASSES,
+    shaders: PASSES,
     stages: stages::ALL,
     limits: &[&crate::gi::common::limits::MAX_RSM_SIZE],
     downscales: true,

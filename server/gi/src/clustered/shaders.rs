@@ -1,7 +1,6 @@
 //! The WGSL modules of `clustered` (`shaders/`), each the concatenation of its files.
 
 use crate::gpu::shaders::{wgsl, ShaderSource};
-use crate::passes::ShaderPass;
 
 /// VPL generation and k-means clustering of `clustered` (`gi::clustered`).
 pub const CLUSTERING: ShaderSource = ShaderSource {
@@ -60,13 +59,3 @@ pub const GEOMETRY_BLUR: ShaderSource = ShaderSource {
     name: "geometry_blur",
     files: &[wgsl!("clustered/vpls.wgsl"), wgsl!("clustered/blur.wgsl")],
 };
-
-/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
-pub const PASSES: &[ShaderPass] = &[
-    ShaderPass::new(&CLUSTERING, &[&super::passes::CLUSTERING_GROUP]),
-    ShaderPass::new(&CLUSTERED_INDIRECT, &[&super::passes::INDIRECT_GROUP]),
-    ShaderPass::new(&PARABOLOID_MAPS, &[&super::passes::MAPS_GROUP]),
-    ShaderPass::new(&CSSM_BASIS, &[&super::passes::BASIS_GROUP]),
-    ShaderPass::new(&CSSM_MIPS, &[&super::passes::MIPS_GROUP]),
-    ShaderPass::new(&GEOMETRY_BLUR, &[&super::passes::BLUR_GROUP]),
-];

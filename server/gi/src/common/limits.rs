@@ -2,6 +2,9 @@
 
 use crate::gi::limits::GiLimit;
 
+/// Most bounces a multi-bounce method computes, whatever the configuration.
+pub const BOUNCES_CAP: u32 = 16;
+
 pub static MAX_RSM_SIZE: GiLimit = GiLimit {
     name: "max_rsm_size",
     flag: "--max-rsm-size",
@@ -17,9 +20,9 @@ pub static MAX_BOUNCES: GiLimit = GiLimit {
     name: "max_bounces",
     flag: "--max-bounces",
     env: "LIGHTCAST_MAX_BOUNCES",
-    default: super::params::MAX_BOUNCES as u64,
+    default: BOUNCES_CAP as u64,
     min: 1,
-    max: super::params::MAX_BOUNCES as u64,
+    max: BOUNCES_CAP as u64,
     at_least: None,
     doc: "Most bounces of indirect light a frame may ask for (`bounces`).",
 };

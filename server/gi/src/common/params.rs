@@ -59,14 +59,11 @@ pub fn indirect_downscale(gi: &GiParams) -> u32 {
     }
 }
 
-/// Most bounces a multi-bounce method computes.
-pub const MAX_BOUNCES: u32 = 16;
-
 /// Reflections after the visible surface (the multi-bounce methods).
 pub const BOUNCES: Param = Param::integer(
     "bounces",
     1,
-    (1, MAX_BOUNCES),
+    (1, super::limits::BOUNCES_CAP),
     "Reflections after the visible surface (1: the single bounce seed 004 approximates); \
      progressive methods add one per frame while the light stays put, a render and a \
      session's still compute all",

@@ -3,13 +3,18 @@
 
 use crate::gi::limits::GiLimit;
 
+/// Most view samples for the importance estimate any configuration allows.
+pub const VIEW_SAMPLES_CAP: u32 = 4096;
+/// Most VALs drawn per frame any configuration allows.
+pub const VAL_COUNT_CAP: u32 = 1 << 20;
+
 pub static MAX_VAL_COUNT: GiLimit = GiLimit {
     name: "max_val_count",
     flag: "--max-val-count",
     env: "LIGHTCAST_MAX_VAL_COUNT",
     default: 65536,
     min: 1,
-    max: super::params::MAX_VAL_COUNT as u64,
+    max: VAL_COUNT_CAP as u64,
     at_least: None,
     doc: "Most VALs per frame (`val_count`).",
 };
@@ -20,7 +25,7 @@ pub static MAX_VIEW_SAMPLES: GiLimit = GiLimit {
     env: "LIGHTCAST_MAX_VIEW_SAMPLES",
     default: 4096,
     min: 1,
-    max: super::params::MAX_VIEW_SAMPLES as u64,
+    max: VIEW_SAMPLES_CAP as u64,
     at_least: None,
     doc: "Most view samples per frame (`view_samples`).",
 };

@@ -32,6 +32,7 @@ use super::{
 };
 use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap};
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
+use crate::passes::ShaderPass;
 use crate::passes::{frame_uniforms::light_faces, gbuffer::GBuffer};
 use cache_buffers::CacheBuffers;
 use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
@@ -51,7 +52,17 @@ pub const BRSM: GiMethod = GiMethod::new("brsm");
 
 use crate::passes::rsm::max_rsm_size;
 pub use crate::passes::rsm::MAX_RSM_SIZE;
-pub use params::{Settings, MAX_VAL_COUNT, MAX_VIEW_SAMPLES};
+pub use params::Settings;
+
+/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
+const PASSES: &[ShaderPass] = &[
+    ShaderPass::new(&shaders::IMPORTANCE, &[&importance::GROUP]),
+    ShaderPass::new(&shaders::CUMULATIVE_SUMS, &[&cumulative_sums::GROUP]),
+    ShaderPass::new(&shaders::VAL_SELECT, &[&val_select::GROUP]),
+    ShaderPass::new(&shaders::CACHE_LIGHTING, &[&cache_lighting::GROUP]),
+    ShaderPass::new(&shaders::INDIRECT_LIGHT, &[&indirect_light::GROUP]),
+    ShaderPass::new(&shaders::PROXY_OCCLUSION, &[&proxy_occlusion::GROUP]),
+];
 
 pub const ENTRY: MethodEntry = MethodEntry {
     tables: &[params::LIGHTSKIN, params::BRSM],
@@ -66,7 +77,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::VIEW_SAMPLES),
         Knob::lower(&crate::gi::common::params::RSM_SIZE),
     ],
-    shaders: shaders::PASSES,
+    shaders: PASSES,
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: true,

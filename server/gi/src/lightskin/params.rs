@@ -6,11 +6,6 @@ use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
 use serde::Deserialize;
 
-/// Most view samples for the importance estimate.
-pub const MAX_VIEW_SAMPLES: u32 = 4096;
-/// Most VALs drawn per frame.
-pub const MAX_VAL_COUNT: u32 = 1 << 20;
-
 pub const OCCLUSION: Param = Param::boolean(
     "occlusion",
     true,
@@ -39,7 +34,7 @@ pub const CACHE_ANGLE: Param = Param::optional_number(
 pub const VAL_COUNT: Param = Param::integer(
     "val_count",
     8192,
-    (1, MAX_VAL_COUNT),
+    (1, super::limits::VAL_COUNT_CAP),
     "N_sVAL: VALs drawn from the importance distribution per frame (eq. 13)",
 )
 .limit(&super::limits::MAX_VAL_COUNT)
@@ -49,7 +44,7 @@ pub const VAL_COUNT: Param = Param::integer(
 pub const VIEW_SAMPLES: Param = Param::integer(
     "view_samples",
     512,
-    (1, MAX_VIEW_SAMPLES),
+    (1, super::limits::VIEW_SAMPLES_CAP),
     "N_VS: view samples estimating each VAL's importance (eq. 10-11)",
 )
 .limit(&super::limits::MAX_VIEW_SAMPLES)

@@ -1,7 +1,6 @@
 //! The WGSL modules of LightSkin and BRSM (`shaders/`), each the concatenation of its files.
 
 use crate::gpu::shaders::{wgsl, ShaderSource};
-use crate::passes::ShaderPass;
 
 pub const IMPORTANCE: ShaderSource = ShaderSource {
     name: "importance",
@@ -52,13 +51,3 @@ pub const PROXY_OCCLUSION: ShaderSource = ShaderSource {
         wgsl!("lightskin/proxy_occlusion.wgsl"),
     ],
 };
-
-/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
-pub const PASSES: &[ShaderPass] = &[
-    ShaderPass::new(&IMPORTANCE, &[&super::importance::GROUP]),
-    ShaderPass::new(&CUMULATIVE_SUMS, &[&super::cumulative_sums::GROUP]),
-    ShaderPass::new(&VAL_SELECT, &[&super::val_select::GROUP]),
-    ShaderPass::new(&CACHE_LIGHTING, &[&super::cache_lighting::GROUP]),
-    ShaderPass::new(&INDIRECT_LIGHT, &[&super::indirect_light::GROUP]),
-    ShaderPass::new(&PROXY_OCCLUSION, &[&super::proxy_occlusion::GROUP]),
-];

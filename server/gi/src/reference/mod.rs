@@ -45,6 +45,7 @@ use crate::passes::bind::{self, bind_group};
 use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
 use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::tonemap::luminance;
+use crate::passes::ShaderPass;
 use crate::passes::{self, ParamSlots};
 use crate::scene::{material, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
@@ -53,7 +54,7 @@ use std::any::{Any, TypeId};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
-pub use crate::gi::common::params::MAX_BOUNCES;
+use crate::gi::common::limits::BOUNCES_CAP;
 
 /// The method's name.
 pub const REFERENCE: GiMethod = GiMethod::new("reference");
@@ -68,6 +69,12 @@ pub const BAND_RAYS: u64 = 1 << 19;
 /// The history of [`PathTracer::accumulate`]'s callers (bench, tests).
 const DIRECT_HISTORY: u64 = u64::MAX;
 
+/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
+const PASSES: &[ShaderPass] = &[
+    ShaderPass::new(&shaders::REFERENCE_PATH_TRACE, &[&PASS_GROUP, &SCENE_GROUP]),
+    ShaderPass::new(&shaders::REFERENCE_RESOLVE, &[&resolve::GROUP]),
+];
+
 pub const ENTRY: MethodEntry = MethodEntry {
     tables: &[params::TABLE],
     type_id: TypeId::of::<Reference>,
@@ -80,7 +87,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::SPP),
         Knob::lower(&crate::gi::common::params::BOUNCES),
     ],
-    shaders: shaders::PASSES,
+    shaders: PASSES,
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: false,
@@ -156,10 +163,10 @@ pub fn bvh_key() -> PrecomputeKey {
 }
 
 fn check_counts(bounces: u32, spp: u32) -> Result<(), InvalidSetting> {
-    if !(1..=MAX_BOUNCES).contains(&bounces) {
+    if !(1..=BOUNCES_CAP).contains(&bounces) {
         return Err(InvalidSetting::new(
             "bounces",
-            format!("{bounces} is outside 1..={MAX_BOUNCES}"),
+            format!("{bounces} is outside 1..={BOUNCES_CAP}"),
         ));
     }
     if !(1..=MAX_SAMPLES_PER_CALL).contains(&spp) {

@@ -1,7 +1,6 @@
 //! The WGSL modules of the reference (`shaders/`), each the concatenation of its files.
 
 use crate::gpu::shaders::{wgsl, ShaderSource};
-use crate::passes::ShaderPass;
 
 /// The reference path tracer (`gi::reference`).
 pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
@@ -22,12 +21,3 @@ pub const REFERENCE_RESOLVE: ShaderSource = ShaderSource {
     name: "reference_resolve",
     files: &[wgsl!("reference/resolve.wgsl")],
 };
-
-/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
-pub const PASSES: &[ShaderPass] = &[
-    ShaderPass::new(
-        &REFERENCE_PATH_TRACE,
-        &[&super::PASS_GROUP, &super::SCENE_GROUP],
-    ),
-    ShaderPass::new(&REFERENCE_RESOLVE, &[&super::resolve::GROUP]),
-];

@@ -28,6 +28,7 @@ use crate::gpu::readback::{
 };
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::rsm::{max_rsm_size, Rsm, RsmFace, RsmPass};
+use crate::passes::ShaderPass;
 use crate::passes::{frame_uniforms::light_faces, Target};
 use lightcast_protocol::{GiMethod, GiParams, View};
 use params::Settings;
@@ -42,6 +43,9 @@ pub const RSM_GATHER: GiMethod = GiMethod::new("rsm_gather");
 /// Most light faces (a point light's cube).
 const MAX_FACES: usize = 6;
 
+/// The module with its pipeline's bind group (see [`ShaderPass`]).
+const PASSES: &[ShaderPass] = &[ShaderPass::new(&shaders::GATHER, &[&passes::GATHER_GROUP])];
+
 pub const ENTRY: MethodEntry = MethodEntry {
     tables: &[params::TABLE],
     type_id: TypeId::of::<RsmGather>,
@@ -54,7 +58,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::GATHER_SAMPLES),
         Knob::lower(&crate::gi::common::params::RSM_SIZE),
     ],
-    shaders: shaders::PASSES,
+    shaders: PASSES,
     stages: stages::ALL,
     limits: &[&crate::gi::common::limits::MAX_RSM_SIZE],
     downscales: true,

@@ -1,7 +1,6 @@
 //! The WGSL module of `rsm_gather` (`shaders/`), the concatenation of its files.
 
 use crate::gpu::shaders::{wgsl, ShaderSource};
-use crate::passes::ShaderPass;
 
 /// Every pixel's gather of RSM texels.
 pub const GATHER: ShaderSource = ShaderSource {
@@ -13,6 +12,3 @@ pub const GATHER: ShaderSource = ShaderSource {
         wgsl!("rsm_gather/gather.wgsl"),
     ],
 };
-
-/// The module with its pipeline's bind group (see [`ShaderPass`]).
-pub const PASSES: &[ShaderPass] = &[ShaderPass::new(&GATHER, &[&super::passes::GATHER_GROUP])];

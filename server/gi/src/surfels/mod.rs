@@ -49,6 +49,7 @@ use crate::gi::{
 use crate::gpu::readback::{stage_buffer, PendingMap};
 use crate::gpu::timing::FrameStages;
 use crate::gpu::GpuContext;
+use crate::passes::ShaderPass;
 use crate::scene::Scene;
 use glam::Vec3;
 use grid::{CacheGrid, GridError};
@@ -71,6 +72,19 @@ pub const MAX_LINK_BYTES: u64 = 128 << 20;
 /// Image histories (sessions) whose bounces a scene's surfels keep at once.
 const MAX_HISTORIES: usize = 4;
 
+/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
+const PASSES: &[ShaderPass] = &[
+    ShaderPass::new(&shaders::SURFEL_LIGHT, &[&passes::LIGHT_GROUP]),
+    ShaderPass::new(&shaders::SURFEL_PULL, &[&passes::PULL_GROUP]),
+    ShaderPass::new(&shaders::SURFEL_CACHE_LIGHT, &[&passes::CACHE_LIGHT_GROUP]),
+    ShaderPass::new(&shaders::SURFEL_SHADE, &[&passes::SHADE_GROUP]),
+    ShaderPass::new(&shaders::SURFEL_CACHE_SH_VIEW, &[&passes::SH_VIEW_GROUP]),
+    ShaderPass::new(
+        &shaders::SURFEL_LINK_RAYS,
+        &[&link_rays::RAY_GROUP, &link_rays::BVH_GROUP],
+    ),
+];
+
 pub const ENTRY: MethodEntry = MethodEntry {
     tables: &[params::TABLE],
     type_id: TypeId::of::<Surfels>,
@@ -85,7 +99,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
         Knob::lower(&params::SH_BANDS),
         Knob::lower(&params::SURFEL_COUNT),
     ],
-    shaders: shaders::PASSES,
+    shaders: PASSES,
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: true,

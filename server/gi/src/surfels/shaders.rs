@@ -1,7 +1,6 @@
 //! The WGSL modules of `surfels` (`shaders/`), each the concatenation of its files.
 
 use crate::gpu::shaders::{wgsl, ShaderSource};
-use crate::passes::ShaderPass;
 
 /// `surfels`: every surfel's radiosity from the light, emission and the previous bounce.
 pub const SURFEL_LIGHT: ShaderSource = ShaderSource {
@@ -54,16 +53,3 @@ pub const SURFEL_LINK_RAYS: ShaderSource = ShaderSource {
     name: "surfel_link_rays",
     files: &[wgsl!("bvh.wgsl"), wgsl!("surfels/link_rays.wgsl")],
 };
-
-/// Every module with its pipeline's bind groups (see [`ShaderPass`]).
-pub const PASSES: &[ShaderPass] = &[
-    ShaderPass::new(&SURFEL_LIGHT, &[&super::passes::LIGHT_GROUP]),
-    ShaderPass::new(&SURFEL_PULL, &[&super::passes::PULL_GROUP]),
-    ShaderPass::new(&SURFEL_CACHE_LIGHT, &[&super::passes::CACHE_LIGHT_GROUP]),
-    ShaderPass::new(&SURFEL_SHADE, &[&super::passes::SHADE_GROUP]),
-    ShaderPass::new(&SURFEL_CACHE_SH_VIEW, &[&super::passes::SH_VIEW_GROUP]),
-    ShaderPass::new(
-        &SURFEL_LINK_RAYS,
-        &[&super::link_rays::RAY_GROUP, &super::link_rays::BVH_GROUP],
-    ),
-];

@@ -76,6 +76,7 @@ pub struct Service {
     render_tx: mpsc::Sender<render_loop::Command>,
     render_thread: std::thread::JoinHandle<()>,
     sessions: Arc<sessions::SessionRegistry>,
+    scenes: Arc<scenes::SceneRegistry>,
 }
 
 impl Service {
@@ -207,7 +208,7 @@ impl Service {
             None => None,
         };
         let state = Arc::new(http::AppState::new(
-            scenes,
+            Arc::clone(&scenes),
             scene_store,
             Arc::clone(&sessions),
             render_tx.clone(),
@@ -241,6 +242,7 @@ impl Service {
             render_tx,
             render_thread,
             sessions,
+            scenes,
         })
     }
 
@@ -259,6 +261,10 @@ impl Service {
             .await
             .map_err(|e| ServeError::Task(e.to_string()))?
             .map_err(|_| ServeError::Task("the render loop panicked".into()))?;
+        let scenes = self.scenes;
+        tokio::task::spawn_blocking(move || scenes.stop_workers())
+            .await
+            .map_err(|e| ServeError::Task(e.to_string()))?;
         served.map_err(|e| ServeError::Task(e.to_string()))
     }
 }

@@ -146,6 +146,8 @@ const MAX_QUEUED_JOBS: usize = 32;
 pub struct SceneRegistry {
     scenes: Mutex<BTreeMap<String, Arc<SceneEntry>>>,
     jobs: Arc<JobQueue>,
+    /// The worker threads, joined by [`SceneRegistry::stop_workers`].
+    workers: Mutex<Vec<std::thread::JoinHandle<()>>>,
     max_scenes: usize,
     budget: Arc<MemoryBudget>,
     quotas: TokenQuotas,

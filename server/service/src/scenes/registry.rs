@@ -25,26 +25,32 @@ impl SceneRegistry {
     /// rayon, and `gpu` where it can).
     pub fn new(store: Store, limits: &Limits, gpu: Option<GpuContext>) -> Arc<Self> {
         let grace = Duration::from_secs(limits.unwanted_precompute_secs);
-        Self::with_workers(limits, Some(QUICK_JOB_SECONDS), move |entry, key| {
-            worker::precompute(&store, gpu.as_ref(), entry, key, grace)
-        })
+        Self::with_workers(
+            limits,
+            Some(QUICK_JOB_SECONDS),
+            move |entry, key, stopping| {
+                worker::precompute(&store, gpu.as_ref(), entry, key, grace, stopping)
+            },
+        )
     }
 
     /// [`SceneRegistry::new`] with `work` run on a worker thread for each queued job, plus a
-    /// second worker for jobs estimated at most `quick` seconds.
+    /// second worker for jobs estimated at most `quick` seconds. `work`'s third argument says
+    /// whether the registry is stopping (a build may end early then).
     pub(super) fn with_workers(
         limits: &Limits,
         quick: Option<f64>,
-        work: impl Fn(&Arc<SceneEntry>, &PrecomputeKey) + Send + Sync + 'static,
+        work: impl Fn(&Arc<SceneEntry>, &PrecomputeKey, &dyn Fn() -> bool) + Send + Sync + 'static,
     ) -> Arc<Self> {
         let jobs = Arc::new(JobQueue::default());
         let work = Arc::new(work);
         let lanes = [("precompute", f64::INFINITY)]
             .into_iter()
             .chain(quick.map(|q| ("precompute-quick", q)));
+        let mut workers = Vec::new();
         for (name, max_seconds) in lanes {
             let (jobs, work) = (Arc::clone(&jobs), Arc::clone(&work));
-            std::thread::Builder::new()
+            let worker = std::thread::Builder::new()
                 .name(name.into())
                 .spawn(move || {
                     while let Some(job) = jobs.next(max_seconds) {
@@ -54,7 +60,8 @@ impl SceneRegistry {
                         let key = job.key;
                         // A bug in one scene's precomputation must not stop every later
                         // scene's.
-                        let run = || work(&entry, &key);
+                        let stopping = || jobs.is_closed();
+                        let run = || work(&entry, &key, &stopping);
                         if std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).is_err() {
                             tracing::error!(scene = %entry.id, kind = key.kind, "a precomputation panicked");
                             entry.update_variant(&key, &mut |v| {
@@ -68,14 +75,29 @@ impl SceneRegistry {
                     }
                 })
                 .expect("spawning a precompute thread");
+            workers.push(worker);
         }
         Arc::new(Self {
             scenes: Mutex::new(BTreeMap::new()),
             jobs,
+            workers: Mutex::new(workers),
             max_scenes: limits.max_scenes as usize,
             budget: Arc::new(MemoryBudget::new(limits)),
             quotas: TokenQuotas::new(limits),
         })
+    }
+
+    /// Ends the precompute workers and waits for them: a build running stops at its next
+    /// cancellation check. Their GPU context goes with them, so that a process exiting after
+    /// this leaves no thread inside the driver (lavapipe crashed at exit when one was).
+    pub fn stop_workers(&self) {
+        self.jobs.close();
+        let workers = std::mem::take(&mut *lock(&self.workers));
+        for worker in workers {
+            if worker.join().is_err() {
+                tracing::error!("a precompute worker panicked");
+            }
+        }
     }
 
     /// The memory budgets every scene is taken from.

@@ -38,7 +38,7 @@ fn gated() -> (Arc<SceneRegistry>, mpsc::Receiver<String>, mpsc::Sender<()>) {
     let (seen_tx, seen) = mpsc::channel();
     let (go, go_rx) = mpsc::channel::<()>();
     let go_rx = Mutex::new(go_rx);
-    let registry = SceneRegistry::with_workers(&limits(4), None, move |entry, _| {
+    let registry = SceneRegistry::with_workers(&limits(4), None, move |entry, _, _| {
         let _ = seen_tx.send(entry.id.clone());
         let _ = lock(&go_rx).recv();
     });
@@ -49,7 +49,7 @@ const WAIT: Duration = Duration::from_secs(10);
 
 /// A registry under `limits` whose worker does nothing.
 fn idle(limits: &Limits) -> Arc<SceneRegistry> {
-    SceneRegistry::with_workers(limits, None, |_, _| {})
+    SceneRegistry::with_workers(limits, None, |_, _, _| {})
 }
 
 /// `limits` with the GI limits `set`.
@@ -271,7 +271,7 @@ fn a_long_precomputation_does_not_hold_up_short_ones() {
     let (release, release_rx) = mpsc::channel::<()>();
     let release_rx = Mutex::new(release_rx);
     let registry = SceneRegistry::with_workers(&limits(4), Some(QUICK_JOB_SECONDS), {
-        move |_, key| {
+        move |_, key, _| {
             let _ = started_tx.send(key.kind);
             if key.kind == crate::gi::surfels::SURFEL_LINKS {
                 let _ = lock(&release_rx).recv();
@@ -332,7 +332,7 @@ fn jobs_of_scenes_gone_from_every_holder_are_skipped() {
 #[test]
 fn a_panicking_precomputation_fails_its_variant_and_the_worker_goes_on() {
     let (done_tx, done) = mpsc::channel();
-    let registry = SceneRegistry::with_workers(&limits(4), None, move |entry, p| {
+    let registry = SceneRegistry::with_workers(&limits(4), None, move |entry, p, _| {
         assert!(p != &params(1.0), "a bug in the precomputation");
         let _ = done_tx.send(entry.id.clone());
     });

@@ -19,7 +19,7 @@ impl JobQueue {
     pub(super) fn next(&self, max_seconds: f64) -> Option<Job> {
         let mut jobs = lock(&self.jobs);
         loop {
-            if self.closed.load(Ordering::Acquire) {
+            if self.is_closed() {
                 return None;
             }
             let priority = |j: &Job| j.estimated - j.queued.elapsed().as_secs_f64();
@@ -39,6 +39,10 @@ impl JobQueue {
         }
     }
 
+    pub(super) fn is_closed(&self) -> bool {
+        self.closed.load(Ordering::Acquire)
+    }
+
     pub(super) fn close(&self) {
         self.closed.store(true, Ordering::Release);
         let _guard = lock(&self.jobs);
@@ -54,12 +58,13 @@ pub(super) fn precompute(
     scene: &Arc<SceneEntry>,
     key: &PrecomputeKey,
     grace: Duration,
+    stopping: &dyn Fn() -> bool,
 ) {
     let update = |f: &mut dyn FnMut(&mut Variant)| scene.update_variant(key, f);
     // Held by nobody but this worker (the scene was deleted and no request renders it any
     // more, or it was a one-shot render's upload whose request has ended), or nobody has
     // waited for it for `grace`: its session was deleted, its one-shot gave up.
-    let cancelled = || Arc::strong_count(scene) == 1 || scene.unwanted(key, grace);
+    let cancelled = || stopping() || Arc::strong_count(scene) == 1 || scene.unwanted(key, grace);
     let entry = match precompute::entries().find(|e| e.kind == key.kind) {
         Some(entry) if !cancelled() => entry,
         _ => {

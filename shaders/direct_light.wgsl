@@ -1,8 +1,8 @@
-// Deferred lighting: emission, one punctual light with PCF shadows, and the indirect light
+// Deferred lighting: emission, every punctual light with PCF shadows, and the indirect light
 // computed before, into HDR.
 
 @group(0) @binding(0) var<storage, read> camera: CameraUniform;
-@group(0) @binding(1) var<storage, read> light: LightUniform;
+@group(0) @binding(1) var<storage, read> lights: Lights;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
 @group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
 @group(0) @binding(4) var g_diffuse: texture_2d<f32>;
@@ -35,12 +35,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         ne.w,
     );
     let v = normalize(camera.position - p);
-    let incident = light_incident(light, p);
-    let cos_x = max(dot(n, incident.to_light), 0.0);
     var radiance = textureLoad(g_emissive, texel, 0).rgb + textureLoad(indirect, texel, 0).rgb;
-    if cos_x > 0.0 {
-        let visibility = shadow_visibility(light, shadow_map, shadow_sampler, p, n, cos_x);
-        radiance += eval_brdf(surface, n, incident.to_light, v) * incident.irradiance * cos_x * visibility;
+    for (var i = 0u; i < lights.count; i++) {
+        let light = lights.list[i];
+        let incident = light_incident(light, p);
+        let cos_x = max(dot(n, incident.to_light), 0.0);
+        if cos_x > 0.0 {
+            let visibility = shadow_visibility(light, shadow_map, shadow_sampler, p, n, cos_x);
+            radiance += eval_brdf(surface, n, incident.to_light, v) * incident.irradiance * cos_x * visibility;
+        }
     }
     textureStore(hdr_out, texel, vec4<f32>(radiance, 1.0));
 }

@@ -1,9 +1,12 @@
-// Punctual lights and their shadow maps. The shadow map is a depth array: one layer for
-// directional (orthographic) and spot (perspective) lights, six cube faces for point lights.
+// Punctual lights and their shadow maps. The shadow map is one depth array for every light of
+// the frame: one layer for a directional (orthographic) or spot (perspective) light, six cube
+// faces for a point light, each light's layers from its `first_layer` on.
 
 const LIGHT_DIRECTIONAL: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
 const LIGHT_POINT: u32 = 2u;
+// Mirrors `MAX_LIGHTS` in server/passes/src/passes/frame_uniforms.rs.
+const MAX_LIGHTS: u32 = 16u;
 
 // Mirrored by `LightUniform` in server/passes/src/passes/frame_uniforms.rs.
 struct LightUniform {
@@ -22,8 +25,18 @@ struct LightUniform {
     // directional lights, world units per metre from the light for spot and point lights
     // (their texels grow with distance).
     normal_bias: f32,
+    // The light's first layer in the frame's shadow-map array.
+    first_layer: u32,
     pad0: f32,
-    pad1: f32,
+}
+
+// Every punctual light of a frame. Mirrored by `LightsUniform` in frame_uniforms.rs.
+struct Lights {
+    count: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+    list: array<LightUniform, MAX_LIGHTS>,
 }
 
 struct Incident {
@@ -93,7 +106,7 @@ fn shadow_visibility(
     for (var y = -1; y <= 1; y++) {
         for (var x = -1; x <= 1; x++) {
             let offset = vec2<f32>(f32(x), f32(y)) * light.shadow_texel;
-            lit += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + offset, face, ndc.z);
+            lit += textureSampleCompareLevel(shadow_map, shadow_sampler, uv + offset, light.first_layer + face, ndc.z);
         }
     }
     return lit / 9.0;

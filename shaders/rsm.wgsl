@@ -1,6 +1,7 @@
 // Reflective shadow map: every texel seen from the light becomes a virtual area light (VAL)
-// with a position, a normal, the flux it reflects and its disk area (eq. 1). Faces of a point
-// light lie side by side in one atlas, so later stages treat every light as one 2D map.
+// with a position, a normal, the flux it reflects and its disk area (eq. 1). The faces of every
+// light (six for a point light) lie side by side in one atlas, so later stages treat all the
+// frame's lights as one 2D map.
 
 // Mirrored by `RsmFace` in server/passes/src/passes/rsm.rs.
 struct RsmFace {
@@ -11,13 +12,14 @@ struct RsmFace {
     // constant texel area (w·h of the orthographic box / texel count) for directional lights.
     texel_area: f32,
     perspective: u32,
+    // The face's light in `lights`.
+    light: u32,
     pad0: u32,
     pad1: u32,
-    pad2: u32,
 }
 
 @group(0) @binding(0) var<storage, read> face: RsmFace;
-@group(0) @binding(1) var<storage, read> light: LightUniform;
+@group(0) @binding(1) var<storage, read> lights: Lights;
 
 @vertex
 fn vs_main(
@@ -43,6 +45,7 @@ fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> RsmOut {
         discard;
     }
     let n = facing_normal(in.normal, front);
+    let light = lights.list[face.light];
     var area = face.texel_area;
     // Cross-section of the texel's beam across the ray, which is what E⊥ falls on.
     var cross_section = area;

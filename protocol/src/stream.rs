@@ -18,9 +18,18 @@ pub enum ClientMessage {
         #[serde(default)]
         input_id: u64,
     },
-    /// Replace the light.
+    /// Replace light `index` of the session's lights (0-based, below their count); without
+    /// `index`, the session gets this one light instead of all it had (`render.light`).
     Light {
         light: Light,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        index: Option<u32>,
+        #[serde(default)]
+        input_id: u64,
+    },
+    /// Replace every light of the session (`render.lights`): add or remove lights this way.
+    Lights {
+        lights: Vec<Light>,
         #[serde(default)]
         input_id: u64,
     },

@@ -166,7 +166,7 @@ fn main() -> anyhow::Result<()> {
                 width: 32,
                 height: 32,
                 camera: default_light::default_camera(&scene),
-                light: default_light::default_light(&scene),
+                lights: vec![default_light::default_light(&scene)],
                 exposure: Exposure::Auto,
                 shadow_map_size: 256,
                 capture_hdr: false,

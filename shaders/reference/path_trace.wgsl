@@ -1,12 +1,12 @@
 // The reference: progressive path tracing of the indirect light leaving each pixel's surface
 // point towards the camera, with the same materials (BRDF of eq. 3–4 split from the textured
-// base colour, alpha masks; surfaces.wgsl), punctual light and emitters as the other methods
+// base colour, alpha masks; surfaces.wgsl), punctual lights and emitters as the other methods
 // but exact visibility (BVH rays instead of shadow maps or caches).
 //
 // A path starts at the surface the pixel centre sees (the point the G-buffer rasterises) and
 // reflects `bounces` times. At each vertex y it reached it adds y's emission (unless
-// `emitters` is off: methods that light from the punctual light alone are compared without
-// it) and, by next-event estimation with a shadow ray, the punctual light y reflects. So
+// `emitters` is off: methods that light from the punctual lights alone are compared without
+// it) and, by next-event estimation with a shadow ray, each punctual light y reflects. So
 // `bounces` = 1 is the single-bounce light seed 004 approximates; more add inter-reflections
 // (seed 001).
 
@@ -31,7 +31,7 @@ struct TraceParams {
 }
 
 @group(0) @binding(0) var<storage, read> params: TraceParams;
-@group(0) @binding(1) var<storage, read> light: LightUniform;
+@group(0) @binding(1) var<storage, read> lights: Lights;
 // Per pixel: the sum of the samples' indirect radiance (rgb) and of their squared luminance (w).
 @group(0) @binding(2) var<storage, read_write> accum: array<vec4<f32>>;
 
@@ -126,8 +126,8 @@ fn sample_brdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, state: ptr<function,
     return basis(reflect(-wo, n)) * vec3<f32>(sin_a * cos(phi), sin_a * sin(phi), cos_a);
 }
 
-// Whether nothing blocks the segment from `p` (already offset) towards the light.
-fn light_visible(p: vec3<f32>, to_light: vec3<f32>) -> bool {
+// Whether nothing blocks the segment from `p` (already offset) towards `light`.
+fn light_visible(light: LightUniform, p: vec3<f32>, to_light: vec3<f32>) -> bool {
     var t_max = 3.4e38;
     if light.kind != LIGHT_DIRECTIONAL {
         t_max = distance(light.position, p) * (1.0 - 1e-4);
@@ -160,15 +160,20 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
         if params.emitters != 0u {
             radiance += throughput * surface.emissive;
         }
-        let incident = light_incident(light, surface.position);
-        let cos_y = dot(surface.normal, incident.to_light);
         let lifted = surface.position + surface.geometric * params.ray_epsilon;
-        // The shadow ray last: only where the light could reach (cone, facing, intensity).
-        if cos_y > 0.0 && dot(surface.geometric, incident.to_light) > 0.0
-            && any(incident.irradiance > vec3<f32>(0.0))
-            && light_visible(lifted, incident.to_light) {
-            radiance += throughput * eval_brdf(surface.brdf, surface.normal, incident.to_light, wo)
-                * incident.irradiance * cos_y;
+        // Next-event estimation sums every light, one shadow ray each: exact in the light
+        // count (no light is sampled), so the noise stays that of the paths.
+        for (var i = 0u; i < lights.count; i++) {
+            let light = lights.list[i];
+            let incident = light_incident(light, surface.position);
+            let cos_y = dot(surface.normal, incident.to_light);
+            // The shadow ray last: only where the light could reach (cone, facing, intensity).
+            if cos_y > 0.0 && dot(surface.geometric, incident.to_light) > 0.0
+                && any(incident.irradiance > vec3<f32>(0.0))
+                && light_visible(light, lifted, incident.to_light) {
+                radiance += throughput * eval_brdf(surface.brdf, surface.normal, incident.to_light, wo)
+                    * incident.irradiance * cos_y;
+            }
         }
     }
     return radiance;

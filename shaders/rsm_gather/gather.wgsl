@@ -19,6 +19,16 @@ struct GatherParams {
     probe_y: u32,
 }
 
+// Mirrored by `GatherFace` in server/gi/src/rsm_gather/passes.rs.
+struct GatherFace {
+    view_proj: mat4x4<f32>,
+    // The face's light: a light's faces follow each other in the atlas.
+    light: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
 // Mirrored by `GatherSample` in server/gi/src/rsm_gather/pattern.rs.
 struct GatherSample {
     // ξ1·(sin 2πξ2, cos 2πξ2): the offset in units of r_max.
@@ -37,10 +47,11 @@ struct GatherSample {
 @group(0) @binding(6) var rsm_position: texture_2d<f32>;
 @group(0) @binding(7) var rsm_normal: texture_2d<f32>;
 @group(0) @binding(8) var rsm_flux_area: texture_2d<f32>;
-// Each face's view-projection, as the RSM was rendered with.
-@group(0) @binding(9) var<storage, read> faces: array<mat4x4<f32>>;
+// Each face's view-projection, as the RSM was rendered with, and its light.
+@group(0) @binding(9) var<storage, read> faces: array<GatherFace>;
 @group(0) @binding(10) var<storage, read> samples: array<GatherSample>;
-// The probe pixel's face, its texel coordinates within it, and 1 where it has a surface.
+// The probe pixel's face of the first light, its texel coordinates within it, and 1 where it
+// has a surface.
 @group(0) @binding(11) var<storage, read_write> probe: vec4<f32>;
 @group(0) @binding(12) var indirect_out: texture_storage_2d<rgba16float, write>;
 
@@ -52,7 +63,7 @@ struct Projection {
 }
 
 fn project(f: u32, x: vec3<f32>) -> Projection {
-    let clip = faces[f] * vec4<f32>(x, 1.0);
+    let clip = faces[f].view_proj * vec4<f32>(x, 1.0);
     let size = f32(params.rsm_size);
     if clip.w <= 0.0 {
         let xy = clip.xy;
@@ -90,20 +101,37 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let n = normalize(ne.xyz);
     let v = normalize(camera.position - x);
     let s = SurfaceBrdf(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb, ne.w);
-    // The first face whose frustum holds x, else the first face's nearest border point.
-    var face = 0u;
-    var centre = project(0u, x).st;
-    for (var f = 0u; f < params.faces; f++) {
-        let p = project(f, x);
-        if p.inside {
-            face = f;
-            centre = p.st;
-            break;
+    var radiance = vec3<f32>(0.0);
+    // Each light's faces in turn (pattern.rs `light_runs`): every light is gathered from.
+    var first = 0u;
+    while first < params.faces {
+        var end = first + 1u;
+        while end < params.faces && faces[end].light == faces[first].light {
+            end++;
         }
+        // The light's first face whose frustum holds x, else its first face's nearest border
+        // point.
+        var face = first;
+        var centre = project(first, x).st;
+        for (var f = first; f < end; f++) {
+            let p = project(f, x);
+            if p.inside {
+                face = f;
+                centre = p.st;
+                break;
+            }
+        }
+        if is_probe && first == 0u {
+            probe = vec4<f32>(f32(face), centre, 1.0);
+        }
+        radiance += gather_face(face, centre, x, n, v, s);
+        first = end;
     }
-    if is_probe {
-        probe = vec4<f32>(f32(face), centre, 1.0);
-    }
+    textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));
+}
+
+// The pattern around `centre` in atlas face `face`: Σ weight × the pixel light's L.
+fn gather_face(face: u32, centre: vec2<f32>, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
     let size = f32(params.rsm_size);
     let r2 = params.radius * params.radius;
     var radiance = vec3<f32>(0.0);
@@ -122,5 +150,5 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         let normal = textureLoad(rsm_normal, t, 0).xyz;
         radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, n, v, s) * (sample.weight * r2);
     }
-    textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));
+    return radiance;
 }

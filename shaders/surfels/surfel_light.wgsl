@@ -28,7 +28,7 @@ struct LightParams {
 }
 
 @group(0) @binding(0) var<storage, read> params: LightParams;
-@group(0) @binding(1) var<storage, read> light: LightUniform;
+@group(0) @binding(1) var<storage, read> lights: Lights;
 @group(0) @binding(2) var shadow_map: texture_depth_2d_array;
 @group(0) @binding(3) var shadow_sampler: sampler_comparison;
 @group(0) @binding(4) var<storage, read> surfels: array<SurfelGpu>;
@@ -44,12 +44,15 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let s = surfels[k];
-    let incident = light_incident(light, s.position);
-    let cos_x = max(dot(s.normal, incident.to_light), 0.0);
     var direct = vec3<f32>(0.0);
-    if cos_x > 0.0 {
-        let v = shadow_visibility(light, shadow_map, shadow_sampler, s.position, s.normal, cos_x);
-        direct = incident.irradiance * cos_x * v;
+    for (var i = 0u; i < lights.count; i++) {
+        let light = lights.list[i];
+        let incident = light_incident(light, s.position);
+        let cos_x = max(dot(s.normal, incident.to_light), 0.0);
+        if cos_x > 0.0 {
+            let v = shadow_visibility(light, shadow_map, shadow_sampler, s.position, s.normal, cos_x);
+            direct += incident.irradiance * cos_x * v;
+        }
     }
     var indirect = vec3<f32>(0.0);
     if params.feedback != 0u {

@@ -112,7 +112,8 @@ function flushInput(now) {
     const value = state.queued[kind];
     if (!value) continue;
     state.queued[kind] = null;
-    send({ type: kind, [kind]: value });
+    // The light the page edits is the session's first (`index` keeps the others).
+    send(kind === 'light' ? { type: kind, light: value, index: 0 } : { type: kind, [kind]: value });
   }
 }
 
@@ -239,7 +240,8 @@ async function useScene(id, render) {
   controls.setSceneSize(Math.hypot(max[0] - min[0], max[1] - min[1], max[2] - min[2]));
   controls.setRegion(scene.camera_region || null);
   controls.setCamera(render.camera || scene.default_camera);
-  state.light = structuredClone(render.light || scene.default_light);
+  state.lights = structuredClone(render.lights || (render.light ? [render.light] : scene.default_lights || [scene.default_light]));
+  state.light = state.lights[0];
   controls.setLight(state.light);
   showLight();
   watchScene(id);
@@ -291,7 +293,7 @@ async function refreshScenes() {
 }
 
 function switchScene(id) {
-  sendUpdate({ render: { scene: id, camera: null, light: null } });
+  sendUpdate({ render: { scene: id, camera: null, light: null, lights: null } });
 }
 
 async function uploadScene(files) {
@@ -531,7 +533,8 @@ $('still').addEventListener('click', async () => {
   button.disabled = true;
   button.textContent = 'Rendering still…';
   try {
-    const render = { ...state.params.render, camera: controls.camera(), light: state.light };
+    const lights = [state.light, ...state.lights.slice(1)];
+    const render = { ...state.params.render, camera: controls.camera(), light: null, lights };
     const { png, report } = await renderStill(render);
     const stamp = new Date().toISOString().replace(/[:.]/g, '-');
     download(png, `lightcast-${render.scene}-${stamp}.png`, 'image/png');

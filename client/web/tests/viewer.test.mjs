@@ -456,7 +456,8 @@ async function main() {
 
     await step('dragging in light mode moves the light', async () => {
       const before = await pageSession(page);
-      assert.equal(before.params.render.light, null, 'the scene light at first');
+      assert.equal(before.params.render.light, null, 'the scene lights at first');
+      assert.equal(before.params.render.lights, null, 'the scene lights at first');
       await page.check('input[name="drag-mode"][value="light"]');
       const box = await page.locator('#frame').boundingBox();
       const diff = await changeAfter(page, async () => {
@@ -468,7 +469,7 @@ async function main() {
       }, 'the light drag');
       assert.ok(diff > 2, `moving the light hardly changed the image: ${diff.toFixed(2)}`);
       const after = await pageSession(page);
-      assert.ok(after.params.render.light, 'the session has its own light now');
+      assert.equal(after.params.render.lights.length, 1, 'the session has its own light now (the scene has one)');
       await page.check('input[name="drag-mode"][value="camera"]');
     });
 
@@ -606,7 +607,7 @@ async function main() {
       }, 'the sun elevation slider');
       assert.ok(diff > 4, `turning the sun hardly changed the street: ${diff.toFixed(2)}`);
       const session = await pageSession(page);
-      assert.equal(session.params.render.light.kind, 'directional');
+      assert.equal(session.params.render.lights[0].kind, 'directional');
     });
 
     if (process.env.LIGHTCAST_UPLOAD_SCENE) {

@@ -95,9 +95,10 @@ pub struct RenderReport {
     /// Time waiting for the render loop (queueing behind sessions).
     pub queue_ms: f64,
     pub exposure_scale: f32,
-    /// The camera and light actually used (after scene defaults).
+    /// The camera and lights actually used (after scene defaults); `light` is the first.
     pub camera: Camera,
     pub light: Light,
+    pub lights: Vec<Light>,
     /// Samples per pixel of a progressive method (`reference`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub samples: Option<u32>,

@@ -114,9 +114,13 @@ pub struct SceneInfo {
     pub lights: Vec<Light>,
     /// The file's cameras.
     pub cameras: Vec<Camera>,
-    /// What a render uses when it names no camera or light.
+    /// What a render uses when it names no camera or lights: `default_lights` (the file's
+    /// lights up to the server's `max_lights`, else one light standing in for its emissive
+    /// surfaces, else a sun); `default_light` is the first of them.
     pub default_camera: Camera,
     pub default_light: Light,
+    #[serde(default)]
+    pub default_lights: Vec<Light>,
     /// Where the viewer keeps the camera while orbiting, panning and flying: a room's inside
     /// (and, for a room open on one side, the space in front of that side), whose walls
     /// are black from outside. Absent: anywhere.

@@ -8,6 +8,10 @@ pub struct Limits {
     pub max_width: u32,
     pub max_height: u32,
     pub max_shadow_map_size: u32,
+    /// Most punctual lights a frame may have (`render.lights`; a scene's default is its first
+    /// this many).
+    #[serde(default)]
+    pub max_lights: u32,
     pub max_fps: f32,
     pub max_sessions: u32,
     pub max_scenes: u32,

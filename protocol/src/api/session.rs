@@ -3,7 +3,7 @@
 
 use super::*;
 
-/// What to render: scene, size, camera, light and GI. Shared by sessions and one-shot renders.
+/// What to render: scene, size, camera, lights and GI. Shared by sessions and one-shot renders.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(default)]
 pub struct RenderParams {
@@ -13,8 +13,12 @@ pub struct RenderParams {
     pub height: u32,
     /// `null`: the scene's camera, else one framing its bounds.
     pub camera: Option<Camera>,
-    /// `null`: the scene's light (see the scene's `default_light`).
+    /// One punctual light: shorthand for `lights: [light]` (give one of the two; a patch that
+    /// sets either clears the other). `null` with `lights` `null`: the scene's lights (its
+    /// `default_lights`).
     pub light: Option<Light>,
+    /// The punctual lights, 1 to the server's `max_lights`; `null`: see `light`.
+    pub lights: Option<Vec<Light>>,
     /// Linear scale before tone mapping; `null` for automatic exposure.
     pub exposure: Option<f32>,
     /// Shadow map side in texels (per cube face for point lights).
@@ -31,6 +35,7 @@ impl Default for RenderParams {
             height: 540,
             camera: None,
             light: None,
+            lights: None,
             exposure: None,
             shadow_map_size: 2048,
             gi: GiParams::default(),

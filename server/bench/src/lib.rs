@@ -33,11 +33,12 @@ use crate::gi::precompute::PrecomputeKey;
 use crate::gi::{reference::ReferenceImage, GiMethod};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::offline::{ExposureArg, GiArgs, DEFAULT_SCENE};
+use crate::passes::frame_uniforms::MAX_LIGHTS;
 use crate::passes::tonemap::luminance;
 use crate::quality::{errors, final_errors, ErrorStats};
 use crate::renderer::{RenderSettings, Renderer};
 use crate::scene::{
-    default_light::{default_camera, default_light},
+    default_light::{default_camera, default_lights},
     Scene,
 };
 use lightcast_protocol::GiParams;
@@ -223,7 +224,7 @@ fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiParams) -> RenderSetting
         width: args.width,
         height: args.height,
         camera: default_camera(scene),
-        light: default_light(scene),
+        lights: default_lights(scene, MAX_LIGHTS),
         exposure: args.exposure.0,
         shadow_map_size: 2048,
         capture_hdr: false,
@@ -295,7 +296,7 @@ impl Bench<'_> {
         while done < spp {
             let n = per_call.min(spp - done);
             let b = &self.base;
-            tracer.accumulate(b.width, b.height, &b.camera, &b.light, &settings, n)?;
+            tracer.accumulate(b.width, b.height, &b.camera, &b.lights, &settings, n)?;
             done += n;
             (self.progress)(u64::from(done), u64::from(spp), &label);
         }
@@ -362,7 +363,9 @@ impl Bench<'_> {
                 history: Some(1),
                 ..self.base.clone()
             };
-            s.light.intensity *= 1.0 + 1e-6 * (i % 2) as f32;
+            for light in &mut s.lights {
+                light.intensity *= 1.0 + 1e-6 * (i % 2) as f32;
+            }
             let frame = self.renderer.render(&s)?;
             (self.progress)(u64::from(i + 1), total, &label);
             if i < args.warmup {

@@ -74,7 +74,9 @@ pub struct FrameShape {
     pub width: u32,
     pub height: u32,
     pub shadow_map_size: u32,
-    /// Faces of the light's shadow map and RSM (6 for a point light).
+    /// Punctual lights of the frame.
+    pub lights: u32,
+    /// Faces of all the lights' shadow maps and RSMs (6 per point light).
     pub light_faces: u32,
     pub triangles: u64,
     /// Units of the precomputed set the frame reads (light caches; surfel links), estimated
@@ -247,6 +249,7 @@ mod tests {
             width: 64,
             height: 48,
             shadow_map_size: 1024,
+            lights: 1,
             light_faces: 1,
             triangles: 1000,
             set_units: 0,

@@ -118,8 +118,8 @@ pub struct SceneResources {
     pub material_layout: wgpu::BindGroupLayout,
     /// `CameraUniform` (see `passes::frame_uniforms`), written every frame.
     pub camera: wgpu::Buffer,
-    /// `LightUniform`, written every frame.
-    pub light: wgpu::Buffer,
+    /// `LightsUniform`: every light of the frame, written every frame.
+    pub lights: wgpu::Buffer,
 }
 
 /// What a method reads of the frame being encoded, and the buffer it fills.
@@ -128,7 +128,8 @@ pub struct FrameInputs<'a> {
     pub width: u32,
     pub height: u32,
     pub camera: &'a Camera,
-    pub light: &'a Light,
+    /// Every punctual light of the frame (at most `passes::frame_uniforms::MAX_LIGHTS`).
+    pub lights: &'a [Light],
     pub settings: &'a GiParams,
     pub gbuffer: &'a GBuffer,
     /// The frame's shadow map, rendered before the GI stages (a method may light its own

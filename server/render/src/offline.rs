@@ -8,7 +8,7 @@ use crate::gi::reference::params::SPP;
 use crate::gi::GiMethod;
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
-use crate::renderer::{RenderSettings, Renderer};
+use crate::renderer::{RenderError, RenderSettings, Renderer};
 use crate::scene::{
     default_light::{default_camera, default_light, emitter_stand_in, emitters_for},
     Scene,
@@ -409,13 +409,17 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
     let asked = gi.get(EMITTERS.name).and_then(serde_json::Value::as_bool);
     gi.set(
         EMITTERS.name,
-        emitters_for(asked, emitter_stand_in(scene).as_ref(), &light),
+        emitters_for(
+            asked,
+            emitter_stand_in(scene).as_ref(),
+            std::slice::from_ref(&light),
+        ),
     );
     RenderSettings {
         width: args.width,
         height: args.height,
         camera,
-        light,
+        lights: vec![light],
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
@@ -451,7 +455,10 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let adapter_is_cpu = ctx.info.device_type == wgpu::DeviceType::Cpu;
     log(&format!("adapter: {adapter}"));
     let settings = settings_from_args(args, &scene);
-    settings.validate(&ctx)?;
+    // The flags describe one light.
+    settings
+        .validate(&ctx)
+        .map_err(RenderError::for_one_light)?;
     let setup_start = Instant::now();
     let data = args
         .gi_args
@@ -488,7 +495,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         width: image.width,
         height: image.height,
         camera: settings.camera,
-        light: settings.light,
+        light: settings.lights[0].clone(),
         exposure_scale,
         timing_source,
         timing_note: timing_source.note(adapter_is_cpu),

@@ -16,7 +16,7 @@ use crate::gpu::{
 use crate::passes::{
     direct_light::{DirectLightInputs, DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
-    frame_uniforms::{CameraUniform, LightUniform},
+    frame_uniforms::{face_count, CameraUniform, LightsUniform, MAX_LIGHTS},
     gbuffer::{GBuffer, GBufferPass},
     indirect_resolution::{FullTargets, IndirectResolutionPass, ReducedTargets, MAX_DOWNSCALE},
     scene_buffers::{SceneBuffers, MATERIAL_GROUP},
@@ -54,7 +54,8 @@ pub struct RenderSettings {
     pub width: u32,
     pub height: u32,
     pub camera: Camera,
-    pub light: Light,
+    /// The punctual lights, 1 to [`MAX_LIGHTS`].
+    pub lights: Vec<Light>,
     pub exposure: Exposure,
     /// Side of the (square) shadow map per light face.
     pub shadow_map_size: u32,
@@ -122,7 +123,7 @@ impl Frame {
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
     #[error("invalid {field}: {reason}")]
-    InvalidSetting { field: &'static str, reason: String },
+    InvalidSetting { field: String, reason: String },
     #[error(transparent)]
     Gi(GiError),
     #[error(transparent)]
@@ -139,19 +140,67 @@ impl From<GiError> for RenderError {
     }
 }
 
-fn invalid(field: &'static str, reason: impl Into<String>) -> RenderError {
+impl RenderError {
+    /// The error as a caller that gave one light (`light`, not `lights`) names its fields:
+    /// `light.direction` for `lights[0].direction`.
+    pub fn for_one_light(self) -> Self {
+        match self {
+            Self::InvalidSetting { field, reason } if field.starts_with("lights[0].") => {
+                Self::InvalidSetting {
+                    field: field.replacen("lights[0].", "light.", 1),
+                    reason,
+                }
+            }
+            other => other,
+        }
+    }
+}
+
+fn invalid(field: impl Into<String>, reason: impl Into<String>) -> RenderError {
     RenderError::InvalidSetting {
-        field,
+        field: field.into(),
         reason: reason.into(),
     }
 }
 
-fn check_finite(field: &'static str, values: &[f32]) -> Result<(), RenderError> {
+fn check_finite(field: impl Into<String>, values: &[f32]) -> Result<(), RenderError> {
     if values.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
         Err(invalid(field, "must be finite numbers"))
     }
+}
+
+/// What is wrong with one light, if anything: the field (`position`, `direction`, `color`,
+/// `intensity`, `cone`) and why.
+fn check_light(l: &Light) -> Result<(), (&'static str, String)> {
+    let finite = |field, values: &[f32]| {
+        if values.iter().all(|v| v.is_finite()) {
+            Ok(())
+        } else {
+            Err((field, "must be finite numbers".to_string()))
+        }
+    };
+    finite("position", &l.position)?;
+    finite("direction", &l.direction)?;
+    finite("color", &l.color)?;
+    if Vec3::from(l.direction).length() < 1e-6 {
+        return Err(("direction", "must not be zero".into()));
+    }
+    if l.color.iter().any(|&c| c < 0.0) {
+        return Err(("color", "must not be negative".into()));
+    }
+    if !(l.intensity.is_finite() && l.intensity >= 0.0) {
+        return Err(("intensity", "must be a finite number ≥ 0".into()));
+    }
+    if !(l.inner_cone.is_finite() && l.outer_cone.is_finite())
+        || l.inner_cone < 0.0
+        || l.outer_cone > std::f32::consts::FRAC_PI_2
+        || l.inner_cone > l.outer_cone
+    {
+        return Err(("cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees".into()));
+    }
+    Ok(())
 }
 
 impl RenderSettings {
@@ -177,7 +226,17 @@ impl RenderSettings {
                 ),
             ));
         }
-        let faces = u64::from(LightUniform::face_count(self.light.kind));
+        if !(1..=MAX_LIGHTS).contains(&self.lights.len()) {
+            return Err(invalid(
+                "lights",
+                format!(
+                    "{} lights; 1 to {MAX_LIGHTS} are allowed",
+                    self.lights.len()
+                ),
+            ));
+        }
+        // Every light's faces share the shadow-map budget.
+        let faces = u64::from(face_count(&self.lights));
         let max_by_budget = ((MAX_SHADOW_TEXELS / faces) as f64).sqrt() as u32;
         let max_shadow = max.min(MAX_SHADOW_MAP_SIZE).min(max_by_budget);
         if !(16..=max_shadow).contains(&self.shadow_map_size) {
@@ -198,25 +257,9 @@ impl RenderSettings {
                 format!("{} is outside (0.5, 179.5)", c.fov_y_degrees),
             ));
         }
-        let l = &self.light;
-        check_finite("light.position", &l.position)?;
-        check_finite("light.direction", &l.direction)?;
-        check_finite("light.color", &l.color)?;
-        if Vec3::from(l.direction).length() < 1e-6 {
-            return Err(invalid("light.direction", "must not be zero"));
-        }
-        if l.color.iter().any(|&c| c < 0.0) {
-            return Err(invalid("light.color", "must not be negative"));
-        }
-        if !(l.intensity.is_finite() && l.intensity >= 0.0) {
-            return Err(invalid("light.intensity", "must be a finite number ≥ 0"));
-        }
-        if !(l.inner_cone.is_finite() && l.outer_cone.is_finite())
-            || l.inner_cone < 0.0
-            || l.outer_cone > std::f32::consts::FRAC_PI_2
-            || l.inner_cone > l.outer_cone
-        {
-            return Err(invalid("light.cone", "need 0 ≤ inner ≤ outer ≤ 90 degrees"));
+        for (i, l) in self.lights.iter().enumerate() {
+            check_light(l)
+                .map_err(|(field, reason)| invalid(format!("lights[{i}].{field}"), reason))?;
         }
         // Powers of two: a reduced pixel covers whole output pixels at every size the API
         // allows in steps of 2 (H.264's even sizes), and the documented choices are 1, 2, 4.
@@ -232,7 +275,7 @@ impl RenderSettings {
                 format!("{downscale} is not one of 1, 2 or 4"),
             ));
         }
-        let faces = LightUniform::face_count(self.light.kind);
+        let faces = face_count(&self.lights);
         (gi::entry(self.gi.method).1.validate)(&self.gi, faces)
             .map_err(|e| invalid(e.field, e.reason))?;
         if let Exposure::Manual(s) = self.exposure {
@@ -474,9 +517,9 @@ impl Renderer {
             "camera",
             bytemuck::bytes_of(&bytemuck::Zeroable::zeroed() as &CameraUniform),
         );
-        let light_buffer = uniform(
-            "light",
-            bytemuck::bytes_of(&bytemuck::Zeroable::zeroed() as &LightUniform),
+        let lights_buffer = uniform(
+            "lights",
+            bytemuck::bytes_of(&bytemuck::Zeroable::zeroed() as &LightsUniform),
         );
         let material_layout = MATERIAL_GROUP.layout(device);
         Self {
@@ -499,7 +542,7 @@ impl Renderer {
             shared: SceneResources {
                 scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
                 camera: camera_buffer,
-                light: light_buffer,
+                lights: lights_buffer,
                 material_layout,
                 scene,
                 ctx,
@@ -717,8 +760,7 @@ impl Renderer {
         settings.validate(&self.shared.ctx)?;
         let (width, height) = (settings.width, settings.height);
         self.ensure_targets(width, height)?;
-        let faces = LightUniform::face_count(settings.light.kind);
-        self.ensure_shadow_map(settings.shadow_map_size, faces)?;
+        self.ensure_shadow_map(settings.shadow_map_size, face_count(&settings.lights))?;
         let (method_index, _) = gi::entry(settings.gi.method);
         let downscale = indirect_downscale(&settings.gi);
         self.ensure_reduced(downscale)?;
@@ -735,19 +777,18 @@ impl Renderer {
             bounds,
             glossy_exponent(&settings.gi),
         );
-        let light = LightUniform::new(&settings.light, bounds, settings.shadow_map_size);
+        let lights = LightsUniform::new(&settings.lights, bounds, settings.shadow_map_size);
         let queue = &self.shared.ctx.queue;
         queue.write_buffer(&self.shared.camera, 0, bytemuck::bytes_of(&camera));
-        queue.write_buffer(&self.shared.light, 0, bytemuck::bytes_of(&light));
-        self.shadow_pass
-            .set_faces(queue, &light.face_view_proj[..faces as usize]);
+        queue.write_buffer(&self.shared.lights, 0, bytemuck::bytes_of(&lights));
+        self.shadow_pass.set_faces(queue, &lights.layer_view_proj());
         self.exposure_pass
             .prepare(queue, &sized.exposure, settings.exposure);
         let direct_bind_group = self.direct_pass.bind(
             &self.shared.ctx.device,
             &DirectLightInputs {
                 camera: &self.shared.camera,
-                light: &self.shared.light,
+                lights: &self.shared.lights,
                 gbuffer: &sized.gbuffer,
                 shadow: shadow_map,
                 indirect: &sized.indirect,
@@ -780,7 +821,7 @@ impl Renderer {
             width: reduced.map_or(width, |r| r.width),
             height: reduced.map_or(height, |r| r.height),
             camera: &settings.camera,
-            light: &settings.light,
+            lights: &settings.lights,
             settings: &settings.gi,
             gbuffer: reduced.map_or(&sized.gbuffer, |r| &r.gbuffer),
             shadow: shadow_map,

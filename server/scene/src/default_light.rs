@@ -33,6 +33,16 @@ pub fn default_light(scene: &Scene) -> Light {
     }
 }
 
+/// The lights a scene is rendered with when the user names none: every KHR_lights_punctual
+/// light of its file, the first `max` of them; else the one [`default_light`].
+pub fn default_lights(scene: &Scene, max: usize) -> Vec<Light> {
+    if scene.lights.is_empty() {
+        vec![default_light(scene)]
+    } else {
+        scene.lights.iter().take(max.max(1)).cloned().collect()
+    }
+}
+
 /// The scene's default light when it stands in for the scene's emissive surfaces (the scene
 /// says its light does, or it has no punctual light of its own and some emissive
 /// triangles): a render with that light and its emitters both would count their light twice.
@@ -47,9 +57,10 @@ pub fn emitter_stand_in(scene: &Scene) -> Option<Light> {
 }
 
 /// Whether emissive surfaces light a render (`render.gi.emitters`): as `asked`, else on
-/// unless `light` is the scene's `stand_in` for them ([`emitter_stand_in`]).
-pub fn emitters_for(asked: Option<bool>, stand_in: Option<&Light>, light: &Light) -> bool {
-    asked.unwrap_or_else(|| stand_in != Some(light))
+/// unless the scene's `stand_in` for them ([`emitter_stand_in`]) is among the render's
+/// lights (they would be counted twice).
+pub fn emitters_for(asked: Option<bool>, stand_in: Option<&Light>, lights: &[Light]) -> bool {
+    asked.unwrap_or_else(|| stand_in.is_none_or(|s| !lights.contains(s)))
 }
 
 /// A wide spot light at the area-weighted centroid of the emissive triangles, aimed at the
@@ -179,5 +190,45 @@ mod tests {
         let half_fov = (camera.fov_y_degrees.to_radians() * 0.5).sin();
         assert!((distance * half_fov - scene.bounds.radius()).abs() < 1e-4);
         assert!(camera.position[2] > scene.bounds.max.z);
+    }
+
+    /// Every light of the file is a default, the first `max` of them; a scene without one gets
+    /// its single stand-in or sun.
+    #[test]
+    fn default_lights_are_the_files_lights_up_to_the_limit() {
+        let mut scene = quad_scene(true);
+        assert_eq!(default_lights(&scene, 16), vec![default_light(&scene)]);
+        let light = |i: usize| Light {
+            kind: LightKind::Point,
+            position: [i as f32, 1.0, 0.0],
+            direction: [0.0, -1.0, 0.0],
+            color: [1.0; 3],
+            intensity: 1.0,
+            inner_cone: 0.0,
+            outer_cone: 0.0,
+        };
+        scene.lights = (0..20).map(light).collect();
+        assert_eq!(default_lights(&scene, 16), scene.lights[..16].to_vec());
+        assert_eq!(default_lights(&scene, 5), scene.lights[..5].to_vec());
+        assert_eq!(default_lights(&scene, 0).len(), 1);
+    }
+
+    /// Emitters are on by default unless the scene's stand-in for them is among the lights
+    /// (alone or beside others); other lights alone leave them on.
+    #[test]
+    fn emitters_are_off_only_under_the_stand_in_alone() {
+        let scene = quad_scene(true);
+        let stand_in = emitter_stand_in(&scene).expect("a stand-in");
+        let other = Light {
+            intensity: 3.0,
+            ..stand_in.clone()
+        };
+        let s = Some(&stand_in);
+        assert!(!emitters_for(None, s, std::slice::from_ref(&stand_in)));
+        assert!(emitters_for(None, s, std::slice::from_ref(&other)));
+        assert!(!emitters_for(None, s, &[other.clone(), stand_in.clone()]));
+        assert!(emitters_for(None, s, &[other.clone(), other]));
+        assert!(emitters_for(Some(true), s, std::slice::from_ref(&stand_in)));
+        assert!(emitters_for(None, None, std::slice::from_ref(&stand_in)));
     }
 }

@@ -96,6 +96,10 @@ pub struct LimitArgs {
     /// Largest shadow map side.
     #[arg(long, env = "LIGHTCAST_MAX_SHADOW_MAP_SIZE", default_value_t = 4096)]
     pub max_shadow_map_size: u32,
+    /// Most punctual lights a frame may have (`render.lights`); a scene's default is its
+    /// file's first this many. At most 16 (the GPU's light list).
+    #[arg(long, env = "LIGHTCAST_MAX_LIGHTS", default_value_t = 16)]
+    pub max_lights: u32,
     /// Highest fps cap a session may ask for.
     #[arg(long, env = "LIGHTCAST_MAX_FPS", default_value_t = 240.0)]
     pub max_fps: f32,
@@ -262,6 +266,12 @@ impl LimitArgs {
             16,
             MAX_SHADOW_MAP_SIZE.into(),
         )?;
+        within(
+            "max-lights",
+            self.max_lights.into(),
+            1,
+            crate::passes::frame_uniforms::MAX_LIGHTS as u64,
+        )?;
         if !(self.max_fps.is_finite() && (1.0..=1000.0).contains(&self.max_fps)) {
             return Err(ConfigError::Invalid {
                 flag: "max-fps",
@@ -369,6 +379,7 @@ impl LimitArgs {
             max_width: self.max_width,
             max_height: self.max_height,
             max_shadow_map_size: self.max_shadow_map_size,
+            max_lights: self.max_lights,
             max_fps: self.max_fps,
             max_sessions: self.max_sessions,
             max_scenes: self.max_scenes,

@@ -461,6 +461,7 @@ mod tests {
             width,
             height,
             shadow_map_size: 1024,
+            lights: 1,
             light_faces: 1,
             triangles: 1090,
             set_units: 0,

@@ -10,7 +10,7 @@ use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
 use crate::scene::default_light::emitters_for;
 use crate::service::video::{VideoConfig, VideoError};
-use lightcast_protocol::{Encoding, GiParams, Limits, RenderParams, SessionParams, View};
+use lightcast_protocol::{Encoding, GiParams, Light, Limits, RenderParams, SessionParams, View};
 use std::sync::Arc;
 
 /// Settings of one frame, ready for the render loop.
@@ -28,8 +28,14 @@ pub struct Resolved {
 /// The renderer's own field names, as paths of the request's `render` object: a GI
 /// parameter's under `gi`.
 fn request_field(renderer_field: &str) -> String {
+    if let Some((light, field)) = renderer_field
+        .strip_prefix("lights[")
+        .and_then(|rest| rest.split_once("]."))
+    {
+        let field = if field == "cone" { "outer_cone" } else { field };
+        return format!("lights[{light}].{field}");
+    }
     match renderer_field {
-        "light.cone" => "light.outer_cone".to_string(),
         "method" => "gi.method".to_string(),
         name if crate::gi::params::find(name).is_some() => format!("gi.{name}"),
         other => other.to_string(),
@@ -44,7 +50,8 @@ pub fn frame_shape(settings: &RenderSettings, entry: &SceneEntry) -> crate::gi::
         width: settings.width,
         height: settings.height,
         shadow_map_size: settings.shadow_map_size,
-        light_faces: crate::passes::frame_uniforms::LightUniform::face_count(settings.light.kind),
+        lights: settings.lights.len() as u32,
+        light_faces: crate::passes::frame_uniforms::face_count(&settings.lights),
         triangles: entry.scene.triangle_count() as u64,
         set_units: 0,
         all_bounces: true,
@@ -88,15 +95,12 @@ pub fn resolve(
     debug_views::check(params.view, g.method)
         .map_err(|e| ApiError::field("view", e.to_string()))?;
     let precompute = entry.precompute_key(g)?;
-    let light = params
-        .light
-        .clone()
-        .unwrap_or_else(|| entry.default_light.clone());
+    let lights = lights(params, entry, limits)?;
     let mut gi = g.clone();
     let asked = g.get(EMITTERS.name).and_then(serde_json::Value::as_bool);
     gi.set(
         EMITTERS.name,
-        emitters_for(asked, entry.emitter_stand_in.as_ref(), &light),
+        emitters_for(asked, entry.emitter_stand_in.as_ref(), &lights),
     );
     let settings = RenderSettings {
         width: params.width,
@@ -105,7 +109,7 @@ pub fn resolve(
             .camera
             .clone()
             .unwrap_or_else(|| entry.default_camera.clone()),
-        light,
+        lights,
         exposure,
         shadow_map_size: params.shadow_map_size,
         capture_hdr: debug_views::reads_indirect(params.view),
@@ -115,9 +119,15 @@ pub fn resolve(
         still: false,
         yuv420: false,
     };
-    settings
-        .validate_for(max_texture)
-        .map_err(|e| render_error(&e))?;
+    settings.validate_for(max_texture).map_err(|e| {
+        // A request that gave the one-light shorthand hears about `light`, not `lights[0]`.
+        let e = if params.light.is_some() {
+            e.for_one_light()
+        } else {
+            e
+        };
+        render_error(&e)
+    })?;
     if let Some(key) = &precompute {
         entry.check_precompute_cost(g, key, limits)?;
     }
@@ -127,6 +137,35 @@ pub fn resolve(
         demand: precompute.as_ref().map(|key| Arc::new(entry.demand(key))),
         precompute,
     })
+}
+
+/// The frame's lights: `render.lights`, or `render.light` alone, or the scene's default
+/// lights (the first `max_lights`); both given, none or too many is refused naming the field.
+fn lights(
+    params: &RenderParams,
+    entry: &SceneEntry,
+    limits: &Limits,
+) -> Result<Vec<Light>, ApiError> {
+    let max = limits.max_lights as usize;
+    match (&params.light, &params.lights) {
+        (Some(_), Some(_)) => Err(ApiError::field(
+            "lights",
+            "give `light` (one light) or `lights`, not both",
+        )),
+        (Some(light), None) => Ok(vec![light.clone()]),
+        (None, Some(lights)) if lights.is_empty() => {
+            Err(ApiError::field("lights", "at least one light is needed"))
+        }
+        (None, Some(lights)) if lights.len() > max => Err(ApiError::field(
+            "lights",
+            format!(
+                "{} lights; this server allows at most {max} (max_lights)",
+                lights.len()
+            ),
+        )),
+        (None, Some(lights)) => Ok(lights.clone()),
+        (None, None) => Ok(entry.default_lights.iter().take(max).cloned().collect()),
+    }
 }
 
 /// Checks a request's GI parameters against the methods' tables and this server's limits

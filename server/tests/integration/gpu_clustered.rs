@@ -251,7 +251,7 @@ fn restarting_from_the_same_seeds_loses_no_clusters_over_a_light_sweep() {
     // A frame with the light turned `angle` from -X towards +Y: the GPU's VALs, and the CPU's
     // from `start` (the seeds when `None`) on the same VPLs.
     let mut frame = |angle: f32, start: Option<Vec<RefCluster>>| {
-        s.light = Light {
+        s.lights = vec![Light {
             kind: LightKind::Spot,
             position: [0.0, 1.0, 0.0],
             direction: [-angle.cos(), angle.sin(), 0.0],
@@ -259,7 +259,7 @@ fn restarting_from_the_same_seeds_loses_no_clusters_over_a_light_sweep() {
             intensity: 10.0,
             inner_cone: 0.4,
             outer_cone: 0.6,
-        };
+        }];
         renderer.render(&s).expect("render");
         let rb = renderer
             .gi_if_created::<Clustered>()

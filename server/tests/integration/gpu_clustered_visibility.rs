@@ -501,7 +501,7 @@ fn a_small_light_step_changes_the_shadows_no_more_than_the_light() {
     // `start` (the seeds when `None`), and what the frame's clustering produced.
     let mut indirect = |visibility, angle: f32, start: Option<Vec<Val>>| {
         s.gi = clustered(visibility, 1024, 30, 32);
-        s.light = lightcast_protocol::Light {
+        s.lights = vec![lightcast_protocol::Light {
             kind: lightcast_protocol::LightKind::Spot,
             position: [0.0, 1.0, 0.0],
             direction: [-angle.cos(), angle.sin(), 0.0],
@@ -509,7 +509,7 @@ fn a_small_light_step_changes_the_shadows_no_more_than_the_light() {
             intensity: 10.0,
             inner_cone: 0.4,
             outer_cone: 0.6,
-        };
+        }];
         if let Some(vals) = start {
             renderer
                 .gi::<Clustered>()

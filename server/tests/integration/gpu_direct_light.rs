@@ -218,6 +218,60 @@ fn point_light_shadows_work_on_side_faces_of_the_cube() {
     );
 }
 
+/// Several lights of different kinds, each with its own shadow-map layers (a spot, a point
+/// light's six faces, a sun): the HDR radiance of all three together is the sum of each
+/// alone, pixel by pixel (f16 rounding: 0.5 %), shadows included (the occluder's shadow
+/// from each light lands in its own place).
+#[test]
+fn three_lights_light_the_floor_as_the_sum_of_each_alone() {
+    let scene = occluder_scene();
+    let camera = top_camera();
+    let lights = [
+        Light {
+            kind: LightKind::Spot,
+            position: [-0.8, 1.5, 0.4],
+            direction: [0.5, -1.0, -0.2],
+            color: [1.0, 0.8, 0.6],
+            intensity: 4.0,
+            inner_cone: 0.4,
+            outer_cone: 0.7,
+        },
+        Light {
+            kind: LightKind::Point,
+            position: [0.7, 1.2, -0.5],
+            direction: [0.0, -1.0, 0.0],
+            color: [0.5, 0.7, 1.0],
+            intensity: 2.0,
+            inner_cone: 0.0,
+            outer_cone: 0.0,
+        },
+        directional(Vec3::new(1.0, -1.0, 0.3), 1.5),
+    ];
+    let hdr = |lights: Vec<Light>| {
+        let mut s = settings(64, 64, camera.clone(), lights[0].clone());
+        s.lights = lights;
+        render(scene.clone(), &s)
+    };
+    let all = hdr(lights.to_vec());
+    let alone: Vec<_> = lights.iter().map(|l| hdr(vec![l.clone()])).collect();
+    let (mut worst, mut lit) = (0.0f32, 0);
+    for y in 0..64 {
+        for x in 0..64 {
+            let sum: Vec3 = alone.iter().map(|f| hdr_at(f, x, y)).sum();
+            let got = hdr_at(&all, x, y);
+            if sum.max_element() > 1e-3 {
+                lit += 1;
+                worst = worst.max((got - sum).abs().max_element() / sum.max_element());
+            }
+        }
+    }
+    assert!(lit > 64 * 64 / 2, "only {lit} lit pixels");
+    assert!(
+        worst < 5e-3,
+        "all lights differ from the sum of each by {worst}"
+    );
+}
+
 /// A square hovering over the floor under a sun straight above: drawn opaque it shadows the
 /// floor beneath it; with a texture whose alpha mask cuts it away entirely, the shadow map
 /// skips it as the G-buffer does and the floor is lit exactly as without it; masked on its

@@ -19,7 +19,7 @@ fn converge(
     tracer: &mut PathTracer,
     (width, height): (u32, u32),
     camera: &Camera,
-    light: &Light,
+    lights: &[Light],
     settings: &ReferenceSettings,
     spp: u32,
 ) -> ReferenceImage {
@@ -27,7 +27,7 @@ fn converge(
     while left > 0 {
         let n = left.min(64);
         tracer
-            .accumulate(width, height, camera, light, settings, n)
+            .accumulate(width, height, camera, lights, settings, n)
             .expect("accumulate");
         left -= n;
     }
@@ -249,7 +249,7 @@ fn one_bounce_between_two_plates_matches_numerical_integration() {
         &mut tracer,
         (w, h),
         &p.camera,
-        &p.light,
+        std::slice::from_ref(&p.light),
         &ReferenceSettings::default(),
         512,
     );
@@ -346,7 +346,14 @@ fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
             bounces,
             ..ReferenceSettings::default()
         };
-        let image = converge(&mut tracer, (16, 12), &camera, &dark, &settings, 8);
+        let image = converge(
+            &mut tracer,
+            (16, 12),
+            &camera,
+            std::slice::from_ref(&dark),
+            &settings,
+            8,
+        );
         let expected: f32 = (1..=bounces).map(|k| emitted * albedo.powi(k as i32)).sum();
         for (i, px) in image.indirect.iter().enumerate() {
             let got = luminance(*px);
@@ -363,7 +370,14 @@ fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
             emitters: false,
             ..settings
         };
-        let image = converge(&mut tracer, (16, 12), &camera, &dark, &dark_box, 8);
+        let image = converge(
+            &mut tracer,
+            (16, 12),
+            &camera,
+            std::slice::from_ref(&dark),
+            &dark_box,
+            8,
+        );
         assert!(
             image.indirect.iter().all(|px| luminance(*px) == 0.0),
             "{bounces} bounces without emitters: {:?}",
@@ -385,11 +399,47 @@ fn the_same_request_gives_the_same_pixels_and_another_seed_others() {
             seed,
             ..ReferenceSettings::default()
         };
-        converge(&mut tracer, (8, 8), &p.camera, &p.light, &settings, 4).indirect
+        converge(
+            &mut tracer,
+            (8, 8),
+            &p.camera,
+            std::slice::from_ref(&p.light),
+            &settings,
+            4,
+        )
+        .indirect
     };
     let first = render(1);
     assert_eq!(first, render(1));
     assert_ne!(first, render(2));
+}
+
+/// Next-event estimation sums every light on the same paths (the random stream does not
+/// depend on the lights), so two lights give the sum of each alone: exactly, up to f32
+/// rounding of the sums (1e-5 relative).
+#[test]
+fn two_lights_give_the_sum_of_each_alone() {
+    let p = plates();
+    let second = point_light(Vec3::new(-0.2, 0.4, 0.15), 0.7);
+    let render = |lights: &[Light]| {
+        let mut tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
+        let settings = ReferenceSettings::default();
+        converge(&mut tracer, (8, 8), &p.camera, lights, &settings, 4).indirect
+    };
+    let first = render(std::slice::from_ref(&p.light));
+    let other = render(std::slice::from_ref(&second));
+    let both = render(&[p.light.clone(), second.clone()]);
+    let (mut lit, mut worst) = (0, 0.0f32);
+    for ((a, b), ab) in first.iter().zip(&other).zip(&both) {
+        let sum = Vec3::from_slice(&a[..3]) + Vec3::from_slice(&b[..3]);
+        let got = Vec3::from_slice(&ab[..3]);
+        if sum.max_element() > 0.0 {
+            lit += 1;
+            worst = worst.max((got - sum).abs().max_element() / sum.max_element());
+        }
+    }
+    assert!(lit > 32, "only {lit} lit pixels");
+    assert!(worst < 1e-5, "two lights differ from the sum by {worst}");
 }
 
 /// A sample is traced in bands of rows, each one dispatch of at most `BAND_RAYS` rays (issue
@@ -414,7 +464,7 @@ fn bands_of_rows_add_up_to_the_whole_image() {
             &mut tracer,
             (width, height),
             &p.camera,
-            &p.light,
+            std::slice::from_ref(&p.light),
             &settings,
             3,
         )
@@ -436,9 +486,23 @@ fn accumulation_restarts_when_the_camera_moves() {
     let p = plates();
     let mut tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
     let settings = ReferenceSettings::default();
-    converge(&mut tracer, (8, 8), &p.camera, &p.light, &settings, 4);
+    converge(
+        &mut tracer,
+        (8, 8),
+        &p.camera,
+        std::slice::from_ref(&p.light),
+        &settings,
+        4,
+    );
     tracer
-        .accumulate(8, 8, &p.camera, &p.light, &settings, 2)
+        .accumulate(
+            8,
+            8,
+            &p.camera,
+            std::slice::from_ref(&p.light),
+            &settings,
+            2,
+        )
         .expect("accumulate");
     assert_eq!(tracer.samples(), 6);
     let moved = Camera {
@@ -446,7 +510,7 @@ fn accumulation_restarts_when_the_camera_moves() {
         ..p.camera.clone()
     };
     tracer
-        .accumulate(8, 8, &moved, &p.light, &settings, 2)
+        .accumulate(8, 8, &moved, std::slice::from_ref(&p.light), &settings, 2)
         .expect("accumulate");
     assert_eq!(tracer.samples(), 2);
 }
@@ -486,7 +550,7 @@ fn reference_frames_accumulate_per_history_and_match_the_tracer() {
         &mut tracer,
         (w, h),
         &p.camera,
-        &p.light,
+        std::slice::from_ref(&p.light),
         &ReferenceSettings::default(),
         16,
     );
@@ -602,7 +666,14 @@ fn a_textured_receiver_reflects_as_the_untextured_colour_of_its_texel() {
     let render = |scene: &Scene| {
         let mut tracer = PathTracer::new(support::gpu(), scene).expect("tracer");
         let settings = ReferenceSettings::default();
-        converge(&mut tracer, (w, h), &p.camera, &p.light, &settings, 64)
+        converge(
+            &mut tracer,
+            (w, h),
+            &p.camera,
+            std::slice::from_ref(&p.light),
+            &settings,
+            64,
+        )
     };
     let got = render(&textured);
     let (as_red, as_blue) = (render(&untextured(red)), render(&untextured(blue)));
@@ -679,11 +750,25 @@ fn rays_pass_through_alpha_masked_texels() {
         let scene = plates_with(blocker, materials, vec![texture]);
         let mut tracer = PathTracer::new(support::gpu(), &scene).expect("tracer");
         let settings = ReferenceSettings::default();
-        converge(&mut tracer, (16, 16), &p.camera, &p.light, &settings, 64)
+        converge(
+            &mut tracer,
+            (16, 16),
+            &p.camera,
+            std::slice::from_ref(&p.light),
+            &settings,
+            64,
+        )
     };
     let mut tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
     let settings = ReferenceSettings::default();
-    let open = converge(&mut tracer, (16, 16), &p.camera, &p.light, &settings, 64);
+    let open = converge(
+        &mut tracer,
+        (16, 16),
+        &p.camera,
+        std::slice::from_ref(&p.light),
+        &settings,
+        64,
+    );
     let masked = render(halves(2, 2, clear, clear), Some(0.5));
     let opaque = render(halves(2, 2, clear, clear), None);
     let half_masked = render(halves(4, 2, clear, solid), Some(0.5));

@@ -83,9 +83,9 @@ fn floor_in_the_boxes_shadow_is_darker_than_lit_floor_as_a_cpu_ray_caster_predic
     // grazing angles) plus the PCF radius: 2048² texels of the spot's 150° cone are ~0.8 cm
     // at the floor.
     settings.shadow_map_size = 2048;
-    assert_eq!(settings.light.kind, LightKind::Spot);
+    assert_eq!(settings.lights[0].kind, LightKind::Spot);
     let frame = render(scene.clone(), &settings);
-    let light_pos = Vec3::from(settings.light.position);
+    let light_pos = Vec3::from(settings.lights[0].position);
     let (mut lit, mut shadowed) = (Vec::new(), Vec::new());
     for y in 0..h {
         for x in 0..w {
@@ -396,7 +396,7 @@ fn invalid_settings_are_rejected_naming_the_field() {
         (
             "shadow_map_size",
             Box::new(|s| {
-                s.light.kind = LightKind::Point;
+                s.lights[0].kind = LightKind::Point;
                 s.shadow_map_size = 8192;
             }),
         ),
@@ -415,18 +415,18 @@ fn invalid_settings_are_rejected_naming_the_field() {
             Box::new(|s| s.camera.fov_y_degrees = 0.0),
         ),
         (
-            "light.direction",
-            Box::new(|s| s.light.direction = [0.0; 3]),
+            "lights[0].direction",
+            Box::new(|s| s.lights[0].direction = [0.0; 3]),
         ),
         (
-            "light.intensity",
-            Box::new(|s| s.light.intensity = f32::INFINITY),
+            "lights[0].intensity",
+            Box::new(|s| s.lights[0].intensity = f32::INFINITY),
         ),
         (
-            "light.color",
-            Box::new(|s| s.light.color = [-1.0, 0.0, 0.0]),
+            "lights[0].color",
+            Box::new(|s| s.lights[0].color = [-1.0, 0.0, 0.0]),
         ),
-        ("light.cone", Box::new(|s| s.light.inner_cone = 2.0)),
+        ("lights[0].cone", Box::new(|s| s.lights[0].inner_cone = 2.0)),
         ("exposure", Box::new(|s| s.exposure = Exposure::Manual(0.0))),
     ];
     for (field, mutate) in cases {

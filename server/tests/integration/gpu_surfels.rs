@@ -106,12 +106,12 @@ fn cpu_direct(scene: &Scene, set: &SurfelSet, s: &RenderSettings) -> Vec<Option<
         .iter()
         .zip(&materials)
         .map(|(surfel, (albedo, emitted))| {
-            let (to_light, irradiance) = incident(&s.light, surfel.position);
+            let (to_light, irradiance) = incident(&s.lights[0], surfel.position);
             let cos = surfel.normal.dot(to_light).max(0.0);
             if cos <= 0.0 {
                 return Some(*emitted);
             }
-            let distance = (Vec3::from(s.light.position) - surfel.position).length();
+            let distance = (Vec3::from(s.lights[0].position) - surfel.position).length();
             let origin = surfel.position + surfel.normal * 1e-3;
             let lit = |o: Vec3| trace(scene, o, to_light, distance - 1e-3).is_none();
             let visible = lit(origin);
@@ -293,12 +293,12 @@ fn bounces_follow_the_cpu_in_one_render_and_one_per_session_frame() {
         "progressive bounces end where a render's do"
     );
     // Moving the light restarts the bounces.
-    session_settings.light.intensity *= 0.5;
+    session_settings.lights[0].intensity *= 0.5;
     renderer.render(&session_settings).expect("render");
     let read = cache_light(&renderer, Some(7));
     assert_eq!(read.bounces, 1);
     // A still does not wait for the frames: it shows every bounce at once.
-    session_settings.light.intensity *= 0.5;
+    session_settings.lights[0].intensity *= 0.5;
     session_settings.still = true;
     renderer.render(&session_settings).expect("render");
     assert_eq!(cache_light(&renderer, Some(7)).bounces, 3);

@@ -130,6 +130,105 @@ async fn a_one_shot_reference_without_spp_takes_what_the_budget_buys() {
 /// the same sources; the reference itself compared with an equal reference has none (same
 /// seed, same pixels), and a repeated comparison (served from the cache) reports the same
 /// numbers.
+/// Every method lights from every light: for each method `/v1/server` lists (at its small
+/// setting, emitters off so only the punctual lights count), the indirect light of two lights
+/// (the scene's spot and a point light) sums to within 20 % of the two alone, and the second
+/// light adds at least a fifth of its own share (a method that ignored it would add none).
+/// Sampling methods (BRSM's importance, clustered's k-means) are not exactly additive, hence
+/// the band; the reference and the gather are exact up to noise.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_method_lights_from_every_light() {
+    use lightcast_server::gi::{self, precompute::SceneFacts};
+    let server = TestServer::start(&[]).await;
+    let info = server.get_json("/v1/server").await;
+    let facts = SceneFacts::of(&lightcast_server::scene::procedural::cornell_box());
+    let scene = server.get_json("/v1/scenes/default").await;
+    let spot = scene["default_light"].clone();
+    let mut point = spot.clone();
+    point["kind"] = json!("point");
+    point["position"] = json!([0.0, 1.0, 0.0]);
+    point["intensity"] = json!(spot["intensity"].as_f64().expect("intensity") * 0.5);
+    let sum = |bytes: &[u8]| -> f64 {
+        bytes
+            .chunks_exact(16)
+            .flat_map(|px| px[..12].chunks_exact(4))
+            .map(|c| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+            .sum()
+    };
+    for m in info["gi_methods"].as_array().expect("gi_methods") {
+        let method = gi::parse_method(m["method"].as_str().expect("a name")).expect("registered");
+        if method == gi::none::NONE {
+            continue;
+        }
+        let mut small =
+            serde_json::to_value((gi::table(method).testing.small)(&facts)).expect("json");
+        small["emitters"] = json!(false);
+        let indirect = |lights: Value| {
+            json!({"render": {"width": 32, "height": 24, "gi": small, "lights": lights},
+                   "format": "raw_indirect"})
+        };
+        let a = sum(&render(&server, &indirect(json!([spot]))).await.1);
+        let b = sum(&render(&server, &indirect(json!([point]))).await.1);
+        let ab = sum(&render(&server, &indirect(json!([spot, point]))).await.1);
+        assert!(
+            a > 0.0 && b > 0.0,
+            "{method}: each light alone lights: {a} {b}"
+        );
+        eprintln!(
+            "{method}: spot {a:.4} + point {b:.4}; both {ab:.4} ({:+.2} %)",
+            100.0 * (ab / (a + b) - 1.0)
+        );
+        assert!(
+            (ab - (a + b)).abs() < 0.2 * (a + b),
+            "{method}: two lights {ab} vs each alone {a} + {b}"
+        );
+        assert!(
+            ab > a + 0.2 * b,
+            "{method}: the second light adds {}",
+            ab - a
+        );
+    }
+    server.stop().await;
+}
+
+/// `render.lights`: the scene's default lights are listed; two lights render brighter than
+/// the first alone at a fixed exposure, and the report names both.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_render_lights_with_every_light_it_lists() {
+    let server = TestServer::start(&[]).await;
+    let scene = server.get_json("/v1/scenes/default").await;
+    let defaults = scene["default_lights"].as_array().expect("default_lights");
+    assert_eq!(defaults.len(), 1, "{scene}");
+    assert_eq!(defaults[0], scene["default_light"]);
+    let first = defaults[0].clone();
+    let mut second = first.clone();
+    second["kind"] = json!("point");
+    second["intensity"] = json!(first["intensity"].as_f64().expect("intensity") * 0.5);
+    let mean = |png: &[u8]| {
+        let image = image::load_from_memory(png).expect("png").to_rgb8();
+        image
+            .pixels()
+            .map(|p| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]))
+            .sum::<f64>()
+            / image.pixels().len() as f64
+    };
+    let request = |lights: Value| {
+        json!({"render": {"width": 32, "height": 24, "exposure": 0.5, "lights": lights,
+                          "gi": {"method": "none"}}})
+    };
+    let (one, png_one) = render(&server, &request(json!([first]))).await;
+    let (two, png_two) = render(&server, &request(json!([first, second]))).await;
+    assert_eq!(one.lights.len(), 1);
+    assert_eq!(two.lights.len(), 2);
+    assert!(
+        mean(&png_two) > mean(&png_one) * 1.05,
+        "{} vs {}",
+        mean(&png_two),
+        mean(&png_one)
+    );
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn renders_compare_with_the_reference() {
     let server = TestServer::start(&[]).await;

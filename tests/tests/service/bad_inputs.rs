@@ -298,6 +298,38 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         case(
             "POST",
             "/v1/sessions",
+            r#"{"render":{"lights":[{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"spot","position":[0,1,0],"direction":[0,-1,0],"color":[-1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0.5}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.lights[1].color"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"width":16,"height":16,"lights":[{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.lights"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"lights":[]}}"#,
+            400,
+            "invalid_field",
+            Some("render.lights"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
+            r#"{"render":{"light":{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0},"lights":[{"kind":"point","position":[0,1,0],"direction":[0,-1,0],"color":[1,1,1],"intensity":1,"inner_cone":0,"outer_cone":0}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.lights"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
             r#"{"render":{"scene":"no-such-scene"}}"#,
             400,
             "invalid_field",
@@ -681,6 +713,10 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
     stream
         .send(json!({"type": "camera", "input_id": -2, "camera": {"position": [0, 0, 1], "target": [0, 0, 0], "fov_y_degrees": 45}}))
         .await;
+    // The built-in scene has one light: index 1 is not one of the session's.
+    stream
+        .send(json!({"type": "light", "index": 1, "light": {"kind": "point", "position": [0, 1, 0], "direction": [0, -1, 0], "color": [1, 1, 1], "intensity": 1, "inner_cone": 0, "outer_cone": 0}}))
+        .await;
     let expected = [
         ("binary_not_accepted", None),
         ("malformed_json", None),
@@ -694,6 +730,7 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
         ("invalid_field", Some("render.camera.position[0]")),
         ("invalid_field", Some("render.light.position[1]")),
         ("invalid_field", Some("input_id")),
+        ("invalid_field", Some("index")),
     ];
     for (kind, field) in expected {
         let error = stream.next_error().await;

@@ -1,6 +1,8 @@
 //! Sessions streaming frames over WebSocket, end to end on loopback.
 
-use lightcast_e2e::{direct_session, mean_abs_diff, small_session, Incoming, TestServer, PATIENCE};
+use lightcast_e2e::{
+    direct_session, mean_abs_diff, small_session, Incoming, ReceivedFrame, TestServer, PATIENCE,
+};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_STILL};
 use lightcast_protocol::{Codec, ServerEvent};
 use serde_json::json;
@@ -151,6 +153,60 @@ async fn a_resting_view_gets_a_lossless_still_and_on_change_mode_idles() {
     let asked = stream.next_frame(&mut events).await;
     assert_ne!(asked.header.flags & FLAG_STILL, 0);
     assert_eq!(asked.header.codec, Codec::Png);
+    server.stop().await;
+}
+
+/// A session of two lights streams both; a `lights` message that removes one darkens the
+/// frames (fixed exposure), and a `light` message with an index past the lights is refused.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn lights_are_added_and_removed_over_the_websocket() {
+    let server = TestServer::start(&[]).await;
+    let first = json!({"kind": "point", "position": [0.3, 1.5, 0.3], "direction": [0, -1, 0],
+                       "color": [1, 1, 1], "intensity": 2, "inner_cone": 0, "outer_cone": 0});
+    let mut second = first.clone();
+    second["position"] = json!([-0.4, 1.2, 0.5]);
+    let mut params = direct_session(64, 48);
+    params["render"]["lights"] = json!([first, second]);
+    params["render"]["exposure"] = json!(0.5);
+    params["encoding"] = json!({"codec": "png", "still_after_ms": 0});
+    let created = server.create_session(params, None).await;
+    assert_eq!(
+        created.session.params.render.lights.as_ref().map(Vec::len),
+        Some(2)
+    );
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    let mean = |f: &ReceivedFrame| {
+        f.rgba
+            .pixels()
+            .map(|p| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]))
+            .sum::<f64>()
+            / f.rgba.pixels().len() as f64
+    };
+    let both = mean(&stream.next_frame(&mut events).await);
+    stream
+        .send(json!({"type": "lights", "input_id": 5, "lights": [first]}))
+        .await;
+    let one = loop {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.input_id >= 5 {
+            break mean(&f);
+        }
+    };
+    assert!(one < both * 0.95, "one light {one} vs two {both}");
+    let info = server
+        .get_json(&format!("/v1/sessions/{}", created.session.id))
+        .await;
+    assert_eq!(
+        info["params"]["render"]["lights"].as_array().map(Vec::len),
+        Some(1),
+        "{info}"
+    );
+    stream
+        .send(json!({"type": "light", "index": 1, "light": first}))
+        .await;
+    let error = stream.next_error().await;
+    assert_eq!(error.field.as_deref(), Some("index"), "{error:?}");
     server.stop().await;
 }
 

@@ -17,11 +17,12 @@ use crate::gpu::timing::Stage;
 use crate::gpu::{context::AdapterSummary, timing::TimingSource, BackendChoice, GpuContext};
 use crate::offline::{ExposureArg, GiArgs, DEFAULT_SCENE};
 use crate::passes::exposure::Exposure;
+use crate::passes::frame_uniforms::MAX_LIGHTS;
 use crate::passes::yuv420::{Yuv420, Yuv420Layout};
 use crate::quality::{flip_mean, psnr};
 use crate::renderer::{Frame, RenderSettings, Renderer};
 use crate::scene::{
-    default_light::{default_camera, default_light},
+    default_light::{default_camera, default_lights},
     Scene,
 };
 use crate::service::encode::{self, EncodeError};
@@ -483,7 +484,7 @@ pub fn run(
         width: TARGET_SIZE.width,
         height: TARGET_SIZE.height,
         camera: default_camera(&scene),
-        light: default_light(&scene),
+        lights: default_lights(&scene, MAX_LIGHTS),
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,

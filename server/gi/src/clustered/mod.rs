@@ -32,7 +32,7 @@ use crate::gpu::readback::{
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::ShaderPass;
 use crate::passes::{
-    frame_uniforms::light_faces,
+    frame_uniforms::lights_faces,
     gbuffer::GBuffer,
     rsm::{max_rsm_size, Rsm, RsmFace, RsmPass},
     Target,
@@ -443,7 +443,7 @@ impl Clustered {
         let device = &r.ctx.device;
         Self {
             ctx: r.ctx.clone(),
-            rsm_pass: RsmPass::new(device, &r.light, &r.material_layout),
+            rsm_pass: RsmPass::new(device, &r.lights, &r.material_layout),
             params: crate::passes::params_buffer(
                 device,
                 "clustered params",
@@ -531,7 +531,7 @@ impl Method for Clustered {
     ) -> Result<Option<ProgressBuffer>, GiError> {
         let r = frame.resources;
         let g = &Settings::of(frame.settings)?;
-        let faces = light_faces(frame.light, &r.scene.bounds);
+        let faces = lights_faces(frame.lights, &r.scene.bounds);
         let device = &r.ctx.device;
         let Prepared {
             rsm,
@@ -542,7 +542,10 @@ impl Method for Clustered {
             .targets
             .prepare(device, &self.visibility, frame, g, faces.len() as u32);
         let queue = &r.ctx.queue;
-        let rsm_faces: Vec<RsmFace> = faces.iter().map(|f| RsmFace::new(f, g.rsm_size)).collect();
+        let rsm_faces: Vec<RsmFace> = faces
+            .iter()
+            .map(|(light, f)| RsmFace::new(f, g.rsm_size, *light))
+            .collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let atlas = visibility.layout;
         let params = ClusteredParams {

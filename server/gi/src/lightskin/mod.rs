@@ -33,7 +33,7 @@ use super::{
 use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap};
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::ShaderPass;
-use crate::passes::{frame_uniforms::light_faces, gbuffer::GBuffer};
+use crate::passes::{frame_uniforms::lights_faces, gbuffer::GBuffer};
 use cache_buffers::CacheBuffers;
 use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
 use cache_store::CacheStore;
@@ -268,7 +268,7 @@ impl LightSkin {
         let device = &r.ctx.device;
         Self {
             ctx: r.ctx.clone(),
-            sampling: ValSampling::new(device, &r.light, &r.material_layout),
+            sampling: ValSampling::new(device, &r.lights, &r.material_layout),
             cache_pass: CacheLightingPass::new(device),
             occlusion_pass: ProxyOcclusionPass::new(device),
             indirect_pass: IndirectLightPass::new(device),
@@ -337,7 +337,7 @@ impl Method for LightSkin {
         self.sampling.prepare(
             &r.ctx,
             frame.gbuffer,
-            &light_faces(frame.light, &r.scene.bounds),
+            &lights_faces(frame.lights, &r.scene.bounds),
             gi,
         );
         let source = match method {

@@ -107,7 +107,7 @@ impl ValSampling {
         &mut self,
         ctx: &GpuContext,
         gbuffer: &GBuffer,
-        faces: &[LightFace],
+        faces: &[(u32, LightFace)],
         settings: &Settings,
     ) {
         let key = Key {
@@ -131,9 +131,12 @@ impl ValSampling {
         }
         let res = &self.resources[0];
         let queue = &ctx.queue;
+        // Every light's faces lie in one atlas and eq. 10–11's importance is estimated over all
+        // of it, so the VAL budget is split between the lights by their share of the summed
+        // importance: light k draws N·ΣI_k/ΣI VALs in expectation (1/(N·P) keeps each unbiased).
         let rsm_faces: Vec<RsmFace> = faces
             .iter()
-            .map(|f| RsmFace::new(f, settings.rsm_size))
+            .map(|(light, f)| RsmFace::new(f, settings.rsm_size, *light))
             .collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let bands = self

@@ -5,7 +5,7 @@
 //! on the CPU ([`bvh`], shared with other methods' visibility rays) is traversed in WGSL (`shaders/bvh.wgsl`, `shaders/reference/`). For every pixel it
 //! estimates the indirect radiance leaving the surface point the pixel centre sees towards the
 //! camera — the quantity the other methods write into their indirect buffer — with the same
-//! BRDF (diffuse + normalised Phong lobe, eq. 3–4 of seed 004), punctual light and emitters, but
+//! BRDF (diffuse + normalised Phong lobe, eq. 3–4 of seed 004), punctual lights and emitters, but
 //! with exact visibility. `bounces` = 1 is the single-bounce light seed 004 approximates.
 //!
 //! Materials are the raster passes' (`shaders/material_model.wgsl` is shared): at every hit the
@@ -19,7 +19,7 @@
 //! the test is compiled away (on lavapipe it would otherwise double the cost of a sample). The
 //! shadow map cuts masked texels away too, so direct light passes the same holes.
 //!
-//! Samples accumulate while the camera, light, size and settings stay the same; each sample
+//! Samples accumulate while the camera, lights, size and settings stay the same; each sample
 //! is one dispatch (short enough for lavapipe's silent dispatch limit at small sizes). Random
 //! numbers are a hash of pixel, sample index and seed, so the same request gives the same
 //! pixels on the same adapter. Each image history (a session; see [`FrameInputs::history`])
@@ -42,7 +42,7 @@ use super::precompute::{
 use super::{FrameInputs, GiError, InvalidSetting, Method, MethodEntry, ProgressBuffer};
 use crate::gpu::{readback::read_buffer, timing::FrameStages, GpuContext, GpuError};
 use crate::passes::bind::{self, bind_group};
-use crate::passes::frame_uniforms::{camera_view_proj, LightUniform};
+use crate::passes::frame_uniforms::{camera_view_proj, LightsUniform};
 use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::tonemap::luminance;
 use crate::passes::ShaderPass;
@@ -95,15 +95,15 @@ pub const ENTRY: MethodEntry = MethodEntry {
 };
 
 /// One frame's paths: every pixel traces `spp` paths of a camera ray and, per bounce, a
-/// bounce ray and a shadow ray. A ray costs about 120 reference ns per level of the BVH
+/// bounce ray and a shadow ray per light. A ray costs about 120 reference ns per level of the BVH
 /// (1.2 µs on the 1,090-triangle Cornell box, measured at 32² with 16 … 256 spp and 2 … 16
 /// bounces); paths that leave the scene early make the real cost lower, never higher.
 fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     let (spp, bounces) = (params::SPP.u32(gi), BOUNCES.u32(gi));
-    let rays = shape.pixels() * f64::from(spp) * f64::from(1 + 2 * bounces);
+    let rays = shape.pixels() * f64::from(spp) * f64::from(1 + (1 + shape.lights) * bounces);
     let depth = (shape.triangles.max(2) as f64).log2().max(10.0);
     cost.add(
-        "path tracing (pixels × spp × (1 + 2 × bounces) rays)",
+        "path tracing (pixels × spp × (1 + (1 + lights) × bounces) rays)",
         rays,
         120.0 * depth,
     );
@@ -429,7 +429,7 @@ struct AccumKey {
     width: u32,
     height: u32,
     camera: Camera,
-    light: Light,
+    lights: Vec<Light>,
     settings: ReferenceSettings,
 }
 
@@ -440,7 +440,7 @@ pub struct PathTracer {
     pass_layout: wgpu::BindGroupLayout,
     scene_group: wgpu::BindGroup,
     params: ParamSlots,
-    light: wgpu::Buffer,
+    lights: wgpu::Buffer,
     bounds: crate::scene::Aabb,
     /// Accumulations of the most recently used histories, most recent first.
     accumulations: Vec<Accumulation>,
@@ -460,7 +460,7 @@ bind_group! {
     /// Group 0 of `shaders/reference/path_trace.wgsl`.
     pub struct PassResources as PASS_GROUP("reference", wgpu::ShaderStages::COMPUTE) {
         params: bind::param_slot::<TraceParams>(),
-        light: bind::PARAMS,
+        lights: bind::PARAMS,
         accum: bind::STORAGE_RW,
     }
 }
@@ -560,17 +560,17 @@ impl PathTracer {
             "main",
             &[("ALPHA_TESTED", f64::from(u8::from(alpha_tested)))],
         );
-        let light = passes::params_buffer(
+        let lights = passes::params_buffer(
             device,
-            "reference light",
-            std::mem::size_of::<LightUniform>(),
+            "reference lights",
+            std::mem::size_of::<LightsUniform>(),
         );
         Ok(Self {
             pipeline,
             pass_layout,
             scene_group,
             params,
-            light,
+            lights,
             bounds: scene.bounds,
             accumulations: Vec::new(),
             resolve: resolve::ResolvePass::new(device),
@@ -658,7 +658,7 @@ impl PathTracer {
         width: u32,
         height: u32,
         camera: &Camera,
-        light: &Light,
+        lights: &[Light],
         settings: &ReferenceSettings,
         samples: u32,
     ) -> Result<(), ReferenceError> {
@@ -677,7 +677,7 @@ impl PathTracer {
             width,
             height,
             camera: camera.clone(),
-            light: light.clone(),
+            lights: lights.to_vec(),
             settings: *settings,
         };
         self.ensure_accumulation(&mut encoder, key);
@@ -696,7 +696,7 @@ impl PathTracer {
                     width,
                     height,
                     camera,
-                    light,
+                    lights,
                     settings,
                     ..
                 },
@@ -727,8 +727,9 @@ impl PathTracer {
             row_offset: 0,
         };
         // Each sample in bands of rows of at most `band_rays` rays (a camera ray, then a bounce
-        // and a shadow ray per bounce), as many as the parameter slots hold.
-        let rays_per_row = u64::from(width) * u64::from(1 + 2 * settings.bounces);
+        // ray and a shadow ray per light per bounce), as many as the parameter slots hold.
+        let rays_per_ray_bounce = 1 + lights.len() as u32;
+        let rays_per_row = u64::from(width) * u64::from(1 + rays_per_ray_bounce * settings.bounces);
         let wanted = u64::from(height)
             .div_ceil((self.band_rays / rays_per_row).max(1))
             .max(1);
@@ -746,13 +747,13 @@ impl PathTracer {
             })
             .collect();
         self.params.write(&self.ctx.queue, &slots);
-        let light_uniform = LightUniform::new(light, &self.bounds, 16);
+        let lights_uniform = LightsUniform::new(lights, &self.bounds, 16);
         self.ctx
             .queue
-            .write_buffer(&self.light, 0, bytemuck::bytes_of(&light_uniform));
+            .write_buffer(&self.lights, 0, bytemuck::bytes_of(&lights_uniform));
         let group = PassResources {
             params: &self.params,
-            light: &self.light,
+            lights: &self.lights,
             accum,
         }
         .bind(device, &self.pass_layout);
@@ -795,7 +796,7 @@ impl PathTracer {
             width: frame.width,
             height: frame.height,
             camera: frame.camera.clone(),
-            light: frame.light.clone(),
+            lights: frame.lights.to_vec(),
             settings: ReferenceSettings {
                 bounces: g.bounces,
                 seed: 0,

@@ -4,14 +4,14 @@
 //! `tests/methods.rs` gathers every method's `gpu_tests.rs`.
 
 use lightcast_gi::common::bvh::SceneBvh;
-use lightcast_gi::rsm_gather::pattern::{gather, gather_centre, RsmAtlas};
+use lightcast_gi::rsm_gather::pattern::{gather, gather_centre, light_runs, RsmAtlas};
 use lightcast_gi::rsm_gather::{GatherReadback, RsmGather, RSM_GATHER};
 use lightcast_passes::gpu::{BackendChoice, GpuContext};
 use lightcast_passes::passes::frame_uniforms::camera_view_proj;
 use lightcast_render::renderer::{RenderSettings, Renderer};
 use lightcast_scene::{default_light, material::DiffuseGlossy, procedural, Scene};
 use glam::{Vec3, Vec4Swizzles};
-use lightcast_protocol::GiParams;
+use lightcast_protocol::{GiParams, Light, LightKind};
 
 const W: u32 = 48;
 const H: u32 = 36;
@@ -68,14 +68,18 @@ fn surface_at(
     ))
 }
 
-fn render(scene: &Scene, gi: GiParams) -> (RenderSettings, GatherReadback, Vec<[f32; 4]>) {
+fn render(
+    scene: &Scene,
+    gi: GiParams,
+    lights: Vec<Light>,
+) -> (RenderSettings, GatherReadback, Vec<[f32; 4]>) {
     let ctx = GpuContext::new(BackendChoice::Auto).expect("a GPU adapter (lavapipe in CI)");
     let mut renderer = Renderer::new(ctx, scene.clone());
     let s = RenderSettings {
         width: W,
         height: H,
         camera: default_light::default_camera(scene),
-        light: default_light::default_light(scene),
+        lights,
         exposure: lightcast_passes::passes::exposure::Exposure::Manual(1.0),
         shadow_map_size: 256,
         capture_hdr: true,
@@ -101,11 +105,30 @@ fn render(scene: &Scene, gi: GiParams) -> (RenderSettings, GatherReadback, Vec<[
 #[test]
 fn the_gather_matches_the_cpu_reference() {
     let scene = procedural::cornell_box();
+    gather_matches_the_cpu(&scene, vec![default_light::default_light(&scene)]);
+}
+
+/// The same with a point light (six faces) after the scene's spot: the gather sums each
+/// light's pattern in its own faces.
+#[test]
+fn the_gather_of_two_lights_matches_the_cpu_reference() {
+    let scene = procedural::cornell_box();
+    let spot = default_light::default_light(&scene);
+    let point = Light {
+        kind: LightKind::Point,
+        position: scene.bounds.center().into(),
+        intensity: spot.intensity * 0.5,
+        ..spot.clone()
+    };
+    gather_matches_the_cpu(&scene, vec![spot, point]);
+}
+
+fn gather_matches_the_cpu(scene: &Scene, lights: Vec<Light>) {
     let gi = GiParams::new(RSM_GATHER)
         .with("rsm_size", 64)
         .with("gather_samples", 200)
         .with("gather_radius", 0.3);
-    let (s, rb, indirect) = render(&scene, gi);
+    let (s, rb, indirect) = render(scene, gi, lights);
     let rsm = RsmAtlas {
         size: rb.rsm_size,
         faces: rb.faces,
@@ -113,7 +136,7 @@ fn the_gather_matches_the_cpu_reference() {
         normal: &rb.rsm_normal,
         flux_area: &rb.rsm_flux_area,
     };
-    let bvh = SceneBvh::build(&scene).expect("a BVH");
+    let bvh = SceneBvh::build(scene).expect("a BVH");
     let viewer = Vec3::from(s.camera.position);
     let radius = 0.3;
     let (mut checked, mut worst) = (0, 0.0f32);
@@ -127,11 +150,12 @@ fn the_gather_matches_the_cpu_reference() {
         (36, 20),
         (6, 20),
     ] {
-        let Some((p, n, brdf)) = surface_at(&scene, &bvh, &s, x, y) else {
+        let Some((p, n, brdf)) = surface_at(scene, &bvh, &s, x, y) else {
             continue;
         };
         if (x, y) == (W / 2, H / 2) {
-            let (face, centre) = gather_centre(&rb.face_view_proj, rb.rsm_size, p);
+            let (_, first_light) = light_runs(&rb.face_view_proj).next().expect("a light");
+            let (face, centre) = gather_centre(&first_light, rb.rsm_size, p);
             let (gpu_face, gpu_centre) = rb.probe.expect("the probe sees a surface");
             assert_eq!(face, gpu_face);
             assert!(
@@ -177,7 +201,7 @@ fn a_larger_radius_gathers_more_texels() {
             .with("rsm_size", 64)
             .with("gather_samples", 400)
             .with("gather_radius", radius);
-        let (_, _, indirect) = render(&scene, gi);
+        let (_, _, indirect) = render(&scene, gi, vec![default_light::default_light(&scene)]);
         indirect
             .iter()
             .map(|p| f64::from(p[0] + p[1] + p[2]))

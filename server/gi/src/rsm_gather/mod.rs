@@ -29,10 +29,10 @@ use crate::gpu::readback::{
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::rsm::{max_rsm_size, Rsm, RsmFace, RsmPass};
 use crate::passes::ShaderPass;
-use crate::passes::{frame_uniforms::light_faces, Target};
+use crate::passes::{frame_uniforms::lights_faces, Target};
 use lightcast_protocol::{GiMethod, GiParams, View};
 use params::Settings;
-use passes::{GatherParams, GatherResources, GATHER_GROUP};
+use passes::{GatherFace, GatherParams, GatherResources, GATHER_GROUP};
 use pattern::GatherSample;
 use std::any::{Any, TypeId};
 use std::sync::Arc;
@@ -40,8 +40,8 @@ use std::sync::Arc;
 /// The method's name.
 pub const RSM_GATHER: GiMethod = GiMethod::new("rsm_gather");
 
-/// Most light faces (a point light's cube).
-const MAX_FACES: usize = 6;
+/// Most light faces (a point light's cube for each of the most lights).
+const MAX_FACES: usize = 6 * crate::passes::frame_uniforms::MAX_LIGHTS;
 
 /// The module with its pipeline's bind group (see [`ShaderPass`]).
 const PASSES: &[ShaderPass] = &[ShaderPass::new(&shaders::GATHER, &[&passes::GATHER_GROUP])];
@@ -133,7 +133,8 @@ pub struct GatherReadback {
     pub rsm_normal: Vec<[f32; 4]>,
     pub rsm_flux_area: Vec<[f32; 4]>,
     /// Each face's view-projection.
-    pub face_view_proj: Vec<glam::Mat4>,
+    /// Each atlas face's light and view-projection.
+    pub face_view_proj: Vec<(u32, glam::Mat4)>,
     pub samples: Vec<GatherSample>,
     pub probe: Option<(usize, glam::Vec2)>,
 }
@@ -152,7 +153,7 @@ pub struct RsmGather {
     sample_buffer: Option<wgpu::Buffer>,
     probe: wgpu::Buffer,
     /// The last frame's faces and r_max (texels), for the view and the tests.
-    last: Option<(Vec<glam::Mat4>, f32)>,
+    last: Option<(Vec<(u32, glam::Mat4)>, f32)>,
 }
 
 fn storage(device: &wgpu::Device, label: &str, bytes: u64) -> wgpu::Buffer {
@@ -173,7 +174,7 @@ impl RsmGather {
         let module = shaders::GATHER.create_module(device);
         Self {
             ctx: r.ctx.clone(),
-            rsm_pass: RsmPass::new(device, &r.light, &r.material_layout),
+            rsm_pass: RsmPass::new(device, &r.lights, &r.material_layout),
             rsm: None,
             pipeline: crate::passes::compute_pipeline(
                 device,
@@ -191,7 +192,7 @@ impl RsmGather {
             faces: storage(
                 device,
                 "rsm gather faces",
-                (MAX_FACES * size_of::<glam::Mat4>()) as u64,
+                (MAX_FACES * size_of::<GatherFace>()) as u64,
             ),
             samples: Vec::new(),
             sample_buffer: None,
@@ -230,16 +231,29 @@ impl Method for RsmGather {
     ) -> Result<Option<ProgressBuffer>, GiError> {
         let r = frame.resources;
         let g = Settings::of(frame.settings)?;
-        let faces = light_faces(frame.light, &r.scene.bounds);
+        let faces = lights_faces(frame.lights, &r.scene.bounds);
         let device = &r.ctx.device;
         let queue = &r.ctx.queue;
         let face_count = faces.len() as u32;
         let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, face_count);
-        let rsm_faces: Vec<RsmFace> = faces.iter().map(|f| RsmFace::new(f, g.rsm_size)).collect();
+        let rsm_faces: Vec<RsmFace> = faces
+            .iter()
+            .map(|(light, f)| RsmFace::new(f, g.rsm_size, *light))
+            .collect();
         self.rsm_pass.set_faces(queue, &rsm_faces);
-        let view_proj: Vec<glam::Mat4> = faces.iter().map(|f| f.view_proj).collect();
-        let matrices: Vec<[[f32; 4]; 4]> = view_proj.iter().map(|m| m.to_cols_array_2d()).collect();
-        queue.write_buffer(&self.faces, 0, bytemuck::cast_slice(&matrices));
+        let view_proj: Vec<(u32, glam::Mat4)> = faces
+            .iter()
+            .map(|(light, f)| (*light, f.view_proj))
+            .collect();
+        let gather_faces: Vec<GatherFace> = view_proj
+            .iter()
+            .map(|(light, m)| GatherFace {
+                view_proj: m.to_cols_array_2d(),
+                light: *light,
+                ..GatherFace::default()
+            })
+            .collect();
+        queue.write_buffer(&self.faces, 0, bytemuck::cast_slice(&gather_faces));
         if self.samples.len() != g.gather_samples as usize || self.sample_buffer.is_none() {
             self.samples = pattern::pattern(g.gather_samples);
             let buffer = storage(

@@ -18,6 +18,19 @@ pub struct GatherParams {
     pub probe_y: u32,
 }
 
+/// One face of the atlas as the gather reads it (mirrors `GatherFace` in
+/// `shaders/rsm_gather/gather.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GatherFace {
+    pub view_proj: [[f32; 4]; 4],
+    /// The face's light: a light's faces follow each other in the atlas.
+    pub light: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+}
+
 bind_group! {
     /// Group 0 of `shaders/rsm_gather/gather.wgsl`.
     pub struct GatherResources as GATHER_GROUP("rsm gather", wgpu::ShaderStages::COMPUTE) {
@@ -60,6 +73,18 @@ mod tests {
                 ("radius", offset_of!(GatherParams, radius)),
                 ("probe_x", offset_of!(GatherParams, probe_x)),
                 ("probe_y", offset_of!(GatherParams, probe_y)),
+            ],
+        );
+        assert_struct(
+            &GATHER,
+            "GatherFace",
+            size_of::<GatherFace>(),
+            &[
+                ("view_proj", offset_of!(GatherFace, view_proj)),
+                ("light", offset_of!(GatherFace, light)),
+                ("pad0", offset_of!(GatherFace, pad0)),
+                ("pad1", offset_of!(GatherFace, pad1)),
+                ("pad2", offset_of!(GatherFace, pad2)),
             ],
         );
         assert_struct(

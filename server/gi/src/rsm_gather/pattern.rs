@@ -120,12 +120,24 @@ pub fn sample_texels(
         .collect()
 }
 
+/// The faces of each light: runs of `faces` (each face's light and view-projection, in atlas
+/// order) with the same light, each with the atlas index of its first face.
+pub fn light_runs(faces: &[(u32, Mat4)]) -> impl Iterator<Item = (usize, Vec<Mat4>)> + '_ {
+    faces.chunk_by(|a, b| a.0 == b.0).scan(0, |start, run| {
+        let first = *start;
+        *start += run.len();
+        Some((first, run.iter().map(|(_, m)| *m).collect()))
+    })
+}
+
 /// The gathered light at surface point `x` (unit normal `n`, BRDF `s`) seen from `viewer`:
-/// Σ over the samples of weight × the pixel light's L (`vpl_light`) of the texel it reaches.
+/// for each light, Σ over the samples of weight × the pixel light's L (`vpl_light`) of the
+/// texel it reaches in that light's faces. `faces`: each atlas face's light and
+/// view-projection.
 #[allow(clippy::too_many_arguments)]
 pub fn gather(
     rsm: &RsmAtlas,
-    faces: &[Mat4],
+    faces: &[(u32, Mat4)],
     samples: &[GatherSample],
     radius_fraction: f32,
     x: Vec3,
@@ -133,11 +145,13 @@ pub fn gather(
     viewer: Vec3,
     s: &DiffuseGlossy,
 ) -> Vec3 {
-    let (face, centre) = gather_centre(faces, rsm.size, x);
     let v = (viewer - x).normalize();
     let radius = radius_fraction * rsm.size as f32;
-    sample_texels(samples, rsm.size, rsm.faces, face, centre, radius)
-        .into_iter()
+    light_runs(faces)
+        .flat_map(|(first, run)| {
+            let (face, centre) = gather_centre(&run, rsm.size, x);
+            sample_texels(samples, rsm.size, rsm.faces, first + face, centre, radius)
+        })
         .filter(|&(i, _)| rsm.position[i][3] != 0.0)
         .map(|(i, weight)| {
             let [fr, fg, fb, area] = rsm.flux_area[i];

@@ -412,7 +412,7 @@ pub fn precompute(
 /// What a history's caches were lit by: a change restarts its bounces.
 #[derive(Clone, Debug, PartialEq)]
 struct LitBy {
-    light: Light,
+    lights: Vec<Light>,
     shadow_map_size: u32,
     bounces: u32,
     emitters: bool,
@@ -663,7 +663,7 @@ impl Surfels {
         let r = frame.resources;
         let wanted = Settings::of(frame.settings)?.bounces.max(1);
         let lit_by = LitBy {
-            light: frame.light.clone(),
+            lights: frame.lights.to_vec(),
             shadow_map_size: frame.shadow.size,
             bounces: wanted,
             emitters: emitters(frame.settings),
@@ -695,7 +695,7 @@ impl Surfels {
                     e,
                     set,
                     &Bounce {
-                        light: &r.light,
+                        lights: &r.lights,
                         shadow: frame.shadow,
                         previous: previous.map(|i| &history.buffers[i]),
                         emitters: emitters(frame.settings),

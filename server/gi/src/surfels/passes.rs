@@ -84,7 +84,7 @@ bind_group! {
     /// Group 0 of `shaders/surfels/surfel_light.wgsl`.
     pub struct LightResources as LIGHT_GROUP("surfel light", wgpu::ShaderStages::COMPUTE) {
         params: bind::PARAMS,
-        light: bind::PARAMS,
+        lights: bind::PARAMS,
         shadow_map: BindKind::Texture {
             sample_type: wgpu::TextureSampleType::Depth,
             dimension: wgpu::TextureViewDimension::D2Array,
@@ -346,7 +346,8 @@ impl SurfelBuffers {
 
 /// What [`SurfelPasses::encode_light`] reads.
 pub struct Bounce<'a> {
-    pub light: &'a wgpu::Buffer,
+    /// The frame's `LightsUniform`.
+    pub lights: &'a wgpu::Buffer,
     pub shadow: &'a ShadowMap,
     /// The cache lighting of the previous bounce (`None`: the first bounce).
     pub previous: Option<&'a wgpu::Buffer>,
@@ -469,7 +470,7 @@ impl SurfelPasses {
         let slot = usize::from(bounce.previous.is_some()) + 2 * usize::from(bounce.emitters);
         let group = LightResources {
             params: &self.light_params[slot],
-            light: bounce.light,
+            lights: bounce.lights,
             shadow_map: &bounce.shadow.array_view,
             shadow_sampler: &self.shadow_sampler,
             surfels: &buffers.surfels,

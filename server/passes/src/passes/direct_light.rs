@@ -1,4 +1,4 @@
-//! Deferred lighting (`shaders/direct_light.wgsl`): emission, one punctual light with the
+//! Deferred lighting (`shaders/direct_light.wgsl`): emission, every punctual light with the
 //! paper's BRDF (eq. 3–4) and PCF shadows, plus the indirect target, into HDR.
 
 use super::bind::{self, bind_group, BindKind};
@@ -10,7 +10,8 @@ pub const HDR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 /// What the lighting pass reads and writes.
 pub struct DirectLightInputs<'a> {
     pub camera: &'a wgpu::Buffer,
-    pub light: &'a wgpu::Buffer,
+    /// The frame's `LightsUniform`.
+    pub lights: &'a wgpu::Buffer,
     pub gbuffer: &'a GBuffer,
     pub shadow: &'a ShadowMap,
     pub indirect: &'a Target,
@@ -21,7 +22,7 @@ bind_group! {
     /// Group 0 of `shaders/direct_light.wgsl`.
     pub struct Resources as GROUP("direct light", wgpu::ShaderStages::COMPUTE) {
         camera: bind::PARAMS,
-        light: bind::PARAMS,
+        lights: bind::PARAMS,
         g_position: bind::TEXTURE,
         g_normal_exponent: bind::TEXTURE,
         g_diffuse: bind::TEXTURE,
@@ -65,7 +66,7 @@ impl DirectLightPass {
     pub fn bind(&self, device: &wgpu::Device, inputs: &DirectLightInputs) -> wgpu::BindGroup {
         Resources {
             camera: inputs.camera,
-            light: inputs.light,
+            lights: inputs.lights,
             g_position: &inputs.gbuffer.position,
             g_normal_exponent: &inputs.gbuffer.normal_exponent,
             g_diffuse: &inputs.gbuffer.diffuse,

@@ -1,5 +1,5 @@
-//! Uniforms every pass shares: the camera (`shaders/common.wgsl`) and the light with its
-//! shadow projections (`shaders/lights.wgsl`).
+//! Uniforms every pass shares: the camera (`shaders/common.wgsl`) and the frame's lights with
+//! their shadow projections (`shaders/lights.wgsl`).
 
 use crate::scene::Aabb;
 use bytemuck::{Pod, Zeroable};
@@ -29,8 +29,79 @@ pub struct LightUniform {
     pub cos_outer: f32,
     pub shadow_texel: f32,
     pub normal_bias: f32,
+    /// The light's first layer in the frame's shadow-map array.
+    pub first_layer: u32,
     pub pad0: f32,
-    pub pad1: f32,
+}
+
+/// Most punctual lights a frame lights with (`MAX_LIGHTS` in `shaders/lights.wgsl`): the
+/// list is a fixed-size storage struct every lighting shader loops over.
+pub const MAX_LIGHTS: usize = 16;
+
+/// Mirrors `Lights` in `shaders/lights.wgsl`: the frame's lights, `count` of them used.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct LightsUniform {
+    pub count: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
+    pub list: [LightUniform; MAX_LIGHTS],
+}
+
+impl LightsUniform {
+    /// Every light of `lights` (at most [`MAX_LIGHTS`]; callers check) with its shadow faces
+    /// fitted to the scene bounds, their layers following each other in light order.
+    pub fn new(lights: &[Light], bounds: &Aabb, shadow_size: u32) -> Self {
+        debug_assert!(lights.len() <= MAX_LIGHTS, "{} lights", lights.len());
+        let mut all = Self::zeroed();
+        let mut first_layer = 0;
+        for (slot, light) in all.list.iter_mut().zip(lights) {
+            *slot = LightUniform::new(light, bounds, shadow_size);
+            slot.first_layer = first_layer;
+            first_layer += LightUniform::face_count(light.kind);
+        }
+        all.count = lights.len().min(MAX_LIGHTS) as u32;
+        all
+    }
+
+    /// The lights in use.
+    pub fn used(&self) -> &[LightUniform] {
+        &self.list[..self.count as usize]
+    }
+
+    /// The view-projection of every shadow-map layer, in layer order.
+    pub fn layer_view_proj(&self) -> Vec<[[f32; 4]; 4]> {
+        self.used()
+            .iter()
+            .flat_map(|l| {
+                l.face_view_proj[..LightUniform::face_count_of(l.kind) as usize]
+                    .iter()
+                    .copied()
+            })
+            .collect()
+    }
+}
+
+/// Shadow-map layers (and RSM faces) of all `lights` together.
+pub fn face_count(lights: &[Light]) -> u32 {
+    lights
+        .iter()
+        .map(|l| LightUniform::face_count(l.kind))
+        .sum()
+}
+
+/// The faces of every light in light order, each with its light's index in the list.
+pub fn lights_faces(lights: &[Light], bounds: &Aabb) -> Vec<(u32, LightFace)> {
+    lights
+        .iter()
+        .enumerate()
+        .flat_map(|(i, l)| {
+            light_faces(l, bounds)
+                .into_iter()
+                .map(move |f| (i as u32, f))
+        })
+        .collect()
 }
 
 /// Widest spot cone a single perspective shadow map covers; light outside it is unshadowed.
@@ -178,8 +249,8 @@ impl LightUniform {
             cos_outer,
             shadow_texel: 1.0 / shadow_size as f32,
             normal_bias: NORMAL_BIAS_TEXELS * texel_world,
+            first_layer: 0,
             pad0: 0.0,
-            pad1: 0.0,
         }
     }
 
@@ -188,6 +259,15 @@ impl LightUniform {
         match kind {
             LightKind::Point => 6,
             LightKind::Directional | LightKind::Spot => 1,
+        }
+    }
+
+    /// [`Self::face_count`] of a light's `kind` code.
+    fn face_count_of(kind: u32) -> u32 {
+        if kind == light_kind_code(LightKind::Point) {
+            6
+        } else {
+            1
         }
     }
 }
@@ -240,10 +320,49 @@ mod tests {
                 ("cos_outer", offset_of!(LightUniform, cos_outer)),
                 ("shadow_texel", offset_of!(LightUniform, shadow_texel)),
                 ("normal_bias", offset_of!(LightUniform, normal_bias)),
+                ("first_layer", offset_of!(LightUniform, first_layer)),
                 ("pad0", offset_of!(LightUniform, pad0)),
-                ("pad1", offset_of!(LightUniform, pad1)),
             ],
         );
+    }
+
+    #[test]
+    fn lights_uniform_matches_wgsl() {
+        assert_struct(
+            &DIRECT_LIGHT,
+            "Lights",
+            size_of::<LightsUniform>(),
+            &[
+                ("count", offset_of!(LightsUniform, count)),
+                ("pad0", offset_of!(LightsUniform, pad0)),
+                ("pad1", offset_of!(LightsUniform, pad1)),
+                ("pad2", offset_of!(LightsUniform, pad2)),
+                ("list", offset_of!(LightsUniform, list)),
+            ],
+        );
+    }
+
+    /// Each light's layers follow the previous light's: a point light between two others takes
+    /// six, and the layer matrices are each light's faces in order.
+    #[test]
+    fn lights_take_consecutive_shadow_layers() {
+        let lights = [
+            light(LightKind::Spot),
+            light(LightKind::Point),
+            light(LightKind::Directional),
+        ];
+        let u = LightsUniform::new(&lights, &unit_box(), 256);
+        assert_eq!(u.count, 3);
+        let firsts: Vec<u32> = u.used().iter().map(|l| l.first_layer).collect();
+        assert_eq!(firsts, [0, 1, 7]);
+        assert_eq!(face_count(&lights), 8);
+        let layers = u.layer_view_proj();
+        assert_eq!(layers.len(), 8);
+        assert_eq!(layers[1..7], u.list[1].face_view_proj[..]);
+        assert_eq!(layers[7], u.list[2].face_view_proj[0]);
+        let faces = lights_faces(&lights, &unit_box());
+        let owners: Vec<u32> = faces.iter().map(|(i, _)| *i).collect();
+        assert_eq!(owners, [0, 1, 1, 1, 1, 1, 1, 2]);
     }
 
     fn unit_box() -> Aabb {

@@ -1,5 +1,5 @@
 //! Reflective shadow map (`shaders/rsm.wgsl`): VAL position, normal, flux and disk area per
-//! texel, the faces of a light side by side in one atlas.
+//! texel, the faces of every light of the frame side by side in one atlas.
 
 use super::bind::{self, bind_group};
 use super::frame_uniforms::LightFace;
@@ -13,15 +13,23 @@ pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 /// Flux of a small texel far from a dim light can be far below f16's normal range.
 pub const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
-const MAX_FACES: u32 = 6;
+/// A point light's six faces for each of the most lights a frame has.
+const MAX_FACES: u32 = 6 * super::frame_uniforms::MAX_LIGHTS as u32;
 /// Largest RSM side per light face.
 pub const MAX_RSM_SIZE: u32 = 4096;
 /// Most RSM texels over all faces (each costs ~50 bytes across the sampling stages).
 pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
+/// Widest atlas: the texture width every Vulkan adapter we run on allows (lavapipe and
+/// desktop GPUs: 16,384 or more).
+pub const MAX_ATLAS_WIDTH: u32 = 16384;
 
-/// Largest RSM side per face for a light of `faces` faces (6 for point lights).
+/// Largest RSM side per face for `faces` faces of all the frame's lights together (6 per
+/// point light): the texel budget and the atlas width shared between them.
 pub fn max_rsm_size(faces: u32) -> u32 {
-    MAX_RSM_SIZE.min(((MAX_RSM_TEXELS / u64::from(faces.max(1))) as f64).sqrt() as u32)
+    let faces = faces.max(1);
+    MAX_RSM_SIZE
+        .min(((MAX_RSM_TEXELS / u64::from(faces)) as f64).sqrt() as u32)
+        .min(MAX_ATLAS_WIDTH / faces)
 }
 
 /// Mirrors `RsmFace` in `shaders/rsm.wgsl`.
@@ -32,25 +40,26 @@ pub struct RsmFace {
     pub axis: [f32; 3],
     pub texel_area: f32,
     pub perspective: u32,
+    /// The face's light in the frame's `LightsUniform`.
+    pub light: u32,
     pub pad0: u32,
     pub pad1: u32,
-    pub pad2: u32,
 }
 
 impl RsmFace {
     /// Eq. 1 for an RSM of `size`² texels per face: the disk area is `texel_area · z²` for
     /// perspective faces (w_near·h_near / z_near² is the squared frustum side at unit depth)
-    /// and `texel_area` itself for an orthographic face.
-    pub fn new(face: &LightFace, size: u32) -> Self {
+    /// and `texel_area` itself for an orthographic face. `light` is the face's light's index.
+    pub fn new(face: &LightFace, size: u32, light: u32) -> Self {
         let texel_side = face.extent / size as f32;
         Self {
             view_proj: face.view_proj.to_cols_array_2d(),
             axis: face.axis.into(),
             texel_area: texel_side * texel_side,
             perspective: u32::from(face.perspective),
+            light,
             pad0: 0,
             pad1: 0,
-            pad2: 0,
         }
     }
 }
@@ -122,7 +131,7 @@ bind_group! {
     /// Group 0 of `shaders/rsm.wgsl` (group 1 is [`super::scene_buffers::MATERIAL_GROUP`]).
     pub struct Resources as GROUP("rsm", wgpu::ShaderStages::VERTEX_FRAGMENT) {
         face: bind::param_slot::<RsmFace>(),
-        light: bind::PARAMS,
+        lights: bind::PARAMS,
     }
 }
 
@@ -135,14 +144,14 @@ pub struct RsmPass {
 impl RsmPass {
     pub fn new(
         device: &wgpu::Device,
-        light: &wgpu::Buffer,
+        lights: &wgpu::Buffer,
         material_layout: &wgpu::BindGroupLayout,
     ) -> Self {
         let layout = GROUP.layout(device);
         let faces = ParamSlots::new::<RsmFace>(device, "rsm faces", MAX_FACES);
         let bind_group = Resources {
             face: &faces,
-            light,
+            lights,
         }
         .bind(device, &layout);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -204,9 +213,9 @@ mod tests {
                 ("axis", offset_of!(RsmFace, axis)),
                 ("texel_area", offset_of!(RsmFace, texel_area)),
                 ("perspective", offset_of!(RsmFace, perspective)),
+                ("light", offset_of!(RsmFace, light)),
                 ("pad0", offset_of!(RsmFace, pad0)),
                 ("pad1", offset_of!(RsmFace, pad1)),
-                ("pad2", offset_of!(RsmFace, pad2)),
             ],
         );
     }

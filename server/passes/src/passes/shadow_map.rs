@@ -6,9 +6,11 @@ use super::ParamSlots;
 use crate::gpu::shaders;
 
 pub const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
-const MAX_FACES: u32 = 6;
+/// A point light's six faces for each of the most lights a frame has.
+const MAX_FACES: u32 = 6 * super::frame_uniforms::MAX_LIGHTS as u32;
 
-/// The depth array for one light and resolution.
+/// The depth array of a frame's lights (every light's faces, see `LightsUniform`) at one
+/// resolution.
 pub struct ShadowMap {
     texture: wgpu::Texture,
     /// Every layer, for the lighting pass.
@@ -152,7 +154,7 @@ impl ShadowMapPass {
         }
     }
 
-    /// Uploads the face matrices (`LightUniform::face_view_proj`) for the next encode.
+    /// Uploads the layer matrices (`LightsUniform::layer_view_proj`) for the next encode.
     pub fn set_faces(&self, queue: &wgpu::Queue, faces: &[[[f32; 4]; 4]]) {
         self.face_matrices.write(queue, faces);
     }

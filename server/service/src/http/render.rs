@@ -285,7 +285,11 @@ pub async fn render(
     );
     // The report and hash name what was actually rendered, defaults included.
     req.render.camera = Some(resolved.settings.camera.clone());
-    req.render.light = Some(resolved.settings.light.clone());
+    // One light stays the shorthand, so a single-light request hashes as it always did.
+    match resolved.settings.lights.as_slice() {
+        [one] => (req.render.light, req.render.lights) = (Some(one.clone()), None),
+        many => (req.render.light, req.render.lights) = (None, Some(many.to_vec())),
+    }
     req.quality = Some(quality);
     let hash = request_hash(&req);
     let (tx, rx) = tokio::sync::oneshot::channel();
@@ -339,7 +343,8 @@ pub async fn render(
         queue_ms: result.queue_ms,
         exposure_scale: rendered.exposure_scale,
         camera: resolved.settings.camera,
-        light: resolved.settings.light,
+        light: resolved.settings.lights[0].clone(),
+        lights: resolved.settings.lights,
         samples: rendered.progress.map(|p| p.samples),
         relative_error: rendered
             .progress

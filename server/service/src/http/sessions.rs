@@ -49,6 +49,15 @@ pub async fn apply_patch(
     let mut merged =
         serde_json::to_value(session.params()).map_err(|e| ApiError::internal(e.to_string()))?;
     merge_patch(&mut merged, patch);
+    // `light` and `lights` are two spellings of one state: the one a patch sets replaces the
+    // other.
+    for (set, other) in [("light", "lights"), ("lights", "light")] {
+        if !patch["render"][set].is_null() {
+            if let Some(render) = merged.get_mut("render").and_then(Value::as_object_mut) {
+                render.remove(other);
+            }
+        }
+    }
     // A `null` removed a field: it gets the server's default back.
     if let Value::Object(map) = &mut merged {
         let render = map

@@ -283,11 +283,29 @@ fn is_ack(text: &[u8]) -> bool {
     serde_json::from_slice::<Tag>(text).is_ok_and(|t| t.kind == Some("ack"))
 }
 
+/// The session's lights as JSON: `render.lights`, or its one `render.light`, or the scene's
+/// default lights.
+fn session_lights(state: &AppState, session: &Session) -> Vec<serde_json::Value> {
+    let render = session.params().render;
+    let lights = match (render.lights, render.light) {
+        (Some(lights), _) => lights,
+        (None, Some(light)) => vec![light],
+        (None, None) => session
+            .scene()
+            .default_lights
+            .iter()
+            .take(state.limits.max_lights as usize)
+            .cloned()
+            .collect(),
+    };
+    lights.iter().map(|l| json!(l)).collect()
+}
+
 /// A field of a control message named as the HTTP API names it: a camera or light message's
-/// `camera`/`light` sets the session's `render.camera`/`render.light`.
+/// `camera`/`light`/`lights` sets the session's `render.camera`/`render.light`/`render.lights`.
 fn session_path(path: &str) -> String {
     let top = path.split(['.', '[']).next().unwrap_or_default();
-    if top == "camera" || top == "light" {
+    if top == "camera" || top == "light" || top == "lights" {
         format!("render.{path}")
     } else {
         path.to_string()
@@ -322,6 +340,7 @@ fn message_error(raw: &serde_json::Value, e: ApiError) -> ApiError {
     let inner = match key.as_str() {
         "camera" => from_value::<lightcast_protocol::Camera>(object[key].clone()).err(),
         "light" => from_value::<lightcast_protocol::Light>(object[key].clone()).err(),
+        "lights" => from_value::<Vec<lightcast_protocol::Light>>(object[key].clone()).err(),
         _ => None,
     };
     match inner
@@ -376,11 +395,48 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
             )
             .await
         }
-        ClientMessage::Light { input_id, .. } => {
+        ClientMessage::Light {
+            index: None,
+            input_id,
+            ..
+        } => {
             apply_patch(
                 state,
                 session,
                 &json!({"render": {"light": raw["light"]}}),
+                input_id,
+            )
+            .await
+        }
+        ClientMessage::Light {
+            index: Some(index),
+            input_id,
+            ..
+        } => {
+            let mut lights = session_lights(state, session);
+            let count = lights.len();
+            match lights.get_mut(index as usize) {
+                Some(slot) => {
+                    *slot = raw["light"].clone();
+                    apply_patch(
+                        state,
+                        session,
+                        &json!({"render": {"lights": lights}}),
+                        input_id,
+                    )
+                    .await
+                }
+                None => Err(ApiError::field(
+                    "index",
+                    format!("{index} is not a light of this session (it has {count})"),
+                )),
+            }
+        }
+        ClientMessage::Lights { input_id, .. } => {
+            apply_patch(
+                state,
+                session,
+                &json!({"render": {"lights": raw["lights"]}}),
                 input_id,
             )
             .await

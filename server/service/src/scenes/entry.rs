@@ -88,6 +88,7 @@ impl SceneEntry {
         load_ms: f64,
         owner: Option<String>,
         budget: &Arc<MemoryBudget>,
+        max_lights: usize,
     ) -> Result<Self, ApiError> {
         let textures = texture_bytes(&scene);
         let texture_held = budget.texture_bytes.try_take(textures).ok_or_else(|| {
@@ -115,6 +116,7 @@ impl SceneEntry {
             owner,
             default_camera: default_camera(&scene),
             default_light: default_light(&scene),
+            default_lights: default_lights(&scene, max_lights.min(MAX_LIGHTS)),
             emitter_stand_in: emitter_stand_in(&scene),
             facts: SceneFacts::of(&scene),
             scene: Arc::new(scene),
@@ -148,6 +150,7 @@ impl SceneEntry {
             cameras: s.cameras.clone(),
             default_camera: self.default_camera.clone(),
             default_light: self.default_light.clone(),
+            default_lights: self.default_lights.clone(),
             camera_region: s.camera_region.map(|r| Bounds {
                 min: r.min.into(),
                 max: r.max.into(),

@@ -16,7 +16,10 @@ use crate::gi::precompute::{
     Store, UnitBudget,
 };
 use crate::gpu::GpuContext;
-use crate::scene::default_light::{default_camera, default_light, emitter_stand_in};
+use crate::passes::frame_uniforms::MAX_LIGHTS;
+use crate::scene::default_light::{
+    default_camera, default_light, default_lights, emitter_stand_in,
+};
 use crate::scene::Scene;
 use lightcast_protocol::{
     Bounds, CacheVariant, Camera, GiParams, Light, Limits, PrecomputeState, Precomputed, SceneInfo,
@@ -87,6 +90,9 @@ pub struct SceneEntry {
     pub scene: Arc<Scene>,
     pub default_camera: Camera,
     pub default_light: Light,
+    /// [`default_lights`] up to the most a frame holds; a server with a lower `max_lights`
+    /// takes the first of them.
+    pub default_lights: Vec<Light>,
     /// The default light when it stands in for the scene's emissive surfaces
     /// ([`emitter_stand_in`]): `render.gi.emitters` `null` turns them off under it.
     pub emitter_stand_in: Option<Light>,
@@ -149,6 +155,8 @@ pub struct SceneRegistry {
     /// The worker threads, joined by [`SceneRegistry::stop_workers`].
     workers: Mutex<Vec<std::thread::JoinHandle<()>>>,
     max_scenes: usize,
+    /// A scene's default lights are its first this many (`--max-lights`).
+    max_lights: usize,
     budget: Arc<MemoryBudget>,
     quotas: TokenQuotas,
 }

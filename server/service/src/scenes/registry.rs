@@ -82,6 +82,7 @@ impl SceneRegistry {
             jobs,
             workers: Mutex::new(workers),
             max_scenes: limits.max_scenes as usize,
+            max_lights: limits.max_lights as usize,
             budget: Arc::new(MemoryBudget::new(limits)),
             quotas: TokenQuotas::new(limits),
         })
@@ -123,6 +124,7 @@ impl SceneRegistry {
             load_ms,
             owner,
             &self.budget,
+            self.max_lights,
         )?);
         {
             let mut scenes = lock(&self.scenes);
@@ -164,6 +166,7 @@ impl SceneRegistry {
             load_ms,
             None,
             &self.budget,
+            self.max_lights,
         )
         .map(Arc::new)
     }

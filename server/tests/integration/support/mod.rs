@@ -105,7 +105,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         width,
         height,
         camera,
-        light,
+        lights: vec![light],
         exposure: Exposure::Manual(1.0),
         shadow_map_size: 256,
         capture_hdr: true,

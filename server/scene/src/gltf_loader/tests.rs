@@ -567,6 +567,37 @@ fn places_spot_and_point_lights_from_their_nodes() {
     );
 }
 
+/// A file with five lights on five nodes: all five are the scene's lights and its default
+/// lights, in node order (a frame renders them all unless the request names others).
+#[test]
+fn every_light_of_a_file_is_a_default_light() {
+    let mut bin = Bin::default();
+    let primitive = quad_primitive(&mut bin, true);
+    let lights: Vec<Value> = (0..5)
+        .map(|i| json!({"type": "point", "intensity": 1 + i}))
+        .collect();
+    let mut nodes = vec![json!({"mesh": 0})];
+    nodes.extend((0..5).map(
+        |i| json!({"translation": [i, 2, 0], "extensions": {"KHR_lights_punctual": {"light": i}}}),
+    ));
+    let doc = bin.document(
+        Some("data.bin"),
+        json!({
+            "extensionsUsed": ["KHR_lights_punctual"],
+            "extensions": {"KHR_lights_punctual": {"lights": lights}},
+            "scene": 0,
+            "scenes": [{"nodes": [0, 1, 2, 3, 4, 5]}],
+            "nodes": nodes,
+            "meshes": [{"primitives": [primitive]}],
+        }),
+    );
+    let scene = load_document(&doc, &bin.bytes).expect("loads");
+    let defaults = crate::default_light::default_lights(&scene, 16);
+    assert_eq!(defaults, scene.lights);
+    let intensities: Vec<f32> = defaults.iter().map(|l| l.intensity).collect();
+    assert_eq!(intensities, [1.0, 2.0, 3.0, 4.0, 5.0]);
+}
+
 #[test]
 fn refuses_lights_outside_their_ranges_and_clamps_extreme_fields_of_view() {
     let document = |light: Value, yfov: f64| {

@@ -10,7 +10,7 @@ use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings, Renderer};
 use crate::scene::{
-    default_light::{default_camera, default_light, emitter_stand_in, emitters_for},
+    default_light::{default_camera, default_lights, emitter_stand_in, emitters_for},
     Scene,
 };
 use glam::Vec3;
@@ -225,8 +225,9 @@ pub struct RenderArgs {
     /// Vertical field of view in degrees.
     #[arg(long, allow_negative_numbers = true)]
     pub fov: Option<f32>,
-    /// Light type. Default: the file's KHR_lights_punctual light, else a light standing in for
-    /// the scene's emissive surfaces, else a sun.
+    /// Type of the first light. Default: the file's KHR_lights_punctual lights (every one is
+    /// rendered; the `--light-*` flags change the first), else a light standing in for the
+    /// scene's emissive surfaces, else a sun.
     #[arg(long, value_enum)]
     pub light_type: Option<LightTypeArg>,
     /// Light position X,Y,Z (spot and point).
@@ -284,7 +285,10 @@ pub struct RenderReport {
     pub width: u32,
     pub height: u32,
     pub camera: Camera,
+    /// The first light (the one the `--light-*` flags change).
     pub light: lightcast_protocol::Light,
+    /// Every light rendered.
+    pub lights: Vec<lightcast_protocol::Light>,
     pub exposure_scale: f32,
     pub timing_source: crate::gpu::timing::TimingSource,
     /// See [`lightcast_protocol::RenderReport::timing_note`].
@@ -368,7 +372,9 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         camera.fov_y_degrees = fov;
     }
 
-    let mut light = default_light(scene);
+    // Every light of the scene; the `--light-*` flags change the first.
+    let mut lights = default_lights(scene, crate::passes::frame_uniforms::MAX_LIGHTS);
+    let light = &mut lights[0];
     if let Some(kind) = args.light_type {
         let kind = LightKind::from(kind);
         if kind != light.kind && kind != LightKind::Directional && args.light_pos.is_none() {
@@ -409,17 +415,13 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
     let asked = gi.get(EMITTERS.name).and_then(serde_json::Value::as_bool);
     gi.set(
         EMITTERS.name,
-        emitters_for(
-            asked,
-            emitter_stand_in(scene).as_ref(),
-            std::slice::from_ref(&light),
-        ),
+        emitters_for(asked, emitter_stand_in(scene).as_ref(), &lights),
     );
     RenderSettings {
         width: args.width,
         height: args.height,
         camera,
-        lights: vec![light],
+        lights,
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
@@ -455,7 +457,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
     let adapter_is_cpu = ctx.info.device_type == wgpu::DeviceType::Cpu;
     log(&format!("adapter: {adapter}"));
     let settings = settings_from_args(args, &scene);
-    // The flags describe one light.
+    // The flags describe the first light.
     settings
         .validate(&ctx)
         .map_err(RenderError::for_one_light)?;
@@ -496,6 +498,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         height: image.height,
         camera: settings.camera,
         light: settings.lights[0].clone(),
+        lights: settings.lights.clone(),
         exposure_scale,
         timing_source,
         timing_note: timing_source.note(adapter_is_cpu),

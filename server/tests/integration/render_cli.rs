@@ -108,6 +108,11 @@ fn json_report_is_machine_readable() {
     assert!(stages.len() >= 5);
     assert!(report["timing_source"].as_str().is_some());
     assert!(report["triangles"].as_u64().is_some_and(|t| t > 100));
+    // The built-in Cornell box has one light (its lamp's stand-in): every light is listed,
+    // the first also as `light`.
+    let lights = report["lights"].as_array().expect("lights");
+    assert_eq!(lights.len(), 1, "{report}");
+    assert_eq!(lights[0], report["light"]);
 }
 
 #[test]

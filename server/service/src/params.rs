@@ -141,7 +141,7 @@ pub fn resolve(
 
 /// The frame's lights: `render.lights`, or `render.light` alone, or the scene's default
 /// lights (the first `max_lights`); both given, none or too many is refused naming the field.
-fn lights(
+pub fn lights(
     params: &RenderParams,
     entry: &SceneEntry,
     limits: &Limits,

@@ -27,6 +27,15 @@ fn gltf_upload(gltf: Vec<u8>, gltf_name: &str, bin: Vec<u8>) -> reqwest::multipa
         .part("bin", part(bin, "box.bin"))
 }
 
+/// The sum of every pixel's RGB in a `raw_indirect` (or `raw_hdr`) body: float32 RGBA.
+fn raw_sum(bytes: &[u8]) -> f64 {
+    bytes
+        .chunks_exact(16)
+        .flat_map(|px| px[..12].chunks_exact(4))
+        .map(|c| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
+        .sum()
+}
+
 async fn render(server: &TestServer, body: &Value) -> (RenderReport, Vec<u8>) {
     let resp = server
         .http
@@ -148,13 +157,6 @@ async fn every_method_lights_from_every_light() {
     point["kind"] = json!("point");
     point["position"] = json!([0.0, 1.0, 0.0]);
     point["intensity"] = json!(spot["intensity"].as_f64().expect("intensity") * 0.5);
-    let sum = |bytes: &[u8]| -> f64 {
-        bytes
-            .chunks_exact(16)
-            .flat_map(|px| px[..12].chunks_exact(4))
-            .map(|c| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
-            .sum()
-    };
     for m in info["gi_methods"].as_array().expect("gi_methods") {
         let method = gi::parse_method(m["method"].as_str().expect("a name")).expect("registered");
         if method == gi::none::NONE {
@@ -167,9 +169,9 @@ async fn every_method_lights_from_every_light() {
             json!({"render": {"width": 32, "height": 24, "gi": small, "lights": lights},
                    "format": "raw_indirect"})
         };
-        let a = sum(&render(&server, &indirect(json!([spot]))).await.1);
-        let b = sum(&render(&server, &indirect(json!([point]))).await.1);
-        let ab = sum(&render(&server, &indirect(json!([spot, point]))).await.1);
+        let a = raw_sum(&render(&server, &indirect(json!([spot]))).await.1);
+        let b = raw_sum(&render(&server, &indirect(json!([point]))).await.1);
+        let ab = raw_sum(&render(&server, &indirect(json!([spot, point]))).await.1);
         assert!(
             a > 0.0 && b > 0.0,
             "{method}: each light alone lights: {a} {b}"
@@ -267,20 +269,13 @@ async fn renders_compare_with_the_reference() {
         raw["format"] = json!("raw_indirect");
         raw
     };
-    let sum = |bytes: &[u8]| -> f64 {
-        bytes
-            .chunks_exact(16)
-            .flat_map(|px| px[..12].chunks_exact(4))
-            .map(|c| f64::from(f32::from_le_bytes([c[0], c[1], c[2], c[3]])))
-            .sum()
-    };
     let (_, brsm_raw) = render(&server, &raw_indirect(&brsm)).await;
     let mut truth = Vec::new();
     for emitters in [json!(false), json!(true), Value::Null] {
         let mut body = raw_indirect(&reference);
         body["render"]["gi"]["emitters"] = emitters;
         body.as_object_mut().expect("object").remove("compare_to");
-        truth.push(sum(&render(&server, &body).await.1));
+        truth.push(raw_sum(&render(&server, &body).await.1));
     }
     assert!(truth[1] > 1.01 * truth[0], "the lamp adds light: {truth:?}");
     // Issue 31: by default the Cornell box's lamp is not counted twice, once as the spot that
@@ -303,14 +298,14 @@ async fn renders_compare_with_the_reference() {
             .expect("intensity")
             * 0.5
     );
-    let with_lamp = sum(&render(&server, &own_light).await.1);
+    let with_lamp = raw_sum(&render(&server, &own_light).await.1);
     own_light["render"]["gi"]["emitters"] = json!(false);
-    let without_lamp = sum(&render(&server, &own_light).await.1);
+    let without_lamp = raw_sum(&render(&server, &own_light).await.1);
     assert!(
         with_lamp > 1.01 * without_lamp,
         "{with_lamp} vs {without_lamp}"
     );
-    let bias = sum(&brsm_raw) / truth[0] - 1.0;
+    let bias = raw_sum(&brsm_raw) / truth[0] - 1.0;
     assert!(
         (c.indirect_bias_relative - bias).abs() < 1e-3,
         "comparison bias {} vs {bias} against the reference without emitters",

@@ -283,24 +283,6 @@ fn is_ack(text: &[u8]) -> bool {
     serde_json::from_slice::<Tag>(text).is_ok_and(|t| t.kind == Some("ack"))
 }
 
-/// The session's lights as JSON: `render.lights`, or its one `render.light`, or the scene's
-/// default lights.
-fn session_lights(state: &AppState, session: &Session) -> Vec<serde_json::Value> {
-    let render = session.params().render;
-    let lights = match (render.lights, render.light) {
-        (Some(lights), _) => lights,
-        (None, Some(light)) => vec![light],
-        (None, None) => session
-            .scene()
-            .default_lights
-            .iter()
-            .take(state.limits.max_lights as usize)
-            .cloned()
-            .collect(),
-    };
-    lights.iter().map(|l| json!(l)).collect()
-}
-
 /// A field of a control message named as the HTTP API names it: a camera or light message's
 /// `camera`/`light`/`lights` sets the session's `render.camera`/`render.light`/`render.lights`.
 fn session_path(path: &str) -> String {
@@ -409,15 +391,17 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
             .await
         }
         ClientMessage::Light {
+            light,
             index: Some(index),
             input_id,
-            ..
         } => {
-            let mut lights = session_lights(state, session);
-            let count = lights.len();
-            match lights.get_mut(index as usize) {
-                Some(slot) => {
-                    *slot = raw["light"].clone();
+            // The lights the session renders now (its own, or its scene's), one replaced.
+            let params = session.params();
+            let lights =
+                crate::service::params::lights(&params.render, &session.scene(), &state.limits);
+            match lights {
+                Ok(mut lights) if (index as usize) < lights.len() => {
+                    lights[index as usize] = light;
                     apply_patch(
                         state,
                         session,
@@ -426,10 +410,14 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
                     )
                     .await
                 }
-                None => Err(ApiError::field(
+                Ok(lights) => Err(ApiError::field(
                     "index",
-                    format!("{index} is not a light of this session (it has {count})"),
+                    format!(
+                        "{index} is not a light of this session (it has {})",
+                        lights.len()
+                    ),
                 )),
+                Err(e) => Err(e),
             }
         }
         ClientMessage::Lights { input_id, .. } => {

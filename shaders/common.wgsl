@@ -8,4 +8,6 @@ struct CameraUniform {
     position: vec3<f32>,
     // Phong exponent k for every material, overriding theirs; 0 keeps the materials' own.
     glossy_exponent: f32,
+    // Clip to world: the ray through a pixel (the environment behind the geometry).
+    inv_view_proj: mat4x4<f32>,
 }

@@ -30,10 +30,12 @@ struct LightUniform {
     pad0: f32,
 }
 
-// Every punctual light of a frame. Mirrored by `LightsUniform` in frame_uniforms.rs.
+// Every light of a frame: the first `punctual` its punctual lights, the rest the directional
+// lights a real-time method splits the environment into. Mirrored by `LightsUniform` in
+// frame_uniforms.rs.
 struct Lights {
     count: u32,
-    pad0: u32,
+    punctual: u32,
     pad1: u32,
     pad2: u32,
     list: array<LightUniform, MAX_LIGHTS>,

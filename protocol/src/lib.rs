@@ -69,6 +69,72 @@ pub struct Light {
     pub outer_cone: f32,
 }
 
+/// What an [`Environment`] is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum EnvironmentKind {
+    /// The same radiance from every direction of the sphere: `color` × `intensity`.
+    #[default]
+    Uniform,
+    /// A clear daylight sky (Preetham, Shirley & Smits 1999) around the frame's first
+    /// directional light, its sun, with `turbidity`; black below the horizon. `intensity` is
+    /// the illuminance the sky alone gives an open horizontal surface, as a multiple of the
+    /// sun's `intensity`.
+    Sky,
+}
+
+/// Light from infinitely far away in every direction: a sky around the scene. It lights
+/// surfaces, shows where no geometry covers a pixel, and bounces like any other light.
+/// The path-traced `reference` samples it exactly (importance sampling with multiple
+/// importance sampling); the real-time methods split it into `directions` directional lights
+/// of equal power (median cut), each lighting with its own shadow map (and RSM), so their
+/// sky light is shadowed from that many directions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(default)]
+pub struct Environment {
+    pub kind: EnvironmentKind,
+    /// Linear RGB colour (`uniform`: the radiance's colour; `sky`: a tint on the model's).
+    pub color: [f32; 3],
+    /// `uniform`: radiance scale, in the lights' units per steradian. `sky`: the sky's
+    /// horizontal illuminance over the sun's `intensity`. `null`: 1 for `uniform`, 0.2 for
+    /// `sky` (a clear day's sky gives a horizontal surface about a fifth of the sun's
+    /// illuminance).
+    pub intensity: Option<f32>,
+    /// `sky`: atmospheric turbidity, 2 (very clear) to 10 (hazy).
+    pub turbidity: f32,
+    /// Directional lights the real-time methods approximate the environment with, 1 to 15
+    /// (with the punctual lights at most the server's light limit, 16).
+    pub directions: u32,
+}
+
+/// The default sky turbidity: a clear day.
+pub const DEFAULT_TURBIDITY: f32 = 3.0;
+/// The default number of directions a real-time method splits an environment into.
+pub const DEFAULT_ENVIRONMENT_DIRECTIONS: u32 = 8;
+
+impl Default for Environment {
+    fn default() -> Self {
+        Self {
+            kind: EnvironmentKind::Uniform,
+            color: [1.0, 1.0, 1.0],
+            intensity: None,
+            turbidity: DEFAULT_TURBIDITY,
+            directions: DEFAULT_ENVIRONMENT_DIRECTIONS,
+        }
+    }
+}
+
+impl Environment {
+    /// `intensity`, or its default for the kind.
+    pub fn intensity(&self) -> f32 {
+        self.intensity.unwrap_or(match self.kind {
+            EnvironmentKind::Uniform => 1.0,
+            EnvironmentKind::Sky => 0.2,
+        })
+    }
+}
+
 /// A pinhole camera.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct Camera {

@@ -167,6 +167,7 @@ fn main() -> anyhow::Result<()> {
                 height: 32,
                 camera: default_light::default_camera(&scene),
                 lights: vec![default_light::default_light(&scene)],
+                environment: None,
                 exposure: Exposure::Auto,
                 shadow_map_size: 256,
                 capture_hdr: false,

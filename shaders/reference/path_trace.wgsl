@@ -9,6 +9,14 @@
 // it) and, by next-event estimation with a shadow ray, each punctual light y reflects. So
 // `bounces` = 1 is the single-bounce light seed 004 approximates; more add inter-reflections
 // (seed 001).
+//
+// An environment (environment.wgsl) lights every vertex x, y1 … y_bounces, from x on (its
+// light at x is the sky's direct light, which the other methods also count with their
+// indirect light): by next-event estimation (a direction sampled by the environment's power,
+// one shadow ray) combined with the BRDF-sampled bounce ray that leaves the scene, each
+// weighted by the power heuristic (Veach 1997, §9.2.4), so that neither a small bright
+// region nor a glossy lobe makes fireflies. The last vertex has no bounce ray after it: its
+// next-event estimate counts whole.
 
 // Mirrored by `TraceParams` in server/gi/src/reference/mod.rs.
 struct TraceParams {
@@ -34,6 +42,7 @@ struct TraceParams {
 @group(0) @binding(1) var<storage, read> lights: Lights;
 // Per pixel: the sum of the samples' indirect radiance (rgb) and of their squared luminance (w).
 @group(0) @binding(2) var<storage, read_write> accum: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read> environment: array<f32>;
 
 // PCG hash (Jarzynski & Olano 2020): the random stream of a path is a pure function of the
 // pixel, the sample index and the seed, so the same request gives the same pixels.
@@ -135,25 +144,58 @@ fn light_visible(light: LightUniform, p: vec3<f32>, to_light: vec3<f32>) -> bool
     return trace(p, to_light, t_max).triangle == NO_HIT;
 }
 
+// Power-heuristic weight of a sample drawn with density `a` against the other strategy's `b`.
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let a2 = a * a;
+    return select(0.0, a2 / (a2 + b * b), a2 > 0.0);
+}
+
+// The environment's light reflected at `surface` towards `wo`, by one direction sampled from
+// the environment; weighted against BRDF sampling when `mis` (a bounce ray follows).
+fn environment_next_event(surface: SurfaceHit, wo: vec3<f32>, mis: bool, state: ptr<function, u32>) -> vec3<f32> {
+    let u = vec3<f32>(rand(state), rand(state), rand(state));
+    let s = env_sample(u);
+    let cos_y = dot(surface.normal, s.direction);
+    if s.pdf <= 0.0 || cos_y <= 0.0 || dot(surface.geometric, s.direction) <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let lifted = surface.position + surface.geometric * params.ray_epsilon;
+    if trace(lifted, s.direction, 3.4e38).triangle != NO_HIT {
+        return vec3<f32>(0.0);
+    }
+    var weight = 1.0;
+    if mis {
+        weight = power_heuristic(s.pdf, brdf_pdf(surface.brdf, surface.normal, wo, s.direction));
+    }
+    return eval_brdf(surface.brdf, surface.normal, s.direction, wo) * s.radiance * cos_y / s.pdf * weight;
+}
+
 // Indirect radiance leaving `x` towards `wo` along one path.
 fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -> vec3<f32> {
     var radiance = vec3<f32>(0.0);
     var throughput = vec3<f32>(1.0);
     var surface = x;
     var wo = wo_in;
+    let sky = env_enabled();
     for (var bounce = 0u; bounce < params.bounces; bounce++) {
         let n = surface.normal;
+        if sky {
+            radiance += throughput * environment_next_event(surface, wo, true, state);
+        }
         let wi = sample_brdf(surface.brdf, n, wo, state);
         let cos_i = dot(n, wi);
         let pdf = brdf_pdf(surface.brdf, n, wo, wi);
         if cos_i <= 0.0 || dot(surface.geometric, wi) <= 0.0 || pdf <= 0.0 {
-            break;
+            return radiance;
         }
         throughput *= eval_brdf(surface.brdf, n, wi, wo) * cos_i / pdf;
         let origin = surface.position + surface.geometric * params.ray_epsilon;
         let hit = trace(origin, wi, 3.4e38);
         if hit.triangle == NO_HIT {
-            break;
+            if sky {
+                radiance += throughput * env_radiance(wi) * power_heuristic(pdf, env_pdf(wi));
+            }
+            return radiance;
         }
         surface = surface_at(hit, origin, wi);
         wo = -wi;
@@ -175,6 +217,9 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
                     * incident.irradiance * cos_y;
             }
         }
+    }
+    if sky {
+        radiance += throughput * environment_next_event(surface, wo, false, state);
     }
     return radiance;
 }

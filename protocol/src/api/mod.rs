@@ -5,7 +5,7 @@
 //! unknown fields in requests, so a misspelt parameter is an error that names it rather than a
 //! silently ignored value.
 
-use crate::{Camera, GiMethod, Light, View};
+use crate::{Camera, Environment, GiMethod, Light, View};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use utoipa::ToSchema;

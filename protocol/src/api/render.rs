@@ -99,6 +99,9 @@ pub struct RenderReport {
     pub camera: Camera,
     pub light: Light,
     pub lights: Vec<Light>,
+    /// The environment used, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment: Option<Environment>,
     /// Samples per pixel of a progressive method (`reference`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub samples: Option<u32>,

@@ -19,6 +19,8 @@ pub struct RenderParams {
     pub light: Option<Light>,
     /// The punctual lights, 1 to the server's `max_lights`; `null`: see `light`.
     pub lights: Option<Vec<Light>>,
+    /// Light from every direction (a sky); `null`: none.
+    pub environment: Option<Environment>,
     /// Linear scale before tone mapping; `null` for automatic exposure.
     pub exposure: Option<f32>,
     /// Shadow map side in texels (per cube face for point lights).
@@ -36,6 +38,7 @@ impl Default for RenderParams {
             camera: None,
             light: None,
             lights: None,
+            environment: None,
             exposure: None,
             shadow_map_size: 2048,
             gi: GiParams::default(),

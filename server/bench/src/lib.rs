@@ -225,6 +225,7 @@ fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiParams) -> RenderSetting
         height: args.height,
         camera: default_camera(scene),
         lights: default_lights(scene, MAX_LIGHTS),
+        environment: None,
         exposure: args.exposure.0,
         shadow_map_size: 2048,
         capture_hdr: false,
@@ -296,7 +297,7 @@ impl Bench<'_> {
         while done < spp {
             let n = per_call.min(spp - done);
             let b = &self.base;
-            tracer.accumulate(b.width, b.height, &b.camera, &b.lights, &settings, n)?;
+            tracer.accumulate(b.width, b.height, &b.camera, &b.lights, None, &settings, n)?;
             done += n;
             (self.progress)(u64::from(done), u64::from(spp), &label);
         }

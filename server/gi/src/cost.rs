@@ -74,10 +74,14 @@ pub struct FrameShape {
     pub width: u32,
     pub height: u32,
     pub shadow_map_size: u32,
-    /// Punctual lights of the frame.
+    /// Lights of the frame the method lights with: its punctual lights (and, after
+    /// [`FrameShape::lit_by`], the environment's directions).
     pub lights: u32,
     /// Faces of all the lights' shadow maps and RSMs (6 per point light).
     pub light_faces: u32,
+    /// The environment's directions (`None`: no environment; after [`FrameShape::lit_by`],
+    /// only for a method that samples it itself).
+    pub environment: Option<u32>,
     pub triangles: u64,
     /// Units of the precomputed set the frame reads (light caches; surfel links), estimated
     /// before it is built.
@@ -88,6 +92,21 @@ pub struct FrameShape {
 }
 
 impl FrameShape {
+    /// The shape as a method lights it: one that samples the environment itself (see
+    /// `MethodEntry::samples_environment`) keeps it apart; any other lights with its
+    /// directions as directional lights, one shadow-map face each.
+    pub fn lit_by(self, samples_environment: bool) -> Self {
+        match self.environment {
+            Some(d) if !samples_environment => Self {
+                lights: self.lights + d,
+                light_faces: self.light_faces + d,
+                environment: None,
+                ..self
+            },
+            _ => self,
+        }
+    }
+
     pub fn pixels(&self) -> f64 {
         f64::from(self.width) * f64::from(self.height)
     }
@@ -251,6 +270,7 @@ mod tests {
             shadow_map_size: 1024,
             lights: 1,
             light_faces: 1,
+            environment: None,
             triangles: 1000,
             set_units: 0,
             all_bounces: true,

@@ -128,8 +128,12 @@ pub struct FrameInputs<'a> {
     pub width: u32,
     pub height: u32,
     pub camera: &'a Camera,
-    /// Every punctual light of the frame (at most `passes::frame_uniforms::MAX_LIGHTS`).
+    /// Every light of the frame (at most `passes::frame_uniforms::MAX_LIGHTS`): its punctual
+    /// lights, then, unless the method samples the environment itself, the environment's
+    /// directional lights.
     pub lights: &'a [Light],
+    /// The frame's environment, if any (see [`MethodEntry::samples_environment`]).
+    pub environment: Option<&'a std::sync::Arc<crate::passes::environment::FrameEnvironment>>,
     pub settings: &'a GiParams,
     pub gbuffer: &'a GBuffer,
     /// The frame's shadow map, rendered before the GI stages (a method may light its own
@@ -273,6 +277,12 @@ pub struct MethodEntry {
     /// approximate; not `none`, which has nothing to compute, nor the reference, which is the
     /// full-resolution truth the others are compared with).
     pub downscales: bool,
+    /// Whether the method samples the frame's environment itself
+    /// ([`FrameInputs::environment`]) and lights with the punctual lights alone (the
+    /// reference); else the renderer appends the environment's directional lights
+    /// (`passes::environment::FrameEnvironment::lights`) to its lights, and it lights with
+    /// them as with any light.
+    pub samples_environment: bool,
     /// What `lightcast-server bench --gi <method>` measures (`gi/<method>/bench.rs`, see
     /// [`bench`]); `None`: the method has no evaluation.
     pub bench: Option<&'static bench::Sweep>,

@@ -39,6 +39,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: &[INDIRECT_CLEAR],
     limits: &[],
     downscales: false,
+    samples_environment: false,
     bench: None,
 };
 

@@ -248,6 +248,23 @@ pub struct RenderArgs {
     /// Spot light outer cone angle in degrees (zero outside).
     #[arg(long, allow_negative_numbers = true)]
     pub light_outer_cone: Option<f32>,
+    /// Light from every direction: `uniform` (the same radiance everywhere) or `sky` (a
+    /// clear daylight sky around the first directional light, its sun). Default: none.
+    #[arg(long, value_enum)]
+    pub environment: Option<lightcast_protocol::EnvironmentKind>,
+    /// `uniform`: radiance scale; `sky`: its horizontal illuminance over the sun's
+    /// intensity. Default 1 (`uniform`), 0.2 (`sky`).
+    #[arg(long, requires = "environment", allow_negative_numbers = true)]
+    pub environment_intensity: Option<f32>,
+    /// Linear colour R,G,B of a uniform environment, tint of a sky.
+    #[arg(long, requires = "environment")]
+    pub environment_color: Option<Vec3Arg>,
+    /// Sky turbidity, 2 (very clear) to 10 (hazy).
+    #[arg(long, requires = "environment", default_value_t = lightcast_protocol::DEFAULT_TURBIDITY)]
+    pub turbidity: f32,
+    /// Directional lights the real-time methods split the environment into (median cut).
+    #[arg(long, requires = "environment", default_value_t = lightcast_protocol::DEFAULT_ENVIRONMENT_DIRECTIONS)]
+    pub environment_directions: u32,
     /// `auto` (log-average luminance to middle grey) or a linear scale applied before tone mapping.
     #[arg(long, default_value = "auto", allow_negative_numbers = true)]
     pub exposure: ExposureArg,
@@ -289,6 +306,9 @@ pub struct RenderReport {
     pub light: lightcast_protocol::Light,
     /// Every light rendered.
     pub lights: Vec<lightcast_protocol::Light>,
+    /// The environment, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub environment: Option<lightcast_protocol::Environment>,
     pub exposure_scale: f32,
     pub timing_source: crate::gpu::timing::TimingSource,
     /// See [`lightcast_protocol::RenderReport::timing_note`].
@@ -422,6 +442,15 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         height: args.height,
         camera,
         lights,
+        environment: args
+            .environment
+            .map(|kind| lightcast_protocol::Environment {
+                kind,
+                color: args.environment_color.map_or([1.0; 3], |Vec3Arg(c)| c),
+                intensity: args.environment_intensity,
+                turbidity: args.turbidity,
+                directions: args.environment_directions,
+            }),
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,
@@ -499,6 +528,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         camera: settings.camera,
         light: settings.lights[0].clone(),
         lights: settings.lights.clone(),
+        environment: settings.environment.clone(),
         exposure_scale,
         timing_source,
         timing_note: timing_source.note(adapter_is_cpu),

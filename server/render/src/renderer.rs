@@ -13,6 +13,7 @@ use crate::gpu::{
     timing::{timestamp_staging, FrameTimer, PendingTimings, StageTiming, TimingSource},
     GpuContext, GpuError,
 };
+use crate::passes::environment::{EnvironmentBuffer, FrameEnvironment};
 use crate::passes::{
     direct_light::{DirectLightInputs, DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
@@ -25,9 +26,10 @@ use crate::passes::{
     yuv420::{Yuv420, Yuv420Layout, Yuv420Pass, Yuv420Target},
     Target, INDIRECT_FORMAT,
 };
+use crate::scene::environment as env;
 use crate::scene::Scene;
 use glam::Vec3;
-use lightcast_protocol::{Camera, GiParams, Light, View};
+use lightcast_protocol::{Camera, Environment, GiParams, Light, View};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -56,6 +58,9 @@ pub struct RenderSettings {
     pub camera: Camera,
     /// The punctual lights, 1 to [`MAX_LIGHTS`].
     pub lights: Vec<Light>,
+    /// Light from every direction (a sky), if any; its directions count against
+    /// [`MAX_LIGHTS`] with the punctual lights.
+    pub environment: Option<Environment>,
     pub exposure: Exposure,
     /// Side of the (square) shadow map per light face.
     pub shadow_map_size: u32,
@@ -235,8 +240,22 @@ impl RenderSettings {
                 ),
             ));
         }
+        if let Some(e) = &self.environment {
+            let room = MAX_LIGHTS - self.lights.len();
+            if !(1..=room).contains(&(e.directions as usize)) {
+                return Err(invalid(
+                    "environment.directions",
+                    format!(
+                        "{} is outside 1..={room}: with {} punctual lights, at most {MAX_LIGHTS} \
+                         lights in all",
+                        e.directions,
+                        self.lights.len()
+                    ),
+                ));
+            }
+        }
         // Every light's faces share the shadow-map budget.
-        let faces = u64::from(face_count(&self.lights));
+        let faces = u64::from(face_count(&self.lights) + self.environment_directions());
         let max_by_budget = ((MAX_SHADOW_TEXELS / faces) as f64).sqrt() as u32;
         let max_shadow = max.min(MAX_SHADOW_MAP_SIZE).min(max_by_budget);
         if !(16..=max_shadow).contains(&self.shadow_map_size) {
@@ -261,6 +280,10 @@ impl RenderSettings {
             check_light(l)
                 .map_err(|(field, reason)| invalid(format!("lights[{i}].{field}"), reason))?;
         }
+        if let Some(e) = &self.environment {
+            env::check(e, &self.lights)
+                .map_err(|e| invalid(format!("environment.{}", e.field), e.reason))?;
+        }
         // Powers of two: a reduced pixel covers whole output pixels at every size the API
         // allows in steps of 2 (H.264's even sizes), and the documented choices are 1, 2, 4.
         gi::check_method(self.gi.method).map_err(|e| invalid(e.field, e.reason))?;
@@ -275,9 +298,14 @@ impl RenderSettings {
                 format!("{downscale} is not one of 1, 2 or 4"),
             ));
         }
-        let faces = face_count(&self.lights);
-        (gi::entry(self.gi.method).1.validate)(&self.gi, faces)
-            .map_err(|e| invalid(e.field, e.reason))?;
+        let entry = gi::entry(self.gi.method).1;
+        let faces = face_count(&self.lights)
+            + if entry.samples_environment {
+                0
+            } else {
+                self.environment_directions()
+            };
+        (entry.validate)(&self.gi, faces).map_err(|e| invalid(e.field, e.reason))?;
         if let Exposure::Manual(s) = self.exposure {
             if !(s.is_finite() && s > 0.0) {
                 return Err(invalid(
@@ -287,6 +315,11 @@ impl RenderSettings {
             }
         }
         Ok(())
+    }
+
+    /// The environment's directional lights (0 without one).
+    fn environment_directions(&self) -> u32 {
+        self.environment.as_ref().map_or(0, |e| e.directions)
     }
 }
 
@@ -298,6 +331,9 @@ struct SizedTargets {
     hdr: Target,
     ldr: Target,
     indirect: Target,
+    /// `indirect` plus the light of the environment's directional lights, as the direct
+    /// pass writes it: what a frame reports as its indirect light.
+    indirect_out: Target,
     /// Staging buffers of the frames in flight (see [`PendingFrame`]).
     readbacks: Vec<ReadbackSet>,
     exposure: ExposureBindings,
@@ -500,6 +536,18 @@ pub struct Renderer {
     shadow_maps: Vec<ShadowMap>,
     /// The GI methods used so far, by index in [`gi::REGISTRY`] (created on first use).
     methods: Vec<Option<Box<dyn Method>>>,
+    /// The last environment evaluated, with what it was evaluated for (see
+    /// [`Self::environment`]).
+    environment: Option<(EnvironmentKey, Arc<FrameEnvironment>)>,
+    /// The packed environment the direct-light pass reads.
+    environment_buffer: EnvironmentBuffer,
+}
+
+/// What an environment's evaluation depends on: its parameters and, for a sky, its sun.
+#[derive(Clone, Debug, PartialEq)]
+struct EnvironmentKey {
+    environment: Environment,
+    sun: Option<Light>,
 }
 
 impl Renderer {
@@ -539,6 +587,8 @@ impl Renderer {
             sized: Vec::new(),
             shadow_maps: Vec::new(),
             methods: gi::REGISTRY.iter().map(|_| None).collect(),
+            environment: None,
+            environment_buffer: EnvironmentBuffer::new(device),
             shared: SceneResources {
                 scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
                 camera: camera_buffer,
@@ -664,6 +714,14 @@ impl Renderer {
                 | wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::COPY_SRC,
         );
+        let indirect_out = Target::new(
+            device,
+            "indirect out",
+            width,
+            height,
+            INDIRECT_FORMAT,
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
+        );
         let exposure = self.exposure_pass.bind(device, &hdr, width, height);
         let tonemap = self
             .tonemap_pass
@@ -676,6 +734,7 @@ impl Renderer {
                 .map(|_| ReadbackSet::new(device, width, height))
                 .collect(),
             indirect,
+            indirect_out,
             hdr,
             ldr,
             exposure,
@@ -749,6 +808,34 @@ impl Renderer {
         Ok(())
     }
 
+    /// The frame's environment evaluated (see [`FrameEnvironment`]), re-evaluated only when
+    /// it or its sun changed.
+    fn environment(
+        &mut self,
+        settings: &RenderSettings,
+    ) -> Result<Option<Arc<FrameEnvironment>>, RenderError> {
+        let Some(environment) = &settings.environment else {
+            return Ok(None);
+        };
+        let key = EnvironmentKey {
+            environment: environment.clone(),
+            sun: (environment.kind == lightcast_protocol::EnvironmentKind::Sky)
+                .then(|| env::sun(&settings.lights).cloned())
+                .flatten(),
+        };
+        if let Some((k, evaluated)) = &self.environment {
+            if *k == key {
+                return Ok(Some(Arc::clone(evaluated)));
+            }
+        }
+        let evaluated = Arc::new(
+            FrameEnvironment::new(environment, &settings.lights)
+                .map_err(|e| invalid(format!("environment.{}", e.field), e.reason))?,
+        );
+        self.environment = Some((key, Arc::clone(&evaluated)));
+        Ok(Some(evaluated))
+    }
+
     /// Renders one frame and reads it back (blocking).
     pub fn render(&mut self, settings: &RenderSettings) -> Result<Frame, RenderError> {
         Ok(self.submit(settings)?.wait()?)
@@ -759,9 +846,20 @@ impl Renderer {
     pub fn submit(&mut self, settings: &RenderSettings) -> Result<PendingFrame, RenderError> {
         settings.validate(&self.shared.ctx)?;
         let (width, height) = (settings.width, settings.height);
+        let environment = self.environment(settings)?;
+        let (method_index, entry) = gi::entry(settings.gi.method);
+        // A method that does not sample the environment lights with its directions too.
+        let mut lights = settings.lights.clone();
+        if let (Some(e), false) = (&environment, entry.samples_environment) {
+            lights.extend(e.lights.iter().cloned());
+        }
         self.ensure_targets(width, height)?;
-        self.ensure_shadow_map(settings.shadow_map_size, face_count(&settings.lights))?;
-        let (method_index, _) = gi::entry(settings.gi.method);
+        self.ensure_shadow_map(settings.shadow_map_size, face_count(&lights))?;
+        self.environment_buffer.set(
+            &self.shared.ctx.device,
+            &self.shared.ctx.queue,
+            environment.as_deref(),
+        );
         let downscale = indirect_downscale(&settings.gi);
         self.ensure_reduced(downscale)?;
         // Created before the targets are borrowed below.
@@ -777,11 +875,17 @@ impl Renderer {
             bounds,
             glossy_exponent(&settings.gi),
         );
-        let lights = LightsUniform::new(&settings.lights, bounds, settings.shadow_map_size);
+        let lights_uniform = LightsUniform::with_punctual(
+            &lights,
+            settings.lights.len(),
+            bounds,
+            settings.shadow_map_size,
+        );
         let queue = &self.shared.ctx.queue;
         queue.write_buffer(&self.shared.camera, 0, bytemuck::bytes_of(&camera));
-        queue.write_buffer(&self.shared.lights, 0, bytemuck::bytes_of(&lights));
-        self.shadow_pass.set_faces(queue, &lights.layer_view_proj());
+        queue.write_buffer(&self.shared.lights, 0, bytemuck::bytes_of(&lights_uniform));
+        self.shadow_pass
+            .set_faces(queue, &lights_uniform.layer_view_proj());
         self.exposure_pass
             .prepare(queue, &sized.exposure, settings.exposure);
         let direct_bind_group = self.direct_pass.bind(
@@ -792,7 +896,9 @@ impl Renderer {
                 gbuffer: &sized.gbuffer,
                 shadow: shadow_map,
                 indirect: &sized.indirect,
+                environment: &self.environment_buffer.buffer,
                 hdr: &sized.hdr,
+                indirect_out: &sized.indirect_out,
             },
         );
 
@@ -821,7 +927,8 @@ impl Renderer {
             width: reduced.map_or(width, |r| r.width),
             height: reduced.map_or(height, |r| r.height),
             camera: &settings.camera,
-            lights: &settings.lights,
+            lights: &lights,
+            environment: environment.as_ref(),
             settings: &settings.gi,
             gbuffer: reduced.map_or(&sized.gbuffer, |r| &r.gbuffer),
             shadow: shadow_map,
@@ -867,7 +974,7 @@ impl Renderer {
             }
             if settings.capture_hdr {
                 set.hdr.encode_copy(e, &sized.hdr.texture);
-                set.indirect.encode_copy(e, &sized.indirect.texture);
+                set.indirect.encode_copy(e, &sized.indirect_out.texture);
             }
             e.copy_buffer_to_buffer(&self.exposure_pass.result, 0, &set.exposure, 0, None);
             if let Some(p) = &progress {

@@ -116,7 +116,8 @@ pub fn frame_cost(gi: &GiParams, shape: FrameShape, set_units: &dyn Fn(&GiParams
     let shape = FrameShape {
         set_units: set_units(gi),
         ..shape
-    };
+    }
+    .lit_by(crate::gi::entry(gi.method).1.samples_environment);
     let mut total = Cost::default();
     cost::shared(&shape, &mut total);
     (crate::gi::entry(gi.method).1.cost)(gi, &shape, &mut total);
@@ -463,6 +464,7 @@ mod tests {
             shadow_map_size: 1024,
             lights: 1,
             light_faces: 1,
+            environment: None,
             triangles: 1090,
             set_units: 0,
             all_bounces: true,

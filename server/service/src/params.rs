@@ -52,6 +52,7 @@ pub fn frame_shape(settings: &RenderSettings, entry: &SceneEntry) -> crate::gi::
         shadow_map_size: settings.shadow_map_size,
         lights: settings.lights.len() as u32,
         light_faces: crate::passes::frame_uniforms::face_count(&settings.lights),
+        environment: settings.environment.as_ref().map(|e| e.directions),
         triangles: entry.scene.triangle_count() as u64,
         set_units: 0,
         all_bounces: true,
@@ -110,6 +111,7 @@ pub fn resolve(
             .clone()
             .unwrap_or_else(|| entry.default_camera.clone()),
         lights,
+        environment: params.environment.clone(),
         exposure,
         shadow_map_size: params.shadow_map_size,
         capture_hdr: debug_views::reads_indirect(params.view),

@@ -27,7 +27,7 @@ fn converge(
     while left > 0 {
         let n = left.min(64);
         tracer
-            .accumulate(width, height, camera, lights, settings, n)
+            .accumulate(width, height, camera, lights, None, settings, n)
             .expect("accumulate");
         left -= n;
     }
@@ -500,6 +500,7 @@ fn accumulation_restarts_when_the_camera_moves() {
             8,
             &p.camera,
             std::slice::from_ref(&p.light),
+            None,
             &settings,
             2,
         )
@@ -510,7 +511,15 @@ fn accumulation_restarts_when_the_camera_moves() {
         ..p.camera.clone()
     };
     tracer
-        .accumulate(8, 8, &moved, std::slice::from_ref(&p.light), &settings, 2)
+        .accumulate(
+            8,
+            8,
+            &moved,
+            std::slice::from_ref(&p.light),
+            None,
+            &settings,
+            2,
+        )
         .expect("accumulate");
     assert_eq!(tracer.samples(), 2);
 }

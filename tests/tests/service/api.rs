@@ -3,7 +3,7 @@
 use lightcast_e2e::{
     cornell_glb, direct_session, glb_to_gltf, small_session, Incoming, TestServer, PATIENCE,
 };
-use lightcast_protocol::{RenderReport, ServerEvent};
+use lightcast_protocol::{EnvironmentKind, RenderReport, ServerEvent};
 use serde_json::{json, Value};
 use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
@@ -227,6 +227,104 @@ async fn a_render_lights_with_every_light_it_lists() {
         "{} vs {}",
         mean(&png_two),
         mean(&png_one)
+    );
+    server.stop().await;
+}
+
+/// `render.environment`: a uniform sky brightens a frame, the report names it, the
+/// comparison with the reference renders the reference under it too, and a session takes it
+/// and drops it by patch.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_environment_lights_renders_comparisons_and_sessions() {
+    let server = TestServer::start(&[]).await;
+    let body = |environment: Value| {
+        json!({"render": {"width": 32, "height": 24, "exposure": 0.5, "shadow_map_size": 256,
+                          "environment": environment, "gi": {"method": "none"}},
+               "format": "png"})
+    };
+    let mean = |png: &[u8]| {
+        let image = image::load_from_memory(png).expect("png").to_rgb8();
+        image
+            .pixels()
+            .map(|p| f64::from(p[0]) + f64::from(p[1]) + f64::from(p[2]))
+            .sum::<f64>()
+            / image.pixels().len() as f64
+    };
+    let without = body(Value::Null);
+    let with = body(json!({"kind": "uniform", "intensity": 0.5, "directions": 4}));
+    let (report, dark) = render(&server, &without).await;
+    assert_eq!(report.environment, None);
+    let (report, lit) = render(&server, &with).await;
+    let env = report
+        .environment
+        .expect("the report names the environment");
+    assert_eq!(env.directions, 4);
+    assert!(
+        mean(&lit) > mean(&dark) * 1.1,
+        "{} vs {}",
+        mean(&lit),
+        mean(&dark)
+    );
+    // Compared with the reference under the same sky: `none` has no indirect light of its
+    // own, so without a sky it misses all of the reference's (bias −100 %); under a sky
+    // bright enough to outshine the lamp's bounce, both count the sky's light on the
+    // surfaces and the bias is what `none` misses of the rest.
+    let bias = |environment: Value| {
+        let mut compared = body(environment);
+        compared["compare_to"] = json!("reference");
+        compared["compare_spp"] = json!(16);
+        let server = &server;
+        async move {
+            let (report, _) = render(server, &compared).await;
+            report
+                .comparison
+                .expect("a comparison")
+                .indirect_bias_relative
+        }
+    };
+    let dark_bias = bias(Value::Null).await;
+    let sky_bias = bias(json!({"kind": "uniform", "intensity": 20.0, "directions": 4})).await;
+    assert!(dark_bias < -0.99, "{dark_bias}");
+    assert!(sky_bias > -0.5, "{sky_bias}");
+
+    let created = server
+        .create_session(
+            json!({"render": {"width": 32, "height": 24, "environment": {"kind": "uniform"}}}),
+            None,
+        )
+        .await;
+    let env = created.session.params.render.environment.clone();
+    assert_eq!(env.map(|e| e.kind), Some(EnvironmentKind::Uniform));
+    let path = format!("/v1/sessions/{}", created.session.id);
+    let patch = |body: Value| {
+        let (server, path) = (&server, &path);
+        async move {
+            let resp = server
+                .http
+                .patch(server.url(path))
+                .json(&body)
+                .send()
+                .await
+                .expect("patch");
+            assert_eq!(resp.status(), 200, "{body}");
+            resp.json::<Value>().await.expect("session")
+        }
+    };
+    let patched = patch(json!({"render": {"environment": {"intensity": 2.0}}})).await;
+    assert_eq!(
+        patched["params"]["render"]["environment"]["intensity"],
+        json!(2.0),
+        "{patched}"
+    );
+    assert_eq!(
+        patched["params"]["render"]["environment"]["kind"],
+        json!("uniform")
+    );
+    let dropped = patch(json!({"render": {"environment": null}})).await;
+    assert_eq!(
+        dropped["params"]["render"]["environment"],
+        Value::Null,
+        "{dropped}"
     );
     server.stop().await;
 }

@@ -485,6 +485,7 @@ pub fn run(
         height: TARGET_SIZE.height,
         camera: default_camera(&scene),
         lights: default_lights(&scene, MAX_LIGHTS),
+        environment: None,
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,

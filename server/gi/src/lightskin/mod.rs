@@ -81,6 +81,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: true,
+    samples_environment: false,
     bench: Some(&bench::SWEEP),
 };
 

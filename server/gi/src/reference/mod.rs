@@ -42,6 +42,7 @@ use super::precompute::{
 use super::{FrameInputs, GiError, InvalidSetting, Method, MethodEntry, ProgressBuffer};
 use crate::gpu::{readback::read_buffer, timing::FrameStages, GpuContext, GpuError};
 use crate::passes::bind::{self, bind_group};
+use crate::passes::environment::{EnvironmentBuffer, FrameEnvironment};
 use crate::passes::frame_uniforms::{camera_view_proj, LightsUniform};
 use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::tonemap::luminance;
@@ -91,6 +92,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: stages::ALL,
     limits: limits::LIMITS,
     downscales: false,
+    samples_environment: true,
     bench: None,
 };
 
@@ -100,10 +102,13 @@ pub const ENTRY: MethodEntry = MethodEntry {
 /// bounces); paths that leave the scene early make the real cost lower, never higher.
 fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     let (spp, bounces) = (params::SPP.u32(gi), BOUNCES.u32(gi));
-    let rays = shape.pixels() * f64::from(spp) * f64::from(1 + (1 + shape.lights) * bounces);
+    // An environment adds a shadow ray per vertex, the first included.
+    let sky = u32::from(shape.environment.is_some());
+    let rays =
+        shape.pixels() * f64::from(spp) * f64::from(1 + sky + (1 + shape.lights + sky) * bounces);
     let depth = (shape.triangles.max(2) as f64).log2().max(10.0);
     cost.add(
-        "path tracing (pixels × spp × (1 + (1 + lights) × bounces) rays)",
+        "path tracing (pixels × spp × (1 + sky + (1 + lights + sky) × bounces) rays)",
         rays,
         120.0 * depth,
     );
@@ -325,9 +330,9 @@ pub fn packed_texture_bytes(textures: &[Texture]) -> u64 {
     4 + textures.iter().map(|t| t.rgba8.len() as u64).sum::<u64>()
 }
 
-/// Storage buffers the path-tracing shader binds: params, light and accumulation (group 0),
-/// BVH nodes and triangles, vertices, indices, surfaces and texels (group 1).
-const STORAGE_BUFFERS: u32 = 9;
+/// Storage buffers the path-tracing shader binds: params, light, accumulation and environment
+/// (group 0), BVH nodes and triangles, vertices, indices, surfaces and texels (group 1).
+const STORAGE_BUFFERS: u32 = 10;
 
 /// Refuses a device that cannot bind the tracer's buffers: the packed textures
 /// (`texture_bytes`, from [`packed_texture_bytes`]) must fit one storage binding and be
@@ -430,6 +435,7 @@ struct AccumKey {
     height: u32,
     camera: Camera,
     lights: Vec<Light>,
+    environment: Option<Arc<FrameEnvironment>>,
     settings: ReferenceSettings,
 }
 
@@ -441,6 +447,7 @@ pub struct PathTracer {
     scene_group: wgpu::BindGroup,
     params: ParamSlots,
     lights: wgpu::Buffer,
+    environment: EnvironmentBuffer,
     bounds: crate::scene::Aabb,
     /// Accumulations of the most recently used histories, most recent first.
     accumulations: Vec<Accumulation>,
@@ -462,6 +469,7 @@ bind_group! {
         params: bind::param_slot::<TraceParams>(),
         lights: bind::PARAMS,
         accum: bind::STORAGE_RW,
+        environment: bind::STORAGE,
     }
 }
 
@@ -566,6 +574,7 @@ impl PathTracer {
             std::mem::size_of::<LightsUniform>(),
         );
         Ok(Self {
+            environment: EnvironmentBuffer::new(device),
             pipeline,
             pass_layout,
             scene_group,
@@ -651,14 +660,17 @@ impl PathTracer {
         );
     }
 
-    /// Adds `samples` samples per pixel (at most [`MAX_SAMPLES_PER_CALL`]), restarting the
-    /// accumulation if anything changed since the last call, and waits for them.
+    /// Adds `samples` samples per pixel (at most [`MAX_SAMPLES_PER_CALL`]) lit by `lights`
+    /// and `environment`, restarting the accumulation if anything changed since the last
+    /// call, and waits for them.
+    #[allow(clippy::too_many_arguments)]
     pub fn accumulate(
         &mut self,
         width: u32,
         height: u32,
         camera: &Camera,
         lights: &[Light],
+        environment: Option<&Arc<FrameEnvironment>>,
         settings: &ReferenceSettings,
         samples: u32,
     ) -> Result<(), ReferenceError> {
@@ -678,6 +690,7 @@ impl PathTracer {
             height,
             camera: camera.clone(),
             lights: lights.to_vec(),
+            environment: environment.cloned(),
             settings: *settings,
         };
         self.ensure_accumulation(&mut encoder, key);
@@ -697,6 +710,7 @@ impl PathTracer {
                     height,
                     camera,
                     lights,
+                    environment,
                     settings,
                     ..
                 },
@@ -728,8 +742,10 @@ impl PathTracer {
         };
         // Each sample in bands of rows of at most `band_rays` rays (a camera ray, then a bounce
         // ray and a shadow ray per light per bounce), as many as the parameter slots hold.
-        let rays_per_ray_bounce = 1 + lights.len() as u32;
-        let rays_per_row = u64::from(width) * u64::from(1 + rays_per_ray_bounce * settings.bounces);
+        let sky = u32::from(environment.is_some());
+        let rays_per_ray_bounce = 1 + lights.len() as u32 + sky;
+        let rays_per_row =
+            u64::from(width) * u64::from(1 + sky + rays_per_ray_bounce * settings.bounces);
         let wanted = u64::from(height)
             .div_ceil((self.band_rays / rays_per_row).max(1))
             .max(1);
@@ -751,10 +767,13 @@ impl PathTracer {
         self.ctx
             .queue
             .write_buffer(&self.lights, 0, bytemuck::bytes_of(&lights_uniform));
+        self.environment
+            .set(device, &self.ctx.queue, environment.as_deref());
         let group = PassResources {
             params: &self.params,
             lights: &self.lights,
             accum,
+            environment: &self.environment.buffer,
         }
         .bind(device, &self.pass_layout);
         let mut pass = passes::begin_compute(encoder, "reference path trace");
@@ -797,6 +816,7 @@ impl PathTracer {
             height: frame.height,
             camera: frame.camera.clone(),
             lights: frame.lights.to_vec(),
+            environment: frame.environment.cloned(),
             settings: ReferenceSettings {
                 bounces: g.bounces,
                 seed: 0,

@@ -9,6 +9,7 @@ pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
         wgsl!("lights.wgsl"),
+        wgsl!("environment.wgsl"),
         wgsl!("material_model.wgsl"),
         wgsl!("bvh.wgsl"),
         wgsl!("reference/surfaces.wgsl"),

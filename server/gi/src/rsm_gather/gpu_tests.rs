@@ -80,6 +80,7 @@ fn render(
         height: H,
         camera: default_light::default_camera(scene),
         lights,
+        environment: None,
         exposure: lightcast_passes::passes::exposure::Exposure::Manual(1.0),
         shadow_map_size: 256,
         capture_hdr: true,

@@ -62,6 +62,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     stages: stages::ALL,
     limits: &[&crate::gi::common::limits::MAX_RSM_SIZE],
     downscales: true,
+    samples_environment: false,
     bench: Some(&bench::SWEEP),
 };
 

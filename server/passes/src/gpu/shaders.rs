@@ -69,6 +69,7 @@ pub const DIRECT_LIGHT: ShaderSource = ShaderSource {
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
         wgsl!("lights.wgsl"),
+        wgsl!("environment.wgsl"),
         wgsl!("direct_light.wgsl"),
     ],
 };

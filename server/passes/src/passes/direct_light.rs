@@ -1,5 +1,7 @@
-//! Deferred lighting (`shaders/direct_light.wgsl`): emission, every punctual light with the
-//! paper's BRDF (eq. 3–4) and PCF shadows, plus the indirect target, into HDR.
+//! Deferred lighting (`shaders/direct_light.wgsl`): emission, every light with the paper's
+//! BRDF (eq. 3–4) and PCF shadows, plus the indirect target, into HDR; the environment where
+//! no geometry is; and the indirect light plus the environment's directional lights' light
+//! into `indirect_out` (what a frame reports as its indirect light).
 
 use super::bind::{self, bind_group, BindKind};
 use super::{gbuffer::GBuffer, shadow_map::ShadowMap, Target};
@@ -15,7 +17,11 @@ pub struct DirectLightInputs<'a> {
     pub gbuffer: &'a GBuffer,
     pub shadow: &'a ShadowMap,
     pub indirect: &'a Target,
+    /// The packed environment (`passes::environment`).
+    pub environment: &'a wgpu::Buffer,
     pub hdr: &'a Target,
+    /// `indirect` plus the environment lights' direct light.
+    pub indirect_out: &'a Target,
 }
 
 bind_group! {
@@ -35,6 +41,8 @@ bind_group! {
         shadow_sampler: BindKind::Sampler(wgpu::SamplerBindingType::Comparison),
         hdr_out: bind::storage_texture(HDR_FORMAT),
         indirect: bind::TEXTURE,
+        environment: bind::STORAGE,
+        indirect_out: bind::storage_texture(super::INDIRECT_FORMAT),
     }
 }
 
@@ -76,6 +84,8 @@ impl DirectLightPass {
             shadow_sampler: &self.shadow_sampler,
             hdr_out: inputs.hdr,
             indirect: inputs.indirect,
+            environment: inputs.environment,
+            indirect_out: inputs.indirect_out,
         }
         .bind(device, &self.layout)
     }

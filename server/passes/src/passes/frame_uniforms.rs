@@ -14,6 +14,8 @@ pub struct CameraUniform {
     pub position: [f32; 3],
     /// Phong exponent k for every material, overriding theirs; 0 keeps the materials' own.
     pub glossy_exponent: f32,
+    /// Clip to world: the ray through a pixel (the environment behind the geometry).
+    pub inv_view_proj: [[f32; 4]; 4],
 }
 
 /// Mirrors `LightUniform` in `shaders/lights.wgsl`.
@@ -34,25 +36,40 @@ pub struct LightUniform {
     pub pad0: f32,
 }
 
-/// Most punctual lights a frame lights with (`MAX_LIGHTS` in `shaders/lights.wgsl`): the
-/// list is a fixed-size storage struct every lighting shader loops over.
+/// Most lights a frame lights with (`MAX_LIGHTS` in `shaders/lights.wgsl`), its punctual
+/// lights and the directional lights a real-time method splits its environment into
+/// together: the list is a fixed-size storage struct every lighting shader loops over.
 pub const MAX_LIGHTS: usize = 16;
 
-/// Mirrors `Lights` in `shaders/lights.wgsl`: the frame's lights, `count` of them used.
+/// Mirrors `Lights` in `shaders/lights.wgsl`: the frame's lights, `count` of them used, the
+/// first `punctual` the scene's punctual lights, the rest its environment's directions.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct LightsUniform {
     pub count: u32,
-    pub pad0: u32,
+    pub punctual: u32,
     pub pad1: u32,
     pub pad2: u32,
     pub list: [LightUniform; MAX_LIGHTS],
 }
 
 impl LightsUniform {
-    /// Every light of `lights` (at most [`MAX_LIGHTS`]; callers check) with its shadow faces
-    /// fitted to the scene bounds, their layers following each other in light order.
+    /// Every light of `lights` (at most [`MAX_LIGHTS`]; callers check), all punctual, with
+    /// its shadow faces fitted to the scene bounds, their layers following each other in
+    /// light order.
     pub fn new(lights: &[Light], bounds: &Aabb, shadow_size: u32) -> Self {
+        Self::with_punctual(lights, lights.len(), bounds, shadow_size)
+    }
+
+    /// [`Self::new`] where only the first `punctual` lights are punctual and the rest light
+    /// for the environment (the direct-light pass counts their light as the environment's,
+    /// with the indirect light).
+    pub fn with_punctual(
+        lights: &[Light],
+        punctual: usize,
+        bounds: &Aabb,
+        shadow_size: u32,
+    ) -> Self {
         debug_assert!(lights.len() <= MAX_LIGHTS, "{} lights", lights.len());
         let mut all = Self::zeroed();
         let mut first_layer = 0;
@@ -62,6 +79,7 @@ impl LightsUniform {
             first_layer += LightUniform::face_count(light.kind);
         }
         all.count = lights.len().min(MAX_LIGHTS) as u32;
+        all.punctual = punctual.min(lights.len()).min(MAX_LIGHTS) as u32;
         all
     }
 
@@ -124,10 +142,12 @@ pub fn camera_view_proj(camera: &Camera, aspect: f32, bounds: &Aabb) -> Mat4 {
 impl CameraUniform {
     /// `glossy_exponent` overrides every material's Phong exponent (`None`: their own).
     pub fn new(camera: &Camera, aspect: f32, bounds: &Aabb, glossy_exponent: Option<f32>) -> Self {
+        let view_proj = camera_view_proj(camera, aspect, bounds);
         Self {
-            view_proj: camera_view_proj(camera, aspect, bounds).to_cols_array_2d(),
+            view_proj: view_proj.to_cols_array_2d(),
             position: camera.position,
             glossy_exponent: glossy_exponent.unwrap_or(0.0),
+            inv_view_proj: view_proj.inverse().to_cols_array_2d(),
         }
     }
 }
@@ -300,6 +320,7 @@ mod tests {
                     "glossy_exponent",
                     offset_of!(CameraUniform, glossy_exponent),
                 ),
+                ("inv_view_proj", offset_of!(CameraUniform, inv_view_proj)),
             ],
         );
     }
@@ -334,7 +355,7 @@ mod tests {
             size_of::<LightsUniform>(),
             &[
                 ("count", offset_of!(LightsUniform, count)),
-                ("pad0", offset_of!(LightsUniform, pad0)),
+                ("punctual", offset_of!(LightsUniform, punctual)),
                 ("pad1", offset_of!(LightsUniform, pad1)),
                 ("pad2", offset_of!(LightsUniform, pad2)),
                 ("list", offset_of!(LightsUniform, list)),

@@ -18,6 +18,7 @@
 
 pub mod bind;
 pub mod direct_light;
+pub mod environment;
 pub mod exposure;
 pub mod frame_uniforms;
 pub mod gbuffer;

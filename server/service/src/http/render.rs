@@ -345,6 +345,7 @@ pub async fn render(
         camera: resolved.settings.camera,
         light: resolved.settings.lights[0].clone(),
         lights: resolved.settings.lights,
+        environment: resolved.settings.environment,
         samples: rendered.progress.map(|p| p.samples),
         relative_error: rendered
             .progress

@@ -106,6 +106,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         height,
         camera,
         lights: vec![light],
+        environment: None,
         exposure: Exposure::Manual(1.0),
         shadow_map_size: 256,
         capture_hdr: true,

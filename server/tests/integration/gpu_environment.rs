@@ -1,0 +1,208 @@
+//! Environments (`render.environment`) on lavapipe against answers known without them: the
+//! reference on an open white plane under a uniform environment and under the analytic sky
+//! converges to albedo × irradiance / π (the irradiance integrated on the CPU from the same
+//! map), and a real-time method's directional lights light that plane the same; the sky
+//! shows where no geometry is.
+
+use super::support::{self, directional, floor_corners, plain_material, quad};
+use glam::Vec3;
+use lightcast_protocol::{Camera, Environment, EnvironmentKind};
+use lightcast_server::gi::reference::{PathTracer, ReferenceSettings, SurfaceGpu};
+use lightcast_server::gi::GiParams;
+use lightcast_server::passes::environment::FrameEnvironment;
+use lightcast_server::renderer::{RenderSettings, Renderer};
+use lightcast_server::scene::environment::texel_solid_angle;
+use lightcast_server::scene::{material, Scene};
+use std::sync::Arc;
+
+const ALBEDO: f32 = 0.6;
+
+/// A 40 m square floor at y = 0 seen from 1 m above, looking down at its centre: nothing
+/// but the floor in view, and the floor sees only the sky.
+fn open_plane() -> (Scene, Camera) {
+    let (mut vertices, mut indices) = (Vec::new(), Vec::new());
+    quad(
+        &mut vertices,
+        &mut indices,
+        floor_corners(0.0, 0.0, 0.0, 20.0),
+        0,
+    );
+    let scene = support::scene(
+        vertices,
+        indices,
+        vec![plain_material([ALBEDO; 3], 0.0, 1.0)],
+    );
+    let camera = Camera {
+        position: [0.0, 1.0, 0.3],
+        target: [0.0, 0.0, 0.0],
+        fov_y_degrees: 60.0,
+    };
+    (scene, camera)
+}
+
+/// The irradiance per channel on a surface facing +Y under `env`'s map, texel by texel.
+fn horizontal_irradiance(env: &FrameEnvironment) -> Vec3 {
+    let m = &env.map;
+    let (w, h) = (m.width, m.height);
+    let mut e = Vec3::ZERO;
+    for j in 0..h {
+        let theta = std::f32::consts::PI * (j as f32 + 0.5) / h as f32;
+        let cos = theta.cos().max(0.0);
+        for i in 0..w {
+            e += Vec3::from(m.radiance[(j * w + i) as usize]) * texel_solid_angle(j, w, h) * cos;
+        }
+    }
+    e
+}
+
+fn environments() -> Vec<(&'static str, Environment)> {
+    vec![
+        (
+            "uniform",
+            Environment {
+                color: [0.5, 0.7, 1.0],
+                intensity: Some(2.0),
+                ..Environment::default()
+            },
+        ),
+        (
+            "sky",
+            Environment {
+                kind: EnvironmentKind::Sky,
+                intensity: Some(0.25),
+                ..Environment::default()
+            },
+        ),
+    ]
+}
+
+#[test]
+fn reference_on_an_open_lambertian_plane_converges_to_albedo_times_irradiance_over_pi() {
+    let (scene, camera) = open_plane();
+    // A Lambertian without the glTF material's 4 % glossy lobe, so the answer is exact.
+    let split = material::DiffuseGlossy {
+        diffuse: Vec3::splat(ALBEDO),
+        glossy: Vec3::ZERO,
+        exponent: 1.0,
+    };
+    let mut tracer = PathTracer::with_surfaces(support::gpu(), &scene, |_| {
+        vec![SurfaceGpu::new(split, [0.0; 3])]
+    })
+    .expect("tracer");
+    let sun = directional(Vec3::new(0.3, -0.6, 0.4), 3.0);
+    for (name, env) in environments() {
+        let frame_env =
+            Arc::new(FrameEnvironment::new(&env, std::slice::from_ref(&sun)).expect("env"));
+        let (w, h) = (16, 16);
+        let mut left = 256;
+        while left > 0 {
+            tracer
+                .accumulate(
+                    w,
+                    h,
+                    &camera,
+                    &[],
+                    Some(&frame_env),
+                    &ReferenceSettings::default(),
+                    64,
+                )
+                .expect("accumulate");
+            left -= 64;
+        }
+        let image = tracer.read().expect("read").expect("samples");
+        let mean = image
+            .indirect
+            .iter()
+            .fold(Vec3::ZERO, |s, p| s + Vec3::from(*p))
+            / image.indirect.len() as f32;
+        let expected = horizontal_irradiance(&frame_env) * ALBEDO / std::f32::consts::PI;
+        let rel = ((mean - expected) / expected).abs();
+        eprintln!("{name}: mean {mean}, expected {expected}, relative {rel}");
+        // 256 pixels × 256 samples: the mean's noise is far below 1 %.
+        assert!(rel.max_element() < 0.01, "{name}: {mean} vs {expected}");
+    }
+}
+
+/// One frame of `gi` over the open plane lit by `env` and a sun, with the indirect light
+/// (plus the environment's light) and the HDR image read back.
+fn render(
+    renderer: &mut Renderer,
+    camera: &Camera,
+    env: &Environment,
+    gi: GiParams,
+) -> (Vec<[f32; 4]>, Vec<[f32; 4]>) {
+    let settings = RenderSettings {
+        environment: Some(env.clone()),
+        gi,
+        ..support::settings(
+            24,
+            16,
+            camera.clone(),
+            directional(Vec3::new(0.3, -0.6, 0.4), 3.0),
+        )
+    };
+    support::precompute(renderer, &settings.gi);
+    let frame = renderer.render(&settings).expect("render");
+    (
+        frame.indirect.expect("captured"),
+        frame.hdr.expect("captured"),
+    )
+}
+
+#[test]
+fn directional_lights_of_the_environment_light_an_open_plane_like_the_reference() {
+    let (scene, camera) = open_plane();
+    let mut renderer = Renderer::new(support::gpu(), scene);
+    for (name, env) in environments() {
+        let mean = |image: &[[f32; 4]]| {
+            image
+                .iter()
+                .fold(Vec3::ZERO, |s, p| s + Vec3::new(p[0], p[1], p[2]))
+                / image.len() as f32
+        };
+        let mut reference = GiParams::new(lightcast_server::gi::reference::REFERENCE);
+        reference.set("spp", 256);
+        let (truth, _) = render(&mut renderer, &camera, &env, reference);
+        let none = GiParams::new(lightcast_server::gi::none::NONE);
+        let (approx, hdr) = render(&mut renderer, &camera, &env, none);
+        let (t, a) = (mean(&truth), mean(&approx));
+        let rel = ((a - t) / t).abs();
+        eprintln!("{name}: reference {t}, directional lights {a}, relative {rel}");
+        // An upward surface sees each light's region whole (the regions' irradiance vectors
+        // give its irradiance exactly); what remains is the reference's noise and the
+        // shadow maps' edge filtering.
+        assert!(rel.max_element() < 0.03, "{name}: {a} vs {t}");
+        // The HDR image has the environment's light in it besides the sun's.
+        assert!(mean(&hdr).min_element() > a.min_element());
+    }
+}
+
+#[test]
+fn the_environment_shows_where_no_geometry_is() {
+    let (scene, _) = open_plane();
+    let mut renderer = Renderer::new(support::gpu(), scene);
+    // Looking up: nothing but sky.
+    let camera = Camera {
+        position: [0.0, 1.0, 0.0],
+        target: [0.0, 2.0, 0.1],
+        fov_y_degrees: 40.0,
+    };
+    let env = Environment {
+        color: [0.2, 0.4, 0.8],
+        intensity: Some(3.0),
+        ..Environment::default()
+    };
+    let (_, hdr) = render(
+        &mut renderer,
+        &camera,
+        &env,
+        GiParams::new(lightcast_server::gi::none::NONE),
+    );
+    for p in &hdr {
+        assert_eq!(p[3], 1.0, "the sky counts as something to expose");
+        for (k, want) in [0.6f32, 1.2, 2.4].iter().enumerate() {
+            // RGBA16F: three significant decimal digits.
+            assert!((p[k] - want).abs() < 2e-3 * want, "{p:?}");
+        }
+    }
+}

@@ -1,7 +1,7 @@
 //! Camera, light and GI flags shared by `render`, `stream` and `loadtest`; the same names as the
 //! offline `lightcast-server render`.
 
-use lightcast_protocol::{parse_vec3, Camera, GiMethod, Light, LightKind, View};
+use lightcast_protocol::{parse_vec3, Camera, EnvironmentKind, GiMethod, Light, LightKind, View};
 
 /// What to render. Unset options are left out of the request, so the server's defaults apply
 /// (`lightcast-server` on a CPU adapter picks smaller GI settings than on a GPU; `/v1/server`
@@ -41,6 +41,24 @@ pub struct RenderFlags {
     /// Lux (directional) or candela (spot, point).
     #[arg(long)]
     pub light_intensity: Option<f32>,
+    /// Light from every direction (`render.environment`): `uniform` or `sky` (a daylight sky
+    /// around the first directional light). Default: none.
+    #[arg(long, value_enum)]
+    pub environment: Option<EnvironmentKind>,
+    /// The environment's scale: `uniform` radiance, or a sky's horizontal illuminance over
+    /// the sun's intensity (server defaults 1 and 0.2).
+    #[arg(long, requires = "environment")]
+    pub environment_intensity: Option<f32>,
+    /// Linear colour R,G,B of a uniform environment, tint of a sky.
+    #[arg(long, requires = "environment", value_parser = parse_vec3)]
+    pub environment_color: Option<[f32; 3]>,
+    /// Sky turbidity, 2 (very clear) to 10 (hazy); server default 3.
+    #[arg(long, requires = "environment")]
+    pub turbidity: Option<f32>,
+    /// Directional lights the real-time methods split the environment into; server
+    /// default 8.
+    #[arg(long, requires = "environment")]
+    pub environment_directions: Option<u32>,
     /// Fixed linear exposure scale (default: automatic).
     #[arg(long)]
     pub exposure: Option<f32>,
@@ -122,6 +140,15 @@ impl RenderFlags {
         put(&mut render, "height", self.height);
         put(&mut render, "camera", camera);
         put(&mut render, "light", light);
+        if let Some(kind) = self.environment {
+            let mut environment = serde_json::Map::new();
+            put(&mut environment, "kind", Some(kind));
+            put(&mut environment, "intensity", self.environment_intensity);
+            put(&mut environment, "color", self.environment_color);
+            put(&mut environment, "turbidity", self.turbidity);
+            put(&mut environment, "directions", self.environment_directions);
+            render.insert("environment".into(), environment.into());
+        }
         put(&mut render, "exposure", self.exposure);
         put(&mut render, "shadow_map_size", self.shadow_map_size);
         put(&mut render, "view", self.view);
@@ -160,6 +187,25 @@ fn parse_gi_param(s: &str) -> Result<(String, serde_json::Value), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[derive(clap::Parser)]
+    struct Wrapper {
+        #[command(flatten)]
+        flags: RenderFlags,
+    }
+
+    #[test]
+    fn environment_flags_give_only_the_fields_they_name() {
+        use clap::Parser;
+        let w = Wrapper::parse_from(["t", "--environment", "sky", "--turbidity", "4"]);
+        assert_eq!(
+            w.flags.params(None, None)["environment"],
+            serde_json::json!({"kind": "sky", "turbidity": 4.0})
+        );
+        let w = Wrapper::parse_from(["t"]);
+        assert!(w.flags.params(None, None).get("environment").is_none());
+        assert!(Wrapper::try_parse_from(["t", "--turbidity", "4"]).is_err());
+    }
 
     #[test]
     fn gi_params_are_name_value_pairs_with_json_values() {

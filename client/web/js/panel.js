@@ -28,6 +28,9 @@ function read(control) {
     case 'optional-float':
       if (raw === '') return { value: null };
       return Number.isFinite(Number(raw)) ? { value: Number(raw) } : { error: 'enter a number, or leave it empty' };
+    case 'environment-kind':
+      // `render.environment` as a whole: none removes it, a kind merges into what it was.
+      return { value: raw === 'none' ? null : { kind: raw } };
     default:
       return { value: raw };
   }
@@ -166,9 +169,15 @@ export class Panel {
   show(params) {
     const method = valueAt(params, 'render.gi.method');
     if (method) this.showMethod(method);
+    const environment = valueAt(params, 'render.environment');
+    const environmentControls = this.root.querySelector('#environment-controls');
+    if (environmentControls) environmentControls.hidden = !environment;
+    const turbidity = this.root.querySelector('#environment-turbidity');
+    if (turbidity) turbidity.hidden = environment?.kind !== 'sky';
     for (const control of this.controls) {
       if (document.activeElement === control && control.type === 'number') continue;
-      const value = valueAt(params, control.dataset.field);
+      let value = valueAt(params, control.dataset.field);
+      if (control.dataset.kind === 'environment-kind') value = value ? value.kind : 'none';
       if (control.type === 'checkbox') {
         // `null` leaves the choice to the server (e.g. `emitters`: by the light in use).
         control.indeterminate = value === null || value === undefined;

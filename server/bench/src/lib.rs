@@ -41,7 +41,7 @@ use crate::scene::{
     default_light::{default_camera, default_lights},
     Scene,
 };
-use lightcast_protocol::GiParams;
+use lightcast_protocol::{GiParams, Light, LightKind};
 pub use report::{
     stats, BenchReport, BenchRow, BounceError, Cell, MethodRow, Precomputed, ReferenceSummary,
     StageStats,
@@ -77,6 +77,13 @@ pub struct BenchArgs {
     /// single-bounce error at about the GI time of the sweep's centre (equal time).
     #[arg(long)]
     pub compare_methods: bool,
+    /// Measure every configuration with the scene's first light split into each of these
+    /// numbers of lights (comma-separated, 1 … 16): N lights of 1/N of its intensity around
+    /// its place (see [`split_light`]), so the scene receives about the same light and GI
+    /// time and error show what more lights cost. Each row names its count and its GI time
+    /// over the same configuration's with one light. Default: the scene's own lights.
+    #[arg(long, value_delimiter = ',', conflicts_with = "compare_methods")]
+    pub light_counts: Vec<usize>,
     /// Timed frames per configuration.
     #[arg(long, default_value_t = 30)]
     pub frames: u32,
@@ -100,6 +107,9 @@ pub struct BenchArgs {
     /// configuration's difference from it. Needs a build with `--features plots`.
     #[arg(long)]
     pub plots: Option<PathBuf>,
+    /// An environment every frame and its reference are lit by besides the scene's lights.
+    #[command(flatten)]
+    pub environment: crate::offline::EnvironmentArgs,
     /// Exposure for the frames (only the indirect buffer is compared, so this does not matter
     /// for the error; `auto` costs one extra stage).
     #[arg(long, default_value = "1", allow_negative_numbers = true)]
@@ -147,6 +157,8 @@ pub enum BenchError {
     },
     #[error("--frames must be at least 1")]
     NoFrames,
+    #[error("--environment: {0}")]
+    Environment(String),
     #[error("reference: {0}")]
     Reference(#[from] crate::gi::reference::ReferenceError),
     #[error("bench --gi {method}: the method has no evaluation; those with one: {with}")]
@@ -158,6 +170,8 @@ pub enum BenchError {
     },
     #[error("--compare-methods needs 1 in --bounces (the comparison is at one bounce)")]
     NoSingleBounce,
+    #[error("--light-counts: {count} is outside 1..={max}")]
+    LightCount { count: usize, max: usize },
 }
 
 /// The adapter of `backend`, logged, with its stages timed as `clock` says.
@@ -225,7 +239,7 @@ fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiParams) -> RenderSetting
         height: args.height,
         camera: default_camera(scene),
         lights: default_lights(scene, MAX_LIGHTS),
-        environment: None,
+        environment: args.environment.environment(),
         exposure: args.exposure.0,
         shadow_map_size: 2048,
         capture_hdr: false,
@@ -293,11 +307,26 @@ impl Bench<'_> {
             "reference path tracing, {bounces} bounce(s){}: samples per pixel",
             if emitters { " with emitters" } else { "" }
         );
+        let b = &self.base;
+        let environment = match &b.environment {
+            Some(e) => Some(std::sync::Arc::new(
+                crate::passes::environment::FrameEnvironment::new(e, &b.lights)
+                    .map_err(|e| BenchError::Environment(e.to_string()))?,
+            )),
+            None => None,
+        };
         let mut done = 0;
         while done < spp {
             let n = per_call.min(spp - done);
-            let b = &self.base;
-            tracer.accumulate(b.width, b.height, &b.camera, &b.lights, None, &settings, n)?;
+            tracer.accumulate(
+                b.width,
+                b.height,
+                &b.camera,
+                &b.lights,
+                environment.as_ref(),
+                &settings,
+                n,
+            )?;
             done += n;
             (self.progress)(u64::from(done), u64::from(spp), &label);
         }
@@ -546,7 +575,11 @@ pub fn run(
         log,
         progress,
     };
-    let result = run_configurations(&mut bench, &configs, &ladders, &bounces);
+    let result = if args.light_counts.is_empty() {
+        run_configurations(&mut bench, &configs, &ladders, &bounces)
+    } else {
+        run_light_counts(&mut bench, &configs, &bounces)
+    };
     if let Some(dir) = fresh {
         // Best effort: a failed removal leaves a temporary directory, not a wrong result.
         let _ = std::fs::remove_dir_all(dir);
@@ -583,6 +616,86 @@ pub fn run(
         rows,
         methods,
     })
+}
+
+/// `count` lights in place of `light`, each of 1/`count` of its intensity: directional lights
+/// tilted by up to 5° around its direction, spot and point lights on a circle of 5 % of the
+/// scene's radius around its position (across its direction), evenly spaced.
+pub fn split_light(light: &Light, count: usize, radius: f32) -> Vec<Light> {
+    if count <= 1 {
+        return vec![light.clone()];
+    }
+    let direction = glam::Vec3::from(light.direction).normalize_or(glam::Vec3::NEG_Y);
+    let (u, v) = direction.any_orthonormal_pair();
+    (0..count)
+        .map(|i| {
+            let angle = std::f32::consts::TAU * i as f32 / count as f32;
+            let across = u * angle.cos() + v * angle.sin();
+            let mut l = light.clone();
+            l.intensity /= count as f32;
+            if l.kind == LightKind::Directional {
+                l.direction = (direction + across * 5f32.to_radians().tan())
+                    .normalize()
+                    .to_array();
+            } else {
+                l.position = (glam::Vec3::from(light.position) + across * 0.05 * radius).to_array();
+            }
+            l
+        })
+        .collect()
+}
+
+/// `--light-counts`: every configuration at every light count, each count with its own
+/// references; rows name their count and their GI time over the one-light row's.
+fn run_light_counts(
+    bench: &mut Bench,
+    configs: &[Configuration],
+    bounces: &[u32],
+) -> Result<(Vec<BenchRow>, Vec<MethodRow>), BenchError> {
+    let Some(first) = bench.base.lights.first().cloned() else {
+        return Ok((Vec::new(), Vec::new()));
+    };
+    let radius = bench.scene.bounds.radius();
+    let mut rows: Vec<BenchRow> = Vec::new();
+    let mut one_light: BTreeMap<usize, f64> = BTreeMap::new();
+    for &count in &bench.args.light_counts.clone() {
+        if !(1..=MAX_LIGHTS).contains(&count) {
+            return Err(BenchError::LightCount {
+                count,
+                max: MAX_LIGHTS,
+            });
+        }
+        bench.base.lights = split_light(&first, count, radius);
+        bench.references.clear();
+        (bench.log)(&format!("{count} light(s)"));
+        let (counted, _) = run_configurations(bench, configs, &[], bounces)?;
+        for (i, mut row) in counted.into_iter().enumerate() {
+            let gi_ms = row.gi.median_ms;
+            if count == 1 {
+                one_light.insert(i, gi_ms);
+            }
+            let ratio = one_light
+                .get(&i)
+                .map_or("–".to_string(), |one| format!("{:.2}", gi_ms / one));
+            row.cells.splice(
+                0..0,
+                [
+                    Cell {
+                        column: "lights".into(),
+                        value: count.to_string(),
+                    },
+                    Cell {
+                        column: "GI time / 1 light".into(),
+                        value: ratio,
+                    },
+                ],
+            );
+            // A baseline index points into this count's rows.
+            row.baseline = row.baseline.map(|b| b + rows.len() - i);
+            rows.push(row);
+        }
+    }
+    Ok((rows, Vec::new()))
 }
 
 /// Checks every configuration, then measures each; then the equal-time comparison.
@@ -803,6 +916,39 @@ mod tests {
             none.contains("has no evaluation; those with one: "),
             "{none}"
         );
+    }
+
+    #[test]
+    fn split_lights_share_the_light_around_its_place() {
+        use lightcast_protocol::{Light, LightKind};
+        let spot = Light {
+            kind: LightKind::Spot,
+            position: [1.0, 2.0, 3.0],
+            direction: [0.0, -1.0, 0.0],
+            color: [1.0; 3],
+            intensity: 8.0,
+            inner_cone: 0.3,
+            outer_cone: 0.5,
+        };
+        assert_eq!(super::split_light(&spot, 1, 10.0), vec![spot.clone()]);
+        for kind in [LightKind::Spot, LightKind::Directional] {
+            let light = Light {
+                kind,
+                ..spot.clone()
+            };
+            let split = super::split_light(&light, 5, 10.0);
+            assert_eq!(split.len(), 5);
+            let total: f32 = split.iter().map(|l| l.intensity).sum();
+            assert!((total - 8.0).abs() < 1e-5);
+            for l in &split {
+                let off = glam::Vec3::from(l.position).distance(glam::Vec3::from(light.position));
+                let tilt = glam::Vec3::from(l.direction).angle_between(glam::Vec3::NEG_Y);
+                match kind {
+                    LightKind::Directional => assert!((tilt.to_degrees() - 5.0).abs() < 0.01),
+                    _ => assert!((off - 0.5).abs() < 1e-4, "{off}"),
+                }
+            }
+        }
     }
 
     #[test]

@@ -248,23 +248,8 @@ pub struct RenderArgs {
     /// Spot light outer cone angle in degrees (zero outside).
     #[arg(long, allow_negative_numbers = true)]
     pub light_outer_cone: Option<f32>,
-    /// Light from every direction: `uniform` (the same radiance everywhere) or `sky` (a
-    /// clear daylight sky around the first directional light, its sun). Default: none.
-    #[arg(long, value_enum)]
-    pub environment: Option<lightcast_protocol::EnvironmentKind>,
-    /// `uniform`: radiance scale; `sky`: its horizontal illuminance over the sun's
-    /// intensity. Default 1 (`uniform`), 0.2 (`sky`).
-    #[arg(long, requires = "environment", allow_negative_numbers = true)]
-    pub environment_intensity: Option<f32>,
-    /// Linear colour R,G,B of a uniform environment, tint of a sky.
-    #[arg(long, requires = "environment")]
-    pub environment_color: Option<Vec3Arg>,
-    /// Sky turbidity, 2 (very clear) to 10 (hazy).
-    #[arg(long, requires = "environment", default_value_t = lightcast_protocol::DEFAULT_TURBIDITY)]
-    pub turbidity: f32,
-    /// Directional lights the real-time methods split the environment into (median cut).
-    #[arg(long, requires = "environment", default_value_t = lightcast_protocol::DEFAULT_ENVIRONMENT_DIRECTIONS)]
-    pub environment_directions: u32,
+    #[command(flatten)]
+    pub environment: EnvironmentArgs,
     /// `auto` (log-average luminance to middle grey) or a linear scale applied before tone mapping.
     #[arg(long, default_value = "auto", allow_negative_numbers = true)]
     pub exposure: ExposureArg,
@@ -287,6 +272,42 @@ pub struct RenderArgs {
     /// Print the report as JSON on stdout instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `render.environment` on the command line (`render`, `bench`).
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct EnvironmentArgs {
+    /// Light from every direction: `uniform` (the same radiance everywhere) or `sky` (a
+    /// clear daylight sky around the first directional light, its sun). Default: none.
+    #[arg(long, value_enum)]
+    pub environment: Option<lightcast_protocol::EnvironmentKind>,
+    /// `uniform`: radiance scale; `sky`: its horizontal illuminance over the sun's
+    /// intensity. Default 1 (`uniform`), 0.2 (`sky`).
+    #[arg(long, requires = "environment", allow_negative_numbers = true)]
+    pub environment_intensity: Option<f32>,
+    /// Linear colour R,G,B of a uniform environment, tint of a sky.
+    #[arg(long, requires = "environment")]
+    pub environment_color: Option<Vec3Arg>,
+    /// Sky turbidity, 2 (very clear) to 10 (hazy).
+    #[arg(long, requires = "environment", default_value_t = lightcast_protocol::DEFAULT_TURBIDITY)]
+    pub turbidity: f32,
+    /// Directional lights the real-time methods split the environment into (median cut).
+    #[arg(long, requires = "environment", default_value_t = lightcast_protocol::DEFAULT_ENVIRONMENT_DIRECTIONS)]
+    pub environment_directions: u32,
+}
+
+impl EnvironmentArgs {
+    /// The environment the flags describe, if any.
+    pub fn environment(&self) -> Option<lightcast_protocol::Environment> {
+        self.environment
+            .map(|kind| lightcast_protocol::Environment {
+                kind,
+                color: self.environment_color.map_or([1.0; 3], |Vec3Arg(c)| c),
+                intensity: self.environment_intensity,
+                turbidity: self.turbidity,
+                directions: self.environment_directions,
+            })
+    }
 }
 
 /// What `render` reports after writing the image.
@@ -442,15 +463,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         height: args.height,
         camera,
         lights,
-        environment: args
-            .environment
-            .map(|kind| lightcast_protocol::Environment {
-                kind,
-                color: args.environment_color.map_or([1.0; 3], |Vec3Arg(c)| c),
-                intensity: args.environment_intensity,
-                turbidity: args.turbidity,
-                directions: args.environment_directions,
-            }),
+        environment: args.environment.environment(),
         exposure: args.exposure.0,
         shadow_map_size: args.shadow_map_size,
         capture_hdr: false,

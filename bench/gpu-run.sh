@@ -5,6 +5,8 @@
 #   - seed 001's evaluation (`bench --gi surfels`, issue 12) on the Cornell box and the street;
 #   - seed 003's evaluation (`bench --gi clustered`, issue 11) on the Cornell box (also at the
 #     paper's 800×800) and the street;
+#   - GI time and error against the light count (`bench/light-counts.sh`, issue 33): every
+#     method with 1 … 16 lights on the Cornell box and the street;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080;
 #   - JPEG against H.264 (`bench/stream-codecs.sh`, issue 13): one camera path at 1280×720 and
@@ -15,7 +17,8 @@
 #
 # KIT_DIR comes from bench/gpu-kit.sh (binaries, font, Vulkan loader .debs). Results land in
 # OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-surfels-{cornell,street}.{md,json,
-# …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png}, gpu-service.md,
+# …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png},
+# gpu-light-counts-{cornell,street}-{brsm,clustered,surfels,rsm_gather}.md, gpu-service.md,
 # gpu-stream-codecs.{md,json}, environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
 # adapter (a software one included) to check this script; its numbers mean nothing.
@@ -138,6 +141,13 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
     echo "command: ${cmd[*]}" >> "$out/environment.txt"
     "${cmd[@]}"
   done
+  # Issue 33: every method's GI time with 1, 2, 4, 8 and 16 lights (seed 001: surfels hardly
+  # grow), as ratios within the run.
+  light_flags=()
+  if $quick; then light_flags=(--quick); fi
+  cmd=("$(dirname "$0")/light-counts.sh" "$server" "$out" gpu "${light_flags[@]}")
+  echo "command: ${cmd[*]}" >> "$out/environment.txt"
+  "${cmd[@]}"
 fi
 
 if [ "$what" = service ] || [ "$what" = all ]; then

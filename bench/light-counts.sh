@@ -10,7 +10,9 @@
 # Writes OUT_DIR/PREFIX-light-counts-{cornell,street}-{brsm,clustered,surfels,rsm_gather}.md
 # (`brsm` rows include LightSkin at the same RSM size). PREFIX names the adapter (`lavapipe`,
 # `gpu-h200`). --quick: tiny sizes and few frames (software adapters); its numbers are only
-# ratios within one run.
+# ratios within one run. LIGHT_COUNT_SCENES and LIGHT_COUNT_METHODS (space-separated) narrow
+# the runs (LightSkin's cache lighting grows with every light's RSM: on lavapipe the street at
+# 16 lights takes minutes per frame).
 set -euo pipefail
 server="${1:?usage: $0 SERVER OUT_DIR PREFIX [--quick] [-- FLAGS]}"
 out="${2:?usage: $0 SERVER OUT_DIR PREFIX [--quick] [-- FLAGS]}"
@@ -31,12 +33,14 @@ counts=1,2,4,8,16
 declare -A sweeps=(
   [brsm]="--rsm-sizes $rsm --vals $vals --view-samples 256"
   [clustered]="--gi-param rsm_size=$rsm --sweep-vpls 1024 --sweep-clusters 30 --baseline-vpls 0"
-  [surfels]="--gi-param surfel_count=$surfels --sweep-surfels $surfels --sweep-links 64 --sweep-bands 3"
+  [surfels]="--gi-param surfel_count=$surfels --gi-param surfel_links=64 --sweep-surfels $surfels --sweep-links 64 --sweep-bands 3"
   [rsm_gather]="--gi-param rsm_size=$rsm --gather-samples 400 --gather-radii 100"
 )
-for scene in procedural:cornell 'procedural:street?blocks=4'; do
+read -r -a scenes <<< "${LIGHT_COUNT_SCENES:-procedural:cornell procedural:street?blocks=4}"
+read -r -a methods <<< "${LIGHT_COUNT_METHODS:-brsm clustered surfels rsm_gather}"
+for scene in "${scenes[@]}"; do
   name=$(case "$scene" in *cornell*) echo cornell ;; *) echo street ;; esac)
-  for gi in brsm clustered surfels rsm_gather; do
+  for gi in "${methods[@]}"; do
     read -r -a flags <<< "${sweeps[$gi]}"
     cmd=("$server" bench --gi "$gi" --scene "$scene" "${size[@]}" "${flags[@]}"
       --light-counts "$counts" --markdown "$out/$prefix-light-counts-$name-$gi.md" "$@")

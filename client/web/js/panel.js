@@ -197,9 +197,13 @@ export class Panel {
     if (output) output.textContent = control.value;
   }
 
-  /** Marks the control of `field` (a server field path, possibly longer or prefixed). */
+  /**
+   * Marks the control of `field` (a server field path, possibly longer or prefixed), else the
+   * control of the object it is in (`render.environment.kind`: the environment's menu).
+   */
   markError(field, message) {
-    const control = this.controls.find((c) => field === c.dataset.field || field.endsWith(`.${c.dataset.field}`));
+    const control = this.controls.find((c) => field === c.dataset.field || field.endsWith(`.${c.dataset.field}`))
+      || this.controls.find((c) => field.startsWith(`${c.dataset.field}.`));
     if (!control) return false;
     control.classList.add('invalid');
     control.title = message;

@@ -610,6 +610,19 @@ async function main() {
       assert.equal(session.params.render.lights[0].kind, 'directional');
     });
 
+    await step('the sky menu turns the daylight sky on around the sun, and off', async () => {
+      const environment = '[data-field="render.environment"]';
+      const on = await changeAfter(page, () => page.selectOption(environment, 'sky'), 'turning the sky on');
+      assert.ok(on > 4, `the sky hardly changed the street: ${on.toFixed(2)}`);
+      await page.waitForSelector('#environment-controls:not([hidden])', { timeout: PATIENCE_MS });
+      assert.ok(await page.locator('#environment-turbidity').isVisible(), 'a sky shows its turbidity');
+      assert.equal((await pageSession(page)).params.render.environment.kind, 'sky');
+      const off = await changeAfter(page, () => page.selectOption(environment, 'none'), 'turning the sky off');
+      assert.ok(off > 4, `turning the sky off hardly changed the street: ${off.toFixed(2)}`);
+      assert.equal((await pageSession(page)).params.render.environment, null);
+      assert.ok(await page.locator('#environment-controls').isHidden(), 'no sky, no sky settings');
+    });
+
     if (process.env.LIGHTCAST_UPLOAD_SCENE) {
       await step('a scene uploaded from the page streams', async () => {
         // The new scene starts from its own camera, so the orbited view changes.

@@ -278,6 +278,22 @@ mod tests {
     }
 
     #[test]
+    fn an_environment_is_lights_for_methods_that_do_not_sample_it() {
+        let with_sky = FrameShape {
+            environment: Some(8),
+            ..shape()
+        };
+        let lit = with_sky.lit_by(false);
+        assert_eq!((lit.lights, lit.light_faces, lit.environment), (9, 9, None));
+        let sampled = with_sky.lit_by(true);
+        assert_eq!(
+            (sampled.lights, sampled.light_faces, sampled.environment),
+            (1, 1, Some(8))
+        );
+        assert_eq!(shape().lit_by(false).lights, 1);
+    }
+
+    #[test]
     fn costs_add_their_terms_and_say_which_dominate() {
         let mut cost = Cost::default();
         cost.add("a", 10.0, 3.0);

@@ -39,7 +39,7 @@ pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
 /// Most shadow-map texels over all faces (a point light's six faces share this budget): 256 MiB
 /// of depth.
 pub const MAX_SHADOW_TEXELS: u64 = 8192 * 8192;
-/// Most output pixels: the frame's targets take about 76 bytes per pixel (4.7 GiB at this size;
+/// Most output pixels: the frame's targets take about 84 bytes per pixel (5.2 GiB at this size;
 /// 6 of them the video planes and their read-back copies).
 pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
 

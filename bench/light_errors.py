@@ -1,0 +1,157 @@
+#!/usr/bin/env python3
+"""Every GI method's indirect-light error against the path-traced reference under the lights
+issue 33 adds, each method at the server's default settings for its adapter, one-shot renders
+with `compare_to: reference`. Loopback only, standard library only.
+
+    cargo build --release -p lightcast-server
+    python3 bench/light_errors.py target/release/lightcast-server --case environment \\
+        [--width 128 --height 96 --spp 256] > bench/results/lavapipe-environment-errors.md
+    python3 bench/light_errors.py target/release/lightcast-server --case three-lights \\
+        > bench/results/lavapipe-three-lights-errors.md
+
+`environment` (part 3): with and without an environment, the Cornell box under a uniform sky
+(it has no directional light for a daylight sky; its open front lets the sky in) and the
+procedural street under the daylight sky around its sun. The reference's indirect buffer holds
+the sky's direct light on the visible surfaces; a real-time method's frame reports its
+indirect light plus its sky directions' direct light, so both sides hold the same light.
+
+`three-lights` (part 2): the Cornell box lit by three lights of different kinds (its ceiling
+spot, a point light low in a back corner, a sun through the open front), each alone and all
+together: the single-light errors are the band the three-light error is held against. Errors are the comparison's 8×8-block MAE over the
+reference's mean and its bias. Times are left out: one-shot renders time a method's first
+frame on the scene, and lavapipe's timestamps under-report some stages (`bench` measures
+time).
+"""
+
+import argparse
+import json
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+SKIPPED = {"none", "reference"}
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def request(url, body=None, method=None):
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url, data=data, method=method)
+    req.add_header("content-type", "application/json")
+    with urllib.request.urlopen(req, timeout=3600) as resp:
+        return resp.headers, resp.read()
+
+
+def compare(base, render, spp, what):
+    """`render` compared with the reference: "block error / bias", or why it was refused."""
+    started = time.time()
+    try:
+        headers, _ = request(base + "/v1/render", {
+            "render": render, "format": "png", "compare_to": "reference", "compare_spp": spp})
+    except urllib.error.HTTPError as e:
+        return f"refused: {e.read().decode()[:120]}"
+    c = json.loads(headers["x-lightcast-report"])["comparison"]
+    cell = (f"{100 * c['indirect_block_mae_relative']:.1f} % / "
+            f"{100 * c['indirect_bias_relative']:+.1f} %")
+    print(f"{what}: {cell} [{time.time() - started:.0f} s]", file=sys.stderr)
+    return cell
+
+
+def environment_case(base, args, methods):
+    _, body = request(base + "/v1/scenes", {"procedural": args.street})
+    street = json.loads(body)["id"]
+    cases = [
+        ("Cornell box", "default", {"kind": "uniform", "intensity": 1.0}, "uniform 1"),
+        (f"street ({args.street})", street, {"kind": "sky"}, "sky (0.2 × sun)"),
+    ]
+    print("| scene | method | no environment: 8×8-block error / bias "
+          "| with environment |")
+    print("|---|---|---|---|")
+    for label, scene, environment, name in cases:
+        for method in methods:
+            cells = [compare(base, {"scene": scene, "width": args.width, "height": args.height,
+                                    "environment": env, "gi": {"method": method}},
+                             args.spp, f"{label} {method} environment {env is not None}")
+                     for env in (None, environment)]
+            print(f"| {label} | `{method}` | {cells[0]} | {cells[1]} ({name}) |")
+
+
+def three_lights_case(base, args, methods):
+    scene = json.loads(request(base + "/v1/scenes/default")[1])
+    spot = scene["default_light"]
+    lo, hi = scene["bounds"]["min"], scene["bounds"]["max"]
+    size = [h - l for l, h in zip(lo, hi)]
+    camera = scene["default_camera"]
+    # Low in the back corner, away from the camera, facing the room.
+    view = [t - p for p, t in zip(camera["position"], camera["target"])]
+    back = [l + 0.25 * s if v < 0 else h - 0.25 * s for l, h, s, v in zip(lo, hi, size, view)]
+    back[1] = lo[1] + 0.3 * size[1]
+    point = dict(spot, kind="point", position=back, intensity=spot["intensity"] * 0.5)
+    # A sun from over the camera's shoulder, in through the open front and down.
+    length = sum(v * v for v in view) ** 0.5
+    sun_dir = [v / length for v in view]
+    sun_dir[1] -= 0.6
+    sun = dict(spot, kind="directional", direction=sun_dir, intensity=spot["intensity"] * 0.02,
+               color=[1.0, 0.9, 0.75])
+    setups = [("spot", [spot]), ("point", [point]), ("sun", [sun]),
+              ("all three", [spot, point, sun])]
+    print("| method | " + " | ".join(name for name, _ in setups) + " |")
+    print("|---|" + "---|" * len(setups))
+    for method in methods:
+        cells = [compare(base, {"width": args.width, "height": args.height, "lights": lights,
+                                "gi": {"method": method}}, args.spp, f"{method} {name}")
+                 for name, lights in setups]
+        print(f"| `{method}` | " + " | ".join(cells) + " |")
+    print()
+    print("Lights (`render.lights`):\n")
+    for name, light in zip(("spot", "point", "sun"), (spot, point, sun)):
+        print(f"- {name}: `{json.dumps(light)}`")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("server", help="path to lightcast-server")
+    ap.add_argument("--case", choices=["environment", "three-lights"], default="environment")
+    ap.add_argument("--width", type=int, default=128)
+    ap.add_argument("--height", type=int, default=96)
+    ap.add_argument("--spp", type=int, default=256, help="reference samples per pixel")
+    ap.add_argument("--street", default="street?blocks=4")
+    args = ap.parse_args()
+
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    server = subprocess.Popen(
+        [args.server, "--listen", f"127.0.0.1:{port}", "--allow-cpu-adapter",
+         "--max-request-cost", "3600", "--max-frame-cost", "600"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        for _ in range(600):
+            try:
+                request(base + "/healthz")
+                break
+            except (urllib.error.URLError, ConnectionError):
+                time.sleep(0.5)
+        info = json.loads(request(base + "/v1/server")[1])
+        methods = [m["method"] for m in info["gi_methods"] if m["method"] not in SKIPPED]
+        print(f"Adapter: {info.get('adapter', '?')}; {args.width}×{args.height}; reference "
+              f"{args.spp} spp; each method at the server's defaults for the adapter "
+              f"(`/v1/server` `defaults`); cells: 8×8-block error / bias against the "
+              f"reference.\n")
+        if args.case == "environment":
+            environment_case(base, args, methods)
+        else:
+            three_lights_case(base, args, methods)
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+
+
+if __name__ == "__main__":
+    main()

@@ -109,22 +109,25 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         while end < params.faces && faces[end].light == faces[first].light {
             end++;
         }
-        // The light's first face whose frustum holds x, else its first face's nearest border
-        // point.
+        // Every face of the light, around where x projects in it (its nearest border point
+        // where x lies outside the face): a point light's six faces see disjoint surfaces, so
+        // a wall lit from the floor gathers from the floor's face (pattern.rs `gather`). The
+        // probe shows the first face whose frustum holds x, else the first face.
         var face = first;
         var centre = project(first, x).st;
+        var found = false;
         for (var f = first; f < end; f++) {
             let p = project(f, x);
-            if p.inside {
+            if p.inside && !found {
                 face = f;
                 centre = p.st;
-                break;
+                found = true;
             }
+            radiance += gather_face(f, p.st, x, n, v, s);
         }
         if is_probe && first == 0u {
             probe = vec4<f32>(f32(face), centre, 1.0);
         }
-        radiance += gather_face(face, centre, x, n, v, s);
         first = end;
     }
     textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));

@@ -66,9 +66,10 @@ pub const ENTRY: MethodEntry = MethodEntry {
     bench: Some(&bench::SWEEP),
 };
 
-/// One frame's stages: the RSM and the gather (each pixel N texel fetches and pixel lights).
-/// Weight in reference ns per pixel·sample, measured on the Cornell box at 128×96 on lavapipe
-/// (`bench --gi rsm_gather`, wall clock per stage: 10 to 14 over 100 … 1,600 samples).
+/// One frame's stages: the RSM and the gather (each pixel N texel fetches and pixel lights in
+/// every light face). Weight in reference ns per pixel·sample·face, measured on the Cornell box
+/// at 128×96 on lavapipe (`bench --gi rsm_gather`, wall clock per stage: 10 to 14 over 100 …
+/// 1,600 samples with one face).
 fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     cost::rsm(gi, shape, cost);
     let pixels = shape.reduced_pixels(gi);
@@ -76,8 +77,8 @@ fn cost(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
         return;
     };
     cost.add(
-        "gather (pixels × gather_samples)",
-        pixels * f64::from(gi.gather_samples),
+        "gather (pixels × gather_samples × light faces)",
+        pixels * f64::from(gi.gather_samples) * f64::from(shape.light_faces.max(1)),
         12.0,
     );
 }

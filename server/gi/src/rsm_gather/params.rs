@@ -15,8 +15,8 @@ pub const GATHER_SAMPLES: Param = Param::integer(
     "gather_samples",
     400,
     (1, MAX_GATHER_SAMPLES),
-    "RSM texels each pixel gathers as pixel lights, the same pattern for every pixel, denser \
-     near the pixel's own texel",
+    "RSM texels each pixel gathers as pixel lights in every light face (a point light's six), \
+     the same pattern for every pixel, denser near the pixel's own texel",
 )
 .software(Default::Int(100))
 .unit("samples");
@@ -31,8 +31,8 @@ pub const GATHER_RADIUS: Param = Param::number(
     1.0,
     (0.0, 1.5),
     "r_max: radius of the disk of RSM texels a pixel gathers from, around the texel it \
-     projects to, as a fraction of the RSM's side (1.5 covers every texel of a face from \
-     anywhere on it)",
+     projects to in each light face (the nearest border point where it lies outside), as a \
+     fraction of the RSM's side (1.5 covers every texel of a face from anywhere on it)",
 )
 .above_min();
 

@@ -69,9 +69,9 @@ pub fn project(view_proj: &Mat4, size: u32, x: Vec3) -> (Vec2, bool) {
     (uv * size, inside)
 }
 
-/// The face (of `faces`, side by side in the atlas) a point gathers in and its texel
-/// coordinates within that face: the first face whose frustum holds it, else the first face
-/// at the nearest point of its border.
+/// The face (of `faces`, side by side in the atlas) whose frustum holds a point, with its
+/// texel coordinates within that face, else the first face at the nearest point of its border:
+/// what the `gather-samples` view's probe shows.
 pub fn gather_centre(faces: &[Mat4], size: u32, x: Vec3) -> (usize, Vec2) {
     let mut first = None;
     for (f, view_proj) in faces.iter().enumerate() {
@@ -131,8 +131,13 @@ pub fn light_runs(faces: &[(u32, Mat4)]) -> impl Iterator<Item = (usize, Vec<Mat
 }
 
 /// The gathered light at surface point `x` (unit normal `n`, BRDF `s`) seen from `viewer`:
-/// for each light, Σ over the samples of weight × the pixel light's L (`vpl_light`) of the
-/// texel it reaches in that light's faces. `faces`: each atlas face's light and
+/// for each face of each light, Σ over the samples of weight × the pixel light's L
+/// (`vpl_light`) of the texel each reaches around where `x` projects in that face (its nearest
+/// border point where `x` lies outside). A spot or directional light has one face; a point
+/// light's six faces see disjoint surfaces, so all six are gathered from: a wall lit from the
+/// floor below the light gathers from the floor's face (gathering only the face that holds
+/// `x`, the first version left a point light's indirect light 80 % dark in the Cornell box,
+/// `bench/results/lavapipe-three-lights-errors.md`). `faces`: each atlas face's light and
 /// view-projection.
 #[allow(clippy::too_many_arguments)]
 pub fn gather(
@@ -149,8 +154,13 @@ pub fn gather(
     let radius = radius_fraction * rsm.size as f32;
     light_runs(faces)
         .flat_map(|(first, run)| {
-            let (face, centre) = gather_centre(&run, rsm.size, x);
-            sample_texels(samples, rsm.size, rsm.faces, first + face, centre, radius)
+            run.iter()
+                .enumerate()
+                .flat_map(|(f, view_proj)| {
+                    let (centre, _) = project(view_proj, rsm.size, x);
+                    sample_texels(samples, rsm.size, rsm.faces, first + f, centre, radius)
+                })
+                .collect::<Vec<_>>()
         })
         .filter(|&(i, _)| rsm.position[i][3] != 0.0)
         .map(|(i, weight)| {

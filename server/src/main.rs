@@ -88,6 +88,20 @@ fn with_progress<T>(
     result
 }
 
+/// Writes `text` to stdout. A reader that stops early (`lightcast-server openapi | head`)
+/// closes the pipe: that ends the output, not the program with a panic as `print!` would.
+fn out(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout
+        .write_all(text.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
 /// Prints a bench's markdown and writes it and its JSON where asked.
 fn write_report(
     markdown: &str,
@@ -95,7 +109,7 @@ fn write_report(
     markdown_path: Option<&std::path::Path>,
     json_path: Option<&std::path::Path>,
 ) -> anyhow::Result<()> {
-    print!("{markdown}");
+    out(markdown)?;
     for (path, text) in [(json_path, json), (markdown_path, markdown)] {
         if let Some(path) = path {
             std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
@@ -150,25 +164,28 @@ fn main() -> anyhow::Result<()> {
     };
     match command {
         Command::Serve(args) => serve(&args)?,
-        Command::Openapi => println!("{}", service::http::openapi_document()?),
-        Command::Asyncapi => println!("{}", service::http::asyncapi::asyncapi_document()?),
-        Command::GiParams => print!("{}", lightcast_server::gi::params::markdown_table()),
-        Command::GiViews => print!("{}", lightcast_server::gi::views::markdown_table()),
-        Command::BenchSweeps => print!("{}", lightcast_server::gi::bench::markdown_table()),
+        Command::Openapi => out(&format!("{}\n", service::http::openapi_document()?))?,
+        Command::Asyncapi => out(&format!(
+            "{}\n",
+            service::http::asyncapi::asyncapi_document()?
+        ))?,
+        Command::GiParams => out(&lightcast_server::gi::params::markdown_table())?,
+        Command::GiViews => out(&lightcast_server::gi::views::markdown_table())?,
+        Command::BenchSweeps => out(&lightcast_server::gi::bench::markdown_table())?,
         Command::Render(args) => {
             let mut log = |line: &str| eprintln!("{line}");
             let report = offline::render(&args, &mut log).context("render failed")?;
             if args.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
+                out(&format!("{}\n", serde_json::to_string_pretty(&report)?))?;
             } else {
-                print!("{}", report.table());
-                println!(
-                    "wrote {} ({}×{}, exposure ×{:.4})",
+                out(&report.table())?;
+                out(&format!(
+                    "wrote {} ({}×{}, exposure ×{:.4})\n",
                     report.out.display(),
                     report.width,
                     report.height,
                     report.exposure_scale
-                );
+                ))?;
             }
         }
         Command::Bench(args) => {

@@ -465,3 +465,33 @@ fn a_broken_vulkan_driver_falls_back_to_lavapipe() {
     assert!(stderr.contains("falling back to lavapipe"), "{stderr}");
     image::open(&out).expect("the fallback rendered an image");
 }
+
+/// A reader that stops early (`lightcast-server openapi | head -c 1`) ends the output, not the
+/// program with a panic.
+#[test]
+fn a_closed_stdout_ends_the_output_quietly() {
+    use std::io::Read;
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lightcast-server"))
+        .arg("openapi")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    let mut first = [0u8; 1];
+    child
+        .stdout
+        .take()
+        .expect("stdout")
+        .read_exact(&mut first)
+        .expect("one byte");
+    // The pipe is closed here, long before the document's ~100 kB are written.
+    let output = child.wait_with_output().expect("wait");
+    assert_eq!(first[0], b'{');
+    assert!(output.status.success(), "{}", text(&output.stderr));
+    assert!(
+        !text(&output.stderr).contains("panicked"),
+        "{}",
+        text(&output.stderr)
+    );
+}

@@ -24,6 +24,10 @@ use std::f32::consts::PI;
 /// than the sky's features away from the sun (the sun itself is a directional light).
 pub const ANALYTIC_WIDTH: u32 = 128;
 pub const ANALYTIC_HEIGHT: u32 = 64;
+/// Largest radiance scale (intensity × colour, × the sun's for a sky) accepted: the sky's
+/// brightest texels are a few hundred times its horizontal illuminance, and the tables sum
+/// 8,192 texels' power, all far within f32.
+pub const MAX_RADIANCE_SCALE: f32 = 1e30;
 /// The turbidities Preetham et al. fitted their model for.
 pub const TURBIDITY_RANGE: std::ops::RangeInclusive<f32> = 2.0..=10.0;
 
@@ -82,6 +86,19 @@ pub fn check(env: &Environment, lights: &[Light]) -> Result<(), EnvironmentError
     }
     if !env.color.iter().all(|c| c.is_finite() && *c >= 0.0) {
         return Err(invalid("color", "must be finite numbers ≥ 0"));
+    }
+    // The scale of the radiance the map will hold: far below f32's range, whose overflow would
+    // reach the sampling tables (they sum every texel's power).
+    let sun_scale = match (env.kind, sun(lights)) {
+        (EnvironmentKind::Sky, Some(s)) => luminance(s.color) * s.intensity,
+        _ => 1.0,
+    };
+    let peak = intensity * env.color.iter().fold(0.0f32, |m, &c| m.max(c)) * sun_scale;
+    if !(peak.is_finite() && peak <= MAX_RADIANCE_SCALE) {
+        return Err(invalid(
+            "intensity",
+            format!("the radiance scale {peak:e} is above {MAX_RADIANCE_SCALE:e}"),
+        ));
     }
     if env.kind == EnvironmentKind::Sky {
         if !TURBIDITY_RANGE.contains(&env.turbidity) {
@@ -144,6 +161,15 @@ impl EnvironmentMap {
                 texels
             }
         };
+        // Finite inputs can still overflow f32 (a huge intensity times a bright sun), and
+        // the sampling tables sum every texel's power.
+        let power: f32 = radiance.iter().map(|&c| luminance(c)).sum();
+        if !power.is_finite() {
+            return Err(invalid(
+                "intensity",
+                "too large: the environment's radiance overflows",
+            ));
+        }
         Ok(Self {
             width: w,
             height: h,
@@ -639,6 +665,14 @@ mod tests {
         assert_eq!(
             EnvironmentMap::new(&env, &[point]).map_err(|e| e.field),
             Err("kind")
+        );
+        let blinding = Environment {
+            intensity: Some(3e38),
+            ..env.clone()
+        };
+        assert_eq!(
+            EnvironmentMap::new(&blinding, &[sun([0.0, -1.0, 0.0])]).map_err(|e| e.field),
+            Err("intensity")
         );
         let hazy = Environment {
             turbidity: 12.0,

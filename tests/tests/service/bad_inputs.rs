@@ -346,6 +346,14 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         case(
             "POST",
             "/v1/sessions",
+            r#"{"render":{"environment":{"intensity":1e35}}}"#,
+            400,
+            "invalid_field",
+            Some("render.environment.intensity"),
+        ),
+        case(
+            "POST",
+            "/v1/sessions",
             r#"{"render":{"environment":{"directions":16}}}"#,
             400,
             "invalid_field",

@@ -197,11 +197,13 @@ impl Client {
             .await
     }
 
-    /// Uploads a `.glb`, or a `.gltf` with the files next to it that it references.
+    /// Uploads a `.glb`, or a `.gltf` with the files next to it that it references, and an
+    /// environment image (`.hdr`/`.exr`) with it if given.
     pub async fn upload_scene(
         &self,
         file: &std::path::Path,
         name: Option<&str>,
+        environment_image: Option<&std::path::Path>,
     ) -> Result<SceneInfo, ClientError> {
         let read = |p: &std::path::Path| {
             std::fs::read(p)
@@ -217,22 +219,37 @@ impl Client {
             path = format!("{path}?name={}", encode_query(n));
         }
         let req = self.request(reqwest::Method::POST, &path);
-        let req = if bytes.starts_with(b"glTF") {
+        let req = if bytes.starts_with(b"glTF") && environment_image.is_none() {
             req.header("content-type", "model/gltf-binary").body(bytes)
         } else {
-            let doc: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| {
-                ClientError::Invalid(format!("{}: not glTF JSON: {e}", file.display()))
-            })?;
+            let uris = if bytes.starts_with(b"glTF") {
+                Vec::new()
+            } else {
+                let doc: serde_json::Value = serde_json::from_slice(&bytes).map_err(|e| {
+                    ClientError::Invalid(format!("{}: not glTF JSON: {e}", file.display()))
+                })?;
+                external_uris(&doc)
+            };
             let dir = file.parent().unwrap_or(std::path::Path::new("."));
             let mut form = reqwest::multipart::Form::new().part(
                 "scene",
                 reqwest::multipart::Part::bytes(bytes).file_name(file_name),
             );
-            for uri in external_uris(&doc) {
-                let data = read(&dir.join(&uri))?;
+            let image = environment_image.map(|p| {
+                let name = p
+                    .file_name()
+                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+                (p.to_path_buf(), name)
+            });
+            let files = uris
+                .into_iter()
+                .map(|uri| (dir.join(&uri), uri))
+                .chain(image);
+            for (path, name) in files {
+                let data = read(&path)?;
                 form = form.part(
-                    uri.clone(),
-                    reqwest::multipart::Part::bytes(data).file_name(uri),
+                    name.clone(),
+                    reqwest::multipart::Part::bytes(data).file_name(name),
                 );
             }
             req.multipart(form)

@@ -41,12 +41,13 @@ pub struct RenderFlags {
     /// Lux (directional) or candela (spot, point).
     #[arg(long)]
     pub light_intensity: Option<f32>,
-    /// Light from every direction (`render.environment`): `uniform` or `sky` (a daylight sky
-    /// around the first directional light). Default: none.
+    /// Light from every direction (`render.environment`): `uniform`, `sky` (a daylight sky
+    /// around the first directional light) or `image` (the `.hdr`/`.exr` uploaded with the
+    /// scene: `scenes upload --environment-image`). Default: none.
     #[arg(long, value_enum)]
     pub environment: Option<EnvironmentKind>,
-    /// The environment's scale: `uniform` radiance, or a sky's horizontal illuminance over
-    /// the sun's intensity (server defaults 1 and 0.2).
+    /// The environment's scale: `uniform` radiance, a sky's horizontal illuminance over the
+    /// sun's intensity, or a scale on an image's texels (server defaults 1, 0.2 and 1).
     #[arg(long, requires = "environment")]
     pub environment_intensity: Option<f32>,
     /// Linear colour R,G,B of a uniform environment, tint of a sky.

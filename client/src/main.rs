@@ -67,6 +67,10 @@ enum ScenesCommand {
         /// Display name (default: the file's stem).
         #[arg(long)]
         name: Option<String>,
+        /// An equirectangular Radiance `.hdr` or OpenEXR image to upload with the scene, which
+        /// `--environment image` lights it with.
+        #[arg(long)]
+        environment_image: Option<PathBuf>,
     },
     /// Show a scene.
     Show { id: String },
@@ -235,8 +239,14 @@ async fn scenes(client: &Client, cmd: ScenesCommand, json: bool) -> anyhow::Resu
                 );
             }
         }
-        ScenesCommand::Upload { file, name } => {
-            let info = client.upload_scene(&file, name.as_deref()).await?;
+        ScenesCommand::Upload {
+            file,
+            name,
+            environment_image,
+        } => {
+            let info = client
+                .upload_scene(&file, name.as_deref(), environment_image.as_deref())
+                .await?;
             if json {
                 return print_json(&info);
             }

@@ -82,6 +82,11 @@ pub enum EnvironmentKind {
     /// the illuminance the sky alone gives an open horizontal surface, as a multiple of the
     /// sun's `intensity`.
     Sky,
+    /// The equirectangular HDR image (Radiance `.hdr` or OpenEXR) uploaded with the scene,
+    /// times `color` × `intensity` (default 1): rows from the zenith (+Y) down; the image's
+    /// left edge faces −Z, a quarter across +X, its centre +Z (Mitsuba's and PBRT's
+    /// convention).
+    Image,
 }
 
 /// Light from infinitely far away in every direction: a sky around the scene. It lights
@@ -94,12 +99,12 @@ pub enum EnvironmentKind {
 #[serde(default)]
 pub struct Environment {
     pub kind: EnvironmentKind,
-    /// Linear RGB colour (`uniform`: the radiance's colour; `sky`: a tint on the model's).
+    /// Linear RGB colour (`uniform`: the radiance's colour; `sky`, `image`: a tint).
     pub color: [f32; 3],
     /// `uniform`: radiance scale, in the lights' units per steradian. `sky`: the sky's
-    /// horizontal illuminance over the sun's `intensity`. `null`: 1 for `uniform`, 0.2 for
-    /// `sky` (a clear day's sky gives a horizontal surface about a fifth of the sun's
-    /// illuminance).
+    /// horizontal illuminance over the sun's `intensity`. `image`: a scale on the image's
+    /// texels. `null`: 1 for `uniform` and `image`, 0.2 for `sky` (a clear day's sky gives a
+    /// horizontal surface about a fifth of the sun's illuminance).
     pub intensity: Option<f32>,
     /// `sky`: atmospheric turbidity, 2 (very clear) to 10 (hazy).
     pub turbidity: f32,
@@ -129,7 +134,7 @@ impl Environment {
     /// `intensity`, or its default for the kind.
     pub fn intensity(&self) -> f32 {
         self.intensity.unwrap_or(match self.kind {
-            EnvironmentKind::Uniform => 1.0,
+            EnvironmentKind::Uniform | EnvironmentKind::Image => 1.0,
             EnvironmentKind::Sky => 0.2,
         })
     }

@@ -239,6 +239,12 @@ async function useScene(id, render) {
   const [min, max] = [scene.bounds.min, scene.bounds.max];
   controls.setSceneSize(Math.hypot(max[0] - min[0], max[1] - min[1], max[2] - min[2]));
   controls.setRegion(scene.camera_region || null);
+  const imageOption = document.getElementById('environment-image');
+  if (imageOption) {
+    const image = scene.environment_image;
+    imageOption.disabled = !image;
+    imageOption.title = image ? `${image.name}, ${image.width}×${image.height}` : 'upload a .hdr or .exr file with the scene';
+  }
   controls.setCamera(render.camera || scene.default_camera);
   state.lights = structuredClone(render.lights || (render.light ? [render.light] : scene.default_lights || [scene.default_light]));
   state.light = state.lights[0];

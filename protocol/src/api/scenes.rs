@@ -98,6 +98,20 @@ pub struct Bounds {
     pub max: [f32; 3],
 }
 
+/// The equirectangular HDR image uploaded with a scene (`render.environment.kind` `image`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct EnvironmentImageInfo {
+    /// The uploaded file's name.
+    pub name: String,
+    /// The file's size in texels.
+    pub width: u32,
+    pub height: u32,
+    /// The size it is kept and lit with (at most 1024×512: larger images are averaged down,
+    /// keeping their power).
+    pub kept_width: u32,
+    pub kept_height: u32,
+}
+
 /// A scene as `GET /v1/scenes/{id}` shows it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SceneInfo {
@@ -126,6 +140,10 @@ pub struct SceneInfo {
     /// are black from outside. Absent: anywhere.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera_region: Option<Bounds>,
+    /// The `.hdr`/`.exr` file uploaded with the scene, which `render.environment` of kind
+    /// `image` lights it with. Absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment_image: Option<EnvironmentImageInfo>,
     /// Light caches: the default set first (the `light_caches` entries of `precomputed`).
     pub caches: Vec<CacheVariant>,
     /// Every precomputation of the scene (light caches, BVH) with its state, oldest first.

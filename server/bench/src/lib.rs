@@ -144,6 +144,8 @@ pub enum BenchError {
     #[error(transparent)]
     Precompute(#[from] crate::offline::PrecomputeError),
     #[error(transparent)]
+    Offline(#[from] crate::offline::OfflineError),
+    #[error(transparent)]
     Gpu(#[from] crate::gpu::GpuError),
     #[error(transparent)]
     Render(#[from] crate::renderer::RenderError),
@@ -310,8 +312,12 @@ impl Bench<'_> {
         let b = &self.base;
         let environment = match &b.environment {
             Some(e) => Some(std::sync::Arc::new(
-                crate::passes::environment::FrameEnvironment::new(e, &b.lights)
-                    .map_err(|e| BenchError::Environment(e.to_string()))?,
+                crate::passes::environment::FrameEnvironment::new(
+                    e,
+                    &b.lights,
+                    self.renderer.scene().environment_image.as_deref(),
+                )
+                .map_err(|e| BenchError::Environment(e.to_string()))?,
             )),
             None => None,
         };
@@ -514,10 +520,11 @@ pub fn run(
         return Err(BenchError::NoSingleBounce);
     }
     let spec = args.scene.as_deref().unwrap_or(DEFAULT_SCENE);
-    let scene = Scene::open(spec).map_err(|error| BenchError::Scene {
+    let mut scene = Scene::open(spec).map_err(|error| BenchError::Scene {
         scene: spec.to_string(),
         error,
     })?;
+    args.environment.attach_image(&mut scene)?;
     let mut base_gi = args.gi_args.gi(args.gi);
     let emitters = crate::gi::common::params::EMITTERS.name;
     if base_gi.get(emitters).is_none() {

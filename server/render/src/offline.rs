@@ -9,6 +9,7 @@ use crate::gi::GiMethod;
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings, Renderer};
+use crate::scene::environment_image::EnvironmentImage;
 use crate::scene::{
     default_light::{default_camera, default_lights, emitter_stand_in, emitters_for},
     Scene,
@@ -277,12 +278,17 @@ pub struct RenderArgs {
 /// `render.environment` on the command line (`render`, `bench`).
 #[derive(clap::Args, Clone, Debug, Default)]
 pub struct EnvironmentArgs {
-    /// Light from every direction: `uniform` (the same radiance everywhere) or `sky` (a
-    /// clear daylight sky around the first directional light, its sun). Default: none.
+    /// Light from every direction: `uniform` (the same radiance everywhere), `sky` (a clear
+    /// daylight sky around the first directional light, its sun) or `image` (the
+    /// equirectangular HDR file of --environment-image). Default: none.
     #[arg(long, value_enum)]
     pub environment: Option<lightcast_protocol::EnvironmentKind>,
+    /// A Radiance `.hdr` or OpenEXR equirectangular image for `--environment image` (rows
+    /// from the zenith down; the left edge faces −Z, the centre +Z, as in Mitsuba and PBRT).
+    #[arg(long, requires = "environment")]
+    pub environment_image: Option<PathBuf>,
     /// `uniform`: radiance scale; `sky`: its horizontal illuminance over the sun's
-    /// intensity. Default 1 (`uniform`), 0.2 (`sky`).
+    /// intensity; `image`: a scale on its texels. Default 1 (`uniform`, `image`), 0.2 (`sky`).
     #[arg(long, requires = "environment", allow_negative_numbers = true)]
     pub environment_intensity: Option<f32>,
     /// Linear colour R,G,B of a uniform environment, tint of a sky.
@@ -308,7 +314,32 @@ impl EnvironmentArgs {
                 directions: self.environment_directions,
             })
     }
+
+    /// Reads --environment-image into `scene` (at most [`MAX_ENVIRONMENT_IMAGE_BYTES`]
+    /// decoded).
+    pub fn attach_image(&self, scene: &mut Scene) -> Result<(), OfflineError> {
+        let Some(path) = &self.environment_image else {
+            return Ok(());
+        };
+        let failed = |error: String| OfflineError::EnvironmentImage {
+            path: path.clone(),
+            error,
+        };
+        let bytes = std::fs::read(path).map_err(|e| failed(e.to_string()))?;
+        let name = path
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into());
+        let image = EnvironmentImage::decode(&name, &bytes, MAX_ENVIRONMENT_IMAGE_BYTES)
+            .map_err(|e| failed(e.to_string()))?;
+        scene.environment_image = Some(std::sync::Arc::new(image));
+        Ok(())
+    }
 }
+
+/// Most bytes an --environment-image may take decoded: a 16k × 8k image, far above what the
+/// kept map (1024×512) resolves.
+pub const MAX_ENVIRONMENT_IMAGE_BYTES: u64 =
+    16384 * 8192 * crate::scene::environment_image::DECODED_BYTES_PER_TEXEL;
 
 /// What `render` reports after writing the image.
 #[derive(Debug, serde::Serialize)]
@@ -350,6 +381,8 @@ pub enum OfflineError {
         scene: String,
         error: crate::scene::OpenError,
     },
+    #[error("--environment-image {}: {error}", path.display())]
+    EnvironmentImage { path: PathBuf, error: String },
     #[error(transparent)]
     Precompute(#[from] PrecomputeError),
     #[error(transparent)]
@@ -479,10 +512,11 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
 pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderReport, OfflineError> {
     let spec = args.scene.as_deref().unwrap_or(DEFAULT_SCENE);
     let started = Instant::now();
-    let scene = Scene::open(spec).map_err(|error| OfflineError::Scene {
+    let mut scene = Scene::open(spec).map_err(|error| OfflineError::Scene {
         scene: spec.to_string(),
         error,
     })?;
+    args.environment.attach_image(&mut scene)?;
     let load_ms = started.elapsed().as_secs_f64() * 1e3;
     log(&format!(
         "scene {}: {} triangles, {} materials, {} textures ({load_ms:.1} ms)",

@@ -829,8 +829,12 @@ impl Renderer {
             }
         }
         let evaluated = Arc::new(
-            FrameEnvironment::new(environment, &settings.lights)
-                .map_err(|e| invalid(format!("environment.{}", e.field), e.reason))?,
+            FrameEnvironment::new(
+                environment,
+                &settings.lights,
+                self.shared.scene.environment_image.as_deref(),
+            )
+            .map_err(|e| invalid(format!("environment.{}", e.field), e.reason))?,
         );
         self.environment = Some((key, Arc::clone(&evaluated)));
         Ok(Some(evaluated))

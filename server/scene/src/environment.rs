@@ -2,8 +2,9 @@
 //! sphere of directions.
 //!
 //! - [`EnvironmentMap::new`] evaluates a [`lightcast_protocol::Environment`] into an
-//!   equirectangular map: a uniform radiance, or the analytic daylight sky of Preetham,
-//!   Shirley & Smits (1999, "A Practical Analytic Model for Daylight", appendix A).
+//!   equirectangular map: a uniform radiance, the analytic daylight sky of Preetham,
+//!   Shirley & Smits (1999, "A Practical Analytic Model for Daylight", appendix A), or the
+//!   scene's HDR image ([`crate::environment_image`]).
 //! - [`EnvironmentMap::sampling`] is what the path-traced reference importance-samples it
 //!   with: a texel chosen by its power (radiance luminance × solid angle), then a direction
 //!   uniform in the texel's solid angle, so the density per solid angle is exact and
@@ -16,6 +17,7 @@
 //! θ ∈ [π j/h, π (j+1)/h] from +Y and the azimuth φ ∈ [2π i/w, 2π (i+1)/w], with
 //! d = (sin θ cos φ, cos θ, sin θ sin φ); `shaders/environment.wgsl` mirrors it.
 
+use crate::environment_image::EnvironmentImage;
 use glam::Vec3;
 use lightcast_protocol::{Environment, EnvironmentKind, Light, LightKind};
 use std::f32::consts::PI;
@@ -78,7 +80,8 @@ pub fn sun(lights: &[Light]) -> Option<&Light> {
 }
 
 /// What is wrong with `env` for a frame lit by `lights`, if anything, without evaluating it.
-/// `directions` is the renderer's to check (it knows the light budget).
+/// `directions` is the renderer's to check (it knows the light budget), the image of kind
+/// `image` the scene's ([`check_image`]).
 pub fn check(env: &Environment, lights: &[Light]) -> Result<(), EnvironmentError> {
     let intensity = env.intensity();
     if !(intensity.is_finite() && intensity >= 0.0) {
@@ -122,16 +125,59 @@ pub fn check(env: &Environment, lights: &[Light]) -> Result<(), EnvironmentError
     Ok(())
 }
 
+/// What is wrong with `env` for a scene whose environment image is `image`: kind `image`
+/// needs one.
+pub fn check_image(
+    env: &Environment,
+    image: Option<&EnvironmentImage>,
+) -> Result<(), EnvironmentError> {
+    if env.kind == EnvironmentKind::Image && image.is_none() {
+        return Err(invalid(
+            "kind",
+            "`image` lights with the scene's environment image (a .hdr or .exr file uploaded \
+             with the scene, or --environment-image), and this scene has none",
+        ));
+    }
+    Ok(())
+}
+
 impl EnvironmentMap {
-    /// Evaluates `env` for a frame lit by `lights` (a sky takes its sun from the first
-    /// directional light; see [`check`]).
-    pub fn new(env: &Environment, lights: &[Light]) -> Result<Self, EnvironmentError> {
+    /// Evaluates `env` for a frame lit by `lights` of a scene with environment image `image`
+    /// (a sky takes its sun from the first directional light; see [`check`]).
+    pub fn new(
+        env: &Environment,
+        lights: &[Light],
+        image: Option<&EnvironmentImage>,
+    ) -> Result<Self, EnvironmentError> {
         check(env, lights)?;
+        check_image(env, image)?;
         let intensity = env.intensity();
-        let (w, h) = (ANALYTIC_WIDTH, ANALYTIC_HEIGHT);
+        let (mut w, mut h) = (ANALYTIC_WIDTH, ANALYTIC_HEIGHT);
         let tint = Vec3::from(env.color);
         let radiance = match env.kind {
             EnvironmentKind::Uniform => vec![(tint * intensity).to_array(); (w * h) as usize],
+            EnvironmentKind::Image => {
+                let Some(image) = image else {
+                    unreachable!("check found the image");
+                };
+                (w, h) = (image.width, image.height);
+                let scale = tint * intensity;
+                let peak = image.peak() * scale.max_element();
+                if !(peak.is_finite() && peak <= MAX_RADIANCE_SCALE) {
+                    return Err(invalid(
+                        "intensity",
+                        format!(
+                            "the image's brightest texel times intensity × color is {peak:e}, \
+                             above {MAX_RADIANCE_SCALE:e}"
+                        ),
+                    ));
+                }
+                image
+                    .radiance
+                    .iter()
+                    .map(|&c| (Vec3::from(c) * scale).to_array())
+                    .collect()
+            }
             EnvironmentKind::Sky => {
                 let Some(sun) = sun(lights) else {
                     unreachable!("check found the sun");
@@ -417,10 +463,12 @@ fn row_angles(j: u32, h: u32) -> (f32, f32) {
     (PI * j as f32 / h as f32, PI * (j + 1) as f32 / h as f32)
 }
 
-/// Solid angle of a texel of row `j`: Δφ (cos θ₀ − cos θ₁).
+/// Solid angle of a texel of row `j`: Δφ (cos θ₀ − cos θ₁), as 2 sin((θ₀+θ₁)/2)
+/// sin((θ₁−θ₀)/2), which keeps f32's precision at the poles of a fine map (where the
+/// difference of two cosines near 1 would lose it).
 pub fn texel_solid_angle(j: u32, w: u32, h: u32) -> f32 {
     let (t0, t1) = row_angles(j, h);
-    2.0 * PI / w as f32 * (t0.cos() - t1.cos())
+    2.0 * PI / w as f32 * 2.0 * (0.5 * (t0 + t1)).sin() * (0.5 * (t1 - t0)).sin()
 }
 
 /// ∫ ω dω over texel `(i, j)`: its irradiance vector under a radiance of 1.
@@ -577,7 +625,7 @@ mod tests {
         let (w, h) = (ANALYTIC_WIDTH, ANALYTIC_HEIGHT);
         let total: f32 = (0..h).map(|j| texel_solid_angle(j, w, h) * w as f32).sum();
         assert!((total - 4.0 * PI).abs() < 1e-3, "{total}");
-        let map = EnvironmentMap::new(&uniform(2.0), &[]).expect("uniform");
+        let map = EnvironmentMap::new(&uniform(2.0), &[], None).expect("uniform");
         // E = ∫ L cos θ dω over the hemisphere = π L.
         assert!((map.horizontal_illuminance() - 2.0 * PI).abs() < 1e-3);
     }
@@ -600,6 +648,7 @@ mod tests {
                 ..Environment::default()
             },
             &[sun([0.3, -0.5, 0.2])],
+            None,
         )
         .expect("sky");
         let s = map.sampling();
@@ -646,7 +695,7 @@ mod tests {
             intensity: Some(0.25),
             ..Environment::default()
         };
-        let map = EnvironmentMap::new(&env, std::slice::from_ref(&light)).expect("sky");
+        let map = EnvironmentMap::new(&env, std::slice::from_ref(&light), None).expect("sky");
         let e = map.horizontal_illuminance();
         assert!((e - 0.25 * 5.0).abs() < 1e-3, "{e}");
         let to_sun = Vec3::new(0.0, 1.0, 1.0).normalize();
@@ -663,7 +712,7 @@ mod tests {
             ..light
         };
         assert_eq!(
-            EnvironmentMap::new(&env, &[point]).map_err(|e| e.field),
+            EnvironmentMap::new(&env, &[point], None).map_err(|e| e.field),
             Err("kind")
         );
         let blinding = Environment {
@@ -671,7 +720,7 @@ mod tests {
             ..env.clone()
         };
         assert_eq!(
-            EnvironmentMap::new(&blinding, &[sun([0.0, -1.0, 0.0])]).map_err(|e| e.field),
+            EnvironmentMap::new(&blinding, &[sun([0.0, -1.0, 0.0])], None).map_err(|e| e.field),
             Err("intensity")
         );
         let hazy = Environment {
@@ -679,7 +728,7 @@ mod tests {
             ..env
         };
         assert_eq!(
-            EnvironmentMap::new(&hazy, &[sun([0.0, -1.0, 0.0])]).map_err(|e| e.field),
+            EnvironmentMap::new(&hazy, &[sun([0.0, -1.0, 0.0])], None).map_err(|e| e.field),
             Err("turbidity")
         );
     }
@@ -693,7 +742,7 @@ mod tests {
                 ..Environment::default()
             },
         ] {
-            let map = EnvironmentMap::new(&env, &[sun([0.4, -0.6, 0.3])]).expect("map");
+            let map = EnvironmentMap::new(&env, &[sun([0.4, -0.6, 0.3])], None).expect("map");
             let (w, h) = (map.width, map.height);
             // Irradiance (luminance) on a surface facing `n`, texel by texel.
             let exact = |n: Vec3| -> f32 {

@@ -7,6 +7,7 @@
 
 pub mod default_light;
 pub mod environment;
+pub mod environment_image;
 pub mod gltf_loader;
 pub mod material;
 pub mod procedural;
@@ -140,6 +141,9 @@ pub struct Scene {
     /// Where a viewer keeps the camera: a room seen from inside or through an opening, whose
     /// walls are black from outside. `None`: anywhere (an object is orbited freely).
     pub camera_region: Option<Aabb>,
+    /// The equirectangular HDR image uploaded with the scene, which `render.environment`
+    /// of kind `image` lights it with.
+    pub environment_image: Option<std::sync::Arc<environment_image::EnvironmentImage>>,
 }
 
 impl Scene {
@@ -239,6 +243,7 @@ impl Scene {
             bounds: Aabb { min, max },
             lights_stand_in_for_emitters: false,
             camera_region: None,
+            environment_image: None,
         })
     }
 

@@ -130,6 +130,10 @@ pub fn resolve(
         };
         render_error(&e)
     })?;
+    if let Some(e) = &settings.environment {
+        crate::scene::environment::check_image(e, entry.scene.environment_image.as_deref())
+            .map_err(|e| ApiError::field(format!("environment.{}", e.field), e.reason))?;
+    }
     if let Some(key) = &precompute {
         entry.check_precompute_cost(g, key, limits)?;
     }

@@ -418,6 +418,7 @@ mod tests {
             default_light: light.clone(),
             default_lights: vec![light],
             camera_region: None,
+            environment_image: None,
             caches: Vec::new(),
             precomputed: Vec::new(),
             sessions: 0,

@@ -92,7 +92,7 @@ fn reference_on_an_open_lambertian_plane_converges_to_albedo_times_irradiance_ov
     let sun = directional(Vec3::new(0.3, -0.6, 0.4), 3.0);
     for (name, env) in environments() {
         let frame_env =
-            Arc::new(FrameEnvironment::new(&env, std::slice::from_ref(&sun)).expect("env"));
+            Arc::new(FrameEnvironment::new(&env, std::slice::from_ref(&sun), None).expect("env"));
         let (w, h) = (16, 16);
         let mut left = 256;
         while left > 0 {

@@ -27,7 +27,7 @@ fn gltf_upload(gltf: Vec<u8>, gltf_name: &str, bin: Vec<u8>) -> reqwest::multipa
         .part("bin", part(bin, "box.bin"))
 }
 
-/// The sum of every pixel's RGB in a `raw_indirect` (or `raw_hdr`) body: float32 RGBA.
+/// The sum of every pixel's RGB in a `raw_indirect` (or `raw_final`) body: float32 RGBA.
 fn raw_sum(bytes: &[u8]) -> f64 {
     bytes
         .chunks_exact(16)
@@ -325,6 +325,129 @@ async fn an_environment_lights_renders_comparisons_and_sessions() {
         dropped["params"]["render"]["environment"],
         Value::Null,
         "{dropped}"
+    );
+    server.stop().await;
+}
+
+/// An equirectangular `width`×`height` Radiance file of `radiance` everywhere.
+fn hdr_file(width: u32, height: u32, radiance: [f32; 3]) -> Vec<u8> {
+    let texels = (0..width * height).flat_map(|_| radiance).collect();
+    let buffer = image::Rgb32FImage::from_raw(width, height, texels).expect("size");
+    let mut bytes = Vec::new();
+    image::DynamicImage::ImageRgb32F(buffer)
+        .write_to(
+            &mut std::io::Cursor::new(&mut bytes),
+            image::ImageFormat::Hdr,
+        )
+        .expect("encode");
+    bytes
+}
+
+/// `render.environment` of kind `image`: a `.hdr` uploaded with the scene is listed with it
+/// and lights it exactly as a uniform environment of the same radiance does; a scene without
+/// one, two images, a broken file and one over the texture budget are refused, naming why.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_environment_image_uploaded_with_the_scene_lights_it() {
+    let server = TestServer::start(&["--max-scene-texture-bytes", "40000"]).await;
+    let part =
+        |bytes, name: &str| reqwest::multipart::Part::bytes(bytes).file_name(name.to_string());
+    let upload = |files: Vec<(Vec<u8>, &'static str)>| {
+        let server = &server;
+        async move {
+            let mut form =
+                reqwest::multipart::Form::new().part("scene", part(cornell_glb(), "box.glb"));
+            for (bytes, name) in files {
+                form = form.part(name, part(bytes, name));
+            }
+            let resp = server
+                .http
+                .post(server.url("/v1/scenes"))
+                .multipart(form)
+                .send()
+                .await
+                .expect("upload");
+            let status = resp.status().as_u16();
+            (status, resp.json::<Value>().await.expect("JSON"))
+        }
+    };
+    // 48×24 texels take 18,432 bytes decoded: within the 40,000-byte scene texture budget.
+    let (status, info) = upload(vec![(hdr_file(48, 24, [0.5, 0.4, 0.3]), "sky.hdr")]).await;
+    assert_eq!(status, 201, "{info}");
+    assert_eq!(
+        info["environment_image"],
+        json!({"name": "sky.hdr", "width": 48, "height": 24, "kept_width": 48, "kept_height": 24})
+    );
+    let id = info["id"].as_str().expect("id").to_string();
+    let listed = server.get_json(&format!("/v1/scenes/{id}")).await;
+    assert_eq!(listed["environment_image"], info["environment_image"]);
+
+    let frame = |scene: &str, environment: Value| {
+        let body = json!({"render": {"scene": scene, "width": 32, "height": 24, "exposure": 0.5,
+                                     "shadow_map_size": 256, "environment": environment,
+                                     "gi": {"method": "none"}},
+                          "format": "raw_final"});
+        let server = &server;
+        async move { render(server, &body).await }
+    };
+    let (report, image_lit) = frame(&id, json!({"kind": "image", "directions": 4})).await;
+    assert_eq!(
+        report.environment.map(|e| e.kind),
+        Some(EnvironmentKind::Image)
+    );
+    let (_, uniform_lit) = frame(
+        &id,
+        json!({"kind": "uniform", "color": [0.5, 0.4, 0.3], "directions": 4}),
+    )
+    .await;
+    let (_, dark) = frame(&id, Value::Null).await;
+    let (a, b, d) = (raw_sum(&image_lit), raw_sum(&uniform_lit), raw_sum(&dark));
+    assert!(
+        a > d * 1.1,
+        "the image lights the scene: {a} vs {d} without"
+    );
+    assert!(
+        (a / b - 1.0).abs() < 0.02,
+        "image {a} vs uniform of its radiance {b}"
+    );
+
+    // The built-in scene has no image.
+    let resp = server
+        .http
+        .post(server.url("/v1/render"))
+        .json(&json!({"render": {"width": 32, "height": 24, "environment": {"kind": "image"}}}))
+        .send()
+        .await
+        .expect("render");
+    assert_eq!(resp.status(), 400);
+    let body: Value = resp.json().await.expect("error JSON");
+    assert_eq!(body["field"], "render.environment.kind", "{body}");
+
+    let (status, body) = upload(vec![
+        (hdr_file(8, 4, [1.0; 3]), "a.hdr"),
+        (hdr_file(8, 4, [1.0; 3]), "b.exr"),
+    ])
+    .await;
+    assert_eq!(
+        (status, body["field"].as_str()),
+        (400, Some("files")),
+        "{body}"
+    );
+    let (status, body) = upload(vec![(b"#?RADIANCE\nbroken".to_vec(), "sky.hdr")]).await;
+    assert_eq!(
+        (status, body["error"].as_str()),
+        (400, Some("invalid_scene")),
+        "{body}"
+    );
+    assert!(
+        body["message"].as_str().unwrap_or("").contains("sky.hdr"),
+        "{body}"
+    );
+    // 96×48 texels take 73,728 bytes decoded: over the budget, refused before decoding.
+    let (status, body) = upload(vec![(hdr_file(96, 48, [1.0; 3]), "big.hdr")]).await;
+    assert_eq!(
+        (status, body["error"].as_str()),
+        (413, Some("texture_budget")),
+        "{body}"
     );
     server.stop().await;
 }

@@ -3,6 +3,7 @@
 //! reference (importance-sampled sky light) bind as `environment`.
 
 use crate::scene::environment::{EnvironmentError, EnvironmentMap, EnvironmentSampling};
+use crate::scene::environment_image::EnvironmentImage;
 use lightcast_protocol::{Environment, Light};
 
 /// A frame's environment, evaluated: its map, what samples it, the words the shaders read
@@ -19,9 +20,14 @@ pub struct FrameEnvironment {
 }
 
 impl FrameEnvironment {
-    /// `env` for a frame whose punctual lights are `lights` (a sky's sun is among them).
-    pub fn new(env: &Environment, lights: &[Light]) -> Result<Self, EnvironmentError> {
-        let map = EnvironmentMap::new(env, lights)?;
+    /// `env` for a frame whose punctual lights are `lights` (a sky's sun is among them), of a
+    /// scene whose environment image is `image`.
+    pub fn new(
+        env: &Environment,
+        lights: &[Light],
+        image: Option<&EnvironmentImage>,
+    ) -> Result<Self, EnvironmentError> {
+        let map = EnvironmentMap::new(env, lights, image)?;
         let sampling = map.sampling();
         let words = pack(Some((&map, &sampling)));
         let lights = map.median_cut(env.directions as usize);

@@ -1,6 +1,9 @@
 //! `/v1/scenes`: upload, list, inspect and delete scenes.
 
 use super::{AppState, Caller};
+use crate::scene::environment_image::{
+    is_environment_image, EnvironmentImage, EnvironmentImageError,
+};
 use crate::scene::gltf_loader::{load_gltf_slice, LoadError, LoadLimits};
 use crate::scene::procedural::Spec;
 use crate::scene::Scene;
@@ -212,10 +215,46 @@ pub async fn load_upload(
             let _ = std::fs::remove_dir_all(&dir);
             loaded?
         };
+        let mut scene = scene;
+        scene.environment_image = environment_image(&resources, &scene, &limits)?;
         Ok(scene)
     });
     task.await
         .map_err(|e| ApiError::internal(format!("the scene loader failed: {e}")))?
+}
+
+/// The environment image among an upload's `resources` (a `.hdr` or `.exr` file), decoded
+/// within what is left of the scene's texture budget after `scene`'s own textures.
+fn environment_image(
+    resources: &[UploadedFile],
+    scene: &Scene,
+    limits: &LoadLimits,
+) -> Result<Option<Arc<EnvironmentImage>>, ApiError> {
+    let mut images = resources.iter().filter(|r| is_environment_image(&r.name));
+    let (file, None) = (images.next(), images.next()) else {
+        return Err(ApiError::field(
+            "files",
+            "more than one environment image (.hdr/.exr) uploaded; a scene has at most one",
+        ));
+    };
+    let Some(file) = file else {
+        return Ok(None);
+    };
+    let left = limits
+        .max_texture_bytes
+        .saturating_sub(crate::service::scenes::texture_bytes(scene));
+    let image = EnvironmentImage::decode(&file.name, &file.bytes, left).map_err(|e| match e {
+        EnvironmentImageError::Budget { .. } => over_budget(
+            "texture_budget",
+            format!(
+                "{}: {e} (--max-scene-texture-bytes per scene, --max-total-texture-bytes over \
+                 all scenes)",
+                echo(&file.name)
+            ),
+        ),
+        e => ApiError::bad_request("invalid_scene", format!("{}: {e}", echo(&file.name))),
+    })?;
+    Ok(Some(Arc::new(image)))
 }
 
 /// Splits uploaded files into the scene file and the files it references.
@@ -292,7 +331,8 @@ pub async fn list(State(state): State<Arc<AppState>>) -> Json<Vec<SceneInfo>> {
 }
 
 /// Adds a scene: a `.glb` body (any content type but JSON or multipart), a
-/// `multipart/form-data` body with one `.gltf`/`.glb` file and the files it references, or a
+/// `multipart/form-data` body with one `.gltf`/`.glb` file, the files it references and at most
+/// one equirectangular `.hdr`/`.exr` image (`render.environment` kind `image`), or a
 /// JSON body naming a procedural scene. Its light caches are computed in the background;
 /// `caches[0].state` shows progress.
 #[utoipa::path(post, path = "/v1/scenes", tag = "scenes",

@@ -73,9 +73,15 @@ pub fn triangles_over_budget(triangles: u64, pool: &Pool) -> ApiError {
     )
 }
 
-/// Decoded texture bytes of a scene, as the budgets count them.
+/// Decoded texture bytes of a scene, as the budgets count them: its textures and its
+/// environment image.
 pub fn texture_bytes(scene: &Scene) -> u64 {
-    scene.textures.iter().map(|t| t.rgba8.len() as u64).sum()
+    scene
+        .textures
+        .iter()
+        .map(|t| t.rgba8.len() as u64)
+        .sum::<u64>()
+        + scene.environment_image.as_ref().map_or(0, |i| i.bytes())
 }
 
 impl SceneEntry {
@@ -154,6 +160,15 @@ impl SceneEntry {
             camera_region: s.camera_region.map(|r| Bounds {
                 min: r.min.into(),
                 max: r.max.into(),
+            }),
+            environment_image: s.environment_image.as_ref().map(|i| {
+                lightcast_protocol::EnvironmentImageInfo {
+                    name: i.name.clone(),
+                    width: i.source_width,
+                    height: i.source_height,
+                    kept_width: i.width,
+                    kept_height: i.height,
+                }
             }),
             caches: precomputed
                 .iter()

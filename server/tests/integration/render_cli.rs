@@ -495,3 +495,71 @@ fn a_closed_stdout_ends_the_output_quietly() {
         text(&output.stderr)
     );
 }
+
+/// `--environment image --environment-image FILE`: a uniform `.hdr` lights the frame as a
+/// uniform environment of its radiance does; without the file, or with a broken one, the
+/// command says which flag is wrong.
+#[test]
+fn an_environment_image_file_lights_the_render() {
+    let dir = out_dir();
+    let hdr = dir.join("uniform.hdr");
+    let texels = vec![0.5f32; 32 * 16 * 3];
+    let buffer = image::Rgb32FImage::from_raw(32, 16, texels).expect("size");
+    image::DynamicImage::ImageRgb32F(buffer)
+        .save_with_format(&hdr, image::ImageFormat::Hdr)
+        .expect("write .hdr");
+    let hdr_s = hdr.to_string_lossy().into_owned();
+    let common = [
+        "--gi",
+        "none",
+        "--exposure",
+        "0.5",
+        "--environment-directions",
+        "4",
+    ];
+    let (image_lit, _, _) = render_ok(
+        "env-image.png",
+        &[
+            &common[..],
+            &["--environment", "image", "--environment-image", &hdr_s],
+        ]
+        .concat(),
+    );
+    let (uniform_lit, _, _) = render_ok(
+        "env-uniform.png",
+        &[
+            &common[..],
+            &["--environment", "uniform", "--environment-intensity", "0.5"],
+        ]
+        .concat(),
+    );
+    let (dark, _, _) = render_ok("env-none.png", &common[..4]);
+    assert!(
+        mean_level(&image_lit) > mean_level(&dark) + 2.0,
+        "{} vs {}",
+        mean_level(&image_lit),
+        mean_level(&dark)
+    );
+    let diff = mean_abs_diff(&image_lit, &uniform_lit);
+    assert!(
+        diff < 1.0,
+        "image vs uniform of its radiance: {diff} levels"
+    );
+
+    let broken = dir.join("broken.hdr");
+    std::fs::write(&broken, b"#?RADIANCE\nnot an image").expect("write");
+    let out = dir.join("env-bad.png").to_string_lossy().into_owned();
+    let broken_s = broken.to_string_lossy().into_owned();
+    for (extra, needle) in [
+        (vec!["--environment", "image"], "environment.kind"),
+        (
+            vec!["--environment", "image", "--environment-image", &broken_s],
+            "--environment-image",
+        ),
+    ] {
+        let o = run(&[&["render", "--out", &out][..], &extra].concat());
+        assert!(!o.status.success(), "{extra:?} succeeded");
+        let err = text(&o.stderr);
+        assert!(err.contains(needle), "{extra:?}: {err}");
+    }
+}

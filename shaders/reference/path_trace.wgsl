@@ -135,13 +135,36 @@ fn sample_brdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, state: ptr<function,
     return basis(reflect(-wo, n)) * vec3<f32>(sin_a * cos(phi), sin_a * sin(phi), cos_a);
 }
 
-// Whether nothing blocks the segment from `p` (already offset) towards `light`.
+// Most emissive surfaces a shadow ray passes through before it counts as blocked.
+const MAX_EMITTER_CROSSINGS: u32 = 4u;
+
+// Whether nothing blocks the segment from `p` (already offset) towards `light`. Emissive
+// surfaces do not: they stand for light sources, and the shadow maps and RSMs leave them out
+// too (`SceneBuffers::shadow_casting`), so a punctual light standing in for a lamp shines
+// through the lamp's own geometry here as in every other method (a spot just above a ceiling
+// lamp's quad would otherwise light nothing beyond the visible surface).
 fn light_visible(light: LightUniform, p: vec3<f32>, to_light: vec3<f32>) -> bool {
     var t_max = 3.4e38;
     if light.kind != LIGHT_DIRECTIONAL {
         t_max = distance(light.position, p) * (1.0 - 1e-4);
     }
-    return trace(p, to_light, t_max).triangle == NO_HIT;
+    var origin = p;
+    for (var crossed = 0u; crossed <= MAX_EMITTER_CROSSINGS; crossed++) {
+        let hit = trace(origin, to_light, t_max);
+        if hit.triangle == NO_HIT {
+            return true;
+        }
+        if all(triangle_surface(hit.triangle).material.emissive <= vec3<f32>(0.0)) {
+            return false;
+        }
+        let step = hit.t + params.ray_epsilon;
+        origin += to_light * step;
+        t_max -= step;
+        if t_max <= 0.0 {
+            return true;
+        }
+    }
+    return false;
 }
 
 // Power-heuristic weight of a sample drawn with density `a` against the other strategy's `b`.

@@ -809,3 +809,55 @@ fn rays_pass_through_alpha_masked_texels() {
         "half-masked {half} between opaque {opaque} and open {open}"
     );
 }
+
+/// Emissive surfaces stand for light sources and cast no shadows in the raster passes
+/// (`SceneBuffers::shadow_casting`); the reference's shadow rays pass through them alike: a
+/// small black lamp quad just above the point light, between it and the upper plate, changes
+/// the floor's indirect light little (bounce rays still meet it), where the same quad without
+/// emission shadows the plate (before the fix: 23 % of the light left).
+#[test]
+fn shadow_rays_pass_through_emissive_surfaces() {
+    let p = plates();
+    // A 0.12 m quad 5 cm above the light, between it and the upper plate, emitting
+    // `quad_emission`; none without.
+    let render = |quad_emission: Option<[f32; 3]>| {
+        let scene = match quad_emission {
+            None => p.scene.clone(),
+            Some(emissive) => {
+                let mut materials = p.scene.materials.clone();
+                // Black (metallic with a black base reflects nothing), so only its shadow counts.
+                materials.push(Material {
+                    emissive,
+                    ..plain_material([0.0; 3], 1.0, 1.0)
+                });
+                let lamp = |vertices: &mut Vec<Vertex>, indices: &mut Vec<u32>| {
+                    quad(vertices, indices, floor_corners(0.2, -0.1, 0.6, 0.06), 2);
+                };
+                plates_with(lamp, materials, Vec::new())
+            }
+        };
+        let mut tracer = PathTracer::new(support::gpu(), &scene).expect("tracer");
+        let settings = ReferenceSettings {
+            emitters: false,
+            ..ReferenceSettings::default()
+        };
+        let image = converge(
+            &mut tracer,
+            (16, 16),
+            &p.camera,
+            std::slice::from_ref(&p.light),
+            &settings,
+            64,
+        );
+        image.indirect.iter().map(|c| luminance(*c)).sum::<f32>() / image.indirect.len() as f32
+    };
+    let open = render(None);
+    let lamp = render(Some([4.0, 4.0, 4.0]));
+    let blocker = render(Some([0.0; 3]));
+    assert!(open > 0.0);
+    assert!(
+        (lamp / open - 1.0).abs() < 0.05,
+        "emissive quad {lamp} vs none {open}"
+    );
+    assert!(blocker < 0.9 * open, "plain quad {blocker} vs none {open}");
+}

@@ -19,6 +19,9 @@ struct GatherParams {
     probe_y: u32,
 }
 
+// The `light` of the face holding the emitters' samples (pattern.rs `EMITTER_FACE`).
+const EMITTER_FACE: u32 = 0xffffffffu;
+
 // Mirrored by `GatherFace` in server/gi/src/rsm_gather/passes.rs.
 struct GatherFace {
     view_proj: mat4x4<f32>,
@@ -109,6 +112,11 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         while end < params.faces && faces[end].light == faces[first].light {
             end++;
         }
+        if faces[first].light == EMITTER_FACE {
+            radiance += gather_emitters(first, x, n, v, s);
+            first = end;
+            continue;
+        }
         // Every face of the light, around where x projects in it (its nearest border point
         // where x lies outside the face): a point light's six faces see disjoint surfaces, so
         // a wall lit from the floor gathers from the floor's face (pattern.rs `gather`). The
@@ -131,6 +139,29 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         first = end;
     }
     textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));
+}
+
+// Emitter face `face` whole: every (size²/N)-th texel, each standing for size²/N of them
+// (pattern.rs `emitter_texels`).
+fn gather_emitters(face: u32, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
+    let texels = params.rsm_size * params.rsm_size;
+    let m = max(min(params.sample_count, texels), 1u);
+    let weight = f32(texels) / f32(m);
+    var radiance = vec3<f32>(0.0);
+    for (var i = 0u; i < m; i++) {
+        // ⌊i·texels/m⌋ without overflowing u32: i·q + ⌊i·r/m⌋ for texels = q·m + r, where
+        // i·r < m² stays small (m ≤ gather_samples).
+        let k = i * (texels / m) + (i * (texels % m)) / m;
+        let t = vec2<i32>(i32(face * params.rsm_size + k % params.rsm_size), i32(k / params.rsm_size));
+        let light_position = textureLoad(rsm_position, t, 0);
+        if light_position.w == 0.0 {
+            continue;
+        }
+        let flux_area = textureLoad(rsm_flux_area, t, 0);
+        let normal = textureLoad(rsm_normal, t, 0).xyz;
+        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, n, v, s) * weight;
+    }
+    return radiance;
 }
 
 // The pattern around `centre` in atlas face `face`: Σ weight × the pixel light's L.

@@ -214,6 +214,18 @@ impl RenderSettings {
         self.validate_for(ctx.device.limits().max_texture_dimension_2d)
     }
 
+    /// The light faces the method renders (an RSM face each in the RSM-based methods): the
+    /// punctual lights' and, unless the method samples the environment itself, its
+    /// directions'.
+    fn method_faces(&self) -> u32 {
+        face_count(&self.lights)
+            + if gi::entry(self.gi.method).1.samples_environment {
+                0
+            } else {
+                self.environment_directions()
+            }
+    }
+
     /// [`Self::validate`] for an adapter whose textures may be `max` texels wide.
     pub fn validate_for(&self, max: u32) -> Result<(), RenderError> {
         for (field, v) in [("width", self.width), ("height", self.height)] {
@@ -299,13 +311,7 @@ impl RenderSettings {
             ));
         }
         let entry = gi::entry(self.gi.method).1;
-        let faces = face_count(&self.lights)
-            + if entry.samples_environment {
-                0
-            } else {
-                self.environment_directions()
-            };
-        (entry.validate)(&self.gi, faces).map_err(|e| invalid(e.field, e.reason))?;
+        (entry.validate)(&self.gi, self.method_faces()).map_err(|e| invalid(e.field, e.reason))?;
         if let Exposure::Manual(s) = self.exposure {
             if !(s.is_finite() && s > 0.0) {
                 return Err(invalid(
@@ -849,6 +855,16 @@ impl Renderer {
     /// of one size may be pending; beyond that this waits for the oldest to be read.
     pub fn submit(&mut self, settings: &RenderSettings) -> Result<PendingFrame, RenderError> {
         settings.validate(&self.shared.ctx)?;
+        // Emissive surfaces are one RSM face more in the methods that light from them
+        // (`passes::rsm::EmitterFace`), where the scene has any.
+        let buffers = &self.shared.scene_buffers;
+        if buffers.shadow_casting.len() < buffers.ranges.len()
+            && gi::common::params::emitters(&settings.gi)
+            && gi::lights_from_emitters(settings.gi.method)
+        {
+            (gi::entry(settings.gi.method).1.validate)(&settings.gi, settings.method_faces() + 1)
+                .map_err(|e| invalid(e.field, e.reason))?;
+        }
         let (width, height) = (settings.width, settings.height);
         let environment = self.environment(settings)?;
         let (method_index, entry) = gi::entry(settings.gi.method);

@@ -6,6 +6,7 @@
 //! material is one contiguous index range (one draw call per material).
 
 pub mod default_light;
+pub mod emitters;
 pub mod environment;
 pub mod environment_image;
 pub mod gltf_loader;

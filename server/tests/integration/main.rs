@@ -10,6 +10,7 @@ mod gpu_cache_lighting;
 mod gpu_clustered;
 mod gpu_clustered_visibility;
 mod gpu_direct_light;
+mod gpu_emitters;
 mod gpu_environment;
 mod gpu_indirect_resolution;
 mod gpu_reference;

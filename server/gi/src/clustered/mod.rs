@@ -21,6 +21,7 @@ pub mod shaders;
 pub mod stages;
 pub mod views;
 
+use super::common::params::emitters;
 use super::cost::{self, Cheaper, Cost, FrameShape, Knob};
 use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
@@ -534,14 +535,22 @@ impl Method for Clustered {
         let g = &Settings::of(frame.settings)?;
         let faces = lights_faces(frame.lights, &r.scene.bounds);
         let device = &r.ctx.device;
+        // Emissive surfaces send VPLs from one more face, clustered with the lights' VPLs.
+        let emitter_face =
+            self.rsm_pass
+                .prepare_emitters(device, &r.scene, g.rsm_size, emitters(frame.settings));
         let Prepared {
             rsm,
             buffers,
             visibility,
             interleaved,
-        } = self
-            .targets
-            .prepare(device, &self.visibility, frame, g, faces.len() as u32);
+        } = self.targets.prepare(
+            device,
+            &self.visibility,
+            frame,
+            g,
+            faces.len() as u32 + u32::from(emitter_face),
+        );
         let queue = &r.ctx.queue;
         let rsm_faces: Vec<RsmFace> = faces
             .iter()

@@ -1,7 +1,7 @@
 //! `clustered`'s parameter table (seed 003) and the struct its passes read it as.
 
 use super::passes::FOURIER_MAX_TERMS;
-use crate::gi::common::params::RSM_SIZE;
+use crate::gi::common::params::{EMITTERS, RSM_SIZE};
 use crate::gi::params::{read, Default, MethodTable, Param};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -132,6 +132,7 @@ pub const TABLE: MethodTable = MethodTable {
     progressive: false,
     params: &[
         &RSM_SIZE,
+        &EMITTERS,
         &VPL_COUNT,
         &CLUSTER_COUNT,
         &KMEANS_ITERATIONS,
@@ -206,6 +207,7 @@ impl Visibility {
 #[serde(deny_unknown_fields)]
 pub struct Settings {
     pub rsm_size: u32,
+    pub emitters: Option<bool>,
     pub vpl_count: u32,
     pub cluster_count: u32,
     pub kmeans_iterations: u32,

@@ -74,9 +74,10 @@ pub const BOUNCES: Param = Param::integer(
 pub const EMITTERS: Param = Param::boolean(
     "emitters",
     true,
-    "Emissive surfaces light the scene as area lights besides the punctual light; null (the \
-     default): on unless the light is the scene's stand-in for them (its default light when \
-     it has no lights of its own), whose light would count twice",
+    "Emissive surfaces light the scene as area lights besides the punctual lights (the \
+     RSM-based methods: as VALs/VPLs of one more RSM face, sampled from the emissive triangles \
+     by power); null (the default): on unless the light is the scene's stand-in for them (its \
+     default light when it has no lights of its own), whose light would count twice",
 )
 .or_null();
 

@@ -23,7 +23,7 @@ pub mod stages;
 pub mod val_select;
 pub mod views;
 
-use super::common::params::glossy_exponent;
+use super::common::params::{emitters, glossy_exponent};
 use super::cost::{self, Cost, FrameShape, Knob};
 use super::precompute::{BudgetPool, Built, PrecomputeEntry, PrecomputeKey, SceneData, UnitBudget};
 use super::{
@@ -339,6 +339,7 @@ impl Method for LightSkin {
             &r.ctx,
             frame.gbuffer,
             &lights_faces(frame.lights, &r.scene.bounds),
+            (&r.scene, emitters(frame.settings)),
             gi,
         );
         let source = match method {

@@ -1,6 +1,6 @@
 //! The parameter tables of `lightskin` and `brsm` (seed 004) and the struct both read them as.
 
-use crate::gi::common::params::RSM_SIZE;
+use crate::gi::common::params::{EMITTERS, RSM_SIZE};
 use crate::gi::params::{read_for, Default, MethodTable, Param, Testing, SCALE_TOLERANCE};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -86,7 +86,13 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
     summary: "LightSkin (seed 004, eq. 3-9): every RSM texel lights every light cache; caches \
               are interpolated per pixel",
     progressive: false,
-    params: &[&RSM_SIZE, &OCCLUSION, &CACHE_DISTANCE, &CACHE_ANGLE],
+    params: &[
+        &RSM_SIZE,
+        &EMITTERS,
+        &OCCLUSION,
+        &CACHE_DISTANCE,
+        &CACHE_ANGLE,
+    ],
     views: super::views::LIGHTSKIN_VIEWS,
     testing: Testing {
         small: |facts| small(facts, crate::gi::lightskin::LIGHTSKIN),
@@ -126,6 +132,7 @@ pub const BRSM: MethodTable = MethodTable {
     progressive: false,
     params: &[
         &RSM_SIZE,
+        &EMITTERS,
         &OCCLUSION,
         &CACHE_DISTANCE,
         &CACHE_ANGLE,
@@ -149,6 +156,7 @@ pub const BRSM: MethodTable = MethodTable {
 #[serde(deny_unknown_fields)]
 pub struct Settings {
     pub rsm_size: u32,
+    pub emitters: Option<bool>,
     pub occlusion: bool,
     pub cache_distance: Option<f32>,
     pub cache_angle: Option<f32>,

@@ -16,6 +16,7 @@ use crate::passes::{
     rsm::{Rsm, RsmFace, RsmPass},
     scene_buffers::SceneBuffers,
 };
+use crate::scene::Scene;
 
 /// What one set of sampling buffers is for. The G-buffer itself, not just its size, is part of
 /// it: the importance stage's bind group reads that G-buffer, and targets of a size evicted
@@ -103,16 +104,22 @@ impl ValSampling {
 
     /// Makes the buffers for this frame's G-buffer and parameters current (reusing a kept set)
     /// and writes the uniforms.
+    /// `emitters`: the scene's emissive surfaces light the frame too, as VALs of one more
+    /// RSM face (`passes::rsm::EmitterFace`), sampled and selected like any other texel.
     pub fn prepare(
         &mut self,
         ctx: &GpuContext,
         gbuffer: &GBuffer,
         faces: &[(u32, LightFace)],
+        (scene, emitters): (&Scene, bool),
         settings: &Settings,
     ) {
+        let emitter_face =
+            self.rsm_pass
+                .prepare_emitters(&ctx.device, scene, settings.rsm_size, emitters);
         let key = Key {
             rsm_size: settings.rsm_size,
-            faces: faces.len() as u32,
+            faces: faces.len() as u32 + u32::from(emitter_face),
             view_samples: settings.view_samples,
             val_count: settings.val_count,
             gbuffer: gbuffer.position.texture.clone(),

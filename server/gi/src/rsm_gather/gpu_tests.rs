@@ -124,8 +124,22 @@ fn the_gather_of_two_lights_matches_the_cpu_reference() {
     gather_matches_the_cpu(&scene, vec![spot, point]);
 }
 
+/// The Cornell box's lamp alone (its spot at intensity 0): the emitter face is gathered whole,
+/// every pixel reading the same texels, as the CPU does.
+#[test]
+fn the_gather_of_emitters_matches_the_cpu_reference() {
+    let scene = procedural::cornell_box();
+    let dark = Light {
+        intensity: 0.0,
+        ..default_light::default_light(&scene)
+    };
+    gather_matches_the_cpu(&scene, vec![dark]);
+}
+
+/// `emitters` on: the Cornell box's lamp lights through the emitter face besides `lights`.
 fn gather_matches_the_cpu(scene: &Scene, lights: Vec<Light>) {
     let gi = GiParams::new(RSM_GATHER)
+        .with("emitters", true)
         .with("rsm_size", 64)
         .with("gather_samples", 200)
         .with("gather_radius", 0.3);

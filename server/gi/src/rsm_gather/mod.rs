@@ -18,6 +18,7 @@ pub mod shaders;
 pub mod stages;
 pub mod views;
 
+use super::common::params::emitters;
 use super::cost::{self, Cost, FrameShape, Knob};
 use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
@@ -40,8 +41,8 @@ use std::sync::Arc;
 /// The method's name.
 pub const RSM_GATHER: GiMethod = GiMethod::new("rsm_gather");
 
-/// Most light faces (a point light's cube for each of the most lights).
-const MAX_FACES: usize = 6 * crate::passes::frame_uniforms::MAX_LIGHTS;
+/// A point light's six faces for each of the most lights a frame has, and the emitter face.
+const MAX_FACES: usize = 6 * crate::passes::frame_uniforms::MAX_LIGHTS + 1;
 
 /// The module with its pipeline's bind group (see [`ShaderPass`]).
 const PASSES: &[ShaderPass] = &[ShaderPass::new(&shaders::GATHER, &[&passes::GATHER_GROUP])];
@@ -236,7 +237,11 @@ impl Method for RsmGather {
         let faces = lights_faces(frame.lights, &r.scene.bounds);
         let device = &r.ctx.device;
         let queue = &r.ctx.queue;
-        let face_count = faces.len() as u32;
+        // Emissive surfaces as one more face, gathered whole (gather.wgsl).
+        let emitter_face =
+            self.rsm_pass
+                .prepare_emitters(device, &r.scene, g.rsm_size, emitters(frame.settings));
+        let face_count = faces.len() as u32 + u32::from(emitter_face);
         let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, face_count);
         let rsm_faces: Vec<RsmFace> = faces
             .iter()
@@ -246,6 +251,7 @@ impl Method for RsmGather {
         let view_proj: Vec<(u32, glam::Mat4)> = faces
             .iter()
             .map(|(light, f)| (*light, f.view_proj))
+            .chain(emitter_face.then_some((pattern::EMITTER_FACE, glam::Mat4::IDENTITY)))
             .collect();
         let gather_faces: Vec<GatherFace> = view_proj
             .iter()

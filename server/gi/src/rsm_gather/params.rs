@@ -1,6 +1,6 @@
 //! `rsm_gather`'s parameter table and the struct its pass reads it as.
 
-use crate::gi::common::params::RSM_SIZE;
+use crate::gi::common::params::{EMITTERS, RSM_SIZE};
 use crate::gi::params::{read, Default, MethodTable, Param, Testing, SCALE_TOLERANCE};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -42,7 +42,7 @@ pub const TABLE: MethodTable = MethodTable {
               fixed pattern of RSM texels around its own as pixel lights, without visibility; \
               the ancestor of the seed methods",
     progressive: false,
-    params: &[&RSM_SIZE, &GATHER_SAMPLES, &GATHER_RADIUS],
+    params: &[&RSM_SIZE, &EMITTERS, &GATHER_SAMPLES, &GATHER_RADIUS],
     views: super::views::VIEWS,
     // The radius is a fraction of the RSM, the pattern has no length in it and a pixel light's
     // disk area bounds its form factor: no length constant, so power-of-two scales are exact.
@@ -62,6 +62,7 @@ pub const TABLE: MethodTable = MethodTable {
 #[serde(deny_unknown_fields)]
 pub struct Settings {
     pub rsm_size: u32,
+    pub emitters: Option<bool>,
     pub gather_samples: u32,
     pub gather_radius: f32,
 }

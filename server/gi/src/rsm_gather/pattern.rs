@@ -120,6 +120,36 @@ pub fn sample_texels(
         .collect()
 }
 
+/// The `light` of the atlas face that holds the emitters' samples (`passes::rsm::EmitterFace`):
+/// it has no projection, so a pixel gathers it whole ([`emitter_texels`]).
+pub const EMITTER_FACE: u32 = u32::MAX;
+
+/// The texels of emitter face `face` a pixel gathers with `count` samples: every
+/// (size²/count)-th, each standing for that many (all of them, each for one, when the face has
+/// no more texels than samples). The emitter samples are stratified by power along the face's
+/// rows (`scene::emitters::sample`), so an even subset of them is a stratified subset of the
+/// emitters; every pixel reads the same one, so the light they give has no noise between
+/// pixels.
+pub fn emitter_texels(count: u32, size: u32, faces: u32, face: usize) -> Vec<(usize, f32)> {
+    let texels = u64::from(size) * u64::from(size);
+    let m = u64::from(count).min(texels).max(1);
+    let atlas_width = (size * faces) as usize;
+    (0..m)
+        .map(|i| {
+            // As gather.wgsl computes it in u32: ⌊i·texels/m⌋ = i·q + ⌊i·r/m⌋.
+            let k = i * (texels / m) + (i * (texels % m)) / m;
+            let (x, y) = (
+                (k % u64::from(size)) as usize,
+                (k / u64::from(size)) as usize,
+            );
+            (
+                y * atlas_width + face * size as usize + x,
+                (texels as f64 / m as f64) as f32,
+            )
+        })
+        .collect()
+}
+
 /// The faces of each light: runs of `faces` (each face's light and view-projection, in atlas
 /// order) with the same light, each with the atlas index of its first face.
 pub fn light_runs(faces: &[(u32, Mat4)]) -> impl Iterator<Item = (usize, Vec<Mat4>)> + '_ {
@@ -138,7 +168,7 @@ pub fn light_runs(faces: &[(u32, Mat4)]) -> impl Iterator<Item = (usize, Vec<Mat
 /// floor below the light gathers from the floor's face (gathering only the face that holds
 /// `x`, the first version left a point light's indirect light 80 % dark in the Cornell box,
 /// `bench/results/lavapipe-three-lights-errors.md`). `faces`: each atlas face's light and
-/// view-projection.
+/// view-projection; a face of light [`EMITTER_FACE`] is gathered whole ([`emitter_texels`]).
 #[allow(clippy::too_many_arguments)]
 pub fn gather(
     rsm: &RsmAtlas,
@@ -154,6 +184,9 @@ pub fn gather(
     let radius = radius_fraction * rsm.size as f32;
     light_runs(faces)
         .flat_map(|(first, run)| {
+            if faces[first].0 == EMITTER_FACE {
+                return emitter_texels(samples.len() as u32, rsm.size, rsm.faces, first);
+            }
             run.iter()
                 .enumerate()
                 .flat_map(|(f, view_proj)| {

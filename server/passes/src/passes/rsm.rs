@@ -1,11 +1,15 @@
 //! Reflective shadow map (`shaders/rsm.wgsl`): VAL position, normal, flux and disk area per
-//! texel, the faces of every light of the frame side by side in one atlas.
+//! texel, the faces of every light of the frame side by side in one atlas, and, when emissive
+//! surfaces light the frame, one face more holding samples of the emitters
+//! ([`EmitterFace`]), so that every RSM-based method lights from them as from any texel.
 
 use super::bind::{self, bind_group};
 use super::frame_uniforms::LightFace;
 use super::scene_buffers::SceneBuffers;
 use super::{ParamSlots, Target};
+use crate::gpu::readback::padded_bytes_per_row;
 use crate::gpu::shaders;
+use crate::scene::{emitters, Scene};
 use bytemuck::{Pod, Zeroable};
 
 pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
@@ -79,7 +83,8 @@ impl Rsm {
         let (w, h) = (size * faces, size);
         let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
             | wgpu::TextureUsages::TEXTURE_BINDING
-            | wgpu::TextureUsages::COPY_SRC;
+            | wgpu::TextureUsages::COPY_SRC
+            | wgpu::TextureUsages::COPY_DST;
         Self {
             size,
             faces,
@@ -139,6 +144,107 @@ pub struct RsmPass {
     pipeline: wgpu::RenderPipeline,
     faces: ParamSlots,
     bind_group: wgpu::BindGroup,
+    /// The emitter face of the last size asked for, by that size (kept while the size stays;
+    /// `None` inside where the scene has no emitters), and whether the frame being prepared
+    /// has it as the atlas's last face.
+    emitters: Option<(u32, Option<EmitterFace>)>,
+    emitter_face: bool,
+}
+
+/// Emissive surfaces as VALs: `size`² samples of the scene's emitters
+/// ([`crate::scene::emitters::sample`]), in the texel layout of an RSM face, copied into the
+/// atlas's last face after the lights' faces are drawn. A texel holds a sample's position
+/// (w = 1), normal and flux with its disk area: what `shaders/rsm.wgsl` writes for a surface a
+/// light reflects from, here the light the emitter sends itself.
+pub struct EmitterFace {
+    pub size: u32,
+    position: wgpu::Buffer,
+    normal: wgpu::Buffer,
+    flux_area: wgpu::Buffer,
+}
+
+impl EmitterFace {
+    /// The scene's emitters as a face of `size`²; `None` when it has none.
+    pub fn new(device: &wgpu::Device, scene: &Scene, size: u32) -> Option<Self> {
+        let samples = emitters::sample(scene, (size * size) as usize);
+        if samples.is_empty() {
+            return None;
+        }
+        let rows = |bytes_per_texel: u32, texel: &dyn Fn(&emitters::EmitterSample) -> Vec<u8>| {
+            let stride = padded_bytes_per_row(size, bytes_per_texel) as usize;
+            let mut data = vec![0u8; stride * size as usize];
+            for (k, s) in samples.iter().enumerate() {
+                let (x, y) = (k % size as usize, k / size as usize);
+                let at = y * stride + x * bytes_per_texel as usize;
+                data[at..at + bytes_per_texel as usize].copy_from_slice(&texel(s));
+            }
+            data
+        };
+        let buffer = |label, contents: Vec<u8>| {
+            wgpu::util::DeviceExt::create_buffer_init(
+                device,
+                &wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: &contents,
+                    usage: wgpu::BufferUsages::COPY_SRC,
+                },
+            )
+        };
+        let f32s = |v: [f32; 4]| bytemuck::cast_slice(&v).to_vec();
+        Some(Self {
+            size,
+            position: buffer(
+                "rsm emitter positions",
+                rows(16, &|s| f32s(s.position.extend(1.0).to_array())),
+            ),
+            normal: buffer(
+                "rsm emitter normals",
+                rows(8, &|s| {
+                    let n = s.normal.extend(0.0).to_array().map(half::f16::from_f32);
+                    bytemuck::cast_slice(&n).to_vec()
+                }),
+            ),
+            flux_area: buffer(
+                "rsm emitter flux",
+                rows(16, &|s| f32s(s.flux.extend(s.area).to_array())),
+            ),
+        })
+    }
+
+    /// Copies the samples into face `face` of `rsm`.
+    fn encode(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm, face: u32) {
+        for (buffer, target, bytes_per_texel) in [
+            (&self.position, &rsm.position, 16),
+            (&self.normal, &rsm.normal, 8),
+            (&self.flux_area, &rsm.flux_area, 16),
+        ] {
+            encoder.copy_buffer_to_texture(
+                wgpu::TexelCopyBufferInfo {
+                    buffer,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(padded_bytes_per_row(self.size, bytes_per_texel)),
+                        rows_per_image: Some(self.size),
+                    },
+                },
+                wgpu::TexelCopyTextureInfo {
+                    texture: &target.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: face * rsm.size,
+                        y: 0,
+                        z: 0,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::Extent3d {
+                    width: self.size,
+                    height: self.size,
+                    depth_or_array_layers: 1,
+                },
+            );
+        }
+    }
 }
 
 impl RsmPass {
@@ -172,6 +278,8 @@ impl RsmPass {
             pipeline,
             faces,
             bind_group,
+            emitters: None,
+            emitter_face: false,
         }
     }
 
@@ -179,7 +287,26 @@ impl RsmPass {
         self.faces.write(queue, faces);
     }
 
+    /// Whether the next frame's RSM of `size`² faces ends with the emitter face: when `on`
+    /// (`render.gi.emitters`) and `scene` has emitters. Builds the face on first use of a size.
+    pub fn prepare_emitters(
+        &mut self,
+        device: &wgpu::Device,
+        scene: &Scene,
+        size: u32,
+        on: bool,
+    ) -> bool {
+        if on && self.emitters.as_ref().is_none_or(|(s, _)| *s != size) {
+            self.emitters = Some((size, EmitterFace::new(device, scene, size)));
+        }
+        self.emitter_face = on && matches!(self.emitters, Some((_, Some(_))));
+        self.emitter_face
+    }
+
+    /// Draws the lights' faces of `rsm` and, if [`Self::prepare_emitters`] said so, copies
+    /// the emitter face into its last.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm, scene: &SceneBuffers) {
+        let light_faces = rsm.faces - u32::from(self.emitter_face);
         let mut pass = super::scene_buffers::begin_material_pass(
             encoder,
             "rsm",
@@ -187,11 +314,15 @@ impl RsmPass {
             &rsm.depth.view,
         );
         pass.set_pipeline(&self.pipeline);
-        for face in 0..rsm.faces {
+        for face in 0..light_faces {
             let size = rsm.size as f32;
             pass.set_viewport(face as f32 * size, 0.0, size, size, 0.0, 1.0);
             pass.set_bind_group(0, &self.bind_group, &[ParamSlots::offset(face)]);
             scene.draw_with_materials(&mut pass, &scene.shadow_casting);
+        }
+        drop(pass);
+        if let (true, Some((_, Some(emitters)))) = (self.emitter_face, &self.emitters) {
+            emitters.encode(encoder, rsm, light_faces);
         }
     }
 }

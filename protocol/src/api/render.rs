@@ -95,9 +95,11 @@ pub struct RenderReport {
     /// Time waiting for the render loop (queueing behind sessions).
     pub queue_ms: f64,
     pub exposure_scale: f32,
-    /// The camera and lights actually used (after scene defaults); `light` is the first.
+    /// The camera and lights actually used (after scene defaults); `light` is the first
+    /// (absent in a frame without punctual lights: emissive surfaces or an environment alone).
     pub camera: Camera,
-    pub light: Light,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub light: Option<Light>,
     pub lights: Vec<Light>,
     /// The environment used, if any.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -17,7 +17,8 @@ pub struct RenderParams {
     /// sets either clears the other). `null` with `lights` `null`: the scene's lights (its
     /// `default_lights`).
     pub light: Option<Light>,
-    /// The punctual lights, 1 to the server's `max_lights`; `null`: see `light`.
+    /// The punctual lights, 0 to the server's `max_lights` (none: a frame lit by emissive
+    /// surfaces, `render.gi.emitters`, or `environment` alone); `null`: see `light`.
     pub lights: Option<Vec<Light>>,
     /// Light from every direction (a sky); `null`: none.
     pub environment: Option<Environment>,

@@ -243,11 +243,12 @@ impl RenderSettings {
                 ),
             ));
         }
-        if !(1..=MAX_LIGHTS).contains(&self.lights.len()) {
+        // None is a frame lit by emissive surfaces or an environment alone.
+        if self.lights.len() > MAX_LIGHTS {
             return Err(invalid(
                 "lights",
                 format!(
-                    "{} lights; 1 to {MAX_LIGHTS} are allowed",
+                    "{} lights; at most {MAX_LIGHTS} are allowed",
                     self.lights.len()
                 ),
             ));
@@ -267,7 +268,7 @@ impl RenderSettings {
             }
         }
         // Every light's faces share the shadow-map budget.
-        let faces = u64::from(face_count(&self.lights) + self.environment_directions());
+        let faces = u64::from((face_count(&self.lights) + self.environment_directions()).max(1));
         let max_by_budget = ((MAX_SHADOW_TEXELS / faces) as f64).sqrt() as u32;
         let max_shadow = max.min(MAX_SHADOW_MAP_SIZE).min(max_by_budget);
         if !(16..=max_shadow).contains(&self.shadow_map_size) {
@@ -874,7 +875,8 @@ impl Renderer {
             lights.extend(e.lights.iter().cloned());
         }
         self.ensure_targets(width, height)?;
-        self.ensure_shadow_map(settings.shadow_map_size, face_count(&lights))?;
+        // A frame without punctual lights keeps one face: a texture array has a layer at least.
+        self.ensure_shadow_map(settings.shadow_map_size, face_count(&lights).max(1))?;
         self.environment_buffer.set(
             &self.shared.ctx.device,
             &self.shared.ctx.queue,

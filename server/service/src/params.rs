@@ -146,7 +146,8 @@ pub fn resolve(
 }
 
 /// The frame's lights: `render.lights`, or `render.light` alone, or the scene's default
-/// lights (the first `max_lights`); both given, none or too many is refused naming the field.
+/// lights (the first `max_lights`); both given or too many is refused naming the field. An
+/// empty `lights` is a frame lit by emissive surfaces or an environment alone.
 pub fn lights(
     params: &RenderParams,
     entry: &SceneEntry,
@@ -159,9 +160,6 @@ pub fn lights(
             "give `light` (one light) or `lights`, not both",
         )),
         (Some(light), None) => Ok(vec![light.clone()]),
-        (None, Some(lights)) if lights.is_empty() => {
-            Err(ApiError::field("lights", "at least one light is needed"))
-        }
         (None, Some(lights)) if lights.len() > max => Err(ApiError::field(
             "lights",
             format!(

@@ -27,6 +27,8 @@ fn sampling(rsm_size: u32, view_samples: u32, val_count: u32) -> GiParams {
         .with("defensive", 0.0)
         .with("uniform_importance", false)
         .with("occlusion", false)
+        // The light's RSM alone: the Cornell box's lamp would add an emitter face.
+        .with("emitters", false)
 }
 
 fn renderer_with_caches(scene: &Scene) -> Renderer {

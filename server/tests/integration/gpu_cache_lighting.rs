@@ -26,6 +26,8 @@ fn gi(method: GiMethod, rsm_size: u32, val_count: u32) -> GiParams {
         .with("jitter", 0.5)
         .with("uniform_importance", false)
         .with("occlusion", false)
+        // The light's RSM alone: the Cornell box's lamp would add an emitter face.
+        .with("emitters", false)
 }
 
 struct Run {

@@ -32,6 +32,8 @@ fn clustered(vpl_count: u32, cluster_count: u32, iterations: u32, interleave: u3
         .with("cluster_count", cluster_count)
         .with("kmeans_iterations", iterations)
         .with("interleave", interleave)
+        // The light's RSM alone: the Cornell box's lamp would add an emitter face.
+        .with("emitters", false)
 }
 
 /// `gi` as `clustered` reads it.

@@ -29,6 +29,8 @@ fn clustered(visibility: ClusteredVisibility, vpls: u32, vals: u32, map: u32) ->
         .with("interleave", 4)
         .with("visibility", visibility.name())
         .with("paraboloid_size", map)
+        // The light's RSM alone: the Cornell box's lamp would add an emitter face.
+        .with("emitters", false)
 }
 
 fn run(scene: &Scene, gi: GiParams) -> (RenderSettings, ClusteredReadback) {

@@ -329,6 +329,32 @@ async fn an_environment_lights_renders_comparisons_and_sessions() {
     server.stop().await;
 }
 
+/// A frame without punctual lights (`lights: []`): the Cornell box's lamp lights it through
+/// `emitters` (on by default, its stand-in spot being absent) in an RSM method, the report has
+/// no `light`, the comparison renders the reference from the lamp alone too; with `emitters`
+/// off nothing lights it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_frame_lit_by_emissive_surfaces_alone() {
+    let server = TestServer::start(&[]).await;
+    let body = |emitters: Value| {
+        json!({"render": {"width": 32, "height": 24, "shadow_map_size": 256, "lights": [],
+                          "gi": {"method": "clustered", "rsm_size": 32, "emitters": emitters}},
+               "format": "raw_indirect", "compare_to": "reference", "compare_spp": 16})
+    };
+    let (report, lit) = render(&server, &body(Value::Null)).await;
+    assert_eq!(report.light, None);
+    assert!(report.lights.is_empty());
+    assert!(raw_sum(&lit) > 0.0, "the lamp lights the room");
+    let comparison = report.comparison.expect("a comparison");
+    assert!(
+        comparison.indirect_bias_relative.abs() < 0.6,
+        "{comparison:?}"
+    );
+    let (_, dark) = render(&server, &body(json!(false))).await;
+    assert_eq!(raw_sum(&dark), 0.0);
+    server.stop().await;
+}
+
 /// An equirectangular `width`×`height` Radiance file of `radiance` everywhere.
 fn hdr_file(width: u32, height: u32, radiance: [f32; 3]) -> Vec<u8> {
     let texels = (0..width * height).flat_map(|_| radiance).collect();

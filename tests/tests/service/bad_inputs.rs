@@ -362,7 +362,7 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         case(
             "POST",
             "/v1/sessions",
-            r#"{"render":{"lights":[]}}"#,
+            r#"{"render":{"lights":3}}"#,
             400,
             "invalid_field",
             Some("render.lights"),

@@ -79,7 +79,10 @@ pub struct Rsm {
 }
 
 impl Rsm {
+    /// `faces` faces (one at least, left empty where a frame has no light and no emitters:
+    /// a texture needs a texel).
     pub fn new(device: &wgpu::Device, size: u32, faces: u32) -> Self {
+        let faces = faces.max(1);
         let (w, h) = (size * faces, size);
         let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
             | wgpu::TextureUsages::TEXTURE_BINDING
@@ -112,7 +115,7 @@ impl Rsm {
     ) -> &'a Rsm {
         if !slot
             .as_ref()
-            .is_some_and(|r| r.size == size && r.faces == faces)
+            .is_some_and(|r| r.size == size && r.faces == faces.max(1))
         {
             *slot = None;
         }
@@ -149,6 +152,8 @@ pub struct RsmPass {
     /// has it as the atlas's last face.
     emitters: Option<(u32, Option<EmitterFace>)>,
     emitter_face: bool,
+    /// Faces drawn from the lights ([`Self::set_faces`]); the emitter face follows them.
+    light_faces: u32,
 }
 
 /// Emissive surfaces as VALs: `size`² samples of the scene's emitters
@@ -280,11 +285,14 @@ impl RsmPass {
             bind_group,
             emitters: None,
             emitter_face: false,
+            light_faces: 0,
         }
     }
 
-    pub fn set_faces(&self, queue: &wgpu::Queue, faces: &[RsmFace]) {
+    /// The lights' faces of the next frame, drawn in this order at the atlas's start.
+    pub fn set_faces(&mut self, queue: &wgpu::Queue, faces: &[RsmFace]) {
         self.faces.write(queue, faces);
+        self.light_faces = faces.len() as u32;
     }
 
     /// Whether the next frame's RSM of `size`² faces ends with the emitter face: when `on`
@@ -304,9 +312,9 @@ impl RsmPass {
     }
 
     /// Draws the lights' faces of `rsm` and, if [`Self::prepare_emitters`] said so, copies
-    /// the emitter face into its last.
+    /// the emitter face in after them.
     pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm, scene: &SceneBuffers) {
-        let light_faces = rsm.faces - u32::from(self.emitter_face);
+        let light_faces = self.light_faces.min(rsm.faces);
         let mut pass = super::scene_buffers::begin_material_pass(
             encoder,
             "rsm",

@@ -343,7 +343,7 @@ pub async fn render(
         queue_ms: result.queue_ms,
         exposure_scale: rendered.exposure_scale,
         camera: resolved.settings.camera,
-        light: resolved.settings.lights[0].clone(),
+        light: resolved.settings.lights.first().cloned(),
         lights: resolved.settings.lights,
         environment: resolved.settings.environment,
         samples: rendered.progress.map(|p| p.samples),

@@ -8,12 +8,21 @@ with `compare_to: reference`. Loopback only, standard library only.
         [--width 128 --height 96 --spp 256] > bench/results/lavapipe-environment-errors.md
     python3 bench/light_errors.py target/release/lightcast-server --case three-lights \\
         > bench/results/lavapipe-three-lights-errors.md
+    python3 bench/light_errors.py target/release/lightcast-server --case emitters --spp 1024 \\
+        > bench/results/lavapipe-emitters-errors.md
 
 `environment` (part 3): with and without an environment, the Cornell box under a uniform sky
 (it has no directional light for a daylight sky; its open front lets the sky in) and the
 procedural street under the daylight sky around its sun. The reference's indirect buffer holds
 the sky's direct light on the visible surfaces; a real-time method's frame reports its
 indirect light plus its sky directions' direct light, so both sides hold the same light.
+
+`emitters` (part 4): frames without punctual lights (`lights: []`), lit by the scene's emissive
+surfaces alone (`emitters`, on by default without the stand-in light): the built-in Cornell
+box (its lamp a bare quad 5 mm under the ceiling) and `tests/data/cornell-box/cornell-box.glb`
+(its lamp a thin closed box), each method against the reference from the same emitters. The
+reference's own noise (`reference_relative_error`, its estimate of its relative error) is
+given per scene: emitters are small, bright and found by bounce rays only.
 
 `three-lights` (part 2): the Cornell box lit by three lights of different kinds (its ceiling
 spot, a point light low in a back corner, a sun through the open front), each alone and all
@@ -25,6 +34,7 @@ time).
 
 import argparse
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -83,6 +93,35 @@ def environment_case(base, args, methods):
             print(f"| {label} | `{method}` | {cells[0]} | {cells[1]} ({name}) |")
 
 
+def emitters_case(base, args, methods):
+    glb = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "data",
+                       "cornell-box", "cornell-box.glb")
+    with open(glb, "rb") as f:
+        req = urllib.request.Request(base + "/v1/scenes", data=f.read(), method="POST")
+    req.add_header("content-type", "model/gltf-binary")
+    with urllib.request.urlopen(req, timeout=600) as resp:
+        uploaded = json.loads(resp.read())["id"]
+    print("| scene | method | 8×8-block error / bias (reference noise) |")
+    print("|---|---|---|")
+    for label, scene in (("Cornell box (built-in)", "default"), ("cornell-box.glb", uploaded)):
+        for method in methods:
+            started = time.time()
+            try:
+                headers, _ = request(base + "/v1/render", {
+                    "render": {"scene": scene, "width": args.width, "height": args.height,
+                               "lights": [], "gi": {"method": method}},
+                    "format": "png", "compare_to": "reference", "compare_spp": args.spp})
+            except urllib.error.HTTPError as e:
+                print(f"| {label} | `{method}` | refused: {e.read().decode()[:120]} |")
+                continue
+            c = json.loads(headers["x-lightcast-report"])["comparison"]
+            cell = (f"{100 * c['indirect_block_mae_relative']:.1f} % / "
+                    f"{100 * c['indirect_bias_relative']:+.1f} % "
+                    f"({100 * c['reference_relative_error']:.0f} %)")
+            print(f"{label} {method}: {cell} [{time.time() - started:.0f} s]", file=sys.stderr)
+            print(f"| {label} | `{method}` | {cell} |")
+
+
 def three_lights_case(base, args, methods):
     scene = json.loads(request(base + "/v1/scenes/default")[1])
     spot = scene["default_light"]
@@ -118,7 +157,8 @@ def three_lights_case(base, args, methods):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("server", help="path to lightcast-server")
-    ap.add_argument("--case", choices=["environment", "three-lights"], default="environment")
+    ap.add_argument("--case", choices=["environment", "emitters", "three-lights"],
+                    default="environment")
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--height", type=int, default=96)
     ap.add_argument("--spp", type=int, default=256, help="reference samples per pixel")
@@ -129,7 +169,8 @@ def main():
     base = f"http://127.0.0.1:{port}"
     server = subprocess.Popen(
         [args.server, "--listen", f"127.0.0.1:{port}", "--allow-cpu-adapter",
-         "--max-request-cost", "3600", "--max-frame-cost", "600"],
+         "--max-request-cost", "3600", "--max-frame-cost", "600",
+         "--max-spp", str(max(args.spp, 256))],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         for _ in range(600):
@@ -146,6 +187,8 @@ def main():
               f"reference.\n")
         if args.case == "environment":
             environment_case(base, args, methods)
+        elif args.case == "emitters":
+            emitters_case(base, args, methods)
         else:
             three_lights_case(base, args, methods)
     finally:

@@ -36,7 +36,10 @@ fn write_gbuffer(in: SurfaceVaryings, front: bool, id: u32) -> GBufferOut {
     out.normal_exponent = vec4<f32>(n, k);
     out.diffuse = vec4<f32>(m.brdf.diffuse, 1.0);
     out.glossy = vec4<f32>(m.brdf.glossy, 1.0);
-    out.emissive = vec4<f32>(m.emissive, 1.0);
+    // Emitters emit from the side their vertex normals face (scene/src/emitters.rs, the
+    // reference's `surface_at`): seen from behind, a lamp quad is dark.
+    let emits = dot(in.normal, camera.position - in.world) > 0.0;
+    out.emissive = vec4<f32>(select(vec3<f32>(0.0), m.emissive, emits), 1.0);
     out.id = id;
     return out;
 }

@@ -86,7 +86,11 @@ fn surface_at(hit: RayHit, origin: vec3<f32>, dir: vec3<f32>) -> SurfaceHit {
     if params.glossy_exponent > 0.0 {
         brdf.exponent = params.glossy_exponent;
     }
-    return SurfaceHit(origin + dir * hit.t, normal, geometric, brdf, m.emissive);
+    // An emitter emits from the side its vertex normals face (glTF's front; Mitsuba's area
+    // emitters are one-sided too), as the real-time methods' emitter samples do
+    // (scene/src/emitters.rs): a bare lamp quad's back does not light the ceiling above it.
+    let emissive = select(vec3<f32>(0.0), m.emissive, dot(interpolated, dir) < 0.0);
+    return SurfaceHit(origin + dir * hit.t, normal, geometric, brdf, emissive);
 }
 
 // An orthonormal basis around unit `n` (Duff et al. 2017).

@@ -320,7 +320,9 @@ fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
             c(1., -1., 1.),
         ],
     ];
-    for f in faces {
+    // Wound to face inwards: emitters emit from the side their normals face.
+    for mut f in faces {
+        f.reverse();
         quad(&mut vertices, &mut indices, f, 0);
     }
     let scene = support::scene(vertices, indices, vec![plain_material([0.5; 3], 0.0, 1.0)]);

@@ -37,6 +37,10 @@ const state = {
   queued: { camera: null, light: null },
   lastFlush: 0,
   lastAck: 0,
+  /** The session's punctual lights as this page last sent them, and the selected one's index
+   * (`light` is that light: the one the editor and light-mode drags change). */
+  lights: [],
+  selected: 0,
   light: null,
   sessionId: null,
   /** The scene whose precomputations `watchScene` is polling, if any. */
@@ -64,9 +68,10 @@ const panel = new Panel($('panel'), (patch) => sendUpdate(patch));
 const controls = new Controls(canvas, {
   onCamera: (camera) => queueInput('camera', camera),
   onLight: (light) => {
+    state.lights[state.selected] = light;
     state.light = light;
     showLight();
-    queueInput('light', light);
+    queueInput('light', { index: state.selected, light });
   },
 });
 
@@ -112,8 +117,8 @@ function flushInput(now) {
     const value = state.queued[kind];
     if (!value) continue;
     state.queued[kind] = null;
-    // The light the page edits is the session's first (`index` keeps the others).
-    send(kind === 'light' ? { type: kind, light: value, index: 0 } : { type: kind, [kind]: value });
+    // The selected light, by its index (the others stay).
+    send(kind === 'light' ? { type: kind, light: value.light, index: value.index } : { type: kind, [kind]: value });
   }
 }
 
@@ -247,9 +252,7 @@ async function useScene(id, render) {
   }
   controls.setCamera(render.camera || scene.default_camera);
   state.lights = structuredClone(render.lights || (render.light ? [render.light] : scene.default_lights || [scene.default_light]));
-  state.light = state.lights[0];
-  controls.setLight(state.light);
-  showLight();
+  selectLight(0);
   watchScene(id);
 }
 
@@ -321,11 +324,81 @@ async function createScene(post, what) {
   }
 }
 
-// ---- light ----
+// ---- lights ----
+
+const DEGREES = Math.PI / 180;
+
+/** Makes light `index` the one the editor and drags change (none where there are no lights). */
+function selectLight(index) {
+  flushLight();
+  state.selected = Math.max(0, Math.min(index, state.lights.length - 1));
+  state.light = state.lights[state.selected] || null;
+  controls.setLight(state.light);
+  const select = $('light-select');
+  select.replaceChildren(...state.lights.map((l, i) => new Option(`${i + 1}: ${l.kind}`, String(i))));
+  select.value = String(state.selected);
+  select.disabled = state.lights.length === 0;
+  $('light-remove').disabled = state.lights.length === 0;
+  const max = state.server ? state.server.limits.max_lights : 16;
+  $('light-add').disabled = state.lights.length >= max;
+  $('light-editor').hidden = !state.light;
+  $('no-lights').hidden = Boolean(state.light);
+  showLight();
+}
+
+/** Sends a queued edit of the selected light now (before the selection or the list changes). */
+function flushLight() {
+  const queued = state.queued.light;
+  if (!queued) return;
+  state.queued.light = null;
+  send({ type: 'light', light: queued.light, index: queued.index });
+}
+
+/** Sends the whole list (lights added or removed) and selects `index`. */
+function sendLights(index) {
+  state.queued.light = null;
+  send({ type: 'lights', lights: structuredClone(state.lights) });
+  selectLight(index);
+}
+
+/** A new light: the selected one's copy, moved aside, or a point light at the scene's centre. */
+function newLight() {
+  if (state.light) {
+    const copy = structuredClone(state.light);
+    if (copy.kind !== 'directional' && state.scene) {
+      const { min, max } = state.scene.bounds;
+      copy.position = copy.position.map((v, k) => v + 0.25 * (max[k] - min[k]) * (k === 0 ? 1 : 0));
+    }
+    return copy;
+  }
+  const bounds = state.scene ? state.scene.bounds : { min: [0, 0, 0], max: [1, 1, 1] };
+  return {
+    kind: 'point', position: bounds.min.map((v, k) => (v + bounds.max[k]) / 2), direction: [0, -1, 0],
+    color: [1, 1, 1], intensity: 10, inner_cone: 0, outer_cone: 0,
+  };
+}
+
+/** Linear RGB (0…1) as the colour input's sRGB hex, and back. */
+function linearToHex(c) {
+  const srgb = (v) => (v <= 0.0031308 ? 12.92 * v : 1.055 * v ** (1 / 2.4) - 0.055);
+  return `#${c.map((v) => Math.round(255 * Math.min(1, Math.max(0, srgb(v)))).toString(16).padStart(2, '0')).join('')}`;
+}
+
+function hexToLinear(hex) {
+  const linear = (v) => (v <= 0.04045 ? v / 12.92 : ((v + 0.055) / 1.055) ** 2.4);
+  return [1, 3, 5].map((i) => linear(parseInt(hex.slice(i, i + 2), 16) / 255));
+}
 
 function showLight() {
   const light = state.light;
   if (!light) return;
+  if (document.activeElement !== $('light-kind')) $('light-kind').value = light.kind;
+  if (document.activeElement !== $('light-color')) $('light-color').value = linearToHex(light.color);
+  $('light-cone').hidden = light.kind !== 'spot';
+  if (light.kind === 'spot') {
+    if (document.activeElement !== $('light-outer-cone')) $('light-outer-cone').value = (light.outer_cone / DEGREES).toFixed(1);
+    if (document.activeElement !== $('light-inner-cone')) $('light-inner-cone').value = (light.inner_cone / DEGREES).toFixed(1);
+  }
   const sun = light.kind === 'directional';
   $('sun-controls').hidden = !sun;
   if (sun) {
@@ -346,7 +419,8 @@ function changeLight(mutate) {
   mutate(state.light);
   controls.setLight(state.light);
   showLight();
-  queueInput('light', structuredClone(state.light));
+  $('light-select').options[state.selected].text = `${state.selected + 1}: ${state.light.kind}`;
+  queueInput('light', { index: state.selected, light: structuredClone(state.light) });
 }
 
 // ---- sizing ----
@@ -531,16 +605,44 @@ $('light-intensity').addEventListener('change', () => {
   if (Number.isFinite(v) && v >= 0) changeLight((l) => { l.intensity = v; });
   else message('light intensity: enter a number ≥ 0');
 });
+$('light-select').addEventListener('change', () => selectLight(Number($('light-select').value)));
+$('light-add').addEventListener('click', () => {
+  state.lights.push(newLight());
+  sendLights(state.lights.length - 1);
+});
+$('light-remove').addEventListener('click', () => {
+  state.lights.splice(state.selected, 1);
+  sendLights(state.selected - 1);
+});
+$('light-kind').addEventListener('change', () => changeLight((l) => {
+  l.kind = $('light-kind').value;
+  if (l.kind === 'spot' && !(l.outer_cone > 0)) {
+    l.outer_cone = 30 * DEGREES;
+    l.inner_cone = 25 * DEGREES;
+  }
+  if (l.kind === 'directional' && !l.direction.some((v) => v !== 0)) l.direction = [0, -1, 0];
+}));
+$('light-color').addEventListener('input', () => changeLight((l) => { l.color = hexToLinear($('light-color').value); }));
+for (const id of ['light-outer-cone', 'light-inner-cone']) {
+  $(id).addEventListener('change', () => {
+    const outer = Number($('light-outer-cone').value);
+    const inner = Number($('light-inner-cone').value);
+    if (!(outer > 0 && outer < 90 && inner >= 0 && inner < outer)) {
+      message('spot cone: the full-inside angle must be below the cone, and the cone within 0…90°');
+      return;
+    }
+    changeLight((l) => { l.outer_cone = outer * DEGREES; l.inner_cone = inner * DEGREES; });
+  });
+}
 $('resolution-scale').addEventListener('change', onResize);
 new ResizeObserver(onResize).observe(canvas);
 $('still').addEventListener('click', async () => {
-  if (!state.params || !state.light) return;
+  if (!state.params) return;
   const button = $('still');
   button.disabled = true;
   button.textContent = 'Rendering still…';
   try {
-    const lights = [state.light, ...state.lights.slice(1)];
-    const render = { ...state.params.render, camera: controls.camera(), light: null, lights };
+    const render = { ...state.params.render, camera: controls.camera(), light: null, lights: structuredClone(state.lights) };
     const { png, report } = await renderStill(render);
     const stamp = new Date().toISOString().replace(/[:.]/g, '-');
     download(png, `lightcast-${render.scene}-${stamp}.png`, 'image/png');

@@ -623,6 +623,22 @@ async function main() {
       assert.ok(await page.locator('#environment-controls').isHidden(), 'no sky, no sky settings');
     });
 
+    await step('the light list adds a light, recolours it and removes it', async () => {
+      const before = (await pageSession(page)).params.render.lights.length;
+      const added = await changeAfter(page, () => page.click('#light-add'), 'adding a light');
+      assert.ok(added > 4, `a second sun hardly changed the street: ${added.toFixed(2)}`);
+      let lights = (await pageSession(page)).params.render.lights;
+      assert.equal(lights.length, before + 1);
+      assert.equal(await page.inputValue('#light-select'), String(before), 'the new light is selected');
+      const recoloured = await changeAfter(page, () => page.fill('#light-color', '#ff0000'), 'recolouring it');
+      assert.ok(recoloured > 4, `a red sun hardly changed the street: ${recoloured.toFixed(2)}`);
+      lights = (await pageSession(page)).params.render.lights;
+      assert.ok(lights[before].color[0] > 0.99 && lights[before].color[1] < 0.01, JSON.stringify(lights[before]));
+      const removed = await changeAfter(page, () => page.click('#light-remove'), 'removing it');
+      assert.ok(removed > 4, `removing the red sun hardly changed the street: ${removed.toFixed(2)}`);
+      assert.equal((await pageSession(page)).params.render.lights.length, before);
+    });
+
     if (process.env.LIGHTCAST_UPLOAD_SCENE) {
       await step('a scene uploaded from the page streams', async () => {
         // The new scene starts from its own camera, so the orbited view changes.

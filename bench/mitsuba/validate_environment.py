@@ -18,12 +18,17 @@ same lighting:
 - image: an equirectangular Radiance `.hdr` (a blue gradient above a dim ground and a
   0.3°-wide sun 50,000 times brighter) uploaded with the scene; Mitsuba gets the map lightcast
   keeps (written by the same example) as for the sky;
+- area: no environment and no punctual light (`lights: []`): a 1 m panel 2.5 m above the
+  box, facing down, emitting 8 per steradian from its front (lightcast's glTF emissive material
+  with KHR_materials_emissive_strength, black; Mitsuba's one-sided `area` emitter on a black
+  `rectangle`), outside the camera's view, uploaded as a second scene;
 - lights: no environment; a point light, a spot light and a sun together (Mitsuba `point`,
   `spot` with a 0.5° transition where ours blends by smoothstep over the same 0.5°, and
   `directional`); their indirect light taken out of Mitsuba's images as above.
 
 Path depth: lightcast's `bounces` B reflects B times after the visible surface; Mitsuba's
-max_depth counts segments from the camera, so B + 2.
+max_depth counts segments from the camera, so B + 2 (B + 1 for the emitter of `area`, which
+lightcast's paths find by their bounce rays only).
 
 Needs `pip install mitsuba numpy` (the `scalar_rgb` variant needs no LLVM) and the
 `environment_map` example (`cargo build -p lightcast-server --example environment_map`).
@@ -95,8 +100,19 @@ def mesh_arrays(faces):
     )
 
 
-def write_glb(path):
-    """The scene as glTF 2.0 binary: one mesh per material, metallic 0, roughness 1."""
+PANEL_CENTRE, PANEL_HALF, PANEL_RADIANCE = (0.3, 2.5, -0.1), 0.5, 8.0
+
+
+def panel():
+    """The `area` case's emitter: (name, corners facing down)."""
+    (x, y, z), h = PANEL_CENTRE, PANEL_HALF
+    return ("panel", [([(x - h, y, z - h), (x + h, y, z - h), (x + h, y, z + h), (x - h, y, z + h)],
+                       (0, -1, 0))])
+
+
+def write_glb(path, with_panel=False):
+    """The scene as glTF 2.0 binary: one mesh per material, metallic 0, roughness 1; with the
+    emissive panel (black: metallic 1 on a black base reflects nothing) if asked."""
     blob = bytearray()
     views, accessors, meshes, nodes, materials = [], [], [], [], []
 
@@ -113,22 +129,39 @@ def write_glb(path):
         accessors.append(acc)
         return len(accessors) - 1
 
-    for k, (name, albedo, faces) in enumerate(quads()):
+    parts = quads() + ([(panel()[0], None, panel()[1])] if with_panel else [])
+    for k, (name, albedo, faces) in enumerate(parts):
         p, n, i = mesh_arrays(faces)
         ap = add(p.tobytes(), 34962, 5126, "VEC3", len(p), (p.min(0).tolist(), p.max(0).tolist()))
         an = add(n.tobytes(), 34962, 5126, "VEC3", len(n))
         ai = add(i.tobytes(), 34963, 5125, "SCALAR", len(i))
-        materials.append(
-            {
-                "name": name,
-                "doubleSided": True,
-                "pbrMetallicRoughness": {
-                    "baseColorFactor": list(albedo) + [1.0],
-                    "metallicFactor": 0.0,
-                    "roughnessFactor": 1.0,
-                },
-            }
-        )
+        if albedo is None:
+            materials.append(
+                {
+                    "name": name,
+                    "pbrMetallicRoughness": {
+                        "baseColorFactor": [0.0, 0.0, 0.0, 1.0],
+                        "metallicFactor": 1.0,
+                        "roughnessFactor": 1.0,
+                    },
+                    "emissiveFactor": [1.0, 1.0, 1.0],
+                    "extensions": {
+                        "KHR_materials_emissive_strength": {"emissiveStrength": PANEL_RADIANCE}
+                    },
+                }
+            )
+        else:
+            materials.append(
+                {
+                    "name": name,
+                    "doubleSided": True,
+                    "pbrMetallicRoughness": {
+                        "baseColorFactor": list(albedo) + [1.0],
+                        "metallicFactor": 0.0,
+                        "roughnessFactor": 1.0,
+                    },
+                }
+            )
         meshes.append(
             {
                 "name": name,
@@ -151,6 +184,8 @@ def write_glb(path):
         "bufferViews": views,
         "buffers": [{"byteLength": len(blob)}],
     }
+    if with_panel:
+        doc["extensionsUsed"] = ["KHR_materials_emissive_strength"]
     js = json.dumps(doc).encode()
     js += b" " * (-len(js) % 4)
     out = struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(js) + 8 + len(blob))
@@ -521,7 +556,17 @@ def mitsuba_job(args):
         }
     depth = case["bounces"] + 2
     env = case["environment"]
-    if what == "env":
+    if what == "area":
+        # lightcast's paths find emitters by their bounce rays only, so `bounces` B counts the
+        # emitter's light after B − 1 reflections before the visible surface, where a punctual
+        # light's (next-event estimation at every vertex) comes after B: depth B + 1 here.
+        depth = case["bounces"] + 1
+        scene["panel"] = {
+            "type": "obj", "filename": os.path.join(workdir, "panel.obj"), "face_normals": True,
+            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}},
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [PANEL_RADIANCE] * 3}},
+        }
+    elif what == "env":
         if env["kind"] == "uniform":
             scene["sky"] = {
                 "type": "constant",
@@ -611,7 +656,7 @@ def main():
     ap.add_argument("--lightcast-spp", type=int, default=1024)
     ap.add_argument("--workers", type=int, default=os.cpu_count())
     ap.add_argument("--bounces", default="1,3")
-    ap.add_argument("--cases", default="uniform,sky,image,lights")
+    ap.add_argument("--cases", default="uniform,sky,image,area,lights")
     ap.add_argument(
         "--env-tool", default="target/debug/examples/environment_map",
         help="the environment_map example (cargo build -p lightcast-server --example environment_map)",
@@ -634,6 +679,7 @@ def main():
             "environment": {"kind": "image", "intensity": 1.0, "color": [1, 1, 1]},
             "lights": [sun(sun_dir, 0.0)],
         },
+        "area": {"environment": None, "lights": [], "area": True},
         "lights": {
             "environment": None,
             "lights": [
@@ -660,6 +706,8 @@ def main():
         for name, _, faces in quads():
             write_obj(os.path.join(workdir, name + ".obj"), faces)
         write_glb(os.path.join(workdir, "scene.glb"))
+        write_glb(os.path.join(workdir, "panel.glb"), with_panel=True)
+        write_obj(os.path.join(workdir, "panel.obj"), panel()[1])
         write_rgbe(os.path.join(workdir, "sky.hdr"), sky_image())
         bad = check_envmap_mapping(workdir)
         print("envmap mapping check: %d of the sampled directions disagree" % bad, flush=True)
@@ -686,7 +734,8 @@ def main():
         scene = upload_scene(
             args.server, os.path.join(workdir, "scene.glb"), [os.path.join(workdir, "sky.hdr")]
         )
-        print("scene", scene, flush=True)
+        panel_scene = upload_scene(args.server, os.path.join(workdir, "panel.glb"))
+        print("scenes", scene, panel_scene, flush=True)
         mask, ids = interior_mask()
 
         # Mitsuba jobs: each case's halves A and B (different seeds); the punctual lights' pair
@@ -698,6 +747,9 @@ def main():
                 if c["environment"]:
                     jobs.append((workdir, c, "env", half, seed))
                     keys.append((c["name"], h, "env"))
+                if c.get("area"):
+                    jobs.append((workdir, c, "area", half, seed))
+                    keys.append((c["name"], h, "area"))
                 if any(light["intensity"] > 0 for light in c["lights"]):
                     for what in ("lights_all", "lights_direct"):
                         jobs.append((workdir, c, what, half, 100 + seed))
@@ -708,7 +760,9 @@ def main():
 
         ours = {}
         for c in cases:
-            img, report, secs = render_lightcast(args.server, scene, c, args.lightcast_spp)
+            img, report, secs = render_lightcast(
+                args.server, panel_scene if c.get("area") else scene, c, args.lightcast_spp
+            )
             ours[c["name"]] = img
             print("lightcast %s: %.1f s, report %s" % (c["name"], secs, json.dumps(report)[:400]), flush=True)
         imgs = dict(zip(keys, pending.get()))
@@ -720,7 +774,7 @@ def main():
             o = ours[c["name"]]
             halves = []
             for h in "ab":
-                m = imgs.get((c["name"], h, "env"), 0.0)
+                m = imgs.get((c["name"], h, "env"), 0.0) + imgs.get((c["name"], h, "area"), 0.0)
                 if (c["name"], h, "lights_all") in imgs:
                     m = m + imgs[(c["name"], h, "lights_all")] - imgs[(c["name"], h, "lights_direct")]
                 halves.append(m)
@@ -734,6 +788,7 @@ def main():
                 r["background_mismatch_px"] = int((bg_ours != bg_model).sum())
             results[c["name"]] = r
             np.save(os.path.join(workdir, c["name"] + ".ours.npy"), o)
+            np.save(os.path.join(workdir, c["name"] + ".mitsuba.npy"), 0.5 * (halves[0] + halves[1]))
         print(json.dumps(results, indent=1))
         print_table(results, args)
         if args.json:

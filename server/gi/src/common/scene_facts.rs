@@ -13,6 +13,8 @@ pub struct SceneFacts {
     pub triangles: u64,
     /// Size of the scene's bounding box.
     pub extent: glam::Vec3,
+    /// Whether it has emissive triangles (an RSM face more where emitters light a frame).
+    pub emitters: bool,
 }
 
 impl SceneFacts {
@@ -22,6 +24,7 @@ impl SceneFacts {
             radius: scene.bounds.radius(),
             triangles: scene.triangle_count() as u64,
             extent: scene.bounds.max - scene.bounds.min,
+            emitters: crate::scene::emitters::has_emitters(scene),
         }
     }
 }

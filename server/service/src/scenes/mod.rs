@@ -98,7 +98,7 @@ pub struct SceneEntry {
     pub emitter_stand_in: Option<Light>,
     /// Summed once: checking a request's precomputation parameters against them happens per
     /// message.
-    facts: SceneFacts,
+    pub facts: SceneFacts,
     pub load_ms: f64,
     /// The SHA-256 of the token that uploaded the scene, the only one that may delete it
     /// (`None`: the server's own scenes, or auth off); the token itself is never kept.

@@ -41,6 +41,10 @@ pub struct RenderFlags {
     /// Lux (directional) or candela (spot, point).
     #[arg(long)]
     pub light_intensity: Option<f32>,
+    /// No punctual light (`render.lights: []`): the scene's emissive surfaces and an
+    /// --environment light it alone.
+    #[arg(long, conflicts_with_all = ["light_type", "light_pos", "light_dir", "light_color", "light_intensity"])]
+    pub no_lights: bool,
     /// Light from every direction (`render.environment`): `uniform`, `sky` (a daylight sky
     /// around the first directional light) or `image` (the `.hdr`/`.exr` uploaded with the
     /// scene: `scenes upload --environment-image`). Default: none.
@@ -141,6 +145,9 @@ impl RenderFlags {
         put(&mut render, "height", self.height);
         put(&mut render, "camera", camera);
         put(&mut render, "light", light);
+        if self.no_lights {
+            render.insert("lights".into(), serde_json::json!([]));
+        }
         if let Some(kind) = self.environment {
             let mut environment = serde_json::Map::new();
             put(&mut environment, "kind", Some(kind));
@@ -206,6 +213,19 @@ mod tests {
         let w = Wrapper::parse_from(["t"]);
         assert!(w.flags.params(None, None).get("environment").is_none());
         assert!(Wrapper::try_parse_from(["t", "--turbidity", "4"]).is_err());
+    }
+
+    #[test]
+    fn no_lights_asks_for_an_empty_light_list_and_excludes_light_flags() {
+        use clap::Parser;
+        let w = Wrapper::parse_from(["t", "--no-lights"]);
+        assert_eq!(w.flags.params(None, None)["lights"], serde_json::json!([]));
+        assert!(Wrapper::parse_from(["t"])
+            .flags
+            .params(None, None)
+            .get("lights")
+            .is_none());
+        assert!(Wrapper::try_parse_from(["t", "--no-lights", "--light-intensity", "2"]).is_err());
     }
 
     #[test]

@@ -249,6 +249,10 @@ pub struct RenderArgs {
     /// Spot light outer cone angle in degrees (zero outside).
     #[arg(long, allow_negative_numbers = true)]
     pub light_outer_cone: Option<f32>,
+    /// No punctual light: the scene's emissive surfaces (`--gi-param emitters`, on by default
+    /// then) and an --environment light it alone.
+    #[arg(long, conflicts_with_all = ["light_type", "light_pos", "light_dir", "light_color", "light_intensity", "light_inner_cone", "light_outer_cone"])]
+    pub no_lights: bool,
     #[command(flatten)]
     pub environment: EnvironmentArgs,
     /// `auto` (log-average luminance to middle grey) or a linear scale applied before tone mapping.
@@ -354,8 +358,9 @@ pub struct RenderReport {
     pub width: u32,
     pub height: u32,
     pub camera: Camera,
-    /// The first light (the one the `--light-*` flags change).
-    pub light: lightcast_protocol::Light,
+    /// The first light (the one the `--light-*` flags change); none with --no-lights.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub light: Option<lightcast_protocol::Light>,
     /// Every light rendered.
     pub lights: Vec<lightcast_protocol::Light>,
     /// The environment, if any.
@@ -446,9 +451,43 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         camera.fov_y_degrees = fov;
     }
 
-    // Every light of the scene; the `--light-*` flags change the first.
-    let mut lights = default_lights(scene, crate::passes::frame_uniforms::MAX_LIGHTS);
-    let light = &mut lights[0];
+    // Every light of the scene (none with --no-lights); the `--light-*` flags change the first.
+    let mut lights = if args.no_lights {
+        Vec::new()
+    } else {
+        default_lights(scene, crate::passes::frame_uniforms::MAX_LIGHTS)
+    };
+    if let Some(light) = lights.first_mut() {
+        apply_light_flags(args, scene, light);
+    }
+    let mut gi = args.gi_args.gi(args.gi);
+    if gi.get(SPP.name).is_none() {
+        gi.set(SPP.name, OFFLINE_SPP);
+    }
+    let asked = gi.get(EMITTERS.name).and_then(serde_json::Value::as_bool);
+    gi.set(
+        EMITTERS.name,
+        emitters_for(asked, emitter_stand_in(scene).as_ref(), &lights),
+    );
+    RenderSettings {
+        width: args.width,
+        height: args.height,
+        camera,
+        lights,
+        environment: args.environment.environment(),
+        exposure: args.exposure.0,
+        shadow_map_size: args.shadow_map_size,
+        capture_hdr: false,
+        debug_view: View::FINAL,
+        gi,
+        history: None,
+        still: false,
+        yuv420: false,
+    }
+}
+
+/// The `--light-*` flags on `light`, the first of the frame's.
+fn apply_light_flags(args: &RenderArgs, scene: &Scene, light: &mut lightcast_protocol::Light) {
     if let Some(kind) = args.light_type {
         let kind = LightKind::from(kind);
         if kind != light.kind && kind != LightKind::Directional && args.light_pos.is_none() {
@@ -481,30 +520,6 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
     }
     if let Some(a) = args.light_outer_cone {
         light.outer_cone = a.to_radians();
-    }
-    let mut gi = args.gi_args.gi(args.gi);
-    if gi.get(SPP.name).is_none() {
-        gi.set(SPP.name, OFFLINE_SPP);
-    }
-    let asked = gi.get(EMITTERS.name).and_then(serde_json::Value::as_bool);
-    gi.set(
-        EMITTERS.name,
-        emitters_for(asked, emitter_stand_in(scene).as_ref(), &lights),
-    );
-    RenderSettings {
-        width: args.width,
-        height: args.height,
-        camera,
-        lights,
-        environment: args.environment.environment(),
-        exposure: args.exposure.0,
-        shadow_map_size: args.shadow_map_size,
-        capture_hdr: false,
-        debug_view: View::FINAL,
-        gi,
-        history: None,
-        still: false,
-        yuv420: false,
     }
 }
 
@@ -573,7 +588,7 @@ pub fn render(args: &RenderArgs, log: &mut dyn FnMut(&str)) -> Result<RenderRepo
         width: image.width,
         height: image.height,
         camera: settings.camera,
-        light: settings.lights[0].clone(),
+        light: settings.lights.first().cloned(),
         lights: settings.lights.clone(),
         environment: settings.environment.clone(),
         exposure_scale,

@@ -563,3 +563,52 @@ fn an_environment_image_file_lights_the_render() {
         assert!(err.contains(needle), "{extra:?}: {err}");
     }
 }
+
+/// `--no-lights`: the Cornell box lit by its lamp alone (emitters on by default without the
+/// stand-in spot), far brighter than with `emitters=false` (where only the lamp itself glows);
+/// a light flag beside it is refused.
+#[test]
+fn no_lights_renders_the_lamp_alone() {
+    let common = [
+        "--no-lights",
+        "--gi",
+        "clustered",
+        "--gi-param",
+        "rsm_size=32",
+        "--exposure",
+        "1",
+    ];
+    let (lamp, stdout, _) = render_ok("no-lights.png", &[&common[..], &["--json"]].concat());
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("JSON report");
+    assert_eq!(report["lights"], serde_json::json!([]));
+    assert!(report.get("light").is_none(), "{report}");
+    assert_eq!(report["gi"]["emitters"], serde_json::json!(true));
+    let (glow, _, _) = render_ok(
+        "no-lights-no-emitters.png",
+        &[&common[..], &["--gi-param", "emitters=false"]].concat(),
+    );
+    assert!(
+        mean_level(&lamp) > mean_level(&glow) * 1.5,
+        "{} vs {}",
+        mean_level(&lamp),
+        mean_level(&glow)
+    );
+    let out = out_dir()
+        .join("no-lights-bad.png")
+        .to_string_lossy()
+        .into_owned();
+    let o = run(&[
+        "render",
+        "--no-lights",
+        "--light-intensity",
+        "3",
+        "--out",
+        &out,
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("--no-lights"),
+        "{}",
+        text(&o.stderr)
+    );
+}

@@ -475,6 +475,21 @@ async fn an_environment_image_uploaded_with_the_scene_lights_it() {
         (413, Some("texture_budget")),
         "{body}"
     );
+    // A 40,000×20,000 header over a few bytes: 12.8 GB decoded, refused from the header alone.
+    let huge = b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 20000 +X 40000\n\x02\x02".to_vec();
+    let (status, body) = upload(vec![(huge, "huge.hdr")]).await;
+    assert_eq!(
+        (status, body["error"].as_str()),
+        (413, Some("texture_budget")),
+        "{body}"
+    );
+    assert!(
+        body["message"]
+            .as_str()
+            .unwrap_or("")
+            .contains("40000×20000"),
+        "{body}"
+    );
     server.stop().await;
 }
 

@@ -40,6 +40,20 @@ fn open_plane() -> (Scene, Camera) {
     (scene, camera)
 }
 
+/// The reference over `scene` with a Lambertian of albedo [`ALBEDO`] everywhere: without the
+/// glTF material's 4 % glossy lobe, so that albedo/π × irradiance is the exact answer.
+fn lambertian_tracer(scene: &Scene) -> PathTracer {
+    let split = material::DiffuseGlossy {
+        diffuse: Vec3::splat(ALBEDO),
+        glossy: Vec3::ZERO,
+        exponent: 1.0,
+    };
+    PathTracer::with_surfaces(support::gpu(), scene, |_| {
+        vec![SurfaceGpu::new(split, [0.0; 3])]
+    })
+    .expect("tracer")
+}
+
 /// The irradiance per channel on a surface facing +Y under `env`'s map, texel by texel.
 fn horizontal_irradiance(env: &FrameEnvironment) -> Vec3 {
     let m = &env.map;
@@ -79,16 +93,7 @@ fn environments() -> Vec<(&'static str, Environment)> {
 #[test]
 fn reference_on_an_open_lambertian_plane_converges_to_albedo_times_irradiance_over_pi() {
     let (scene, camera) = open_plane();
-    // A Lambertian without the glTF material's 4 % glossy lobe, so the answer is exact.
-    let split = material::DiffuseGlossy {
-        diffuse: Vec3::splat(ALBEDO),
-        glossy: Vec3::ZERO,
-        exponent: 1.0,
-    };
-    let mut tracer = PathTracer::with_surfaces(support::gpu(), &scene, |_| {
-        vec![SurfaceGpu::new(split, [0.0; 3])]
-    })
-    .expect("tracer");
+    let mut tracer = lambertian_tracer(&scene);
     let sun = directional(Vec3::new(0.3, -0.6, 0.4), 3.0);
     for (name, env) in environments() {
         let frame_env =
@@ -258,16 +263,7 @@ fn one_bright_texel_lights_like_a_directional_light_of_its_irradiance() {
             / image.len() as f32
     };
 
-    // A Lambertian without the glTF material's 4 % glossy lobe, so the answer is exact.
-    let split = material::DiffuseGlossy {
-        diffuse: Vec3::splat(ALBEDO),
-        glossy: Vec3::ZERO,
-        exponent: 1.0,
-    };
-    let mut tracer = PathTracer::with_surfaces(support::gpu(), &scene, |_| {
-        vec![SurfaceGpu::new(split, [0.0; 3])]
-    })
-    .expect("tracer");
+    let mut tracer = lambertian_tracer(&scene);
     let frame_env = Arc::new(FrameEnvironment::new(&env, &[], Some(&image)).expect("env"));
     for _ in 0..4 {
         tracer

@@ -6,7 +6,8 @@
 #   - seed 003's evaluation (`bench --gi clustered`, issue 11) on the Cornell box (also at the
 #     paper's 800×800) and the street;
 #   - GI time and error against the light count (`bench/light-counts.sh`, issue 33): every
-#     method with 1 … 16 lights on the Cornell box and the street;
+#     method with 1 … 16 lights on the Cornell box and the street; every method lit by
+#     emissive surfaces alone against the reference (`bench/light_errors.py --case emitters`);
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080;
 #   - JPEG against H.264 (`bench/stream-codecs.sh`, issue 13): one camera path at 1280×720 and
@@ -18,7 +19,8 @@
 # KIT_DIR comes from bench/gpu-kit.sh (binaries, font, Vulkan loader .debs). Results land in
 # OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-surfels-{cornell,street}.{md,json,
 # …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png},
-# gpu-light-counts-{cornell,street}-{brsm,clustered,surfels,rsm_gather}.md, gpu-service.md,
+# gpu-light-counts-{cornell,street}-{brsm,clustered,surfels,rsm_gather}.md, gpu-emitters-errors.md,
+# gpu-service.md,
 # gpu-stream-codecs.{md,json}, environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
 # adapter (a software one included) to check this script; its numbers mean nothing.
@@ -148,6 +150,11 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
   cmd=("$(dirname "$0")/light-counts.sh" "$server" "$out" gpu "${light_flags[@]}")
   echo "command: ${cmd[*]}" >> "$out/environment.txt"
   "${cmd[@]}"
+  # Issue 33 part 4: every method lit by emissive surfaces alone against the reference.
+  if $quick; then emitter_size=(--width 64 --height 48 --spp 16); else emitter_size=(--width 1280 --height 720 --spp 1024); fi
+  cmd=(python3 "$(dirname "$0")/light_errors.py" "$server" --case emitters "${emitter_size[@]}")
+  echo "command: ${cmd[*]} > $out/gpu-emitters-errors.md" >> "$out/environment.txt"
+  "${cmd[@]}" > "$out/gpu-emitters-errors.md"
 fi
 
 if [ "$what" = service ] || [ "$what" = all ]; then

@@ -27,7 +27,8 @@ struct GatherFace {
     view_proj: mat4x4<f32>,
     // The face's light: a light's faces follow each other in the atlas.
     light: u32,
-    pad0: u32,
+    // The emitter face's samples, in its first texels (pattern.rs `emitter_texels`).
+    emitter_samples: u32,
     pad1: u32,
     pad2: u32,
 }
@@ -141,10 +142,10 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));
 }
 
-// Emitter face `face` whole: every (size²/N)-th texel, each standing for size²/N of them
+// Emitter face `face` whole: every (S/N)-th of its S samples, each standing for S/N of them
 // (pattern.rs `emitter_texels`).
 fn gather_emitters(face: u32, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
-    let texels = params.rsm_size * params.rsm_size;
+    let texels = faces[face].emitter_samples;
     let m = max(min(params.sample_count, texels), 1u);
     let weight = f32(texels) / f32(m);
     var radiance = vec3<f32>(0.0);

@@ -258,6 +258,11 @@ impl Method for RsmGather {
             .map(|(light, m)| GatherFace {
                 view_proj: m.to_cols_array_2d(),
                 light: *light,
+                emitter_samples: if *light == pattern::EMITTER_FACE {
+                    crate::passes::rsm::emitter_samples(g.rsm_size)
+                } else {
+                    0
+                },
                 ..GatherFace::default()
             })
             .collect();

@@ -26,7 +26,9 @@ pub struct GatherFace {
     pub view_proj: [[f32; 4]; 4],
     /// The face's light: a light's faces follow each other in the atlas.
     pub light: u32,
-    pub pad0: u32,
+    /// The emitter face's samples (`passes::rsm::emitter_samples`), in its first texels; 0 on
+    /// a light's face.
+    pub emitter_samples: u32,
     pub pad1: u32,
     pub pad2: u32,
 }
@@ -82,7 +84,7 @@ mod tests {
             &[
                 ("view_proj", offset_of!(GatherFace, view_proj)),
                 ("light", offset_of!(GatherFace, light)),
-                ("pad0", offset_of!(GatherFace, pad0)),
+                ("emitter_samples", offset_of!(GatherFace, emitter_samples)),
                 ("pad1", offset_of!(GatherFace, pad1)),
                 ("pad2", offset_of!(GatherFace, pad2)),
             ],

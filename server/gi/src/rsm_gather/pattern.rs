@@ -20,6 +20,7 @@
 
 use crate::gi::common::halton::halton;
 use crate::gi::common::vpl::{vpl_light, VplLight};
+use crate::passes::rsm::emitter_samples;
 use crate::scene::material::DiffuseGlossy;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec2, Vec3, Vec4Swizzles};
@@ -124,14 +125,20 @@ pub fn sample_texels(
 /// it has no projection, so a pixel gathers it whole ([`emitter_texels`]).
 pub const EMITTER_FACE: u32 = u32::MAX;
 
-/// The texels of emitter face `face` a pixel gathers with `count` samples: every
-/// (size²/count)-th, each standing for that many (all of them, each for one, when the face has
-/// no more texels than samples). The emitter samples are stratified by power along the face's
-/// rows (`scene::emitters::sample`), so an even subset of them is a stratified subset of the
-/// emitters; every pixel reads the same one, so the light they give has no noise between
-/// pixels.
-pub fn emitter_texels(count: u32, size: u32, faces: u32, face: usize) -> Vec<(usize, f32)> {
-    let texels = u64::from(size) * u64::from(size);
+/// The texels of emitter face `face`, whose first `filled` texels hold samples, that a pixel
+/// gathers with `count` samples: every (filled/count)-th, each standing for that many (all of
+/// them, each for one, when there are no more than `count`). The emitter samples are
+/// stratified by power in their order (`scene::emitters::sample`), so an even subset of them
+/// is a stratified subset of the emitters; every pixel reads the same one, so the light they
+/// give has no noise between pixels.
+pub fn emitter_texels(
+    count: u32,
+    filled: u32,
+    size: u32,
+    faces: u32,
+    face: usize,
+) -> Vec<(usize, f32)> {
+    let texels = u64::from(filled);
     let m = u64::from(count).min(texels).max(1);
     let atlas_width = (size * faces) as usize;
     (0..m)
@@ -185,7 +192,8 @@ pub fn gather(
     light_runs(faces)
         .flat_map(|(first, run)| {
             if faces[first].0 == EMITTER_FACE {
-                return emitter_texels(samples.len() as u32, rsm.size, rsm.faces, first);
+                let filled = emitter_samples(rsm.size);
+                return emitter_texels(samples.len() as u32, filled, rsm.size, rsm.faces, first);
             }
             run.iter()
                 .enumerate()

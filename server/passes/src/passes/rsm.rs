@@ -156,13 +156,26 @@ pub struct RsmPass {
     light_faces: u32,
 }
 
-/// Emissive surfaces as VALs: `size`² samples of the scene's emitters
+/// Most emitter samples an emitter face holds: 256² points stand for the emitters finer than
+/// any real-time method resolves them, and keep the face's copy buffers small (2.6 MB) at
+/// every RSM size.
+pub const MAX_EMITTER_SAMPLES: u32 = 256 * 256;
+
+/// The emitter samples a face of `size`² holds: all its texels, at most
+/// [`MAX_EMITTER_SAMPLES`]; they fill its first texels in rows, the rest stay empty.
+pub fn emitter_samples(size: u32) -> u32 {
+    (size * size).min(MAX_EMITTER_SAMPLES)
+}
+
+/// Emissive surfaces as VALs: [`emitter_samples`] samples of the scene's emitters
 /// ([`crate::scene::emitters::sample`]), in the texel layout of an RSM face, copied into the
 /// atlas's last face after the lights' faces are drawn. A texel holds a sample's position
 /// (w = 1), normal and flux with its disk area: what `shaders/rsm.wgsl` writes for a surface a
 /// light reflects from, here the light the emitter sends itself.
 pub struct EmitterFace {
     pub size: u32,
+    /// Rows of the face the samples fill (the copy's height).
+    rows: u32,
     position: wgpu::Buffer,
     normal: wgpu::Buffer,
     flux_area: wgpu::Buffer,
@@ -171,13 +184,14 @@ pub struct EmitterFace {
 impl EmitterFace {
     /// The scene's emitters as a face of `size`²; `None` when it has none.
     pub fn new(device: &wgpu::Device, scene: &Scene, size: u32) -> Option<Self> {
-        let samples = emitters::sample(scene, (size * size) as usize);
+        let samples = emitters::sample(scene, emitter_samples(size) as usize);
         if samples.is_empty() {
             return None;
         }
+        let filled_rows = (samples.len() as u32).div_ceil(size);
         let rows = |bytes_per_texel: u32, texel: &dyn Fn(&emitters::EmitterSample) -> Vec<u8>| {
             let stride = padded_bytes_per_row(size, bytes_per_texel) as usize;
-            let mut data = vec![0u8; stride * size as usize];
+            let mut data = vec![0u8; stride * filled_rows as usize];
             for (k, s) in samples.iter().enumerate() {
                 let (x, y) = (k % size as usize, k / size as usize);
                 let at = y * stride + x * bytes_per_texel as usize;
@@ -198,6 +212,7 @@ impl EmitterFace {
         let f32s = |v: [f32; 4]| bytemuck::cast_slice(&v).to_vec();
         Some(Self {
             size,
+            rows: filled_rows,
             position: buffer(
                 "rsm emitter positions",
                 rows(16, &|s| f32s(s.position.extend(1.0).to_array())),
@@ -229,7 +244,7 @@ impl EmitterFace {
                     layout: wgpu::TexelCopyBufferLayout {
                         offset: 0,
                         bytes_per_row: Some(padded_bytes_per_row(self.size, bytes_per_texel)),
-                        rows_per_image: Some(self.size),
+                        rows_per_image: Some(self.rows),
                     },
                 },
                 wgpu::TexelCopyTextureInfo {
@@ -244,7 +259,7 @@ impl EmitterFace {
                 },
                 wgpu::Extent3d {
                     width: self.size,
-                    height: self.size,
+                    height: self.rows,
                     depth_or_array_layers: 1,
                 },
             );

@@ -548,6 +548,8 @@ pub struct Renderer {
     environment: Option<(EnvironmentKey, Arc<FrameEnvironment>)>,
     /// The packed environment the direct-light pass reads.
     environment_buffer: EnvironmentBuffer,
+    /// The scene has emissive triangles (`scene::emitters::has_emitters`).
+    has_emitters: bool,
 }
 
 /// What an environment's evaluation depends on: its parameters and, for a sky, its sun.
@@ -578,6 +580,7 @@ impl Renderer {
         );
         let material_layout = MATERIAL_GROUP.layout(device);
         Self {
+            has_emitters: crate::scene::emitters::has_emitters(&scene),
             timer: FrameTimer::new(&ctx),
             gbuffer_pass: GBufferPass::new(
                 device,
@@ -858,8 +861,7 @@ impl Renderer {
         settings.validate(&self.shared.ctx)?;
         // Emissive surfaces are one RSM face more in the methods that light from them
         // (`passes::rsm::EmitterFace`), where the scene has any.
-        let buffers = &self.shared.scene_buffers;
-        if buffers.shadow_casting.len() < buffers.ranges.len()
+        if self.has_emitters
             && gi::common::params::emitters(&settings.gi)
             && gi::lights_from_emitters(settings.gi.method)
         {

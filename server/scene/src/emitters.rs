@@ -15,6 +15,8 @@
 //! carries flux π L_t A_t / (N p_t) over the disk area A_t / (N p_t), so the expected flux of
 //! each triangle is exactly its πLA.
 
+use crate::environment::luminance;
+use crate::halton::halton;
 use crate::{material::Material, Scene};
 use glam::Vec3;
 use std::f32::consts::PI;
@@ -53,7 +55,7 @@ fn emissive_triangles(scene: &Scene) -> Vec<([Vec3; 3], Vec3, f32, Vec3, f64)> {
             let vertex = |i: u32| &scene.vertices[i as usize];
             let material: &Material = &scene.materials[vertex(t[0]).material as usize];
             let radiance = Vec3::from(material.emissive);
-            let power = f64::from(luminance(radiance)) * f64::from(area);
+            let power = f64::from(luminance(radiance.to_array())) * f64::from(area);
             let shading: Vec3 = t.iter().map(|&i| Vec3::from(vertex(i).normal)).sum();
             let geometric = cross / (2.0 * area);
             let front = if shading.dot(geometric) < 0.0 {
@@ -65,23 +67,6 @@ fn emissive_triangles(scene: &Scene) -> Vec<([Vec3; 3], Vec3, f32, Vec3, f64)> {
                 .then_some((p, front, area, radiance, power))
         })
         .collect()
-}
-
-fn luminance(c: Vec3) -> f32 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
-}
-
-/// The radical inverse of `i` in `base` (the Halton sequence's coordinate): stratified
-/// numbers, so `count` samples cover the emitters evenly and the same scene gives the same
-/// samples every frame.
-fn radical_inverse(mut i: u32, base: u32) -> f32 {
-    let (mut inv, mut f) = (0.0f64, 1.0f64 / f64::from(base));
-    while i > 0 {
-        inv += f64::from(i % base) * f;
-        i /= base;
-        f /= f64::from(base);
-    }
-    inv as f32
 }
 
 /// `count` samples of the scene's emitters (see the module doc); empty without emitters.
@@ -107,8 +92,9 @@ pub fn sample(scene: &Scene, count: usize) -> Vec<EmitterSample> {
                 .min(triangles.len() - 1);
             let (p, normal, area, radiance, power) = triangles[index];
             let probability = power / total;
-            // Uniform in the triangle (square-root warp).
-            let (a, b) = (radical_inverse(k + 1, 2), radical_inverse(k + 1, 3));
+            // Uniform in the triangle (square-root warp), by Halton points: the same scene gives
+            // the same samples every frame.
+            let (a, b) = (halton(k + 1, 2), halton(k + 1, 3));
             let s = a.sqrt();
             let position = p[0] * (1.0 - s) + p[1] * (s * (1.0 - b)) + p[2] * (s * b);
             let share = (f64::from(area) / (n * probability)) as f32;

@@ -11,7 +11,6 @@
 //! texels each target texel covers, weighted by covered azimuth × covered cos θ span (their
 //! solid angle), so the map's power ∫ L dω is the image's, a small bright sun included.
 
-use crate::environment::luminance;
 use std::f64::consts::PI;
 use std::io::Cursor;
 
@@ -22,13 +21,19 @@ pub const MAX_HEIGHT: u32 = 512;
 /// Bytes decoding takes per source texel (RGBA f32, what an EXR decodes to at most).
 pub const DECODED_BYTES_PER_TEXEL: u64 = 16;
 
-/// The file types taken as environment images, by (lower-case) extension.
-pub const EXTENSIONS: &[&str] = &["hdr", "exr"];
+/// The image format of an environment image named `name`, by its extension (`.hdr`, `.exr`,
+/// any case).
+fn format_of(name: &str) -> Option<image::ImageFormat> {
+    match name.rsplit_once('.')?.1.to_ascii_lowercase().as_str() {
+        "hdr" => Some(image::ImageFormat::Hdr),
+        "exr" => Some(image::ImageFormat::OpenExr),
+        _ => None,
+    }
+}
 
 /// Whether `name` is an environment image by its extension (`.hdr`, `.exr`).
 pub fn is_environment_image(name: &str) -> bool {
-    name.rsplit_once('.')
-        .is_some_and(|(_, ext)| EXTENSIONS.contains(&ext.to_ascii_lowercase().as_str()))
+    format_of(name).is_some()
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -72,11 +77,7 @@ impl EnvironmentImage {
     /// Decodes `bytes` (format by `name`'s extension), refusing before decoding an image
     /// whose decoded texels would take more than `max_bytes`.
     pub fn decode(name: &str, bytes: &[u8], max_bytes: u64) -> Result<Self, EnvironmentImageError> {
-        let format = match name.rsplit_once('.').map(|(_, e)| e.to_ascii_lowercase()) {
-            Some(e) if e == "hdr" => image::ImageFormat::Hdr,
-            Some(e) if e == "exr" => image::ImageFormat::OpenExr,
-            _ => return Err(EnvironmentImageError::Extension),
-        };
+        let format = format_of(name).ok_or(EnvironmentImageError::Extension)?;
         let decode_error = |e: image::ImageError| EnvironmentImageError::Decode(e.to_string());
         let reader = || image::ImageReader::with_format(Cursor::new(bytes), format);
         let (width, height) = reader().into_dimensions().map_err(decode_error)?;
@@ -183,13 +184,6 @@ impl EnvironmentImage {
             .flatten()
             .fold(0.0f32, |m, &c| m.max(c))
     }
-
-    /// Largest texel luminance.
-    pub fn peak_luminance(&self) -> f32 {
-        self.radiance
-            .iter()
-            .fold(0.0f32, |m, &c| m.max(luminance(c)))
-    }
 }
 
 /// For each of `to` target cells, the source cells of `from` it covers (indices modulo
@@ -243,7 +237,7 @@ fn row_weights(from: u32, to: u32) -> Vec<Vec<(u32, f64)>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::environment::{texel_of, texel_solid_angle};
+    use crate::environment::{luminance, texel_of, texel_solid_angle};
     use glam::Vec3;
 
     /// Power ∫ L dω (luminance) of a map of rows from +Y.

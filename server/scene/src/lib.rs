@@ -10,6 +10,7 @@ pub mod emitters;
 pub mod environment;
 pub mod environment_image;
 pub mod gltf_loader;
+pub mod halton;
 pub mod material;
 pub mod procedural;
 

@@ -54,6 +54,29 @@ fn lambertian_tracer(scene: &Scene) -> PathTracer {
     .expect("tracer")
 }
 
+/// The mean indirect light of 16×16 pixels at 256 samples each under `env` alone.
+fn traced_mean(tracer: &mut PathTracer, camera: &Camera, env: &Arc<FrameEnvironment>) -> Vec3 {
+    for _ in 0..4 {
+        tracer
+            .accumulate(
+                16,
+                16,
+                camera,
+                &[],
+                Some(env),
+                &ReferenceSettings::default(),
+                64,
+            )
+            .expect("accumulate");
+    }
+    let image = tracer.read().expect("read").expect("samples");
+    image
+        .indirect
+        .iter()
+        .fold(Vec3::ZERO, |s, p| s + Vec3::from(*p))
+        / image.indirect.len() as f32
+}
+
 /// The irradiance per channel on a surface facing +Y under `env`'s map, texel by texel.
 fn horizontal_irradiance(env: &FrameEnvironment) -> Vec3 {
     let m = &env.map;
@@ -98,28 +121,7 @@ fn reference_on_an_open_lambertian_plane_converges_to_albedo_times_irradiance_ov
     for (name, env) in environments() {
         let frame_env =
             Arc::new(FrameEnvironment::new(&env, std::slice::from_ref(&sun), None).expect("env"));
-        let (w, h) = (16, 16);
-        let mut left = 256;
-        while left > 0 {
-            tracer
-                .accumulate(
-                    w,
-                    h,
-                    &camera,
-                    &[],
-                    Some(&frame_env),
-                    &ReferenceSettings::default(),
-                    64,
-                )
-                .expect("accumulate");
-            left -= 64;
-        }
-        let image = tracer.read().expect("read").expect("samples");
-        let mean = image
-            .indirect
-            .iter()
-            .fold(Vec3::ZERO, |s, p| s + Vec3::from(*p))
-            / image.indirect.len() as f32;
+        let mean = traced_mean(&mut tracer, &camera, &frame_env);
         let expected = horizontal_irradiance(&frame_env) * ALBEDO / std::f32::consts::PI;
         let rel = ((mean - expected) / expected).abs();
         eprintln!("{name}: mean {mean}, expected {expected}, relative {rel}");
@@ -265,21 +267,7 @@ fn one_bright_texel_lights_like_a_directional_light_of_its_irradiance() {
 
     let mut tracer = lambertian_tracer(&scene);
     let frame_env = Arc::new(FrameEnvironment::new(&env, &[], Some(&image)).expect("env"));
-    for _ in 0..4 {
-        tracer
-            .accumulate(
-                16,
-                16,
-                &camera,
-                &[],
-                Some(&frame_env),
-                &ReferenceSettings::default(),
-                64,
-            )
-            .expect("accumulate");
-    }
-    let traced = tracer.read().expect("read").expect("samples").indirect;
-    let exact = traced.iter().fold(Vec3::ZERO, |s, p| s + Vec3::from(*p)) / traced.len() as f32;
+    let exact = traced_mean(&mut tracer, &camera, &frame_env);
     eprintln!("one bright texel, Lambertian: reference {exact}, expected {expected}");
     // Next-event estimation finds the one texel every sample: the noise is small.
     assert!(

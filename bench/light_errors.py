@@ -59,8 +59,9 @@ def request(url, body=None, method=None):
         return resp.headers, resp.read()
 
 
-def compare(base, render, spp, what):
-    """`render` compared with the reference: "block error / bias", or why it was refused."""
+def compare(base, render, spp, what, noise=False):
+    """`render` compared with the reference: "block error / bias" (and, with `noise`, the
+    reference's own estimated per-pixel error in parentheses), or why it was refused."""
     started = time.time()
     try:
         headers, _ = request(base + "/v1/render", {
@@ -70,6 +71,8 @@ def compare(base, render, spp, what):
     c = json.loads(headers["x-lightcast-report"])["comparison"]
     cell = (f"{100 * c['indirect_block_mae_relative']:.1f} % / "
             f"{100 * c['indirect_bias_relative']:+.1f} %")
+    if noise:
+        cell += f" ({100 * c['reference_relative_error']:.0f} %)"
     print(f"{what}: {cell} [{time.time() - started:.0f} s]", file=sys.stderr)
     return cell
 
@@ -105,20 +108,9 @@ def emitters_case(base, args, methods):
     print("|---|---|---|")
     for label, scene in (("Cornell box (built-in)", "default"), ("cornell-box.glb", uploaded)):
         for method in methods:
-            started = time.time()
-            try:
-                headers, _ = request(base + "/v1/render", {
-                    "render": {"scene": scene, "width": args.width, "height": args.height,
-                               "lights": [], "gi": {"method": method}},
-                    "format": "png", "compare_to": "reference", "compare_spp": args.spp})
-            except urllib.error.HTTPError as e:
-                print(f"| {label} | `{method}` | refused: {e.read().decode()[:120]} |")
-                continue
-            c = json.loads(headers["x-lightcast-report"])["comparison"]
-            cell = (f"{100 * c['indirect_block_mae_relative']:.1f} % / "
-                    f"{100 * c['indirect_bias_relative']:+.1f} % "
-                    f"({100 * c['reference_relative_error']:.0f} %)")
-            print(f"{label} {method}: {cell} [{time.time() - started:.0f} s]", file=sys.stderr)
+            cell = compare(base, {"scene": scene, "width": args.width, "height": args.height,
+                                  "lights": [], "gi": {"method": method}},
+                           args.spp, f"{label} {method}", noise=True)
             print(f"| {label} | `{method}` | {cell} |")
 
 

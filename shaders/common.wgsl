@@ -6,8 +6,9 @@ const PI: f32 = 3.14159265358979;
 struct CameraUniform {
     view_proj: mat4x4<f32>,
     position: vec3<f32>,
-    // Phong exponent k for every material, overriding theirs; 0 keeps the materials' own.
-    glossy_exponent: f32,
+    // Roughness for every material, overriding theirs (the `glossy_exponent` parameter); 0
+    // keeps the materials' own.
+    roughness: f32,
     // Clip to world: the ray through a pixel (the environment behind the geometry).
     inv_view_proj: mat4x4<f32>,
 }

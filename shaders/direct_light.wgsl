@@ -8,16 +8,16 @@
 @group(0) @binding(0) var<storage, read> camera: CameraUniform;
 @group(0) @binding(1) var<storage, read> lights: Lights;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
-@group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
-@group(0) @binding(4) var g_diffuse: texture_2d<f32>;
-@group(0) @binding(5) var g_glossy: texture_2d<f32>;
-@group(0) @binding(6) var g_emissive: texture_2d<f32>;
-@group(0) @binding(7) var shadow_map: texture_depth_2d_array;
-@group(0) @binding(8) var shadow_sampler: sampler_comparison;
-@group(0) @binding(9) var hdr_out: texture_storage_2d<rgba16float, write>;
-@group(0) @binding(10) var indirect: texture_2d<f32>;
-@group(0) @binding(11) var<storage, read> environment: array<f32>;
-@group(0) @binding(12) var indirect_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(3) var g_normal_roughness: texture_2d<f32>;
+@group(0) @binding(4) var g_base_metallic: texture_2d<f32>;
+@group(0) @binding(5) var g_emissive_specular: texture_2d<f32>;
+@group(0) @binding(6) var shadow_map: texture_depth_2d_array;
+@group(0) @binding(7) var shadow_sampler: sampler_comparison;
+@group(0) @binding(8) var hdr_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(9) var indirect: texture_2d<f32>;
+@group(0) @binding(10) var<storage, read> environment: array<f32>;
+@group(0) @binding(11) var indirect_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(12) var<storage, read> brdf_table: array<vec4<f32>>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -45,13 +45,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let p = position.xyz;
-    let ne = textureLoad(g_normal_exponent, texel, 0);
-    let n = normalize(ne.xyz);
-    let surface = SurfaceBrdf(
-        textureLoad(g_diffuse, texel, 0).rgb,
-        textureLoad(g_glossy, texel, 0).rgb,
-        ne.w,
-    );
+    let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
+    let surface = gbuffer_brdf(texel);
     let v = normalize(camera.position - p);
     var punctual = vec3<f32>(0.0);
     var beyond = indirect_in.rgb;
@@ -69,7 +64,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    let radiance = textureLoad(g_emissive, texel, 0).rgb + punctual + beyond;
+    let radiance = textureLoad(g_emissive_specular, texel, 0).rgb + punctual + beyond;
     textureStore(hdr_out, texel, vec4<f32>(radiance, 1.0));
     textureStore(indirect_out, texel, vec4<f32>(beyond, indirect_in.a));
 }

@@ -15,17 +15,15 @@ struct ReduceParams {
 
 @group(0) @binding(0) var<storage, read> params: ReduceParams;
 @group(0) @binding(1) var g_position: texture_2d<f32>;
-@group(0) @binding(2) var g_normal_exponent: texture_2d<f32>;
-@group(0) @binding(3) var g_diffuse: texture_2d<f32>;
-@group(0) @binding(4) var g_glossy: texture_2d<f32>;
-@group(0) @binding(5) var g_emissive: texture_2d<f32>;
-@group(0) @binding(6) var g_id: texture_2d<u32>;
-@group(0) @binding(7) var out_position: texture_storage_2d<rgba32float, write>;
-@group(0) @binding(8) var out_normal_exponent: texture_storage_2d<rgba16float, write>;
-@group(0) @binding(9) var out_diffuse: texture_storage_2d<rgba8unorm, write>;
-@group(0) @binding(10) var out_glossy: texture_storage_2d<rgba8unorm, write>;
-@group(0) @binding(11) var out_emissive: texture_storage_2d<rgba16float, write>;
-@group(0) @binding(12) var out_id: texture_storage_2d<r32uint, write>;
+@group(0) @binding(2) var g_normal_roughness: texture_2d<f32>;
+@group(0) @binding(3) var g_base_metallic: texture_2d<f32>;
+@group(0) @binding(4) var g_emissive_specular: texture_2d<f32>;
+@group(0) @binding(5) var g_id: texture_2d<u32>;
+@group(0) @binding(6) var out_position: texture_storage_2d<rgba32float, write>;
+@group(0) @binding(7) var out_normal_roughness: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(8) var out_base_metallic: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(9) var out_emissive_specular: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(10) var out_id: texture_storage_2d<r32uint, write>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -51,9 +49,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let texel = vec2<i32>(id.xy);
     textureStore(out_position, texel, textureLoad(g_position, pick, 0));
-    textureStore(out_normal_exponent, texel, textureLoad(g_normal_exponent, pick, 0));
-    textureStore(out_diffuse, texel, textureLoad(g_diffuse, pick, 0));
-    textureStore(out_glossy, texel, textureLoad(g_glossy, pick, 0));
-    textureStore(out_emissive, texel, textureLoad(g_emissive, pick, 0));
+    textureStore(out_normal_roughness, texel, textureLoad(g_normal_roughness, pick, 0));
+    textureStore(out_base_metallic, texel, textureLoad(g_base_metallic, pick, 0));
+    textureStore(out_emissive_specular, texel, textureLoad(g_emissive_specular, pick, 0));
     textureStore(out_id, texel, textureLoad(g_id, pick, 0));
 }

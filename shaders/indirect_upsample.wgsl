@@ -17,15 +17,13 @@ struct UpsampleParams {
 @group(0) @binding(0) var<storage, read> camera: CameraUniform;
 @group(0) @binding(1) var<storage, read> params: UpsampleParams;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
-@group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
-@group(0) @binding(4) var g_diffuse: texture_2d<f32>;
-@group(0) @binding(5) var g_glossy: texture_2d<f32>;
-@group(0) @binding(6) var r_position: texture_2d<f32>;
-@group(0) @binding(7) var r_normal_exponent: texture_2d<f32>;
-@group(0) @binding(8) var r_diffuse: texture_2d<f32>;
-@group(0) @binding(9) var r_glossy: texture_2d<f32>;
-@group(0) @binding(10) var r_indirect: texture_2d<f32>;
-@group(0) @binding(11) var indirect_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(3) var g_normal_roughness: texture_2d<f32>;
+@group(0) @binding(4) var g_base_metallic: texture_2d<f32>;
+@group(0) @binding(5) var r_position: texture_2d<f32>;
+@group(0) @binding(6) var r_normal_roughness: texture_2d<f32>;
+@group(0) @binding(7) var r_base_metallic: texture_2d<f32>;
+@group(0) @binding(8) var r_indirect: texture_2d<f32>;
+@group(0) @binding(9) var indirect_out: texture_storage_2d<rgba16float, write>;
 
 // Reflectance floor of the demodulation: any positive value is exact on a uniform material;
 // the floor only keeps black texels from dividing by zero.
@@ -45,8 +43,9 @@ struct Pixel {
     tolerance: f32,
 }
 
-fn reflectance(diffuse: vec3<f32>, glossy: vec3<f32>) -> vec3<f32> {
-    return max(diffuse + glossy, vec3<f32>(MIN_REFLECTANCE));
+// The base colour carries a material's texture detail, in its diffuse and metallic light alike.
+fn reflectance(base: vec3<f32>) -> vec3<f32> {
+    return max(base, vec3<f32>(MIN_REFLECTANCE));
 }
 
 // How well reduced sample `q` stands for the pixel's surface: x in [0, 1] for the blend,
@@ -57,7 +56,7 @@ fn match_weight(p: Pixel, q: vec2<i32>) -> vec2<f32> {
     if s.w == 0.0 {
         return vec2<f32>(0.0);
     }
-    let n = normalize(textureLoad(r_normal_exponent, q, 0).xyz);
+    let n = normalize(textureLoad(r_normal_roughness, q, 0).xyz);
     let plane = dot(p.n, s.xyz - p.x) / p.tolerance;
     let facing = max(dot(p.n, n), 0.0);
     return vec2<f32>(
@@ -68,7 +67,7 @@ fn match_weight(p: Pixel, q: vec2<i32>) -> vec2<f32> {
 
 // The sample's indirect radiance per unit reflectance.
 fn demodulated(q: vec2<i32>) -> vec3<f32> {
-    let m = reflectance(textureLoad(r_diffuse, q, 0).rgb, textureLoad(r_glossy, q, 0).rgb);
+    let m = reflectance(textureLoad(r_base_metallic, q, 0).rgb);
     return textureLoad(r_indirect, q, 0).rgb / m;
 }
 
@@ -86,7 +85,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let p = Pixel(
         position.xyz,
-        normalize(textureLoad(g_normal_exponent, texel, 0).xyz),
+        normalize(textureLoad(g_normal_roughness, texel, 0).xyz),
         PLANE_FOOTPRINTS * params.footprint * max(distance(camera.position, position.xyz), 1e-6),
     );
     let last = vec2<i32>(textureDimensions(r_indirect)) - vec2<i32>(1);
@@ -126,6 +125,6 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    let m = reflectance(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb);
+    let m = reflectance(textureLoad(g_base_metallic, texel, 0).rgb);
     textureStore(indirect_out, texel, vec4<f32>(radiance * m, 1.0));
 }

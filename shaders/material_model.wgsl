@@ -1,5 +1,5 @@
 // The material model every pass shades with: a material's factors times its base-colour
-// texel, cut by its alpha mask and split into the paper's BRDF. The rasterising passes sample
+// texel, cut by its alpha mask, as the BRDF's parameters (brdf.wgsl). The rasterising passes sample
 // the texel with a sampler (materials.wgsl); the reference path tracer filters it by hand
 // (reference/surfaces.wgsl), so both share this function and cannot drift apart.
 
@@ -11,8 +11,9 @@ struct MaterialGpu {
     roughness: f32,
     // Alpha below this is discarded; 0 for opaque materials (glTF BLEND is loaded as opaque).
     alpha_cutoff: f32,
+    // Dielectric specular weight (KHR_materials_specular's specularFactor).
+    specular: f32,
     pad0: f32,
-    pad1: f32,
 }
 
 struct MaterialSample {
@@ -27,7 +28,7 @@ struct MaterialSample {
 fn shade_material(m: MaterialGpu, texel: vec4<f32>) -> MaterialSample {
     let base = m.base_color * texel;
     return MaterialSample(
-        split_material(base.rgb, m.metallic, m.roughness),
+        surface_brdf(base.rgb, m.metallic, m.roughness, m.specular),
         m.emissive,
         base.a >= m.alpha_cutoff,
     );

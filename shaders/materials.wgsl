@@ -5,6 +5,8 @@
 @group(1) @binding(0) var base_color_texture: texture_2d<f32>;
 @group(1) @binding(1) var base_color_sampler: sampler;
 @group(1) @binding(2) var<storage, read> materials: array<MaterialGpu>;
+// `scene::brdf::BrdfTable`, for brdf_eval.wgsl (the RSM evaluates the BRDF).
+@group(1) @binding(3) var<storage, read> brdf_table: array<vec4<f32>>;
 
 fn sample_material(index: u32, uv: vec2<f32>) -> MaterialSample {
     // Untextured materials are bound to a 1×1 white texture, so sampling stays uniform.

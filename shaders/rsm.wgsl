@@ -57,15 +57,18 @@ fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> RsmOut {
         // cross-section is A_disk·cosθ (so the texel receives I·Ω with Ω = texel_area·cos³θ).
         cross_section = area * z / max(length(to_texel), 1e-20);
     }
-    // The texel receives E⊥ times its beam's cross-section and reflects the diffuse part of
-    // that (the VAL emits diffusely, eq. 3).
+    // The texel receives E⊥ times its beam's cross-section and sends on what its diffuse lobe
+    // reflects of that, in whatever direction (the VAL emits diffusely, eq. 3): the diffuse
+    // lobe's albedo for light arriving at the texel's cosine. What its specular lobe reflects
+    // is not sent on (the paper's VALs are diffuse).
     let incident = light_incident(light, in.world);
-    let facing = select(0.0, 1.0, dot(n, incident.to_light) > 0.0);
+    let cos_l = dot(n, incident.to_light);
+    let facing = select(0.0, 1.0, cos_l > 0.0);
     var out: RsmOut;
     out.position = vec4<f32>(in.world, 1.0);
     out.normal = vec4<f32>(n, 0.0);
     out.flux_area = vec4<f32>(
-        m.brdf.diffuse * incident.irradiance * cross_section * facing,
+        diffuse_albedo(m.brdf, cos_l) * incident.irradiance * cross_section * facing,
         area,
     );
     return out;

@@ -5,7 +5,7 @@ several punctual lights (`render.lights`) against Mitsuba 3.
 A ground plane (20×20 m, y = 0, open below) and a 1 m box standing on it are rendered by
 lightcast's `reference` (raw_indirect: the light leaving each pixel's surface but the punctual
 lights' direct light) and by Mitsuba 3 (`scalar_rgb`, `path` integrator) with the same
-camera, the same BRDF (a Python BSDF implementing shaders/brdf.wgsl at roughness 1) and the
+camera, the same BRDF (lightcast_bsdf.py's Python BSDF at metallic 0, roughness 1) and the
 same lighting:
 
 - uniform: Mitsuba `constant` emitter; lightcast with a zero-intensity directional light
@@ -52,6 +52,8 @@ import urllib.error
 import urllib.request
 
 import numpy as np
+
+from lightcast_bsdf import register_bsdf
 
 # ---------------------------------------------------------------------------------------------
 # The scene
@@ -110,9 +112,42 @@ def panel():
                        (0, -1, 0))])
 
 
+def gltf_material(name, base, metallic=0.0, roughness=1.0):
+    """A two-sided glTF metallic-roughness material."""
+    return {
+        "name": name,
+        "doubleSided": True,
+        "pbrMetallicRoughness": {
+            "baseColorFactor": list(base) + [1.0],
+            "metallicFactor": metallic,
+            "roughnessFactor": roughness,
+        },
+    }
+
+
 def write_glb(path, with_panel=False):
     """The scene as glTF 2.0 binary: one mesh per material, metallic 0, roughness 1; with the
     emissive panel (black: metallic 1 on a black base reflects nothing) if asked."""
+    parts = [(name, gltf_material(name, albedo), faces) for name, albedo, faces in quads()]
+    if not with_panel:
+        write_glb_parts(path, parts)
+        return
+    name, faces = panel()
+    emissive = {
+        "name": name,
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [0.0, 0.0, 0.0, 1.0],
+            "metallicFactor": 1.0,
+            "roughnessFactor": 1.0,
+        },
+        "emissiveFactor": [1.0, 1.0, 1.0],
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": PANEL_RADIANCE}},
+    }
+    write_glb_parts(path, parts + [(name, emissive, faces)], ["KHR_materials_emissive_strength"])
+
+
+def write_glb_parts(path, parts, extensions_used=()):
+    """glTF 2.0 binary of (name, glTF material, faces) parts: one mesh and node each."""
     blob = bytearray()
     views, accessors, meshes, nodes, materials = [], [], [], [], []
 
@@ -129,39 +164,12 @@ def write_glb(path, with_panel=False):
         accessors.append(acc)
         return len(accessors) - 1
 
-    parts = quads() + ([(panel()[0], None, panel()[1])] if with_panel else [])
-    for k, (name, albedo, faces) in enumerate(parts):
+    for k, (name, material, faces) in enumerate(parts):
         p, n, i = mesh_arrays(faces)
         ap = add(p.tobytes(), 34962, 5126, "VEC3", len(p), (p.min(0).tolist(), p.max(0).tolist()))
         an = add(n.tobytes(), 34962, 5126, "VEC3", len(n))
         ai = add(i.tobytes(), 34963, 5125, "SCALAR", len(i))
-        if albedo is None:
-            materials.append(
-                {
-                    "name": name,
-                    "pbrMetallicRoughness": {
-                        "baseColorFactor": [0.0, 0.0, 0.0, 1.0],
-                        "metallicFactor": 1.0,
-                        "roughnessFactor": 1.0,
-                    },
-                    "emissiveFactor": [1.0, 1.0, 1.0],
-                    "extensions": {
-                        "KHR_materials_emissive_strength": {"emissiveStrength": PANEL_RADIANCE}
-                    },
-                }
-            )
-        else:
-            materials.append(
-                {
-                    "name": name,
-                    "doubleSided": True,
-                    "pbrMetallicRoughness": {
-                        "baseColorFactor": list(albedo) + [1.0],
-                        "metallicFactor": 0.0,
-                        "roughnessFactor": 1.0,
-                    },
-                }
-            )
+        materials.append(material)
         meshes.append(
             {
                 "name": name,
@@ -184,8 +192,8 @@ def write_glb(path, with_panel=False):
         "bufferViews": views,
         "buffers": [{"byteLength": len(blob)}],
     }
-    if with_panel:
-        doc["extensionsUsed"] = ["KHR_materials_emissive_strength"]
+    if extensions_used:
+        doc["extensionsUsed"] = list(extensions_used)
     js = json.dumps(doc).encode()
     js += b" " * (-len(js) % 4)
     out = struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(js) + 8 + len(blob))
@@ -433,96 +441,20 @@ def mitsuba_grid(env, width=1024, height=513):
     return np.stack([rows @ env[..., k] @ cols.T for k in range(3)], -1).astype(np.float32)
 
 
-def register_bsdf(mi):
-    F0, K = 0.04, 1.0  # shaders/brdf.wgsl split_material at metallic 0, roughness 1
-
-    def lum(c):
-        return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
-
-    class LightcastBSDF(mi.BSDF):
-        """f = base/π + 0.04 (k+2)/(2π) max(0, reflect(−wi, n)·wo)^k, k = 1, two-sided; sampled
-        like shaders/reference/path_trace.wgsl (cosine or Phong lobe by albedo luminance)."""
-
-        def __init__(self, props):
-            mi.BSDF.__init__(self, props)
-            self.base = (props["r"], props["g"], props["b"])
-            self.p_diffuse = lum(self.base) / (lum(self.base) + F0)
-            flags = (
-                mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.GlossyReflection
-                | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide
-            )
-            self.m_components = [flags]
-            self.m_flags = flags
-
-        def _local(self, si, wo):
-            wi = (float(si.wi[0]), float(si.wi[1]), float(si.wi[2]))
-            o = (float(wo[0]), float(wo[1]), float(wo[2]))
-            if wi[2] < 0:  # two-sided: the side facing the ray is the front
-                wi = (wi[0], wi[1], -wi[2])
-                o = (o[0], o[1], -o[2])
-            return wi, o
-
-        def _f_pdf(self, wi, o):
-            if wi[2] <= 0 or o[2] <= 0:
-                return (0.0, 0.0, 0.0), 0.0
-            cos_m = max(-wi[0] * o[0] - wi[1] * o[1] + wi[2] * o[2], 0.0)
-            glossy = F0 * (K + 2) / (2 * math.pi) * cos_m**K
-            f = tuple(b / math.pi + glossy for b in self.base)
-            pdf = self.p_diffuse * o[2] / math.pi + (1 - self.p_diffuse) * (K + 1) / (
-                2 * math.pi
-            ) * cos_m**K
-            return f, pdf
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            bs = mi.BSDFSample3f()
-            wi = (float(si.wi[0]), float(si.wi[1]), float(si.wi[2]))
-            flip = wi[2] < 0
-            if flip:
-                wi = (wi[0], wi[1], -wi[2])
-            u1, u2 = float(sample2[0]), float(sample2[1])
-            phi = 2 * math.pi * u1
-            if float(sample1) < self.p_diffuse:
-                r = math.sqrt(u2)
-                o = (r * math.cos(phi), r * math.sin(phi), math.sqrt(max(1 - u2, 0.0)))
-                kind = mi.BSDFFlags.DiffuseReflection
-            else:
-                ca = u2 ** (1 / (K + 1))
-                sa = math.sqrt(max(1 - ca * ca, 0.0))
-                m = mi.Frame3f(mi.Vector3f(-wi[0], -wi[1], wi[2]))
-                v = m.to_world(mi.Vector3f(sa * math.cos(phi), sa * math.sin(phi), ca))
-                o = (float(v[0]), float(v[1]), float(v[2]))
-                kind = mi.BSDFFlags.GlossyReflection
-            f, pdf = self._f_pdf(wi, o)
-            if pdf <= 0:
-                return bs, mi.Color3f(0.0)
-            bs.wo = mi.Vector3f(o[0], o[1], -o[2] if flip else o[2])
-            bs.pdf = pdf
-            bs.eta = 1.0
-            bs.sampled_type = int(kind)
-            bs.sampled_component = 0
-            c = o[2] / pdf
-            return bs, mi.Color3f(f[0] * c, f[1] * c, f[2] * c)
-
-        def eval(self, ctx, si, wo, active=True):
-            wi, o = self._local(si, wo)
-            f, _ = self._f_pdf(wi, o)
-            c = max(o[2], 0.0)
-            return mi.Color3f(f[0] * c, f[1] * c, f[2] * c)
-
-        def pdf(self, ctx, si, wo, active=True):
-            wi, o = self._local(si, wo)
-            return self._f_pdf(wi, o)[1]
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            wi, o = self._local(si, wo)
-            f, pdf = self._f_pdf(wi, o)
-            c = max(o[2], 0.0)
-            return mi.Color3f(f[0] * c, f[1] * c, f[2] * c), pdf
-
-        def to_string(self):
-            return "LightcastBSDF[base=%r]" % (self.base,)
-
-    mi.register_bsdf("lightcast", lambda props: LightcastBSDF(props))
+def mitsuba_camera(mi, spp, seed):
+    """lightcast's camera (CAMERA, WIDTH × HEIGHT) as a Mitsuba sensor, box-filtered pixels."""
+    return {
+        "type": "perspective", "fov": CAMERA["fov_y_degrees"], "fov_axis": "y",
+        "near_clip": 0.01, "far_clip": 1000.0,
+        "to_world": mi.ScalarTransform4f().look_at(
+            origin=CAMERA["position"], target=CAMERA["target"], up=[0, 1, 0]
+        ),
+        "film": {
+            "type": "hdrfilm", "width": WIDTH, "height": HEIGHT,
+            "rfilter": {"type": "box"}, "pixel_format": "rgb",
+        },
+        "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
+    }
 
 
 def mitsuba_job(args):
@@ -534,25 +466,12 @@ def mitsuba_job(args):
     mi.set_variant("scalar_rgb")
     dr.set_thread_count(1)
     register_bsdf(mi)
-    scene = {
-        "type": "scene",
-        "camera": {
-            "type": "perspective", "fov": CAMERA["fov_y_degrees"], "fov_axis": "y",
-            "near_clip": 0.01, "far_clip": 1000.0,
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=CAMERA["position"], target=CAMERA["target"], up=[0, 1, 0]
-            ),
-            "film": {
-                "type": "hdrfilm", "width": WIDTH, "height": HEIGHT,
-                "rfilter": {"type": "box"}, "pixel_format": "rgb",
-            },
-            "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
-        },
-    }
+    scene = {"type": "scene", "camera": mitsuba_camera(mi, spp, seed)}
     for name, albedo, _ in quads():
         scene[name] = {
             "type": "obj", "filename": os.path.join(workdir, name + ".obj"), "face_normals": True,
-            "bsdf": {"type": "lightcast", "r": albedo[0], "g": albedo[1], "b": albedo[2]},
+            "bsdf": {"type": "lightcast", "r": albedo[0], "g": albedo[1], "b": albedo[2],
+                     "metallic": 0.0, "roughness": 1.0},
         }
     depth = case["bounces"] + 2
     env = case["environment"]

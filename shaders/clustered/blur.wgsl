@@ -5,7 +5,7 @@
 
 @group(0) @binding(0) var<storage, read> params: ClusteredParams;
 @group(0) @binding(1) var g_position: texture_2d<f32>;
-@group(0) @binding(2) var g_normal_exponent: texture_2d<f32>;
+@group(0) @binding(2) var g_normal_roughness: texture_2d<f32>;
 @group(0) @binding(3) var interleaved: texture_2d<f32>;
 @group(0) @binding(4) var indirect_out: texture_storage_2d<rgba16float, write>;
 
@@ -20,7 +20,7 @@ fn blur(@builtin(global_invocation_id) id: vec3<u32>) {
         textureStore(indirect_out, texel, vec4<f32>(0.0));
         return;
     }
-    let n = normalize(textureLoad(g_normal_exponent, texel, 0).xyz);
+    let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
     let b = i32(params.interleave);
     let first = texel - vec2<i32>(b / 2);
     let size = vec2<i32>(i32(params.width), i32(params.height));
@@ -33,7 +33,7 @@ fn blur(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             let pq = textureLoad(g_position, q, 0);
-            let nq = normalize(textureLoad(g_normal_exponent, q, 0).xyz);
+            let nq = normalize(textureLoad(g_normal_roughness, q, 0).xyz);
             let apart = pq.w == 0.0 || distance(pq.xyz, position.xyz) > params.blur_distance || dot(nq, n) < params.blur_normal;
             if apart && any(q != texel) {
                 continue;

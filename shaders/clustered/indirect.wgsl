@@ -11,30 +11,31 @@
 @group(0) @binding(0) var<storage, read> params: ClusteredParams;
 @group(0) @binding(1) var<storage, read> camera: CameraUniform;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
-@group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
-@group(0) @binding(4) var g_diffuse: texture_2d<f32>;
-@group(0) @binding(5) var g_glossy: texture_2d<f32>;
+@group(0) @binding(3) var g_normal_roughness: texture_2d<f32>;
+@group(0) @binding(4) var g_base_metallic: texture_2d<f32>;
+@group(0) @binding(5) var g_emissive_specular: texture_2d<f32>;
 @group(0) @binding(6) var<storage, read> vpls: array<Vpl>;
 @group(0) @binding(7) var interleaved_out: texture_storage_2d<rgba32float, write>;
+// Bindings 8–12 are visibility.wgsl's.
+@group(0) @binding(13) var<storage, read> brdf_table: array<vec4<f32>>;
 
 // L_i(x, ω_o) of §4 (vpl_light.wgsl).
 fn vpl_radiance(vpl: Vpl, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
     return vpl_light(vpl.position, vpl.normal, vpl.flux, vpl.area, x, n, v, s);
 }
 
-// The surface pixel `id` sees: its point, unit normal and Phong exponent; `covered` false
-// where no geometry is (the pixel's output is then cleared).
+// The surface pixel `id` sees: its point and unit normal; `covered` false where no geometry
+// is (the pixel's output is then cleared).
 struct Receiver {
     x: vec3<f32>,
     n: vec3<f32>,
-    exponent: f32,
     covered: bool,
 }
 
 fn receiver(texel: vec2<i32>) -> Receiver {
     let position = textureLoad(g_position, texel, 0);
-    let ne = textureLoad(g_normal_exponent, texel, 0);
-    return Receiver(position.xyz, normalize(ne.xyz), ne.w, position.w != 0.0);
+    let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
+    return Receiver(position.xyz, n, position.w != 0.0);
 }
 
 @compute @workgroup_size(8, 8)
@@ -49,7 +50,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let v = normalize(camera.position - r.x);
-    let s = SurfaceBrdf(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb, r.exponent);
+    let s = gbuffer_brdf(texel);
     let b = params.interleave;
     let classes = b * b;
     let own_class = (id.y % b) * b + id.x % b;

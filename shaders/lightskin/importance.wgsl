@@ -20,7 +20,7 @@ struct ImportanceParams {
 
 @group(0) @binding(0) var<storage, read> params: ImportanceParams;
 @group(0) @binding(1) var g_position: texture_2d<f32>;
-@group(0) @binding(2) var g_normal_exponent: texture_2d<f32>;
+@group(0) @binding(2) var g_normal_roughness: texture_2d<f32>;
 @group(0) @binding(3) var<storage, read_write> samples: array<ViewSample>;
 @group(0) @binding(4) var rsm_position: texture_2d<f32>;
 @group(0) @binding(5) var rsm_normal: texture_2d<f32>;
@@ -38,7 +38,7 @@ fn gather_view_samples(@builtin(global_invocation_id) id: vec3<u32>) {
     let h = vec2<f32>(halton(i + 1u, 2u), halton(i + 1u, 3u));
     let pixel = min(vec2<u32>(h * vec2<f32>(size)), size - vec2<u32>(1u));
     let p = textureLoad(g_position, pixel, 0);
-    let n = textureLoad(g_normal_exponent, pixel, 0).xyz;
+    let n = textureLoad(g_normal_roughness, pixel, 0).xyz;
     samples[i] = ViewSample(p.xyz, p.w, n, 0.0);
 }
 

@@ -2,7 +2,9 @@
 // interpolated with the weights of eq. 8 (eq. 9) and applied with the surface's BRDF. With
 // triangle ids in the G-buffer the results for the triangle's three vertices are blended by
 // the pixel's barycentric coordinates (smooth across triangles); without, the provoking
-// vertex serves the whole triangle.
+// vertex serves the whole triangle. The surface reflects with the paper's lobes (eq. 3–4)
+// fitted to its BRDF as seen from the camera (brdf_eval.wgsl `phong_lobes`): the specular
+// lobe as a Phong lobe is this method's approximation of it. Mirrors `cpu::shade`.
 
 // Mirrored by `IndirectParams` in server/passes/src/passes/indirect_light.rs.
 struct IndirectParams {
@@ -17,9 +19,9 @@ struct IndirectParams {
 @group(0) @binding(0) var<storage, read> camera: CameraUniform;
 @group(0) @binding(1) var<storage, read> params: IndirectParams;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
-@group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
-@group(0) @binding(4) var g_diffuse: texture_2d<f32>;
-@group(0) @binding(5) var g_glossy: texture_2d<f32>;
+@group(0) @binding(3) var g_normal_roughness: texture_2d<f32>;
+@group(0) @binding(4) var g_base_metallic: texture_2d<f32>;
+@group(0) @binding(5) var g_emissive_specular: texture_2d<f32>;
 @group(0) @binding(6) var g_id: texture_2d<u32>;
 @group(0) @binding(7) var<storage, read> caches: array<LightCache>;
 @group(0) @binding(8) var<storage, read> lighting: array<CacheLighting>;
@@ -29,6 +31,7 @@ struct IndirectParams {
 // The scene's triangle list and vertex positions (9 floats per vertex, position first).
 @group(0) @binding(11) var<storage, read> indices: array<u32>;
 @group(0) @binding(12) var<storage, read> vertices: array<f32>;
+@group(0) @binding(13) var<storage, read> brdf_table: array<vec4<f32>>;
 
 const NEIGHBOURS: u32 = 16u;
 const NO_CACHE: u32 = 0xffffffffu;
@@ -38,9 +41,7 @@ struct Surface {
     x: vec3<f32>,
     n: vec3<f32>,
     v: vec3<f32>,
-    diffuse: vec3<f32>,
-    glossy: vec3<f32>,
-    k: f32,
+    lobes: PhongLobes,
 }
 
 // Indirect radiance at the surface from the 16 caches of `vertex` (eq. 8–9).
@@ -109,16 +110,17 @@ fn shade_from_vertex(s: Surface, vertex: u32) -> vec3<f32> {
         let d2 = max(dot(to_light, to_light), MIN_DIST2_PER_AREA * area_d / sum_d);
         let w = direction(to_light);
         if d2 > 0.0 {
-            radiance += s.diffuse / PI * (flux_d / sum_d) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
+            radiance += s.lobes.diffuse / PI * (flux_d / sum_d) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
         }
     }
     if lit_g > 0.0 {
         let to_light = pos_g / lit_g - s.x;
         let d2 = max(dot(to_light, to_light), MIN_DIST2_PER_AREA * area_g / sum_g);
         let w = direction(to_light);
-        let lobe = (s.k + 2.0) / (2.0 * PI) * pow(max(dot(mirror(s.n, w), s.v), 0.0), s.k);
+        let k = s.lobes.exponent;
+        let lobe = (k + 2.0) / (2.0 * PI) * pow(max(dot(mirror(s.n, w), s.v), 0.0), k);
         if d2 > 0.0 {
-            radiance += s.glossy * lobe * (flux_g / sum_g) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
+            radiance += s.lobes.glossy * lobe * (flux_g / sum_g) / (4.0 * PI * d2) * max(dot(s.n, w), 0.0);
         }
     }
     return radiance;
@@ -141,15 +143,9 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         textureStore(indirect_out, texel, vec4<f32>(0.0));
         return;
     }
-    let ne = textureLoad(g_normal_exponent, texel, 0);
-    let s = Surface(
-        position.xyz,
-        normalize(ne.xyz),
-        normalize(camera.position - position.xyz),
-        textureLoad(g_diffuse, texel, 0).rgb,
-        textureLoad(g_glossy, texel, 0).rgb,
-        ne.w,
-    );
+    let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
+    let v = normalize(camera.position - position.xyz);
+    let s = Surface(position.xyz, n, v, phong_lobes(gbuffer_brdf(texel), max(dot(n, v), 0.0)));
     let g = textureLoad(g_id, texel, 0).x;
     var radiance = vec3<f32>(0.0);
     if params.triangle_ids == 0u {

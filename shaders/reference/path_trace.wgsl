@@ -1,6 +1,6 @@
 // The reference: progressive path tracing of the indirect light leaving each pixel's surface
-// point towards the camera, with the same materials (BRDF of eq. 3–4 split from the textured
-// base colour, alpha masks; surfaces.wgsl), punctual lights and emitters as the other methods
+// point towards the camera, with the same materials (the BRDF of brdf_eval.wgsl with the
+// textured base colour, alpha masks; surfaces.wgsl), punctual lights and emitters as the other methods
 // but exact visibility (BVH rays instead of shadow maps or caches).
 //
 // A path starts at the surface the pixel centre sees (the point the G-buffer rasterises) and
@@ -30,8 +30,8 @@ struct TraceParams {
     seed: u32,
     // Offset of continuation rays along the geometric normal, in scene units.
     ray_epsilon: f32,
-    // Phong exponent k for every material; 0 keeps each material's own.
-    glossy_exponent: f32,
+    // Roughness for every material (the `glossy_exponent` override); 0 keeps their own.
+    roughness: f32,
     // 1: add the emission of the surfaces a path reaches (emissive surfaces as area lights).
     emitters: u32,
     // First row of this dispatch's band of the image (a sample is traced in bands of rows).
@@ -83,8 +83,8 @@ fn surface_at(hit: RayHit, origin: vec3<f32>, dir: vec3<f32>) -> SurfaceHit {
     normal = select(geometric, normal / len, len > 1e-12);
     let m = material_at(hit.triangle, hit.uv);
     var brdf = m.brdf;
-    if params.glossy_exponent > 0.0 {
-        brdf.exponent = params.glossy_exponent;
+    if params.roughness > 0.0 {
+        brdf.roughness = params.roughness;
     }
     // An emitter emits from the side its vertex normals face (glTF's front; Mitsuba's area
     // emitters are one-sided too), as the real-time methods' emitter samples do
@@ -109,20 +109,25 @@ fn luminance(c: vec3<f32>) -> f32 {
     return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
 }
 
-// Probability of sampling the diffuse lobe: proportional to its albedo's luminance.
-fn diffuse_probability(s: SurfaceBrdf) -> f32 {
-    let d = luminance(s.diffuse);
-    let total = d + luminance(s.glossy);
+// Probability of sampling the diffuse lobe rather than the specular one: in proportion to
+// their albedos' luminance seen from `wo`.
+fn diffuse_probability(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>) -> f32 {
+    let lobes = phong_lobes(s, max(dot(n, wo), 0.0));
+    let d = luminance(lobes.diffuse);
+    let total = d + luminance(lobes.glossy);
     return select(0.0, d / total, total > 0.0);
 }
 
-// Density (per solid angle) of `sample_brdf` choosing `wi`: cosine-weighted diffuse mixed with
-// the Phong lobe cos^k α about the mirror direction, (k+1)/2π cos^k α.
+// Density (per solid angle) of `sample_brdf` choosing `wi`: cosine-weighted for the diffuse
+// lobe, and for the specular one a half vector drawn with density D(h)·(n·h) and mirrored,
+// D(h)·(n·h)/(4·|wo·h|) per solid angle of wi (Walter et al. 2007, eq. 14 and 38).
 fn brdf_pdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
-    let p_d = diffuse_probability(s);
-    let cos_mirror = max(dot(reflect(-wo, n), wi), 0.0);
-    let glossy = (s.exponent + 1.0) / (2.0 * PI) * pow(cos_mirror, s.exponent);
-    return p_d * max(dot(n, wi), 0.0) / PI + (1.0 - p_d) * glossy;
+    let p_d = diffuse_probability(s, n, wo);
+    let h = normalize(wo + wi);
+    let alpha = s.roughness * s.roughness;
+    let nh = dot(n, h);
+    let specular = ggx_d(nh, alpha * alpha) * max(nh, 0.0) / (4.0 * max(abs(dot(wo, h)), 1e-8));
+    return p_d * max(dot(n, wi), 0.0) / PI + (1.0 - p_d) * specular;
 }
 
 fn sample_brdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, state: ptr<function, u32>) -> vec3<f32> {
@@ -130,13 +135,16 @@ fn sample_brdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, state: ptr<function,
     let u1 = rand(state);
     let u2 = rand(state);
     let phi = 2.0 * PI * u1;
-    if u0 < diffuse_probability(s) {
+    if u0 < diffuse_probability(s, n, wo) {
         let r = sqrt(u2);
         return basis(n) * vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(1.0 - u2, 0.0)));
     }
-    let cos_a = pow(u2, 1.0 / (s.exponent + 1.0));
-    let sin_a = sqrt(max(1.0 - cos_a * cos_a, 0.0));
-    return basis(reflect(-wo, n)) * vec3<f32>(sin_a * cos(phi), sin_a * sin(phi), cos_a);
+    // GGX's D(h)·(n·h) inverted: cos²θ_h = (1 − u)/(1 + (α² − 1)·u).
+    let alpha = s.roughness * s.roughness;
+    let cos_h = sqrt((1.0 - u2) / (1.0 + (alpha * alpha - 1.0) * u2));
+    let sin_h = sqrt(max(1.0 - cos_h * cos_h, 0.0));
+    let h = basis(n) * vec3<f32>(sin_h * cos(phi), sin_h * sin(phi), cos_h);
+    return reflect(-wo, h);
 }
 
 // Most emissive surfaces a shadow ray passes through before it counts as blocked.

@@ -12,13 +12,7 @@ struct SurfaceGpu {
     texture_offset: u32,
     texture_width: u32,
     texture_height: u32,
-    // Non-zero: the `fixed_*` BRDF below replaces the textured split (for test BRDFs that
-    // metallic/roughness cannot express, e.g. a Lambertian without the 4 % glossy lobe).
-    fixed_brdf: u32,
-    fixed_diffuse: vec3<f32>,
-    fixed_exponent: f32,
-    fixed_glossy: vec3<f32>,
-    pad0: f32,
+    pad0: u32,
 }
 
 // Nine floats per vertex (`scene::Vertex`): position, normal, uv, material bits.
@@ -28,6 +22,8 @@ struct SurfaceGpu {
 // Every texture's texels, rows top to bottom: RGBA8 in sRGB, red in the low byte (packed by
 // `gi::reference::PackedTextures`).
 @group(1) @binding(5) var<storage, read> texels: array<u32>;
+// `scene::brdf::BrdfTable`, for brdf_eval.wgsl.
+@group(1) @binding(6) var<storage, read> brdf_table: array<vec4<f32>>;
 
 fn vertex_position(i: u32) -> vec3<f32> {
     return vec3<f32>(vertices[9u * i], vertices[9u * i + 1u], vertices[9u * i + 2u]);
@@ -77,10 +73,6 @@ fn sample_texture(s: SurfaceGpu, uv: vec2<f32>) -> vec4<f32> {
 // The material of `triangle` at barycentric coordinates `b` (of its second and third vertex).
 fn material_at(triangle: u32, b: vec2<f32>) -> MaterialSample {
     let s = triangle_surface(triangle);
-    if s.fixed_brdf != 0u {
-        let brdf = SurfaceBrdf(s.fixed_diffuse, s.fixed_glossy, s.fixed_exponent);
-        return MaterialSample(brdf, s.material.emissive, true);
-    }
     let i0 = indices[3u * triangle];
     let i1 = indices[3u * triangle + 1u];
     let i2 = indices[3u * triangle + 2u];

@@ -45,9 +45,9 @@ struct GatherSample {
 @group(0) @binding(0) var<storage, read> params: GatherParams;
 @group(0) @binding(1) var<storage, read> camera: CameraUniform;
 @group(0) @binding(2) var g_position: texture_2d<f32>;
-@group(0) @binding(3) var g_normal_exponent: texture_2d<f32>;
-@group(0) @binding(4) var g_diffuse: texture_2d<f32>;
-@group(0) @binding(5) var g_glossy: texture_2d<f32>;
+@group(0) @binding(3) var g_normal_roughness: texture_2d<f32>;
+@group(0) @binding(4) var g_base_metallic: texture_2d<f32>;
+@group(0) @binding(5) var g_emissive_specular: texture_2d<f32>;
 @group(0) @binding(6) var rsm_position: texture_2d<f32>;
 @group(0) @binding(7) var rsm_normal: texture_2d<f32>;
 @group(0) @binding(8) var rsm_flux_area: texture_2d<f32>;
@@ -58,6 +58,7 @@ struct GatherSample {
 // has a surface.
 @group(0) @binding(11) var<storage, read_write> probe: vec4<f32>;
 @group(0) @binding(12) var indirect_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(13) var<storage, read> brdf_table: array<vec4<f32>>;
 
 // Where `x` projects in face `f`: texel coordinates (clamped to the face) and whether it lies
 // inside the face's frustum (pattern.rs `project`).
@@ -101,10 +102,9 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let x = position.xyz;
-    let ne = textureLoad(g_normal_exponent, texel, 0);
-    let n = normalize(ne.xyz);
+    let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
     let v = normalize(camera.position - x);
-    let s = SurfaceBrdf(textureLoad(g_diffuse, texel, 0).rgb, textureLoad(g_glossy, texel, 0).rgb, ne.w);
+    let s = gbuffer_brdf(texel);
     var radiance = vec3<f32>(0.0);
     // Each light's faces in turn (pattern.rs `light_runs`): every light is gathered from.
     var first = 0u;

@@ -4,7 +4,7 @@
 // surface, before any lobe. Mirrors `cpu::radiance_along`.
 
 @group(0) @binding(0) var g_position: texture_2d<f32>;
-@group(0) @binding(1) var g_normal_exponent: texture_2d<f32>;
+@group(0) @binding(1) var g_normal_roughness: texture_2d<f32>;
 @group(0) @binding(2) var<storage, read> grid: GridUniform;
 @group(0) @binding(3) var<storage, read> cache_usable: array<u32>;
 @group(0) @binding(4) var<storage, read> cache_light: array<vec4<f32>>;
@@ -22,7 +22,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let position = textureLoad(g_position, texel, 0);
     var radiance = vec3<f32>(0.0);
     if position.w != 0.0 {
-        let n = normalize(textureLoad(g_normal_exponent, texel, 0).xyz);
+        let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
         let caches = interpolate_caches(position.xyz, position.xyz, n);
         if caches.total > 0.0 {
             let y = sh_eval(n);

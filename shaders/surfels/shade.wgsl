@@ -2,18 +2,20 @@
 // pixel's surface point interpolated trilinearly, then the diffuse lobe (ρ_d/π)·max(ω·n, 0)
 // and the normalised Phong lobe about the mirror direction r projected by zonal rotation
 // (eq. 8). The paper's lobe (k+1)/(2π)·cosᵏ is scaled by (k+2)/(k+1)·max(n·r, 0) so it is the
-// lobe our direct light uses, (k+2)/(2π)·cosᵏ·cos θ_i, with cos θ_i taken at r.
-// Mirrors `cpu::shade`.
+// normalised lobe (k+2)/(2π)·cosᵏ·cos θ_i, with cos θ_i taken at r. ρ_d, the lobe's colour and
+// k are the paper's lobes fitted to the pixel's BRDF (brdf_eval.wgsl `phong_lobes`): the
+// specular lobe as a Phong lobe is this method's approximation of it. Mirrors `cpu::shade`.
 
 @group(0) @binding(0) var<storage, read> camera: CameraUniform;
 @group(0) @binding(1) var g_position: texture_2d<f32>;
-@group(0) @binding(2) var g_normal_exponent: texture_2d<f32>;
-@group(0) @binding(3) var g_diffuse: texture_2d<f32>;
-@group(0) @binding(4) var g_glossy: texture_2d<f32>;
+@group(0) @binding(2) var g_normal_roughness: texture_2d<f32>;
+@group(0) @binding(3) var g_base_metallic: texture_2d<f32>;
+@group(0) @binding(4) var g_emissive_specular: texture_2d<f32>;
 @group(0) @binding(5) var<storage, read> grid: GridUniform;
 @group(0) @binding(6) var<storage, read> cache_usable: array<u32>;
 @group(0) @binding(7) var<storage, read> cache_light: array<vec4<f32>>;
 @group(0) @binding(8) var indirect_out: texture_storage_2d<rgba16float, write>;
+@group(0) @binding(9) var<storage, read> brdf_table: array<vec4<f32>>;
 
 @compute @workgroup_size(8, 8)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -27,16 +29,14 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         textureStore(indirect_out, texel, vec4<f32>(0.0));
         return;
     }
-    let ne = textureLoad(g_normal_exponent, texel, 0);
-    let n = normalize(ne.xyz);
-    let k = ne.w;
+    let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
     let v = normalize(camera.position - position.xyz);
+    let lobes = phong_lobes(gbuffer_brdf(texel), max(dot(n, v), 0.0));
+    let k = lobes.exponent;
     let r = reflect(-v, n);
     let caches = interpolate_caches(position.xyz, position.xyz, n);
     var radiance = vec3<f32>(0.0);
     if caches.total > 0.0 {
-        let diffuse = textureLoad(g_diffuse, texel, 0).rgb;
-        let glossy = textureLoad(g_glossy, texel, 0).rgb;
         let e = irradiance_from(caches, n);
         let yr = sh_eval(r);
         let s = zonal_phong(k);
@@ -46,7 +46,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         lobe /= caches.total;
         let scale = (k + 2.0) / (k + 1.0) * max(dot(n, r), 0.0);
-        radiance = diffuse / PI * e + glossy * max(lobe * scale, vec3<f32>(0.0));
+        radiance = lobes.diffuse / PI * e + lobes.glossy * max(lobe * scale, vec3<f32>(0.0));
     }
     textureStore(indirect_out, texel, vec4<f32>(radiance, 1.0));
 }

@@ -364,8 +364,15 @@ function sendLights(index) {
 /** A new light: the selected one's copy, moved aside, or a point light at the scene's centre. */
 function newLight() {
   if (state.light) {
+    // A copy moved aside, so the new light shows as a light of its own: a quarter of the scene
+    // along x, or a sun turned 60° about the vertical.
     const copy = structuredClone(state.light);
-    if (copy.kind !== 'directional' && state.scene) {
+    if (copy.kind === 'directional') {
+      const [x, y, z] = copy.direction;
+      const c = Math.cos(60 * DEGREES);
+      const s = Math.sin(60 * DEGREES);
+      copy.direction = [c * x + s * z, y, c * z - s * x];
+    } else if (state.scene) {
       const { min, max } = state.scene.bounds;
       copy.position = copy.position.map((v, k) => v + 0.25 * (max[k] - min[k]) * (k === 0 ? 1 : 0));
     }

@@ -300,7 +300,7 @@ impl Bench<'_> {
         let settings = ReferenceSettings {
             bounces,
             seed: 0,
-            glossy_exponent: crate::gi::common::params::glossy_exponent(gi),
+            roughness: crate::gi::common::params::roughness_override(gi),
             emitters,
         };
         // Small calls keep each submission short (lavapipe drops long ones) and show progress.

@@ -3,7 +3,7 @@
 //!
 //! No async runtime is involved; the offline `render` command and tests drive it directly.
 
-use crate::gi::common::params::{glossy_exponent, indirect_downscale};
+use crate::gi::common::params::{indirect_downscale, roughness_override};
 use crate::gi::{
     self, DebugCapture, DebugData, FrameInputs, GiError, Method, ProgressBuffer, ProgressSums,
     SceneResources,
@@ -897,7 +897,7 @@ impl Renderer {
             &settings.camera,
             width as f32 / height as f32,
             bounds,
-            glossy_exponent(&settings.gi),
+            roughness_override(&settings.gi),
         );
         let lights_uniform = LightsUniform::with_punctual(
             &lights,
@@ -921,6 +921,7 @@ impl Renderer {
                 shadow: shadow_map,
                 indirect: &sized.indirect,
                 environment: &self.environment_buffer.buffer,
+                brdf_table: &self.shared.scene_buffers.brdf_table,
                 hdr: &sized.hdr,
                 indirect_out: &sized.indirect_out,
             },

@@ -5,6 +5,7 @@
 //! [`Scene::new`], which validates indices, computes bounds and sorts triangles so that each
 //! material is one contiguous index range (one draw call per material).
 
+pub mod brdf;
 pub mod default_light;
 pub mod emitters;
 pub mod environment;

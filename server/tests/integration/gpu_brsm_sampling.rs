@@ -118,7 +118,7 @@ fn check_rsm_flux(scene: &Scene, light: &Light, rb: &SamplingReadback, size: u32
         } else {
             e * texel_area
         };
-        let expected = m.diffuse_glossy().diffuse * received * facing;
+        let expected = m.brdf().diffuse_albedo(n.dot(l)) * received * facing;
         let got = Vec3::new(fa[0], fa[1], fa[2]);
         let err = (got - expected).abs().max_element() / expected.max_element().max(1e-12);
         if expected.max_element() > 0.0 {

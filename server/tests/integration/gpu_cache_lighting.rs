@@ -359,13 +359,15 @@ fn check_interpolation(triangle_ids: bool) {
             if area.dot(d) > 0.0 {
                 n = -n;
             }
-            let split = scene.materials[v[0].material as usize].diffuse_glossy();
+            // The paper's lobes the pixel shades with, from its BRDF as the G-buffer holds it.
+            let brdf = gbuffer_brdf(&scene.materials[v[0].material as usize].brdf());
+            let lobes = brdf.lobes(n.dot((eye - p).normalize()).max(0.0));
             let surface = RefSurface {
                 position: p,
                 normal: n,
-                diffuse: split.diffuse,
-                glossy: split.glossy,
-                exponent: split.exponent,
+                diffuse: lobes.diffuse,
+                glossy: lobes.glossy,
+                exponent: lobes.exponent,
             };
             // A vertex's 16 caches, with the GPU's proxy lights.
             let shade_vertex = |vertex: usize| {

@@ -12,7 +12,7 @@ use lightcast_server::gi::GiParams;
 use lightcast_server::passes::environment::FrameEnvironment;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::environment::texel_solid_angle;
-use lightcast_server::scene::{material, Scene};
+use lightcast_server::scene::{brdf::Brdf, Scene};
 use std::sync::Arc;
 
 const ALBEDO: f32 = 0.6;
@@ -41,15 +41,11 @@ fn open_plane() -> (Scene, Camera) {
 }
 
 /// The reference over `scene` with a Lambertian of albedo [`ALBEDO`] everywhere: without the
-/// glTF material's 4 % glossy lobe, so that albedo/π × irradiance is the exact answer.
+/// glTF material's specular lobe, so that albedo/π × irradiance is the exact answer.
 fn lambertian_tracer(scene: &Scene) -> PathTracer {
-    let split = material::DiffuseGlossy {
-        diffuse: Vec3::splat(ALBEDO),
-        glossy: Vec3::ZERO,
-        exponent: 1.0,
-    };
+    let lambertian = Brdf::lambertian(Vec3::splat(ALBEDO));
     PathTracer::with_surfaces(support::gpu(), scene, |_| {
-        vec![SurfaceGpu::new(split, [0.0; 3])]
+        vec![SurfaceGpu::new(&lambertian, [0.0; 3])]
     })
     .expect("tracer")
 }

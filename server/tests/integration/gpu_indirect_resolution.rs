@@ -53,8 +53,9 @@ fn region(x: u32, y: u32) -> Region {
     }
 }
 
-/// The full-resolution texel at (x, y), with its reflectance as the 8-bit targets store it.
-fn texel(x: u32, y: u32) -> (Texel, [u8; 4], [u8; 4]) {
+/// The full-resolution texel at (x, y), with its base colour and metallic as the G-buffer
+/// stores them (half floats).
+fn texel(x: u32, y: u32) -> (Texel, [f32; 4]) {
     let (sx, sy) = ((x as f32 - 30.0) * 0.1, (y as f32 - 18.0) * -0.1);
     let (position, normal) = match region(x, y) {
         Region::Near => (Vec3::new(sx, sy, 0.0), Vec3::Z),
@@ -63,23 +64,21 @@ fn texel(x: u32, y: u32) -> (Texel, [u8; 4], [u8; 4]) {
         Region::Background => (Vec3::ZERO, Vec3::Z),
     };
     // A checker finer than the reduced grid: only demodulation keeps it.
-    let diffuse = if (x + y).is_multiple_of(2) {
-        [200, 120, 30, 255]
+    let base = if (x + y).is_multiple_of(2) {
+        [0.78, 0.47, 0.12]
     } else {
-        [40, 90, 160, 255]
-    };
-    let glossy = [10, 10, 10, 255];
-    let unorm = |c: [u8; 4]| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) / 255.0;
+        [0.16, 0.35, 0.63]
+    }
+    .map(|c| half::f16::from_f32(c).to_f32());
     let covered = region(x, y) != Region::Background;
     (
         Texel {
             position,
             covered,
             normal,
-            reflectance: unorm(diffuse) + unorm(glossy),
+            reflectance: Vec3::from(base),
         },
-        diffuse,
-        glossy,
+        [base[0], base[1], base[2], 0.0],
     )
 }
 
@@ -126,19 +125,14 @@ fn read_reduced(ctx: &GpuContext, r: &ReducedTargets) -> Vec<Texel> {
     let (w, h) = (r.width, r.height);
     let positions: Vec<[f32; 4]> =
         bytemuck::pod_collect_to_vec(&read(ctx, &r.gbuffer.position.texture, w, h, 16));
-    let normals = rgba16(&read(ctx, &r.gbuffer.normal_exponent.texture, w, h, 8));
-    let diffuse = read(ctx, &r.gbuffer.diffuse.texture, w, h, 4);
-    let glossy = read(ctx, &r.gbuffer.glossy.texture, w, h, 4);
+    let normals = rgba16(&read(ctx, &r.gbuffer.normal_roughness.texture, w, h, 8));
+    let base = rgba16(&read(ctx, &r.gbuffer.base_metallic.texture, w, h, 8));
     (0..(w * h) as usize)
-        .map(|i| {
-            let c = |b: &[u8], k: usize| b[4 * i + k] as f32 / 255.0;
-            Texel {
-                position: Vec3::new(positions[i][0], positions[i][1], positions[i][2]),
-                covered: positions[i][3] != 0.0,
-                normal: Vec3::new(normals[i][0], normals[i][1], normals[i][2]),
-                reflectance: Vec3::new(c(&diffuse, 0), c(&diffuse, 1), c(&diffuse, 2))
-                    + Vec3::new(c(&glossy, 0), c(&glossy, 1), c(&glossy, 2)),
-            }
+        .map(|i| Texel {
+            position: Vec3::new(positions[i][0], positions[i][1], positions[i][2]),
+            covered: positions[i][3] != 0.0,
+            normal: Vec3::new(normals[i][0], normals[i][1], normals[i][2]),
+            reflectance: Vec3::new(base[i][0], base[i][1], base[i][2]),
         })
         .collect()
 }
@@ -162,7 +156,7 @@ fn run(ctx: &GpuContext, factor: u32, ratio: impl Fn(&Texel) -> Vec3) -> Run {
         H,
         wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
     );
-    let pixels: Vec<(Texel, [u8; 4], [u8; 4])> = (0..H)
+    let pixels: Vec<(Texel, [f32; 4])> = (0..H)
         .flat_map(|y| (0..W).map(move |x| texel(x, y)))
         .collect();
     let full: Vec<Texel> = pixels.iter().map(|p| p.0).collect();
@@ -183,16 +177,14 @@ fn run(ctx: &GpuContext, factor: u32, ratio: impl Fn(&Texel) -> Vec3) -> Run {
     );
     let normals = f16s(
         full.iter()
-            .flat_map(|t| [t.normal.x, t.normal.y, t.normal.z, 8.0]),
+            .flat_map(|t| [t.normal.x, t.normal.y, t.normal.z, 0.5]),
     );
-    upload(ctx, &gbuffer.normal_exponent, W, H, &normals, 8);
-    let diffuse: Vec<u8> = pixels.iter().flat_map(|p| p.1).collect();
-    upload(ctx, &gbuffer.diffuse, W, H, &diffuse, 4);
-    let glossy: Vec<u8> = pixels.iter().flat_map(|p| p.2).collect();
-    upload(ctx, &gbuffer.glossy, W, H, &glossy, 4);
+    upload(ctx, &gbuffer.normal_roughness, W, H, &normals, 8);
+    let base = f16s(pixels.iter().flat_map(|p| p.1));
+    upload(ctx, &gbuffer.base_metallic, W, H, &base, 8);
     upload(
         ctx,
-        &gbuffer.emissive,
+        &gbuffer.emissive_specular,
         W,
         H,
         &f16s(vec![0.0; (W * H * 4) as usize]),
@@ -368,7 +360,7 @@ fn upsample_keeps_light_on_its_own_side_of_edges_and_keeps_texture_detail() {
     let mut checked = 0;
     for y in 0..H {
         for x in 0..W {
-            let (t, _, _) = texel(x, y);
+            let (t, _) = texel(x, y);
             let got = at(&r.result, x, y);
             let want = level(&t) * t.reflectance;
             assert!(

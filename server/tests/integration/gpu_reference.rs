@@ -11,7 +11,7 @@ use lightcast_server::gi::common::shaders;
 use lightcast_server::gi::reference::{PathTracer, ReferenceImage, ReferenceSettings, SurfaceGpu};
 use lightcast_server::gpu::{readback::map_read, GpuContext};
 use lightcast_server::passes::tonemap::luminance;
-use lightcast_server::scene::{material, Material, Scene, Texture, Vertex};
+use lightcast_server::scene::{brdf::Brdf, Material, Scene, Texture, Vertex};
 use wgpu::util::DeviceExt;
 
 /// Renders `spp` samples per pixel in calls of at most 64.
@@ -276,10 +276,9 @@ fn one_bounce_between_two_plates_matches_numerical_integration() {
     assert!(image.relative_standard_error > 0.0 && image.relative_standard_error < 0.2);
 }
 
-/// A closed cube whose every face emits `emitted` and reflects `albedo` diffusely, and
-/// nothing else: the radiance after k bounces is emitted·(albedo + … + albedo^k).
-#[test]
-fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
+/// A closed cube (2 m) whose faces face inwards: emitters emit from the side their normals
+/// face. The camera inside looks at a corner.
+fn closed_box() -> (Scene, Camera) {
     let (mut vertices, mut indices) = (Vec::new(), Vec::new());
     let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
     let faces = [
@@ -326,22 +325,23 @@ fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
         quad(&mut vertices, &mut indices, f, 0);
     }
     let scene = support::scene(vertices, indices, vec![plain_material([0.5; 3], 0.0, 1.0)]);
-    let (albedo, emitted) = (0.6f32, 0.25f32);
-    let lambertian = SurfaceGpu::new(
-        material::DiffuseGlossy {
-            diffuse: Vec3::splat(albedo),
-            glossy: Vec3::ZERO,
-            exponent: 1.0,
-        },
-        [emitted; 3],
-    );
-    let mut tracer =
-        PathTracer::with_surfaces(support::gpu(), &scene, |_| vec![lambertian]).expect("tracer");
     let camera = Camera {
         position: [0.1, 0.2, 0.3],
         target: [0.6, -0.4, 0.2],
         fov_y_degrees: 70.0,
     };
+    (scene, camera)
+}
+
+/// A closed cube whose every face emits `emitted` and reflects `albedo` diffusely, and
+/// nothing else: the radiance after k bounces is emitted·(albedo + … + albedo^k).
+#[test]
+fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
+    let (scene, camera) = closed_box();
+    let (albedo, emitted) = (0.6f32, 0.25f32);
+    let lambertian = SurfaceGpu::new(&Brdf::lambertian(Vec3::splat(albedo)), [emitted; 3]);
+    let mut tracer =
+        PathTracer::with_surfaces(support::gpu(), &scene, |_| vec![lambertian]).expect("tracer");
     let dark = point_light(Vec3::new(0.0, 0.5, 0.0), 0.0);
     for bounces in [1, 2, 4] {
         let settings = ReferenceSettings {
@@ -390,6 +390,51 @@ fn a_closed_emitting_box_converges_to_the_geometric_series_of_its_albedo() {
                 .fold(0.0, f32::max)
         );
     }
+}
+
+/// The white furnace: the same closed box with glTF's white dielectric (base colour 1,
+/// metallic 0) reflects all it receives at any roughness, so after k bounces the radiance is
+/// k·emitted; a white metal loses what single-scattering GGX loses and stays below.
+#[test]
+fn a_white_closed_box_reflects_all_it_receives() {
+    let (scene, camera) = closed_box();
+    let emitted = 0.25f32;
+    let bounces = 3;
+    let dark = point_light(Vec3::new(0.0, 0.5, 0.0), 0.0);
+    let settings = ReferenceSettings {
+        bounces,
+        ..ReferenceSettings::default()
+    };
+    let mean_of = |brdf: Brdf| {
+        let surface = SurfaceGpu::new(&brdf, [emitted; 3]);
+        let mut tracer =
+            PathTracer::with_surfaces(support::gpu(), &scene, |_| vec![surface]).expect("tracer");
+        let image = converge(
+            &mut tracer,
+            (16, 12),
+            &camera,
+            std::slice::from_ref(&dark),
+            &settings,
+            128,
+        );
+        let values: Vec<f32> = image.indirect.iter().map(|px| luminance(*px)).collect();
+        values.iter().sum::<f32>() / values.len() as f32
+    };
+    let expected = emitted * bounces as f32;
+    for roughness in [0.3, 0.6, 1.0] {
+        let got = mean_of(Brdf::new(Vec3::ONE, 0.0, roughness, 1.0));
+        // Monte Carlo noise of 16×12×128 paths and the albedo table's interpolation (0.07 %
+        // or less on lavapipe).
+        assert!(
+            (got - expected).abs() <= 2e-3 * expected,
+            "white dielectric, roughness {roughness}: {got} vs {expected}"
+        );
+    }
+    let metal = mean_of(Brdf::new(Vec3::ONE, 1.0, 0.6, 1.0));
+    assert!(
+        metal < 0.97 * expected && metal > 0.5 * expected,
+        "white metal: {metal} vs {expected}"
+    );
 }
 
 #[test]

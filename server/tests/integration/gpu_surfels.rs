@@ -317,6 +317,7 @@ fn shading_matches_the_cpu_at_the_pixels() {
     let light = vec3s(&cache_light(&renderer, None).coefficients);
     compare_pixels(&scene, &s, indirect, |surface| {
         let to_viewer = (Vec3::from(s.camera.position) - surface.position).normalize();
+        let lobes = surface.brdf.lobes(surface.normal.dot(to_viewer).max(0.0));
         cpu::shade(
             &set,
             &light,
@@ -324,9 +325,9 @@ fn shading_matches_the_cpu_at_the_pixels() {
                 position: surface.position,
                 normal: surface.normal,
                 to_viewer,
-                diffuse: surface.brdf.diffuse,
-                glossy: surface.brdf.glossy,
-                exponent: surface.brdf.exponent,
+                diffuse: lobes.diffuse,
+                glossy: lobes.glossy,
+                exponent: lobes.exponent,
             },
         )
     });

@@ -5,6 +5,7 @@
 mod caches;
 mod frame_memory;
 mod fuzz;
+mod gpu_brdf;
 mod gpu_brsm_sampling;
 mod gpu_cache_lighting;
 mod gpu_clustered;

@@ -11,7 +11,7 @@
 
 use crate::gi::common::halton::halton;
 use crate::gi::common::vpl::{vpl_light, VplLight};
-use crate::scene::material::DiffuseGlossy;
+use crate::scene::brdf::Brdf;
 use glam::{Vec2, Vec3};
 
 /// An RSM atlas as read back: per texel RGBA position (w = 1 where a surface is), normal and
@@ -283,7 +283,7 @@ pub struct RefSurface {
     pub position: Vec3,
     /// Unit normal.
     pub normal: Vec3,
-    pub brdf: DiffuseGlossy,
+    pub brdf: Brdf,
 }
 
 /// §4's sum Σ L_i(x, ω_o) over `vpls` without visibility: f_r·Φ_i·cosθ_i·cosθ_x over
@@ -508,11 +508,7 @@ mod tests {
         let s = RefSurface {
             position: Vec3::ZERO,
             normal: Vec3::Y,
-            brdf: DiffuseGlossy {
-                diffuse: Vec3::splat(0.5),
-                glossy: Vec3::ZERO,
-                exponent: 1.0,
-            },
+            brdf: Brdf::lambertian(Vec3::splat(0.5)),
         };
         let light = vpl(Vec3::new(0.0, 2.0, 0.0), -Vec3::Y);
         let got = shade(&s, Vec3::new(1.0, 1.0, 0.0), [&light]);
@@ -544,11 +540,7 @@ mod tests {
         let s = RefSurface {
             position: Vec3::ZERO,
             normal: Vec3::Y,
-            brdf: DiffuseGlossy {
-                diffuse: Vec3::splat(0.8),
-                glossy: Vec3::splat(0.04),
-                exponent: 20.0,
-            },
+            brdf: Brdf::new(Vec3::splat(0.8), 0.0, 0.4, 1.0),
         };
         let viewer = Vec3::new(0.5, 3.0, 1.0);
         let b = 3;

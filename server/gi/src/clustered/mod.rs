@@ -606,9 +606,9 @@ impl Method for Clustered {
             params: &self.params,
             camera: &r.camera,
             g_position: &gb.position,
-            g_normal_exponent: &gb.normal_exponent,
-            g_diffuse: &gb.diffuse,
-            g_glossy: &gb.glossy,
+            g_normal_roughness: &gb.normal_roughness,
+            g_base_metallic: &gb.base_metallic,
+            g_emissive_specular: &gb.emissive_specular,
             vpls: &buffers.vpls,
             interleaved_out: interleaved,
             centres,
@@ -616,12 +616,13 @@ impl Method for Clustered {
             depth_atlas: &visibility.depth.view,
             basis: &visibility.basis_view,
             basis_sampler: &visibility.sampler,
+            brdf_table: &r.scene_buffers.brdf_table,
         };
         let indirect_group = indirect_resources.bind(device, &self.indirect.layout);
         let blur_group = BlurResources {
             params: &self.params,
             g_position: &gb.position,
-            g_normal_exponent: &gb.normal_exponent,
+            g_normal_roughness: &gb.normal_roughness,
             interleaved,
             indirect_out: frame.indirect,
         }

@@ -251,9 +251,9 @@ bind_group! {
         params: bind::PARAMS,
         camera: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
-        g_diffuse: bind::TEXTURE,
-        g_glossy: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
+        g_base_metallic: bind::TEXTURE,
+        g_emissive_specular: bind::TEXTURE,
         vpls: bind::STORAGE,
         interleaved_out: bind::storage_texture(INTERLEAVED_FORMAT),
         centres: bind::STORAGE,
@@ -261,6 +261,7 @@ bind_group! {
         depth_atlas: DEPTH,
         basis: FILTERABLE,
         basis_sampler: BindKind::Sampler(wgpu::SamplerBindingType::Filtering),
+        brdf_table: bind::STORAGE,
     }
 }
 
@@ -269,7 +270,7 @@ bind_group! {
     pub struct BlurResources as BLUR_GROUP("geometry blur", wgpu::ShaderStages::COMPUTE) {
         params: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
         interleaved: bind::TEXTURE,
         indirect_out: bind::storage_texture(INDIRECT_FORMAT),
     }

@@ -18,6 +18,8 @@ pub const CLUSTERED_INDIRECT: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("gbuffer_surface.wgsl"),
         wgsl!("vpl_light.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/paraboloid.wgsl"),

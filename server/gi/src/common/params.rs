@@ -22,12 +22,13 @@ pub const RSM_SIZE: Param = Param::integer(
 /// Largest Phong exponent accepted (a mirror-like lobe; beyond it the lobe is a single texel).
 pub const MAX_GLOSSY_EXPONENT: f32 = 10_000.0;
 
-/// Every frame's: the materials' Phong exponent, in direct and indirect shading alike.
+/// Every frame's: the materials' lobe sharpness, in direct and indirect shading alike.
 pub const GLOSSY_EXPONENT: Param = Param::optional_number(
     "glossy_exponent",
     (0.0, MAX_GLOSSY_EXPONENT as f64),
-    "Phong exponent k (seed 004, eq. 3-4) for every material, in direct and indirect shading \
-     alike; null keeps the materials' own",
+    "Phong exponent k (seed 004, eq. 3-4) for every material: the methods' Phong lobes take k \
+     and the BRDF the roughness of the same sharpness (GGX alpha = sqrt(2/(4k+2))), in direct \
+     and indirect shading alike; null keeps the materials' own",
 )
 .above_min();
 
@@ -36,6 +37,11 @@ pub fn glossy_exponent(gi: &GiParams) -> Option<f32> {
     gi.get(GLOSSY_EXPONENT.name)
         .and_then(serde_json::Value::as_f64)
         .map(|k| k as f32)
+}
+
+/// The roughness [`glossy_exponent`] gives every material (`None`: their own).
+pub fn roughness_override(gi: &GiParams) -> Option<f32> {
+    glossy_exponent(gi).map(crate::scene::brdf::roughness_for_exponent)
 }
 
 /// The renderer's, for the methods that approximate (`MethodEntry::downscales`). The software

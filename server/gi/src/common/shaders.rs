@@ -1,4 +1,4 @@
-//! The WGSL modules of the shared BVH (`shaders/`), each the concatenation of its files.
+//! The WGSL test harnesses of shared code (`shaders/`), each the concatenation of its files.
 
 use crate::gpu::shaders::{wgsl, ShaderSource};
 use crate::passes::ShaderPass;
@@ -9,9 +9,25 @@ pub const BVH_TEST: ShaderSource = ShaderSource {
     files: &[wgsl!("bvh.wgsl"), wgsl!("bvh_test.wgsl")],
 };
 
-/// The shared modules; the BVH test's pipeline (an integration-test harness) takes its layout
-/// from the WGSL.
-pub const PASSES: &[ShaderPass] = &[ShaderPass {
-    source: &BVH_TEST,
-    groups: None,
-}];
+/// The BRDF and its fitted lobes for a list of cases, to test them against `scene::brdf`.
+pub const BRDF_TEST: ShaderSource = ShaderSource {
+    name: "brdf_test",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("brdf_test.wgsl"),
+    ],
+};
+
+/// The harnesses (integration tests) take their pipelines' layouts from the WGSL.
+pub const PASSES: &[ShaderPass] = &[
+    ShaderPass {
+        source: &BVH_TEST,
+        groups: None,
+    },
+    ShaderPass {
+        source: &BRDF_TEST,
+        groups: None,
+    },
+];

@@ -1,17 +1,9 @@
 //! Light from one virtual point light, the CPU reference of `shaders/vpl_light.wgsl` shared
 //! by the VPL methods (seed paper 003's §4; Dachsbacher & Stamminger 2005's pixel lights).
 
-use crate::scene::material::DiffuseGlossy;
+use crate::scene::brdf::Brdf;
 use glam::Vec3;
 use std::f32::consts::PI;
-
-/// f_r of `shaders/brdf.wgsl`: Lambert plus the normalised Phong lobe around the mirror
-/// direction.
-pub fn brdf(s: &DiffuseGlossy, n: Vec3, to_light: Vec3, to_viewer: Vec3) -> Vec3 {
-    let mirrored = 2.0 * n.dot(to_light) * n - to_light;
-    let cos_e = mirrored.dot(to_viewer).max(0.0);
-    s.diffuse / PI + s.glossy * (s.exponent + 2.0) / (2.0 * PI) * cos_e.powf(s.exponent)
-}
 
 /// A diffusely emitting VPL: where it is, its unit normal, its flux Φ and its disk area A.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -25,7 +17,7 @@ pub struct VplLight {
 /// L(x, ω_o) from `vpl` at surface point `x` with unit normal `n` and BRDF `s`, seen from
 /// direction `v` (unit, towards the viewer): f_r·Φ·cosθ_i·cosθ_x over A + π d² (the irradiance
 /// of the VPL's disk on its axis, finite at d = 0).
-pub fn vpl_light(vpl: &VplLight, x: Vec3, n: Vec3, v: Vec3, s: &DiffuseGlossy) -> Vec3 {
+pub fn vpl_light(vpl: &VplLight, x: Vec3, n: Vec3, v: Vec3, s: &Brdf) -> Vec3 {
     let to_vpl = vpl.position - x;
     let d2 = to_vpl.length_squared();
     if d2 <= 0.0 {
@@ -34,5 +26,5 @@ pub fn vpl_light(vpl: &VplLight, x: Vec3, n: Vec3, v: Vec3, s: &DiffuseGlossy) -
     let w = to_vpl / d2.sqrt();
     let cos_x = n.dot(w).max(0.0);
     let cos_i = vpl.normal.dot(-w).max(0.0);
-    brdf(s, n, w, v) * vpl.flux * (cos_i * cos_x / (vpl.area + PI * d2))
+    s.eval(n, w, v) * vpl.flux * (cos_i * cos_x / (vpl.area + PI * d2))
 }

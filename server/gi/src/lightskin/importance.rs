@@ -34,7 +34,7 @@ bind_group! {
     pub struct Resources as GROUP("importance", wgpu::ShaderStages::COMPUTE) {
         params: bind::param_slot::<ImportanceParams>(),
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
         samples: bind::STORAGE_RW,
         rsm_position: bind::TEXTURE,
         rsm_normal: bind::TEXTURE,
@@ -90,7 +90,7 @@ impl ImportancePass {
         Resources {
             params: &self.params,
             g_position: &gbuffer.position,
-            g_normal_exponent: &gbuffer.normal_exponent,
+            g_normal_roughness: &gbuffer.normal_roughness,
             samples,
             rsm_position: &rsm.position,
             rsm_normal: &rsm.normal,

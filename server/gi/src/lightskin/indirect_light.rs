@@ -29,9 +29,9 @@ bind_group! {
         camera: bind::PARAMS,
         params: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
-        g_diffuse: bind::TEXTURE,
-        g_glossy: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
+        g_base_metallic: bind::TEXTURE,
+        g_emissive_specular: bind::TEXTURE,
         g_id: BindKind::Texture {
             sample_type: wgpu::TextureSampleType::Uint,
             dimension: wgpu::TextureViewDimension::D2,
@@ -42,6 +42,7 @@ bind_group! {
         indirect_out: bind::storage_texture(INDIRECT_FORMAT),
         indices: bind::STORAGE,
         vertices: bind::STORAGE,
+        brdf_table: bind::STORAGE,
     }
 }
 
@@ -85,9 +86,9 @@ impl IndirectLightPass {
             camera,
             params: &self.params,
             g_position: &gbuffer.position,
-            g_normal_exponent: &gbuffer.normal_exponent,
-            g_diffuse: &gbuffer.diffuse,
-            g_glossy: &gbuffer.glossy,
+            g_normal_roughness: &gbuffer.normal_roughness,
+            g_base_metallic: &gbuffer.base_metallic,
+            g_emissive_specular: &gbuffer.emissive_specular,
             g_id: &gbuffer.id,
             caches: caches.caches,
             lighting: caches.lighting,
@@ -95,6 +96,7 @@ impl IndirectLightPass {
             indirect_out: indirect,
             indices: &caches.scene.indices,
             vertices: &caches.scene.vertices,
+            brdf_table: &caches.scene.brdf_table,
         }
         .bind(device, &self.layout)
     }

@@ -38,6 +38,9 @@ pub const INDIRECT_LIGHT: ShaderSource = ShaderSource {
     name: "indirect_light",
     files: &[
         wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("gbuffer_surface.wgsl"),
         wgsl!("lightskin/light_caches.wgsl"),
         wgsl!("lightskin/indirect_light.wgsl"),
     ],

@@ -5,12 +5,12 @@
 //! on the CPU ([`bvh`], shared with other methods' visibility rays) is traversed in WGSL (`shaders/bvh.wgsl`, `shaders/reference/`). For every pixel it
 //! estimates the indirect radiance leaving the surface point the pixel centre sees towards the
 //! camera — the quantity the other methods write into their indirect buffer — with the same
-//! BRDF (diffuse + normalised Phong lobe, eq. 3–4 of seed 004), punctual lights and emitters, but
+//! BRDF (glTF's metallic-roughness model, `scene::brdf`), punctual lights and emitters, but
 //! with exact visibility. `bounces` = 1 is the single-bounce light seed 004 approximates.
 //!
 //! Materials are the raster passes' (`shaders/material_model.wgsl` is shared): at every hit the
 //! base colour factor times the base-colour texture at the hit's interpolated uv (filtered like
-//! the raster sampler: bilinear, repeat, sRGB decoded) is split into diffuse and glossy. All
+//! the raster sampler: bilinear, repeat, sRGB decoded) gives the BRDF's base colour. All
 //! texels of the scene lie in one storage buffer ([`PackedTextures`]), so its size is bounded by
 //! the device's storage binding size ([`check_device`]). Where an alpha mask cuts a surface away
 //! (glTF `MASK`, the texels the G-buffer and the RSM discard) the traversal skips the hit, so
@@ -34,7 +34,7 @@ pub mod shaders;
 pub mod stages;
 
 use super::common::bvh;
-use super::common::params::{emitters, glossy_exponent, BOUNCES};
+use super::common::params::{emitters, roughness_override, BOUNCES};
 use super::cost::{Cost, FrameShape, Knob};
 use super::precompute::{
     BudgetPool, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, UnitBudget,
@@ -48,7 +48,7 @@ use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::tonemap::luminance;
 use crate::passes::ShaderPass;
 use crate::passes::{self, ParamSlots};
-use crate::scene::{material, Material, Scene, Texture};
+use crate::scene::{brdf::Brdf, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
 use lightcast_protocol::{Camera, GiMethod, GiParams, Light};
 use std::any::{Any, TypeId};
@@ -195,7 +195,8 @@ pub struct TraceParams {
     pub bounces: u32,
     pub seed: u32,
     pub ray_epsilon: f32,
-    pub glossy_exponent: f32,
+    /// Roughness for every material (the `glossy_exponent` override); 0 keeps their own.
+    pub roughness: f32,
     /// 1: a path adds the emission of the surfaces it reaches (`render.gi.emitters`).
     pub emitters: u32,
     /// First row of this dispatch's band of the image.
@@ -213,12 +214,7 @@ pub struct SurfaceGpu {
     pub texture_offset: u32,
     pub texture_width: u32,
     pub texture_height: u32,
-    /// Non-zero: the `fixed_*` BRDF replaces the textured split.
-    pub fixed_brdf: u32,
-    pub fixed_diffuse: [f32; 3],
-    pub fixed_exponent: f32,
-    pub fixed_glossy: [f32; 3],
-    pub pad0: f32,
+    pub pad0: u32,
 }
 
 impl SurfaceGpu {
@@ -235,22 +231,22 @@ impl SurfaceGpu {
         }
     }
 
-    /// An untextured, opaque surface with this BRDF: for BRDFs the metallic/roughness split
-    /// cannot express, such as a Lambertian without the 4 % glossy lobe.
-    pub fn new(split: material::DiffuseGlossy, emissive: [f32; 3]) -> Self {
+    /// An untextured, opaque surface with this BRDF (tests light a Lambertian,
+    /// [`Brdf::lambertian`], to compare with closed forms).
+    pub fn new(brdf: &Brdf, emissive: [f32; 3]) -> Self {
         Self {
             material: MaterialGpu::from(&Material {
+                base_color: brdf.base.extend(1.0).to_array(),
+                metallic: brdf.metallic,
+                roughness: brdf.roughness,
+                specular: brdf.specular,
                 emissive,
                 ..Material::default()
             }),
             texture_offset: WHITE.offset,
             texture_width: WHITE.width,
             texture_height: WHITE.height,
-            fixed_brdf: 1,
-            fixed_diffuse: split.diffuse.to_array(),
-            fixed_exponent: split.exponent,
-            fixed_glossy: split.glossy.to_array(),
-            pad0: 0.0,
+            pad0: 0,
         }
     }
 }
@@ -364,8 +360,8 @@ pub struct ReferenceSettings {
     pub bounces: u32,
     /// Seed of the random streams.
     pub seed: u32,
-    /// Phong exponent for every material (`None`: their own), as in the other methods.
-    pub glossy_exponent: Option<f32>,
+    /// Roughness for every material (`None`: their own), as in the other methods.
+    pub roughness: Option<f32>,
     /// Whether emissive surfaces light the scene (area lights) besides the punctual light.
     pub emitters: bool,
 }
@@ -375,7 +371,7 @@ impl Default for ReferenceSettings {
         Self {
             bounces: 1,
             seed: 0,
-            glossy_exponent: None,
+            roughness: None,
             emitters: true,
         }
     }
@@ -483,6 +479,7 @@ bind_group! {
         indices: bind::STORAGE,
         surfaces: bind::STORAGE,
         texels: bind::STORAGE,
+        brdf_table: bind::STORAGE,
     }
 }
 
@@ -514,6 +511,7 @@ fn scene_group(
         indices: &storage_init(device, "indices", bytemuck::cast_slice(&scene.indices)),
         surfaces: &storage_init(device, "surfaces", bytemuck::cast_slice(surfaces)),
         texels: &storage_init(device, "texels", bytemuck::cast_slice(texels)),
+        brdf_table: &passes::scene_buffers::brdf_table(device),
     }
     .bind(device, layout)
 }
@@ -736,7 +734,7 @@ impl PathTracer {
             seed: settings.seed,
             // Far above f32 rounding at the scene's coordinates, far below its features.
             ray_epsilon: 1e-4 * scale,
-            glossy_exponent: settings.glossy_exponent.unwrap_or(0.0),
+            roughness: settings.roughness.unwrap_or(0.0),
             emitters: u32::from(settings.emitters),
             row_offset: 0,
         };
@@ -820,7 +818,7 @@ impl PathTracer {
             settings: ReferenceSettings {
                 bounces: g.bounces,
                 seed: 0,
-                glossy_exponent: glossy_exponent(gi),
+                roughness: roughness_override(gi),
                 emitters: emitters(gi),
             },
         };
@@ -962,7 +960,7 @@ mod tests {
                 ("bounces", offset_of!(TraceParams, bounces)),
                 ("seed", offset_of!(TraceParams, seed)),
                 ("ray_epsilon", offset_of!(TraceParams, ray_epsilon)),
-                ("glossy_exponent", offset_of!(TraceParams, glossy_exponent)),
+                ("roughness", offset_of!(TraceParams, roughness)),
                 ("emitters", offset_of!(TraceParams, emitters)),
                 ("row_offset", offset_of!(TraceParams, row_offset)),
             ],
@@ -976,10 +974,6 @@ mod tests {
                 ("texture_offset", offset_of!(SurfaceGpu, texture_offset)),
                 ("texture_width", offset_of!(SurfaceGpu, texture_width)),
                 ("texture_height", offset_of!(SurfaceGpu, texture_height)),
-                ("fixed_brdf", offset_of!(SurfaceGpu, fixed_brdf)),
-                ("fixed_diffuse", offset_of!(SurfaceGpu, fixed_diffuse)),
-                ("fixed_exponent", offset_of!(SurfaceGpu, fixed_exponent)),
-                ("fixed_glossy", offset_of!(SurfaceGpu, fixed_glossy)),
                 ("pad0", offset_of!(SurfaceGpu, pad0)),
             ],
         );
@@ -995,8 +989,8 @@ mod tests {
                 ("metallic", offset_of!(MaterialGpu, metallic)),
                 ("roughness", offset_of!(MaterialGpu, roughness)),
                 ("alpha_cutoff", offset_of!(MaterialGpu, alpha_cutoff)),
+                ("specular", offset_of!(MaterialGpu, specular)),
                 ("pad0", offset_of!(MaterialGpu, pad0)),
-                ("pad1", offset_of!(MaterialGpu, pad1)),
             ],
         );
     }
@@ -1053,7 +1047,6 @@ mod tests {
             (3, 1, 3)
         );
         assert_eq!(surface.material.alpha_cutoff, 0.5);
-        assert_eq!(surface.fixed_brdf, 0);
     }
 
     #[test]

@@ -8,6 +8,7 @@ pub const REFERENCE_PATH_TRACE: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
         wgsl!("lights.wgsl"),
         wgsl!("environment.wgsl"),
         wgsl!("material_model.wgsl"),

@@ -9,22 +9,22 @@ use lightcast_gi::rsm_gather::{GatherReadback, RsmGather, RSM_GATHER};
 use lightcast_passes::gpu::{BackendChoice, GpuContext};
 use lightcast_passes::passes::frame_uniforms::camera_view_proj;
 use lightcast_render::renderer::{RenderSettings, Renderer};
-use lightcast_scene::{default_light, material::DiffuseGlossy, procedural, Scene};
+use lightcast_scene::{brdf::Brdf, default_light, procedural, Scene};
 use glam::{Vec3, Vec4Swizzles};
 use lightcast_protocol::{GiParams, Light, LightKind};
 
 const W: u32 = 48;
 const H: u32 = 36;
 
-/// The surface a pixel's centre sees, as the G-buffer stores it (8-bit albedos, f16
-/// exponent), if the rays through four points around the centre meet the same plane.
+/// The surface a pixel's centre sees, as the G-buffer stores it (the material's factors in
+/// half floats), if the rays through four points around the centre meet the same plane.
 fn surface_at(
     scene: &Scene,
     bvh: &SceneBvh,
     s: &RenderSettings,
     x: u32,
     y: u32,
-) -> Option<(Vec3, Vec3, DiffuseGlossy)> {
+) -> Option<(Vec3, Vec3, Brdf)> {
     let inv = camera_view_proj(&s.camera, W as f32 / H as f32, &scene.bounds).inverse();
     let hit = |fx: f32, fy: f32| {
         let ndc = (fx / W as f32 * 2.0 - 1.0, 1.0 - fy / H as f32 * 2.0);
@@ -55,15 +55,17 @@ fn surface_at(
         }
     }
     let material = scene.vertices[scene.indices[tri as usize * 3] as usize].material;
-    let m = scene.materials[material as usize].diffuse_glossy();
-    let unorm8 = |v: Vec3| (v * 255.0).round() / 255.0;
+    let m = scene.materials[material as usize].brdf();
+    // As the G-buffer stores it, in half floats.
+    let f16 = |v: f32| half::f16::from_f32(v).to_f32();
     Some((
         position,
         n,
-        DiffuseGlossy {
-            diffuse: unorm8(m.diffuse),
-            glossy: unorm8(m.glossy),
-            exponent: half::f16::from_f32(m.exponent).to_f32(),
+        Brdf {
+            base: m.base.to_array().map(f16).into(),
+            metallic: f16(m.metallic),
+            roughness: f16(m.roughness),
+            specular: f16(m.specular),
         },
     ))
 }

@@ -299,9 +299,9 @@ impl Method for RsmGather {
             params: &self.params,
             camera: &r.camera,
             g_position: &gb.position,
-            g_normal_exponent: &gb.normal_exponent,
-            g_diffuse: &gb.diffuse,
-            g_glossy: &gb.glossy,
+            g_normal_roughness: &gb.normal_roughness,
+            g_base_metallic: &gb.base_metallic,
+            g_emissive_specular: &gb.emissive_specular,
             rsm_position: &rsm.position,
             rsm_normal: &rsm.normal,
             rsm_flux_area: &rsm.flux_area,
@@ -309,6 +309,7 @@ impl Method for RsmGather {
             samples,
             probe: &self.probe,
             indirect_out: frame.indirect,
+            brdf_table: &r.scene_buffers.brdf_table,
         }
         .bind(device, &self.layout);
         stages.stage(crate::passes::stages::RSM, |e| {

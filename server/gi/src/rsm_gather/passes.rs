@@ -39,9 +39,9 @@ bind_group! {
         params: bind::PARAMS,
         camera: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
-        g_diffuse: bind::TEXTURE,
-        g_glossy: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
+        g_base_metallic: bind::TEXTURE,
+        g_emissive_specular: bind::TEXTURE,
         rsm_position: bind::TEXTURE,
         rsm_normal: bind::TEXTURE,
         rsm_flux_area: bind::TEXTURE,
@@ -49,6 +49,7 @@ bind_group! {
         samples: bind::STORAGE,
         probe: bind::STORAGE_RW,
         indirect_out: bind::storage_texture(crate::passes::INDIRECT_FORMAT),
+        brdf_table: bind::STORAGE,
     }
 }
 

@@ -21,7 +21,7 @@
 use crate::gi::common::halton::halton;
 use crate::gi::common::vpl::{vpl_light, VplLight};
 use crate::passes::rsm::emitter_samples;
-use crate::scene::material::DiffuseGlossy;
+use crate::scene::brdf::Brdf;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec2, Vec3, Vec4Swizzles};
 use std::f32::consts::TAU;
@@ -185,7 +185,7 @@ pub fn gather(
     x: Vec3,
     n: Vec3,
     viewer: Vec3,
-    s: &DiffuseGlossy,
+    s: &Brdf,
 ) -> Vec3 {
     let v = (viewer - x).normalize();
     let radius = radius_fraction * rsm.size as f32;

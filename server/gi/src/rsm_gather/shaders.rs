@@ -8,6 +8,8 @@ pub const GATHER: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("gbuffer_surface.wgsl"),
         wgsl!("vpl_light.wgsl"),
         wgsl!("rsm_gather/gather.wgsl"),
     ],

@@ -720,6 +720,7 @@ impl Surfels {
                 &history.buffers[history.latest],
                 frame.indirect,
                 (frame.width, frame.height),
+                &r.scene_buffers.brdf_table,
             );
             if frame.debug_view == views::CACHE_SH.name {
                 let size = (frame.width, frame.height);

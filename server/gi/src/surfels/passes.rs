@@ -15,7 +15,7 @@ use crate::passes::bind::{self, bind_group, BindKind};
 use crate::passes::{
     gbuffer::GBuffer, params_buffer, shadow_map::ShadowMap, ParamSlots, Target, INDIRECT_FORMAT,
 };
-use crate::scene::{material, Scene};
+use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
 use wgpu::util::DeviceExt;
@@ -124,13 +124,14 @@ bind_group! {
     pub struct ShadeResources as SHADE_GROUP("surfel shade", wgpu::ShaderStages::COMPUTE) {
         camera: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
-        g_diffuse: bind::TEXTURE,
-        g_glossy: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
+        g_base_metallic: bind::TEXTURE,
+        g_emissive_specular: bind::TEXTURE,
         grid: bind::PARAMS,
         cache_usable: bind::STORAGE,
         cache_light: bind::STORAGE,
         indirect_out: bind::storage_texture(INDIRECT_FORMAT),
+        brdf_table: bind::STORAGE,
     }
 }
 
@@ -138,7 +139,7 @@ bind_group! {
     /// Group 0 of `shaders/surfels/cache_sh_view.wgsl` (debug view `cache-sh`).
     pub struct ShViewResources as SH_VIEW_GROUP("surfel cache sh view", wgpu::ShaderStages::COMPUTE) {
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
         grid: bind::PARAMS,
         cache_usable: bind::STORAGE,
         cache_light: bind::STORAGE,
@@ -146,8 +147,10 @@ bind_group! {
     }
 }
 
-/// Diffuse albedo and emitted radiosity of the surface under every surfel: the material's
-/// base colour (times its texture at the surfel's uv) split as the raster passes split it.
+/// Diffuse albedo and emitted radiosity of the surface under every surfel: the diffuse lobe's
+/// albedo of the material's BRDF with its base colour times its texture at the surfel's uv,
+/// averaged over cosine-weighted directions (`Brdf::mean_lobes`: a surfel's light goes every
+/// way).
 pub fn surfel_materials(scene: &Scene, set: &SurfelSet) -> Vec<(Vec3, Vec3)> {
     set.surfels
         .iter()
@@ -155,13 +158,12 @@ pub fn surfel_materials(scene: &Scene, set: &SurfelSet) -> Vec<(Vec3, Vec3)> {
             let Some(m) = scene.materials.get(s.material as usize) else {
                 return (Vec3::ZERO, Vec3::ZERO);
             };
-            let factor = Vec3::new(m.base_color[0], m.base_color[1], m.base_color[2]);
             let texture = m
                 .base_color_texture
                 .and_then(|t| scene.textures.get(t))
                 .map_or(Vec3::ONE, |t| texel_linear(t, s.uv));
-            let split = material::split(factor * texture, m.metallic, m.roughness);
-            (split.diffuse, Vec3::from(m.emissive) * std::f32::consts::PI)
+            let albedo = m.brdf_with(texture).mean_lobes().diffuse;
+            (albedo, Vec3::from(m.emissive) * std::f32::consts::PI)
         })
         .collect()
 }
@@ -549,17 +551,19 @@ impl SurfelPasses {
         source: &wgpu::Buffer,
         indirect: &Target,
         size: (u32, u32),
+        brdf_table: &wgpu::Buffer,
     ) {
         let group = ShadeResources {
             camera,
             g_position: &gbuffer.position,
-            g_normal_exponent: &gbuffer.normal_exponent,
-            g_diffuse: &gbuffer.diffuse,
-            g_glossy: &gbuffer.glossy,
+            g_normal_roughness: &gbuffer.normal_roughness,
+            g_base_metallic: &gbuffer.base_metallic,
+            g_emissive_specular: &gbuffer.emissive_specular,
             grid: &buffers.grid,
             cache_usable: &buffers.cache_usable,
             cache_light: source,
             indirect_out: indirect,
+            brdf_table,
         }
         .bind(device, &self.shade_layout);
         crate::passes::dispatch_2d(encoder, "surfel shade", &self.shade, &group, size.0, size.1);
@@ -579,7 +583,7 @@ impl SurfelPasses {
         let size = gbuffer.position.texture.size();
         let group = ShViewResources {
             g_position: &gbuffer.position,
-            g_normal_exponent: &gbuffer.normal_exponent,
+            g_normal_roughness: &gbuffer.normal_roughness,
             grid: &buffers.grid,
             cache_usable: &buffers.cache_usable,
             cache_light: source,

@@ -31,6 +31,9 @@ pub const SURFEL_SHADE: ShaderSource = ShaderSource {
     name: "surfel_shade",
     files: &[
         wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("gbuffer_surface.wgsl"),
         wgsl!("surfels/sh.wgsl"),
         wgsl!("surfels/caches.wgsl"),
         wgsl!("surfels/shade.wgsl"),

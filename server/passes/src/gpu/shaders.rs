@@ -68,6 +68,8 @@ pub const DIRECT_LIGHT: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("gbuffer_surface.wgsl"),
         wgsl!("lights.wgsl"),
         wgsl!("environment.wgsl"),
         wgsl!("direct_light.wgsl"),
@@ -107,6 +109,7 @@ pub const RSM: ShaderSource = ShaderSource {
     files: &[
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
         wgsl!("lights.wgsl"),
         wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),

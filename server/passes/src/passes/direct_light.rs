@@ -1,5 +1,5 @@
-//! Deferred lighting (`shaders/direct_light.wgsl`): emission, every light with the paper's
-//! BRDF (eq. 3–4) and PCF shadows, plus the indirect target, into HDR; the environment where
+//! Deferred lighting (`shaders/direct_light.wgsl`): emission, every light with the
+//! materials' BRDF (`scene::brdf`) and PCF shadows, plus the indirect target, into HDR; the environment where
 //! no geometry is; and the indirect light plus the environment's directional lights' light
 //! into `indirect_out` (what a frame reports as its indirect light).
 
@@ -19,6 +19,8 @@ pub struct DirectLightInputs<'a> {
     pub indirect: &'a Target,
     /// The packed environment (`passes::environment`).
     pub environment: &'a wgpu::Buffer,
+    /// `SceneBuffers::brdf_table`.
+    pub brdf_table: &'a wgpu::Buffer,
     pub hdr: &'a Target,
     /// `indirect` plus the environment lights' direct light.
     pub indirect_out: &'a Target,
@@ -30,10 +32,9 @@ bind_group! {
         camera: bind::PARAMS,
         lights: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
-        g_diffuse: bind::TEXTURE,
-        g_glossy: bind::TEXTURE,
-        g_emissive: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
+        g_base_metallic: bind::TEXTURE,
+        g_emissive_specular: bind::TEXTURE,
         shadow_map: BindKind::Texture {
             sample_type: wgpu::TextureSampleType::Depth,
             dimension: wgpu::TextureViewDimension::D2Array,
@@ -43,6 +44,7 @@ bind_group! {
         indirect: bind::TEXTURE,
         environment: bind::STORAGE,
         indirect_out: bind::storage_texture(super::INDIRECT_FORMAT),
+        brdf_table: bind::STORAGE,
     }
 }
 
@@ -76,16 +78,16 @@ impl DirectLightPass {
             camera: inputs.camera,
             lights: inputs.lights,
             g_position: &inputs.gbuffer.position,
-            g_normal_exponent: &inputs.gbuffer.normal_exponent,
-            g_diffuse: &inputs.gbuffer.diffuse,
-            g_glossy: &inputs.gbuffer.glossy,
-            g_emissive: &inputs.gbuffer.emissive,
+            g_normal_roughness: &inputs.gbuffer.normal_roughness,
+            g_base_metallic: &inputs.gbuffer.base_metallic,
+            g_emissive_specular: &inputs.gbuffer.emissive_specular,
             shadow_map: &inputs.shadow.array_view,
             shadow_sampler: &self.shadow_sampler,
             hdr_out: inputs.hdr,
             indirect: inputs.indirect,
             environment: inputs.environment,
             indirect_out: inputs.indirect_out,
+            brdf_table: inputs.brdf_table,
         }
         .bind(device, &self.layout)
     }

@@ -12,8 +12,8 @@ use lightcast_protocol::{Camera, Light, LightKind};
 pub struct CameraUniform {
     pub view_proj: [[f32; 4]; 4],
     pub position: [f32; 3],
-    /// Phong exponent k for every material, overriding theirs; 0 keeps the materials' own.
-    pub glossy_exponent: f32,
+    /// Roughness for every material, overriding theirs; 0 keeps the materials' own.
+    pub roughness: f32,
     /// Clip to world: the ray through a pixel (the environment behind the geometry).
     pub inv_view_proj: [[f32; 4]; 4],
 }
@@ -140,13 +140,13 @@ pub fn camera_view_proj(camera: &Camera, aspect: f32, bounds: &Aabb) -> Mat4 {
 }
 
 impl CameraUniform {
-    /// `glossy_exponent` overrides every material's Phong exponent (`None`: their own).
-    pub fn new(camera: &Camera, aspect: f32, bounds: &Aabb, glossy_exponent: Option<f32>) -> Self {
+    /// `roughness` overrides every material's (`None`: their own).
+    pub fn new(camera: &Camera, aspect: f32, bounds: &Aabb, roughness: Option<f32>) -> Self {
         let view_proj = camera_view_proj(camera, aspect, bounds);
         Self {
             view_proj: view_proj.to_cols_array_2d(),
             position: camera.position,
-            glossy_exponent: glossy_exponent.unwrap_or(0.0),
+            roughness: roughness.unwrap_or(0.0),
             inv_view_proj: view_proj.inverse().to_cols_array_2d(),
         }
     }
@@ -316,10 +316,7 @@ mod tests {
             &[
                 ("view_proj", offset_of!(CameraUniform, view_proj)),
                 ("position", offset_of!(CameraUniform, position)),
-                (
-                    "glossy_exponent",
-                    offset_of!(CameraUniform, glossy_exponent),
-                ),
+                ("roughness", offset_of!(CameraUniform, roughness)),
                 ("inv_view_proj", offset_of!(CameraUniform, inv_view_proj)),
             ],
         );

@@ -4,13 +4,15 @@ use super::bind::{self, bind_group};
 use super::{scene_buffers::SceneBuffers, Target};
 use crate::gpu::shaders;
 
-/// Formats of the colour targets, in `GBufferOut` location order.
-pub const FORMATS: [wgpu::TextureFormat; 6] = [
+/// Formats of the colour targets, in `GBufferOut` location order. The material's factors
+/// are stored, not a diffuse/glossy split, so every pass shades with the same BRDF
+/// (`shaders/brdf_eval.wgsl`); base colour in half floats keeps dark albedos exact to
+/// 0.05 % (8-bit linear lost a few per cent below 0.1).
+pub const FORMATS: [wgpu::TextureFormat; 5] = [
     wgpu::TextureFormat::Rgba32Float, // world position, w = coverage
-    wgpu::TextureFormat::Rgba16Float, // normal, w = glossy exponent
-    wgpu::TextureFormat::Rgba8Unorm,  // diffuse albedo
-    wgpu::TextureFormat::Rgba8Unorm,  // glossy colour
-    wgpu::TextureFormat::Rgba16Float, // emitted radiance
+    wgpu::TextureFormat::Rgba16Float, // normal, w = roughness
+    wgpu::TextureFormat::Rgba16Float, // linear base colour, w = metallic
+    wgpu::TextureFormat::Rgba16Float, // emitted radiance, w = dielectric specular weight
     wgpu::TextureFormat::R32Uint,     // triangle or provoking-vertex id (finds the light caches)
 ];
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -18,10 +20,9 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// The G-buffer's textures for one output size.
 pub struct GBuffer {
     pub position: Target,
-    pub normal_exponent: Target,
-    pub diffuse: Target,
-    pub glossy: Target,
-    pub emissive: Target,
+    pub normal_roughness: Target,
+    pub base_metallic: Target,
+    pub emissive_specular: Target,
     /// Scene-wide triangle id, or the provoking vertex without primitive indices.
     pub id: Target,
     pub depth: Target,
@@ -48,11 +49,10 @@ impl GBuffer {
         let t = |label, format| Target::new(device, label, width, height, format, usage);
         Self {
             position: t("gbuffer position", FORMATS[0]),
-            normal_exponent: t("gbuffer normal", FORMATS[1]),
-            diffuse: t("gbuffer diffuse", FORMATS[2]),
-            glossy: t("gbuffer glossy", FORMATS[3]),
-            emissive: t("gbuffer emissive", FORMATS[4]),
-            id: t("gbuffer id", FORMATS[5]),
+            normal_roughness: t("gbuffer normal", FORMATS[1]),
+            base_metallic: t("gbuffer base colour", FORMATS[2]),
+            emissive_specular: t("gbuffer emissive", FORMATS[3]),
+            id: t("gbuffer id", FORMATS[4]),
             depth: Target::new(
                 device,
                 "gbuffer depth",
@@ -64,13 +64,12 @@ impl GBuffer {
         }
     }
 
-    fn colour_views(&self) -> [&wgpu::TextureView; 6] {
+    fn colour_views(&self) -> [&wgpu::TextureView; 5] {
         [
             &self.position.view,
-            &self.normal_exponent.view,
-            &self.diffuse.view,
-            &self.glossy.view,
-            &self.emissive.view,
+            &self.normal_roughness.view,
+            &self.base_metallic.view,
+            &self.emissive_specular.view,
             &self.id.view,
         ]
     }

@@ -56,20 +56,18 @@ bind_group! {
     pub struct ReduceResources as REDUCE_GROUP("gbuffer reduce", wgpu::ShaderStages::COMPUTE) {
         params: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
-        g_diffuse: bind::TEXTURE,
-        g_glossy: bind::TEXTURE,
-        g_emissive: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
+        g_base_metallic: bind::TEXTURE,
+        g_emissive_specular: bind::TEXTURE,
         g_id: BindKind::Texture {
             sample_type: wgpu::TextureSampleType::Uint,
             dimension: wgpu::TextureViewDimension::D2,
         },
         out_position: bind::storage_texture(FORMATS[0]),
-        out_normal_exponent: bind::storage_texture(FORMATS[1]),
-        out_diffuse: bind::storage_texture(FORMATS[2]),
-        out_glossy: bind::storage_texture(FORMATS[3]),
-        out_emissive: bind::storage_texture(FORMATS[4]),
-        out_id: bind::storage_texture(FORMATS[5]),
+        out_normal_roughness: bind::storage_texture(FORMATS[1]),
+        out_base_metallic: bind::storage_texture(FORMATS[2]),
+        out_emissive_specular: bind::storage_texture(FORMATS[3]),
+        out_id: bind::storage_texture(FORMATS[4]),
     }
 }
 
@@ -79,13 +77,11 @@ bind_group! {
         camera: bind::PARAMS,
         params: bind::PARAMS,
         g_position: bind::TEXTURE,
-        g_normal_exponent: bind::TEXTURE,
-        g_diffuse: bind::TEXTURE,
-        g_glossy: bind::TEXTURE,
+        g_normal_roughness: bind::TEXTURE,
+        g_base_metallic: bind::TEXTURE,
         r_position: bind::TEXTURE,
-        r_normal_exponent: bind::TEXTURE,
-        r_diffuse: bind::TEXTURE,
-        r_glossy: bind::TEXTURE,
+        r_normal_roughness: bind::TEXTURE,
+        r_base_metallic: bind::TEXTURE,
         r_indirect: bind::TEXTURE,
         indirect_out: bind::storage_texture(INDIRECT_FORMAT),
     }
@@ -197,16 +193,14 @@ impl IndirectResolutionPass {
         let reduce_group = ReduceResources {
             params: &reduce_params,
             g_position: &g.position,
-            g_normal_exponent: &g.normal_exponent,
-            g_diffuse: &g.diffuse,
-            g_glossy: &g.glossy,
-            g_emissive: &g.emissive,
+            g_normal_roughness: &g.normal_roughness,
+            g_base_metallic: &g.base_metallic,
+            g_emissive_specular: &g.emissive_specular,
             g_id: &g.id,
             out_position: &gbuffer.position,
-            out_normal_exponent: &gbuffer.normal_exponent,
-            out_diffuse: &gbuffer.diffuse,
-            out_glossy: &gbuffer.glossy,
-            out_emissive: &gbuffer.emissive,
+            out_normal_roughness: &gbuffer.normal_roughness,
+            out_base_metallic: &gbuffer.base_metallic,
+            out_emissive_specular: &gbuffer.emissive_specular,
             out_id: &gbuffer.id,
         }
         .bind(device, &self.reduce_layout);
@@ -214,13 +208,11 @@ impl IndirectResolutionPass {
             camera: full.camera,
             params: &upsample_params,
             g_position: &g.position,
-            g_normal_exponent: &g.normal_exponent,
-            g_diffuse: &g.diffuse,
-            g_glossy: &g.glossy,
+            g_normal_roughness: &g.normal_roughness,
+            g_base_metallic: &g.base_metallic,
             r_position: &gbuffer.position,
-            r_normal_exponent: &gbuffer.normal_exponent,
-            r_diffuse: &gbuffer.diffuse,
-            r_glossy: &gbuffer.glossy,
+            r_normal_roughness: &gbuffer.normal_roughness,
+            r_base_metallic: &gbuffer.base_metallic,
             r_indirect: &indirect,
             indirect_out: full.indirect,
         }
@@ -293,7 +285,7 @@ pub struct Texel {
     /// False for background.
     pub covered: bool,
     pub normal: Vec3,
-    /// Diffuse albedo plus glossy colour.
+    /// The material's base colour (what carries its texture detail).
     pub reflectance: Vec3,
 }
 

@@ -15,8 +15,8 @@ pub struct MaterialGpu {
     pub metallic: f32,
     pub roughness: f32,
     pub alpha_cutoff: f32,
+    pub specular: f32,
     pub pad0: f32,
-    pub pad1: f32,
 }
 
 impl From<&Material> for MaterialGpu {
@@ -27,8 +27,8 @@ impl From<&Material> for MaterialGpu {
             metallic: m.metallic,
             roughness: m.roughness,
             alpha_cutoff: m.alpha_cutoff.unwrap_or(0.0),
+            specular: m.specular,
             pad0: 0.0,
-            pad1: 0.0,
         }
     }
 }
@@ -48,6 +48,9 @@ pub struct SceneBuffers {
     pub shadow_opaque: Vec<MaterialRange>,
     /// Group 1 of `shaders/materials.wgsl`, indexed by material.
     pub materials: Vec<wgpu::BindGroup>,
+    /// `scene::brdf::BrdfTable` (`[f32; 4]` entries): what every pass that evaluates the BRDF
+    /// binds as `brdf_table` (`shaders/brdf_eval.wgsl`).
+    pub brdf_table: wgpu::Buffer,
 }
 
 bind_group! {
@@ -59,6 +62,7 @@ bind_group! {
         },
         base_color_sampler: BindKind::Sampler(wgpu::SamplerBindingType::Filtering),
         materials: bind::STORAGE,
+        brdf_table: bind::STORAGE,
     }
 }
 
@@ -89,6 +93,7 @@ impl SceneBuffers {
         let (shadow_masked, shadow_opaque) = shadow_casting
             .iter()
             .partition(|r| scene.materials[r.material as usize].alpha_cutoff.is_some());
+        let brdf_table = brdf_table(device);
         Self {
             vertices,
             indices,
@@ -96,7 +101,8 @@ impl SceneBuffers {
             shadow_casting,
             shadow_masked,
             shadow_opaque,
-            materials: material_bind_groups(device, queue, scene, material_layout),
+            materials: material_bind_groups(device, queue, scene, material_layout, &brdf_table),
+            brdf_table,
         }
     }
 
@@ -214,11 +220,21 @@ pub fn begin_material_pass<'e>(
 pub const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 4] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2, 3 => Uint32];
 
+/// The BRDF's albedo table on the GPU.
+pub fn brdf_table(device: &wgpu::Device) -> wgpu::Buffer {
+    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("brdf table"),
+        contents: bytemuck::cast_slice(&crate::scene::brdf::BrdfTable::get().entries),
+        usage: wgpu::BufferUsages::STORAGE,
+    })
+}
+
 fn material_bind_groups(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
     scene: &Scene,
     layout: &wgpu::BindGroupLayout,
+    brdf_table: &wgpu::Buffer,
 ) -> Vec<wgpu::BindGroup> {
     let table: Vec<MaterialGpu> = scene.materials.iter().map(MaterialGpu::from).collect();
     let table = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -252,6 +268,7 @@ fn material_bind_groups(
                 base_color_texture: view,
                 base_color_sampler: &sampler,
                 materials: &table,
+                brdf_table,
             }
             .bind(device, layout)
         })
@@ -307,8 +324,8 @@ mod tests {
                 ("metallic", offset_of!(MaterialGpu, metallic)),
                 ("roughness", offset_of!(MaterialGpu, roughness)),
                 ("alpha_cutoff", offset_of!(MaterialGpu, alpha_cutoff)),
+                ("specular", offset_of!(MaterialGpu, specular)),
                 ("pad0", offset_of!(MaterialGpu, pad0)),
-                ("pad1", offset_of!(MaterialGpu, pad1)),
             ],
         );
     }

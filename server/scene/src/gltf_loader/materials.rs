@@ -38,12 +38,27 @@ impl Loader<'_> {
             .and_then(|e| e.emissive_strength.as_ref())
             .map_or(1.0, |s| s.emissive_strength.0);
         let emissive = material.emissive_factor.0.map(|e| e * strength);
+        let specular = material
+            .extensions
+            .as_ref()
+            .and_then(|e| e.specular.as_ref());
+        if specular.is_some_and(|s| {
+            s.specular_texture.is_some()
+                || s.specular_color_texture.is_some()
+                || s.specular_color_factor.0 != [1.0; 3]
+        }) {
+            tracing::warn!(
+                "{part}: KHR_materials_specular's textures and specularColorFactor are not \
+                 supported; only specularFactor is used"
+            );
+        }
+        let specular = specular.map_or(1.0, |s| s.specular_factor.0);
         let base_color = pbr.base_color_factor.0;
         let (metallic, roughness) = (pbr.metallic_factor.0, pbr.roughness_factor.0);
         let factors = base_color
             .iter()
             .chain(&emissive)
-            .chain([&metallic, &roughness]);
+            .chain([&metallic, &roughness, &specular]);
         if !factors.into_iter().all(|f| f.is_finite()) {
             return Err(invalid(part, "has a non-finite factor"));
         }
@@ -78,6 +93,7 @@ impl Loader<'_> {
             base_color,
             metallic,
             roughness,
+            specular,
             emissive,
             base_color_texture,
             alpha_cutoff,

@@ -449,7 +449,10 @@ fn loads_materials_and_shares_textures_per_image() {
             "alphaMode": "MASK",
             "alphaCutoff": 0.3,
             "emissiveFactor": [1, 0.5, 0],
-            "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4}},
+            "extensions": {
+                "KHR_materials_emissive_strength": {"emissiveStrength": 4},
+                "KHR_materials_specular": {"specularFactor": 0.25},
+            },
         },
         {"name": "shared", "pbrMetallicRoughness": {"baseColorTexture": {"index": 1}}},
         {
@@ -482,6 +485,12 @@ fn loads_materials_and_shares_textures_per_image() {
     let masked = material("masked");
     assert_eq!(masked.base_color, [0.5, 0.5, 0.5, 1.0]);
     assert_eq!((masked.metallic, masked.roughness), (0.25, 0.75));
+    assert_eq!(masked.specular, 0.25);
+    assert_eq!(
+        material("shared").specular,
+        1.0,
+        "glTF's default without the extension"
+    );
     assert_eq!(masked.emissive, [4.0, 2.0, 0.0]);
     assert_eq!(masked.alpha_cutoff, Some(0.3));
     assert_eq!(masked.base_color_texture, Some(0));

@@ -7,8 +7,7 @@ use lightcast_server::gpu::{BackendChoice, GpuContext};
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::passes::frame_uniforms::camera_view_proj;
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
-use lightcast_server::scene::{material, Material, Scene, Vertex};
-use std::f32::consts::PI;
+use lightcast_server::scene::{brdf::Brdf, Material, Scene, Vertex};
 
 pub fn gpu() -> GpuContext {
     GpuContext::new(BackendChoice::Auto).expect("a GPU adapter (lavapipe in CI)")
@@ -205,12 +204,9 @@ pub fn hit_plane(
     (t > 0.0).then(|| o + d * t)
 }
 
-/// CPU port of `eval_brdf` in `shaders/brdf.wgsl` (paper eq. 3–4).
+/// `eval_brdf` of `shaders/brdf_eval.wgsl` through its CPU reference, `scene::brdf`.
 pub fn brdf(m: &Material, n: Vec3, to_light: Vec3, to_viewer: Vec3) -> Vec3 {
-    let s = m.diffuse_glossy();
-    let mirrored = (-to_light) - 2.0 * (-to_light).dot(n) * n;
-    let cos_e = mirrored.dot(to_viewer).max(0.0);
-    s.diffuse / PI + s.glossy * (s.exponent + 2.0) / (2.0 * PI) * cos_e.powf(s.exponent)
+    m.brdf().eval(n, to_light, to_viewer)
 }
 
 fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
@@ -263,11 +259,6 @@ pub fn rgba_at(frame: &Frame, x: u32, y: u32) -> [u8; 4] {
 
 pub fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
-}
-
-/// Re-exported so tests can state which material split they expect.
-pub fn split(m: &Material) -> material::DiffuseGlossy {
-    m.diffuse_glossy()
 }
 
 /// Distance along the ray to triangle `tri` (Möller–Trumbore), if it is hit.
@@ -393,17 +384,23 @@ pub fn surface_at(
             return None;
         }
     }
-    let m = scene.materials[triangle_material(scene, tri) as usize].diffuse_glossy();
-    let unorm8 = |v: Vec3| (v * 255.0).round() / 255.0;
+    let m = scene.materials[triangle_material(scene, tri) as usize].brdf();
     Some(lightcast_server::gi::clustered::cpu::RefSurface {
         position,
         normal: n,
-        brdf: material::DiffuseGlossy {
-            diffuse: unorm8(m.diffuse),
-            glossy: unorm8(m.glossy),
-            exponent: half::f16::from_f32(m.exponent).to_f32(),
-        },
+        brdf: gbuffer_brdf(&m),
     })
+}
+
+/// A material's BRDF as the G-buffer stores it: its factors in half floats.
+pub fn gbuffer_brdf(m: &Brdf) -> Brdf {
+    let f16 = |v: f32| half::f16::from_f32(v).to_f32();
+    Brdf {
+        base: m.base.to_array().map(f16).into(),
+        metallic: f16(m.metallic),
+        roughness: f16(m.roughness),
+        specular: f16(m.specular),
+    }
 }
 
 /// A test whose environment is missing here (a tool or driver the set-up script installs):

@@ -22,7 +22,7 @@
 
 use crate::gi::common::kdtree::KdTree;
 use crate::gi::common::triangles::{surface_area, triangle, triangle_area, triangle_normal};
-use crate::scene::material::{split, DiffuseGlossy};
+use crate::scene::material::DiffuseGlossy;
 use crate::scene::Scene;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -375,10 +375,10 @@ pub fn precompute(
 // Scene helpers
 // ---------------------------------------------------------------------------------------------
 
-/// The paper's BRDF parameters per material, with base colour textures folded in as their mean
-/// linear colour (caches represent whole surface patches, so a per-texel value is not needed).
-/// The split is linear in the base colour, so scaling the base colour first is exact for the
-/// mean.
+/// The paper's lobes per material (`Brdf::mean_lobes`: a cache's light goes every way), with
+/// base colour textures folded in as their mean linear colour (caches represent whole surface
+/// patches, so a per-texel value is not needed). The lobes are affine in the base colour, so
+/// scaling the base colour first is exact for the mean.
 pub fn material_splits(scene: &Scene) -> Vec<DiffuseGlossy> {
     let texture_means: Vec<Vec3> = scene
         .textures
@@ -389,12 +389,11 @@ pub fn material_splits(scene: &Scene) -> Vec<DiffuseGlossy> {
         .materials
         .iter()
         .map(|m| {
-            let [r, g, b, _] = m.base_color;
             let tint = m
                 .base_color_texture
                 .and_then(|t| texture_means.get(t).copied())
                 .unwrap_or(Vec3::ONE);
-            split(Vec3::new(r, g, b) * tint, m.metallic, m.roughness)
+            m.brdf_with(tint).mean_lobes()
         })
         .collect()
 }

@@ -127,7 +127,8 @@ def gltf_material(name, base, metallic=0.0, roughness=1.0):
 
 def write_glb(path, with_panel=False):
     """The scene as glTF 2.0 binary: one mesh per material, metallic 0, roughness 1; with the
-    emissive panel (black: metallic 1 on a black base reflects nothing) if asked."""
+    emissive panel if asked (black: a black dielectric without its specular lobe,
+    KHR_materials_specular's specularFactor 0, reflects nothing, as Mitsuba's black panel)."""
     parts = [(name, gltf_material(name, albedo), faces) for name, albedo, faces in quads()]
     if not with_panel:
         write_glb_parts(path, parts)
@@ -137,13 +138,20 @@ def write_glb(path, with_panel=False):
         "name": name,
         "pbrMetallicRoughness": {
             "baseColorFactor": [0.0, 0.0, 0.0, 1.0],
-            "metallicFactor": 1.0,
+            "metallicFactor": 0.0,
             "roughnessFactor": 1.0,
         },
         "emissiveFactor": [1.0, 1.0, 1.0],
-        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": PANEL_RADIANCE}},
+        "extensions": {
+            "KHR_materials_emissive_strength": {"emissiveStrength": PANEL_RADIANCE},
+            "KHR_materials_specular": {"specularFactor": 0.0},
+        },
     }
-    write_glb_parts(path, parts + [(name, emissive, faces)], ["KHR_materials_emissive_strength"])
+    write_glb_parts(
+        path,
+        parts + [(name, emissive, faces)],
+        ["KHR_materials_emissive_strength", "KHR_materials_specular"],
+    )
 
 
 def write_glb_parts(path, parts, extensions_used=()):

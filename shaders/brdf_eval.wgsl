@@ -5,7 +5,8 @@
 //     var<storage, read> brdf_table: array<vec4<f32>>;
 // holding `scene::brdf::BrdfTable` (`SceneBuffers::brdf_table`).
 
-// Mirrored by `scene::brdf::TABLE_SIZE`, `DIELECTRIC_F0` and `MIN_LOBE_ALBEDO`.
+// Mirrored by `scene::brdf::TABLE_SIZE`, `DIELECTRIC_F0` and `MIN_LOBE_ALBEDO` (and
+// `phong_exponent`'s range by `MIN_EXPONENT`, `MAX_EXPONENT`).
 const BRDF_TABLE_SIZE: u32 = 32u;
 const DIELECTRIC_F0: f32 = 0.04;
 const MIN_LOBE_ALBEDO: f32 = 1e-4;
@@ -34,8 +35,8 @@ fn dielectric_mean_albedo(roughness: f32) -> f32 {
     return brdf_terms(1.0, roughness).z;
 }
 
-// Schlick's F0 (the first three) and F90 per channel: glTF's mix of the dielectric and the
-// metal by `metallic`.
+// Schlick's F0 (per channel) and F90: glTF's mix of the dielectric and the metal by
+// `metallic`.
 fn fresnel_f0(s: SurfaceBrdf) -> vec3<f32> {
     return mix(vec3<f32>(DIELECTRIC_F0 * s.specular), s.base, s.metallic);
 }
@@ -54,6 +55,12 @@ fn smith_visibility(nl: f32, nv: f32, a2: f32) -> f32 {
 fn ggx_d(nh: f32, a2: f32) -> f32 {
     let d = nh * nh * (a2 - 1.0) + 1.0;
     return select(0.0, a2 / (PI * d * d), nh > 0.0);
+}
+
+// The specular lobe's directional albedo at cosine `mu`, F0·A + F90·B.
+fn specular_albedo(s: SurfaceBrdf, mu: f32) -> vec3<f32> {
+    let t = brdf_terms(mu, s.roughness);
+    return fresnel_f0(s) * t.x + fresnel_f90(s) * t.y;
 }
 
 // The diffuse lobe's albedo for light arriving at cosine `mu` (`Brdf::diffuse_albedo`).

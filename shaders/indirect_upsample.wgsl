@@ -43,9 +43,12 @@ struct Pixel {
     tolerance: f32,
 }
 
-// The base colour carries a material's texture detail, in its diffuse and metallic light alike.
-fn reflectance(base: vec3<f32>) -> vec3<f32> {
-    return max(base, vec3<f32>(MIN_REFLECTANCE));
+// A material's reflectance from its base colour and metallic (a G-buffer texel): what carries
+// its texture detail, the base colour, plus a dielectric's 4 % specular reflection, which the
+// base colour does not tint (dividing that by a dark texel's base colour would inflate it).
+fn reflectance(base_metallic: vec4<f32>) -> vec3<f32> {
+    let base = base_metallic.rgb;
+    return max(mix(base + vec3<f32>(0.04), base, base_metallic.a), vec3<f32>(MIN_REFLECTANCE));
 }
 
 // How well reduced sample `q` stands for the pixel's surface: x in [0, 1] for the blend,
@@ -67,7 +70,7 @@ fn match_weight(p: Pixel, q: vec2<i32>) -> vec2<f32> {
 
 // The sample's indirect radiance per unit reflectance.
 fn demodulated(q: vec2<i32>) -> vec3<f32> {
-    let m = reflectance(textureLoad(r_base_metallic, q, 0).rgb);
+    let m = reflectance(textureLoad(r_base_metallic, q, 0));
     return textureLoad(r_indirect, q, 0).rgb / m;
 }
 
@@ -125,6 +128,6 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
             }
         }
     }
-    let m = reflectance(textureLoad(g_base_metallic, texel, 0).rgb);
+    let m = reflectance(textureLoad(g_base_metallic, texel, 0));
     textureStore(indirect_out, texel, vec4<f32>(radiance * m, 1.0));
 }

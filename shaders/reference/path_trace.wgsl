@@ -112,9 +112,9 @@ fn luminance(c: vec3<f32>) -> f32 {
 // Probability of sampling the diffuse lobe rather than the specular one: in proportion to
 // their albedos' luminance seen from `wo`.
 fn diffuse_probability(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>) -> f32 {
-    let lobes = phong_lobes(s, max(dot(n, wo), 0.0));
-    let d = luminance(lobes.diffuse);
-    let total = d + luminance(lobes.glossy);
+    let mu = max(dot(n, wo), 0.0);
+    let d = luminance(diffuse_albedo(s, mu));
+    let total = d + luminance(specular_albedo(s, mu));
     return select(0.0, d / total, total > 0.0);
 }
 

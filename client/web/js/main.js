@@ -365,13 +365,17 @@ function sendLights(index) {
 function newLight() {
   if (state.light) {
     // A copy moved aside, so the new light shows as a light of its own: a quarter of the scene
-    // along x, or a sun turned 60° about the vertical.
+    // along x, or a sun turned 60° about the vertical (a sun straight overhead, which that
+    // would not move, tilted to 60° elevation instead).
     const copy = structuredClone(state.light);
     if (copy.kind === 'directional') {
       const [x, y, z] = copy.direction;
       const c = Math.cos(60 * DEGREES);
       const s = Math.sin(60 * DEGREES);
-      copy.direction = [c * x + s * z, y, c * z - s * x];
+      const level = Math.hypot(x, z);
+      copy.direction = level > 1e-3 * Math.hypot(x, y, z)
+        ? [c * x + s * z, y, c * z - s * x]
+        : [c, Math.sign(y || -1) * s, 0];
     } else if (state.scene) {
       const { min, max } = state.scene.bounds;
       copy.position = copy.position.map((v, k) => v + 0.25 * (max[k] - min[k]) * (k === 0 ? 1 : 0));

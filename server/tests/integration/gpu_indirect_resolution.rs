@@ -76,7 +76,8 @@ fn texel(x: u32, y: u32) -> (Texel, [f32; 4]) {
             position,
             covered,
             normal,
-            reflectance: Vec3::from(base),
+            // A dielectric (metallic 0): its base colour plus the 4 % specular reflection.
+            reflectance: Vec3::from(base) + 0.04,
         },
         [base[0], base[1], base[2], 0.0],
     )
@@ -132,7 +133,7 @@ fn read_reduced(ctx: &GpuContext, r: &ReducedTargets) -> Vec<Texel> {
             position: Vec3::new(positions[i][0], positions[i][1], positions[i][2]),
             covered: positions[i][3] != 0.0,
             normal: Vec3::new(normals[i][0], normals[i][1], normals[i][2]),
-            reflectance: Vec3::new(base[i][0], base[i][1], base[i][2]),
+            reflectance: Vec3::new(base[i][0], base[i][1], base[i][2]) + 0.04 * (1.0 - base[i][3]),
         })
         .collect()
 }

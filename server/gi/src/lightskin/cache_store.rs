@@ -8,7 +8,7 @@
 //! renamed, so readers never see half a file.
 
 use super::caches::{
-    material_splits, precompute, CacheError, CacheParams, CacheSet, CacheStats, LightCache,
+    material_lobes, precompute, CacheError, CacheParams, CacheSet, CacheStats, LightCache,
     Progress, StepTimings, MAX_CACHES, NEIGHBOURS,
 };
 use crate::gi::precompute::Store;
@@ -91,14 +91,14 @@ impl CacheStore {
         &self.dir
     }
 
-    /// SHA-256 (hex) over the format version, the vertex and index bytes, the material split
+    /// SHA-256 (hex) over the format version, the vertex and index bytes, the materials' lobe
     /// values (with texture means folded in) and the parameters: everything `precompute` reads.
     pub fn key(scene: &Scene, params: &CacheParams) -> String {
         let mut h = Sha256::new();
         h.update(MAGIC);
         h.update(FORMAT_VERSION.to_le_bytes());
         crate::gi::precompute::hash_geometry(&mut h, scene);
-        let splits = material_splits(scene);
+        let splits = material_lobes(scene);
         h.update((splits.len() as u64).to_le_bytes());
         for m in &splits {
             for v in m.diffuse.to_array().into_iter().chain(m.glossy.to_array()) {

@@ -23,7 +23,7 @@ pub mod stages;
 pub mod val_select;
 pub mod views;
 
-use super::common::params::{emitters, glossy_exponent};
+use super::common::params::{emitters, roughness_override};
 use super::cost::{self, Cost, FrameShape, Knob};
 use super::precompute::{BudgetPool, Built, PrecomputeEntry, PrecomputeKey, SceneData, UnitBudget};
 use super::{
@@ -354,7 +354,9 @@ impl Method for LightSkin {
             caches.count,
             self.sampling.rsm(),
             source,
-            glossy_exponent(frame.settings),
+            // The exponent the pixels' lobes take from the overridden roughness (within
+            // [1, 4096]), so caches and pixels agree.
+            roughness_override(frame.settings).map(crate::scene::brdf::phong_exponent),
         );
         let occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
         self.indirect_pass

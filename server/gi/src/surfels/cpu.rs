@@ -102,7 +102,7 @@ pub struct ShadedPoint {
 
 /// Indirect radiance towards the viewer (`shaders/surfels/shade.wgsl`, eq. 5–8): the diffuse
 /// lobe (ρ_d/π)·max(ω·n, 0) and the normalised Phong lobe about the mirror direction r,
-/// scaled by (k+2)/(k+1)·max(n·r, 0) to our direct light's lobe, clamped at 0 against SH
+/// scaled by (k+2)/(k+1)·max(n·r, 0) to the normalised lobe, clamped at 0 against SH
 /// ringing.
 pub fn shade(set: &SurfelSet, cache_light: &[Vec3], s: &ShadedPoint) -> Vec3 {
     let n = s.normal.normalize();

@@ -285,7 +285,8 @@ pub struct Texel {
     /// False for background.
     pub covered: bool,
     pub normal: Vec3,
-    /// The material's base colour (what carries its texture detail).
+    /// The material's reflectance: its base colour (what carries its texture detail) plus, for
+    /// a dielectric, its 4 % specular reflection (`reflectance` in the WGSL).
     pub reflectance: Vec3,
 }
 

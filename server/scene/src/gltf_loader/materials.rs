@@ -53,6 +53,9 @@ impl Loader<'_> {
             );
         }
         let specular = specular.map_or(1.0, |s| s.specular_factor.0);
+        if !(0.0..=1.0).contains(&specular) {
+            tracing::warn!("{part}: specularFactor {specular} is clamped to [0, 1]");
+        }
         let base_color = pbr.base_color_factor.0;
         let (metallic, roughness) = (pbr.metallic_factor.0, pbr.roughness_factor.0);
         let factors = base_color

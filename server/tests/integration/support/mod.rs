@@ -354,7 +354,7 @@ pub fn ref_vals(
 }
 
 /// The G-buffer texel the CPU expects at pixel (x, y): the nearest surface along the pixel's
-/// ray, with its material as the G-buffer stores it (8-bit colours, f16 exponent); `None`
+/// ray, with its material as the G-buffer stores it (its factors in half floats); `None`
 /// where rays a tenth of a pixel away meet another plane (near an edge the rasteriser may
 /// pick either).
 pub fn surface_at(

@@ -27,7 +27,7 @@ pub(super) fn assign(
         nearest.unwrap_or(owner[i])
     });
 
-    let splits = material_splits(scene);
+    let splits = material_lobes(scene);
     #[derive(Clone, Copy, Default)]
     struct Sum {
         area: f64,

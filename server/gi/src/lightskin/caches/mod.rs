@@ -379,7 +379,7 @@ pub fn precompute(
 /// base colour textures folded in as their mean linear colour (caches represent whole surface
 /// patches, so a per-texel value is not needed). The lobes are affine in the base colour, so
 /// scaling the base colour first is exact for the mean.
-pub fn material_splits(scene: &Scene) -> Vec<DiffuseGlossy> {
+pub fn material_lobes(scene: &Scene) -> Vec<DiffuseGlossy> {
     let texture_means: Vec<Vec3> = scene
         .textures
         .par_iter()

@@ -118,15 +118,27 @@ fn diffuse_probability(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>) -> f32 {
     return select(0.0, d / total, total > 0.0);
 }
 
+// The view specular sampling uses: `wo`, lifted just above the shading normal's horizon where an
+// interpolated normal faces slightly away from it (visible normals are undefined there).
+// Sampling and `brdf_pdf` both use it, so the density stays exact.
+fn sampling_view(n: vec3<f32>, wo: vec3<f32>) -> vec3<f32> {
+    let c = dot(n, wo);
+    return select(wo, normalize(wo + n * (1e-4 - c)), c < 1e-4);
+}
+
 // Density (per solid angle) of `sample_brdf` choosing `wi`: cosine-weighted for the diffuse
-// lobe, and for the specular one a half vector drawn with density D(h)·(n·h) and mirrored,
-// D(h)·(n·h)/(4·|wo·h|) per solid angle of wi (Walter et al. 2007, eq. 14 and 38).
+// lobe, and for the specular one a visible normal h mirrored, G₁(wo)·D(h)/(4·n·wo) per solid
+// angle of wi (Heitz 2018, "Sampling the GGX Distribution of Visible Normals", eq. 17 with
+// the reflection's Jacobian 1/(4·wo·h)).
 fn brdf_pdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, wi: vec3<f32>) -> f32 {
     let p_d = diffuse_probability(s, n, wo);
-    let h = normalize(wo + wi);
+    let view = sampling_view(n, wo);
+    let h = normalize(view + wi);
     let alpha = s.roughness * s.roughness;
-    let nh = dot(n, h);
-    let specular = ggx_d(nh, alpha * alpha) * max(nh, 0.0) / (4.0 * max(abs(dot(wo, h)), 1e-8));
+    let a2 = alpha * alpha;
+    let nv = dot(n, view);
+    let g1 = 2.0 * nv / (nv + sqrt(a2 + (1.0 - a2) * nv * nv));
+    let specular = select(0.0, g1 * ggx_d(dot(n, h), a2) / (4.0 * nv), dot(view, h) > 0.0);
     return p_d * max(dot(n, wi), 0.0) / PI + (1.0 - p_d) * specular;
 }
 
@@ -134,17 +146,30 @@ fn sample_brdf(s: SurfaceBrdf, n: vec3<f32>, wo: vec3<f32>, state: ptr<function,
     let u0 = rand(state);
     let u1 = rand(state);
     let u2 = rand(state);
-    let phi = 2.0 * PI * u1;
+    let frame = basis(n);
     if u0 < diffuse_probability(s, n, wo) {
+        let phi = 2.0 * PI * u1;
         let r = sqrt(u2);
-        return basis(n) * vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(1.0 - u2, 0.0)));
+        return frame * vec3<f32>(r * cos(phi), r * sin(phi), sqrt(max(1.0 - u2, 0.0)));
     }
-    // GGX's D(h)·(n·h) inverted: cos²θ_h = (1 − u)/(1 + (α² − 1)·u).
+    // Heitz 2018 (listing 1): the view in the frame where the GGX of roughness α is the unit
+    // hemisphere, a point of the projected visible half disk, back to GGX's frame. The same
+    // sampling as `scene::brdf::specular_albedo` builds the albedo table with.
     let alpha = s.roughness * s.roughness;
-    let cos_h = sqrt((1.0 - u2) / (1.0 + (alpha * alpha - 1.0) * u2));
-    let sin_h = sqrt(max(1.0 - cos_h * cos_h, 0.0));
-    let h = basis(n) * vec3<f32>(sin_h * cos(phi), sin_h * sin(phi), cos_h);
-    return reflect(-wo, h);
+    let view = sampling_view(n, wo);
+    let local = transpose(frame) * view;
+    let v = normalize(vec3<f32>(alpha * local.x, alpha * local.y, local.z));
+    let len2 = v.x * v.x + v.y * v.y;
+    let t1 = select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(-v.y, v.x, 0.0) * inverseSqrt(len2), len2 > 0.0);
+    let t2 = cross(v, t1);
+    let r = sqrt(u1);
+    let phi = 2.0 * PI * u2;
+    let p1 = r * cos(phi);
+    let blend = 0.5 * (1.0 + v.z);
+    let p2 = (1.0 - blend) * sqrt(max(1.0 - p1 * p1, 0.0)) + blend * r * sin(phi);
+    let m = p1 * t1 + p2 * t2 + sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0)) * v;
+    let h = frame * normalize(vec3<f32>(alpha * m.x, alpha * m.y, max(m.z, 1e-6)));
+    return reflect(-view, h);
 }
 
 // Most emissive surfaces a shadow ray passes through before it counts as blocked.

@@ -21,8 +21,14 @@ struct MapLookup {
     inside: bool,
 }
 
-// One texel spans up to 4/S radians (the map's 2 units of uv over S texels, dθ/du ≤ 2), so a
-// surface seen at angle θ from its normal moves up to d·(4/S)·tan θ in depth within a texel.
+// The slope bias sized to the texel the receiver falls in: the paraboloid map is conformal,
+// with dφ/du = 1 + cos φ at angle φ off its axis, so a texel (2/S of uv) spans
+// τ = 2(1 + cos φ)/S radians, from 4/S at the centre to 1.3/S at the rim. The nearest texel's
+// centre ray is at most τ/√2 away, where a receiver plane at angle θ from its normal lies
+// d·tan θ·τ/√2 deeper: the bias takes d·τ·(tan θ + ½), √2 of margin on the slope term for
+// curved surfaces and shading normals, and half a texel for the depth the map's rasteriser
+// rounds (issue 34: the fixed d·(4/S)(1 + tan θ) ignored up to 56 % of the distance with
+// 32² maps at grazing angles).
 fn map_lookup(j: u32, x: vec3<f32>, n: vec3<f32>) -> MapLookup {
     var out: MapLookup;
     let centre = centres[j];
@@ -42,7 +48,8 @@ fn map_lookup(j: u32, x: vec3<f32>, n: vec3<f32>) -> MapLookup {
     out.distance = d / params.extent;
     let cos_r = max(abs(dot(n, w)), 1e-3);
     out.slope = min(sqrt(max(1.0 - cos_r * cos_r, 0.0)) / cos_r, 8.0);
-    out.depth = out.distance * (1.0 - 4.0 / f32(params.map_size) * (1.0 + out.slope));
+    let texel_angle = 2.0 * (1.0 + local.z) / f32(params.map_size);
+    out.depth = out.distance * (1.0 - texel_angle * (0.5 + out.slope));
     return out;
 }
 

@@ -163,7 +163,8 @@ fn lookup(light: &MapLight, x: Vec3, n: Vec3, map_size: u32, extent: f32) -> Opt
         uv: uv_of(local),
         distance,
         slope,
-        depth: distance * (1.0 - 4.0 / map_size as f32 * (1.0 + slope)),
+        // `map_lookup`'s bias: the texel's angle at the receiver times (tan θ + ½).
+        depth: distance * (1.0 - 2.0 * (1.0 + local.z) / map_size as f32 * (0.5 + slope)),
     })
 }
 

@@ -68,27 +68,50 @@ fn diffuse_albedo(s: SurfaceBrdf, mu: f32) -> vec3<f32> {
     return s.base * ((1.0 - s.metallic) * (1.0 - s.specular * dielectric_albedo(mu, s.roughness)));
 }
 
-// f_r for light arriving from `to_light` and leaving towards `to_viewer` (`Brdf::eval`).
-fn eval_brdf(s: SurfaceBrdf, n: vec3<f32>, to_light: vec3<f32>, to_viewer: vec3<f32>) -> vec3<f32> {
-    let nl = dot(n, to_light);
+// A surface point's BRDF seen from one direction, with what does not depend on the light's
+// direction worked out once: a pixel lit by many lights (VPLs, RSM texels) evaluates it per
+// light with `eval_viewed`, two table lookups fewer each.
+struct ViewedBrdf {
+    brdf: SurfaceBrdf,
+    // Unit shading normal and direction towards the viewer.
+    n: vec3<f32>,
+    v: vec3<f32>,
+    nv: f32,
+    // The diffuse lobe's viewer-side weight (1 − s·E(n·v))/(1 − s·Ē), over π.
+    diffuse_view: f32,
+}
+
+fn view_brdf(s: SurfaceBrdf, n: vec3<f32>, to_viewer: vec3<f32>) -> ViewedBrdf {
+    let nv = max(dot(n, to_viewer), 0.0);
+    let diffuse_view = (1.0 - s.specular * dielectric_albedo(nv, s.roughness))
+        / (1.0 - s.specular * dielectric_mean_albedo(s.roughness)) / PI;
+    return ViewedBrdf(s, n, to_viewer, nv, diffuse_view);
+}
+
+// f_r for light arriving from `to_light` at the viewed surface (`Brdf::eval`).
+fn eval_viewed(viewed: ViewedBrdf, to_light: vec3<f32>) -> vec3<f32> {
+    let s = viewed.brdf;
+    let nl = dot(viewed.n, to_light);
     if nl <= 0.0 {
         return vec3<f32>(0.0);
     }
-    let nv = max(dot(n, to_viewer), 0.0);
     let alpha = s.roughness * s.roughness;
     let a2 = alpha * alpha;
-    let diffuse = diffuse_albedo(s, nl) / PI
-        * (1.0 - s.specular * dielectric_albedo(nv, s.roughness))
-        / (1.0 - s.specular * dielectric_mean_albedo(s.roughness));
-    let sum = to_light + to_viewer;
+    let diffuse = diffuse_albedo(s, nl) * viewed.diffuse_view;
+    let sum = to_light + viewed.v;
     let len2 = dot(sum, sum);
     if len2 <= 0.0 {
         return diffuse;
     }
     let h = sum * inverseSqrt(len2);
     let f0 = fresnel_f0(s);
-    let fresnel = f0 + (fresnel_f90(s) - f0) * pow(1.0 - clamp(dot(to_viewer, h), 0.0, 1.0), 5.0);
-    return diffuse + fresnel * (ggx_d(dot(n, h), a2) * smith_visibility(nl, nv, a2));
+    let fresnel = f0 + (fresnel_f90(s) - f0) * pow(1.0 - clamp(dot(viewed.v, h), 0.0, 1.0), 5.0);
+    return diffuse + fresnel * (ggx_d(dot(viewed.n, h), a2) * smith_visibility(nl, viewed.nv, a2));
+}
+
+// f_r for light arriving from `to_light` and leaving towards `to_viewer` (`Brdf::eval`).
+fn eval_brdf(s: SurfaceBrdf, n: vec3<f32>, to_light: vec3<f32>, to_viewer: vec3<f32>) -> vec3<f32> {
+    return eval_viewed(view_brdf(s, n, to_viewer), to_light);
 }
 
 // The paper's lobes fitted to the BRDF (`scene::material::DiffuseGlossy`).

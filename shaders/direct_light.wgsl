@@ -46,8 +46,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let p = position.xyz;
     let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
-    let surface = gbuffer_brdf(texel);
     let v = normalize(camera.position - p);
+    let surface = view_brdf(gbuffer_brdf(texel), n, v);
     var punctual = vec3<f32>(0.0);
     var beyond = indirect_in.rgb;
     for (var i = 0u; i < lights.count; i++) {
@@ -56,7 +56,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         let cos_x = max(dot(n, incident.to_light), 0.0);
         if cos_x > 0.0 {
             let visibility = shadow_visibility(light, shadow_map, shadow_sampler, p, n, cos_x);
-            let l = eval_brdf(surface, n, incident.to_light, v) * incident.irradiance * cos_x * visibility;
+            let l = eval_viewed(surface, incident.to_light) * incident.irradiance * cos_x * visibility;
             if i < lights.punctual {
                 punctual += l;
             } else {

@@ -12,9 +12,7 @@ fn vpl_light(
     flux: vec3<f32>,
     area: f32,
     x: vec3<f32>,
-    n: vec3<f32>,
-    v: vec3<f32>,
-    s: SurfaceBrdf,
+    s: ViewedBrdf,
 ) -> vec3<f32> {
     let to_vpl = position - x;
     let d2 = dot(to_vpl, to_vpl);
@@ -22,7 +20,7 @@ fn vpl_light(
         return vec3<f32>(0.0);
     }
     let w = to_vpl * inverseSqrt(d2);
-    let cos_x = max(dot(n, w), 0.0);
+    let cos_x = max(dot(s.n, w), 0.0);
     let cos_i = max(dot(normal, -w), 0.0);
-    return eval_brdf(s, n, w, v) * flux * (cos_i * cos_x / (area + PI * d2));
+    return eval_viewed(s, w) * flux * (cos_i * cos_x / (area + PI * d2));
 }

@@ -10,7 +10,7 @@
 //! `cargo run --release -p lightcast-server --example phong_fit > bench/results/phong-fit.md`
 
 use glam::{DVec3, Vec3};
-use lightcast_server::scene::brdf::Brdf;
+use lightcast_server::scene::brdf::{cosine_cells, Brdf};
 use std::f32::consts::PI;
 
 /// Cells per axis of the quadrature (uniform in sin²θ and φ, each of solid angle × cos π/N²).
@@ -49,20 +49,14 @@ fn compare(brdf: &Brdf, mu: f32) -> (f64, f64) {
     let lobes = brdf.lobes(mu);
     let k = lobes.exponent;
     let (mut exact, mut fitted, mut diff) = (DVec3::ZERO, DVec3::ZERO, DVec3::ZERO);
-    for i in 0..RINGS {
-        let s2 = (i as f32 + 0.5) / RINGS as f32;
-        let (sin_t, cos_t) = (s2.sqrt(), (1.0 - s2).sqrt());
-        for j in 0..RINGS {
-            let phi = 2.0 * PI * (j as f32 + 0.5) / RINGS as f32;
-            let l = Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
-            let f = brdf.eval(n, l, v);
-            let mirrored = 2.0 * n.dot(l) * n - l;
-            let cos_e = mirrored.dot(v).max(0.0);
-            let g = lobes.diffuse / PI + lobes.glossy * (k + 2.0) / (2.0 * PI) * cos_e.powf(k);
-            exact += f.as_dvec3();
-            fitted += g.as_dvec3();
-            diff += (g - f).abs().as_dvec3();
-        }
+    for l in cosine_cells(RINGS) {
+        let f = brdf.eval(n, l, v);
+        let mirrored = 2.0 * n.dot(l) * n - l;
+        let cos_e = mirrored.dot(v).max(0.0);
+        let g = lobes.diffuse / PI + lobes.glossy * (k + 2.0) / (2.0 * PI) * cos_e.powf(k);
+        exact += f.as_dvec3();
+        fitted += g.as_dvec3();
+        diff += (g - f).abs().as_dvec3();
     }
     let lum = |c: DVec3| c.dot(DVec3::new(0.2126, 0.7152, 0.0722));
     (lum(fitted) / lum(exact), lum(diff) / lum(exact))

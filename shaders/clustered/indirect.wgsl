@@ -20,8 +20,8 @@
 @group(0) @binding(13) var<storage, read> brdf_table: array<vec4<f32>>;
 
 // L_i(x, ω_o) of §4 (vpl_light.wgsl).
-fn vpl_radiance(vpl: Vpl, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
-    return vpl_light(vpl.position, vpl.normal, vpl.flux, vpl.area, x, n, v, s);
+fn vpl_radiance(vpl: Vpl, x: vec3<f32>, s: ViewedBrdf) -> vec3<f32> {
+    return vpl_light(vpl.position, vpl.normal, vpl.flux, vpl.area, x, s);
 }
 
 // The surface pixel `id` sees: its point and unit normal; `covered` false where no geometry
@@ -50,7 +50,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let v = normalize(camera.position - r.x);
-    let s = gbuffer_brdf(texel);
+    let s = view_brdf(gbuffer_brdf(texel), r.n, v);
     let b = params.interleave;
     let classes = b * b;
     let own_class = (id.y % b) * b + id.x % b;
@@ -61,7 +61,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var i = first; i < end; i++) {
         let vpl = vpls[i];
         if vpl.lit != 0u {
-            let l = vpl_radiance(vpl, r.x, r.n, v, s);
+            let l = vpl_radiance(vpl, r.x, s);
             if any(l > vec3<f32>(0.0)) {
                 radiance += l * vpl_visibility(i, r.x, r.n);
             }

@@ -104,7 +104,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
     let x = position.xyz;
     let n = normalize(textureLoad(g_normal_roughness, texel, 0).xyz);
     let v = normalize(camera.position - x);
-    let s = gbuffer_brdf(texel);
+    let s = view_brdf(gbuffer_brdf(texel), n, v);
     var radiance = vec3<f32>(0.0);
     // Each light's faces in turn (pattern.rs `light_runs`): every light is gathered from.
     var first = 0u;
@@ -114,7 +114,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
             end++;
         }
         if faces[first].light == EMITTER_FACE {
-            radiance += gather_emitters(first, x, n, v, s);
+            radiance += gather_emitters(first, x, s);
             first = end;
             continue;
         }
@@ -132,7 +132,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
                 centre = p.st;
                 found = true;
             }
-            radiance += gather_face(f, p.st, x, n, v, s);
+            radiance += gather_face(f, p.st, x, s);
         }
         if is_probe && first == 0u {
             probe = vec4<f32>(f32(face), centre, 1.0);
@@ -144,7 +144,7 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // Emitter face `face` whole: every (S/N)-th of its S samples, each standing for S/N of them
 // (pattern.rs `emitter_texels`).
-fn gather_emitters(face: u32, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
+fn gather_emitters(face: u32, x: vec3<f32>, s: ViewedBrdf) -> vec3<f32> {
     let texels = faces[face].emitter_samples;
     let m = max(min(params.sample_count, texels), 1u);
     let weight = f32(texels) / f32(m);
@@ -160,13 +160,13 @@ fn gather_emitters(face: u32, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: Surfa
         }
         let flux_area = textureLoad(rsm_flux_area, t, 0);
         let normal = textureLoad(rsm_normal, t, 0).xyz;
-        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, n, v, s) * weight;
+        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, s) * weight;
     }
     return radiance;
 }
 
 // The pattern around `centre` in atlas face `face`: Σ weight × the pixel light's L.
-fn gather_face(face: u32, centre: vec2<f32>, x: vec3<f32>, n: vec3<f32>, v: vec3<f32>, s: SurfaceBrdf) -> vec3<f32> {
+fn gather_face(face: u32, centre: vec2<f32>, x: vec3<f32>, s: ViewedBrdf) -> vec3<f32> {
     let size = f32(params.rsm_size);
     let r2 = params.radius * params.radius;
     var radiance = vec3<f32>(0.0);
@@ -183,7 +183,7 @@ fn gather_face(face: u32, centre: vec2<f32>, x: vec3<f32>, n: vec3<f32>, v: vec3
         }
         let flux_area = textureLoad(rsm_flux_area, t, 0);
         let normal = textureLoad(rsm_normal, t, 0).xyz;
-        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, n, v, s) * (sample.weight * r2);
+        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, s) * (sample.weight * r2);
     }
     return radiance;
 }

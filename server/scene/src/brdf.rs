@@ -150,6 +150,21 @@ impl Brdf {
     }
 }
 
+/// The centres of `rings`² cells over the upper hemisphere (z up) that each carry the same
+/// projected solid angle π/rings² (cos θ dω = ½ d(sin²θ) dφ: cells uniform in sin²θ and φ):
+/// ∫ g(l) cos θ dω ≈ π/rings² · Σ g(l). A quadrature independent of the table's sampling, for
+/// tests and `examples/phong_fit.rs`.
+pub fn cosine_cells(rings: usize) -> impl Iterator<Item = Vec3> {
+    (0..rings).flat_map(move |i| {
+        let s2 = (i as f32 + 0.5) / rings as f32;
+        let (sin_t, cos_t) = (s2.sqrt(), (1.0 - s2).sqrt());
+        (0..rings).map(move |j| {
+            let phi = 2.0 * PI * (j as f32 + 0.5) / rings as f32;
+            Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+        })
+    })
+}
+
 /// GGX's α² for perceptual roughness `roughness`.
 fn alpha2(roughness: f32) -> f32 {
     let alpha = roughness * roughness;
@@ -396,17 +411,9 @@ mod tests {
         let n = Vec3::Z;
         let v = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
         // f64 sums: a million f32 additions would drift by a few 0.1 %.
-        let mut sum = glam::DVec3::ZERO;
-        for i in 0..rings {
-            // cos θ dω = ½ d(sin²θ) dφ: cells uniform in sin²θ and φ each carry π/rings².
-            let s2 = (i as f32 + 0.5) / rings as f32;
-            let (sin_t, cos_t) = (s2.sqrt(), (1.0 - s2).sqrt());
-            for j in 0..rings {
-                let phi = 2.0 * PI * (j as f32 + 0.5) / rings as f32;
-                let l = Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
-                sum += brdf.eval(n, l, v).as_dvec3();
-            }
-        }
+        let sum: glam::DVec3 = cosine_cells(rings)
+            .map(|l| brdf.eval(n, l, v).as_dvec3())
+            .sum();
         (sum * (std::f64::consts::PI / (rings * rings) as f64)).as_vec3()
     }
 
@@ -457,18 +464,13 @@ mod tests {
         let a2 = alpha2(0.2);
         let v = Vec3::new((1.0f32 - 0.01).sqrt(), 0.0, 0.1);
         let rings = 800;
-        let mut sum = 0.0f64;
-        for i in 0..rings {
-            let s2 = (i as f32 + 0.5) / rings as f32;
-            let (sin_t, cos_t) = (s2.sqrt(), (1.0 - s2).sqrt());
-            for j in 0..rings {
-                let phi = 2.0 * PI * (j as f32 + 0.5) / rings as f32;
-                let l = Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t);
+        let sum: f64 = cosine_cells(rings)
+            .map(|l| {
                 let h = (l + v).normalize();
                 let f = DIELECTRIC_F0 + (1.0 - DIELECTRIC_F0) * schlick_weight(v.dot(h));
-                sum += f64::from((1.0 - f) / PI + f * ggx_d(h.z, a2) * smith_v(l.z, v.z, a2));
-            }
-        }
+                f64::from((1.0 - f) / PI + f * ggx_d(h.z, a2) * smith_v(l.z, v.z, a2))
+            })
+            .sum();
         let albedo = sum * std::f64::consts::PI / (rings * rings) as f64;
         assert!(albedo > 1.3, "{albedo}");
     }

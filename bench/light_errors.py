@@ -10,6 +10,8 @@ with `compare_to: reference`. Loopback only, standard library only.
         > bench/results/lavapipe-three-lights-errors.md
     python3 bench/light_errors.py target/release/lightcast-server --case emitters --spp 1024 \\
         > bench/results/lavapipe-emitters-errors.md
+    python3 bench/light_errors.py target/release/lightcast-server --case street --spp 1024 \\
+        --width 128 --height 72 > bench/results/lavapipe-street-truth.md
 
 `environment` (part 3): with and without an environment, the Cornell box under a uniform sky
 (it has no directional light for a daylight sky; its open front lets the sky in) and the
@@ -23,6 +25,12 @@ box (its lamp a bare quad 5 mm under the ceiling) and `tests/data/cornell-box/co
 (its lamp a thin closed box), each method against the reference from the same emitters. The
 reference's own noise (`reference_relative_error`, its estimate of its relative error) is
 given per scene: emitters are small, bright and found by bounce rays only.
+
+`street` (issue 34): the street as authored (glass and steel façades, glossy signs) and with
+every surface Lambertian (`materials=diffuse`), at its own camera and sun, each method against
+the full reference and (`compare_modelled`) against the reference of the light transport it
+models (diffuse senders): on the diffuse street the two are one; the RSM-based methods with
+the sun's maps over the whole scene (`light_fit: scene`) and fitted to the view (`view`).
 
 `three-lights` (part 2): the Cornell box lit by three lights of different kinds (its ceiling
 spot, a point light low in a back corner, a sun through the open front), each alone and all
@@ -59,21 +67,35 @@ def request(url, body=None, method=None):
         return resp.headers, resp.read()
 
 
-def compare(base, render, spp, what, noise=False):
-    """`render` compared with the reference: "block error / bias" (and, with `noise`, the
-    reference's own estimated per-pixel error in parentheses), or why it was refused."""
-    started = time.time()
-    try:
-        headers, _ = request(base + "/v1/render", {
-            "render": render, "format": "png", "compare_to": "reference", "compare_spp": spp})
-    except urllib.error.HTTPError as e:
-        return f"refused: {e.read().decode()[:120]}"
-    c = json.loads(headers["x-lightcast-report"])["comparison"]
-    cell = (f"{100 * c['indirect_block_mae_relative']:.1f} % / "
+def cell_of(c):
+    """A comparison as "block error / bias"."""
+    return (f"{100 * c['indirect_block_mae_relative']:.1f} % / "
             f"{100 * c['indirect_bias_relative']:+.1f} %")
+
+
+def compare(base, render, spp, what, noise=False, modelled=False):
+    """`render` compared with the reference: "block error / bias" (and, with `noise`, the
+    reference's own estimated per-pixel error in parentheses), or why it was refused. With
+    `modelled`, a pair: that and the same against the reference of the transport the method
+    models ("-" where it models the full one)."""
+    started = time.time()
+    body = {"render": render, "format": "png", "compare_to": "reference", "compare_spp": spp}
+    if modelled:
+        body["compare_modelled"] = True
+    try:
+        headers, _ = request(base + "/v1/render", body)
+    except urllib.error.HTTPError as e:
+        refused = f"refused: {e.read().decode()[:120]}"
+        return (refused, refused) if modelled else refused
+    report = json.loads(headers["x-lightcast-report"])
+    c = report["comparison"]
+    cell = cell_of(c)
     if noise:
         cell += f" ({100 * c['reference_relative_error']:.0f} %)"
     print(f"{what}: {cell} [{time.time() - started:.0f} s]", file=sys.stderr)
+    if modelled:
+        m = report.get("comparison_modelled")
+        return cell, cell_of(m) if m else "-"
     return cell
 
 
@@ -146,10 +168,31 @@ def three_lights_case(base, args, methods):
         print(f"- {name}: `{json.dumps(light)}`")
 
 
+def street_case(base, args, methods, info):
+    fits = {m["method"]: any(p["name"] == "light_fit" for p in m["parameters"])
+            for m in info["gi_methods"]}
+    print("| street | method | sun's maps (`light_fit`) | against the reference | against the "
+          "reference of the transport it models |\n|---|---|---|---|---|")
+    for materials in ["authored", "diffuse"]:
+        spec = f"{args.street}&materials={materials}"
+        _, body = request(base + "/v1/scenes", {"procedural": spec})
+        scene = json.loads(body)["id"]
+        for method in methods:
+            for fit in (["scene", "view"] if fits.get(method) else [None]):
+                gi = {"method": method}
+                if fit:
+                    gi["light_fit"] = fit
+                full, modelled = compare(
+                    base, {"scene": scene, "width": args.width, "height": args.height, "gi": gi},
+                    args.spp, f"{materials} {method} {fit}", modelled=True)
+                print(f"| {materials} | `{method}` | {fit or '-'} | {full} | {modelled} |",
+                      flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("server", help="path to lightcast-server")
-    ap.add_argument("--case", choices=["environment", "emitters", "three-lights"],
+    ap.add_argument("--case", choices=["environment", "emitters", "three-lights", "street"],
                     default="environment")
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--height", type=int, default=96)
@@ -162,7 +205,7 @@ def main():
     server = subprocess.Popen(
         [args.server, "--listen", f"127.0.0.1:{port}", "--allow-cpu-adapter",
          "--max-request-cost", "3600", "--max-frame-cost", "600",
-         "--max-spp", str(max(args.spp, 256))],
+         "--max-spp", str(max(args.spp, 256)), "--max-scenes", "8"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         for _ in range(600):
@@ -181,6 +224,8 @@ def main():
             environment_case(base, args, methods)
         elif args.case == "emitters":
             emitters_case(base, args, methods)
+        elif args.case == "street":
+            street_case(base, args, methods, info)
         else:
             three_lights_case(base, args, methods)
     finally:

@@ -114,6 +114,15 @@ fn eval_brdf(s: SurfaceBrdf, n: vec3<f32>, to_light: vec3<f32>, to_viewer: vec3<
     return eval_viewed(view_brdf(s, n, to_viewer), to_light);
 }
 
+// Its diffuse lobe alone (`Brdf::eval_diffuse`).
+fn eval_diffuse(s: SurfaceBrdf, n: vec3<f32>, to_light: vec3<f32>, to_viewer: vec3<f32>) -> vec3<f32> {
+    let nl = dot(n, to_light);
+    if nl <= 0.0 {
+        return vec3<f32>(0.0);
+    }
+    return diffuse_albedo(s, nl) * view_brdf(s, n, to_viewer).diffuse_view;
+}
+
 // The paper's lobes fitted to the BRDF (`scene::material::DiffuseGlossy`).
 struct PhongLobes {
     diffuse: vec3<f32>,

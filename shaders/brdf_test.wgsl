@@ -1,4 +1,4 @@
-// Test harness (server/tests/integration/gpu_brdf.rs): eval_brdf and phong_lobes of
+// Test harness (server/tests/integration/gpu_brdf.rs): eval_brdf, eval_diffuse and phong_lobes of
 // brdf_eval.wgsl for a list of cases, compared with their CPU reference `scene::brdf`.
 
 // Mirrored by `BrdfCase` in gpu_brdf.rs.
@@ -14,7 +14,8 @@ struct BrdfCase {
 }
 
 @group(0) @binding(0) var<storage, read> cases: array<BrdfCase>;
-// Three per case: f_r (rgb), the lobes' diffuse (rgb) and exponent (w), their glossy (rgb).
+// Four per case: f_r (rgb), the lobes' diffuse (rgb) and exponent (w), their glossy (rgb), the
+// diffuse lobe of f_r (rgb).
 @group(0) @binding(1) var<storage, read_write> results: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> brdf_table: array<vec4<f32>>;
 
@@ -26,7 +27,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = cases[id.x];
     let s = surface_brdf(c.base, c.metallic, c.roughness, c.specular);
     let lobes = phong_lobes(s, max(dot(c.n, c.to_viewer), 0.0));
-    results[3u * id.x] = vec4<f32>(eval_brdf(s, c.n, c.to_light, c.to_viewer), 0.0);
-    results[3u * id.x + 1u] = vec4<f32>(lobes.diffuse, lobes.exponent);
-    results[3u * id.x + 2u] = vec4<f32>(lobes.glossy, 0.0);
+    results[4u * id.x] = vec4<f32>(eval_brdf(s, c.n, c.to_light, c.to_viewer), 0.0);
+    results[4u * id.x + 1u] = vec4<f32>(lobes.diffuse, lobes.exponent);
+    results[4u * id.x + 2u] = vec4<f32>(lobes.glossy, 0.0);
+    results[4u * id.x + 3u] = vec4<f32>(eval_diffuse(s, c.n, c.to_light, c.to_viewer), 0.0);
 }

@@ -1,6 +1,7 @@
 // Punctual lights and their shadow maps. The shadow map is one depth array for every light of
 // the frame: one layer for a directional (orthographic) or spot (perspective) light, six cube
-// faces for a point light, each light's layers from its `first_layer` on.
+// faces for a point light, two cascades (near, far) for a directional light fitted to the view
+// (`frame_uniforms::Coverage::View`), each light's layers from its `first_layer` on.
 
 const LIGHT_DIRECTIONAL: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
@@ -27,7 +28,8 @@ struct LightUniform {
     normal_bias: f32,
     // The light's first layer in the frame's shadow-map array.
     first_layer: u32,
-    pad0: f32,
+    // Its layers: 6 for a point light, 2 for a directional light's cascades, else 1.
+    face_count: u32,
 }
 
 // Every light of a frame: the first `punctual` its punctual lights, the rest the directional
@@ -61,8 +63,24 @@ fn light_incident(light: LightUniform, p: vec3<f32>) -> Incident {
     return Incident(l, e);
 }
 
-// Cube face (+X, -X, +Y, -Y, +Z, -Z) whose frustum contains `p` for a point light.
+// Whether `p` lies inside the near cascade of a directional light (with its filter's
+// footprint), whose face is the finer of the two wherever it reaches.
+fn in_near_cascade(light: LightUniform, p: vec3<f32>) -> bool {
+    let clip = light.face_view_proj[0] * vec4<f32>(p, 1.0);
+    return all(abs(clip.xy / clip.w) <= vec2<f32>(1.0 - 4.0 * light.shadow_texel));
+}
+
+// Length of the first row of an orthographic face's matrix: 2 / the face's side.
+fn ortho_scale(m: mat4x4<f32>) -> f32 {
+    return length(vec3<f32>(m[0].x, m[1].x, m[2].x));
+}
+
+// The face whose map holds `p`: the cube face (+X, -X, +Y, -Y, +Z, -Z) of a point light, the
+// cascade of a directional light fitted to the view.
 fn shadow_face(light: LightUniform, p: vec3<f32>) -> u32 {
+    if light.kind == LIGHT_DIRECTIONAL && light.face_count > 1u {
+        return select(1u, 0u, in_near_cascade(light, p));
+    }
     if light.kind != LIGHT_POINT {
         return 0u;
     }
@@ -91,6 +109,9 @@ fn shadow_visibility(
     var bias = light.normal_bias;
     if light.kind != LIGHT_DIRECTIONAL {
         bias *= distance(p, light.position);
+    } else if face > 0u {
+        // `normal_bias` is in texels of the first face; the far cascade's are larger.
+        bias *= ortho_scale(light.face_view_proj[0]) / ortho_scale(light.face_view_proj[face]);
     }
     // A texel's footprint on a surface grows as 1/cos towards grazing light; so does the
     // depth error the offset has to clear (capped, or the shadow detaches entirely).

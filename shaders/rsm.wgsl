@@ -14,7 +14,8 @@ struct RsmFace {
     perspective: u32,
     // The face's light in `lights`.
     light: u32,
-    pad0: u32,
+    // The face's index among its light's: a cube face, or a directional light's cascade.
+    index: u32,
     pad1: u32,
 }
 
@@ -46,6 +47,14 @@ fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> RsmOut {
     }
     let n = facing_normal(in.normal, front);
     let light = lights.list[face.light];
+    // A directional light's far cascade leaves what its near one covers to it: each surface
+    // point sends its light from one face (frame_uniforms::Coverage::View).
+    if light.kind == LIGHT_DIRECTIONAL && face.index > 0u {
+        let near = light.face_view_proj[0] * vec4<f32>(in.world, 1.0);
+        if all(abs(near.xy / near.w) <= vec2<f32>(1.0)) {
+            discard;
+        }
+    }
     var area = face.texel_area;
     // Cross-section of the texel's beam across the ray, which is what E⊥ falls on.
     var cross_section = area;

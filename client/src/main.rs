@@ -99,6 +99,11 @@ struct RenderCmd {
     /// Samples per pixel of the comparison's reference (server default 256).
     #[arg(long)]
     compare_spp: Option<u32>,
+    /// Also compare with a reference of the light transport the method models (diffuse
+    /// senders for the RSM-based methods), to part the error of what it leaves out from the
+    /// error in what it models; one more reference render.
+    #[arg(long, requires = "compare_to")]
+    compare_modelled: bool,
     #[command(flatten)]
     render: RenderFlags,
 }
@@ -324,6 +329,9 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
     if let Some(method) = cmd.compare_to {
         request["compare_to"] = serde_json::to_value(GiMethod::from(method))?;
     }
+    if cmd.compare_modelled {
+        request["compare_modelled"] = true.into();
+    }
     if let Some(spp) = cmd.compare_spp {
         request["compare_spp"] = spp.into();
     }
@@ -371,10 +379,15 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
             None => println!("{n} samples per pixel"),
         }
     }
-    if let Some(c) = &last.comparison {
+    for c in last.comparison.iter().chain(&last.comparison_modelled) {
         println!(
-            "against {} ({} spp, its own relative error {:.2} %):",
+            "against {}{} ({} spp, its own relative error {:.2} %):",
             c.against,
+            match c.senders {
+                lightcast_protocol::Senders::Full => "",
+                lightcast_protocol::Senders::Diffuse =>
+                    " of diffuse senders (the light transport the method models)",
+            },
             c.reference_samples,
             c.reference_relative_error * 100.0
         );

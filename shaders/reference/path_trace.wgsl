@@ -17,6 +17,12 @@
 // weighted by the power heuristic (Veach 1997, §9.2.4), so that neither a small bright
 // region nor a glossy lobe makes fireflies. The last vertex has no bounce ray after it: its
 // next-event estimate counts whole.
+//
+// With `diffuse_senders` a vertex y1 … y_bounces reflects the light it receives straight from
+// a light (punctual or the environment) by its BRDF's diffuse lobe alone: the light transport
+// of the methods whose VPLs/VALs/surfels are diffuse. The environment then reaches those
+// vertices by next-event estimation only (a BRDF-sampled ray that leaves the scene there
+// carries the whole BRDF's weight, which this transport does not have), which stays unbiased.
 
 // Mirrored by `TraceParams` in server/gi/src/reference/mod.rs.
 struct TraceParams {
@@ -36,6 +42,8 @@ struct TraceParams {
     emitters: u32,
     // First row of this dispatch's band of the image (a sample is traced in bands of rows).
     row_offset: u32,
+    // 1: y1 … y_bounces reflect direct light by their diffuse lobe alone (see above).
+    diffuse_senders: u32,
 }
 
 @group(0) @binding(0) var<storage, read> params: TraceParams;
@@ -210,9 +218,20 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
     return select(0.0, a2 / (a2 + b * b), a2 > 0.0);
 }
 
+// f_r of a vertex reflecting direct light: the whole BRDF at x (the pixel's surface, lit
+// directly) and wherever senders are full, the diffuse lobe alone at y1 … with
+// `diffuse_senders`.
+fn sender_brdf(s: SurfaceBrdf, n: vec3<f32>, to_light: vec3<f32>, wo: vec3<f32>, first: bool) -> vec3<f32> {
+    if params.diffuse_senders != 0u && !first {
+        return eval_diffuse(s, n, to_light, wo);
+    }
+    return eval_brdf(s, n, to_light, wo);
+}
+
 // The environment's light reflected at `surface` towards `wo`, by one direction sampled from
-// the environment; weighted against BRDF sampling when `mis` (a bounce ray follows).
-fn environment_next_event(surface: SurfaceHit, wo: vec3<f32>, mis: bool, state: ptr<function, u32>) -> vec3<f32> {
+// the environment; weighted against BRDF sampling when `mis` (a bounce ray follows, whose
+// escape counts the environment too). `first`: `surface` is the pixel's.
+fn environment_next_event(surface: SurfaceHit, wo: vec3<f32>, mis: bool, first: bool, state: ptr<function, u32>) -> vec3<f32> {
     let u = vec3<f32>(rand(state), rand(state), rand(state));
     let s = env_sample(u);
     let cos_y = dot(surface.normal, s.direction);
@@ -227,7 +246,7 @@ fn environment_next_event(surface: SurfaceHit, wo: vec3<f32>, mis: bool, state: 
     if mis {
         weight = power_heuristic(s.pdf, brdf_pdf(surface.brdf, surface.normal, wo, s.direction));
     }
-    return eval_brdf(surface.brdf, surface.normal, s.direction, wo) * s.radiance * cos_y / s.pdf * weight;
+    return sender_brdf(surface.brdf, surface.normal, s.direction, wo, first) * s.radiance * cos_y / s.pdf * weight;
 }
 
 // Indirect radiance leaving `x` towards `wo` along one path.
@@ -239,8 +258,11 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
     let sky = env_enabled();
     for (var bounce = 0u; bounce < params.bounces; bounce++) {
         let n = surface.normal;
+        // Whether the environment at this vertex is shared between next-event estimation
+        // and the escaping bounce ray (not at a diffuse sender: see the top).
+        let mis = bounce == 0u || params.diffuse_senders == 0u;
         if sky {
-            radiance += throughput * environment_next_event(surface, wo, true, state);
+            radiance += throughput * environment_next_event(surface, wo, mis, bounce == 0u, state);
         }
         let wi = sample_brdf(surface.brdf, n, wo, state);
         let cos_i = dot(n, wi);
@@ -252,7 +274,7 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
         let origin = surface.position + surface.geometric * params.ray_epsilon;
         let hit = trace(origin, wi, 3.4e38);
         if hit.triangle == NO_HIT {
-            if sky {
+            if sky && mis {
                 radiance += throughput * env_radiance(wi) * power_heuristic(pdf, env_pdf(wi));
             }
             return radiance;
@@ -273,13 +295,13 @@ fn indirect_sample(x: SurfaceHit, wo_in: vec3<f32>, state: ptr<function, u32>) -
             if cos_y > 0.0 && dot(surface.geometric, incident.to_light) > 0.0
                 && any(incident.irradiance > vec3<f32>(0.0))
                 && light_visible(light, lifted, incident.to_light) {
-                radiance += throughput * eval_brdf(surface.brdf, surface.normal, incident.to_light, wo)
+                radiance += throughput * sender_brdf(surface.brdf, surface.normal, incident.to_light, wo, false)
                     * incident.irradiance * cos_y;
             }
         }
     }
     if sky {
-        radiance += throughput * environment_next_event(surface, wo, false, state);
+        radiance += throughput * environment_next_event(surface, wo, false, params.bounces == 0u, state);
     }
     return radiance;
 }

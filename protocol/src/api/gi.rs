@@ -133,3 +133,38 @@ impl ToSchema for GiParams {
         "GiParams".into()
     }
 }
+
+/// How a method's indirect light leaves the surfaces its lights reach directly (the senders:
+/// the RSM's texels, VPLs, VALs, surfels).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Senders {
+    /// By the whole BRDF: diffuse and glossy reflection, as the truth.
+    #[default]
+    Full,
+    /// By the diffuse lobe alone: what the RSM stores of the light it reflects, so every
+    /// glossy reflection of a light is missing.
+    Diffuse,
+}
+
+impl Senders {
+    /// The names of the reference's `senders` parameter, in this order.
+    pub const NAMES: &'static [&'static str] = &["full", "diffuse"];
+
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::Full => "full",
+            Self::Diffuse => "diffuse",
+        }
+    }
+
+    /// For a table whose method always sends diffuse light.
+    pub fn diffuse(_: &GiParams) -> Self {
+        Self::Diffuse
+    }
+
+    /// For a table whose method sends by the whole BRDF (or sends nothing).
+    pub fn full(_: &GiParams) -> Self {
+        Self::Full
+    }
+}

@@ -44,6 +44,13 @@ pub struct RenderRequest {
     /// only when the compared method lights from them (its parameters include `emitters`)
     /// with `render.gi.emitters` on, so both see the same light sources.
     pub compare_spp: Option<u32>,
+    /// With `compare_to: reference`, also compare against a reference that models only the
+    /// light transport the method does (its senders, e.g. `diffuse` for the RSM-based
+    /// methods, whose VPLs/VALs reflect the light they receive by the diffuse lobe alone),
+    /// reported as `comparison_modelled`: its error is the error in what the method models,
+    /// the rest of `comparison`'s is what it leaves out. Costs a second reference render
+    /// (cached like the first); ignored for a method that models the full transport.
+    pub compare_modelled: bool,
 }
 
 /// A render's errors against another method's render of the same view (see
@@ -51,6 +58,10 @@ pub struct RenderRequest {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct Comparison {
     pub against: GiMethod,
+    /// How the reference reflects the light its surfaces receive straight from a light: `full`
+    /// (the truth) or `diffuse` (the transport of methods with diffuse senders).
+    #[serde(default)]
+    pub senders: Senders,
     /// Samples per pixel of the reference (0 when `against` is not progressive).
     pub reference_samples: u32,
     /// The reference's own convergence: RMS standard error of pixel luminance over the mean.
@@ -115,6 +126,10 @@ pub struct RenderReport {
     /// Errors against `compare_to`'s render, when the request asked for one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub comparison: Option<Comparison>,
+    /// Errors against the reference of the light transport the method models, when the
+    /// request asked for it (`compare_modelled`) and it differs from the full one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub comparison_modelled: Option<Comparison>,
     /// What the request was estimated to cost before it ran (the comparison render included),
     /// in seconds of this server's adapter: the number checked against `max_request_seconds`
     /// (absent from offline renders, which have no such limit).

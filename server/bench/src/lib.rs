@@ -29,6 +29,7 @@ pub mod stream;
 pub mod plots;
 
 use crate::gi::bench::{Configuration, Sweep, SweepArgs};
+use crate::gi::params::Senders;
 use crate::gi::precompute::PrecomputeKey;
 use crate::gi::{reference::ReferenceImage, GiMethod};
 use crate::gpu::{context::AdapterSummary, BackendChoice, GpuContext};
@@ -273,8 +274,8 @@ struct Bench<'a> {
     scene: Scene,
     renderer: Renderer,
     base: RenderSettings,
-    /// The references by (bounces, emitters), rendered when first needed.
-    references: Vec<(u32, bool, ReferenceImage)>,
+    /// The references by (bounces, emitters, senders), rendered when first needed.
+    references: Vec<(ReferenceKey, ReferenceImage)>,
     /// The precomputed set each registry entry's renderer holds, by its key.
     installed: BTreeMap<usize, (PrecomputeKey, Precomputed)>,
     /// Where built sets go (afresh: a directory of this run, removed at the end).
@@ -283,17 +284,32 @@ struct Bench<'a> {
     progress: &'a mut dyn FnMut(u64, u64, &str),
 }
 
+/// What tells the references of a run apart.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ReferenceKey {
+    bounces: u32,
+    emitters: bool,
+    senders: Senders,
+}
+
 impl Bench<'_> {
     /// The reference for frames of `gi` at `bounces`: lit by emissive surfaces only for a
-    /// method that lights from them and has `emitters` on, so both see the same sources.
-    fn reference(&mut self, gi: &GiParams, bounces: u32) -> Result<usize, BenchError> {
+    /// method that lights from them and has `emitters` on, so both see the same sources;
+    /// reflecting direct light on as `senders` says (full: the truth).
+    fn reference(
+        &mut self,
+        gi: &GiParams,
+        bounces: u32,
+        senders: Senders,
+    ) -> Result<usize, BenchError> {
         use crate::gi::reference::{PathTracer, ReferenceSettings};
         let emitters = crate::gi::reference_emitters(gi);
-        if let Some(i) = self
-            .references
-            .iter()
-            .position(|(b, e, _)| (*b, *e) == (bounces, emitters))
-        {
+        let key = ReferenceKey {
+            bounces,
+            emitters,
+            senders,
+        };
+        if let Some(i) = self.references.iter().position(|(k, _)| *k == key) {
             return Ok(i);
         }
         let mut tracer = PathTracer::new(self.renderer.context().clone(), &self.scene)?;
@@ -302,12 +318,18 @@ impl Bench<'_> {
             seed: 0,
             roughness: crate::gi::common::params::roughness_override(gi),
             emitters,
+            senders,
         };
         // Small calls keep each submission short (lavapipe drops long ones) and show progress.
         let (spp, per_call) = (self.args.reference_spp, 4);
         let label = format!(
-            "reference path tracing, {bounces} bounce(s){}: samples per pixel",
-            if emitters { " with emitters" } else { "" }
+            "reference path tracing, {bounces} bounce(s){}{}: samples per pixel",
+            if emitters { " with emitters" } else { "" },
+            if senders == Senders::Diffuse {
+                ", diffuse senders"
+            } else {
+                ""
+            }
         );
         let b = &self.base;
         let environment = match &b.environment {
@@ -340,12 +362,39 @@ impl Bench<'_> {
             .read()?
             .expect("the reference has accumulated samples");
         (self.log)(&format!(
-            "reference: {} spp, {bounces} bounce(s), relative standard error {:.2} %",
+            "reference: {} spp, {bounces} bounce(s), {} senders, relative standard error {:.2} %",
             image.samples,
+            senders.name(),
             image.relative_standard_error * 100.0
         ));
-        self.references.push((bounces, emitters, image));
+        self.references.push((key, image));
         Ok(self.references.len() - 1)
+    }
+
+    /// The references frames of `gi` at `bounces` are measured against: the full one, and the
+    /// one of the light transport the method models where that differs.
+    fn references_of(
+        &mut self,
+        gi: &GiParams,
+        bounces: u32,
+    ) -> Result<(usize, Option<usize>), BenchError> {
+        let full = self.reference(gi, bounces, Senders::Full)?;
+        let modelled = match crate::gi::reference_senders(gi) {
+            Senders::Full => None,
+            senders => Some(self.reference(gi, bounces, senders)?),
+        };
+        Ok((full, modelled))
+    }
+
+    /// `indirect`'s errors against the full reference and the modelled one (if any).
+    fn errors_of(
+        &self,
+        (full, modelled): (usize, Option<usize>),
+        indirect: &[[f32; 4]],
+    ) -> (ErrorStats, Option<ErrorStats>) {
+        let width = self.args.width as usize;
+        let against = |i: usize| errors(&self.references[i].1.indirect, indirect, width);
+        (against(full), modelled.map(against))
     }
 
     /// Gives the renderer the set `gi`'s frames read, building it when its key differs from
@@ -608,13 +657,14 @@ pub fn run(
         base: base_gi.values.clone(),
         reference_image: first
             .filter(|_| pictures)
-            .map(|(_, _, r)| reference_picture(&r.indirect, mean(&r.indirect))),
+            .map(|(_, r)| reference_picture(&r.indirect, mean(&r.indirect))),
         references: bench
             .references
             .iter()
-            .map(|(bounces, emitters, r)| ReferenceSummary {
-                bounces: *bounces,
-                emitters: *emitters,
+            .map(|(key, r)| ReferenceSummary {
+                bounces: key.bounces,
+                emitters: key.emitters,
+                senders: key.senders,
                 spp: r.samples,
                 relative_standard_error: r.relative_standard_error,
                 mean: mean(&r.indirect),
@@ -717,7 +767,7 @@ fn run_configurations(
     }
     for c in configs.iter().chain(ladders) {
         for &b in bounces {
-            bench.reference(&c.gi, b)?;
+            bench.references_of(&c.gi, b)?;
         }
     }
     // The indirect light of configurations a later one is compared with.
@@ -733,20 +783,22 @@ fn run_configurations(
         let mut first: Option<Captured> = None;
         for &b in bounces {
             let shot = bench.capture(&c.gi, b)?;
-            let r = bench.reference(&c.gi, b)?;
-            let truth = &bench.references[r].2.indirect;
+            let refs = bench.references_of(&c.gi, b)?;
+            let (vs_reference, vs_modelled) = bench.errors_of(refs, &shot.indirect);
+            let truth = &bench.references[refs.0].1.indirect;
             let finals = final_errors(&shot.hdr, &shot.indirect, truth, shot.exposure, width);
             errors_by_bounce.push(BounceError {
                 bounces: b,
-                vs_reference: errors(truth, &shot.indirect, width as usize),
+                vs_reference,
+                vs_modelled,
                 final_psnr_db: finals.psnr_db,
                 final_flip: finals.flip_mean,
             });
             first.get_or_insert(shot);
         }
         let shot = first.expect("at least one bounce count");
-        let r = bench.reference(&c.gi, bounces[0])?;
-        let truth = &bench.references[r].2.indirect;
+        let r = bench.reference(&c.gi, bounces[0], Senders::Full)?;
+        let truth = &bench.references[r].1.indirect;
         let difference_image =
             pictures.then(|| difference_picture(truth, &shot.indirect, mean(truth)));
         let vs_baseline: Option<ErrorStats> = c
@@ -761,10 +813,16 @@ fn run_configurations(
         }
         let first_error = errors_by_bounce[0].vs_reference;
         (bench.log)(&format!(
-            "{what}: GI {:.2} ms, error against the reference {:.2} % (8×8 blocks {:.2} %)",
+            "{what}: GI {:.2} ms, error against the reference {:.2} % (8×8 blocks {:.2} %){}",
             timed.gi.median_ms,
             first_error.mae_relative * 100.0,
-            first_error.block_mae_relative * 100.0
+            first_error.block_mae_relative * 100.0,
+            errors_by_bounce[0]
+                .vs_modelled
+                .map_or(String::new(), |e| format!(
+                    ", against the modelled transport {:.2} % (8×8 blocks)",
+                    e.block_mae_relative * 100.0
+                ))
         ));
         rows.push(BenchRow {
             method: c.gi.method,
@@ -830,9 +888,9 @@ fn equal_time(
         setting: cells(&configs[centre]),
         gi: row.gi,
         vs_reference: single.vs_reference,
+        vs_modelled: single.vs_modelled,
         nearest_equal_time: true,
     }];
-    let width = bench.args.width as usize;
     for rung in ladders.iter().filter(|c| c.gi.method != skip) {
         let gi = rung
             .gi
@@ -841,13 +899,14 @@ fn equal_time(
         bench.precompute(&gi)?;
         let timed = bench.time(&gi, &rung.label())?;
         let shot = bench.capture(&gi, 1)?;
-        let r = bench.reference(&gi, 1)?;
-        let truth = &bench.references[r].2.indirect;
+        let refs = bench.references_of(&gi, 1)?;
+        let (vs_reference, vs_modelled) = bench.errors_of(refs, &shot.indirect);
         out.push(MethodRow {
             method: gi.method,
             setting: cells(rung),
             gi: timed.gi,
-            vs_reference: errors(truth, &shot.indirect, width),
+            vs_reference,
+            vs_modelled,
             nearest_equal_time: false,
         });
     }

@@ -46,6 +46,10 @@ pub struct BounceError {
     pub bounces: u32,
     /// Errors of the indirect buffer.
     pub vs_reference: ErrorStats,
+    /// Errors against a reference that models the same light transport as the method (its
+    /// table's `senders`), where that differs from the full one: what is left of the error
+    /// is the error in what the method models; the difference is what it leaves out.
+    pub vs_modelled: Option<ErrorStats>,
     /// PSNR in dB of the final image against the same frame with the reference's indirect
     /// light (see [`crate::quality::final_errors`]); `None` when identical.
     pub final_psnr_db: Option<f64>,
@@ -115,6 +119,9 @@ pub struct ReferenceSummary {
     pub bounces: u32,
     /// Whether emissive surfaces lit it (for the methods that light from them).
     pub emitters: bool,
+    /// How it reflects direct light on (`full`: the truth; `diffuse`: the diffuse lobe alone,
+    /// what the RSM-based methods model).
+    pub senders: crate::gi::params::Senders,
     pub spp: u32,
     /// Its own convergence estimate (relative standard error).
     pub relative_standard_error: f32,
@@ -131,6 +138,9 @@ pub struct MethodRow {
     pub gi: StageStats,
     /// Error against the single-bounce reference.
     pub vs_reference: ErrorStats,
+    /// Error against the single-bounce reference of the light transport it models, where
+    /// that is not the full one ([`BounceError::vs_modelled`]).
+    pub vs_modelled: Option<ErrorStats>,
     /// The method's setting whose GI time is nearest the centre's.
     pub nearest_equal_time: bool,
 }
@@ -215,9 +225,13 @@ impl BenchReport {
         }
         for r in &self.references {
             s += &format!(
-                " Reference at {} bounce(s){}: path traced, {} spp, relative standard error {:.2} %, mean {:.4e}.",
+                " Reference at {} bounce(s){}{}: path traced, {} spp, relative standard error {:.2} %, mean {:.4e}.",
                 r.bounces,
                 if r.emitters { " with emitters" } else { "" },
+                match r.senders {
+                    crate::gi::params::Senders::Full => "",
+                    crate::gi::params::Senders::Diffuse => " of diffuse senders (the transport the method models)",
+                },
                 r.spp,
                 r.relative_standard_error * 100.0,
                 r.mean
@@ -229,6 +243,10 @@ impl BenchReport {
             .first()
             .map(|r| r.errors.iter().map(|e| e.bounces).collect())
             .unwrap_or_default();
+        let modelled = self
+            .rows
+            .iter()
+            .any(|r| r.errors.iter().any(|e| e.vs_modelled.is_some()));
         let precomputed = self.rows.iter().any(|r| r.precomputed.is_some());
         let baselines = self.rows.iter().any(|r| r.baseline.is_some());
         let mut header = vec!["method".to_string()];
@@ -248,6 +266,12 @@ impl BenchReport {
                 ]
                 .map(|h| format!("{h}, {b} bounce(s)")),
             );
+            if modelled {
+                header.extend(
+                    ["8×8-block MAE / mean", "bias"]
+                        .map(|h| format!("{h} vs modelled transport, {b} bounce(s)")),
+                );
+            }
         }
         if baselines {
             header.extend(
@@ -293,6 +317,9 @@ impl BenchReport {
                         .map_or("identical".into(), |p| format!("{p:.2} dB")),
                 );
                 cells.push(format!("{:.4}", e.final_flip));
+                if modelled {
+                    cells.extend(modelled_cells(e.vs_modelled));
+                }
             }
             if baselines {
                 match (r.baseline, r.vs_baseline, r.speedup_vs_baseline) {
@@ -324,14 +351,27 @@ impl BenchReport {
     }
 }
 
+/// Block error and bias against the modelled transport's reference, "-" where the method
+/// models the full one.
+fn modelled_cells(e: Option<ErrorStats>) -> [String; 2] {
+    match e {
+        Some(e) => [
+            format!("{:.2} %", e.block_mae_relative * 100.0),
+            format!("{:+.2} %", e.bias_relative * 100.0),
+        ],
+        None => ["-".into(), "-".into()],
+    }
+}
+
 /// The equal-time table; `against` is the centre's method.
 fn equal_time_table(rows: &[MethodRow], against: GiMethod) -> String {
     let mut s = format!(
-        "\nAll GI methods at one bounce against the same reference; ✓ marks each method's setting whose GI time is nearest {against}'s (equal time):\n\n| method | setting | GI ms (median / p95) | MAE / mean | 8×8-block MAE / mean | bias | equal time |\n|---|---|---|---|---|---|---|\n"
+        "\nAll GI methods at one bounce against the same reference (and against the reference of the light transport each models, diffuse senders for the RSM-based ones); ✓ marks each method's setting whose GI time is nearest {against}'s (equal time):\n\n| method | setting | GI ms (median / p95) | MAE / mean | 8×8-block MAE / mean | bias | 8×8-block MAE / mean vs modelled | bias vs modelled | equal time |\n|---|---|---|---|---|---|---|---|---|\n"
     );
     for m in rows {
+        let [block, bias] = modelled_cells(m.vs_modelled);
         s += &format!(
-            "| {} | {} | {:.3} / {:.3} | {:.2} % | {:.2} % | {:+.2} % | {} |\n",
+            "| {} | {} | {:.3} / {:.3} | {:.2} % | {:.2} % | {:+.2} % | {block} | {bias} | {} |\n",
             m.method,
             m.setting,
             m.gi.median_ms,
@@ -413,6 +453,7 @@ pub(crate) mod tests {
             errors: vec![BounceError {
                 bounces: 1,
                 vs_reference: error(e),
+                vs_modelled: None,
                 final_psnr_db: Some(30.0),
                 final_flip: 0.1,
             }],
@@ -440,6 +481,7 @@ pub(crate) mod tests {
             references: vec![ReferenceSummary {
                 bounces: 1,
                 emitters: false,
+                senders: crate::gi::params::Senders::Full,
                 spp: 4,
                 relative_standard_error: 0.1,
                 mean: 1.0,
@@ -503,6 +545,31 @@ pub(crate) mod tests {
             "{}",
             lines[2]
         );
+    }
+
+    /// Errors against the modelled transport get their own columns once any row has them,
+    /// "-" in the rows of methods that model the whole transport.
+    #[test]
+    fn modelled_transport_errors_have_their_columns() {
+        let without = report(vec![row("brsm", &[("RSM", "64²")], 2.0, 0.2)]).markdown();
+        assert!(!without.contains("vs modelled"), "{without}");
+        let mut brsm = row("brsm", &[("RSM", "64²")], 2.0, 0.2);
+        brsm.errors[0].vs_modelled = Some(error(0.07));
+        let md = report(vec![brsm, row("reference", &[], 9.0, 0.01)]).markdown();
+        let lines: Vec<&str> = md.lines().filter(|l| l.starts_with("| ")).collect();
+        assert!(
+            lines[0].contains(
+                "| final FLIP, 1 bounce(s) | 8×8-block MAE / mean vs modelled transport, 1 bounce(s) | bias vs modelled transport, 1 bounce(s) |"
+            ),
+            "{}",
+            lines[0]
+        );
+        assert!(
+            lines[1].ends_with("| 0.1000 | 7.00 % | -7.00 % |"),
+            "{}",
+            lines[1]
+        );
+        assert!(lines[2].ends_with("| 0.1000 | - | - |"), "{}", lines[2]);
     }
 
     /// A column first seen in a later row goes after its neighbour in that row.

@@ -62,6 +62,13 @@ pub fn reference_emitters(gi: &GiParams) -> bool {
     common::params::emitters(gi) && lights_from_emitters(gi.method)
 }
 
+/// How a reference that models the light transport of frames of `gi` reflects direct light at
+/// the surfaces that send it on (its `senders` parameter): [`params::Senders::Full`] for a
+/// method that models it whole, where the full reference is the same.
+pub fn reference_senders(gi: &GiParams) -> params::Senders {
+    (table(gi.method).senders)(gi)
+}
+
 /// Whether `method` lights the scene from emissive surfaces (area lights), as
 /// `render.gi.emitters` asks: the methods whose table has that parameter. The others light it
 /// from the punctual light only, so a comparison measures them against a reference with
@@ -132,6 +139,10 @@ pub struct FrameInputs<'a> {
     /// lights, then, unless the method samples the environment itself, the environment's
     /// directional lights.
     pub lights: &'a [Light],
+    /// The faces of every light in light order with its index in `lights`, as the shadow map
+    /// renders them (`passes::frame_uniforms::lights_faces`: a directional light's fitted to
+    /// the view where the method's `light_fit` says so): the RSM's faces.
+    pub light_faces: &'a [(u32, crate::passes::frame_uniforms::LightFace)],
     /// The frame's environment, if any (see [`MethodEntry::samples_environment`]).
     pub environment: Option<&'a std::sync::Arc<crate::passes::environment::FrameEnvironment>>,
     pub settings: &'a GiParams,

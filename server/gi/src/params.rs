@@ -10,6 +10,7 @@
 
 use super::common::params as common;
 use super::InvalidSetting;
+pub use lightcast_protocol::Senders;
 use lightcast_protocol::{GiMethod, GiParamInfo, GiParamKind, GiParams, Limits};
 use serde::de::DeserializeOwned;
 use serde_json::{Map, Value};
@@ -354,6 +355,11 @@ pub struct MethodTable {
     pub views: &'static [&'static super::views::DebugView],
     /// What the tests that run every method (frame memory, scale invariance) need of it.
     pub testing: Testing,
+    /// The light transport a frame with these parameters models: how the light a surface
+    /// receives straight from a light leaves it towards the surfaces it lights. A comparison
+    /// also measures the method against a reference that models the same (see
+    /// [`super::reference_senders`]).
+    pub senders: fn(&GiParams) -> Senders,
 }
 
 /// A method's part in the tests that run every registered method.

@@ -163,7 +163,8 @@ impl Truth {
     }
 }
 
-/// `frame` (of any GI method) against `truth` (the same view rendered by `against`): errors
+/// `frame` (of any GI method) against `truth` (the same view rendered by `against`, its senders
+/// reflecting direct light as `senders` says): errors
 /// of the indirect buffers, and PSNR of the final image against the same frame with the
 /// truth's indirect light (PSNR and FLIP), tone-mapped with the truth's exposure (so automatic exposure does
 /// not count as error).
@@ -171,6 +172,7 @@ pub fn compare(
     frame: &Frame,
     truth: &Truth,
     against: GiMethod,
+    senders: lightcast_protocol::Senders,
 ) -> Result<Comparison, CompareError> {
     if (frame.width, frame.height) != (truth.width, truth.height) {
         return Err(CompareError::Size(
@@ -194,6 +196,7 @@ pub fn compare(
     let progress = truth.progress;
     Ok(Comparison {
         against,
+        senders,
         reference_samples: progress.map_or(0, |p| p.samples),
         reference_relative_error: progress.map_or(0.0, |p| p.relative_standard_error),
         indirect_mae: e.mae,

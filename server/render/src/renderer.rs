@@ -17,7 +17,9 @@ use crate::passes::environment::{EnvironmentBuffer, FrameEnvironment};
 use crate::passes::{
     direct_light::{DirectLightInputs, DirectLightPass, HDR_FORMAT},
     exposure::{Exposure, ExposureBindings, ExposurePass, ExposureResult},
-    frame_uniforms::{face_count, CameraUniform, LightsUniform, MAX_LIGHTS},
+    frame_uniforms::{
+        face_count, lights_faces, CameraUniform, Coverage, LightsUniform, MAX_LIGHTS,
+    },
     gbuffer::{GBuffer, GBufferPass},
     indirect_resolution::{FullTargets, IndirectResolutionPass, ReducedTargets, MAX_DOWNSCALE},
     scene_buffers::{SceneBuffers, MATERIAL_GROUP},
@@ -29,7 +31,7 @@ use crate::passes::{
 use crate::scene::environment as env;
 use crate::scene::Scene;
 use glam::Vec3;
-use lightcast_protocol::{Camera, Environment, GiParams, Light, View};
+use lightcast_protocol::{Camera, Environment, GiParams, Light, LightKind, View};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
@@ -218,12 +220,24 @@ impl RenderSettings {
     /// punctual lights' and, unless the method samples the environment itself, its
     /// directions'.
     fn method_faces(&self) -> u32 {
-        face_count(&self.lights)
+        let coverage = self.coverage();
+        face_count(&self.lights, coverage)
             + if gi::entry(self.gi.method).1.samples_environment {
                 0
             } else {
-                self.environment_directions()
+                self.environment_directions() * coverage.faces(LightKind::Directional)
             }
+    }
+
+    /// What the frame's directional lights cover, as its method's `light_fit` says.
+    pub fn coverage(&self) -> Coverage<'_> {
+        match crate::gi::common::params::light_fit(&self.gi) {
+            crate::gi::common::params::LightFit::View => Coverage::View {
+                camera: &self.camera,
+                aspect: self.width as f32 / self.height.max(1) as f32,
+            },
+            crate::gi::common::params::LightFit::Scene => Coverage::Scene,
+        }
     }
 
     /// [`Self::validate`] for an adapter whose textures may be `max` texels wide.
@@ -268,7 +282,9 @@ impl RenderSettings {
             }
         }
         // Every light's faces share the shadow-map budget.
-        let faces = u64::from((face_count(&self.lights) + self.environment_directions()).max(1));
+        let coverage = self.coverage();
+        let directions = self.environment_directions() * coverage.faces(LightKind::Directional);
+        let faces = u64::from((face_count(&self.lights, coverage) + directions).max(1));
         let max_by_budget = ((MAX_SHADOW_TEXELS / faces) as f64).sqrt() as u32;
         let max_shadow = max.min(MAX_SHADOW_MAP_SIZE).min(max_by_budget);
         if !(16..=max_shadow).contains(&self.shadow_map_size) {
@@ -878,7 +894,11 @@ impl Renderer {
         }
         self.ensure_targets(width, height)?;
         // A frame without punctual lights keeps one face: a texture array has a layer at least.
-        self.ensure_shadow_map(settings.shadow_map_size, face_count(&lights).max(1))?;
+        let coverage = settings.coverage();
+        self.ensure_shadow_map(
+            settings.shadow_map_size,
+            face_count(&lights, coverage).max(1),
+        )?;
         self.environment_buffer.set(
             &self.shared.ctx.device,
             &self.shared.ctx.queue,
@@ -899,10 +919,12 @@ impl Renderer {
             bounds,
             roughness_override(&settings.gi),
         );
+        let light_faces = lights_faces(&lights, bounds, coverage);
         let lights_uniform = LightsUniform::with_punctual(
             &lights,
             settings.lights.len(),
             bounds,
+            coverage,
             settings.shadow_map_size,
         );
         let queue = &self.shared.ctx.queue;
@@ -953,6 +975,7 @@ impl Renderer {
             height: reduced.map_or(height, |r| r.height),
             camera: &settings.camera,
             lights: &lights,
+            light_faces: &light_faces,
             environment: environment.as_ref(),
             settings: &settings.gi,
             gbuffer: reduced.map_or(&sized.gbuffer, |r| &r.gbuffer),

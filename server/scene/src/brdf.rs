@@ -89,12 +89,7 @@ impl Brdf {
         // A shading normal may face slightly away from the viewer; V stays finite at n·v = 0.
         let nv = n.dot(to_viewer).max(0.0);
         let a2 = alpha2(self.roughness);
-        let table = BrdfTable::get();
-        let diffuse = self.base
-            * ((1.0 - self.metallic) / PI
-                * (1.0 - self.specular * table.dielectric(nl, self.roughness))
-                * (1.0 - self.specular * table.dielectric(nv, self.roughness))
-                / (1.0 - self.specular * table.dielectric_mean(self.roughness)));
+        let diffuse = self.eval_diffuse(n, to_light, to_viewer);
         let h = (to_light + to_viewer).normalize_or_zero();
         if h == Vec3::ZERO {
             return diffuse;
@@ -102,6 +97,22 @@ impl Brdf {
         let (f0, f90) = self.fresnel_ends();
         let w = schlick_weight(to_viewer.dot(h));
         diffuse + (f0 + (f90 - f0) * w) * (ggx_d(n.dot(h), a2) * smith_v(nl, nv, a2))
+    }
+
+    /// The diffuse lobe of [`Self::eval`] alone: Lambert × (1 − m) weighted by what the
+    /// specular lobe leaves in both directions.
+    pub fn eval_diffuse(&self, n: Vec3, to_light: Vec3, to_viewer: Vec3) -> Vec3 {
+        let nl = n.dot(to_light);
+        if nl <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let nv = n.dot(to_viewer).max(0.0);
+        let table = BrdfTable::get();
+        self.base
+            * ((1.0 - self.metallic) / PI
+                * (1.0 - self.specular * table.dielectric(nl, self.roughness))
+                * (1.0 - self.specular * table.dielectric(nv, self.roughness))
+                / (1.0 - self.specular * table.dielectric_mean(self.roughness)))
     }
 
     /// The paper's lobes (a Lambertian plus a normalised Phong lobe about the mirror

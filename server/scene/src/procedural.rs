@@ -5,7 +5,9 @@
 //!
 //! * `cornell` (alias `cornell-box`): a Cornell-box-like room, the default scene.
 //! * `street`: a city grid whose triangle count scales from thousands to tens of millions, for
-//!   stress tests. Parameters `blocks` (grid side), `seed` and `detail` (face subdivision).
+//!   stress tests. Parameters `blocks` (grid side), `seed`, `detail` (face subdivision) and
+//!   `materials` (`authored`, or `diffuse`: every surface Lambertian of its base colour, the
+//!   light transport the RSM-based methods model, for measuring what the rest costs them).
 //!
 //! All geometry is Y up, in metres, with counter-clockwise winding seen from the side the
 //! normal points to.
@@ -16,7 +18,7 @@ use lightcast_protocol::{Camera, Light, LightKind};
 
 /// Scene names accepted by [`build`], as listed in error messages.
 const KNOWN_SCENES: &str = "cornell (alias cornell-box), street";
-const STREET_PARAMETERS: &str = "blocks, seed, detail";
+const STREET_PARAMETERS: &str = "blocks, seed, detail, materials";
 
 const BLOCKS_RANGE: (u64, u64) = (1, 2000);
 const DETAIL_RANGE: (u64, u64) = (1, 64);
@@ -42,6 +44,12 @@ pub enum ProceduralError {
     InvalidValue {
         parameter: &'static str,
         value: String,
+    },
+    #[error("parameter \"{parameter}\" is \"{value}\"; expected one of {expected}")]
+    InvalidChoice {
+        parameter: &'static str,
+        value: String,
+        expected: &'static str,
     },
     #[error("parameter \"{parameter}\" is {value}, outside the allowed range {min}..={max}")]
     OutOfRange {
@@ -163,6 +171,35 @@ pub struct StreetParams {
     pub seed: u64,
     /// Every building face, sidewalk and street cell is split into `detail × detail` quads.
     pub detail: u32,
+    pub materials: StreetMaterials,
+}
+
+/// The street's surfaces: as designed (glass and steel facades, glossy signs) or all
+/// Lambertian.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StreetMaterials {
+    #[default]
+    Authored,
+    /// Every material Lambertian of its base colour (metallic 0, no specular lobe): the same
+    /// geometry and sun with only the light transport that methods with diffuse VPLs/VALs
+    /// and diffuse receivers model exactly.
+    Diffuse,
+}
+
+impl StreetMaterials {
+    const CHOICES: &'static str = "authored, diffuse";
+
+    fn parse(value: &str) -> Result<Self, ProceduralError> {
+        match value {
+            "authored" => Ok(Self::Authored),
+            "diffuse" => Ok(Self::Diffuse),
+            _ => Err(ProceduralError::InvalidChoice {
+                parameter: "materials",
+                value: value.to_owned(),
+                expected: Self::CHOICES,
+            }),
+        }
+    }
 }
 
 impl Default for StreetParams {
@@ -171,6 +208,7 @@ impl Default for StreetParams {
             blocks: 8,
             seed: 1,
             detail: 1,
+            materials: StreetMaterials::Authored,
         }
     }
 }
@@ -191,6 +229,7 @@ impl StreetParams {
                     params.detail = v as u32;
                 }
                 "seed" => params.seed = parse_u64("seed", value)?,
+                "materials" => params.materials = StreetMaterials::parse(value)?,
                 _ => {
                     return Err(ProceduralError::UnknownParameter {
                         scene: "street",
@@ -489,8 +528,8 @@ const PAVEMENT: u32 = 1;
 const FACADES: std::ops::Range<u32> = 2..10;
 const SIGNS: std::ops::Range<u32> = 10..16;
 
-fn street_materials() -> Vec<Material> {
-    let materials = vec![
+fn street_materials(kind: StreetMaterials) -> Vec<Material> {
+    let mut materials = vec![
         material("asphalt", [0.06, 0.06, 0.065], 0.0, 0.9),
         material("sidewalk", [0.55, 0.55, 0.52], 0.0, 0.85),
         material("facade-concrete", [0.60, 0.56, 0.48], 0.0, 0.9),
@@ -509,6 +548,12 @@ fn street_materials() -> Vec<Material> {
         material("sign-gold", [0.95, 0.65, 0.25], 1.0, 0.25),
     ];
     debug_assert_eq!(materials.len() as u32, SIGNS.end);
+    if kind == StreetMaterials::Diffuse {
+        for m in &mut materials {
+            m.metallic = 0.0;
+            m.specular = 0.0;
+        }
+    }
     materials
 }
 
@@ -655,11 +700,16 @@ pub fn street(params: &StreetParams) -> Result<Scene, ProceduralError> {
         inner_cone: 0.0,
         outer_cone: 0.0,
     };
+    let diffuse = match params.materials {
+        StreetMaterials::Authored => "",
+        StreetMaterials::Diffuse => ", materials=diffuse",
+    };
     let name = format!(
-        "street (blocks={}, seed={}, detail={})",
+        "street (blocks={}, seed={}, detail={}{diffuse})",
         params.blocks, params.seed, params.detail
     );
-    Ok(mesh.into_scene(name, street_materials(), vec![sun], vec![camera])?)
+    let materials = street_materials(params.materials);
+    Ok(mesh.into_scene(name, materials, vec![sun], vec![camera])?)
 }
 
 /// A coloured plane attached to the street-facing `wall` point (centre of a wall's base) of a
@@ -792,6 +842,36 @@ mod tests {
         );
         let e = err("cornell?blocks=2");
         assert!(e.contains("cornell") && e.contains("blocks"), "{e}");
+        let e = err("street?materials=matte");
+        assert!(
+            e.contains("materials") && e.contains("\"matte\"") && e.contains("authored, diffuse"),
+            "{e}"
+        );
+    }
+
+    /// The diffuse street is the authored one with every surface Lambertian of its base
+    /// colour: same geometry, light and camera.
+    #[test]
+    fn the_diffuse_street_differs_only_in_its_materials() {
+        let authored = build("street?blocks=2&materials=authored").expect("street");
+        let diffuse = build("street?blocks=2&materials=diffuse").expect("street");
+        assert_eq!(authored.name, "street (blocks=2, seed=1, detail=1)");
+        assert_eq!(
+            diffuse.name,
+            "street (blocks=2, seed=1, detail=1, materials=diffuse)"
+        );
+        assert_eq!(authored.vertices, diffuse.vertices);
+        assert_eq!(authored.indices, diffuse.indices);
+        assert_eq!(authored.lights, diffuse.lights);
+        assert!(authored.materials.iter().any(|m| m.metallic > 0.5));
+        for (a, d) in authored.materials.iter().zip(&diffuse.materials) {
+            assert_eq!(a.base_color, d.base_color);
+            assert_eq!((d.metallic, d.specular), (0.0, 0.0), "{}", d.name);
+            let (n, l, v) = (Vec3::Y, Vec3::new(0.6, 0.8, 0.0), Vec3::new(-0.8, 0.6, 0.0));
+            let lambert = Vec3::from_slice(&a.base_color[..3]) / std::f32::consts::PI;
+            let f = d.brdf().eval(n, l, v);
+            assert!((f - lambert).abs().max_element() < 1e-6, "{}: {f}", d.name);
+        }
     }
 
     #[test]
@@ -926,7 +1006,7 @@ mod tests {
             street(&StreetParams {
                 blocks: 3,
                 seed,
-                detail: 1,
+                ..StreetParams::default()
             })
             .expect("street")
         };
@@ -966,8 +1046,8 @@ mod tests {
         for (blocks, detail) in [(2000, 64), (2000, 1), (300, 8)] {
             let params = StreetParams {
                 blocks,
-                seed: 1,
                 detail,
+                ..StreetParams::default()
             };
             match street(&params) {
                 Err(ProceduralError::TooLarge { triangles, .. }) => {

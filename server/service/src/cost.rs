@@ -99,10 +99,30 @@ pub enum Submission {
     /// A session's frame: one submission per turn of the render loop, within
     /// `--max-frame-cost`.
     SessionFrame,
-    /// A one-shot render: its path tracing (a `reference` frame, the comparison at
-    /// `compare_spp`) in chunks (see [`chunk_spp`]), the whole within `--max-request-cost`;
-    /// any other frame is one submission within `--max-frame-cost` as well.
-    OneShot { compare_spp: Option<u32> },
+    /// A one-shot render: its path tracing (a `reference` frame, the comparison renders) in
+    /// chunks (see [`chunk_spp`]), the whole within `--max-request-cost`; any other frame is
+    /// one submission within `--max-frame-cost` as well.
+    OneShot { compare: Option<Compared> },
+}
+
+/// What a one-shot render is compared with: `renders` reference renders of `spp` samples per
+/// pixel each (the full light transport's, and the modelled transport's when the request
+/// asks for it: `compare_modelled`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Compared {
+    pub spp: u32,
+    pub renders: u32,
+}
+
+impl Compared {
+    /// The cost of them all, the cost of one being `one`.
+    fn cost(self, one: Cost) -> Cost {
+        let mut all = Cost::default();
+        for t in one.terms() {
+            all.add(t.what, f64::from(self.renders), t.ns);
+        }
+        all
+    }
 }
 
 /// How much one request may cost, in reference ns.
@@ -131,17 +151,17 @@ fn truth(gi: &GiParams, spp: u32) -> GiParams {
     truth
 }
 
-/// The estimated seconds on this server's adapter of a frame of `gi` and, with `compare_spp`,
-/// the reference render it is compared with.
+/// The estimated seconds on this server's adapter of a frame of `gi` and, with `compare`,
+/// the reference renders it is compared with.
 pub fn request_seconds(
     gi: &GiParams,
     shape: FrameShape,
     set_units: &dyn Fn(&GiParams) -> u64,
-    compare_spp: Option<u32>,
+    compare: Option<Compared>,
     limits: &Limits,
 ) -> f64 {
-    let compared = compare_spp.map_or(0.0, |spp| {
-        frame_cost(&truth(gi, spp), shape, set_units).ns()
+    let compared = compare.map_or(0.0, |c| {
+        c.cost(frame_cost(&truth(gi, c.spp), shape, set_units)).ns()
     });
     (frame_cost(gi, shape, set_units).ns() + compared) * 1e-9 / limits.adapter_speed
 }
@@ -155,7 +175,7 @@ pub fn one_shot_spp(
     gi: &GiParams,
     shape: FrameShape,
     set_units: &dyn Fn(&GiParams) -> u64,
-    compare_spp: Option<u32>,
+    compare: Option<Compared>,
     limits: &Limits,
     floor: u32,
 ) -> u32 {
@@ -165,7 +185,7 @@ pub fn one_shot_spp(
     let Some(knob) = knobs.iter().find(|k| k.field() == SPP.name) else {
         return floor;
     };
-    let cost_of = |g: &GiParams| request_seconds(g, shape, set_units, compare_spp, limits) * 1e9;
+    let cost_of = |g: &GiParams| request_seconds(g, shape, set_units, compare, limits) * 1e9;
     let budget_ns = 0.5 * limits.max_request_seconds * 1e9;
     let start = gi.clone().with(SPP.name, most);
     cost::fitting_value(&start, knob, (floor, most), budget_ns, &cost_of).unwrap_or(floor)
@@ -183,16 +203,16 @@ fn chunk_seconds(limits: &Limits) -> f64 {
 }
 
 /// Samples per submission of a one-shot's path tracing (its own frame with the `reference`,
-/// its comparison with `compare_spp`) when more of them than that would exceed
+/// its comparisons with `compare`) when more of them than that would exceed
 /// [`chunk_seconds`]; `None` when every path-traced render fits in one submission.
 pub fn chunk_spp(
     gi: &GiParams,
     shape: FrameShape,
-    compare_spp: Option<u32>,
+    compare: Option<Compared>,
     limits: &Limits,
 ) -> Option<u32> {
     let own = (gi.method == crate::gi::reference::REFERENCE).then(|| SPP.u32(gi));
-    let most = own.into_iter().chain(compare_spp).max()?;
+    let most = own.into_iter().chain(compare.map(|c| c.spp)).max()?;
     let mut one_sample = Cost::default();
     (crate::gi::entry(crate::gi::reference::REFERENCE).1.cost)(
         &truth(gi, 1),
@@ -297,8 +317,8 @@ fn refusal(
 }
 
 /// Refuses a frame of `gi` (plus, for a one-shot render compared with the reference, the
-/// comparison frame at `compare_spp`) over `--max-request-cost`. Field paths are relative to
-/// `render` but for `compare_spp`.
+/// comparison frames) over `--max-request-cost`. Field paths are relative to `render` but for
+/// `compare_spp`.
 pub fn check_frame(
     gi: &GiParams,
     shape: FrameShape,
@@ -315,11 +335,9 @@ pub fn check_frame(
         knobs.push(cost::DOWNSCALE_KNOB);
     }
     let knobs = &knobs[..];
-    let (compare_spp, chunked) = match submission {
+    let (compare, chunked) = match submission {
         Submission::SessionFrame => (None, false),
-        Submission::OneShot { compare_spp } => {
-            (compare_spp, gi.method == crate::gi::reference::REFERENCE)
-        }
+        Submission::OneShot { compare } => (compare, gi.method == crate::gi::reference::REFERENCE),
     };
     let cost = own(gi);
     // A frame submitted at once holds up every other session's: --max-frame-cost.
@@ -336,13 +354,13 @@ pub fn check_frame(
             (FRAME_FLAG, speed, "width"),
         ));
     }
-    let compared = compare_spp.map(|spp| frame_cost(&truth(gi, spp), shape, set_units));
+    let compared = compare.map(|c| c.cost(frame_cost(&truth(gi, c.spp), shape, set_units)));
     let compared_ns = compared.as_ref().map_or(0.0, Cost::ns);
     if cost.ns() + compared_ns <= budget {
         return Ok(());
     }
     let flags = ("--max-request-cost", speed, "width");
-    let (Some(spp), Some(compared)) = (compare_spp, compared) else {
+    let (Some(with), Some(compared)) = (compare, compared) else {
         return Err(refusal(
             "this frame",
             gi,
@@ -362,9 +380,10 @@ pub fn check_frame(
             .filter(|k| k.field() == "spp")
             .copied()
             .collect();
-        let of_truth = |g: &GiParams| frame_cost(g, shape, set_units);
+        let of_truth = |g: &GiParams| with.cost(frame_cost(g, shape, set_units));
         let left = budget - cost.ns();
-        if let Some((_, value)) = fitting_knob(&truth(gi, spp), &spp_knob, left, &of_truth, limits)
+        if let Some((_, value)) =
+            fitting_knob(&truth(gi, with.spp), &spp_knob, left, &of_truth, limits)
         {
             let mut both = cost.clone();
             for t in compared.terms() {
@@ -447,7 +466,7 @@ mod tests {
     use super::*;
     use crate::gi::reference::limits::MAX_SPP;
 
-    const ONE_SHOT: Submission = Submission::OneShot { compare_spp: None };
+    const ONE_SHOT: Submission = Submission::OneShot { compare: None };
 
     fn limits(seconds: f64) -> Limits {
         let mut l = crate::service::config::tests::default_limits();
@@ -486,7 +505,14 @@ mod tests {
         // A comparison shares the budget; a tiny frame gets the most the server allows; a
         // frame where even the default is over budget keeps the default (and is refused or
         // chunked as any other).
-        assert!(one_shot_spp(&reference, shape(320, 240), &none, Some(256), &limits, 4) < spp);
+        let compared = |spp, renders| {
+            let c = Some(Compared { spp, renders });
+            one_shot_spp(&reference, shape(320, 240), &none, c, &limits, 4)
+        };
+        assert!(compared(256, 1) < spp);
+        // Two comparison renders (the modelled transport's too) leave less.
+        let (one, two) = (compared(spp / 4, 1), compared(spp / 4, 2));
+        assert!(two < one && two > 4, "{two} {one}");
         assert_eq!(
             one_shot_spp(&reference, shape(2, 2), &none, None, &limits, 4),
             MAX_SPP.of(&limits) as u32
@@ -596,7 +622,10 @@ mod tests {
             shape(64, 48),
             &none,
             Submission::OneShot {
-                compare_spp: Some(16),
+                compare: Some(Compared {
+                    spp: 16,
+                    renders: 2,
+                }),
             },
             &limits,
         )
@@ -606,7 +635,10 @@ mod tests {
             shape(64, 48),
             &none,
             Submission::OneShot {
-                compare_spp: Some(256_000),
+                compare: Some(Compared {
+                    spp: 256_000,
+                    renders: 1,
+                }),
             },
             &limits,
         )

@@ -52,12 +52,14 @@ pub fn frame_shape(settings: &RenderSettings, entry: &SceneEntry) -> crate::gi::
         shadow_map_size: settings.shadow_map_size,
         lights: settings.lights.len() as u32,
         // The emitter face is one more RSM face (counted as a light's, shadow map included).
-        light_faces: crate::passes::frame_uniforms::face_count(&settings.lights)
-            + u32::from(
-                entry.facts.emitters
-                    && crate::gi::common::params::emitters(&settings.gi)
-                    && crate::gi::lights_from_emitters(settings.gi.method),
-            ),
+        light_faces: crate::passes::frame_uniforms::face_count(
+            &settings.lights,
+            settings.coverage(),
+        ) + u32::from(
+            entry.facts.emitters
+                && crate::gi::common::params::emitters(&settings.gi)
+                && crate::gi::lights_from_emitters(settings.gi.method),
+        ),
         environment: settings.environment.as_ref().map(|e| e.directions),
         triangles: entry.scene.triangle_count() as u64,
         set_units: 0,

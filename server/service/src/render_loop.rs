@@ -11,14 +11,14 @@ use super::video::VideoConfig;
 use crate::debug_views::{self, Image};
 use crate::gi::common::params::{BOUNCES, GLOSSY_EXPONENT};
 use crate::gi::precompute::{PrecomputeKey, SceneData};
-use crate::gi::reference::params::SPP;
+use crate::gi::reference::params::{SENDERS, SPP};
 use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::passes::yuv420::Yuv420;
 use crate::quality::Truth;
 use crate::renderer::{Frame, FrameProgress, PendingFrame, Renderer};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_KEYFRAME, FLAG_MOVING, FLAG_STILL};
-use lightcast_protocol::{Comparison, FrameHeader, GiMethod, StageMs, View};
+use lightcast_protocol::{Comparison, FrameHeader, GiMethod, Senders, StageMs, View};
 use std::collections::{HashMap, VecDeque};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
@@ -94,8 +94,8 @@ pub struct OneShot {
     pub resolved: Resolved,
     pub reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
     pub queued: Instant,
-    /// Render the same view with this method and `spp` samples too, and compare.
-    pub compare: Option<(GiMethod, u32)>,
+    /// Render the same view with another method too, and compare.
+    pub compare: Option<CompareWith>,
     /// Samples per submission of the request's path-traced renders (its own frame with the
     /// `reference`, its comparison): a longer one is accumulated over several turns of the
     /// loop, the sessions due served between them, and stops when nobody waits any more.
@@ -108,7 +108,7 @@ impl OneShot {
         scene: Arc<SceneEntry>,
         resolved: Resolved,
         reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
-        compare: Option<(GiMethod, u32)>,
+        compare: Option<CompareWith>,
         chunk_spp: Option<u32>,
     ) -> Self {
         Self {
@@ -123,16 +123,46 @@ impl OneShot {
     }
 }
 
+/// What a one-shot is compared with: `method` (the reference) with `spp` samples, of the full
+/// light transport and, when `modelled` names one, also of the transport the compared method
+/// models (`RenderRequest::compare_modelled`).
+#[derive(Clone, Copy, Debug)]
+pub struct CompareWith {
+    pub method: GiMethod,
+    pub spp: u32,
+    pub modelled: Option<Senders>,
+}
+
+impl CompareWith {
+    /// The comparison renders, in the order they are rendered and reported: the full one
+    /// first.
+    fn transports(&self) -> impl Iterator<Item = Senders> {
+        std::iter::once(Senders::Full).chain(self.modelled)
+    }
+}
+
+/// At most this many comparison renders per one-shot (the full reference and the modelled).
+const MAX_COMPARANDS: usize = 2;
+
 /// How far a chunked one-shot is: samples accumulated ahead of its final submission (in image
 /// histories of its own), and the chunk still on the GPU.
 #[derive(Default)]
 struct Chunks {
     /// How long it waited for its first turn.
     queue_ms: Option<f64>,
-    histories: Option<(u64, u64)>,
+    /// Its own image's history, then its comparisons' (one each, in `transports` order).
+    histories: Option<(u64, [u64; MAX_COMPARANDS])>,
     own: u32,
-    compared: u32,
+    /// Samples accumulated per comparison render.
+    compared: [u32; MAX_COMPARANDS],
     in_flight: Option<PendingFrame>,
+}
+
+impl Chunks {
+    /// Samples accumulated ahead of the final submission, over every image.
+    fn samples(&self) -> u32 {
+        self.own + self.compared.iter().sum::<u32>()
+    }
 }
 
 /// Image histories of chunked one-shots: one pair per request, apart from the sessions' (a
@@ -180,7 +210,8 @@ impl Rendered {
 pub struct OneShotResult {
     pub rendered: Rendered,
     pub queue_ms: f64,
-    pub comparison: Option<Comparison>,
+    /// Against the full reference, then (if asked) the modelled transport's.
+    pub comparisons: Vec<Comparison>,
 }
 
 pub enum Command {
@@ -429,7 +460,7 @@ impl Loop {
                 metrics::counter!(super::metrics::RENDERS_ABANDONED).increment(1);
                 tracing::info!(
                     scene = %job.scene.id,
-                    samples = job.chunks.own + job.chunks.compared,
+                    samples = job.chunks.samples(),
                     "one-shot render stopped between chunks: nobody waits for it any more"
                 );
             }
@@ -457,12 +488,16 @@ impl Loop {
             }
         }
         metrics::counter!(super::metrics::RENDERS).increment(1);
-        let compare = match job.compare {
-            None => Ok(None),
-            Some((method, spp)) => self.comparison(&job, method, spp).map(Some),
+        let compare: Result<Vec<Comparand>, ApiError> = match job.compare {
+            None => Ok(Vec::new()),
+            Some(with) => with
+                .transports()
+                .enumerate()
+                .map(|(i, senders)| self.comparison(&job, with, i, senders))
+                .collect(),
         };
         let (mut resolved, expected) = self.own_settings(&job);
-        resolved.settings.capture_hdr |= compare.as_ref().is_ok_and(Option::is_some);
+        resolved.settings.capture_hdr |= compare.as_ref().is_ok_and(|c| !c.is_empty());
         let submitted = compare.and_then(|c| Ok((c, self.submit(&job.scene, &resolved)?)));
         let (compare, submitted) = match submitted {
             Ok(s) => s,
@@ -512,22 +547,31 @@ impl Loop {
         } else {
             0
         };
-        let compare_total = match job.compare {
-            Some((method, spp)) => match self.truth(job, method, spp) {
-                Ok((_, key)) if self.comparisons.contains(key) => 0,
-                Ok(_) => spp,
-                Err(e) => return Some(Err(e)),
-            },
-            None => 0,
-        };
-        // The last chunk of each is left to the final submission, which reads them back.
-        let compare_next = job.chunks.compared + step < compare_total;
-        if !compare_next && job.chunks.own + step >= own_total {
+        // The first comparison render with more than its last chunk left (the last chunk of
+        // each is left to the final submission, which reads them back).
+        let mut compare_next = None;
+        if let Some(with) = job.compare {
+            for (i, senders) in with.transports().enumerate() {
+                let total = match self.truth(job, with, senders) {
+                    Ok((_, key)) if self.comparisons.contains(key) => 0,
+                    Ok(_) => with.spp,
+                    Err(e) => return Some(Err(e)),
+                };
+                if job.chunks.compared[i] + step < total {
+                    compare_next = Some((i, senders));
+                    break;
+                }
+            }
+        }
+        if compare_next.is_none() && job.chunks.own + step >= own_total {
             return None;
         }
-        let (own_history, compare_history) = *job.chunks.histories.get_or_insert_with(|| {
-            let first = NEXT_ONE_SHOT_HISTORY.fetch_add(2, std::sync::atomic::Ordering::Relaxed);
-            (first, first + 1)
+        let (own_history, compare_histories) = *job.chunks.histories.get_or_insert_with(|| {
+            let first = NEXT_ONE_SHOT_HISTORY.fetch_add(
+                1 + MAX_COMPARANDS as u64,
+                std::sync::atomic::Ordering::Relaxed,
+            );
+            (first, std::array::from_fn(|i| first + 1 + i as u64))
         });
         // One chunk at a time on the GPU: the sessions' frames submitted since the last one
         // run before the next.
@@ -537,16 +581,15 @@ impl Loop {
             }
         }
         let mut resolved = match (compare_next, job.compare) {
-            (true, Some((method, spp))) => match self.truth(job, method, spp) {
+            (Some((_, senders)), Some(with)) => match self.truth(job, with, senders) {
                 Ok((truth, _)) => truth,
                 Err(e) => return Some(Err(e)),
             },
             _ => job.resolved.clone(),
         };
-        resolved.settings.history = Some(if compare_next {
-            compare_history
-        } else {
-            own_history
+        resolved.settings.history = Some(match compare_next {
+            Some((i, _)) => compare_histories[i],
+            None => own_history,
         });
         resolved.settings.gi.set(SPP.name, step);
         resolved.settings.capture_hdr = false;
@@ -555,22 +598,23 @@ impl Loop {
             Err(e) => return Some(Err(e)),
         };
         job.chunks.in_flight = Some(submitted.pending);
-        if compare_next {
-            job.chunks.compared += step;
-        } else {
-            job.chunks.own += step;
+        match compare_next {
+            Some((i, _)) => job.chunks.compared[i] += step,
+            None => job.chunks.own += step,
         }
         Some(Ok(()))
     }
 
-    /// The settings of the render a one-shot is compared with (`method` with `spp` samples
-    /// at the same view), and their key in the comparison cache.
+    /// The settings of a render a one-shot is compared with (`with`'s method and samples at
+    /// the same view, reflecting direct light on as `senders` says), and their key in the
+    /// comparison cache.
     fn truth(
         &self,
         job: &OneShot,
-        method: GiMethod,
-        spp: u32,
+        with: CompareWith,
+        senders: Senders,
     ) -> Result<(Resolved, u64), ApiError> {
+        let CompareWith { method, spp, .. } = with;
         let mut truth = job.resolved.clone();
         let asked = &job.resolved.settings.gi;
         // Only what the comparison method reads, so that comparisons of one view at several
@@ -578,7 +622,8 @@ impl Loop {
         let mut gi = lightcast_protocol::GiParams::new(method)
             .with("spp", spp)
             .with("bounces", BOUNCES.u32(asked))
-            .with("emitters", crate::gi::reference_emitters(asked));
+            .with("emitters", crate::gi::reference_emitters(asked))
+            .with(SENDERS.name, senders.name());
         if let Some(k) = asked.get(GLOSSY_EXPONENT.name) {
             gi.set(GLOSSY_EXPONENT.name, k.clone());
         }
@@ -602,15 +647,17 @@ impl Loop {
         Ok((truth, key))
     }
 
-    /// The frame a one-shot render is compared with: `method` with `spp` samples at the same
-    /// view, from the cache or submitted now (after the samples its chunks accumulated).
+    /// The `index`th frame a one-shot render is compared with (see [`Self::truth`]), from the
+    /// cache or submitted now (after the samples its chunks accumulated).
     fn comparison(
         &mut self,
         job: &OneShot,
-        method: GiMethod,
-        spp: u32,
+        with: CompareWith,
+        index: usize,
+        senders: Senders,
     ) -> Result<Comparand, ApiError> {
-        let (mut truth, key) = self.truth(job, method, spp)?;
+        let CompareWith { method, spp, .. } = with;
+        let (mut truth, key) = self.truth(job, with, senders)?;
         // The HTTP handler waited for it; a comparison never falls back to direct light.
         if let Some(needed) = &truth.precompute {
             if !matches!(self.scenes.precomputed(&job.scene, needed), Now::Ready(_)) {
@@ -621,12 +668,13 @@ impl Loop {
             }
         }
         let mut expected = None;
-        if let Some((_, history)) = job.chunks.histories.filter(|_| job.chunks.compared > 0) {
-            truth.settings.history = Some(history);
+        let compared = job.chunks.compared[index];
+        if let Some((_, histories)) = job.chunks.histories.filter(|_| compared > 0) {
+            truth.settings.history = Some(histories[index]);
             truth
                 .settings
                 .gi
-                .set(SPP.name, spp.saturating_sub(job.chunks.compared).max(1));
+                .set(SPP.name, spp.saturating_sub(compared).max(1));
             expected = Some(spp);
         }
         let frame = match self.comparisons.lookup(key) {
@@ -635,6 +683,7 @@ impl Loop {
         };
         Ok(Comparand {
             method,
+            senders,
             key,
             frame,
             expected,
@@ -729,7 +778,8 @@ enum Destination {
     OneShot {
         reply: oneshot::Sender<Result<OneShotResult, ApiError>>,
         queue_ms: f64,
-        compare: Option<Comparand>,
+        /// Full reference first, as [`CompareWith::transports`] orders them.
+        compare: Vec<Comparand>,
         /// The samples per pixel a chunked render's image must hold.
         expected: Option<u32>,
     },
@@ -755,6 +805,7 @@ impl ReadbackJob {
 /// The render a one-shot is compared with.
 struct Comparand {
     method: GiMethod,
+    senders: Senders,
     /// Its key in the cache.
     key: u64,
     frame: ComparandFrame,
@@ -788,7 +839,7 @@ enum ComparandFrame {
 
 impl Comparand {
     /// The read-back frame, added to the cache when it was rendered for this request.
-    fn wait(self) -> Result<(GiMethod, Arc<Truth>), ApiError> {
+    fn wait(self) -> Result<(GiMethod, Senders, Arc<Truth>), ApiError> {
         let frame = match self.frame {
             ComparandFrame::Cached(frame) => frame,
             ComparandFrame::Pending(pending) => {
@@ -803,7 +854,7 @@ impl Comparand {
                 frame
             }
         };
-        Ok((self.method, frame))
+        Ok((self.method, self.senders, frame))
     }
 }
 
@@ -887,11 +938,11 @@ fn read_back(job: ReadbackJob, encoder: &EncodePool) {
             expected,
         } => {
             let result =
-                one_shot_result(job.frame, compare, expected).map(|(rendered, comparison)| {
+                one_shot_result(job.frame, compare, expected).map(|(rendered, comparisons)| {
                     OneShotResult {
                         rendered,
                         queue_ms,
-                        comparison,
+                        comparisons,
                     }
                 });
             let _ = reply.send(result);
@@ -899,25 +950,27 @@ fn read_back(job: ReadbackJob, encoder: &EncodePool) {
     }
 }
 
-/// A one-shot frame read back, with its comparison when one was asked for.
+/// A one-shot frame read back, with its comparisons when they were asked for.
 fn one_shot_result(
     frame: FrameJob,
-    compare: Option<Comparand>,
+    compare: Vec<Comparand>,
     expected: Option<u32>,
-) -> Result<(Rendered, Option<Comparison>), ApiError> {
-    let Some(compare) = compare else {
-        return Ok((frame.wait(|frame| check_samples(frame, expected))?, None));
-    };
-    let (method, reference) = compare.wait()?;
-    let mut comparison = None;
+) -> Result<(Rendered, Vec<Comparison>), ApiError> {
+    let truths = compare
+        .into_iter()
+        .map(Comparand::wait)
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut comparisons = Vec::new();
     let rendered = frame.wait(|frame| {
         check_samples(frame, expected)?;
-        let c = crate::quality::compare(frame, &reference, method)
-            .map_err(|e| ApiError::internal(e.to_string()))?;
-        comparison = Some(c);
+        for (method, senders, truth) in &truths {
+            let c = crate::quality::compare(frame, truth, *method, *senders)
+                .map_err(|e| ApiError::internal(e.to_string()))?;
+            comparisons.push(c);
+        }
         Ok(())
     })?;
-    Ok((rendered, comparison))
+    Ok((rendered, comparisons))
 }
 
 /// A read-back frame as the service hands it on: the image of `view` (made by `image`) plus

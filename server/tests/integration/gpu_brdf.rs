@@ -90,7 +90,7 @@ fn the_gpu_brdf_matches_its_cpu_reference() {
     );
     let results = storage(
         "results",
-        &vec![0u8; cases.len() * 48],
+        &vec![0u8; cases.len() * 64],
         wgpu::BufferUsages::COPY_SRC,
     );
     let table = brdf_table(device);
@@ -146,7 +146,12 @@ fn the_gpu_brdf_matches_its_cpu_reference() {
         let f = brdf.eval(n, l, v);
         peak = peak.max(f.max_element());
         let lobes = brdf.lobes(Vec3::from(c.n).dot(v).max(0.0));
-        let [f_gpu, d_gpu, g_gpu] = [0, 1, 2].map(|i| got[3 * k + i]);
+        let [f_gpu, d_gpu, g_gpu, fd_gpu] = [0, 1, 2, 3].map(|i| got[4 * k + i]);
+        let f_diffuse = brdf.eval_diffuse(n, l, v);
+        assert!(
+            close(Vec3::from_slice(&fd_gpu), f_diffuse),
+            "case {k}: diffuse f_r GPU {fd_gpu:?} vs CPU {f_diffuse}"
+        );
         assert!(
             close(Vec3::from_slice(&f_gpu), f),
             "case {k} {c:?}: f_r GPU {f_gpu:?} vs CPU {f}"

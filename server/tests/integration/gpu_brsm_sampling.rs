@@ -10,7 +10,7 @@ use lightcast_server::gi::lightskin::caches::{precompute, CacheParams};
 use lightcast_server::gi::lightskin::sampling::SamplingReadback;
 use lightcast_server::gi::lightskin::LightSkin;
 use lightcast_server::gi::GiParams;
-use lightcast_server::passes::frame_uniforms::light_faces;
+use lightcast_server::passes::frame_uniforms::{light_faces, Coverage};
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::{procedural, Scene};
@@ -62,7 +62,7 @@ fn run(scene: &Scene, light: Light, sampling: GiParams) -> (RenderSettings, Samp
 /// for an orthographic one. The material is found by casting a ray from the light to the
 /// texel's position.
 fn check_rsm_flux(scene: &Scene, light: &Light, rb: &SamplingReadback, size: u32) {
-    let faces = light_faces(light, &scene.bounds);
+    let faces = light_faces(light, &scene.bounds, Coverage::Scene);
     let light_pos = Vec3::from(light.position);
     let (mut checked, mut worst) = (0, 0.0f32);
     for (i, (p, fa)) in rb.rsm_position.iter().zip(&rb.rsm_flux_area).enumerate() {

@@ -588,3 +588,113 @@ fn the_interleave_pattern_is_hidden_on_a_flat_wall() {
         (hi - lo) * 100.0
     );
 }
+
+/// A directional light fitted to the view (`light_fit: view`) renders two cascades whose RSM
+/// texels send each lit surface point's light once: on a 60 m Lambertian floor seen from
+/// 2 m above its edge, the near face's lit texels lie inside its square and the far face's
+/// outside it, and the flux of both together is what the floor reflects of the light over
+/// the far face's square (E⊥·ρ times the part of the square the floor fills, found on the
+/// CPU). Counting the near square twice would add its share (checked to exceed the
+/// tolerance).
+#[test]
+fn view_fitted_cascades_send_each_point_once_with_its_footprints_flux() {
+    use lightcast_server::passes::frame_uniforms::{light_faces, Coverage};
+    let albedo = 0.5;
+    let (mut vertices, mut indices) = (Vec::new(), Vec::new());
+    quad(
+        &mut vertices,
+        &mut indices,
+        floor_corners(0.0, 0.0, 0.0, 30.0),
+        0,
+    );
+    let floor = lightcast_server::scene::Material {
+        specular: 0.0,
+        ..plain_material([albedo; 3], 0.0, 1.0)
+    };
+    let scene = crate::support::scene(vertices, indices, vec![floor]);
+    let camera = lightcast_protocol::Camera {
+        position: [0.0, 2.0, 29.0],
+        target: [0.0, 0.0, 10.0],
+        fov_y_degrees: 50.0,
+    };
+    let e = 3.0;
+    let sun = directional(Vec3::new(-0.4, -0.8, -0.3).normalize(), e);
+    let mut s = settings(W, H, camera.clone(), sun.clone());
+    s.gi = clustered(256, 8, 1, 4).with("light_fit", "view");
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    renderer.render(&s).expect("render");
+    let rb = renderer
+        .gi_if_created::<Clustered>()
+        .expect("a clustered frame ran")
+        .read_back()
+        .expect("readback")
+        .expect("the frame ran the clustering");
+    let size = 64;
+    assert_eq!((rb.rsm_width, rb.rsm_height), (2 * size, size));
+    let coverage = Coverage::View {
+        camera: &camera,
+        aspect: W as f32 / H as f32,
+    };
+    let faces = light_faces(&sun, &scene.bounds, coverage);
+    let (near, far) = (faces[0], faces[1]);
+    assert!(
+        near.extent < 0.7 * far.extent,
+        "{} {}",
+        near.extent,
+        far.extent
+    );
+    // How far outside the near square a point lies: > 0 outside, in its clip units.
+    let outside_near = |p: Vec3| {
+        let c = near.view_proj * p.extend(1.0);
+        (c.x / c.w).abs().max((c.y / c.w).abs()) - 1.0
+    };
+    let mut total = Vec3::ZERO;
+    let mut lit = [0usize; 2];
+    for (i, (p, f)) in rb.rsm_position.iter().zip(&rb.rsm_flux_area).enumerate() {
+        if p[3] == 0.0 {
+            continue;
+        }
+        let cascade = (i as u32 % rb.rsm_width) / size;
+        let world = Vec3::new(p[0], p[1], p[2]);
+        // The far face keeps a fragment whose centre's point is outside the near square, as
+        // the near face draws those inside it (float rounding aside).
+        let outside = outside_near(world);
+        match cascade {
+            0 => assert!(outside <= 1e-4, "near texel {i} at {world}: {outside}"),
+            _ => assert!(outside >= -1e-4, "far texel {i} at {world}: {outside}"),
+        }
+        lit[cascade as usize] += 1;
+        total += Vec3::new(f[0], f[1], f[2]);
+    }
+    assert!(lit[0] > 1000 && lit[1] > 1000, "{lit:?}");
+    // The part of the far square the floor fills: a 256² grid of rays along the light.
+    let inverse = far.view_proj.inverse();
+    let n = 256;
+    let mut filled = 0;
+    for j in 0..n {
+        for i in 0..n {
+            let (x, y) = (
+                -1.0 + (i as f32 + 0.5) * 2.0 / n as f32,
+                -1.0 + (j as f32 + 0.5) * 2.0 / n as f32,
+            );
+            let a = inverse.project_point3(Vec3::new(x, y, 0.0));
+            let b = inverse.project_point3(Vec3::new(x, y, 1.0));
+            let t = a.y / (a.y - b.y);
+            let hit = a + (b - a) * t;
+            if (0.0..=1.0).contains(&t) && hit.x.abs() <= 30.0 && hit.z.abs() <= 30.0 {
+                filled += 1;
+            }
+        }
+    }
+    let expected = e * albedo * far.extent * far.extent * filled as f32 / (n * n) as f32;
+    let relative = (total.x - expected) / expected;
+    let twice = (near.extent / far.extent).powi(2);
+    eprintln!(
+        "RSM flux {total} vs {expected} ({relative:+.4}); lit texels {lit:?}; the near square's share {twice:.3}"
+    );
+    assert!(relative.abs() < 0.02, "{total} vs {expected}");
+    assert!(
+        twice > 0.04,
+        "the check could not see the near square counted twice"
+    );
+}

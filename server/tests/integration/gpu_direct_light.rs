@@ -383,3 +383,44 @@ fn alpha_masked_texels_cast_no_shadow() {
         "{left_lit} lit, {right_dark} dark"
     );
 }
+
+/// The sun's shadow map fitted to the view (`light_fit: view`, two cascades) shadows the
+/// street as the whole-scene map does, with the finer texels the viewer gets: at 512² its
+/// direct light is nearer that of a 2048² whole-scene map than the 512² whole-scene map is,
+/// and no pixel is lit by one and dark in the other beyond the maps' shadow edges.
+#[test]
+fn view_fitted_sun_shadows_match_the_scene_fitted_ones_more_finely() {
+    use lightcast_server::scene::default_light::{default_camera, default_light};
+    let street = lightcast_server::scene::procedural::build("street?blocks=2").expect("street");
+    let (w, h) = (96, 54);
+    let mut renderer = lightcast_server::renderer::Renderer::new(gpu(), street.clone());
+    let mut direct = |fit: &str, size: u32| {
+        let mut s = settings(w, h, default_camera(&street), default_light(&street));
+        s.shadow_map_size = size;
+        s.gi = lightcast_server::gi::GiParams::new(lightcast_server::gi::rsm_gather::RSM_GATHER)
+            .with("rsm_size", 16)
+            .with("light_fit", fit);
+        let frame = renderer.render(&s).expect("render");
+        let (hdr, indirect) = (frame.hdr.expect("hdr"), frame.indirect.expect("indirect"));
+        hdr.iter()
+            .zip(&indirect)
+            .map(|(a, b)| Vec3::new(a[0] - b[0], a[1] - b[1], a[2] - b[2]))
+            .collect::<Vec<_>>()
+    };
+    let truth = direct("scene", 2048);
+    let coarse = direct("scene", 512);
+    let fitted = direct("view", 512);
+    let mean = truth.iter().map(|c| c.element_sum()).sum::<f32>();
+    let error = |image: &[Vec3]| {
+        image
+            .iter()
+            .zip(&truth)
+            .map(|(a, b)| (*a - *b).abs().element_sum())
+            .sum::<f32>()
+            / mean
+    };
+    let (e_coarse, e_fitted) = (error(&coarse), error(&fitted));
+    eprintln!("direct light against a 2048² map: scene-fitted 512² {e_coarse:.4}, view-fitted 512² {e_fitted:.4}");
+    assert!(e_fitted < 0.05, "{e_fitted}");
+    assert!(e_fitted < e_coarse, "{e_fitted} vs {e_coarse}");
+}

@@ -7,7 +7,7 @@
 use super::support::{self, directional, floor_corners, plain_material, quad};
 use glam::Vec3;
 use lightcast_protocol::{Camera, Environment, EnvironmentKind};
-use lightcast_server::gi::reference::{PathTracer, ReferenceSettings, SurfaceGpu};
+use lightcast_server::gi::reference::{PathTracer, ReferenceSettings, Senders, SurfaceGpu};
 use lightcast_server::gi::GiParams;
 use lightcast_server::passes::environment::FrameEnvironment;
 use lightcast_server::renderer::{RenderSettings, Renderer};
@@ -52,17 +52,18 @@ fn lambertian_tracer(scene: &Scene) -> PathTracer {
 
 /// The mean indirect light of 16×16 pixels at 256 samples each under `env` alone.
 fn traced_mean(tracer: &mut PathTracer, camera: &Camera, env: &Arc<FrameEnvironment>) -> Vec3 {
+    traced_mean_with(tracer, camera, env, &ReferenceSettings::default())
+}
+
+fn traced_mean_with(
+    tracer: &mut PathTracer,
+    camera: &Camera,
+    env: &Arc<FrameEnvironment>,
+    settings: &ReferenceSettings,
+) -> Vec3 {
     for _ in 0..4 {
         tracer
-            .accumulate(
-                16,
-                16,
-                camera,
-                &[],
-                Some(env),
-                &ReferenceSettings::default(),
-                64,
-            )
+            .accumulate(16, 16, camera, &[], Some(env), settings, 64)
             .expect("accumulate");
     }
     let image = tracer.read().expect("read").expect("samples");
@@ -123,6 +124,42 @@ fn reference_on_an_open_lambertian_plane_converges_to_albedo_times_irradiance_ov
         eprintln!("{name}: mean {mean}, expected {expected}, relative {rel}");
         // 256 pixels × 256 samples: the mean's noise is far below 1 %.
         assert!(rel.max_element() < 0.01, "{name}: {mean} vs {expected}");
+    }
+}
+
+/// With `senders: diffuse` the environment reaches the surfaces after the first by next-event
+/// estimation alone (no shared estimate with the escaping bounce ray): on Lambertian surfaces,
+/// where the diffuse lobe is the whole BRDF, that must converge to the same light. A 2 m wall
+/// standing on the open plane sends the sky's light onto it, over two bounces.
+#[test]
+fn diffuse_senders_under_the_sky_equal_full_ones_on_lambertian_surfaces() {
+    let (plane, camera) = open_plane();
+    let (mut vertices, mut indices) = (plane.vertices, plane.indices);
+    let wall = [
+        Vec3::new(-1.0, 0.0, -0.3),
+        Vec3::new(1.0, 0.0, -0.3),
+        Vec3::new(1.0, 2.0, -0.3),
+        Vec3::new(-1.0, 2.0, -0.3),
+    ];
+    quad(&mut vertices, &mut indices, wall, 0);
+    let scene = support::scene(vertices, indices, plane.materials);
+    let mut tracer = lambertian_tracer(&scene);
+    let sun = directional(Vec3::new(0.3, -0.6, 0.4), 3.0);
+    for (name, env) in environments() {
+        let frame_env =
+            Arc::new(FrameEnvironment::new(&env, std::slice::from_ref(&sun), None).expect("env"));
+        let [full, diffuse] = [Senders::Full, Senders::Diffuse].map(|senders| {
+            let settings = ReferenceSettings {
+                bounces: 2,
+                senders,
+                ..ReferenceSettings::default()
+            };
+            traced_mean_with(&mut tracer, &camera, &frame_env, &settings)
+        });
+        let rel = ((diffuse - full) / full).abs();
+        eprintln!("{name}: full {full}, diffuse senders {diffuse}, relative {rel}");
+        // 256 pixels × 256 samples each: the means' noise is well below 1 %.
+        assert!(rel.max_element() < 0.01, "{name}: {diffuse} vs {full}");
     }
 }
 

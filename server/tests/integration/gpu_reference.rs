@@ -1,14 +1,17 @@
 //! The reference path tracer (`gi::reference`) on lavapipe against answers known without it:
 //! the BVH traversal against brute-force intersection, one bounce between two plates against
 //! a numerically integrated CPU value, a closed emitting box against the geometric series
-//! of its albedo (and dark with `emitters` off), textured and alpha-masked surfaces against untextured and absent ones.
+//! of its albedo (and dark with `emitters` off), textured and alpha-masked surfaces against untextured and absent ones,
+//! diffuse senders (`senders: diffuse`) against the same integral with the sender's diffuse lobe.
 
 use super::support::{self, brdf, floor_corners, hit_plane, plain_material, quad};
 use glam::Vec3;
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gi::common::bvh::SceneBvh;
 use lightcast_server::gi::common::shaders;
-use lightcast_server::gi::reference::{PathTracer, ReferenceImage, ReferenceSettings, SurfaceGpu};
+use lightcast_server::gi::reference::{
+    PathTracer, ReferenceImage, ReferenceSettings, Senders, SurfaceGpu,
+};
 use lightcast_server::gpu::{readback::map_read, GpuContext};
 use lightcast_server::passes::tonemap::luminance;
 use lightcast_server::scene::{brdf::Brdf, Material, Scene, Texture, Vertex};
@@ -210,8 +213,9 @@ fn plates() -> Plates {
 }
 
 /// One-bounce indirect radiance leaving `x` on plate A towards `eye`: the integral over plate
-/// B of f_A · L_B · G, with L_B = f_B · E_B from the point light, by the midpoint rule.
-fn plates_indirect(p: &Plates, x: Vec3, eye: Vec3, cells: u32) -> Vec3 {
+/// B of f_A · L_B · G, with L_B = f_B · E_B from the point light, by the midpoint rule; f_B is
+/// the whole BRDF or, with diffuse `senders`, its diffuse lobe.
+fn plates_indirect(p: &Plates, x: Vec3, eye: Vec3, cells: u32, senders: Senders) -> Vec3 {
     let (floor, ceiling) = (&p.scene.materials[0], &p.scene.materials[1]);
     let (n_a, n_b) = (Vec3::Y, Vec3::NEG_Y);
     let light = Vec3::from(p.light.position);
@@ -233,47 +237,72 @@ fn plates_indirect(p: &Plates, x: Vec3, eye: Vec3, cells: u32) -> Vec3 {
             let d_l2 = to_light.length_squared();
             let to_light = to_light / d_l2.sqrt();
             let e_b = p.light.intensity * n_b.dot(to_light).max(0.0) / d_l2;
-            let l_b = brdf(ceiling, n_b, to_light, -w) * e_b;
+            let f_b = match senders {
+                Senders::Full => brdf(ceiling, n_b, to_light, -w),
+                Senders::Diffuse => ceiling.brdf().eval_diffuse(n_b, to_light, -w),
+            };
+            let l_b = f_b * e_b;
             sum += brdf(floor, n_a, w, to_eye) * l_b * cos_x.max(0.0) * cos_y.max(0.0) / r2;
         }
     }
     sum * cell * cell
 }
 
+/// Both transports: the whole BRDF at the glossy ceiling (roughness 0.5, half metal), and its
+/// diffuse lobe alone (what the RSM-based methods model), which must differ from it by far
+/// more than the tolerance for the check to tell them apart.
 #[test]
 fn one_bounce_between_two_plates_matches_numerical_integration() {
-    let p = plates();
+    let plain = plates();
+    let mut materials = plain.scene.materials.clone();
+    materials[1].metallic = 0.5;
+    let p = Plates {
+        scene: plates_with(|_, _| {}, materials, Vec::new()),
+        ..plain
+    };
     let (w, h) = (16, 16);
     let mut tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
-    let image = converge(
-        &mut tracer,
-        (w, h),
-        &p.camera,
-        std::slice::from_ref(&p.light),
-        &ReferenceSettings::default(),
-        512,
-    );
     let eye = Vec3::from(p.camera.position);
-    // Compare the mean over each half of the image (left/right), where the MC noise of
-    // 128 pixels × 512 samples is well below the tolerance.
-    for half in 0..2 {
-        let (mut gpu, mut cpu) = (Vec3::ZERO, Vec3::ZERO);
-        for y in 0..h {
-            for x in half * w / 2..(half + 1) * w / 2 {
-                let hit = hit_plane(&p.camera, &p.scene, w, h, x, y, 0.0).expect("sees A");
-                cpu += plates_indirect(&p, hit, eye, 160);
-                gpu += Vec3::from(image.indirect[(y * w + x) as usize]);
-            }
-        }
-        let rel = (gpu - cpu).abs() / cpu;
-        eprintln!("half {half}: relative error {rel}");
-        assert!(
-            rel.max_element() < 0.03,
-            "half {half}: GPU {gpu} vs CPU {cpu} (relative {rel}; RSE {})",
-            image.relative_standard_error
+    let mut means = Vec::new();
+    for senders in [Senders::Full, Senders::Diffuse] {
+        let image = converge(
+            &mut tracer,
+            (w, h),
+            &p.camera,
+            std::slice::from_ref(&p.light),
+            &ReferenceSettings {
+                senders,
+                ..ReferenceSettings::default()
+            },
+            512,
         );
+        // Compare the mean over each half of the image (left/right), where the MC noise of
+        // 128 pixels × 512 samples is well below the tolerance.
+        let mut total = Vec3::ZERO;
+        for half in 0..2 {
+            let (mut gpu, mut cpu) = (Vec3::ZERO, Vec3::ZERO);
+            for y in 0..h {
+                for x in half * w / 2..(half + 1) * w / 2 {
+                    let hit = hit_plane(&p.camera, &p.scene, w, h, x, y, 0.0).expect("sees A");
+                    cpu += plates_indirect(&p, hit, eye, 160, senders);
+                    gpu += Vec3::from(image.indirect[(y * w + x) as usize]);
+                }
+            }
+            let rel = (gpu - cpu).abs() / cpu;
+            eprintln!("{senders:?} senders, half {half}: relative error {rel}");
+            assert!(
+                rel.max_element() < 0.03,
+                "{senders:?} senders, half {half}: GPU {gpu} vs CPU {cpu} (relative {rel}; RSE {})",
+                image.relative_standard_error
+            );
+            total += cpu;
+        }
+        means.push(total);
+        assert!(image.relative_standard_error > 0.0 && image.relative_standard_error < 0.2);
     }
-    assert!(image.relative_standard_error > 0.0 && image.relative_standard_error < 0.2);
+    let glossy_share = (means[0] - means[1]) / means[0];
+    eprintln!("the ceiling's glossy share of the floor's light: {glossy_share}");
+    assert!(glossy_share.min_element() > 0.2, "{glossy_share}");
 }
 
 /// A closed cube (2 m) whose faces face inwards: emitters emit from the side their normals

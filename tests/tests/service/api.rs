@@ -3,7 +3,7 @@
 use lightcast_e2e::{
     cornell_glb, direct_session, glb_to_gltf, small_session, Incoming, TestServer, PATIENCE,
 };
-use lightcast_protocol::{EnvironmentKind, RenderReport, ServerEvent};
+use lightcast_protocol::{EnvironmentKind, RenderReport, Senders, ServerEvent};
 use serde_json::{json, Value};
 use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
@@ -511,6 +511,22 @@ async fn renders_compare_with_the_reference() {
     assert!(c.final_flip > 0.0 && c.final_flip < 1.0, "{}", c.final_flip);
     let (again, _) = render(&server, &brsm).await;
     assert_eq!(again.comparison.expect("comparison"), c);
+    assert_eq!(c.senders, Senders::Full);
+    assert_eq!(again.comparison_modelled, None, "not asked for");
+
+    // Against the light transport BRSM models (diffuse VALs): a second reference without the
+    // glossy reflections of the light at the senders, so darker, and BRSM's bias against it
+    // larger; the full comparison is the same as without it.
+    let mut modelled = brsm.clone();
+    modelled["compare_modelled"] = json!(true);
+    let (m, _) = render(&server, &modelled).await;
+    assert_eq!(m.comparison.as_ref(), Some(&c));
+    let d = m.comparison_modelled.expect("a modelled comparison");
+    assert_eq!((d.senders, d.reference_samples), (Senders::Diffuse, 16));
+    assert!(
+        d.indirect_bias_relative > c.indirect_bias_relative,
+        "{d:?} vs {c:?}"
+    );
 
     let mut reference = brsm.clone();
     reference["render"]["gi"] = json!({"method": "reference", "spp": 16});
@@ -521,6 +537,17 @@ async fn renders_compare_with_the_reference() {
     assert_eq!(same.final_psnr_db, None);
     assert_eq!(same.final_flip, 0.0);
     assert!(r.stages.iter().any(|s| s.stage == "path_trace"));
+    // The reference models the whole transport: no second comparison; one of diffuse
+    // senders is its own modelled reference.
+    let mut asked = reference.clone();
+    asked["compare_modelled"] = json!(true);
+    assert_eq!(render(&server, &asked).await.0.comparison_modelled, None);
+    asked["render"]["gi"]["senders"] = json!("diffuse");
+    let (diffuse, _) = render(&server, &asked).await;
+    let own = diffuse.comparison_modelled.expect("modelled");
+    assert_eq!((own.senders, own.indirect_mae), (Senders::Diffuse, 0.0));
+    let full = diffuse.comparison.expect("comparison");
+    assert!(full.indirect_bias_relative < 0.0, "{full:?}");
 
     // The same light sources on both sides: BRSM lights from the punctual light alone, so its
     // reference leaves the lamp's emission out (its bias is the one against a reference with

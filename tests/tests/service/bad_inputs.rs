@@ -541,6 +541,22 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         case(
             "POST",
             "/v1/render",
+            r#"{"compare_modelled":true}"#,
+            400,
+            "invalid_field",
+            Some("compare_modelled"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"compare_to":"reference","compare_modelled":"yes"}"#,
+            400,
+            "invalid_field",
+            Some("compare_modelled"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
             r#"{"compare_to":"reference","compare_spp":0}"#,
             400,
             "invalid_field",

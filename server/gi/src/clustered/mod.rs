@@ -33,7 +33,6 @@ use crate::gpu::readback::{
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::ShaderPass;
 use crate::passes::{
-    frame_uniforms::lights_faces,
     gbuffer::GBuffer,
     rsm::{max_rsm_size, Rsm, RsmFace, RsmPass},
     Target,
@@ -533,7 +532,7 @@ impl Method for Clustered {
     ) -> Result<Option<ProgressBuffer>, GiError> {
         let r = frame.resources;
         let g = &Settings::of(frame.settings)?;
-        let faces = lights_faces(frame.lights, &r.scene.bounds);
+        let faces = frame.light_faces;
         let device = &r.ctx.device;
         // Emissive surfaces send VPLs from one more face, clustered with the lights' VPLs.
         let emitter_face =
@@ -552,10 +551,7 @@ impl Method for Clustered {
             faces.len() as u32 + u32::from(emitter_face),
         );
         let queue = &r.ctx.queue;
-        let rsm_faces: Vec<RsmFace> = faces
-            .iter()
-            .map(|(light, f)| RsmFace::new(f, g.rsm_size, *light))
-            .collect();
+        let rsm_faces = RsmFace::all(faces, g.rsm_size);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let atlas = visibility.layout;
         let params = ClusteredParams {

@@ -1,7 +1,7 @@
 //! `clustered`'s parameter table (seed 003) and the struct its passes read it as.
 
 use super::passes::FOURIER_MAX_TERMS;
-use crate::gi::common::params::{EMITTERS, RSM_SIZE};
+use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE};
 use crate::gi::params::{read, Default, MethodTable, Param};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -133,6 +133,7 @@ pub const TABLE: MethodTable = MethodTable {
     params: &[
         &RSM_SIZE,
         &EMITTERS,
+        &LIGHT_FIT,
         &VPL_COUNT,
         &CLUSTER_COUNT,
         &KMEANS_ITERATIONS,
@@ -161,6 +162,8 @@ pub const TABLE: MethodTable = MethodTable {
         scale_tolerance: crate::gi::params::SCALE_TOLERANCE,
         exact_at_powers_of_two: true,
     },
+    // VPLs are diffuse (seed 003, §3: the RSM stores diffusely reflected flux).
+    senders: crate::gi::params::Senders::diffuse,
 };
 
 /// How each VPL's visibility is found (`visibility`).
@@ -208,6 +211,7 @@ impl Visibility {
 pub struct Settings {
     pub rsm_size: u32,
     pub emitters: Option<bool>,
+    pub light_fit: LightFit,
     pub vpl_count: u32,
     pub cluster_count: u32,
     pub kmeans_iterations: u32,

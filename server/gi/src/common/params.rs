@@ -44,6 +44,41 @@ pub fn roughness_override(gi: &GiParams) -> Option<f32> {
     glossy_exponent(gi).map(crate::scene::brdf::roughness_for_exponent)
 }
 
+/// The RSM-based methods': what a directional light's shadow map and RSM cover.
+pub const LIGHT_FIT: Param = Param::choice(
+    "light_fit",
+    "scene",
+    LightFit::NAMES,
+    "What a directional light's shadow map and RSM cover: scene (the whole scene's bounding \
+     sphere, one face, as the papers do) or view (what the camera sees of the scene and a 5 % \
+     margin, in two cascades: a near face up to a quarter of the way to the farthest surface \
+     in view and a far face over the rest; the same texels, VPLs and VALs over less ground \
+     where much of the scene is out of view, e.g. a city seen from its streets, at twice the \
+     RSM texels; moves in whole texels as the camera does)",
+);
+
+/// See [`LIGHT_FIT`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LightFit {
+    View,
+    Scene,
+}
+
+impl LightFit {
+    const NAMES: &'static [&'static str] = &["view", "scene"];
+}
+
+/// What the frame's directional lights cover: [`LightFit::Scene`] for a method without
+/// `light_fit` in its table (`surfels` lights every surfel of the scene through the shadow
+/// map; `none` and `reference` draw direct light only).
+pub fn light_fit(gi: &GiParams) -> LightFit {
+    match gi.get(LIGHT_FIT.name).and_then(serde_json::Value::as_str) {
+        Some("view") => LightFit::View,
+        _ => LightFit::Scene,
+    }
+}
+
 /// The renderer's, for the methods that approximate (`MethodEntry::downscales`). The software
 /// profile's 2: a quarter of the pixels, about 2 GI frames a second in a viewer-sized stream
 /// on lavapipe instead of 0.25 (`bench/first-minute.sh`).

@@ -32,8 +32,8 @@ use super::{
 };
 use crate::gpu::readback::{read_buffer, stage_buffer, PendingMap};
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
+use crate::passes::gbuffer::GBuffer;
 use crate::passes::ShaderPass;
-use crate::passes::{frame_uniforms::lights_faces, gbuffer::GBuffer};
 use cache_buffers::CacheBuffers;
 use cache_lighting::{CacheLighting, CacheLightingPass, ValSource};
 use cache_store::CacheStore;
@@ -338,7 +338,7 @@ impl Method for LightSkin {
         self.sampling.prepare(
             &r.ctx,
             frame.gbuffer,
-            &lights_faces(frame.lights, &r.scene.bounds),
+            frame.light_faces,
             (&r.scene, emitters(frame.settings)),
             gi,
         );

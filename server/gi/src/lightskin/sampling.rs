@@ -141,10 +141,7 @@ impl ValSampling {
         // Every light's faces lie in one atlas and eq. 10–11's importance is estimated over all
         // of it, so the VAL budget is split between the lights by their share of the summed
         // importance: light k draws N·ΣI_k/ΣI VALs in expectation (1/(N·P) keeps each unbiased).
-        let rsm_faces: Vec<RsmFace> = faces
-            .iter()
-            .map(|(light, f)| RsmFace::new(f, settings.rsm_size, *light))
-            .collect();
+        let rsm_faces = RsmFace::all(faces, settings.rsm_size);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let bands = self
             .importance_pass

@@ -36,6 +36,7 @@ pub mod stages;
 use super::common::bvh;
 use super::common::params::{emitters, roughness_override, BOUNCES};
 use super::cost::{Cost, FrameShape, Knob};
+pub use super::params::Senders;
 use super::precompute::{
     BudgetPool, Built, PrecomputeEntry, PrecomputeKey, Progress, SceneData, UnitBudget,
 };
@@ -201,6 +202,10 @@ pub struct TraceParams {
     pub emitters: u32,
     /// First row of this dispatch's band of the image.
     pub row_offset: u32,
+    /// 1: light straight from a light leaves the surface it reaches by the diffuse lobe alone
+    /// ([`Senders::Diffuse`]).
+    pub diffuse_senders: u32,
+    pub pad: [u32; 3],
 }
 
 /// Mirrors `SurfaceGpu` in `shaders/reference/surfaces.wgsl`: a material as the reference
@@ -364,6 +369,8 @@ pub struct ReferenceSettings {
     pub roughness: Option<f32>,
     /// Whether emissive surfaces light the scene (area lights) besides the punctual light.
     pub emitters: bool,
+    /// How the light a surface receives straight from a light leaves it.
+    pub senders: Senders,
 }
 
 impl Default for ReferenceSettings {
@@ -373,6 +380,7 @@ impl Default for ReferenceSettings {
             seed: 0,
             roughness: None,
             emitters: true,
+            senders: Senders::Full,
         }
     }
 }
@@ -737,6 +745,8 @@ impl PathTracer {
             roughness: settings.roughness.unwrap_or(0.0),
             emitters: u32::from(settings.emitters),
             row_offset: 0,
+            diffuse_senders: u32::from(settings.senders == Senders::Diffuse),
+            pad: [0; 3],
         };
         // Each sample in bands of rows of at most `band_rays` rays (a camera ray, then a bounce
         // ray and a shadow ray per light per bounce), as many as the parameter slots hold.
@@ -820,6 +830,7 @@ impl PathTracer {
                 seed: 0,
                 roughness: roughness_override(gi),
                 emitters: emitters(gi),
+                senders: g.senders,
             },
         };
         stages.stage(stages::PATH_TRACE, |e| {
@@ -963,6 +974,7 @@ mod tests {
                 ("roughness", offset_of!(TraceParams, roughness)),
                 ("emitters", offset_of!(TraceParams, emitters)),
                 ("row_offset", offset_of!(TraceParams, row_offset)),
+                ("diffuse_senders", offset_of!(TraceParams, diffuse_senders)),
             ],
         );
         assert_struct(

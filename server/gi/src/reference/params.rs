@@ -2,7 +2,7 @@
 
 use super::MAX_SAMPLES_PER_CALL;
 use crate::gi::common::params::{BOUNCES, EMITTERS};
-use crate::gi::params::{read, Default, MethodTable, Param};
+use crate::gi::params::{read, Default, MethodTable, Param, Senders};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
 use serde::Deserialize;
@@ -23,12 +23,23 @@ pub const SPP: Param = Param::integer(
 .software(Default::Int(1))
 .unit("samples");
 
+/// What a light's reflection off the surfaces it reaches models (see [`Senders`]).
+pub const SENDERS: Param = Param::choice(
+    "senders",
+    "full",
+    Senders::NAMES,
+    "How the light a surface receives straight from a light (punctual or the sky) leaves it: \
+     full (the whole BRDF: the truth) or diffuse (its diffuse lobe alone, the light transport \
+     of the methods whose VPLs, VALs or surfels are diffuse; comparisons also render this, to \
+     part the error of what a method leaves out from the error in what it models)",
+);
+
 pub const TABLE: MethodTable = MethodTable {
     method: crate::gi::reference::REFERENCE,
     summary: "Path-traced reference: the converged indirect light (exact visibility, the same \
               BRDF and light), accumulated while nothing changes",
     progressive: true,
-    params: &[&BOUNCES, &EMITTERS, &SPP],
+    params: &[&BOUNCES, &EMITTERS, &SENDERS, &SPP],
     views: &[&crate::gi::common::views::INDIRECT],
     // Two bounces test the ray offsets of the second surface too. The same random numbers at
     // every scale (the seed and sample indices are equal), so paths differ only where a
@@ -44,6 +55,7 @@ pub const TABLE: MethodTable = MethodTable {
         scale_tolerance: 0.02,
         exact_at_powers_of_two: true,
     },
+    senders: |gi| Settings::of(gi).map(|s| s.senders).unwrap_or(Senders::Full),
 };
 
 /// The reference's parameters, as [`TABLE`] describes them.
@@ -52,6 +64,7 @@ pub const TABLE: MethodTable = MethodTable {
 pub struct Settings {
     pub bounces: u32,
     pub emitters: Option<bool>,
+    pub senders: Senders,
     pub spp: u32,
 }
 

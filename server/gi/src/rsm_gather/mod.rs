@@ -30,7 +30,7 @@ use crate::gpu::readback::{
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::rsm::{max_rsm_size, Rsm, RsmFace, RsmPass};
 use crate::passes::ShaderPass;
-use crate::passes::{frame_uniforms::lights_faces, Target};
+use crate::passes::Target;
 use lightcast_protocol::{GiMethod, GiParams, View};
 use params::Settings;
 use passes::{GatherFace, GatherParams, GatherResources, GATHER_GROUP};
@@ -234,7 +234,7 @@ impl Method for RsmGather {
     ) -> Result<Option<ProgressBuffer>, GiError> {
         let r = frame.resources;
         let g = Settings::of(frame.settings)?;
-        let faces = lights_faces(frame.lights, &r.scene.bounds);
+        let faces = frame.light_faces;
         let device = &r.ctx.device;
         let queue = &r.ctx.queue;
         // Emissive surfaces as one more face, gathered whole (gather.wgsl).
@@ -243,10 +243,7 @@ impl Method for RsmGather {
                 .prepare_emitters(device, &r.scene, g.rsm_size, emitters(frame.settings));
         let face_count = faces.len() as u32 + u32::from(emitter_face);
         let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, face_count);
-        let rsm_faces: Vec<RsmFace> = faces
-            .iter()
-            .map(|(light, f)| RsmFace::new(f, g.rsm_size, *light))
-            .collect();
+        let rsm_faces = RsmFace::all(faces, g.rsm_size);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let view_proj: Vec<(u32, glam::Mat4)> = faces
             .iter()

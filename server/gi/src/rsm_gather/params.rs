@@ -1,6 +1,6 @@
 //! `rsm_gather`'s parameter table and the struct its pass reads it as.
 
-use crate::gi::common::params::{EMITTERS, RSM_SIZE};
+use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE};
 use crate::gi::params::{read, Default, MethodTable, Param, Testing, SCALE_TOLERANCE};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -42,7 +42,13 @@ pub const TABLE: MethodTable = MethodTable {
               fixed pattern of RSM texels around its own as pixel lights, without visibility; \
               the ancestor of the seed methods",
     progressive: false,
-    params: &[&RSM_SIZE, &EMITTERS, &GATHER_SAMPLES, &GATHER_RADIUS],
+    params: &[
+        &RSM_SIZE,
+        &EMITTERS,
+        &LIGHT_FIT,
+        &GATHER_SAMPLES,
+        &GATHER_RADIUS,
+    ],
     views: super::views::VIEWS,
     // The radius is a fraction of the RSM, the pattern has no length in it and a pixel light's
     // disk area bounds its form factor: no length constant, so power-of-two scales are exact.
@@ -55,6 +61,8 @@ pub const TABLE: MethodTable = MethodTable {
         scale_tolerance: SCALE_TOLERANCE,
         exact_at_powers_of_two: true,
     },
+    // RSM texels are diffuse reflectors (Dachsbacher & Stamminger 2005, eq. 1).
+    senders: crate::gi::params::Senders::diffuse,
 };
 
 /// `rsm_gather`'s parameters, as [`TABLE`] describes them.
@@ -63,6 +71,7 @@ pub const TABLE: MethodTable = MethodTable {
 pub struct Settings {
     pub rsm_size: u32,
     pub emitters: Option<bool>,
+    pub light_fit: LightFit,
     pub gather_samples: u32,
     pub gather_radius: f32,
 }

@@ -84,6 +84,8 @@ pub const TABLE: MethodTable = MethodTable {
         scale_tolerance: crate::gi::params::SCALE_TOLERANCE,
         exact_at_powers_of_two: false,
     },
+    // surfels store the diffuse light they reflect (seed 001, eq. 2).
+    senders: crate::gi::params::Senders::diffuse,
 };
 
 /// `surfels`' parameters, as [`TABLE`] describes them.

@@ -3,7 +3,7 @@
 
 use crate::scene::Aabb;
 use bytemuck::{Pod, Zeroable};
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec3, Vec4};
 use lightcast_protocol::{Camera, Light, LightKind};
 
 /// Mirrors `CameraUniform` in `shaders/common.wgsl`.
@@ -33,7 +33,9 @@ pub struct LightUniform {
     pub normal_bias: f32,
     /// The light's first layer in the frame's shadow-map array.
     pub first_layer: u32,
-    pub pad0: f32,
+    /// Its faces (layers): 6 for a point light, 2 for a directional light fitted to the view
+    /// (near and far cascade), else 1.
+    pub face_count: u32,
 }
 
 /// Most lights a frame lights with (`MAX_LIGHTS` in `shaders/lights.wgsl`), its punctual
@@ -53,12 +55,64 @@ pub struct LightsUniform {
     pub list: [LightUniform; MAX_LIGHTS],
 }
 
+/// What the faces of a directional light (its shadow map and RSM) cover. Spot and point
+/// lights cover what their cones and cubes see either way.
+#[derive(Clone, Copy, Debug)]
+pub enum Coverage<'a> {
+    /// The whole scene: one face, a square around its bounding sphere.
+    Scene,
+    /// What a camera of aspect ratio `aspect` sees of the scene, and a margin around it for
+    /// the light that reaches it from just outside (see [`visible_region`]), in two cascades:
+    /// a near face over what it sees up to [`NEAR_CASCADE`] of the way to the farthest
+    /// surface it sees, and a far face over all it sees, whose RSM leaves out (and whose
+    /// shadow lookups leave to the near face) what the near face covers. The same texels
+    /// over far less ground where a city seen from its streets has most of it out of view,
+    /// and the finest where the viewer is.
+    View { camera: &'a Camera, aspect: f32 },
+}
+
+impl Coverage<'_> {
+    /// Faces a light of `kind` renders from.
+    pub fn faces(&self, kind: LightKind) -> u32 {
+        match (kind, self) {
+            (LightKind::Point, _) => 6,
+            (LightKind::Directional, Self::View { .. }) => 2,
+            _ => 1,
+        }
+    }
+}
+
+/// The near cascade of a view-fitted directional light reaches this fraction of the way from
+/// the camera to the farthest surface it sees.
+pub const NEAR_CASCADE: f32 = 0.25;
+
+/// Margin around the visible region a directional light's fitted faces cover, as a fraction
+/// of the region's side on each side: the surfaces just outside the view that light it.
+const VIEW_MARGIN: f32 = 0.05;
+/// A fitted face's side is the scene's (2 × radius) times a power of 2^(1/8) and its centre a
+/// multiple of side / 4096 in the light's plane: as the camera moves the texel grid moves in
+/// whole texels (of maps up to 4096²) and changes scale in steps, so shadows and RSM samples
+/// do not crawl from frame to frame.
+const SIDE_STEPS_PER_OCTAVE: f32 = 8.0;
+const SNAP_TEXELS: f32 = 4096.0;
+
 impl LightsUniform {
     /// Every light of `lights` (at most [`MAX_LIGHTS`]; callers check), all punctual, with
     /// its shadow faces fitted to the scene bounds, their layers following each other in
     /// light order.
     pub fn new(lights: &[Light], bounds: &Aabb, shadow_size: u32) -> Self {
-        Self::with_punctual(lights, lights.len(), bounds, shadow_size)
+        Self::with_punctual(lights, lights.len(), bounds, Coverage::Scene, shadow_size)
+    }
+
+    /// The faces of light `index` (in `lights`) of `faces` that covers it, from its first:
+    /// the index of a face within its light (a cascade or a cube face).
+    pub fn face_index(faces: &[(u32, LightFace)], at: usize) -> u32 {
+        let light = faces[at].0;
+        faces[..at]
+            .iter()
+            .rev()
+            .take_while(|(l, _)| *l == light)
+            .count() as u32
     }
 
     /// [`Self::new`] where only the first `punctual` lights are punctual and the rest light
@@ -68,15 +122,16 @@ impl LightsUniform {
         lights: &[Light],
         punctual: usize,
         bounds: &Aabb,
+        coverage: Coverage,
         shadow_size: u32,
     ) -> Self {
         debug_assert!(lights.len() <= MAX_LIGHTS, "{} lights", lights.len());
         let mut all = Self::zeroed();
         let mut first_layer = 0;
         for (slot, light) in all.list.iter_mut().zip(lights) {
-            *slot = LightUniform::new(light, bounds, shadow_size);
+            *slot = LightUniform::new(light, bounds, coverage, shadow_size);
             slot.first_layer = first_layer;
-            first_layer += LightUniform::face_count(light.kind);
+            first_layer += slot.face_count;
         }
         all.count = lights.len().min(MAX_LIGHTS) as u32;
         all.punctual = punctual.min(lights.len()).min(MAX_LIGHTS) as u32;
@@ -92,30 +147,23 @@ impl LightsUniform {
     pub fn layer_view_proj(&self) -> Vec<[[f32; 4]; 4]> {
         self.used()
             .iter()
-            .flat_map(|l| {
-                l.face_view_proj[..LightUniform::face_count_of(l.kind) as usize]
-                    .iter()
-                    .copied()
-            })
+            .flat_map(|l| l.face_view_proj[..l.face_count as usize].iter().copied())
             .collect()
     }
 }
 
 /// Shadow-map layers (and RSM faces) of all `lights` together.
-pub fn face_count(lights: &[Light]) -> u32 {
-    lights
-        .iter()
-        .map(|l| LightUniform::face_count(l.kind))
-        .sum()
+pub fn face_count(lights: &[Light], coverage: Coverage) -> u32 {
+    lights.iter().map(|l| coverage.faces(l.kind)).sum()
 }
 
 /// The faces of every light in light order, each with its light's index in the list.
-pub fn lights_faces(lights: &[Light], bounds: &Aabb) -> Vec<(u32, LightFace)> {
+pub fn lights_faces(lights: &[Light], bounds: &Aabb, coverage: Coverage) -> Vec<(u32, LightFace)> {
     lights
         .iter()
         .enumerate()
         .flat_map(|(i, l)| {
-            light_faces(l, bounds)
+            light_faces(l, bounds, coverage)
                 .into_iter()
                 .map(move |f| (i as u32, f))
         })
@@ -186,25 +234,13 @@ pub struct LightFace {
 }
 
 /// The faces a light renders from, fitted to the scene bounds: one orthographic face for a
-/// directional light, one perspective face for a spot light, six cube faces for a point light.
-pub fn light_faces(light: &Light, bounds: &Aabb) -> Vec<LightFace> {
+/// directional light (over what `coverage` says), one perspective face for a spot light, six
+/// cube faces for a point light.
+pub fn light_faces(light: &Light, bounds: &Aabb, coverage: Coverage) -> Vec<LightFace> {
     let direction = Vec3::from(light.direction).normalize_or(Vec3::NEG_Y);
     let position = Vec3::from(light.position);
-    let radius = bounds.radius().max(1e-3);
-    let center = bounds.center();
     match light.kind {
-        LightKind::Directional => {
-            let eye = center - direction * 2.0 * radius;
-            let view = Mat4::look_to_rh(eye, direction, stable_up(direction));
-            let proj =
-                Mat4::orthographic_rh(-radius, radius, -radius, radius, radius, 3.0 * radius);
-            vec![LightFace {
-                view_proj: proj * view,
-                axis: direction,
-                extent: 2.0 * radius,
-                perspective: false,
-            }]
-        }
+        LightKind::Directional => directional_faces(direction, bounds, coverage),
         LightKind::Spot => {
             let half = light.outer_cone.clamp(1e-3, MAX_SPOT_SHADOW_HALF_ANGLE);
             let (near, far) = depth_range(position, bounds);
@@ -238,18 +274,205 @@ pub fn light_faces(light: &Light, bounds: &Aabb) -> Vec<LightFace> {
     }
 }
 
+/// A directional light's orthographic faces: along the light their depth range holds the
+/// whole scene (every caster and every surface it lights); across it a square over the
+/// scene's bounding sphere, or the near and far cascades of [`Coverage::View`], each over its
+/// region and a margin (never more than the sphere's).
+fn directional_faces(direction: Vec3, bounds: &Aabb, coverage: Coverage) -> Vec<LightFace> {
+    let radius = bounds.radius().max(1e-3);
+    let center = bounds.center();
+    let eye = center - direction * 2.0 * radius;
+    let view = Mat4::look_to_rh(eye, direction, stable_up(direction));
+    let face = |square: Option<(f32, f32, f32)>| {
+        let (x, y, half) = square.unwrap_or((0.0, 0.0, radius));
+        let proj =
+            Mat4::orthographic_rh(x - half, x + half, y - half, y + half, radius, 3.0 * radius);
+        LightFace {
+            view_proj: proj * view,
+            axis: direction,
+            extent: 2.0 * half,
+            perspective: false,
+        }
+    };
+    match coverage {
+        Coverage::Scene => vec![face(None)],
+        Coverage::View { camera, aspect } => {
+            let all = visible_region(camera, aspect, bounds, None);
+            let forward = camera_forward(camera);
+            let farthest = all
+                .iter()
+                .map(|p| (*p - Vec3::from(camera.position)).dot(forward))
+                .fold(0.0f32, f32::max);
+            let near = visible_region(camera, aspect, bounds, Some(NEAR_CASCADE * farthest));
+            vec![
+                face(fitted_square(&view, &near, radius)),
+                face(fitted_square(&view, &all, radius)),
+            ]
+        }
+    }
+}
+
+/// The unit direction a camera looks in.
+fn camera_forward(camera: &Camera) -> Vec3 {
+    (Vec3::from(camera.target) - Vec3::from(camera.position)).normalize_or(Vec3::NEG_Z)
+}
+
+/// Centre (x, y in the light's view space) and half side of the snapped square that covers
+/// `region`'s points (world space) plus [`VIEW_MARGIN`], at most `radius`; `None` when the
+/// region is empty or the square would be the scene's anyway.
+fn fitted_square(view: &Mat4, region: &[Vec3], radius: f32) -> Option<(f32, f32, f32)> {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for p in region {
+        let q = view.transform_point3(*p);
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    if region.is_empty() {
+        return None;
+    }
+    let side = (hi.x - lo.x).max(hi.y - lo.y) * (1.0 + 2.0 * VIEW_MARGIN);
+    let steps = ((2.0 * radius) / side.max(1e-6)).log2() * SIDE_STEPS_PER_OCTAVE;
+    if steps < 1.0 {
+        return None;
+    }
+    let half = radius * 2f32.powf(-steps.floor() / SIDE_STEPS_PER_OCTAVE);
+    let snap = 2.0 * half / SNAP_TEXELS;
+    let centre = |a: f32, b: f32| (0.5 * (a + b) / snap).round() * snap;
+    Some((centre(lo.x, hi.x), centre(lo.y, hi.y), half))
+}
+
+/// The vertices of what `camera` (aspect `aspect`) sees of `bounds`: the intersection of its
+/// view frustum (near and far planes as [`camera_view_proj`] puts them) with the box, a
+/// convex polyhedron whose vertices lie on the box's faces clipped by the frustum and the
+/// frustum's faces clipped by the box. Empty when the camera sees none of it. With `far`, the
+/// frustum ends that far from the camera instead.
+pub fn visible_region(camera: &Camera, aspect: f32, bounds: &Aabb, far: Option<f32>) -> Vec<Vec3> {
+    let view_proj = match far {
+        None => camera_view_proj(camera, aspect, bounds),
+        Some(far) => {
+            let eye = Vec3::from(camera.position);
+            let forward = camera_forward(camera);
+            let view = Mat4::look_to_rh(eye, forward, stable_up(forward));
+            let far = far.max(1e-3);
+            Mat4::perspective_rh(camera.fov_y_degrees.to_radians(), aspect, far * 1e-4, far) * view
+        }
+    };
+    let inverse = view_proj.inverse();
+    // Clip space z runs 0 (near) … 1 (far) in wgpu.
+    let corner = |x: f32, y: f32, z: f32| inverse.project_point3(Vec3::new(x, y, z));
+    let frustum: [Vec3; 8] = [
+        corner(-1.0, -1.0, 0.0),
+        corner(1.0, -1.0, 0.0),
+        corner(1.0, 1.0, 0.0),
+        corner(-1.0, 1.0, 0.0),
+        corner(-1.0, -1.0, 1.0),
+        corner(1.0, -1.0, 1.0),
+        corner(1.0, 1.0, 1.0),
+        corner(-1.0, 1.0, 1.0),
+    ];
+    let (r0, r1, r2, r3) = (
+        view_proj.row(0),
+        view_proj.row(1),
+        view_proj.row(2),
+        view_proj.row(3),
+    );
+    // Inside: plane · (p, 1) ≥ 0 (Gribb & Hartmann's planes for z in 0 … w).
+    let frustum_planes = [r3 + r0, r3 - r0, r3 + r1, r3 - r1, r2, r3 - r2];
+    let (a, b) = (bounds.min, bounds.max);
+    let box_planes = [
+        Vec4::new(1.0, 0.0, 0.0, -a.x),
+        Vec4::new(-1.0, 0.0, 0.0, b.x),
+        Vec4::new(0.0, 1.0, 0.0, -a.y),
+        Vec4::new(0.0, -1.0, 0.0, b.y),
+        Vec4::new(0.0, 0.0, 1.0, -a.z),
+        Vec4::new(0.0, 0.0, -1.0, b.z),
+    ];
+    // Faces as corner indices, for the box (`Aabb::corners` order) and the frustum alike.
+    let faces_of = |c: &[Vec3; 8], quads: &[[usize; 4]; 6]| {
+        quads
+            .iter()
+            .map(|q| q.map(|i| c[i]).to_vec())
+            .collect::<Vec<_>>()
+    };
+    const FRUSTUM_QUADS: [[usize; 4]; 6] = [
+        [0, 1, 2, 3],
+        [4, 5, 6, 7],
+        [0, 1, 5, 4],
+        [3, 2, 6, 7],
+        [0, 3, 7, 4],
+        [1, 2, 6, 5],
+    ];
+    let mut points = Vec::new();
+    let clipped = |polygon: Vec<Vec3>, planes: &[Vec4; 6]| {
+        planes
+            .iter()
+            .fold(polygon, |poly, plane| clip_polygon(&poly, *plane))
+    };
+    for face in faces_of(&frustum, &FRUSTUM_QUADS) {
+        points.extend(clipped(face, &box_planes));
+    }
+    for face in box_faces(bounds) {
+        points.extend(clipped(face, &frustum_planes));
+    }
+    points
+}
+
+/// The six faces of `bounds` as quads.
+fn box_faces(bounds: &Aabb) -> Vec<Vec<Vec3>> {
+    let (a, b) = (bounds.min, bounds.max);
+    let p = |x: bool, y: bool, z: bool| {
+        Vec3::new(
+            if x { b.x } else { a.x },
+            if y { b.y } else { a.y },
+            if z { b.z } else { a.z },
+        )
+    };
+    (0..3)
+        .flat_map(|axis| {
+            [false, true].map(move |side| {
+                // The other two axes' four combinations, in order around the quad.
+                [(false, false), (true, false), (true, true), (false, true)]
+                    .map(|(u, v)| match axis {
+                        0 => p(side, u, v),
+                        1 => p(u, side, v),
+                        _ => p(u, v, side),
+                    })
+                    .to_vec()
+            })
+        })
+        .collect()
+}
+
+/// Sutherland–Hodgman: the part of convex `polygon` where plane · (p, 1) ≥ 0.
+fn clip_polygon(polygon: &[Vec3], plane: Vec4) -> Vec<Vec3> {
+    let side = |p: Vec3| plane.dot(p.extend(1.0));
+    let mut out = Vec::with_capacity(polygon.len() + 1);
+    for (i, &p) in polygon.iter().enumerate() {
+        let q = polygon[(i + 1) % polygon.len()];
+        let (sp, sq) = (side(p), side(q));
+        if sp >= 0.0 {
+            out.push(p);
+        }
+        if (sp >= 0.0) != (sq >= 0.0) {
+            out.push(p + (q - p) * (sp / (sp - sq)));
+        }
+    }
+    out
+}
+
 impl LightUniform {
     /// The light's parameters and the view-projection of each shadow-map face, fitted to the
-    /// scene bounds.
-    pub fn new(light: &Light, bounds: &Aabb, shadow_size: u32) -> Self {
+    /// scene bounds (a directional light's to what `coverage` says).
+    pub fn new(light: &Light, bounds: &Aabb, coverage: Coverage, shadow_size: u32) -> Self {
         let direction = Vec3::from(light.direction).normalize_or(Vec3::NEG_Y);
-        let faces = light_faces(light, bounds);
+        let faces = light_faces(light, bounds, coverage);
         let mut face_view_proj = [Mat4::IDENTITY.to_cols_array_2d(); 6];
         for (slot, face) in face_view_proj.iter_mut().zip(&faces) {
             *slot = face.view_proj.to_cols_array_2d();
         }
         // World size of one shadow texel (per metre of distance for perspective faces).
         let texel_world = faces[0].extent / shadow_size as f32;
+        let face_count = faces.len() as u32;
         let (cos_inner, cos_outer) = match light.kind {
             LightKind::Spot => {
                 let outer = light.outer_cone.max(1e-4);
@@ -270,24 +493,7 @@ impl LightUniform {
             shadow_texel: 1.0 / shadow_size as f32,
             normal_bias: NORMAL_BIAS_TEXELS * texel_world,
             first_layer: 0,
-            pad0: 0.0,
-        }
-    }
-
-    /// Shadow-map layers this light renders.
-    pub fn face_count(kind: LightKind) -> u32 {
-        match kind {
-            LightKind::Point => 6,
-            LightKind::Directional | LightKind::Spot => 1,
-        }
-    }
-
-    /// [`Self::face_count`] of a light's `kind` code.
-    fn face_count_of(kind: u32) -> u32 {
-        if kind == light_kind_code(LightKind::Point) {
-            6
-        } else {
-            1
+            face_count,
         }
     }
 }
@@ -339,7 +545,7 @@ mod tests {
                 ("shadow_texel", offset_of!(LightUniform, shadow_texel)),
                 ("normal_bias", offset_of!(LightUniform, normal_bias)),
                 ("first_layer", offset_of!(LightUniform, first_layer)),
-                ("pad0", offset_of!(LightUniform, pad0)),
+                ("face_count", offset_of!(LightUniform, face_count)),
             ],
         );
     }
@@ -373,12 +579,12 @@ mod tests {
         assert_eq!(u.count, 3);
         let firsts: Vec<u32> = u.used().iter().map(|l| l.first_layer).collect();
         assert_eq!(firsts, [0, 1, 7]);
-        assert_eq!(face_count(&lights), 8);
+        assert_eq!(face_count(&lights, Coverage::Scene), 8);
         let layers = u.layer_view_proj();
         assert_eq!(layers.len(), 8);
         assert_eq!(layers[1..7], u.list[1].face_view_proj[..]);
         assert_eq!(layers[7], u.list[2].face_view_proj[0]);
-        let faces = lights_faces(&lights, &unit_box());
+        let faces = lights_faces(&lights, &unit_box(), Coverage::Scene);
         let owners: Vec<u32> = faces.iter().map(|(i, _)| *i).collect();
         assert_eq!(owners, [0, 1, 1, 1, 1, 1, 1, 2]);
     }
@@ -410,7 +616,12 @@ mod tests {
 
     #[test]
     fn directional_shadow_frustum_encloses_the_scene() {
-        let u = LightUniform::new(&light(LightKind::Directional), &unit_box(), 512);
+        let u = LightUniform::new(
+            &light(LightKind::Directional),
+            &unit_box(),
+            Coverage::Scene,
+            512,
+        );
         for c in unit_box().corners() {
             let ndc = project(u.face_view_proj[0], c);
             assert!(ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0, "{c} -> {ndc}");
@@ -424,7 +635,7 @@ mod tests {
 
     #[test]
     fn point_light_faces_cover_their_axis() {
-        let u = LightUniform::new(&light(LightKind::Point), &unit_box(), 256);
+        let u = LightUniform::new(&light(LightKind::Point), &unit_box(), Coverage::Scene, 256);
         let axes = [
             Vec3::X,
             Vec3::NEG_X,
@@ -442,11 +653,152 @@ mod tests {
         }
     }
 
+    /// A 100 m × 100 m, 20 m high "city" seen from its southern edge at eye height, the sun
+    /// from above at an angle.
+    fn city_view(x: f32) -> (Aabb, Camera, Light) {
+        let bounds = Aabb {
+            min: Vec3::new(-50.0, 0.0, -50.0),
+            max: Vec3::new(50.0, 20.0, 50.0),
+        };
+        let camera = Camera {
+            position: [x, 5.0, 45.0],
+            target: [x, 2.0, 0.0],
+            fov_y_degrees: 40.0,
+        };
+        let sun = Light {
+            direction: Vec3::new(-0.4, -0.8, -0.3).normalize().to_array(),
+            ..light(LightKind::Directional)
+        };
+        (bounds, camera, sun)
+    }
+
+    /// Every point the camera sees of the scene lands inside the far cascade (texture space
+    /// and depth), those up to the near cascade's distance inside the near one, and both cover
+    /// less than the scene's face: a grid of points in the box, those inside the view frustum
+    /// checked.
+    #[test]
+    fn a_view_fitted_face_covers_what_the_camera_sees() {
+        let (bounds, camera, sun) = city_view(0.0);
+        let aspect = 16.0 / 9.0;
+        let view = Coverage::View {
+            camera: &camera,
+            aspect,
+        };
+        let faces = light_faces(&sun, &bounds, view);
+        let (near, fitted) = (faces[0], faces[1]);
+        let whole = light_faces(&sun, &bounds, Coverage::Scene)[0];
+        assert_eq!(faces.len() as u32, view.faces(LightKind::Directional));
+        assert!(
+            fitted.extent < whole.extent && near.extent < 0.5 * fitted.extent,
+            "{} {} {}",
+            near.extent,
+            fitted.extent,
+            whole.extent
+        );
+        let camera_clip = camera_view_proj(&camera, aspect, &bounds);
+        let eye = Vec3::from(camera.position);
+        let depth = |p: Vec3| (p - eye).dot(camera_forward(&camera));
+        let farthest = bounds.corners().map(depth).into_iter().fold(0.0, f32::max);
+        let (mut seen, mut near_seen, n) = (0, 0, 24);
+        for i in 0..=n {
+            for j in 0..=n {
+                for k in 0..=n {
+                    let t = Vec3::new(i as f32, j as f32, k as f32) / n as f32;
+                    let p = bounds.min + (bounds.max - bounds.min) * t;
+                    let c = camera_clip * p.extend(1.0);
+                    let ndc = c.truncate() / c.w;
+                    let in_view = c.w > 0.0
+                        && ndc.x.abs() <= 1.0
+                        && ndc.y.abs() <= 1.0
+                        && (0.0..=1.0).contains(&ndc.z);
+                    if !in_view {
+                        continue;
+                    }
+                    seen += 1;
+                    let inside = |f: LightFace| {
+                        let q = project(f.view_proj.to_cols_array_2d(), p);
+                        q.x.abs() <= 1.0 && q.y.abs() <= 1.0 && (0.0..=1.0).contains(&q.z)
+                    };
+                    assert!(
+                        inside(fitted),
+                        "{p} seen by the camera is outside the far face"
+                    );
+                    // The far plane of the camera's clip space is beyond the farthest corner,
+                    // so the near cascade reaches at least this far.
+                    if depth(p) <= NEAR_CASCADE * 0.9 * farthest {
+                        near_seen += 1;
+                        assert!(inside(near), "{p} seen nearby is outside the near face");
+                    }
+                }
+            }
+        }
+        assert!(seen > 1000 && near_seen > 20, "{seen} {near_seen}");
+    }
+
+    /// A camera that sees the whole scene gets the scene's face; one that moves a little keeps
+    /// the face's size and moves it by whole texels of a 4096² map; the light's texel area
+    /// (and so an RSM texel's flux) follows the fitted side.
+    #[test]
+    fn view_fitted_faces_are_stable_and_fall_back_to_the_scene() {
+        let (bounds, _, sun) = city_view(0.0);
+        let overview = Camera {
+            position: [0.0, 400.0, 400.0],
+            target: [0.0, 0.0, 0.0],
+            fov_y_degrees: 60.0,
+        };
+        let coverage = |camera| Coverage::View {
+            camera,
+            aspect: 1.5,
+        };
+        let whole = light_faces(&sun, &bounds, Coverage::Scene)[0];
+        assert_eq!(light_faces(&sun, &bounds, coverage(&overview))[1], whole);
+        let (_, a, _) = city_view(0.0);
+        let (_, b, _) = city_view(0.37);
+        let (fa, fb) = (
+            light_faces(&sun, &bounds, coverage(&a))[0],
+            light_faces(&sun, &bounds, coverage(&b))[0],
+        );
+        assert_eq!(fa.extent, fb.extent);
+        // The same world point's texture coordinates differ by whole texels of 4096².
+        let p = Vec3::new(3.0, 1.0, -7.0);
+        let (pa, pb) = (
+            project(fa.view_proj.to_cols_array_2d(), p),
+            project(fb.view_proj.to_cols_array_2d(), p),
+        );
+        let texels = (pa - pb).truncate() * 0.5 * SNAP_TEXELS;
+        assert!(
+            (texels - texels.round()).abs().max_element() < 1e-2,
+            "{texels}"
+        );
+        assert!(texels.abs().max_element() >= 1.0, "{texels}");
+        // A step of the side is 2^(1/8): the scene's side over the fitted one is a power of it.
+        let steps = (whole.extent / fa.extent).log2() * SIDE_STEPS_PER_OCTAVE;
+        assert!((steps - steps.round()).abs() < 1e-3, "{steps}");
+    }
+
+    /// Sutherland–Hodgman keeps the part of a square on the plane's positive side.
+    #[test]
+    fn polygons_are_clipped_to_the_positive_side() {
+        let square = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(2.0, 2.0, 0.0),
+            Vec3::new(0.0, 2.0, 0.0),
+        ];
+        // x ≤ 1.
+        let half = clip_polygon(&square, Vec4::new(-1.0, 0.0, 0.0, 1.0));
+        assert_eq!(half.len(), 4);
+        assert!(half.iter().all(|p| p.x <= 1.0 + 1e-6));
+        assert!(half.iter().any(|p| (p.x - 1.0).abs() < 1e-6));
+        assert!(clip_polygon(&square, Vec4::new(1.0, 0.0, 0.0, -5.0)).is_empty());
+    }
+
     #[test]
     fn spot_cone_cosines_are_ordered_and_radiance_scales() {
-        let u = LightUniform::new(&light(LightKind::Spot), &unit_box(), 256);
+        let u = LightUniform::new(&light(LightKind::Spot), &unit_box(), Coverage::Scene, 256);
         assert!(u.cos_inner > u.cos_outer);
         assert_eq!(u.radiance, [2.0; 3]);
-        assert_eq!(LightUniform::face_count(LightKind::Point), 6);
+        assert_eq!(u.face_count, 1);
+        assert_eq!(Coverage::Scene.faces(LightKind::Point), 6);
     }
 }

@@ -4,7 +4,7 @@
 //! ([`EmitterFace`]), so that every RSM-based method lights from them as from any texel.
 
 use super::bind::{self, bind_group};
-use super::frame_uniforms::LightFace;
+use super::frame_uniforms::{LightFace, LightsUniform};
 use super::scene_buffers::SceneBuffers;
 use super::{ParamSlots, Target};
 use crate::gpu::readback::padded_bytes_per_row;
@@ -46,15 +46,17 @@ pub struct RsmFace {
     pub perspective: u32,
     /// The face's light in the frame's `LightsUniform`.
     pub light: u32,
-    pub pad0: u32,
+    /// The face's index among its light's (a cube face, a directional light's cascade).
+    pub index: u32,
     pub pad1: u32,
 }
 
 impl RsmFace {
     /// Eq. 1 for an RSM of `size`² texels per face: the disk area is `texel_area · z²` for
     /// perspective faces (w_near·h_near / z_near² is the squared frustum side at unit depth)
-    /// and `texel_area` itself for an orthographic face. `light` is the face's light's index.
-    pub fn new(face: &LightFace, size: u32, light: u32) -> Self {
+    /// and `texel_area` itself for an orthographic face. `light` is the face's light's index,
+    /// `index` the face's among its light's.
+    pub fn new(face: &LightFace, size: u32, light: u32, index: u32) -> Self {
         let texel_side = face.extent / size as f32;
         Self {
             view_proj: face.view_proj.to_cols_array_2d(),
@@ -62,9 +64,18 @@ impl RsmFace {
             texel_area: texel_side * texel_side,
             perspective: u32::from(face.perspective),
             light,
-            pad0: 0,
+            index,
             pad1: 0,
         }
+    }
+
+    /// The RSM faces of every light's `faces` (as `frame_uniforms::lights_faces` lists them).
+    pub fn all(faces: &[(u32, LightFace)], size: u32) -> Vec<Self> {
+        faces
+            .iter()
+            .enumerate()
+            .map(|(i, (light, f))| Self::new(f, size, *light, LightsUniform::face_index(faces, i)))
+            .collect()
     }
 }
 
@@ -368,7 +379,7 @@ mod tests {
                 ("texel_area", offset_of!(RsmFace, texel_area)),
                 ("perspective", offset_of!(RsmFace, perspective)),
                 ("light", offset_of!(RsmFace, light)),
-                ("pad0", offset_of!(RsmFace, pad0)),
+                ("index", offset_of!(RsmFace, index)),
                 ("pad1", offset_of!(RsmFace, pad1)),
             ],
         );

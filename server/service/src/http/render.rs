@@ -4,11 +4,13 @@ use super::scenes::{is_multipart, load_upload, read_body, read_multipart, split_
 use super::{AppState, Caller};
 use crate::gi::precompute::PrecomputeKey;
 use crate::gi::reference::params::SPP;
-use crate::service::cost::{check_frame, chunk_spp, one_shot_spp, request_seconds, Submission};
+use crate::service::cost::{
+    check_frame, chunk_spp, one_shot_spp, request_seconds, Compared, Submission,
+};
 use crate::service::encode;
 use crate::service::error::ApiError;
 use crate::service::params::{check_gi, check_quality, frame_shape, resolve};
-use crate::service::render_loop::{Command, OneShot};
+use crate::service::render_loop::{Command, CompareWith, OneShot};
 use crate::service::scenes::{precompute_failed, precompute_label, Now, SceneEntry};
 use axum::extract::{FromRequest, Multipart, Request, State};
 use axum::http::{header, HeaderValue};
@@ -196,6 +198,13 @@ pub async fn render(
         ));
     }
     let compare = match req.compare_to {
+        None if req.compare_modelled => {
+            return Err(ApiError::field(
+                "compare_modelled",
+                "compares with the reference of the modelled light transport beside the full \
+                 one: set compare_to to 'reference'",
+            ))
+        }
         None => None,
         Some(crate::gi::reference::REFERENCE) => {
             let spp = req.compare_spp.unwrap_or(DEFAULT_COMPARE_SPP);
@@ -213,7 +222,14 @@ pub async fn render(
                     e.within("render")
                 }
             })?;
-            Some((crate::gi::reference::REFERENCE, spp))
+            // The modelled transport's reference only where it differs from the full one.
+            let modelled = Some(crate::gi::reference_senders(&req.render.gi))
+                .filter(|s| req.compare_modelled && *s != lightcast_protocol::Senders::Full);
+            Some(CompareWith {
+                method: crate::gi::reference::REFERENCE,
+                spp,
+                modelled,
+            })
         }
         Some(other) => {
             return Err(ApiError::field(
@@ -226,13 +242,16 @@ pub async fn render(
         .map_err(|e| e.within("render"))?;
     let shape = frame_shape(&resolved.settings, &entry);
     let set_units = |g: &lightcast_protocol::GiParams| entry.estimated_set_units(g);
-    let compare_spp = compare.map(|(_, spp)| spp);
+    let comparing = compare.map(|c| Compared {
+        spp: c.spp,
+        renders: 1 + u32::from(c.modelled.is_some()),
+    });
     if !spp_named && req.render.gi.method == crate::gi::reference::REFERENCE {
         let spp = one_shot_spp(
             &req.render.gi,
             shape,
             &set_units,
-            compare_spp,
+            comparing,
             &state.limits,
             SPP.u32(&req.render.gi),
         );
@@ -243,7 +262,7 @@ pub async fn render(
         &req.render.gi,
         shape,
         &set_units,
-        Submission::OneShot { compare_spp },
+        Submission::OneShot { compare: comparing },
         &state.limits,
     )
     .map_err(|e| {
@@ -255,7 +274,7 @@ pub async fn render(
     })?;
     resolved.settings.capture_hdr |= raw;
     let compared = match compare {
-        Some((method, _)) => entry.precompute_key(&lightcast_protocol::GiParams::new(method))?,
+        Some(c) => entry.precompute_key(&lightcast_protocol::GiParams::new(c.method))?,
         None => None,
     };
     // Both are queued before either is waited for, so they are built back to back.
@@ -276,13 +295,8 @@ pub async fn render(
                 e
             })?;
     }
-    let estimated_seconds = request_seconds(
-        &req.render.gi,
-        shape,
-        &set_units,
-        compare_spp,
-        &state.limits,
-    );
+    let estimated_seconds =
+        request_seconds(&req.render.gi, shape, &set_units, comparing, &state.limits);
     // The report and hash name what was actually rendered, defaults included.
     req.render.camera = Some(resolved.settings.camera.clone());
     // One light stays the shorthand, so a single-light request hashes as it always did.
@@ -300,13 +314,14 @@ pub async fn render(
             resolved.clone(),
             tx,
             compare,
-            chunk_spp(&req.render.gi, shape, compare_spp, &state.limits),
+            chunk_spp(&req.render.gi, shape, comparing, &state.limits),
         ))))
         .map_err(|_| ApiError::unavailable("the render loop has stopped"))?;
     let result = rx
         .await
         .map_err(|_| ApiError::unavailable("the render loop has stopped"))??;
     let rendered = result.rendered;
+    let mut comparisons = result.comparisons.into_iter();
     let (gpu_ms, stages) = (rendered.gpu_ms(), rendered.stages());
     let format = req.format;
     let encode_started = Instant::now();
@@ -350,7 +365,8 @@ pub async fn render(
         relative_error: rendered
             .progress
             .map(|p| f64::from(p.relative_standard_error)),
-        comparison: result.comparison,
+        comparison: comparisons.next(),
+        comparison_modelled: comparisons.next(),
         estimated_seconds: Some(estimated_seconds),
         timing_note: rendered.timing_source.note(state.adapter_is_cpu),
     };

@@ -8,6 +8,9 @@
 #   - GI time and error against the light count (`bench/light-counts.sh`, issue 33): every
 #     method with 1 … 16 lights on the Cornell box and the street; every method lit by
 #     emissive surfaces alone against the reference (`bench/light_errors.py --case emitters`);
+#   - the street against the truth (issue 34, `bench/light_errors.py --case street`): every
+#     method as authored and all Lambertian, two views, against the full and the modelled
+#     transport's reference, the sun's maps over the scene and fitted to the view;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080;
 #   - JPEG against H.264 (`bench/stream-codecs.sh`, issue 13): one camera path at 1280×720 and
@@ -20,6 +23,7 @@
 # OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-surfels-{cornell,street}.{md,json,
 # …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png},
 # gpu-light-counts-{cornell,street}-{brsm,clustered,surfels,rsm_gather}.md, gpu-emitters-errors.md,
+# gpu-street-truth.md,
 # gpu-service.md,
 # gpu-stream-codecs.{md,json}, environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
@@ -155,6 +159,13 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
   cmd=(python3 "$(dirname "$0")/light_errors.py" "$server" --case emitters "${emitter_size[@]}")
   echo "command: ${cmd[*]} > $out/gpu-emitters-errors.md" >> "$out/environment.txt"
   "${cmd[@]}" > "$out/gpu-emitters-errors.md"
+  # Issue 34: every method on the street as authored and all Lambertian, down its middle street
+  # and one street over, against the full reference and the modelled transport's, with the
+  # sun's maps over the scene and fitted to the view.
+  if $quick; then truth_size=(--width 64 --height 36 --spp 16); else truth_size=(--width 1920 --height 1080 --spp 1024); fi
+  cmd=(python3 "$(dirname "$0")/light_errors.py" "$server" --case street "${truth_size[@]}")
+  echo "command: ${cmd[*]} > $out/gpu-street-truth.md" >> "$out/environment.txt"
+  "${cmd[@]}" > "$out/gpu-street-truth.md"
 fi
 
 if [ "$what" = service ] || [ "$what" = all ]; then

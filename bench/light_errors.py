@@ -27,7 +27,8 @@ reference's own noise (`reference_relative_error`, its estimate of its relative 
 given per scene: emitters are small, bright and found by bounce rays only.
 
 `street` (issue 34): the street as authored (glass and steel façades, glossy signs) and with
-every surface Lambertian (`materials=diffuse`), at its own camera and sun, each method against
+every surface Lambertian (`materials=diffuse`), under its own sun from its own camera (down the
+middle street) and from the same camera one street over (60 m along x), each method against
 the full reference and (`compare_modelled`) against the reference of the light transport it
 models (diffuse senders): on the diffuse street the two are one; the RSM-based methods with
 the sun's maps over the whole scene (`light_fit: scene`) and fitted to the view (`view`).
@@ -168,25 +169,34 @@ def three_lights_case(base, args, methods):
         print(f"- {name}: `{json.dumps(light)}`")
 
 
+# The street's blocks repeat every 60 m (`scene::procedural`'s PITCH).
+STREET_PITCH = 60.0
+
+
 def street_case(base, args, methods, info):
     fits = {m["method"]: any(p["name"] == "light_fit" for p in m["parameters"])
             for m in info["gi_methods"]}
-    print("| street | method | sun's maps (`light_fit`) | against the reference | against the "
-          "reference of the transport it models |\n|---|---|---|---|---|")
+    print("| street | view | method | sun's maps (`light_fit`) | against the reference | "
+          "against the reference of the transport it models |\n|---|---|---|---|---|---|")
     for materials in ["authored", "diffuse"]:
         spec = f"{args.street}&materials={materials}"
         _, body = request(base + "/v1/scenes", {"procedural": spec})
-        scene = json.loads(body)["id"]
-        for method in methods:
-            for fit in (["scene", "view"] if fits.get(method) else [None]):
-                gi = {"method": method}
-                if fit:
-                    gi["light_fit"] = fit
-                full, modelled = compare(
-                    base, {"scene": scene, "width": args.width, "height": args.height, "gi": gi},
-                    args.spp, f"{materials} {method} {fit}", modelled=True)
-                print(f"| {materials} | `{method}` | {fit or '-'} | {full} | {modelled} |",
-                      flush=True)
+        entry = json.loads(body)
+        own = entry["default_camera"]
+        over = dict(own, position=[own["position"][0] + STREET_PITCH] + own["position"][1:],
+                    target=[own["target"][0] + STREET_PITCH] + own["target"][1:])
+        for view, camera in [("down its middle street", own), ("one street over", over)]:
+            for method in methods:
+                for fit in (["scene", "view"] if fits.get(method) else [None]):
+                    gi = {"method": method}
+                    if fit:
+                        gi["light_fit"] = fit
+                    render = {"scene": entry["id"], "width": args.width, "height": args.height,
+                              "camera": camera, "gi": gi}
+                    full, modelled = compare(base, render, args.spp,
+                                             f"{materials} {view} {method} {fit}", modelled=True)
+                    print(f"| {materials} | {view} | `{method}` | {fit or '-'} | {full} | "
+                          f"{modelled} |", flush=True)
 
 
 def main():

@@ -13,6 +13,10 @@ from the light (they get indirect light only) and its shadow falls towards the c
 - diffuse: ground 0.6 grey, box (0.8, 0.55, 0.3), both metallic 0, roughness 1;
 - glossy: ground a dielectric 0.6 grey at roughness 0.4; box metallic 1, roughness 0.3, base
   (0.95, 0.64, 0.54) (copper-like);
+- glossy-sender (issue 34): the diffuse box on a steel ground (metallic 1, roughness 0.3) under
+  a sun (SUN, 3 lx) from behind the camera, whose reflection off the ground lights the box's
+  visible sides: the glossy senders the RSM-based methods leave out, checked in the reference
+  before anything is measured against it;
 - glossy-white: glossy with a white metal box (F = 1), which Mitsuba renders with its own
   `roughconductor` (ggx, alpha 0.09, material none: η = 0, k = 1, Fresnel 1; check_bsdf.py
   shows it equals the Python BSDF there to 10⁻⁶): a check of the metal that does not rest on
@@ -77,6 +81,10 @@ SCENES = {
     },
     "glossy": {"ground": GLOSSY_GROUND, "box": GltfMaterial((0.95, 0.64, 0.54), 1.0, 0.3)},
     "glossy-white": {"ground": GLOSSY_GROUND, "box": GltfMaterial((1.0, 1.0, 1.0), 1.0, 0.3, True)},
+    "glossy-sender": {
+        "ground": GltfMaterial((0.78, 0.78, 0.8), 1.0, 0.3),
+        "box": GltfMaterial(ve.BOX_ALBEDO, 0.0, 1.0),
+    },
 }
 
 # The top face's centre (0.3, 1, −0.1) mirrors this point towards the camera.
@@ -84,6 +92,16 @@ LIGHT = {
     "kind": "point", "position": [-2.26, 2.2, -3.78], "direction": [0, -1, 0],
     "color": [1.0, 1.0, 1.0], "intensity": 60.0, "inner_cone": 0, "outer_cone": 0,
 }
+# From above and behind the camera: the ground mirrors it onto the box's +x and +z sides.
+SUN = {
+    "kind": "directional", "position": [0, 0, 0], "direction": [-0.55, -0.6, -0.58],
+    "color": [1.0, 1.0, 1.0], "intensity": 3.0, "inner_cone": 0, "outer_cone": 0,
+}
+LIGHTS = {"glossy-sender": SUN}
+
+
+def light_of(scene):
+    return LIGHTS.get(scene, LIGHT)
 
 
 def faces_by_part():
@@ -101,11 +119,11 @@ def write_scene_glb(path, materials):
 # ---------------------------------------------------------------------------------------------
 # lightcast
 
-def render_lightcast(server, scene, gi, fmt, shadow_map_size):
+def render_lightcast(server, scene, light, gi, fmt, shadow_map_size):
     req = {
         "render": {
             "scene": scene, "width": WIDTH, "height": HEIGHT, "camera": CAMERA,
-            "lights": [LIGHT], "environment": None, "exposure": 1.0,
+            "lights": [light], "environment": None, "exposure": 1.0,
             "shadow_map_size": shadow_map_size, "gi": gi,
         },
         "format": fmt,
@@ -135,14 +153,14 @@ def mitsuba_bsdf(m):
     }
 
 
-def mitsuba_scene(mi, workdir, materials, depth, spp, seed):
+def mitsuba_scene(mi, workdir, materials, light, depth, spp, seed):
     scene = {"type": "scene", "camera": ve.mitsuba_camera(mi, spp, seed)}
     for name in faces_by_part():
         scene[name] = {
             "type": "obj", "filename": os.path.join(workdir, name + ".obj"), "face_normals": True,
             "bsdf": mitsuba_bsdf(materials[name]),
         }
-    scene["light"] = ve.mitsuba_light(LIGHT)
+    scene["light"] = ve.mitsuba_light(light)
     scene["integrator"] = {"type": "path", "max_depth": depth, "rr_depth": 1000}
     return mi.load_dict(scene)
 
@@ -165,15 +183,16 @@ def direct_at_centres(mi, scene):
 
 
 def mitsuba_job(args):
-    """One Mitsuba image: (workdir, materials, what ∈ {centres, render}, depth, spp, seed)."""
-    workdir, materials, what, depth, spp, seed = args
+    """One Mitsuba image: (workdir, materials, light, what ∈ {centres, render}, depth, spp,
+    seed)."""
+    workdir, materials, light, what, depth, spp, seed = args
     import drjit as dr
     import mitsuba as mi
 
     mi.set_variant("scalar_rgb")
     dr.set_thread_count(1)
     register_bsdf(mi)
-    scene = mitsuba_scene(mi, workdir, materials, depth, spp, seed)
+    scene = mitsuba_scene(mi, workdir, materials, light, depth, spp, seed)
     if what == "centres":
         return direct_at_centres(mi, scene)
     return np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float64)[..., :3]
@@ -281,11 +300,11 @@ def main():
         half = args.spp // 2
         jobs, keys = [], []
         for s in scenes:
-            jobs.append((workdir, SCENES[s], "centres", 2, 1, 0))
+            jobs.append((workdir, SCENES[s], light_of(s), "centres", 2, 1, 0))
             keys.append((s, "centres"))
             for h, seed in (("a", 1), ("b", 2)):
                 for b in [0] + bounces:
-                    jobs.append((workdir, SCENES[s], "render", b + 2, half, seed))
+                    jobs.append((workdir, SCENES[s], light_of(s), "render", b + 2, half, seed))
                     keys.append((s, h, b))
         t = time.time()
         pool = mp.get_context("spawn").Pool(args.workers)
@@ -300,7 +319,7 @@ def main():
             ]
             for what, gi, fmt in gis:
                 img, report, secs = render_lightcast(
-                    args.server, scene_ids[s], gi, fmt, args.shadow_map_size
+                    args.server, scene_ids[s], light_of(s), gi, fmt, args.shadow_map_size
                 )
                 ours[(s, what)] = img
                 print("lightcast %s %s: %.1f s, report %s"
@@ -335,7 +354,8 @@ def main():
         ve.print_table(reference, args)
         if args.json:
             with open(args.json, "w") as f:
-                json.dump({"args": vars(args), "light": LIGHT, "results": results}, f, indent=1)
+                json.dump({"args": vars(args), "lights": {s: light_of(s) for s in scenes},
+                           "results": results}, f, indent=1)
     finally:
         if os.environ.get("KEEP_WORKDIR"):
             print("kept", workdir)

@@ -12,6 +12,8 @@ with `compare_to: reference`. Loopback only, standard library only.
         > bench/results/lavapipe-emitters-errors.md
     python3 bench/light_errors.py target/release/lightcast-server --case street --spp 1024 \\
         --width 128 --height 72 > bench/results/lavapipe-street-truth.md
+    python3 bench/light_errors.py target/release/lightcast-server --case street-motion \\
+        --width 128 --height 72 --spp 512 > bench/results/lavapipe-street-motion.md
 
 `environment` (part 3): with and without an environment, the Cornell box under a uniform sky
 (it has no directional light for a daylight sky; its open front lets the sky in) and the
@@ -32,6 +34,12 @@ middle street) and from the same camera one street over (60 m along x), each met
 the full reference and (`compare_modelled`) against the reference of the light transport it
 models (diffuse senders): on the diffuse street the two are one; the RSM-based methods with
 the sun's maps over the whole scene (`light_fit: scene`) and fitted to the view (`view`).
+
+`street-motion` (issue 34): how much each method's indirect light changes between frames while
+the camera moves sideways down the middle of the Lambertian street (four frames 13 cm apart),
+the mean absolute change of a pixel between consecutive frames over the mean, with the sun's
+maps over the scene and fitted to the view: a fitted map that slid under the VPLs would make
+them flicker. The reference's change (at `--spp`) includes its own noise.
 
 `three-lights` (part 2): the Cornell box lit by three lights of different kinds (its ceiling
 spot, a point light low in a back corner, a sun through the open front), each alone and all
@@ -199,10 +207,44 @@ def street_case(base, args, methods, info):
                           f"{modelled} |", flush=True)
 
 
+def street_motion_case(base, args, methods, info):
+    import numpy as np
+
+    fits = {m["method"]: any(p["name"] == "light_fit" for p in m["parameters"])
+            for m in info["gi_methods"]}
+    _, body = request(base + "/v1/scenes", {"procedural": f"{args.street}&materials=diffuse"})
+    entry = json.loads(body)
+    own = entry["default_camera"]
+
+    def frames(gi):
+        images = []
+        for step in range(4):
+            dx = 0.13 * step
+            camera = dict(own, position=[own["position"][0] + dx] + own["position"][1:],
+                          target=[own["target"][0] + dx] + own["target"][1:])
+            _, raw = request(base + "/v1/render", {
+                "render": {"scene": entry["id"], "width": args.width, "height": args.height,
+                           "camera": camera, "gi": gi}, "format": "raw_indirect"})
+            images.append(np.frombuffer(raw, "<f4").reshape(-1, 4)[:, :3].astype(np.float64))
+        change = np.mean([np.abs(b - a).mean() for a, b in zip(images, images[1:])])
+        return f"{100 * change / np.mean([i.mean() for i in images]):.2f} %"
+
+    print("| method | sun's maps (`light_fit`) | change between frames / mean |\n|---|---|---|")
+    reference = {"method": "reference", "spp": args.spp}
+    print(f"| `reference` ({args.spp} spp) | - | {frames(reference)} |")
+    for method in methods:
+        for fit in (["scene", "view"] if fits.get(method) else [None]):
+            gi = {"method": method}
+            if fit:
+                gi["light_fit"] = fit
+            print(f"| `{method}` | {fit or '-'} | {frames(gi)} |", flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("server", help="path to lightcast-server")
-    ap.add_argument("--case", choices=["environment", "emitters", "three-lights", "street"],
+    ap.add_argument("--case", choices=["environment", "emitters", "three-lights", "street",
+                                       "street-motion"],
                     default="environment")
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--height", type=int, default=96)
@@ -228,14 +270,17 @@ def main():
         methods = [m["method"] for m in info["gi_methods"] if m["method"] not in SKIPPED]
         print(f"Adapter: {info.get('adapter', '?')}; {args.width}×{args.height}; reference "
               f"{args.spp} spp; each method at the server's defaults for the adapter "
-              f"(`/v1/server` `defaults`); cells: 8×8-block error / bias against the "
-              f"reference.\n")
+              f"(`/v1/server` `defaults`)"
+              + ("." if args.case == "street-motion"
+                 else "; cells: 8×8-block error / bias against the reference.") + "\n")
         if args.case == "environment":
             environment_case(base, args, methods)
         elif args.case == "emitters":
             emitters_case(base, args, methods)
         elif args.case == "street":
             street_case(base, args, methods, info)
+        elif args.case == "street-motion":
+            street_motion_case(base, args, methods, info)
         else:
             three_lights_case(base, args, methods)
     finally:

@@ -82,6 +82,9 @@ pub struct FrameShape {
     /// The environment's directions (`None`: no environment; after [`FrameShape::lit_by`],
     /// only for a method that samples it itself).
     pub environment: Option<u32>,
+    /// Faces a directional light renders from: 1, or 2 with its maps fitted to the view
+    /// (`light_fit: view`'s cascades).
+    pub directional_faces: u32,
     pub triangles: u64,
     /// Units of the precomputed set the frame reads (light caches; surfel links), estimated
     /// before it is built.
@@ -94,12 +97,13 @@ pub struct FrameShape {
 impl FrameShape {
     /// The shape as a method lights it: one that samples the environment itself (see
     /// `MethodEntry::samples_environment`) keeps it apart; any other lights with its
-    /// directions as directional lights, one shadow-map face each.
+    /// directions as directional lights, [`FrameShape::directional_faces`] shadow-map faces
+    /// each.
     pub fn lit_by(self, samples_environment: bool) -> Self {
         match self.environment {
             Some(d) if !samples_environment => Self {
                 lights: self.lights + d,
-                light_faces: self.light_faces + d,
+                light_faces: self.light_faces + d * self.directional_faces,
                 environment: None,
                 ..self
             },
@@ -271,6 +275,7 @@ mod tests {
             lights: 1,
             light_faces: 1,
             environment: None,
+            directional_faces: 1,
             triangles: 1000,
             set_units: 0,
             all_bounces: true,
@@ -291,6 +296,11 @@ mod tests {
             (1, 1, Some(8))
         );
         assert_eq!(shape().lit_by(false).lights, 1);
+        let cascades = FrameShape {
+            directional_faces: 2,
+            ..with_sky
+        };
+        assert_eq!(cascades.lit_by(false).light_faces, 17);
     }
 
     #[test]

@@ -484,6 +484,7 @@ mod tests {
             lights: 1,
             light_faces: 1,
             environment: None,
+            directional_faces: 1,
             triangles: 1090,
             set_units: 0,
             all_bounces: true,

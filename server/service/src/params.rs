@@ -61,6 +61,9 @@ pub fn frame_shape(settings: &RenderSettings, entry: &SceneEntry) -> crate::gi::
                 && crate::gi::lights_from_emitters(settings.gi.method),
         ),
         environment: settings.environment.as_ref().map(|e| e.directions),
+        directional_faces: settings
+            .coverage()
+            .faces(lightcast_protocol::LightKind::Directional),
         triangles: entry.scene.triangle_count() as u64,
         set_units: 0,
         all_bounces: true,

@@ -90,11 +90,14 @@ pub const NEAR_CASCADE: f32 = 0.25;
 /// of the region's side on each side: the surfaces just outside the view that light it.
 const VIEW_MARGIN: f32 = 0.05;
 /// A fitted face's side is the scene's (2 × radius) times a power of 2^(1/8) and its centre a
-/// multiple of side / 4096 in the light's plane: as the camera moves the texel grid moves in
-/// whole texels (of maps up to 4096²) and changes scale in steps, so shadows and RSM samples
-/// do not crawl from frame to frame.
+/// multiple of side / 16 in the light's plane: the face stays put while the camera moves a
+/// little (no texel of its shadow map or RSM changes, so nor do the VPLs and VALs drawn from
+/// them), then moves by whole texels of any map whose side is a multiple of 16, and changes
+/// scale in steps. A finer step (side / 4096) slid the maps under the VPLs as the camera moved:
+/// `clustered`'s indirect light changed 10.8 % of its mean between frames 13 cm apart on the
+/// street, against 6.5 % with the whole scene's map.
 const SIDE_STEPS_PER_OCTAVE: f32 = 8.0;
-const SNAP_TEXELS: f32 = 4096.0;
+const SNAP_TEXELS: f32 = 16.0;
 
 impl LightsUniform {
     /// Every light of `lights` (at most [`MAX_LIGHTS`]; callers check), all punctual, with
@@ -330,7 +333,8 @@ fn fitted_square(view: &Mat4, region: &[Vec3], radius: f32) -> Option<(f32, f32,
     if region.is_empty() {
         return None;
     }
-    let side = (hi.x - lo.x).max(hi.y - lo.y) * (1.0 + 2.0 * VIEW_MARGIN);
+    // The margin, and room for the centre's rounding to the snapping grid.
+    let side = (hi.x - lo.x).max(hi.y - lo.y) * (1.0 + 2.0 * VIEW_MARGIN + 1.0 / SNAP_TEXELS);
     let steps = ((2.0 * radius) / side.max(1e-6)).log2() * SIDE_STEPS_PER_OCTAVE;
     if steps < 1.0 {
         return None;
@@ -736,8 +740,9 @@ mod tests {
     }
 
     /// A camera that sees the whole scene gets the scene's face; one that moves a little keeps
-    /// the face's size and moves it by whole texels of a 4096² map; the light's texel area
-    /// (and so an RSM texel's flux) follows the fitted side.
+    /// its faces as they were; one that moves further (sideways, so the region keeps its size)
+    /// moves them by whole snapping steps (side / 16: whole texels of any map whose side is a
+    /// multiple of 16); sides are the scene's over a power of 2^(1/8).
     #[test]
     fn view_fitted_faces_are_stable_and_fall_back_to_the_scene() {
         let (bounds, _, sun) = city_view(0.0);
@@ -752,25 +757,33 @@ mod tests {
         };
         let whole = light_faces(&sun, &bounds, Coverage::Scene)[0];
         assert_eq!(light_faces(&sun, &bounds, coverage(&overview))[1], whole);
-        let (_, a, _) = city_view(0.0);
-        let (_, b, _) = city_view(0.37);
-        let (fa, fb) = (
-            light_faces(&sun, &bounds, coverage(&a))[0],
-            light_faces(&sun, &bounds, coverage(&b))[0],
-        );
+        let near_face = |x: f32| {
+            let camera = city_view(x).1;
+            light_faces(
+                &sun,
+                &bounds,
+                Coverage::View {
+                    camera: &camera,
+                    aspect: 1.5,
+                },
+            )[0]
+        };
+        let fa = near_face(0.0);
+        assert_eq!(near_face(0.37), fa, "a small step moves nothing");
+        let fb = near_face(9.0);
         assert_eq!(fa.extent, fb.extent);
-        // The same world point's texture coordinates differ by whole texels of 4096².
+        // The same world point's texture coordinates differ by whole snapping steps.
         let p = Vec3::new(3.0, 1.0, -7.0);
         let (pa, pb) = (
             project(fa.view_proj.to_cols_array_2d(), p),
             project(fb.view_proj.to_cols_array_2d(), p),
         );
-        let texels = (pa - pb).truncate() * 0.5 * SNAP_TEXELS;
+        let steps_moved = (pa - pb).truncate() * 0.5 * SNAP_TEXELS;
         assert!(
-            (texels - texels.round()).abs().max_element() < 1e-2,
-            "{texels}"
+            (steps_moved - steps_moved.round()).abs().max_element() < 1e-3,
+            "{steps_moved}"
         );
-        assert!(texels.abs().max_element() >= 1.0, "{texels}");
+        assert!(steps_moved.abs().max_element() >= 1.0, "{steps_moved}");
         // A step of the side is 2^(1/8): the scene's side over the fitted one is a power of it.
         let steps = (whole.extent / fa.extent).log2() * SIDE_STEPS_PER_OCTAVE;
         assert!((steps - steps.round()).abs() < 1e-3, "{steps}");

@@ -70,11 +70,15 @@ impl LightFit {
 }
 
 /// What the frame's directional lights cover: [`LightFit::Scene`] for a method without
-/// `light_fit` in its table (`surfels` lights every surfel of the scene through the shadow
-/// map; `none` and `reference` draw direct light only).
+/// `light_fit` in its table, whatever the request carries for other methods (`surfels` lights
+/// every surfel of the scene through the shadow map; `none` and `reference` draw direct light
+/// only).
 pub fn light_fit(gi: &GiParams) -> LightFit {
+    let reads = crate::gi::params::of(gi.method)
+        .iter()
+        .any(|p| p.name == LIGHT_FIT.name);
     match gi.get(LIGHT_FIT.name).and_then(serde_json::Value::as_str) {
-        Some("view") => LightFit::View,
+        Some("view") if reads => LightFit::View,
         _ => LightFit::Scene,
     }
 }
@@ -128,4 +132,23 @@ pub fn emitters(gi: &GiParams) -> bool {
     gi.get(EMITTERS.name)
         .and_then(serde_json::Value::as_bool)
         .unwrap_or(true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lightcast_protocol::GiMethod;
+
+    /// A request may carry other methods' parameters (a session keeps them across methods):
+    /// `light_fit: view` fits the maps only for a method that reads it.
+    #[test]
+    fn only_methods_with_light_fit_fit_the_sun_to_the_view() {
+        let with = |method| GiParams::new(GiMethod::new(method)).with(LIGHT_FIT.name, "view");
+        assert_eq!(light_fit(&with("clustered")), LightFit::View);
+        assert_eq!(light_fit(&with("brsm")), LightFit::View);
+        assert_eq!(light_fit(&with("surfels")), LightFit::Scene);
+        assert_eq!(light_fit(&with("reference")), LightFit::Scene);
+        let default = GiParams::new(GiMethod::new("clustered"));
+        assert_eq!(light_fit(&default), LightFit::Scene);
+    }
 }

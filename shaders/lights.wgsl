@@ -75,6 +75,25 @@ fn ortho_scale(m: mat4x4<f32>) -> f32 {
     return length(vec3<f32>(m[0].x, m[1].x, m[2].x));
 }
 
+// `bias` (in the first face's texels for a directional light) in face `face`'s: the far
+// cascade's texels are larger.
+fn bias_in(light: LightUniform, face: u32, bias: f32) -> f32 {
+    if light.kind == LIGHT_DIRECTIONAL && face > 0u {
+        return bias * ortho_scale(light.face_view_proj[0]) / ortho_scale(light.face_view_proj[face]);
+    }
+    return bias;
+}
+
+// `q` in face `face`'s normalised device coordinates (w = 1), or w = 0 where it lies behind a
+// perspective face's eye.
+fn shadow_ndc(light: LightUniform, face: u32, q: vec3<f32>) -> vec4<f32> {
+    let clip = light.face_view_proj[face] * vec4<f32>(q, 1.0);
+    if clip.w <= 0.0 {
+        return vec4<f32>(0.0);
+    }
+    return vec4<f32>(clip.xyz / clip.w, 1.0);
+}
+
 // The face whose map holds `p`: the cube face (+X, -X, +Y, -Y, +Z, -Z) of a point light, the
 // cascade of a directional light fitted to the view.
 fn shadow_face(light: LightUniform, p: vec3<f32>) -> u32 {
@@ -105,23 +124,27 @@ fn shadow_visibility(
     n: vec3<f32>,
     cos_x: f32,
 ) -> f32 {
-    let face = shadow_face(light, p);
+    var face = shadow_face(light, p);
     var bias = light.normal_bias;
     if light.kind != LIGHT_DIRECTIONAL {
         bias *= distance(p, light.position);
-    } else if face > 0u {
-        // `normal_bias` is in texels of the first face; the far cascade's are larger.
-        bias *= ortho_scale(light.face_view_proj[0]) / ortho_scale(light.face_view_proj[face]);
     }
     // A texel's footprint on a surface grows as 1/cos towards grazing light; so does the
     // depth error the offset has to clear (capped, or the shadow detaches entirely).
     bias *= min(1.0 / max(cos_x, 1e-3), 4.0);
-    let clip = light.face_view_proj[face] * vec4<f32>(p + n * bias, 1.0);
-    if clip.w <= 0.0 {
+    var ndc = shadow_ndc(light, face, p + n * bias_in(light, face, bias));
+    var uv = ndc.xy * vec2<f32>(0.5, -0.5) + vec2<f32>(0.5);
+    // Near a directional light's near cascade's edge the offset point may leave it: the far
+    // cascade holds it.
+    let outside = any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0));
+    if outside && light.kind == LIGHT_DIRECTIONAL && face == 0u && light.face_count > 1u {
+        face = 1u;
+        ndc = shadow_ndc(light, face, p + n * bias_in(light, face, bias));
+        uv = ndc.xy * vec2<f32>(0.5, -0.5) + vec2<f32>(0.5);
+    }
+    if ndc.w == 0.0 {
         return 0.0;
     }
-    let ndc = clip.xyz / clip.w;
-    let uv = ndc.xy * vec2<f32>(0.5, -0.5) + vec2<f32>(0.5);
     if any(uv < vec2<f32>(0.0)) || any(uv > vec2<f32>(1.0)) || ndc.z > 1.0 {
         return 1.0;
     }

@@ -115,6 +115,15 @@ pub struct Compared {
 }
 
 impl Compared {
+    /// What a refusal calls the request.
+    fn what(self) -> &'static str {
+        if self.renders > 1 {
+            "this render and its comparisons"
+        } else {
+            "this render and its comparison"
+        }
+    }
+
     /// The cost of them all, the cost of one being `one`.
     fn cost(self, one: Cost) -> Cost {
         let mut all = Cost::default();
@@ -393,24 +402,18 @@ pub fn check_frame(
                 "compare_spp",
                 format!(
                     "{}; compare_spp at most {value} fits",
-                    over(
-                        "this render and its comparison",
-                        &both,
-                        budget,
-                        speed,
-                        "--max-request-cost"
-                    )
+                    over(with.what(), &both, budget, speed, "--max-request-cost")
                 ),
             ));
         }
     }
     let with_comparison = |g: &GiParams| {
         let mut c = own(g);
-        c.add("comparison render", 1.0, compared_ns);
+        c.add("comparison renders", 1.0, compared_ns);
         c
     };
     Err(refusal(
-        "this render and its comparison",
+        with.what(),
         gi,
         &with_comparison(gi),
         budget,

@@ -165,8 +165,8 @@ impl Chunks {
     }
 }
 
-/// Image histories of chunked one-shots: one pair per request, apart from the sessions' (a
-/// hash of their ids) by their top bit.
+/// Image histories of chunked one-shots: one per image a request accumulates (its own and
+/// each comparison's), apart from the sessions' (a hash of their ids) by their top bit.
 static NEXT_ONE_SHOT_HISTORY: std::sync::atomic::AtomicU64 =
     std::sync::atomic::AtomicU64::new(1 << 63);
 

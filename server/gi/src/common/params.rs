@@ -52,7 +52,8 @@ pub const LIGHT_FIT: Param = Param::choice(
     "What a directional light's shadow map and RSM cover: scene (the whole scene's bounding \
      sphere, one face, as the papers do) or view (what the camera sees of the scene and a 5 % \
      margin, in two cascades: a near face up to a quarter of the way to the farthest surface \
-     in view and a far face over the rest; the same texels, VPLs and VALs over less ground \
+     in view and a far face over all in view, whose RSM leaves the near face's part to it; \
+     the same texels, VPLs and VALs over less ground \
      where much of the scene is out of view, e.g. a city seen from its streets, at twice the \
      RSM texels; moves in whole texels as the camera does)",
 );

@@ -63,8 +63,10 @@ pub const REFERENCE: GiMethod = GiMethod::new("reference");
 /// Samples per pixel one frame or [`PathTracer::accumulate`] call adds at most (one dispatch
 /// each).
 pub const MAX_SAMPLES_PER_CALL: u32 = 1024;
-/// Image histories (sessions) whose accumulations a scene's tracer keeps at once.
-const MAX_HISTORIES: usize = 4;
+/// Image histories (sessions, chunked one-shots) whose accumulations a scene's tracer keeps
+/// at once: a chunked one-shot of the reference compared with both references holds three
+/// (its own and its two comparisons'), so two of them fit beside a session.
+const MAX_HISTORIES: usize = 6;
 /// Rays one dispatch traces at most (a band of rows of one sample): about 0.6 s on lavapipe
 /// with 2 cores, well below the ~2.8 s after which it silently cuts a dispatch short.
 pub const BAND_RAYS: u64 = 1 << 19;

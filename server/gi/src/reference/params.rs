@@ -31,7 +31,8 @@ pub const SENDERS: Param = Param::choice(
     "How the light a surface receives straight from a light (punctual or the sky) leaves it: \
      full (the whole BRDF: the truth) or diffuse (its diffuse lobe alone, the light transport \
      of the methods whose VPLs, VALs or surfels are diffuse; comparisons also render this, to \
-     part the error of what a method leaves out from the error in what it models)",
+     part the error of what a method leaves out from the error in what it models). Light from \
+     emissive surfaces and light of later bounces still leave by the whole BRDF",
 );
 
 pub const TABLE: MethodTable = MethodTable {

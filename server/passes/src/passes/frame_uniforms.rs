@@ -107,17 +107,6 @@ impl LightsUniform {
         Self::with_punctual(lights, lights.len(), bounds, Coverage::Scene, shadow_size)
     }
 
-    /// The faces of light `index` (in `lights`) of `faces` that covers it, from its first:
-    /// the index of a face within its light (a cascade or a cube face).
-    pub fn face_index(faces: &[(u32, LightFace)], at: usize) -> u32 {
-        let light = faces[at].0;
-        faces[..at]
-            .iter()
-            .rev()
-            .take_while(|(l, _)| *l == light)
-            .count() as u32
-    }
-
     /// [`Self::new`] where only the first `punctual` lights are punctual and the rest light
     /// for the environment (the direct-light pass counts their light as the environment's,
     /// with the indirect light).
@@ -153,6 +142,17 @@ impl LightsUniform {
             .flat_map(|l| l.face_view_proj[..l.face_count as usize].iter().copied())
             .collect()
     }
+}
+
+/// The index of face `at` of `faces` (as [`lights_faces`] lists them) among its own light's
+/// faces: a directional light's cascade or a point light's cube face.
+pub fn face_index(faces: &[(u32, LightFace)], at: usize) -> u32 {
+    let light = faces[at].0;
+    faces[..at]
+        .iter()
+        .rev()
+        .take_while(|(l, _)| *l == light)
+        .count() as u32
 }
 
 /// Shadow-map layers (and RSM faces) of all `lights` together.
@@ -307,10 +307,10 @@ fn directional_faces(direction: Vec3, bounds: &Aabb, coverage: Coverage) -> Vec<
                 .map(|p| (*p - Vec3::from(camera.position)).dot(forward))
                 .fold(0.0f32, f32::max);
             let near = visible_region(camera, aspect, bounds, Some(NEAR_CASCADE * farthest));
-            vec![
-                face(fitted_square(&view, &near, radius)),
-                face(fitted_square(&view, &all, radius)),
-            ]
+            let far = fitted_square(&view, &all, radius);
+            // A camera that sees nothing near it (outside the scene) keeps the far square for
+            // both: the near face then holds every shadow and every sender.
+            vec![face(fitted_square(&view, &near, radius).or(far)), face(far)]
         }
     }
 }
@@ -333,8 +333,9 @@ fn fitted_square(view: &Mat4, region: &[Vec3], radius: f32) -> Option<(f32, f32,
     if region.is_empty() {
         return None;
     }
-    // The margin, and room for the centre's rounding to the snapping grid.
-    let side = (hi.x - lo.x).max(hi.y - lo.y) * (1.0 + 2.0 * VIEW_MARGIN + 1.0 / SNAP_TEXELS);
+    // The margin on both sides, and room for the centre's rounding to the snapping grid (half
+    // a step either way).
+    let side = (hi.x - lo.x).max(hi.y - lo.y) * (1.0 + 2.0 * VIEW_MARGIN + 2.0 / SNAP_TEXELS);
     let steps = ((2.0 * radius) / side.max(1e-6)).log2() * SIDE_STEPS_PER_OCTAVE;
     if steps < 1.0 {
         return None;

@@ -4,7 +4,7 @@
 //! ([`EmitterFace`]), so that every RSM-based method lights from them as from any texel.
 
 use super::bind::{self, bind_group};
-use super::frame_uniforms::{LightFace, LightsUniform};
+use super::frame_uniforms::{face_index, LightFace};
 use super::scene_buffers::SceneBuffers;
 use super::{ParamSlots, Target};
 use crate::gpu::readback::padded_bytes_per_row;
@@ -74,7 +74,7 @@ impl RsmFace {
         faces
             .iter()
             .enumerate()
-            .map(|(i, (light, f))| Self::new(f, size, *light, LightsUniform::face_index(faces, i)))
+            .map(|(i, (light, f))| Self::new(f, size, *light, face_index(faces, i)))
             .collect()
     }
 }

@@ -181,9 +181,19 @@ def three_lights_case(base, args, methods):
 STREET_PITCH = 60.0
 
 
+def light_fits(info, method):
+    """The `light_fit` values to try for `method` ([None] where it has no such parameter)."""
+    m = next(m for m in info["gi_methods"] if m["method"] == method)
+    return ["scene", "view"] if any(p["name"] == "light_fit" for p in m["parameters"]) else [None]
+
+
+def moved(camera, dx):
+    """`camera` moved `dx` metres along x."""
+    return dict(camera, position=[camera["position"][0] + dx] + camera["position"][1:],
+                target=[camera["target"][0] + dx] + camera["target"][1:])
+
+
 def street_case(base, args, methods, info):
-    fits = {m["method"]: any(p["name"] == "light_fit" for p in m["parameters"])
-            for m in info["gi_methods"]}
     print("| street | view | method | sun's maps (`light_fit`) | against the reference | "
           "against the reference of the transport it models |\n|---|---|---|---|---|---|")
     for materials in ["authored", "diffuse"]:
@@ -191,11 +201,10 @@ def street_case(base, args, methods, info):
         _, body = request(base + "/v1/scenes", {"procedural": spec})
         entry = json.loads(body)
         own = entry["default_camera"]
-        over = dict(own, position=[own["position"][0] + STREET_PITCH] + own["position"][1:],
-                    target=[own["target"][0] + STREET_PITCH] + own["target"][1:])
+        over = moved(own, STREET_PITCH)
         for view, camera in [("down its middle street", own), ("one street over", over)]:
             for method in methods:
-                for fit in (["scene", "view"] if fits.get(method) else [None]):
+                for fit in light_fits(info, method):
                     gi = {"method": method}
                     if fit:
                         gi["light_fit"] = fit
@@ -210,8 +219,6 @@ def street_case(base, args, methods, info):
 def street_motion_case(base, args, methods, info):
     import numpy as np
 
-    fits = {m["method"]: any(p["name"] == "light_fit" for p in m["parameters"])
-            for m in info["gi_methods"]}
     _, body = request(base + "/v1/scenes", {"procedural": f"{args.street}&materials=diffuse"})
     entry = json.loads(body)
     own = entry["default_camera"]
@@ -219,9 +226,7 @@ def street_motion_case(base, args, methods, info):
     def frames(gi):
         images = []
         for step in range(4):
-            dx = 0.13 * step
-            camera = dict(own, position=[own["position"][0] + dx] + own["position"][1:],
-                          target=[own["target"][0] + dx] + own["target"][1:])
+            camera = moved(own, 0.13 * step)
             _, raw = request(base + "/v1/render", {
                 "render": {"scene": entry["id"], "width": args.width, "height": args.height,
                            "camera": camera, "gi": gi}, "format": "raw_indirect"})
@@ -233,7 +238,7 @@ def street_motion_case(base, args, methods, info):
     reference = {"method": "reference", "spp": args.spp}
     print(f"| `reference` ({args.spp} spp) | - | {frames(reference)} |")
     for method in methods:
-        for fit in (["scene", "view"] if fits.get(method) else [None]):
+        for fit in light_fits(info, method):
             gi = {"method": method}
             if fit:
                 gi["light_fit"] = fit

@@ -157,14 +157,4 @@ impl Senders {
             Self::Diffuse => "diffuse",
         }
     }
-
-    /// For a table whose method always sends diffuse light.
-    pub fn diffuse(_: &GiParams) -> Self {
-        Self::Diffuse
-    }
-
-    /// For a table whose method sends by the whole BRDF (or sends nothing).
-    pub fn full(_: &GiParams) -> Self {
-        Self::Full
-    }
 }

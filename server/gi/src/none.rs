@@ -27,7 +27,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
             scale_tolerance: crate::gi::params::SCALE_TOLERANCE,
             exact_at_powers_of_two: true,
         },
-        senders: crate::gi::params::Senders::full,
+        senders: |_| crate::gi::params::Senders::Full,
     }],
     type_id: TypeId::of::<NoIndirect>,
     validate: |_, _| Ok(()),

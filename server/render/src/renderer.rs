@@ -923,8 +923,7 @@ impl Renderer {
         let lights_uniform = LightsUniform::with_punctual(
             &lights,
             settings.lights.len(),
-            bounds,
-            coverage,
+            &light_faces,
             settings.shadow_map_size,
         );
         let queue = &self.shared.ctx.queue;

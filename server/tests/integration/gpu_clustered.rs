@@ -54,13 +54,18 @@ fn run_lit(
     s.gi = gi;
     let mut renderer = Renderer::new(gpu(), scene.clone());
     let frame = renderer.render(&s).expect("render");
-    let readback = renderer
+    let readback = read_back(&renderer);
+    (s, readback, frame.indirect.expect("captured"))
+}
+
+/// What the last clustered frame of `renderer` computed.
+fn read_back(renderer: &Renderer) -> ClusteredReadback {
+    renderer
         .gi_if_created::<Clustered>()
         .expect("a clustered frame ran")
         .read_back()
         .expect("readback")
-        .expect("the frame ran the clustering");
-    (s, readback, frame.indirect.expect("captured"))
+        .expect("the frame ran the clustering")
 }
 
 fn ref_vpl(v: &Vpl) -> RefVpl {
@@ -263,12 +268,7 @@ fn restarting_from_the_same_seeds_loses_no_clusters_over_a_light_sweep() {
             outer_cone: 0.6,
         }];
         renderer.render(&s).expect("render");
-        let rb = renderer
-            .gi_if_created::<Clustered>()
-            .expect("clustered ran")
-            .read_back()
-            .expect("readback")
-            .expect("a frame");
+        let rb = read_back(&renderer);
         let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
         let w = Weights {
             position: typed(&s.gi).cluster_position_weight / rb.extent,
@@ -338,12 +338,7 @@ fn the_clusters_view_shows_the_frames_mapping() {
         .0
         .downcast_ref::<ClusterView>()
         .expect("a ClusterView");
-    let rb = renderer
-        .gi_if_created::<Clustered>()
-        .expect("clustered ran")
-        .read_back()
-        .expect("readback")
-        .expect("a frame");
+    let rb = read_back(&renderer);
     assert_eq!((view.rsm_width, view.rsm_height), (64, 64));
     assert_eq!(
         view.texels,
@@ -623,12 +618,7 @@ fn view_fitted_cascades_send_each_point_once_with_its_footprints_flux() {
     s.gi = clustered(256, 8, 1, 4).with("light_fit", "view");
     let mut renderer = Renderer::new(gpu(), scene.clone());
     renderer.render(&s).expect("render");
-    let rb = renderer
-        .gi_if_created::<Clustered>()
-        .expect("a clustered frame ran")
-        .read_back()
-        .expect("readback")
-        .expect("the frame ran the clustering");
+    let rb = read_back(&renderer);
     let size = 64;
     assert_eq!((rb.rsm_width, rb.rsm_height), (2 * size, size));
     let coverage = Coverage::View {

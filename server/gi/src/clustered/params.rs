@@ -163,7 +163,7 @@ pub const TABLE: MethodTable = MethodTable {
         exact_at_powers_of_two: true,
     },
     // VPLs are diffuse (seed 003, §3: the RSM stores diffusely reflected flux).
-    senders: crate::gi::params::Senders::diffuse,
+    senders: |_| crate::gi::params::Senders::Diffuse,
 };
 
 /// How each VPL's visibility is found (`visibility`).

@@ -102,7 +102,7 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
         exact_at_powers_of_two: false,
     },
     // VALs are diffuse (seed 004, eq. 3: the RSM texel's flux leaves it by Lambert's law).
-    senders: crate::gi::params::Senders::diffuse,
+    senders: |_| crate::gi::params::Senders::Diffuse,
 };
 
 /// A 64² RSM and caches four times as far apart as the default (a few hundred on the Cornell
@@ -153,7 +153,7 @@ pub const BRSM: MethodTable = MethodTable {
         exact_at_powers_of_two: false,
     },
     // VALs are diffuse (seed 004, eq. 3: the RSM texel's flux leaves it by Lambert's law).
-    senders: crate::gi::params::Senders::diffuse,
+    senders: |_| crate::gi::params::Senders::Diffuse,
 };
 
 /// The parameters of both methods, as [`BRSM`]'s table (a superset of [`LIGHTSKIN`]'s)

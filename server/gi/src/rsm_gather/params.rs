@@ -62,7 +62,7 @@ pub const TABLE: MethodTable = MethodTable {
         exact_at_powers_of_two: true,
     },
     // RSM texels are diffuse reflectors (Dachsbacher & Stamminger 2005, eq. 1).
-    senders: crate::gi::params::Senders::diffuse,
+    senders: |_| crate::gi::params::Senders::Diffuse,
 };
 
 /// `rsm_gather`'s parameters, as [`TABLE`] describes them.

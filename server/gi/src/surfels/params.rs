@@ -85,7 +85,7 @@ pub const TABLE: MethodTable = MethodTable {
         exact_at_powers_of_two: false,
     },
     // surfels store the diffuse light they reflect (seed 001, eq. 2).
-    senders: crate::gi::params::Senders::diffuse,
+    senders: |_| crate::gi::params::Senders::Diffuse,
 };
 
 /// `surfels`' parameters, as [`TABLE`] describes them.

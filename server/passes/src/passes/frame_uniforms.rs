@@ -104,24 +104,30 @@ impl LightsUniform {
     /// its shadow faces fitted to the scene bounds, their layers following each other in
     /// light order.
     pub fn new(lights: &[Light], bounds: &Aabb, shadow_size: u32) -> Self {
-        Self::with_punctual(lights, lights.len(), bounds, Coverage::Scene, shadow_size)
+        let faces = lights_faces(lights, bounds, Coverage::Scene);
+        Self::with_punctual(lights, lights.len(), &faces, shadow_size)
     }
 
     /// [`Self::new`] where only the first `punctual` lights are punctual and the rest light
     /// for the environment (the direct-light pass counts their light as the environment's,
     /// with the indirect light).
+    /// `faces` are every light's, as [`lights_faces`] lists them (the frame's RSM faces).
     pub fn with_punctual(
         lights: &[Light],
         punctual: usize,
-        bounds: &Aabb,
-        coverage: Coverage,
+        faces: &[(u32, LightFace)],
         shadow_size: u32,
     ) -> Self {
         debug_assert!(lights.len() <= MAX_LIGHTS, "{} lights", lights.len());
         let mut all = Self::zeroed();
         let mut first_layer = 0;
-        for (slot, light) in all.list.iter_mut().zip(lights) {
-            *slot = LightUniform::new(light, bounds, coverage, shadow_size);
+        for (i, (slot, light)) in all.list.iter_mut().zip(lights).enumerate() {
+            let own: Vec<LightFace> = faces
+                .iter()
+                .filter(|(l, _)| *l as usize == i)
+                .map(|(_, f)| *f)
+                .collect();
+            *slot = LightUniform::with_faces(light, &own, shadow_size);
             slot.first_layer = first_layer;
             first_layer += slot.face_count;
         }
@@ -469,10 +475,14 @@ impl LightUniform {
     /// The light's parameters and the view-projection of each shadow-map face, fitted to the
     /// scene bounds (a directional light's to what `coverage` says).
     pub fn new(light: &Light, bounds: &Aabb, coverage: Coverage, shadow_size: u32) -> Self {
+        Self::with_faces(light, &light_faces(light, bounds, coverage), shadow_size)
+    }
+
+    /// [`Self::new`] with the light's faces ([`light_faces`]) already worked out.
+    pub fn with_faces(light: &Light, faces: &[LightFace], shadow_size: u32) -> Self {
         let direction = Vec3::from(light.direction).normalize_or(Vec3::NEG_Y);
-        let faces = light_faces(light, bounds, coverage);
         let mut face_view_proj = [Mat4::IDENTITY.to_cols_array_2d(); 6];
-        for (slot, face) in face_view_proj.iter_mut().zip(&faces) {
+        for (slot, face) in face_view_proj.iter_mut().zip(faces) {
             *slot = face.view_proj.to_cols_array_2d();
         }
         // World size of one shadow texel (per metre of distance for perspective faces).

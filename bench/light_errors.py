@@ -12,6 +12,9 @@ with `compare_to: reference`. Loopback only, standard library only.
         > bench/results/lavapipe-emitters-errors.md
     python3 bench/light_errors.py target/release/lightcast-server --case street --spp 1024 \\
         --width 128 --height 72 > bench/results/lavapipe-street-truth.md
+    python3 bench/light_errors.py target/release/lightcast-server --case street --spp 1024 \\
+        --width 128 --height 72 --materials authored --senders full,diffuse \\
+        > bench/results/lavapipe-street-glossy-senders.md
     python3 bench/light_errors.py target/release/lightcast-server --case street-motion \\
         --width 128 --height 72 --spp 512 > bench/results/lavapipe-street-motion.md
 
@@ -33,7 +36,9 @@ every surface Lambertian (`materials=diffuse`), under its own sun from its own c
 middle street) and from the same camera one street over (60 m along x), each method against
 the full reference and (`compare_modelled`) against the reference of the light transport it
 models (diffuse senders): on the diffuse street the two are one; the RSM-based methods with
-the sun's maps over the whole scene (`light_fit: scene`) and fitted to the view (`view`).
+the sun's maps over the whole scene (`light_fit: scene`) and fitted to the view (`view`), and
+(`--senders`) with each value of `senders` for the methods that have it: `full`, the default,
+sends an RSM texel's glossy lobe on, `diffuse` is the papers' diffuse VALs and VPLs.
 
 `street-motion` (issue 34): how much each method's indirect light changes between frames while
 the camera moves sideways down the middle of the Lambertian street (four frames 13 cm apart),
@@ -193,10 +198,38 @@ def moved(camera, dx):
                 target=[camera["target"][0] + dx] + camera["target"][1:])
 
 
+def senders_of(info, method, wanted):
+    """The `senders` values of `wanted` to try for `method` ([None] where it has no such
+    parameter or it is the reference)."""
+    m = next(m for m in info["gi_methods"] if m["method"] == method)
+    has = any(p["name"] == "senders" for p in m["parameters"])
+    return wanted if has and method != "reference" else [None]
+
+
+def street_configs_case(base, args):
+    """`--case street --gi-configs`: the given `render.gi` objects on the streets."""
+    print("| street | view | `render.gi` | against the reference |\n|---|---|---|---|")
+    for materials in args.materials.split(","):
+        spec = f"{args.street}&materials={materials}"
+        entry = json.loads(request(base + "/v1/scenes", {"procedural": spec})[1])
+        own = entry["default_camera"]
+        for view, camera in [("down its middle street", own),
+                             ("one street over", moved(own, STREET_PITCH))]:
+            for gi in json.loads(args.gi_configs):
+                render = {"scene": entry["id"], "width": args.width, "height": args.height,
+                          "camera": camera, "gi": gi}
+                cell = compare(base, render, args.spp, f"{materials} {view} {gi}")
+                print(f"| {materials} | {view} | `{json.dumps(gi)}` | {cell} |", flush=True)
+
+
 def street_case(base, args, methods, info):
-    print("| street | view | method | sun's maps (`light_fit`) | against the reference | "
-          "against the reference of the transport it models |\n|---|---|---|---|---|---|")
-    for materials in ["authored", "diffuse"]:
+    if args.gi_configs:
+        street_configs_case(base, args)
+        return
+    print("| street | view | method | sun's maps (`light_fit`) | `senders` | against the "
+          "reference | against the reference of the transport it models |\n"
+          "|---|---|---|---|---|---|---|")
+    for materials in args.materials.split(","):
         spec = f"{args.street}&materials={materials}"
         _, body = request(base + "/v1/scenes", {"procedural": spec})
         entry = json.loads(body)
@@ -205,15 +238,19 @@ def street_case(base, args, methods, info):
         for view, camera in [("down its middle street", own), ("one street over", over)]:
             for method in methods:
                 for fit in light_fits(info, method):
-                    gi = {"method": method}
-                    if fit:
-                        gi["light_fit"] = fit
-                    render = {"scene": entry["id"], "width": args.width, "height": args.height,
-                              "camera": camera, "gi": gi}
-                    full, modelled = compare(base, render, args.spp,
-                                             f"{materials} {view} {method} {fit}", modelled=True)
-                    print(f"| {materials} | {view} | `{method}` | {fit or '-'} | {full} | "
-                          f"{modelled} |", flush=True)
+                    for senders in senders_of(info, method, args.senders.split(",")):
+                        gi = {"method": method}
+                        if fit:
+                            gi["light_fit"] = fit
+                        if senders:
+                            gi["senders"] = senders
+                        render = {"scene": entry["id"], "width": args.width,
+                                  "height": args.height, "camera": camera, "gi": gi}
+                        full, modelled = compare(base, render, args.spp,
+                                                 f"{materials} {view} {method} {fit} {senders}",
+                                                 modelled=True)
+                        print(f"| {materials} | {view} | `{method}` | {fit or '-'} | "
+                              f"{senders or '-'} | {full} | {modelled} |", flush=True)
 
 
 def street_motion_case(base, args, methods, info):
@@ -255,6 +292,13 @@ def main():
     ap.add_argument("--height", type=int, default=96)
     ap.add_argument("--spp", type=int, default=256, help="reference samples per pixel")
     ap.add_argument("--street", default="street?blocks=4")
+    ap.add_argument("--materials", default="authored,diffuse",
+                    help="street: the streets' `materials`, comma-separated")
+    ap.add_argument("--gi-configs",
+                    help="street: a JSON list of `render.gi` objects to compare instead of "
+                         "every method at its defaults")
+    ap.add_argument("--senders", default="full",
+                    help="street: the `senders` values of the RSM-based methods, comma-separated")
     args = ap.parse_args()
 
     port = free_port()

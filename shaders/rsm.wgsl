@@ -1,5 +1,6 @@
 // Reflective shadow map: every texel seen from the light becomes a virtual area light (VAL)
-// with a position, a normal, the flux it reflects and its disk area (eq. 1). The faces of every
+// with a position, a normal, the flux it reflects and its disk area (eq. 1), and the glossy
+// lobe it sends on (rsm_glossy.wgsl). The faces of every
 // light (six for a point light) lie side by side in one atlas, so later stages treat all the
 // frame's lights as one 2D map.
 
@@ -16,7 +17,9 @@ struct RsmFace {
     light: u32,
     // The face's index among its light's: a cube face, or a directional light's cascade.
     index: u32,
-    pad1: u32,
+    // 1: texels send on the glossy part of what they reflect (`senders: full`); 0: the
+    // paper's diffuse VALs alone.
+    glossy: u32,
 }
 
 @group(0) @binding(0) var<storage, read> face: RsmFace;
@@ -37,6 +40,8 @@ struct RsmOut {
     @location(1) normal: vec4<f32>,
     // rgb: reflected flux Φ_l; a: disk area A_l (eq. 1).
     @location(2) flux_area: vec4<f32>,
+    // `encode_glossy` (rsm_glossy.wgsl).
+    @location(3) glossy: vec4<u32>,
 }
 
 @fragment
@@ -66,19 +71,24 @@ fn fs_main(in: SurfaceVaryings, @builtin(front_facing) front: bool) -> RsmOut {
         // cross-section is A_disk·cosθ (so the texel receives I·Ω with Ω = texel_area·cos³θ).
         cross_section = area * z / max(length(to_texel), 1e-20);
     }
-    // The texel receives E⊥ times its beam's cross-section and sends on what its diffuse lobe
-    // reflects of that, in whatever direction (the VAL emits diffusely, eq. 3): the diffuse
-    // lobe's albedo for light arriving at the texel's cosine. What its specular lobe reflects
-    // is not sent on (the paper's VALs are diffuse).
+    // The texel receives E⊥ times its beam's cross-section, Φ_in, and sends on what its diffuse
+    // lobe reflects of that, in whatever direction (the VAL emits diffusely, eq. 3): the
+    // diffuse lobe's albedo for light arriving at the texel's cosine. Its specular lobe's part
+    // leaves as the Phong lobe of eq. 4 about the light's mirror direction, with the colour
+    // that lobe has for light arriving at that cosine (reciprocity).
     let incident = light_incident(light, in.world);
     let cos_l = dot(n, incident.to_light);
     let facing = select(0.0, 1.0, cos_l > 0.0);
+    let flux_in = incident.irradiance * cross_section * facing;
+    let lobes = phong_lobes(m.brdf, cos_l);
     var out: RsmOut;
     out.position = vec4<f32>(in.world, 1.0);
     out.normal = vec4<f32>(n, 0.0);
-    out.flux_area = vec4<f32>(
-        diffuse_albedo(m.brdf, cos_l) * incident.irradiance * cross_section * facing,
-        area,
+    out.flux_area = vec4<f32>(lobes.diffuse * flux_in, area);
+    out.glossy = encode_glossy(
+        lobes.glossy * flux_in * f32(face.glossy),
+        reflect(-incident.to_light, n),
+        lobes.exponent,
     );
     return out;
 }

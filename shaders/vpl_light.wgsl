@@ -2,15 +2,19 @@
 // 2005; seed paper 003, §4), shared by the VPL methods. Mirrored by
 // `gi::common::vpl::vpl_light`.
 
-// L(x, ω_o) from a diffusely emitting VPL at `position` with unit `normal`, flux Φ and disk
-// area A: f_r·Φ·cosθ_i·cosθ_x / (π d²), with A added to π d² — the irradiance of a disk of area
-// A on its axis, Φ/(A + π d²) — which keeps the 1/d² singularity finite without a distance
-// clamp in scene units.
+// L(x, ω_o) from a VPL at `position` with unit `normal`, diffuse flux Φ, glossy lobe `glossy`
+// (rsm_glossy.wgsl) and disk area A: f_r·Φ(ω)·cosθ_i·cosθ_x / (π d²), Φ(ω) the flux it sends
+// towards x (Φ itself for a diffuse VPL) with its lobe widened by the `footprint` area it
+// stands for, and A added to π d² — the irradiance of a disk of area A on its axis,
+// Φ/(A + π d²) — which keeps the 1/d² singularity finite without a distance clamp in scene
+// units.
 fn vpl_light(
     position: vec3<f32>,
     normal: vec3<f32>,
     flux: vec3<f32>,
+    glossy: GlossySender,
     area: f32,
+    footprint: f32,
     x: vec3<f32>,
     s: ViewedBrdf,
 ) -> vec3<f32> {
@@ -22,5 +26,5 @@ fn vpl_light(
     let w = to_vpl * inverseSqrt(d2);
     let cos_x = max(dot(s.n, w), 0.0);
     let cos_i = max(dot(normal, -w), 0.0);
-    return eval_viewed(s, w) * flux * (cos_i * cos_x / (area + PI * d2));
+    return eval_viewed(s, w) * sent_flux(flux, glossy, -w, glossy_spread(footprint, d2)) * (cos_i * cos_x / (area + PI * d2));
 }

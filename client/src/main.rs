@@ -100,8 +100,9 @@ struct RenderCmd {
     #[arg(long)]
     compare_spp: Option<u32>,
     /// Also compare with a reference of the light transport the method models (diffuse
-    /// senders for the RSM-based methods), to part the error of what it leaves out from the
-    /// error in what it models; one more reference render.
+    /// senders for `surfels` and the RSM-based methods with `senders: diffuse`), to part the
+    /// error of what it leaves out from the error in what it models; one more reference
+    /// render.
     #[arg(long, requires = "compare_to")]
     compare_modelled: bool,
     #[command(flatten)]

@@ -18,10 +18,11 @@
 @group(0) @binding(7) var interleaved_out: texture_storage_2d<rgba32float, write>;
 // Bindings 8–12 are visibility.wgsl's.
 @group(0) @binding(13) var<storage, read> brdf_table: array<vec4<f32>>;
+@group(0) @binding(14) var<storage, read> vpl_glossy: array<GlossySender>;
 
 // L_i(x, ω_o) of §4 (vpl_light.wgsl).
-fn vpl_radiance(vpl: Vpl, x: vec3<f32>, s: ViewedBrdf) -> vec3<f32> {
-    return vpl_light(vpl.position, vpl.normal, vpl.flux, vpl.area, x, s);
+fn vpl_radiance(i: u32, vpl: Vpl, x: vec3<f32>, s: ViewedBrdf) -> vec3<f32> {
+    return vpl_light(vpl.position, vpl.normal, vpl.flux, vpl_glossy[i], vpl.area, vpl.area, x, s);
 }
 
 // The surface pixel `id` sees: its point and unit normal; `covered` false where no geometry
@@ -61,7 +62,7 @@ fn shade(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var i = first; i < end; i++) {
         let vpl = vpls[i];
         if vpl.lit != 0u {
-            let l = vpl_radiance(vpl, r.x, s);
+            let l = vpl_radiance(i, vpl, r.x, s);
             if any(l > vec3<f32>(0.0)) {
                 radiance += l * vpl_visibility(i, r.x, r.n);
             }

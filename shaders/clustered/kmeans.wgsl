@@ -14,6 +14,10 @@
 @group(0) @binding(4) var<storage, read_write> vpls: array<Vpl>;
 @group(0) @binding(5) var<storage, read_write> vals: array<Val>;
 @group(0) @binding(6) var<storage, read_write> mapping: array<u32>;
+@group(0) @binding(7) var rsm_glossy: texture_2d<u32>;
+// Each VPL's glossy lobe, beside `vpls` (whose layout the paraboloid maps share with the VALs'):
+// the texels' weight times their count, like `flux`.
+@group(0) @binding(8) var<storage, read_write> vpl_glossy: array<GlossySender>;
 
 // §6 "VPL Generation": the RSM fetched with point sampling at N Halton positions. Each VPL
 // stands for 1/N of the atlas, so it carries the flux (and disk area) of W·H/N texels: the
@@ -30,8 +34,11 @@ fn generate_vpls(@builtin(global_invocation_id) id: vec3<u32>) {
     let texel = min(vec2<u32>(h * vec2<f32>(size)), size - vec2<u32>(1u));
     let p = textureLoad(rsm_position, texel, 0);
     let fa = textureLoad(rsm_flux_area, texel, 0);
+    var glossy = decode_glossy(textureLoad(rsm_glossy, texel, 0));
     let share = f32(params.rsm_width * params.rsm_height) / f32(params.vpl_count);
-    let lit = p.w > 0.0 && max(fa.r, max(fa.g, fa.b)) > 0.0;
+    // A metal texel reflects nothing diffusely, but its glossy lobe makes it a VPL.
+    let lit = p.w > 0.0 && max(max(fa.r, max(fa.g, fa.b)), max(glossy.weight.r, max(glossy.weight.g, glossy.weight.b))) > 0.0;
+    glossy.weight *= share;
     var vpl = Vpl(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, vec3<f32>(0.0), texel.y * size.x + texel.x);
     if lit {
         vpl.position = p.xyz;
@@ -41,6 +48,7 @@ fn generate_vpls(@builtin(global_invocation_id) id: vec3<u32>) {
         vpl.flux = fa.rgb * share;
     }
     vpls[i] = vpl;
+    vpl_glossy[i] = glossy;
 }
 
 // §5.2 and §6 "Clustering": every frame restarts from the same initial assignment, never

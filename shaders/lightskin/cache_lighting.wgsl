@@ -30,6 +30,7 @@ struct CacheLightingParams {
 @group(0) @binding(5) var rsm_flux_area: texture_2d<f32>;
 @group(0) @binding(6) var<storage, read_write> lighting: array<CacheLighting>;
 @group(0) @binding(7) var<storage, read_write> accum: array<Accum>;
+@group(0) @binding(8) var rsm_glossy: texture_2d<u32>;
 
 // ε_p of eq. 6 as a fraction of F_max = A_l / (A_l + π d²), the largest form factor the VAL's
 // disk could have at its distance (facing the cache): eq. 6's weight becomes ε_p·F_max + F.
@@ -48,7 +49,7 @@ var<workgroup> tile: array<Val, 64>;
 
 fn load_val(index: u32) -> Val {
     if index >= params.val_count {
-        return Val(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u);
+        return Val(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, GlossySender(vec3<f32>(0.0), 1.0, vec3<f32>(0.0, 0.0, 1.0), 0.0));
     }
     if params.every_texel == 0u {
         return vals[index];
@@ -57,7 +58,8 @@ fn load_val(index: u32) -> Val {
     let p = textureLoad(rsm_position, texel, 0);
     let fa = textureLoad(rsm_flux_area, texel, 0);
     // Uncovered texels get weight 0.
-    return Val(p.xyz, fa.a, textureLoad(rsm_normal, texel, 0).xyz, p.w, fa.rgb, index);
+    let glossy = decode_glossy(textureLoad(rsm_glossy, texel, 0));
+    return Val(p.xyz, fa.a, textureLoad(rsm_normal, texel, 0).xyz, p.w, fa.rgb, index, glossy);
 }
 
 // Mirrored by `CacheAccum` in server/passes/src/passes/cache_lighting.rs.
@@ -104,8 +106,10 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
     }
     let form_factor = val.area * g;
     let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), cache_exponent(c));
-    (*acc).e_d += val.weight * val.flux * g;
-    (*acc).e_g += val.weight * val.flux * g * lobe;
+    // Φ_l of eq. 3/4 is what the VAL sends towards the cache: its glossy lobe's share too.
+    let flux = sent_flux(val.flux, val.glossy, -w_dir, glossy_spread(val.area, len2));
+    (*acc).e_d += val.weight * flux * g;
+    (*acc).e_g += val.weight * flux * g * lobe;
     let a_d = val.weight * (EPS_P * f_max + form_factor);
     let a_g = val.weight * (EPS_P * f_max + lobe * form_factor);
     (*acc).s_d += a_d;

@@ -26,6 +26,11 @@ struct ImportanceParams {
 @group(0) @binding(5) var rsm_normal: texture_2d<f32>;
 @group(0) @binding(6) var rsm_flux_area: texture_2d<f32>;
 @group(0) @binding(7) var<storage, read_write> importance: array<f32>;
+@group(0) @binding(8) var rsm_glossy: texture_2d<u32>;
+
+fn luminance(c: vec3<f32>) -> f32 {
+    return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
+}
 
 @compute @workgroup_size(64)
 fn gather_view_samples(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -54,13 +59,22 @@ fn estimate_importance(
     let inside = texel.x < params.rsm_width && texel.y < params.rsm_height;
     var val_position = vec3<f32>(0.0);
     var val_normal = vec3<f32>(0.0);
-    var flux = 0.0;
+    var flux = vec3<f32>(0.0);
+    var glossy = GlossySender(vec3<f32>(0.0), 1.0, vec3<f32>(0.0, 0.0, 1.0), 0.0);
     if inside {
         let p = textureLoad(rsm_position, texel, 0);
         val_position = p.xyz;
         val_normal = textureLoad(rsm_normal, texel, 0).xyz;
-        flux = p.w * dot(textureLoad(rsm_flux_area, texel, 0).rgb, vec3<f32>(0.2126, 0.7152, 0.0722));
+        flux = p.w * textureLoad(rsm_flux_area, texel, 0).rgb;
+        glossy = decode_glossy(textureLoad(rsm_glossy, texel, 0));
+        glossy.weight *= p.w;
     }
+    // Eq. 10's Φ_VAL: all the VAL reflects, its glossy part ρ_g·Φ_in as if it left diffusely.
+    // Its lobe is left out: a sharp lobe between the view samples would give a VAL that
+    // lights the caches brightly no importance, and the few draws the defensive mixture gives
+    // it weights of hundreds (the street's glass: BRSM recovered under half of what LightSkin
+    // did of the glossy senders' light).
+    let sent = luminance(flux + glossy.weight);
     var sum = 0.0;
     // Samples are staged through workgroup memory, 64 at a time, shared by the 64 texels.
     for (var base = 0u; base < params.sample_count; base += TILE_SAMPLES) {
@@ -72,7 +86,7 @@ fn estimate_importance(
             tile[local] = ViewSample(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0);
         }
         workgroupBarrier();
-        if flux > 0.0 {
+        if sent > 0.0 {
             for (var k = 0u; k < TILE_SAMPLES; k++) {
                 let vs = tile[k];
                 let l = vs.position - val_position;
@@ -87,7 +101,7 @@ fn estimate_importance(
         }
     }
     if inside {
-        var value = flux * sum / f32(max(params.sample_count, 1u));
+        var value = sent * sum / f32(max(params.sample_count, 1u));
         if params.uniform_importance != 0u {
             value = 1.0;
         }

@@ -30,6 +30,7 @@ struct SelectParams {
 @group(0) @binding(5) var rsm_normal: texture_2d<f32>;
 @group(0) @binding(6) var rsm_flux_area: texture_2d<f32>;
 @group(0) @binding(7) var<storage, read_write> vals: array<Val>;
+@group(0) @binding(8) var rsm_glossy: texture_2d<u32>;
 
 // Mixture CDF up to and including column `x` (texels in column-major order).
 fn column_cdf(x: u32, alpha: f32, total: f32) -> f32 {
@@ -119,5 +120,6 @@ fn select_vals(@builtin(global_invocation_id) id: vec3<u32>) {
         weight,
         fa.rgb,
         texel,
+        decode_glossy(textureLoad(rsm_glossy, vec2<u32>(x, y), 0)),
     );
 }

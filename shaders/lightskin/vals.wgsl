@@ -11,4 +11,6 @@ struct Val {
     flux: vec3<f32>,
     // Row-major index of the RSM texel it came from.
     texel: u32,
+    // The texel's glossy lobe (rsm_glossy.wgsl).
+    glossy: GlossySender,
 }

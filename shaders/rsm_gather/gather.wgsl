@@ -59,6 +59,20 @@ struct GatherSample {
 @group(0) @binding(11) var<storage, read_write> probe: vec4<f32>;
 @group(0) @binding(12) var indirect_out: texture_storage_2d<rgba16float, write>;
 @group(0) @binding(13) var<storage, read> brdf_table: array<vec4<f32>>;
+@group(0) @binding(14) var rsm_glossy: texture_2d<u32>;
+
+// L at x from atlas texel `t` as a pixel light (vpl_light.wgsl) standing for `texels` texels
+// (its glossy lobe widened by their footprint); nothing where it is empty.
+fn texel_light(t: vec2<i32>, texels: f32, x: vec3<f32>, s: ViewedBrdf) -> vec3<f32> {
+    let light_position = textureLoad(rsm_position, t, 0);
+    if light_position.w == 0.0 {
+        return vec3<f32>(0.0);
+    }
+    let flux_area = textureLoad(rsm_flux_area, t, 0);
+    let normal = textureLoad(rsm_normal, t, 0).xyz;
+    let glossy = decode_glossy(textureLoad(rsm_glossy, t, 0));
+    return vpl_light(light_position.xyz, normal, flux_area.rgb, glossy, flux_area.a, flux_area.a * texels, x, s) * texels;
+}
 
 // Where `x` projects in face `f`: texel coordinates (clamped to the face) and whether it lies
 // inside the face's frustum (pattern.rs `project`).
@@ -154,13 +168,7 @@ fn gather_emitters(face: u32, x: vec3<f32>, s: ViewedBrdf) -> vec3<f32> {
         // i·r < m² stays small (m ≤ gather_samples).
         let k = i * (texels / m) + (i * (texels % m)) / m;
         let t = vec2<i32>(i32(face * params.rsm_size + k % params.rsm_size), i32(k / params.rsm_size));
-        let light_position = textureLoad(rsm_position, t, 0);
-        if light_position.w == 0.0 {
-            continue;
-        }
-        let flux_area = textureLoad(rsm_flux_area, t, 0);
-        let normal = textureLoad(rsm_normal, t, 0).xyz;
-        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, s) * weight;
+        radiance += texel_light(t, weight, x, s);
     }
     return radiance;
 }
@@ -177,13 +185,7 @@ fn gather_face(face: u32, centre: vec2<f32>, x: vec3<f32>, s: ViewedBrdf) -> vec
             continue;
         }
         let t = vec2<i32>(vec2<u32>(p) + vec2<u32>(face * params.rsm_size, 0u));
-        let light_position = textureLoad(rsm_position, t, 0);
-        if light_position.w == 0.0 {
-            continue;
-        }
-        let flux_area = textureLoad(rsm_flux_area, t, 0);
-        let normal = textureLoad(rsm_normal, t, 0).xyz;
-        radiance += vpl_light(light_position.xyz, normal, flux_area.rgb, flux_area.a, x, s) * (sample.weight * r2);
+        radiance += texel_light(t, sample.weight * r2, x, s);
     }
     return radiance;
 }

@@ -45,8 +45,9 @@ pub struct RenderRequest {
     /// with `render.gi.emitters` on, so both see the same light sources.
     pub compare_spp: Option<u32>,
     /// With `compare_to: reference`, also compare against a reference that models only the
-    /// light transport the method does (its senders, e.g. `diffuse` for the RSM-based
-    /// methods, whose VPLs/VALs reflect the light they receive by the diffuse lobe alone),
+    /// light transport the method does (its senders: `diffuse` for `surfels` and for the
+    /// RSM-based methods with `render.gi.senders: diffuse`, whose surfels, VPLs or VALs
+    /// reflect the light they receive by the diffuse lobe alone),
     /// reported as `comparison_modelled`: its error is the error in what the method models,
     /// the rest of `comparison`'s is what it leaves out. Costs a second reference render
     /// (cached like the first); ignored for a method that models the full transport.

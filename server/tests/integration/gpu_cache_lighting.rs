@@ -11,6 +11,7 @@ use lightcast_server::gi::lightskin::cpu::{
 };
 use lightcast_server::gi::lightskin::LightSkin;
 use lightcast_server::gi::{GiMethod, GiParams};
+use lightcast_server::passes::rsm::GlossySender;
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
 use lightcast_server::scene::{load_gltf, procedural, Scene};
@@ -281,13 +282,15 @@ fn lightskin_cache_lighting_matches_the_cpu_reference_over_every_texel() {
         .iter()
         .zip(&sampling.rsm_normal)
         .zip(&sampling.rsm_flux_area)
-        .filter(|((p, _), _)| p[3] > 0.0)
-        .map(|((p, n), fa)| RefVal {
+        .zip(&sampling.rsm_glossy)
+        .filter(|(((p, _), _), _)| p[3] > 0.0)
+        .map(|(((p, n), fa), g)| RefVal {
             position: Vec3::from_slice(&p[..3]),
             normal: Vec3::from_slice(&n[..3]),
             flux: Vec3::from_slice(&fa[..3]),
             area: fa[3],
             weight: 1.0,
+            glossy: GlossySender::decode(*g),
         })
         .collect();
     assert!(vals.len() > 200);

@@ -9,7 +9,7 @@ use glam::Vec3;
 use lightcast_protocol::{Light, LightKind};
 use lightcast_server::gi::clustered::cpu::{self, RefCluster, RefVpl, Weights};
 use lightcast_server::gi::clustered::params::{Settings as ClusteredSettings, INTERLEAVE};
-use lightcast_server::gi::clustered::passes::{Vpl, NO_VAL};
+use lightcast_server::gi::clustered::passes::NO_VAL;
 use lightcast_server::gi::clustered::Visibility as ClusteredVisibility;
 use lightcast_server::gi::clustered::{Clustered, ClusteredReadback};
 use lightcast_server::gi::GiParams;
@@ -68,17 +68,6 @@ fn read_back(renderer: &Renderer) -> ClusteredReadback {
         .expect("the frame ran the clustering")
 }
 
-fn ref_vpl(v: &Vpl) -> RefVpl {
-    RefVpl {
-        position: Vec3::from(v.position),
-        normal: Vec3::from(v.normal),
-        flux: Vec3::from(v.flux),
-        area: v.area,
-        lit: v.lit != 0,
-        texel: v.texel,
-    }
-}
-
 fn close(a: Vec3, b: Vec3, relative: f32) -> bool {
     (a - b).abs().max_element() <= relative * a.abs().max_element().max(b.abs().max_element())
 }
@@ -92,9 +81,10 @@ fn check_vpls(rb: &ClusteredReadback, n: u32) -> Vec<RefVpl> {
         position: &rb.rsm_position,
         normal: &rb.rsm_normal,
         flux_area: &rb.rsm_flux_area,
+        glossy: &rb.rsm_glossy,
     };
     let want = cpu::generate_vpls(&rsm, n);
-    let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
+    let vpls = RefVpl::all_read_back(rb);
     assert_eq!(vpls.len(), n as usize);
     for (i, (got, want)) in vpls.iter().zip(&want).enumerate() {
         assert_eq!(got.texel, want.texel, "VPL {i}");
@@ -113,6 +103,13 @@ fn check_vpls(rb: &ClusteredReadback, n: u32) -> Vec<RefVpl> {
                 "VPL {i}: {got:?} vs {want:?}"
             );
             assert!((got.area - want.area).abs() <= 1e-6 * want.area, "VPL {i}");
+            let (g, w) = (got.glossy, want.glossy);
+            assert!(
+                close(g.weight.into(), w.weight.into(), 1e-6)
+                    && (g.exponent - w.exponent).abs() <= 1e-5 * w.exponent
+                    && close(g.mirror.into(), w.mirror.into(), 1e-5),
+                "VPL {i}: {g:?} vs {w:?}"
+            );
         }
     }
     vpls
@@ -269,7 +266,7 @@ fn restarting_from_the_same_seeds_loses_no_clusters_over_a_light_sweep() {
         }];
         renderer.render(&s).expect("render");
         let rb = read_back(&renderer);
-        let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
+        let vpls = RefVpl::all_read_back(&rb);
         let w = Weights {
             position: typed(&s.gi).cluster_position_weight / rb.extent,
             normal: typed(&s.gi).cluster_normal_weight,
@@ -364,7 +361,7 @@ fn interleaved_shading_and_blur_match_the_cpu() {
     let scene = procedural::cornell_box();
     let b = 4;
     let (s, rb, indirect) = run(&scene, clustered(1024, 8, 2, b));
-    let vpls: Vec<RefVpl> = rb.vpls.iter().map(ref_vpl).collect();
+    let vpls = RefVpl::all_read_back(&rb);
     let viewer = Vec3::from(s.camera.position);
     let mut checked = 0;
     let mut worst = 0.0f32;

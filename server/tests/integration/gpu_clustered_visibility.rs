@@ -147,20 +147,6 @@ fn paraboloid_maps_of_vals_and_vpls_match_cpu_ray_casts() {
     }
 }
 
-fn ref_vpls(rb: &ClusteredReadback) -> Vec<RefVpl> {
-    rb.vpls
-        .iter()
-        .map(|v| RefVpl {
-            position: Vec3::from(v.position),
-            normal: Vec3::from(v.normal),
-            flux: Vec3::from(v.flux),
-            area: v.area,
-            lit: v.lit != 0,
-            texel: v.texel,
-        })
-        .collect()
-}
-
 /// Pixels shaded on the CPU with the visibility the CPU reads from the GPU's maps (the CSSM
 /// basis and its mips rebuilt from the depths) match the interleaved buffer, and visibility
 /// darkens them.
@@ -174,7 +160,7 @@ fn shading_with_visibility_matches_the_cpu() {
         (ClusteredVisibility::VplShadows, 0.03),
     ] {
         let (s, rb) = run(&scene, clustered(visibility, 256, 8, 32));
-        let vpls = ref_vpls(&rb);
+        let vpls = RefVpl::all_read_back(&rb);
         let lights = map_lights(&rb, visibility);
         let maps = CssmMaps::new(rb.atlas, rb.extent, rb.maps.clone());
         let viewer = Vec3::from(s.camera.position);
@@ -250,7 +236,7 @@ fn hard_shadows_match_ray_traced_visibility(map_size: u32) {
     let scene = procedural::cornell_box();
     let visibility = ClusteredVisibility::VplShadows;
     let (s, rb) = run(&scene, clustered(visibility, 256, 8, map_size));
-    let vpls = ref_vpls(&rb);
+    let vpls = RefVpl::all_read_back(&rb);
     let lights = map_lights(&rb, visibility);
     let maps = CssmMaps::new(rb.atlas, rb.extent, rb.maps.clone());
     let viewer = Vec3::from(s.camera.position);
@@ -593,7 +579,12 @@ fn a_small_light_step_changes_the_shadows_no_more_than_the_light() {
         position: d.cluster_position_weight / second.extent,
         normal: d.cluster_normal_weight,
     };
-    let (want, _) = cpu::cluster_from(&ref_vpls(&second), start, d.kmeans_iterations, w);
+    let (want, _) = cpu::cluster_from(
+        &RefVpl::all_read_back(&second),
+        start,
+        d.kmeans_iterations,
+        w,
+    );
     let lit = want.iter().filter(|c| c.is_some()).count();
     let agree = want
         .iter()

@@ -4,9 +4,10 @@
 //! of its albedo (and dark with `emitters` off), textured and alpha-masked surfaces against untextured and absent ones,
 //! diffuse senders (`senders: diffuse`) against the same integral with the sender's diffuse lobe.
 
-use super::support::{self, brdf, floor_corners, hit_plane, plain_material, quad};
+use super::support::plates::{glossy_plates, plates, plates_indirect, point_light};
+use super::support::{self, floor_corners, hit_plane, plain_material, quad};
 use glam::Vec3;
-use lightcast_protocol::{Camera, Light, LightKind};
+use lightcast_protocol::{Camera, Light};
 use lightcast_server::gi::common::bvh::SceneBvh;
 use lightcast_server::gi::common::shaders;
 use lightcast_server::gi::reference::{
@@ -37,18 +38,6 @@ fn converge(
     let image = tracer.read().expect("read").expect("samples");
     assert_eq!(image.samples, spp);
     image
-}
-
-fn point_light(position: Vec3, intensity: f32) -> Light {
-    Light {
-        kind: LightKind::Point,
-        position: position.to_array(),
-        direction: [0.0, -1.0, 0.0],
-        color: [1.0; 3],
-        intensity,
-        inner_cone: 0.0,
-        outer_cone: 0.0,
-    }
 }
 
 /// Nearest hits of `rays` traced by the WGSL traversal.
@@ -177,89 +166,12 @@ fn wgsl_traversal_finds_the_brute_force_hits() {
     assert!(hits > 2000, "only {hits} of 4096 rays hit");
 }
 
-/// Plate A (floor, y = 0, 2×2, facing up) under plate B (y = 1, 2×2, facing down), a point
-/// light between them, the camera looking down at A from under B. With one bounce A's
-/// indirect light is the light B reflects onto it.
-struct Plates {
-    scene: Scene,
-    camera: Camera,
-    light: Light,
-}
-
-fn plates() -> Plates {
-    let (mut vertices, mut indices) = (Vec::new(), Vec::new());
-    quad(
-        &mut vertices,
-        &mut indices,
-        floor_corners(0.0, 0.0, 0.0, 1.0),
-        0,
-    );
-    let mut top = floor_corners(0.0, 0.0, 1.0, 1.0);
-    top.reverse();
-    quad(&mut vertices, &mut indices, top, 1);
-    let materials = vec![
-        plain_material([0.8, 0.7, 0.6], 0.0, 1.0),
-        plain_material([0.3, 0.6, 0.9], 0.0, 0.5),
-    ];
-    Plates {
-        scene: support::scene(vertices, indices, materials),
-        camera: Camera {
-            position: [0.05, 0.9, 0.1],
-            target: [0.0, 0.0, 0.0],
-            fov_y_degrees: 60.0,
-        },
-        light: point_light(Vec3::new(0.2, 0.55, -0.1), 1.0),
-    }
-}
-
-/// One-bounce indirect radiance leaving `x` on plate A towards `eye`: the integral over plate
-/// B of f_A · L_B · G, with L_B = f_B · E_B from the point light, by the midpoint rule; f_B is
-/// the whole BRDF or, with diffuse `senders`, its diffuse lobe.
-fn plates_indirect(p: &Plates, x: Vec3, eye: Vec3, cells: u32, senders: Senders) -> Vec3 {
-    let (floor, ceiling) = (&p.scene.materials[0], &p.scene.materials[1]);
-    let (n_a, n_b) = (Vec3::Y, Vec3::NEG_Y);
-    let light = Vec3::from(p.light.position);
-    let to_eye = (eye - x).normalize();
-    let cell = 2.0 / cells as f32;
-    let mut sum = Vec3::ZERO;
-    for i in 0..cells {
-        for j in 0..cells {
-            let y = Vec3::new(
-                -1.0 + (i as f32 + 0.5) * cell,
-                1.0,
-                -1.0 + (j as f32 + 0.5) * cell,
-            );
-            let d = y - x;
-            let r2 = d.length_squared();
-            let w = d / r2.sqrt();
-            let (cos_x, cos_y) = (n_a.dot(w), n_b.dot(-w));
-            let to_light = light - y;
-            let d_l2 = to_light.length_squared();
-            let to_light = to_light / d_l2.sqrt();
-            let e_b = p.light.intensity * n_b.dot(to_light).max(0.0) / d_l2;
-            let f_b = match senders {
-                Senders::Full => brdf(ceiling, n_b, to_light, -w),
-                Senders::Diffuse => ceiling.brdf().eval_diffuse(n_b, to_light, -w),
-            };
-            let l_b = f_b * e_b;
-            sum += brdf(floor, n_a, w, to_eye) * l_b * cos_x.max(0.0) * cos_y.max(0.0) / r2;
-        }
-    }
-    sum * cell * cell
-}
-
 /// Both transports: the whole BRDF at the glossy ceiling (roughness 0.5, half metal), and its
 /// diffuse lobe alone (what the RSM-based methods model), which must differ from it by far
 /// more than the tolerance for the check to tell them apart.
 #[test]
 fn one_bounce_between_two_plates_matches_numerical_integration() {
-    let plain = plates();
-    let mut materials = plain.scene.materials.clone();
-    materials[1].metallic = 0.5;
-    let p = Plates {
-        scene: plates_with(|_, _| {}, materials, Vec::new()),
-        ..plain
-    };
+    let p = glossy_plates(1);
     let (w, h) = (16, 16);
     let mut tracer = PathTracer::new(support::gpu(), &p.scene).expect("tracer");
     let eye = Vec3::from(p.camera.position);

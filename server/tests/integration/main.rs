@@ -13,6 +13,7 @@ mod gpu_clustered_visibility;
 mod gpu_direct_light;
 mod gpu_emitters;
 mod gpu_environment;
+mod gpu_glossy_senders;
 mod gpu_indirect_resolution;
 mod gpu_reference;
 mod gpu_scenes;

@@ -514,18 +514,23 @@ async fn renders_compare_with_the_reference() {
     assert_eq!(c.senders, Senders::Full);
     assert_eq!(again.comparison_modelled, None, "not asked for");
 
-    // Against the light transport BRSM models (diffuse VALs): a second reference without the
-    // glossy reflections of the light at the senders, so darker, and BRSM's bias against it
-    // larger; the full comparison is the same as without it.
+    // BRSM sends its texels' glossy lobes on by default (`senders: full`): it models the
+    // whole transport, so there is no second comparison.
     let mut modelled = brsm.clone();
     modelled["compare_modelled"] = json!(true);
     let (m, _) = render(&server, &modelled).await;
     assert_eq!(m.comparison.as_ref(), Some(&c));
+    assert_eq!(m.comparison_modelled, None, "glossy senders model it all");
+    // With the papers' diffuse VALs: a second reference without the glossy reflections of the
+    // light at the senders, so darker, and BRSM's bias against it larger.
+    modelled["render"]["gi"]["senders"] = json!("diffuse");
+    let (m, _) = render(&server, &modelled).await;
+    let full = m.comparison.expect("a comparison");
     let d = m.comparison_modelled.expect("a modelled comparison");
     assert_eq!((d.senders, d.reference_samples), (Senders::Diffuse, 16));
     assert!(
-        d.indirect_bias_relative > c.indirect_bias_relative,
-        "{d:?} vs {c:?}"
+        d.indirect_bias_relative > full.indirect_bias_relative,
+        "{d:?} vs {full:?}"
     );
 
     let mut reference = brsm.clone();

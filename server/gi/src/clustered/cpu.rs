@@ -11,6 +11,7 @@
 
 use crate::gi::common::halton::halton;
 use crate::gi::common::vpl::{vpl_light, VplLight};
+use crate::passes::rsm::GlossySender;
 use crate::scene::brdf::Brdf;
 use glam::{Vec2, Vec3};
 
@@ -22,6 +23,8 @@ pub struct RsmTexels<'a> {
     pub position: &'a [[f32; 4]],
     pub normal: &'a [[f32; 4]],
     pub flux_area: &'a [[f32; 4]],
+    /// [`GlossySender::decode`] reads these.
+    pub glossy: &'a [[u32; 4]],
 }
 
 /// A virtual point light.
@@ -34,10 +37,36 @@ pub struct RefVpl {
     pub flux: Vec3,
     /// Disk area of the texels it stands for.
     pub area: f32,
+    /// The glossy lobe of the texels it stands for.
+    pub glossy: GlossySender,
     /// Whether it reflects light (a surface with flux under its texel).
     pub lit: bool,
     /// Row-major RSM texel.
     pub texel: u32,
+}
+
+impl RefVpl {
+    /// A GPU VPL and its glossy lobe as read back.
+    pub fn read_back(v: &super::passes::Vpl, glossy: &GlossySender) -> Self {
+        Self {
+            position: Vec3::from(v.position),
+            normal: Vec3::from(v.normal),
+            flux: Vec3::from(v.flux),
+            area: v.area,
+            glossy: *glossy,
+            lit: v.lit != 0,
+            texel: v.texel,
+        }
+    }
+
+    /// Every VPL of a clustered frame's readback.
+    pub fn all_read_back(rb: &super::ClusteredReadback) -> Vec<Self> {
+        rb.vpls
+            .iter()
+            .zip(&rb.vpl_glossy)
+            .map(|(v, g)| Self::read_back(v, g))
+            .collect()
+    }
 }
 
 /// The texel VPL `i` of `n` is fetched from in a `width`×`height` atlas (Halton index i + 1:
@@ -59,13 +88,17 @@ pub fn generate_vpls(rsm: &RsmTexels, n: u32) -> Vec<RefVpl> {
             let [px, py, pz, pw] = rsm.position[t];
             let [fr, fg, fb, area] = rsm.flux_area[t];
             let flux = Vec3::new(fr, fg, fb);
-            if pw > 0.0 && flux.max_element() > 0.0 {
+            let glossy = GlossySender::decode(rsm.glossy[t]);
+            // A metal texel reflects nothing diffusely, but its glossy lobe makes it a VPL.
+            let sends = flux.max_element() > 0.0 || Vec3::from(glossy.weight).max_element() > 0.0;
+            if pw > 0.0 && sends {
                 let [nx, ny, nz, _] = rsm.normal[t];
                 RefVpl {
                     position: Vec3::new(px, py, pz),
                     normal: Vec3::new(nx, ny, nz).normalize(),
                     flux: flux * share,
                     area: area * share,
+                    glossy: glossy.scaled(share),
                     lit: true,
                     texel,
                 }
@@ -308,7 +341,9 @@ pub fn shade_visible<'a>(
                     position: vpl.position,
                     normal: vpl.normal,
                     flux: vpl.flux,
+                    glossy: vpl.glossy,
                     area: vpl.area,
+                    footprint: vpl.area,
                 },
                 s.position,
                 s.normal,
@@ -427,6 +462,7 @@ mod tests {
             normal,
             flux: Vec3::ONE,
             area: 0.01,
+            glossy: GlossySender::default(),
             lit: true,
             texel: 0,
         }

@@ -27,14 +27,16 @@ use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
+use crate::gi::params::Senders;
 use crate::gpu::readback::{
-    read_buffer, read_rgba_texture, stage_buffer, PendingMap, TextureReadback,
+    read_buffer, read_rgba_texture, read_rgba_u32_texture, stage_buffer, PendingMap,
+    TextureReadback,
 };
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::ShaderPass;
 use crate::passes::{
     gbuffer::GBuffer,
-    rsm::{max_rsm_size, Rsm, RsmFace, RsmPass},
+    rsm::{max_rsm_size, GlossySender, Rsm, RsmFace, RsmPass},
     Target,
 };
 use lightcast_protocol::{GiParams, View};
@@ -424,7 +426,11 @@ pub struct ClusteredReadback {
     pub rsm_position: Vec<[f32; 4]>,
     pub rsm_normal: Vec<[f32; 4]>,
     pub rsm_flux_area: Vec<[f32; 4]>,
+    /// `GlossySender::decode` reads these.
+    pub rsm_glossy: Vec<[u32; 4]>,
     pub vpls: Vec<Vpl>,
+    /// Each VPL's glossy lobe.
+    pub vpl_glossy: Vec<GlossySender>,
     /// The VALs.
     pub vals: Vec<Val>,
     /// C: the VAL of every VPL ([`passes::NO_VAL`] for unlit ones).
@@ -513,7 +519,9 @@ impl Clustered {
             rsm_position: read_texture(&rsm.position.texture)?,
             rsm_normal: read_texture(&rsm.normal.texture)?,
             rsm_flux_area: read_texture(&rsm.flux_area.texture)?,
+            rsm_glossy: read_rgba_u32_texture(ctx, &rsm.glossy.texture)?,
             vpls: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.vpls)?),
+            vpl_glossy: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.vpl_glossy)?),
             vals: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.vals)?),
             mapping: bytemuck::pod_collect_to_vec(&read_buffer(ctx, &buffers.mapping)?),
             interleaved: read_texture(&interleaved.target.texture)?,
@@ -551,7 +559,7 @@ impl Method for Clustered {
             faces.len() as u32 + u32::from(emitter_face),
         );
         let queue = &r.ctx.queue;
-        let rsm_faces = RsmFace::all(faces, g.rsm_size);
+        let rsm_faces = RsmFace::all(faces, g.rsm_size, g.senders == Senders::Full);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let atlas = visibility.layout;
         let params = ClusteredParams {
@@ -613,6 +621,7 @@ impl Method for Clustered {
             basis: &visibility.basis_view,
             basis_sampler: &visibility.sampler,
             brdf_table: &r.scene_buffers.brdf_table,
+            vpl_glossy: &buffers.vpl_glossy,
         };
         let indirect_group = indirect_resources.bind(device, &self.indirect.layout);
         let blur_group = BlurResources {

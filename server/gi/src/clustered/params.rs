@@ -1,7 +1,7 @@
 //! `clustered`'s parameter table (seed 003) and the struct its passes read it as.
 
 use super::passes::FOURIER_MAX_TERMS;
-use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE};
+use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE, SENDERS};
 use crate::gi::params::{read, Default, MethodTable, Param};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -134,6 +134,7 @@ pub const TABLE: MethodTable = MethodTable {
         &RSM_SIZE,
         &EMITTERS,
         &LIGHT_FIT,
+        &SENDERS,
         &VPL_COUNT,
         &CLUSTER_COUNT,
         &KMEANS_ITERATIONS,
@@ -162,8 +163,8 @@ pub const TABLE: MethodTable = MethodTable {
         scale_tolerance: crate::gi::params::SCALE_TOLERANCE,
         exact_at_powers_of_two: true,
     },
-    // VPLs are diffuse (seed 003, §3: the RSM stores diffusely reflected flux).
-    senders: |_| crate::gi::params::Senders::Diffuse,
+    // `senders: diffuse` is the paper's diffuse VALs/VPLs; `full` adds their glossy lobes.
+    senders: |gi| Settings::of(gi).map(|s| s.senders).unwrap_or_default(),
 };
 
 /// How each VPL's visibility is found (`visibility`).
@@ -212,6 +213,7 @@ pub struct Settings {
     pub rsm_size: u32,
     pub emitters: Option<bool>,
     pub light_fit: LightFit,
+    pub senders: crate::gi::params::Senders,
     pub vpl_count: u32,
     pub cluster_count: u32,
     pub kmeans_iterations: u32,

@@ -8,8 +8,9 @@ use super::Visibility;
 use crate::gpu::shaders::ShaderSource;
 use crate::passes::bind::BindKind;
 use crate::passes::bind::{self, bind_group, BindGroupDesc};
+use crate::passes::rsm::{GlossySender, Rsm};
 use crate::passes::scene_buffers::SceneBuffers;
-use crate::passes::{self, rsm::Rsm, Target, INDIRECT_FORMAT};
+use crate::passes::{self, Target, INDIRECT_FORMAT};
 use bytemuck::{Pod, Zeroable};
 
 /// Format of the interleaved shading before the blur: values are B² times a pixel's share
@@ -199,6 +200,8 @@ bind_group! {
         vpls: bind::STORAGE_RW,
         vals: bind::STORAGE_RW,
         mapping: bind::STORAGE_RW,
+        rsm_glossy: bind::UINT_TEXTURE,
+        vpl_glossy: bind::STORAGE_RW,
     }
 }
 
@@ -262,6 +265,7 @@ bind_group! {
         basis: FILTERABLE,
         basis_sampler: BindKind::Sampler(wgpu::SamplerBindingType::Filtering),
         brdf_table: bind::STORAGE,
+        vpl_glossy: bind::STORAGE,
     }
 }
 
@@ -281,6 +285,9 @@ pub struct ClusterBuffers {
     pub vpl_count: u32,
     pub cluster_count: u32,
     pub vpls: wgpu::Buffer,
+    /// Each VPL's [`GlossySender`], beside `vpls` (whose layout the paraboloid maps share
+    /// with the VALs').
+    pub vpl_glossy: wgpu::Buffer,
     pub vals: wgpu::Buffer,
     pub mapping: wgpu::Buffer,
 }
@@ -307,6 +314,11 @@ impl ClusterBuffers {
             vpl_count,
             cluster_count,
             vpls: storage(device, "clustered vpls", n * size_of::<Vpl>()),
+            vpl_glossy: storage(
+                device,
+                "clustered vpl glossy",
+                n * size_of::<GlossySender>(),
+            ),
             vals: storage(device, "clustered vals", m * size_of::<Val>()),
             mapping: storage(device, "clustered mapping", n * size_of::<u32>()),
         }
@@ -354,6 +366,8 @@ impl ClusteringPass {
             vpls: &buffers.vpls,
             vals: &buffers.vals,
             mapping: &buffers.mapping,
+            rsm_glossy: &rsm.glossy,
+            vpl_glossy: &buffers.vpl_glossy,
         }
         .bind(device, &self.layout)
     }

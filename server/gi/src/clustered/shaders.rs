@@ -7,6 +7,7 @@ pub const CLUSTERING: ShaderSource = ShaderSource {
     name: "clustering",
     files: &[
         wgsl!("halton.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/kmeans.wgsl"),
     ],
@@ -20,6 +21,7 @@ pub const CLUSTERED_INDIRECT: ShaderSource = ShaderSource {
         wgsl!("brdf.wgsl"),
         wgsl!("brdf_eval.wgsl"),
         wgsl!("gbuffer_surface.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
         wgsl!("vpl_light.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/paraboloid.wgsl"),
@@ -33,6 +35,7 @@ pub const PARABOLOID_MAPS: ShaderSource = ShaderSource {
     name: "paraboloid_maps",
     files: &[
         wgsl!("common.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/paraboloid.wgsl"),
         wgsl!("clustered/paraboloid_maps.wgsl"),
@@ -44,6 +47,7 @@ pub const CSSM_BASIS: ShaderSource = ShaderSource {
     name: "cssm_basis",
     files: &[
         wgsl!("common.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/paraboloid.wgsl"),
         wgsl!("clustered/cssm_basis.wgsl"),
@@ -59,5 +63,9 @@ pub const CSSM_MIPS: ShaderSource = ShaderSource {
 /// The geometry-aware blur of `clustered`.
 pub const GEOMETRY_BLUR: ShaderSource = ShaderSource {
     name: "geometry_blur",
-    files: &[wgsl!("clustered/vpls.wgsl"), wgsl!("clustered/blur.wgsl")],
+    files: &[
+        wgsl!("rsm_glossy.wgsl"),
+        wgsl!("clustered/vpls.wgsl"),
+        wgsl!("clustered/blur.wgsl"),
+    ],
 };

@@ -58,6 +58,23 @@ pub const LIGHT_FIT: Param = Param::choice(
      RSM texels; moves in whole texels as the camera does)",
 );
 
+/// How the light a surface receives straight from a light leaves it (the reference and the
+/// RSM-based methods; see [`crate::gi::params::Senders`]).
+pub const SENDERS: Param = Param::choice(
+    "senders",
+    "full",
+    crate::gi::params::Senders::NAMES,
+    "How the light a surface receives straight from a light (punctual or the sky) leaves it: \
+     full (the whole BRDF) or diffuse (its diffuse lobe alone). The RSM-based methods: with \
+     full an RSM texel also sends its glossy part, as the Phong lobe of LightSkin's eq. 4 \
+     fitted to its material about the light's mirror direction (the sun's reflection off glass \
+     or metal onto the street; beyond the papers, whose VALs and VPLs are diffuse: diffuse). \
+     The reference: full is the truth; diffuse is the light transport of diffuse VALs, VPLs \
+     or surfels, which comparisons also render (`compare_modelled`) to part the error of what \
+     a method leaves out from the error in what it models; light from emissive surfaces and \
+     light of later bounces still leave by the whole BRDF there",
+);
+
 /// See [`LIGHT_FIT`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -77,6 +77,7 @@ bind_group! {
         rsm_flux_area: bind::TEXTURE,
         lighting: bind::STORAGE_RW,
         accum: bind::STORAGE_RW,
+        rsm_glossy: bind::UINT_TEXTURE,
     }
 }
 
@@ -134,6 +135,7 @@ impl CacheLightingPass {
             rsm_flux_area: &rsm.flux_area,
             lighting,
             accum,
+            rsm_glossy: &rsm.glossy,
         }
         .bind(device, &self.layout)
     }

@@ -17,6 +17,7 @@
 //! light at the cache, independent of any material there, and the shaded surface applies its
 //! own ρ_d, ρ_g in [`shade`].
 
+use crate::passes::rsm::GlossySender;
 use glam::Vec3;
 use std::f32::consts::PI;
 
@@ -66,6 +67,8 @@ pub struct RefVal {
     pub area: f32,
     /// 1 for LightSkin; 1/(N_sVAL·P_VAL) for BRSM (eq. 13–15). VALs with weight ≤ 0 are skipped.
     pub weight: f32,
+    /// The glossy lobe it sends besides Φ_l (`GlossySender`; beyond the paper).
+    pub glossy: GlossySender,
 }
 
 /// A proxy point light with its extent.
@@ -211,8 +214,12 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
         // cos^k θ_e of eq. 4 with the cache's k.
         let lobe = phong_lobe(n_c, omega, view, k);
         let w = val.weight;
-        e_d += w * g * val.flux;
-        e_g += w * g * lobe * val.flux;
+        // Φ_l of eq. 3/4 is what the VAL sends towards the cache: its glossy lobe's share too.
+        let flux = val
+            .glossy
+            .sent_flux(val.flux, -omega, GlossySender::spread(val.area, len2));
+        e_d += w * g * flux;
+        e_g += w * g * lobe * flux;
         // Eq. 6 weights (ε_p relative to F_max, see [`EPS_P`]) times the BRSM weight
         // 1/(N_sVAL·P_VAL) of eq. 13.
         m_d.add(w * (EPS_P * f_max + form_factor), delta);
@@ -362,6 +369,7 @@ mod tests {
             flux,
             area: 0.1,
             weight: 1.0,
+            glossy: GlossySender::default(),
         }
     }
 

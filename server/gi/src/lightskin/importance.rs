@@ -40,6 +40,7 @@ bind_group! {
         rsm_normal: bind::TEXTURE,
         rsm_flux_area: bind::TEXTURE,
         importance: bind::STORAGE_RW,
+        rsm_glossy: bind::UINT_TEXTURE,
     }
 }
 
@@ -96,6 +97,7 @@ impl ImportancePass {
             rsm_normal: &rsm.normal,
             rsm_flux_area: &rsm.flux_area,
             importance,
+            rsm_glossy: &rsm.glossy,
         }
         .bind(device, &self.layout)
     }

@@ -1,6 +1,6 @@
 //! The parameter tables of `lightskin` and `brsm` (seed 004) and the struct both read them as.
 
-use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE};
+use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE, SENDERS};
 use crate::gi::params::{read_for, Default, MethodTable, Param, Testing, SCALE_TOLERANCE};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -90,6 +90,7 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
         &RSM_SIZE,
         &EMITTERS,
         &LIGHT_FIT,
+        &SENDERS,
         &OCCLUSION,
         &CACHE_DISTANCE,
         &CACHE_ANGLE,
@@ -101,8 +102,8 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
         // d_eps is derived (and rounded) from the surface area.
         exact_at_powers_of_two: false,
     },
-    // VALs are diffuse (seed 004, eq. 3: the RSM texel's flux leaves it by Lambert's law).
-    senders: |_| crate::gi::params::Senders::Diffuse,
+    // `senders: diffuse` is the paper's diffuse VALs/VPLs; `full` adds their glossy lobes.
+    senders: |gi| Settings::of(gi).map(|s| s.senders).unwrap_or_default(),
 };
 
 /// A 64² RSM and caches four times as far apart as the default (a few hundred on the Cornell
@@ -137,6 +138,7 @@ pub const BRSM: MethodTable = MethodTable {
         &RSM_SIZE,
         &EMITTERS,
         &LIGHT_FIT,
+        &SENDERS,
         &OCCLUSION,
         &CACHE_DISTANCE,
         &CACHE_ANGLE,
@@ -152,8 +154,8 @@ pub const BRSM: MethodTable = MethodTable {
         scale_tolerance: SCALE_TOLERANCE,
         exact_at_powers_of_two: false,
     },
-    // VALs are diffuse (seed 004, eq. 3: the RSM texel's flux leaves it by Lambert's law).
-    senders: |_| crate::gi::params::Senders::Diffuse,
+    // `senders: diffuse` is the paper's diffuse VALs/VPLs; `full` adds their glossy lobes.
+    senders: |gi| Settings::of(gi).map(|s| s.senders).unwrap_or_default(),
 };
 
 /// The parameters of both methods, as [`BRSM`]'s table (a superset of [`LIGHTSKIN`]'s)
@@ -164,6 +166,7 @@ pub struct Settings {
     pub rsm_size: u32,
     pub emitters: Option<bool>,
     pub light_fit: LightFit,
+    pub senders: crate::gi::params::Senders,
     pub occlusion: bool,
     pub cache_distance: Option<f32>,
     pub cache_angle: Option<f32>,

@@ -8,6 +8,7 @@ use super::{
     importance::{ImportanceParams, ImportancePass, ViewSample},
     val_select::{SelectionBuffers, Val, ValSelectPass},
 };
+use crate::gi::params::Senders;
 use crate::gpu::readback::{stage_buffer, PendingMap, TextureReadback};
 use crate::gpu::{GpuContext, GpuError};
 use crate::passes::{
@@ -70,6 +71,8 @@ pub struct SamplingReadback {
     pub rsm_normal: Vec<[f32; 4]>,
     /// RGBA per texel: reflected flux (rgb) and disk area (a).
     pub rsm_flux_area: Vec<[f32; 4]>,
+    /// Per texel: the glossy lobe it sends on (`GlossySender::decode`).
+    pub rsm_glossy: Vec<[u32; 4]>,
     pub view_samples: Vec<ViewSample>,
     pub importance: Vec<f32>,
     pub column_sums: Vec<f32>,
@@ -141,7 +144,7 @@ impl ValSampling {
         // Every light's faces lie in one atlas and eq. 10–11's importance is estimated over all
         // of it, so the VAL budget is split between the lights by their share of the summed
         // importance: light k draws N·ΣI_k/ΣI VALs in expectation (1/(N·P) keeps each unbiased).
-        let rsm_faces = RsmFace::all(faces, settings.rsm_size);
+        let rsm_faces = RsmFace::all(faces, settings.rsm_size, settings.senders == Senders::Full);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let bands = self
             .importance_pass
@@ -285,6 +288,7 @@ impl ValSampling {
                 texture(encoder, &rsm.normal.texture, 8),
                 texture(encoder, &rsm.flux_area.texture, 16),
             ],
+            rsm_glossy: texture(encoder, &rsm.glossy.texture, 16).0,
             buffers: [
                 &res.samples,
                 &res.importance,
@@ -315,6 +319,7 @@ pub struct SamplingCapture {
     val_count: u32,
     /// RSM position, normal and flux/area, with their bytes per texel.
     rsm: [(TextureReadback, u32); 3],
+    rsm_glossy: TextureReadback,
     /// View samples, importance, column sums, row sums, VALs.
     buffers: [wgpu::Buffer; 5],
 }
@@ -328,6 +333,7 @@ impl SamplingCapture {
         submission: Option<&wgpu::SubmissionIndex>,
     ) -> Result<SamplingReadback, GpuError> {
         let rsm = self.rsm.map(|(r, bytes)| (r.begin_read(), bytes));
+        let glossy = self.rsm_glossy.begin_read();
         let maps = self.buffers.each_ref().map(PendingMap::new);
         ctx.wait_for(submission)?;
         let texels = (self.rsm_width * self.rsm_height) as usize;
@@ -358,6 +364,7 @@ impl SamplingCapture {
             rsm_position,
             rsm_normal,
             rsm_flux_area,
+            rsm_glossy: bytemuck::pod_collect_to_vec(&glossy.finish()?),
             view_samples,
             importance,
             column_sums,

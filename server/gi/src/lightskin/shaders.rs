@@ -7,6 +7,7 @@ pub const IMPORTANCE: ShaderSource = ShaderSource {
     files: &[
         wgsl!("halton.wgsl"),
         wgsl!("lightskin/view_samples.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
         wgsl!("lightskin/importance.wgsl"),
     ],
 };
@@ -19,6 +20,7 @@ pub const CUMULATIVE_SUMS: ShaderSource = ShaderSource {
 pub const VAL_SELECT: ShaderSource = ShaderSource {
     name: "val_select",
     files: &[
+        wgsl!("rsm_glossy.wgsl"),
         wgsl!("lightskin/vals.wgsl"),
         wgsl!("lightskin/val_select.wgsl"),
     ],
@@ -28,6 +30,7 @@ pub const CACHE_LIGHTING: ShaderSource = ShaderSource {
     name: "cache_lighting",
     files: &[
         wgsl!("common.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
         wgsl!("lightskin/vals.wgsl"),
         wgsl!("lightskin/light_caches.wgsl"),
         wgsl!("lightskin/cache_lighting.wgsl"),

@@ -2,7 +2,7 @@
 //! distribution by binary search on the cumulative sums, each with its Monte Carlo weight.
 
 use crate::passes::bind::{self, bind_group};
-use crate::passes::rsm::Rsm;
+use crate::passes::rsm::{GlossySender, Rsm};
 use bytemuck::{Pod, Zeroable};
 
 /// Mirrors `SelectParams` in `shaders/val_select.wgsl`.
@@ -29,6 +29,8 @@ pub struct Val {
     pub weight: f32,
     pub flux: [f32; 3],
     pub texel: u32,
+    /// The texel's glossy lobe.
+    pub glossy: GlossySender,
 }
 
 const WORKGROUP: u32 = 64;
@@ -46,6 +48,7 @@ bind_group! {
         rsm_normal: bind::TEXTURE,
         rsm_flux_area: bind::TEXTURE,
         vals: bind::STORAGE_RW,
+        rsm_glossy: bind::UINT_TEXTURE,
     }
 }
 
@@ -99,6 +102,7 @@ impl ValSelectPass {
             rsm_normal: &rsm.normal,
             rsm_flux_area: &rsm.flux_area,
             vals: buffers.vals,
+            rsm_glossy: &rsm.glossy,
         }
         .bind(device, &self.layout)
     }
@@ -174,6 +178,7 @@ mod tests {
                 ("weight", offset_of!(Val, weight)),
                 ("flux", offset_of!(Val, flux)),
                 ("texel", offset_of!(Val, texel)),
+                ("glossy", offset_of!(Val, glossy)),
             ],
         );
     }

@@ -1,7 +1,7 @@
 //! The reference's parameter table and the struct it reads it as.
 
 use super::MAX_SAMPLES_PER_CALL;
-use crate::gi::common::params::{BOUNCES, EMITTERS};
+use crate::gi::common::params::{BOUNCES, EMITTERS, SENDERS};
 use crate::gi::params::{read, Default, MethodTable, Param, Senders};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -22,18 +22,6 @@ pub const SPP: Param = Param::integer(
 .limit(&super::limits::MAX_SPP)
 .software(Default::Int(1))
 .unit("samples");
-
-/// What a light's reflection off the surfaces it reaches models (see [`Senders`]).
-pub const SENDERS: Param = Param::choice(
-    "senders",
-    "full",
-    Senders::NAMES,
-    "How the light a surface receives straight from a light (punctual or the sky) leaves it: \
-     full (the whole BRDF: the truth) or diffuse (its diffuse lobe alone, the light transport \
-     of the methods whose VPLs, VALs or surfels are diffuse; comparisons also render this, to \
-     part the error of what a method leaves out from the error in what it models). Light from \
-     emissive surfaces and light of later bounces still leave by the whole BRDF",
-);
 
 pub const TABLE: MethodTable = MethodTable {
     method: crate::gi::reference::REFERENCE,

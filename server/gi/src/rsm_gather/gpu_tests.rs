@@ -152,6 +152,7 @@ fn gather_matches_the_cpu(scene: &Scene, lights: Vec<Light>) {
         position: &rb.rsm_position,
         normal: &rb.rsm_normal,
         flux_area: &rb.rsm_flux_area,
+        glossy: &rb.rsm_glossy,
     };
     let bvh = SceneBvh::build(scene).expect("a BVH");
     let viewer = Vec3::from(s.camera.position);

@@ -24,8 +24,10 @@ use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
+use crate::gi::params::Senders;
 use crate::gpu::readback::{
-    read_buffer, read_rgba_texture, stage_buffer, PendingMap, TextureReadback,
+    read_buffer, read_rgba_texture, read_rgba_u32_texture, stage_buffer, PendingMap,
+    TextureReadback,
 };
 use crate::gpu::{timing::FrameStages, GpuContext, GpuError};
 use crate::passes::rsm::{max_rsm_size, Rsm, RsmFace, RsmPass};
@@ -135,6 +137,8 @@ pub struct GatherReadback {
     pub rsm_position: Vec<[f32; 4]>,
     pub rsm_normal: Vec<[f32; 4]>,
     pub rsm_flux_area: Vec<[f32; 4]>,
+    /// `GlossySender::decode` reads these.
+    pub rsm_glossy: Vec<[u32; 4]>,
     /// Each face's view-projection.
     /// Each atlas face's light and view-projection.
     pub face_view_proj: Vec<(u32, glam::Mat4)>,
@@ -219,6 +223,7 @@ impl RsmGather {
             rsm_position: read(&rsm.position)?,
             rsm_normal: read(&rsm.normal)?,
             rsm_flux_area: read(&rsm.flux_area)?,
+            rsm_glossy: read_rgba_u32_texture(ctx, &rsm.glossy.texture)?,
             face_view_proj: faces.clone(),
             samples: self.samples.clone(),
             probe: read_probe(probe),
@@ -243,7 +248,7 @@ impl Method for RsmGather {
                 .prepare_emitters(device, &r.scene, g.rsm_size, emitters(frame.settings));
         let face_count = faces.len() as u32 + u32::from(emitter_face);
         let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, face_count);
-        let rsm_faces = RsmFace::all(faces, g.rsm_size);
+        let rsm_faces = RsmFace::all(faces, g.rsm_size, g.senders == Senders::Full);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let view_proj: Vec<(u32, glam::Mat4)> = faces
             .iter()
@@ -307,6 +312,7 @@ impl Method for RsmGather {
             probe: &self.probe,
             indirect_out: frame.indirect,
             brdf_table: &r.scene_buffers.brdf_table,
+            rsm_glossy: &rsm.glossy,
         }
         .bind(device, &self.layout);
         stages.stage(crate::passes::stages::RSM, |e| {

@@ -1,6 +1,6 @@
 //! `rsm_gather`'s parameter table and the struct its pass reads it as.
 
-use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE};
+use crate::gi::common::params::{LightFit, EMITTERS, LIGHT_FIT, RSM_SIZE, SENDERS};
 use crate::gi::params::{read, Default, MethodTable, Param, Testing, SCALE_TOLERANCE};
 use crate::gi::InvalidSetting;
 use lightcast_protocol::GiParams;
@@ -46,6 +46,7 @@ pub const TABLE: MethodTable = MethodTable {
         &RSM_SIZE,
         &EMITTERS,
         &LIGHT_FIT,
+        &SENDERS,
         &GATHER_SAMPLES,
         &GATHER_RADIUS,
     ],
@@ -61,8 +62,8 @@ pub const TABLE: MethodTable = MethodTable {
         scale_tolerance: SCALE_TOLERANCE,
         exact_at_powers_of_two: true,
     },
-    // RSM texels are diffuse reflectors (Dachsbacher & Stamminger 2005, eq. 1).
-    senders: |_| crate::gi::params::Senders::Diffuse,
+    // `senders: diffuse` is the paper's diffuse VALs/VPLs; `full` adds their glossy lobes.
+    senders: |gi| Settings::of(gi).map(|s| s.senders).unwrap_or_default(),
 };
 
 /// `rsm_gather`'s parameters, as [`TABLE`] describes them.
@@ -72,6 +73,7 @@ pub struct Settings {
     pub rsm_size: u32,
     pub emitters: Option<bool>,
     pub light_fit: LightFit,
+    pub senders: crate::gi::params::Senders,
     pub gather_samples: u32,
     pub gather_radius: f32,
 }

@@ -50,6 +50,7 @@ bind_group! {
         probe: bind::STORAGE_RW,
         indirect_out: bind::storage_texture(crate::passes::INDIRECT_FORMAT),
         brdf_table: bind::STORAGE,
+        rsm_glossy: bind::UINT_TEXTURE,
     }
 }
 

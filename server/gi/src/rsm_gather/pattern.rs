@@ -20,7 +20,7 @@
 
 use crate::gi::common::halton::halton;
 use crate::gi::common::vpl::{vpl_light, VplLight};
-use crate::passes::rsm::emitter_samples;
+use crate::passes::rsm::{emitter_samples, GlossySender};
 use crate::scene::brdf::Brdf;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec2, Vec3, Vec4Swizzles};
@@ -93,6 +93,8 @@ pub struct RsmAtlas<'a> {
     pub position: &'a [[f32; 4]],
     pub normal: &'a [[f32; 4]],
     pub flux_area: &'a [[f32; 4]],
+    /// [`GlossySender::decode`] reads these.
+    pub glossy: &'a [[u32; 4]],
 }
 
 /// The row-major atlas texels (`faces` faces of `size`² side by side) that `samples` reach
@@ -210,7 +212,9 @@ pub fn gather(
                 position: Vec3::from_slice(&rsm.position[i][..3]),
                 normal: Vec3::from_slice(&rsm.normal[i][..3]),
                 flux: Vec3::new(fr, fg, fb),
+                glossy: GlossySender::decode(rsm.glossy[i]),
                 area,
+                footprint: area * weight,
             };
             vpl_light(&light, x, n, v, s) * weight
         })

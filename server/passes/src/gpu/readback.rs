@@ -214,6 +214,27 @@ pub fn read_rgba_texture(
         wgpu::TextureFormat::Rgba16Float => 8,
         _ => 16,
     };
+    Ok(rgba_f32(
+        &read_texture_bytes(ctx, texture, bytes_per_texel)?,
+        bytes_per_texel,
+    ))
+}
+
+/// An `Rgba32Uint` texture's texels (blocking; for tests and debug views).
+pub fn read_rgba_u32_texture(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+) -> Result<Vec<[u32; 4]>, GpuError> {
+    Ok(bytemuck::pod_collect_to_vec(&read_texture_bytes(
+        ctx, texture, 16,
+    )?))
+}
+
+fn read_texture_bytes(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    bytes_per_texel: u32,
+) -> Result<Vec<u8>, GpuError> {
     let size = texture.size();
     let readback = TextureReadback::new(
         &ctx.device,
@@ -227,7 +248,7 @@ pub fn read_rgba_texture(
         .create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
     readback.encode_copy(&mut encoder, texture);
     ctx.queue.submit([encoder.finish()]);
-    Ok(rgba_f32(&readback.read(ctx)?, bytes_per_texel))
+    readback.read(ctx)
 }
 
 #[cfg(test)]

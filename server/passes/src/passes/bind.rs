@@ -66,6 +66,12 @@ pub const TEXTURE: BindKind = BindKind::Texture {
     dimension: wgpu::TextureViewDimension::D2,
 };
 
+/// A `texture_2d<u32>` read with `textureLoad`.
+pub const UINT_TEXTURE: BindKind = BindKind::Texture {
+    sample_type: wgpu::TextureSampleType::Uint,
+    dimension: wgpu::TextureViewDimension::D2,
+};
+
 /// A slot of a [`ParamSlots`] holding one `T`.
 pub const fn param_slot<T>() -> BindKind {
     BindKind::ParamSlot {

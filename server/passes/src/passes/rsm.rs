@@ -1,5 +1,5 @@
 //! Reflective shadow map (`shaders/rsm.wgsl`): VAL position, normal, flux and disk area per
-//! texel, the faces of every light of the frame side by side in one atlas, and, when emissive
+//! texel and the glossy lobe it sends on ([`GlossySender`]), the faces of every light of the frame side by side in one atlas, and, when emissive
 //! surfaces light the frame, one face more holding samples of the emitters
 //! ([`EmitterFace`]), so that every RSM-based method lights from them as from any texel.
 
@@ -16,12 +16,15 @@ pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Floa
 pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 /// Flux of a small texel far from a dim light can be far below f16's normal range.
 pub const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+/// [`GlossySender::encode`]: three f32 and a packed direction and exponent.
+pub const GLOSSY_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// A point light's six faces for each of the most lights a frame has.
 const MAX_FACES: u32 = 6 * super::frame_uniforms::MAX_LIGHTS as u32;
 /// Largest RSM side per light face.
 pub const MAX_RSM_SIZE: u32 = 4096;
-/// Most RSM texels over all faces (each costs ~50 bytes across the sampling stages).
+/// Most RSM texels over all faces (each costs ~66 bytes across the sampling stages: 60 in
+/// the RSM's targets and depth).
 pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
 /// Widest atlas: the texture width every Vulkan adapter we run on allows (lavapipe and
 /// desktop GPUs: 16,384 or more).
@@ -48,15 +51,17 @@ pub struct RsmFace {
     pub light: u32,
     /// The face's index among its light's (a cube face, a directional light's cascade).
     pub index: u32,
-    pub pad1: u32,
+    /// 1: texels send on their glossy part (`senders: full`).
+    pub glossy: u32,
 }
 
 impl RsmFace {
     /// Eq. 1 for an RSM of `size`² texels per face: the disk area is `texel_area · z²` for
     /// perspective faces (w_near·h_near / z_near² is the squared frustum side at unit depth)
     /// and `texel_area` itself for an orthographic face. `light` is the face's light's index,
-    /// `index` the face's among its light's.
-    pub fn new(face: &LightFace, size: u32, light: u32, index: u32) -> Self {
+    /// `index` the face's among its light's; `glossy`: whether texels send on their glossy
+    /// part.
+    pub fn new(face: &LightFace, size: u32, light: u32, index: u32, glossy: bool) -> Self {
         let texel_side = face.extent / size as f32;
         Self {
             view_proj: face.view_proj.to_cols_array_2d(),
@@ -65,17 +70,87 @@ impl RsmFace {
             perspective: u32::from(face.perspective),
             light,
             index,
-            pad1: 0,
+            glossy: u32::from(glossy),
         }
     }
 
     /// The RSM faces of every light's `faces` (as `frame_uniforms::lights_faces` lists them).
-    pub fn all(faces: &[(u32, LightFace)], size: u32) -> Vec<Self> {
+    pub fn all(faces: &[(u32, LightFace)], size: u32, glossy: bool) -> Vec<Self> {
         faces
             .iter()
             .enumerate()
-            .map(|(i, (light, f))| Self::new(f, size, *light, face_index(faces, i)))
+            .map(|(i, (light, f))| Self::new(f, size, *light, face_index(faces, i), glossy))
             .collect()
+    }
+}
+
+/// Mirrors `GlossySender` in `shaders/rsm_glossy.wgsl`: the glossy lobe an RSM texel sends on,
+/// ρ_g·Φ_in·(k+2)/2π·max(r·ω, 0)^k (see there), as the VALs and VPLs made from texels carry it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GlossySender {
+    /// ρ_g·Φ_in: the Phong lobe's colour times the flux the texel receives.
+    pub weight: [f32; 3],
+    /// Phong exponent k.
+    pub exponent: f32,
+    /// Unit mirror direction of the light the texel receives.
+    pub mirror: [f32; 3],
+    pub pad0: f32,
+}
+
+/// Bits of the octahedral mirror direction's coordinates and of log2 k in an RSM texel
+/// (`GLOSSY_*` in `shaders/rsm_glossy.wgsl`).
+const GLOSSY_OCT_BITS: u32 = 11;
+const GLOSSY_EXPONENT_BITS: u32 = 10;
+const GLOSSY_MAX_LOG2_EXPONENT: f32 = 12.0;
+
+impl GlossySender {
+    /// `decode_glossy`: the sender of a [`GLOSSY_FORMAT`] texel as read back.
+    pub fn decode(texel: [u32; 4]) -> Self {
+        let unit = |q: u32, bits: u32| (q & ((1 << bits) - 1)) as f32 / ((1 << bits) - 1) as f32;
+        let w = texel[3];
+        let oct = glam::Vec2::new(
+            unit(w, GLOSSY_OCT_BITS),
+            unit(w >> GLOSSY_OCT_BITS, GLOSSY_OCT_BITS),
+        ) * 2.0
+            - glam::Vec2::ONE;
+        let mut d = oct.extend(1.0 - oct.x.abs() - oct.y.abs());
+        let t = (-d.z).max(0.0);
+        d.x += if d.x >= 0.0 { -t } else { t };
+        d.y += if d.y >= 0.0 { -t } else { t };
+        let log2_k = unit(w >> (2 * GLOSSY_OCT_BITS), GLOSSY_EXPONENT_BITS);
+        Self {
+            weight: [0, 1, 2].map(|i| f32::from_bits(texel[i])),
+            exponent: (log2_k * GLOSSY_MAX_LOG2_EXPONENT).exp2(),
+            mirror: d.normalize().into(),
+            pad0: 0.0,
+        }
+    }
+
+    /// `sent_flux`: the flux a light of diffuse flux `flux` sends towards unit `toward` (in
+    /// the units of a diffuse flux: its intensity is this times cosθ/π), its lobe widened by
+    /// `spread` ([`Self::spread`]).
+    pub fn sent_flux(&self, flux: glam::Vec3, toward: glam::Vec3, spread: f32) -> glam::Vec3 {
+        let c = glam::Vec3::from(self.mirror).dot(toward);
+        if c <= 0.0 {
+            return flux;
+        }
+        let k = self.exponent / (1.0 + self.exponent * spread);
+        flux + glam::Vec3::from(self.weight) * (0.5 * (k + 2.0) * c.powf(k))
+    }
+
+    /// `glossy_spread`: the variance a light standing for texels over `area` adds to its
+    /// lobe seen from squared distance `d2`, A/(4π d²).
+    pub fn spread(area: f32, d2: f32) -> f32 {
+        area / (4.0 * std::f32::consts::PI * d2)
+    }
+
+    /// This sender with its weight times `s` (a VPL standing for `s` texels).
+    pub fn scaled(self, s: f32) -> Self {
+        Self {
+            weight: self.weight.map(|w| w * s),
+            ..self
+        }
     }
 }
 
@@ -86,6 +161,7 @@ pub struct Rsm {
     pub position: Target,
     pub normal: Target,
     pub flux_area: Target,
+    pub glossy: Target,
     depth: Target,
 }
 
@@ -105,6 +181,7 @@ impl Rsm {
             position: Target::new(device, "rsm position", w, h, POSITION_FORMAT, usage),
             normal: Target::new(device, "rsm normal", w, h, NORMAL_FORMAT, usage),
             flux_area: Target::new(device, "rsm flux", w, h, FLUX_FORMAT, usage),
+            glossy: Target::new(device, "rsm glossy", w, h, GLOSSY_FORMAT, usage),
             depth: Target::new(
                 device,
                 "rsm depth",
@@ -182,7 +259,8 @@ pub fn emitter_samples(size: u32) -> u32 {
 /// ([`crate::scene::emitters::sample`]), in the texel layout of an RSM face, copied into the
 /// atlas's last face after the lights' faces are drawn. A texel holds a sample's position
 /// (w = 1), normal and flux with its disk area: what `shaders/rsm.wgsl` writes for a surface a
-/// light reflects from, here the light the emitter sends itself.
+/// light reflects from, here the light the emitter sends itself. Emitters are Lambertian: the
+/// face's glossy texels stay as the pass cleared them (no glossy lobe).
 pub struct EmitterFace {
     pub size: u32,
     /// Rows of the face the samples fill (the copy's height).
@@ -302,7 +380,7 @@ impl RsmPass {
             "rsm",
             &pipeline_layout,
             &module,
-            &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT],
+            &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT, GLOSSY_FORMAT],
             DEPTH_FORMAT,
         );
         Self {
@@ -344,7 +422,12 @@ impl RsmPass {
         let mut pass = super::scene_buffers::begin_material_pass(
             encoder,
             "rsm",
-            &[&rsm.position.view, &rsm.normal.view, &rsm.flux_area.view],
+            &[
+                &rsm.position.view,
+                &rsm.normal.view,
+                &rsm.flux_area.view,
+                &rsm.glossy.view,
+            ],
             &rsm.depth.view,
         );
         pass.set_pipeline(&self.pipeline);
@@ -380,7 +463,22 @@ mod tests {
                 ("perspective", offset_of!(RsmFace, perspective)),
                 ("light", offset_of!(RsmFace, light)),
                 ("index", offset_of!(RsmFace, index)),
-                ("pad1", offset_of!(RsmFace, pad1)),
+                ("glossy", offset_of!(RsmFace, glossy)),
+            ],
+        );
+    }
+
+    #[test]
+    fn glossy_sender_matches_wgsl() {
+        assert_struct(
+            &RSM,
+            "GlossySender",
+            size_of::<GlossySender>(),
+            &[
+                ("weight", offset_of!(GlossySender, weight)),
+                ("exponent", offset_of!(GlossySender, exponent)),
+                ("mirror", offset_of!(GlossySender, mirror)),
+                ("pad0", offset_of!(GlossySender, pad0)),
             ],
         );
     }

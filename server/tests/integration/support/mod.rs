@@ -1,11 +1,14 @@
 //! Helpers shared by the GPU tests: tiny scenes, a CPU ray caster for planes and CPU ports of
 //! the shading equations in `shaders/` (the references the GPU output is compared against).
 
+pub mod plates;
+
 use glam::{Vec3, Vec4Swizzles};
 use lightcast_protocol::{Camera, Light, LightKind};
 use lightcast_server::gpu::{BackendChoice, GpuContext};
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::passes::frame_uniforms::camera_view_proj;
+use lightcast_server::passes::rsm::GlossySender;
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::{brdf::Brdf, Material, Scene, Vertex};
 
@@ -323,7 +326,8 @@ pub fn cpu_importance(
         Vec3::from_slice(&p[..3]),
         Vec3::from_slice(&rb.rsm_normal[i][..3]),
     );
-    let flux = luminance(Vec3::from_slice(&rb.rsm_flux_area[i][..3]));
+    let flux = Vec3::from_slice(&rb.rsm_flux_area[i][..3]);
+    let glossy = GlossySender::decode(rb.rsm_glossy[i]);
     let sum: f32 = rb
         .view_samples
         .iter()
@@ -335,7 +339,8 @@ pub fn cpu_importance(
             vs.valid * nl.dot(d).max(0.0) * Vec3::from(vs.normal).dot(-d).max(0.0) / d2.max(1.0)
         })
         .sum();
-    flux * sum / rb.view_samples.len() as f32
+    // Eq. 10's Φ_VAL: its glossy part as if it left diffusely.
+    luminance(flux + Vec3::from(glossy.weight)) * sum / rb.view_samples.len() as f32
 }
 
 /// The selected VALs as inputs of the CPU reference.
@@ -349,6 +354,7 @@ pub fn ref_vals(
             flux: Vec3::from(v.flux),
             area: v.area,
             weight: v.weight,
+            glossy: v.glossy,
         })
         .collect()
 }

@@ -35,7 +35,7 @@ given per scene: emitters are small, bright and found by bounce rays only.
 every surface Lambertian (`materials=diffuse`), under its own sun from its own camera (down the
 middle street) and from the same camera one street over (60 m along x), each method against
 the full reference and (`compare_modelled`) against the reference of the light transport it
-models (diffuse senders): on the diffuse street the two are one; the RSM-based methods with
+models (diffuse senders, where a method has them): on the diffuse street the two are one; the RSM-based methods with
 the sun's maps over the whole scene (`light_fit: scene`) and fitted to the view (`view`), and
 (`--senders`) with each value of `senders` for the methods that have it: `full`, the default,
 sends an RSM texel's glossy lobe on, `diffuse` is the papers' diffuse VALs and VPLs.

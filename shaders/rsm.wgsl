@@ -1,8 +1,7 @@
 // Reflective shadow map: every texel seen from the light becomes a virtual area light (VAL)
 // with a position, a normal, the flux it reflects and its disk area (eq. 1), and the glossy
-// lobe it sends on (rsm_glossy.wgsl). The faces of every
-// light (six for a point light) lie side by side in one atlas, so later stages treat all the
-// frame's lights as one 2D map.
+// lobe it sends on (rsm_glossy.wgsl). The faces of every light (six for a point light) lie
+// side by side in one atlas, so later stages treat all the frame's lights as one 2D map.
 
 // Mirrored by `RsmFace` in server/passes/src/passes/rsm.rs.
 struct RsmFace {

@@ -8,7 +8,6 @@
 // cosine, Φ_in the flux arriving at the texel. Mirrored by `GlossySender` in
 // server/passes/src/passes/rsm.rs.
 
-// Mirrored by `GlossySender` in server/passes/src/passes/rsm.rs.
 struct GlossySender {
     // ρ_g·Φ_in; zero where the texel sends nothing glossy (`senders: diffuse`, emitters).
     weight: vec3<f32>,
@@ -17,6 +16,11 @@ struct GlossySender {
     // Unit mirror direction r of the light the texel receives.
     mirror: vec3<f32>,
     pad0: f32,
+}
+
+// A light without a glossy lobe.
+fn no_glossy() -> GlossySender {
+    return GlossySender(vec3<f32>(0.0), 1.0, vec3<f32>(0.0, 0.0, 1.0), 0.0);
 }
 
 // The texel layout (an Rgba32Uint target): the weight's f32 bits in xyz; in w the mirror

@@ -49,7 +49,7 @@ var<workgroup> tile: array<Val, 64>;
 
 fn load_val(index: u32) -> Val {
     if index >= params.val_count {
-        return Val(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, GlossySender(vec3<f32>(0.0), 1.0, vec3<f32>(0.0, 0.0, 1.0), 0.0));
+        return Val(vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0.0, vec3<f32>(0.0), 0u, no_glossy());
     }
     if params.every_texel == 0u {
         return vals[index];

@@ -28,10 +28,6 @@ struct ImportanceParams {
 @group(0) @binding(7) var<storage, read_write> importance: array<f32>;
 @group(0) @binding(8) var rsm_glossy: texture_2d<u32>;
 
-fn luminance(c: vec3<f32>) -> f32 {
-    return dot(c, vec3<f32>(0.2126, 0.7152, 0.0722));
-}
-
 @compute @workgroup_size(64)
 fn gather_view_samples(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -59,22 +55,20 @@ fn estimate_importance(
     let inside = texel.x < params.rsm_width && texel.y < params.rsm_height;
     var val_position = vec3<f32>(0.0);
     var val_normal = vec3<f32>(0.0);
-    var flux = vec3<f32>(0.0);
-    var glossy = GlossySender(vec3<f32>(0.0), 1.0, vec3<f32>(0.0, 0.0, 1.0), 0.0);
+    var sent = 0.0;
     if inside {
         let p = textureLoad(rsm_position, texel, 0);
         val_position = p.xyz;
         val_normal = textureLoad(rsm_normal, texel, 0).xyz;
-        flux = p.w * textureLoad(rsm_flux_area, texel, 0).rgb;
-        glossy = decode_glossy(textureLoad(rsm_glossy, texel, 0));
-        glossy.weight *= p.w;
+        // Eq. 10's Φ_VAL: all the VAL reflects, its glossy part as if it left diffusely. That
+        // part is ρ_g·P·Φ_in (P the Phong lobe's albedo, which ρ_g divides out), and P ≈ cosθ_l
+        // = n·r for the sharp lobes where it matters. The lobe's direction is left out: a
+        // sharp lobe between the view samples would give a VAL that lights the caches brightly
+        // no importance, and the few draws the defensive mixture gives it weights of hundreds.
+        let g = decode_glossy(textureLoad(rsm_glossy, texel, 0));
+        let all = textureLoad(rsm_flux_area, texel, 0).rgb + g.weight * max(dot(val_normal, g.mirror), 0.0);
+        sent = p.w * dot(all, vec3<f32>(0.2126, 0.7152, 0.0722));
     }
-    // Eq. 10's Φ_VAL: all the VAL reflects, its glossy part ρ_g·Φ_in as if it left diffusely.
-    // Its lobe is left out: a sharp lobe between the view samples would give a VAL that
-    // lights the caches brightly no importance, and the few draws the defensive mixture gives
-    // it weights of hundreds (the street's glass: BRSM recovered under half of what LightSkin
-    // did of the glossy senders' light).
-    let sent = luminance(flux + glossy.weight);
     var sum = 0.0;
     // Samples are staged through workgroup memory, 64 at a time, shared by the 64 texels.
     for (var base = 0u; base < params.sample_count; base += TILE_SAMPLES) {

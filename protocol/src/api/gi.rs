@@ -142,8 +142,8 @@ pub enum Senders {
     /// By the whole BRDF: diffuse and glossy reflection, as the truth.
     #[default]
     Full,
-    /// By the diffuse lobe alone: what the RSM stores of the light it reflects, so every
-    /// glossy reflection of a light is missing.
+    /// By the diffuse lobe alone: the papers' VALs, VPLs and surfels, so every glossy
+    /// reflection of a light is missing.
     Diffuse,
 }
 

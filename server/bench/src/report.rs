@@ -366,7 +366,7 @@ fn modelled_cells(e: Option<ErrorStats>) -> [String; 2] {
 /// The equal-time table; `against` is the centre's method.
 fn equal_time_table(rows: &[MethodRow], against: GiMethod) -> String {
     let mut s = format!(
-        "\nAll GI methods at one bounce against the same reference (and against the reference of the light transport each models, diffuse senders for the RSM-based ones); ✓ marks each method's setting whose GI time is nearest {against}'s (equal time):\n\n| method | setting | GI ms (median / p95) | MAE / mean | 8×8-block MAE / mean | bias | 8×8-block MAE / mean vs modelled | bias vs modelled | equal time |\n|---|---|---|---|---|---|---|---|---|\n"
+        "\nAll GI methods at one bounce against the same reference (and against the reference of the light transport each models, diffuse senders for `surfels` and the RSM-based ones with `senders: diffuse`); ✓ marks each method's setting whose GI time is nearest {against}'s (equal time):\n\n| method | setting | GI ms (median / p95) | MAE / mean | 8×8-block MAE / mean | bias | 8×8-block MAE / mean vs modelled | bias vs modelled | equal time |\n|---|---|---|---|---|---|---|---|---|\n"
     );
     for m in rows {
         let [block, bias] = modelled_cells(m.vs_modelled);

@@ -150,7 +150,8 @@ pub fn shared(shape: &FrameShape, cost: &mut Cost) {
 
 /// A reflective shadow map of `gi.rsm_size` (the RSM-based methods): 100 reference ns per
 /// texel for its several targets (measured with VPLs from an RSM of 2048² against 64², at
-/// 32×32).
+/// 32×32, with three targets of 40 bytes a texel; the glossy senders' fourth, 16 bytes more,
+/// is not yet measured: `bench/gpu-run.sh` times the `rsm` stage at 2048²).
 pub fn rsm(gi: &GiParams, shape: &FrameShape, cost: &mut Cost) {
     cost.add("RSM (faces × rsm_size²)", shape.rsm_texels(gi), 100.0);
     cost.add(

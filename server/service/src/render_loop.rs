@@ -9,8 +9,7 @@ use super::scenes::{precompute_failed, precompute_label, Now, SceneEntry, SceneR
 use super::sessions::{unix_us, FramePlan, Session, SessionRegistry};
 use super::video::VideoConfig;
 use crate::debug_views::{self, Image};
-use crate::gi::common::params::SENDERS;
-use crate::gi::common::params::{BOUNCES, GLOSSY_EXPONENT};
+use crate::gi::common::params::{BOUNCES, GLOSSY_EXPONENT, SENDERS};
 use crate::gi::precompute::{PrecomputeKey, SceneData};
 use crate::gi::reference::params::SPP;
 use crate::gpu::timing::{StageTiming, TimingSource};

@@ -148,6 +148,12 @@ fn vpls_of_point_and_directional_lights_match_the_cpu() {
     // quarter of it sees geometry (139 of 512 VPLs on lavapipe).
     let lit = vpls.iter().filter(|v| v.lit).count();
     assert!(lit > 100, "the sun's RSM holds lit VPLs: {lit} of 512");
+    // Among them, checked against the CPU like the rest: the steel façades' VPLs, which send
+    // light by their glossy lobe alone, and the glass's sharp lobes.
+    let steel = vpls.iter().filter(|v| v.lit && v.flux.max_element() == 0.0);
+    assert!(steel.count() > 0, "no VPL on a metal");
+    let sharp = vpls.iter().filter(|v| v.lit && v.glossy.exponent > 100.0);
+    assert!(sharp.count() > 0, "no VPL with a sharp lobe");
 }
 
 /// The VPLs are the RSM texels at Halton positions with W·H/N of their flux and area, and

@@ -27,7 +27,6 @@ use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
-use crate::gi::params::Senders;
 use crate::gpu::readback::{
     read_buffer, read_rgba_texture, read_rgba_u32_texture, stage_buffer, PendingMap,
     TextureReadback,
@@ -559,7 +558,7 @@ impl Method for Clustered {
             faces.len() as u32 + u32::from(emitter_face),
         );
         let queue = &r.ctx.queue;
-        let rsm_faces = RsmFace::all(faces, g.rsm_size, g.senders == Senders::Full);
+        let rsm_faces = RsmFace::all(faces, g.rsm_size, g.senders);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let atlas = visibility.layout;
         let params = ClusteredParams {

@@ -35,7 +35,6 @@ pub const PARABOLOID_MAPS: ShaderSource = ShaderSource {
     name: "paraboloid_maps",
     files: &[
         wgsl!("common.wgsl"),
-        wgsl!("rsm_glossy.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/paraboloid.wgsl"),
         wgsl!("clustered/paraboloid_maps.wgsl"),
@@ -47,7 +46,6 @@ pub const CSSM_BASIS: ShaderSource = ShaderSource {
     name: "cssm_basis",
     files: &[
         wgsl!("common.wgsl"),
-        wgsl!("rsm_glossy.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/paraboloid.wgsl"),
         wgsl!("clustered/cssm_basis.wgsl"),
@@ -63,9 +61,5 @@ pub const CSSM_MIPS: ShaderSource = ShaderSource {
 /// The geometry-aware blur of `clustered`.
 pub const GEOMETRY_BLUR: ShaderSource = ShaderSource {
     name: "geometry_blur",
-    files: &[
-        wgsl!("rsm_glossy.wgsl"),
-        wgsl!("clustered/vpls.wgsl"),
-        wgsl!("clustered/blur.wgsl"),
-    ],
+    files: &[wgsl!("clustered/vpls.wgsl"), wgsl!("clustered/blur.wgsl")],
 };

@@ -21,7 +21,8 @@ pub static CLUSTERS: DebugView = DebugView {
 pub static VPLS: DebugView = DebugView {
     name: View::new("vpls"),
     summary: "The frame at a third of its brightness with every lit VPL as a dot at its \
-              surface point in the colour of its flux.",
+              surface point in the colour of its diffuse flux (black on metal, which sends \
+              light by its glossy lobe alone).",
     reads_indirect: false,
     draw: |v| Some(vpls(v, v.debug()?)),
 };

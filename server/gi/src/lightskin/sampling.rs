@@ -8,7 +8,6 @@ use super::{
     importance::{ImportanceParams, ImportancePass, ViewSample},
     val_select::{SelectionBuffers, Val, ValSelectPass},
 };
-use crate::gi::params::Senders;
 use crate::gpu::readback::{stage_buffer, PendingMap, TextureReadback};
 use crate::gpu::{GpuContext, GpuError};
 use crate::passes::{
@@ -144,7 +143,7 @@ impl ValSampling {
         // Every light's faces lie in one atlas and eq. 10–11's importance is estimated over all
         // of it, so the VAL budget is split between the lights by their share of the summed
         // importance: light k draws N·ΣI_k/ΣI VALs in expectation (1/(N·P) keeps each unbiased).
-        let rsm_faces = RsmFace::all(faces, settings.rsm_size, settings.senders == Senders::Full);
+        let rsm_faces = RsmFace::all(faces, settings.rsm_size, settings.senders);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let bands = self
             .importance_pass
@@ -271,12 +270,15 @@ impl ValSampling {
     ) -> SamplingCapture {
         let res = self.res();
         let rsm = &res.rsm;
-        // RGBA textures of 32-bit (16 bytes per texel) or 16-bit (8 bytes) floats.
-        let texture = |encoder: &mut wgpu::CommandEncoder, t: &wgpu::Texture, bytes: u32| {
+        // RGBA textures of 32-bit (16 bytes per texel) or 16-bit (8 bytes) channels.
+        let readback = |encoder: &mut wgpu::CommandEncoder, t: &wgpu::Texture, bytes: u32| {
             let readback =
                 TextureReadback::new(device, "rsm readback", rsm.width(), rsm.height(), bytes);
             readback.encode_copy(encoder, t);
-            (readback, bytes)
+            readback
+        };
+        let texture = |encoder: &mut wgpu::CommandEncoder, t: &wgpu::Texture, bytes: u32| {
+            (readback(encoder, t, bytes), bytes)
         };
         SamplingCapture {
             rsm_width: rsm.width(),
@@ -288,7 +290,7 @@ impl ValSampling {
                 texture(encoder, &rsm.normal.texture, 8),
                 texture(encoder, &rsm.flux_area.texture, 16),
             ],
-            rsm_glossy: texture(encoder, &rsm.glossy.texture, 16).0,
+            rsm_glossy: readback(encoder, &rsm.glossy.texture, 16),
             buffers: [
                 &res.samples,
                 &res.importance,

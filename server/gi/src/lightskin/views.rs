@@ -7,13 +7,15 @@ use super::caches::CacheSet;
 use super::sampling::SamplingReadback;
 use crate::gi::common::views::{auto_exposure, Image, Overlay, INDIRECT};
 use crate::gi::views::{DebugView, ViewInputs};
+use crate::passes::rsm::GlossySender;
 use crate::passes::tonemap::{luminance, tonemap_cpu};
 use glam::Vec3;
 use lightcast_protocol::View;
 
 pub static RSM_FLUX: DebugView = DebugView {
     name: View::new("rsm-flux"),
-    summary: "The reflective shadow map's flux (all light faces side by side), auto-exposed.",
+    summary: "The reflective shadow map's reflected flux, diffuse and glossy (all light faces \
+              side by side), auto-exposed.",
     reads_indirect: false,
     draw: |v| Some(rsm_flux(v.debug()?)),
 };
@@ -50,16 +52,25 @@ pub const LIGHTSKIN_VIEWS: &[&DebugView] = &[&INDIRECT, &RSM_FLUX, &CACHES];
 /// `brsm`'s: `lightskin`'s and its importance sampling's.
 pub const BRSM_VIEWS: &[&DebugView] = &[&INDIRECT, &RSM_FLUX, &IMPORTANCE, &SELECTED_VALS, &CACHES];
 
-/// The RSM's reflected flux, auto-exposed.
+/// The RSM's reflected flux, auto-exposed: the diffuse flux and the glossy lobe's, ρ_g·P·Φ_in
+/// with P ≈ n·r (what a metal texel sends is its glossy lobe alone).
 pub fn rsm_flux(s: &SamplingReadback) -> Image {
-    let rgb = |t: &[f32; 4]| [t[0], t[1], t[2]];
-    let exposure = auto_exposure(s.rsm_flux_area.iter().map(|t| luminance(rgb(t))));
+    let flux: Vec<[f32; 3]> = s
+        .rsm_flux_area
+        .iter()
+        .zip(&s.rsm_normal)
+        .zip(&s.rsm_glossy)
+        .map(|((t, n), g)| {
+            let g = GlossySender::decode(*g);
+            let cos = Vec3::from_slice(&n[..3]).dot(Vec3::from(g.mirror)).max(0.0);
+            (Vec3::from_slice(&t[..3]) + Vec3::from(g.weight) * cos).to_array()
+        })
+        .collect();
+    let exposure = auto_exposure(flux.iter().map(|&t| luminance(t)));
     Image::from_rgb(
         s.rsm_width,
         s.rsm_height,
-        s.rsm_flux_area
-            .iter()
-            .map(|t| tonemap_cpu(rgb(t), exposure)),
+        flux.iter().map(|&t| tonemap_cpu(t, exposure)),
     )
 }
 

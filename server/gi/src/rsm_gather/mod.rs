@@ -24,7 +24,6 @@ use super::{
     DebugCapture, DebugData, FrameInputs, GiError, InvalidSetting, Method, MethodEntry,
     ProgressBuffer, SceneResources,
 };
-use crate::gi::params::Senders;
 use crate::gpu::readback::{
     read_buffer, read_rgba_texture, read_rgba_u32_texture, stage_buffer, PendingMap,
     TextureReadback,
@@ -248,7 +247,7 @@ impl Method for RsmGather {
                 .prepare_emitters(device, &r.scene, g.rsm_size, emitters(frame.settings));
         let face_count = faces.len() as u32 + u32::from(emitter_face);
         let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, face_count);
-        let rsm_faces = RsmFace::all(faces, g.rsm_size, g.senders == Senders::Full);
+        let rsm_faces = RsmFace::all(faces, g.rsm_size, g.senders);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let view_proj: Vec<(u32, glam::Mat4)> = faces
             .iter()

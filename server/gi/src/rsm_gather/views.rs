@@ -9,9 +9,9 @@ use lightcast_protocol::View;
 
 pub static GATHER_SAMPLES: DebugView = DebugView {
     name: View::new("gather-samples"),
-    summary: "The RSM's flux (all light faces side by side) at a quarter of its brightness, \
-              with the texels the pixel at the image's centre gathers in magenta (the paper's \
-              sampling pattern around the texel the pixel projects to).",
+    summary: "The RSM's diffuse flux (all light faces side by side) at a quarter of its \
+              brightness, with the texels the pixel at the image's centre gathers in magenta \
+              (the paper's sampling pattern around the texel the pixel projects to).",
     reads_indirect: false,
     draw: |v| Some(gather_samples(v.debug()?)),
 };

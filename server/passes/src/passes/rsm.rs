@@ -1,7 +1,8 @@
 //! Reflective shadow map (`shaders/rsm.wgsl`): VAL position, normal, flux and disk area per
-//! texel and the glossy lobe it sends on ([`GlossySender`]), the faces of every light of the frame side by side in one atlas, and, when emissive
-//! surfaces light the frame, one face more holding samples of the emitters
-//! ([`EmitterFace`]), so that every RSM-based method lights from them as from any texel.
+//! texel and the glossy lobe it sends on ([`GlossySender`]), the faces of every light of the
+//! frame side by side in one atlas, and, when emissive surfaces light the frame, one face more
+//! holding samples of the emitters ([`EmitterFace`]), so that every RSM-based method lights
+//! from them as from any texel.
 
 use super::bind::{self, bind_group};
 use super::frame_uniforms::{face_index, LightFace};
@@ -11,6 +12,7 @@ use crate::gpu::readback::padded_bytes_per_row;
 use crate::gpu::shaders;
 use crate::scene::{emitters, Scene};
 use bytemuck::{Pod, Zeroable};
+use lightcast_protocol::Senders;
 
 pub const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 pub const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
@@ -59,9 +61,9 @@ impl RsmFace {
     /// Eq. 1 for an RSM of `size`² texels per face: the disk area is `texel_area · z²` for
     /// perspective faces (w_near·h_near / z_near² is the squared frustum side at unit depth)
     /// and `texel_area` itself for an orthographic face. `light` is the face's light's index,
-    /// `index` the face's among its light's; `glossy`: whether texels send on their glossy
+    /// `index` the face's among its light's; with `senders` full texels send on their glossy
     /// part.
-    pub fn new(face: &LightFace, size: u32, light: u32, index: u32, glossy: bool) -> Self {
+    pub fn new(face: &LightFace, size: u32, light: u32, index: u32, senders: Senders) -> Self {
         let texel_side = face.extent / size as f32;
         Self {
             view_proj: face.view_proj.to_cols_array_2d(),
@@ -70,16 +72,16 @@ impl RsmFace {
             perspective: u32::from(face.perspective),
             light,
             index,
-            glossy: u32::from(glossy),
+            glossy: u32::from(senders == Senders::Full),
         }
     }
 
     /// The RSM faces of every light's `faces` (as `frame_uniforms::lights_faces` lists them).
-    pub fn all(faces: &[(u32, LightFace)], size: u32, glossy: bool) -> Vec<Self> {
+    pub fn all(faces: &[(u32, LightFace)], size: u32, senders: Senders) -> Vec<Self> {
         faces
             .iter()
             .enumerate()
-            .map(|(i, (light, f))| Self::new(f, size, *light, face_index(faces, i), glossy))
+            .map(|(i, (light, f))| Self::new(f, size, *light, face_index(faces, i), senders))
             .collect()
     }
 }

@@ -339,8 +339,9 @@ pub fn cpu_importance(
             vs.valid * nl.dot(d).max(0.0) * Vec3::from(vs.normal).dot(-d).max(0.0) / d2.max(1.0)
         })
         .sum();
-    // Eq. 10's Φ_VAL: its glossy part as if it left diffusely.
-    luminance(flux + Vec3::from(glossy.weight)) * sum / rb.view_samples.len() as f32
+    // Eq. 10's Φ_VAL: its glossy part ρ_g·P·Φ_in as if it left diffusely, with P ≈ n·r.
+    let glossy = Vec3::from(glossy.weight) * nl.dot(Vec3::from(glossy.mirror)).max(0.0);
+    luminance(flux + glossy) * sum / rb.view_samples.len() as f32
 }
 
 /// The selected VALs as inputs of the CPU reference.

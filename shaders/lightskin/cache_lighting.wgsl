@@ -18,7 +18,8 @@ struct CacheLightingParams {
     end_val: u32,
     // Phong exponent k for every cache, overriding the materials'; 0 keeps their own.
     glossy_exponent: f32,
-    pad1: u32,
+    // Side of each cache's visibility map (`cache_visibility`); 0: none.
+    visibility_side: u32,
     pad2: u32,
 }
 
@@ -31,6 +32,32 @@ struct CacheLightingParams {
 @group(0) @binding(6) var<storage, read_write> lighting: array<CacheLighting>;
 @group(0) @binding(7) var<storage, read_write> accum: array<Accum>;
 @group(0) @binding(8) var rsm_glossy: texture_2d<u32>;
+// Per cache, (visibility_side + 1)² octahedral grid vertices: how far the cache sees in each
+// direction (server/gi/src/lightskin/cache_visibility.rs).
+@group(0) @binding(9) var<storage, read> visibility: array<f32>;
+
+// Mirrored by `cache_visibility::{SLACK, RAMP}`.
+const VISIBILITY_SLACK: f32 = 0.25;
+const VISIBILITY_RAMP: f32 = 0.25;
+
+// Whether cache `ci` sees a point at `distance` in unit direction `dir`: 1 up to its map's
+// distance there (bilinear between its cell's vertices) and a quarter beyond, falling to 0 at
+// half beyond (`CacheVisibility::visibility`); 1 without maps.
+fn cache_visibility(ci: u32, dir: vec3<f32>, distance: f32) -> f32 {
+    let side = params.visibility_side;
+    if side == 0u {
+        return 1.0;
+    }
+    let uv = (octahedral_encode(dir) * 0.5 + vec2<f32>(0.5)) * f32(side);
+    let cell = clamp(floor(uv), vec2<f32>(0.0), vec2<f32>(f32(side - 1u)));
+    let f = uv - cell;
+    let row = side + 1u;
+    let base = ci * row * row + u32(cell.y) * row + u32(cell.x);
+    let bottom = mix(visibility[base], visibility[base + 1u], f.x);
+    let top = mix(visibility[base + row], visibility[base + row + 1u], f.x);
+    let seen = mix(bottom, top, f.y);
+    return clamp((seen * (1.0 + VISIBILITY_SLACK + VISIBILITY_RAMP) - distance) / (VISIBILITY_RAMP * seen), 0.0, 1.0);
+}
 
 // ε_p of eq. 6 as a fraction of F_max = A_l / (A_l + π d²), the largest form factor the VAL's
 // disk could have at its distance (facing the cache): eq. 6's weight becomes ε_p·F_max + F.
@@ -85,13 +112,15 @@ struct Accum {
     pad3: f32,
 }
 
-fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) {
+fn accumulate(acc: ptr<function, Accum>, ci: u32, c: LightCache, v: vec3<f32>, val: Val) {
     let delta = val.position - c.position;
     let len2 = dot(delta, delta);
     if val.weight <= 0.0 || len2 <= 0.0 {
         return;
     }
     let w_dir = delta * inverseSqrt(len2);
+    // A VAL the cache cannot see lights it with nothing and takes no part in its proxies.
+    let weight = val.weight * cache_visibility(ci, w_dir, sqrt(len2));
     let cos_l = max(dot(val.normal, -w_dir), 0.0);
     let cos_x = max(dot(c.normal, w_dir), 0.0);
     // Geometric factor of eq. 3/4 with the VAL's disk area (which keeps it finite at any
@@ -108,10 +137,10 @@ fn accumulate(acc: ptr<function, Accum>, c: LightCache, v: vec3<f32>, val: Val) 
     let lobe = pow(max(dot(mirror(c.normal, w_dir), v), 0.0), cache_exponent(c));
     // Φ_l of eq. 3/4 is what the VAL sends towards the cache: its glossy lobe's share too.
     let flux = sent_flux(val.flux, val.glossy, -w_dir, glossy_spread(val.area, len2));
-    (*acc).e_d += val.weight * flux * g;
-    (*acc).e_g += val.weight * flux * g * lobe;
-    let a_d = val.weight * (EPS_P * f_max + form_factor);
-    let a_g = val.weight * (EPS_P * f_max + lobe * form_factor);
+    (*acc).e_d += weight * flux * g;
+    (*acc).e_g += weight * flux * g * lobe;
+    let a_d = weight * (EPS_P * f_max + form_factor);
+    let a_g = weight * (EPS_P * f_max + lobe * form_factor);
     (*acc).s_d += a_d;
     (*acc).s_g += a_g;
     // Moments about the cache rather than the origin: E[x²] − E[x]² in f32 loses the spread
@@ -169,7 +198,7 @@ fn accumulate_vals(
         if in_range {
             let count = min(TILE_VALS, params.end_val - base);
             for (var k = 0u; k < count; k++) {
-                accumulate(&acc, c, v, tile[k]);
+                accumulate(&acc, i, c, v, tile[k]);
             }
         }
     }

@@ -258,8 +258,8 @@ pub struct UnitBudget {
     pub unit: &'static str,
     /// The request field under `gi` that sizes a set; refusals name it.
     pub field: &'static str,
-    /// What to ask for instead when a set of the scene must stay within `allowed` units.
-    pub advice: fn(&SceneFacts, allowed: u64) -> String,
+    /// What to ask for instead when the set of `key` must stay within `allowed` units.
+    pub advice: fn(&PrecomputeKey, &SceneFacts, allowed: u64) -> String,
 }
 
 /// One method family's per-scene precomputation.

@@ -13,6 +13,7 @@ pub mod environment_image;
 pub mod gltf_loader;
 pub mod halton;
 pub mod material;
+pub mod octahedral;
 pub mod procedural;
 
 use bytemuck::{Pod, Zeroable};

@@ -7,6 +7,7 @@ pub const CLUSTERING: ShaderSource = ShaderSource {
     name: "clustering",
     files: &[
         wgsl!("halton.wgsl"),
+        wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("clustered/vpls.wgsl"),
         wgsl!("clustered/kmeans.wgsl"),
@@ -21,6 +22,7 @@ pub const CLUSTERED_INDIRECT: ShaderSource = ShaderSource {
         wgsl!("brdf.wgsl"),
         wgsl!("brdf_eval.wgsl"),
         wgsl!("gbuffer_surface.wgsl"),
+        wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("vpl_light.wgsl"),
         wgsl!("clustered/vpls.wgsl"),

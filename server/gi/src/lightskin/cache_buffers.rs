@@ -13,6 +13,11 @@ pub struct CacheBuffers {
     pub accum: wgpu::Buffer,
     /// Covered proxy areas carried between the chunked occlusion dispatches.
     pub coverage: wgpu::Buffer,
+    /// Each cache's visibility map (`cache_visibility::CacheVisibility::distances`), or one
+    /// unread texel without them.
+    pub visibility: wgpu::Buffer,
+    /// Their side; 0: none.
+    pub visibility_side: u32,
     pub count: u32,
 }
 
@@ -62,6 +67,16 @@ impl CacheBuffers {
                 usage: storage,
                 mapped_at_creation: false,
             }),
+            visibility: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("cache visibility"),
+                contents: bytemuck::cast_slice(
+                    set.visibility
+                        .as_ref()
+                        .map_or(&[0.0f32][..], |v| &v.distances),
+                ),
+                usage: storage,
+            }),
+            visibility_side: set.visibility.as_ref().map_or(0, |v| v.side),
             count: set.caches.len() as u32,
         }
     }

@@ -1,6 +1,7 @@
 //! Cache lighting (`shaders/cache_lighting.wgsl`): the diffuse and glossy proxy lights of every
 //! light cache from the VALs (eq. 3–7 for LightSkin, eq. 13–15 for the BRSM subset).
 
+use super::cache_buffers::CacheBuffers;
 use crate::passes::bind::{self, bind_group};
 use crate::passes::rsm::Rsm;
 use bytemuck::{Pod, Zeroable};
@@ -32,7 +33,8 @@ pub struct CacheLightingParams {
     pub end_val: u32,
     /// Phong exponent k for every cache, overriding the materials'; 0 keeps their own.
     pub glossy_exponent: f32,
-    pub pad1: u32,
+    /// Side of each cache's visibility map (`cache_visibility`); 0: none.
+    pub visibility_side: u32,
     pub pad2: u32,
 }
 
@@ -78,6 +80,7 @@ bind_group! {
         lighting: bind::STORAGE_RW,
         accum: bind::STORAGE_RW,
         rsm_glossy: bind::UINT_TEXTURE,
+        visibility: bind::STORAGE,
     }
 }
 
@@ -120,22 +123,21 @@ impl CacheLightingPass {
     pub fn bind(
         &self,
         device: &wgpu::Device,
-        caches: &wgpu::Buffer,
+        caches: &CacheBuffers,
         vals: &wgpu::Buffer,
         rsm: &Rsm,
-        lighting: &wgpu::Buffer,
-        accum: &wgpu::Buffer,
     ) -> wgpu::BindGroup {
         Resources {
             params: &self.params,
-            caches,
+            caches: &caches.caches,
             vals,
             rsm_position: &rsm.position,
             rsm_normal: &rsm.normal,
             rsm_flux_area: &rsm.flux_area,
-            lighting,
-            accum,
+            lighting: &caches.lighting,
+            accum: &caches.accum,
             rsm_glossy: &rsm.glossy,
+            visibility: &caches.visibility,
         }
         .bind(device, &self.layout)
     }
@@ -145,11 +147,12 @@ impl CacheLightingPass {
         &self,
         queue: &wgpu::Queue,
         camera: [f32; 3],
-        cache_count: u32,
+        caches: &CacheBuffers,
         rsm: &Rsm,
         source: ValSource,
         glossy_exponent: Option<f32>,
     ) -> u32 {
+        let cache_count = caches.count;
         let (val_count, every_texel) = match source {
             ValSource::Selected { count } => (count, 0),
             ValSource::EveryTexel => (rsm.texels(), 1),
@@ -167,7 +170,7 @@ impl CacheLightingPass {
                 first_val: range.start,
                 end_val: range.end,
                 glossy_exponent: glossy_exponent.unwrap_or(0.0),
-                pad1: 0,
+                visibility_side: caches.visibility_side,
                 pad2: 0,
             })
             .collect();
@@ -241,7 +244,10 @@ mod tests {
                     "glossy_exponent",
                     offset_of!(CacheLightingParams, glossy_exponent),
                 ),
-                ("pad1", offset_of!(CacheLightingParams, pad1)),
+                (
+                    "visibility_side",
+                    offset_of!(CacheLightingParams, visibility_side),
+                ),
                 ("pad2", offset_of!(CacheLightingParams, pad2)),
             ],
         );

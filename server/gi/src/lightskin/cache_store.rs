@@ -362,6 +362,7 @@ fn decode(
     }
     Ok(CacheSet {
         params: *params,
+        visibility: None,
         caches,
         vertex_caches,
         stats,
@@ -391,6 +392,7 @@ mod tests {
                 d_eps: 0.25,
                 theta_eps_degrees: 30.0,
             },
+            visibility: None,
             caches: vec![cache; 2],
             vertex_caches: vec![entry; vertices],
             stats: CacheStats {

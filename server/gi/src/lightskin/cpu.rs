@@ -174,6 +174,17 @@ fn proxy_light(cache: Vec3, moments: &Moments, flux_at: impl Fn(Vec3) -> Vec3) -
 /// The diffuse and glossy proxy lights of `cache`, lit by `vals`, for a camera at `camera`
 /// (eq. 3–7, 13–15).
 pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLights {
+    light_cache_seen(cache, vals, camera, |_, _| 1.0)
+}
+
+/// [`light_cache`] with each VAL weighted by `visible(direction, distance)`, how much of it
+/// the cache sees in that unit direction at that distance (`cache_visibility`).
+pub fn light_cache_seen(
+    cache: &RefCache,
+    vals: &[RefVal],
+    camera: Vec3,
+    visible: impl Fn(Vec3, f32) -> f32,
+) -> ProxyLights {
     let c = cache.position;
     let n_c = cache.normal;
     let k = cache.exponent;
@@ -213,7 +224,7 @@ pub fn light_cache(cache: &RefCache, vals: &[RefVal], camera: Vec3) -> ProxyLigh
         let form_factor = val.area * g;
         // cos^k θ_e of eq. 4 with the cache's k.
         let lobe = phong_lobe(n_c, omega, view, k);
-        let w = val.weight;
+        let w = val.weight * visible(omega, d);
         // Φ_l of eq. 3/4 is what the VAL sends towards the cache: its glossy lobe's share too.
         let flux = val
             .glossy

@@ -12,6 +12,18 @@ pub const OCCLUSION: Param = Param::boolean(
     "Dim proxy lights hidden behind other caches (the paper's double projection)",
 );
 
+pub const CACHE_VISIBILITY: Param = Param::integer(
+    "cache_visibility",
+    0,
+    (0, 32),
+    "Weigh every VAL by whether its cache sees it (beyond the paper): n > 0 traces n² \
+     directions per cache (a ray each) against the scene's BVH once per scene and cache set \
+     and keeps how far the cache sees in each; a VAL beyond that (by more than half) lights \
+     the cache with nothing. Stops the light that reaches caches through buildings; \
+     0: off (the paper)",
+)
+.unit("directions per side");
+
 pub const CACHE_DISTANCE: Param = Param::optional_number(
     "cache_distance",
     (0.0, f64::INFINITY),
@@ -92,6 +104,7 @@ pub const LIGHTSKIN: MethodTable = MethodTable {
         &LIGHT_FIT,
         &SENDERS,
         &OCCLUSION,
+        &CACHE_VISIBILITY,
         &CACHE_DISTANCE,
         &CACHE_ANGLE,
     ],
@@ -140,6 +153,7 @@ pub const BRSM: MethodTable = MethodTable {
         &LIGHT_FIT,
         &SENDERS,
         &OCCLUSION,
+        &CACHE_VISIBILITY,
         &CACHE_DISTANCE,
         &CACHE_ANGLE,
         &VAL_COUNT,
@@ -168,6 +182,7 @@ pub struct Settings {
     pub light_fit: LightFit,
     pub senders: crate::gi::params::Senders,
     pub occlusion: bool,
+    pub cache_visibility: u32,
     pub cache_distance: Option<f32>,
     pub cache_angle: Option<f32>,
     pub val_count: u32,

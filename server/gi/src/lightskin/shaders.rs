@@ -7,6 +7,7 @@ pub const IMPORTANCE: ShaderSource = ShaderSource {
     files: &[
         wgsl!("halton.wgsl"),
         wgsl!("lightskin/view_samples.wgsl"),
+        wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("lightskin/importance.wgsl"),
     ],
@@ -20,6 +21,7 @@ pub const CUMULATIVE_SUMS: ShaderSource = ShaderSource {
 pub const VAL_SELECT: ShaderSource = ShaderSource {
     name: "val_select",
     files: &[
+        wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("lightskin/vals.wgsl"),
         wgsl!("lightskin/val_select.wgsl"),
@@ -30,6 +32,7 @@ pub const CACHE_LIGHTING: ShaderSource = ShaderSource {
     name: "cache_lighting",
     files: &[
         wgsl!("common.wgsl"),
+        wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("lightskin/vals.wgsl"),
         wgsl!("lightskin/light_caches.wgsl"),

@@ -130,7 +130,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         pool: BudgetPool::Triangles,
         unit: "triangles",
         field: "method",
-        advice: |_, _| "delete a scene, or use a GI method other than the reference".into(),
+        advice: |_, _, _| "delete a scene, or use a GI method other than the reference".into(),
     }),
     estimate: |_, facts| facts.triangles,
     // About 2 s per 1.2 M triangles (the street's), binned SAH.

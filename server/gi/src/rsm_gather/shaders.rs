@@ -10,6 +10,7 @@ pub const GATHER: ShaderSource = ShaderSource {
         wgsl!("brdf.wgsl"),
         wgsl!("brdf_eval.wgsl"),
         wgsl!("gbuffer_surface.wgsl"),
+        wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("vpl_light.wgsl"),
         wgsl!("rsm_gather/gather.wgsl"),

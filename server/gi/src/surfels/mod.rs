@@ -159,7 +159,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         },
         unit: "surfel links",
         field: "surfel_links",
-        advice: |_, allowed| {
+        advice: |_, _, allowed| {
             format!(
                 "use fewer surfel_links or a larger surfel_cache_spacing (at most {allowed} \
                  caches × links)"

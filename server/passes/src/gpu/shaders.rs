@@ -113,6 +113,7 @@ pub const RSM: ShaderSource = ShaderSource {
         wgsl!("lights.wgsl"),
         wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),
+        wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("rsm.wgsl"),
     ],

@@ -116,15 +116,11 @@ impl GlossySender {
             unit(w >> GLOSSY_OCT_BITS, GLOSSY_OCT_BITS),
         ) * 2.0
             - glam::Vec2::ONE;
-        let mut d = oct.extend(1.0 - oct.x.abs() - oct.y.abs());
-        let t = (-d.z).max(0.0);
-        d.x += if d.x >= 0.0 { -t } else { t };
-        d.y += if d.y >= 0.0 { -t } else { t };
         let log2_k = unit(w >> (2 * GLOSSY_OCT_BITS), GLOSSY_EXPONENT_BITS);
         Self {
             weight: [0, 1, 2].map(|i| f32::from_bits(texel[i])),
             exponent: (log2_k * GLOSSY_MAX_LOG2_EXPONENT).exp2(),
-            mirror: d.normalize().into(),
+            mirror: crate::scene::octahedral::decode(oct).into(),
             pad0: 0.0,
         }
     }

@@ -261,7 +261,7 @@ impl SceneEntry {
                         key,
                         budget.unit,
                         self.facts.surface_area,
-                        (budget.advice)(&self.facts, per_set)
+                        (budget.advice)(key, &self.facts, per_set)
                     ),
                 ));
             }
@@ -315,7 +315,7 @@ impl SceneEntry {
                     budget.unit,
                     pool.available(),
                     pool.limit(),
-                    (budget.advice)(&self.facts, pool.available())
+                    (budget.advice)(key, &self.facts, pool.available())
                 ),
             )
         })

@@ -15,10 +15,13 @@ fn limits(max_scenes: u32) -> Limits {
 }
 
 fn params(d_eps: f32) -> PrecomputeKey {
-    cache_key(&CacheParams {
-        d_eps,
-        theta_eps_degrees: 30.0,
-    })
+    cache_key(
+        &CacheParams {
+            d_eps,
+            theta_eps_degrees: 30.0,
+        },
+        0,
+    )
 }
 
 /// The light caches a brsm frame asks for with `cache_distance`.

@@ -250,6 +250,9 @@ pub struct CacheStats {
 #[derive(Clone, Debug, PartialEq)]
 pub struct CacheSet {
     pub params: CacheParams,
+    /// What each cache sees (`cache_visibility`), traced after the caches are placed or
+    /// loaded; never stored with them.
+    pub visibility: Option<super::cache_visibility::CacheVisibility>,
     pub caches: Vec<LightCache>,
     /// Per scene vertex, indices of its 16 nearest caches (nearest first), padded with u32::MAX
     /// if fewer exist. Caches whose normal is within 90° of the vertex normal come first; only
@@ -365,6 +368,7 @@ pub fn precompute(
     tracing::debug!(?stats, "light caches computed");
     Ok(CacheSet {
         params: *params,
+        visibility: None,
         caches,
         vertex_caches,
         stats,

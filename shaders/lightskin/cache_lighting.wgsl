@@ -119,8 +119,6 @@ fn accumulate(acc: ptr<function, Accum>, ci: u32, c: LightCache, v: vec3<f32>, v
         return;
     }
     let w_dir = delta * inverseSqrt(len2);
-    // A VAL the cache cannot see lights it with nothing and takes no part in its proxies.
-    let weight = val.weight * cache_visibility(ci, w_dir, sqrt(len2));
     let cos_l = max(dot(val.normal, -w_dir), 0.0);
     let cos_x = max(dot(c.normal, w_dir), 0.0);
     // Geometric factor of eq. 3/4 with the VAL's disk area (which keeps it finite at any
@@ -131,6 +129,11 @@ fn accumulate(acc: ptr<function, Accum>, ci: u32, c: LightCache, v: vec3<f32>, v
     // many VALs behind a cache, ε_p alone would drag the proxy far off, and eq. 9 then
     // interpolates that far proxy's large flux onto nearby points.
     if g <= 0.0 {
+        return;
+    }
+    // A VAL the cache cannot see lights it with nothing and takes no part in its proxies.
+    let weight = val.weight * cache_visibility(ci, w_dir, sqrt(len2));
+    if weight <= 0.0 {
         return;
     }
     let form_factor = val.area * g;

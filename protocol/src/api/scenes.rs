@@ -70,7 +70,9 @@ pub struct CacheVariant {
     pub state: PrecomputeState,
     pub cache_distance: f32,
     pub cache_angle: f32,
-    /// Number of caches, once ready.
+    /// Number of caches, once ready, as the cache budgets count them: with `cache_visibility`
+    /// (in `SceneInfo::precomputed`'s parameters) each cache's visibility map counts as
+    /// ⌈(n + 1)²/16⌉ caches more.
     pub caches: Option<u64>,
     /// Current step while running (e.g. `clustering`), with progress.
     pub step: Option<String>,

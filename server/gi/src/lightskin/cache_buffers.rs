@@ -72,7 +72,9 @@ impl CacheBuffers {
                 contents: bytemuck::cast_slice(
                     set.visibility
                         .as_ref()
-                        .map_or(&[0.0f32][..], |v| &v.distances),
+                        .map(|v| &v.distances[..])
+                        .filter(|d| !d.is_empty())
+                        .unwrap_or(&[0.0f32]),
                 ),
                 usage: storage,
             }),

@@ -24,6 +24,8 @@ use crate::scene::octahedral;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+/// Elevation (radians, about) above the cache's surface at which the vertices below it look.
+const HORIZON: f32 = 0.01;
 /// Most grid vertices over all caches: 4 bytes each, 64 MiB.
 pub const MAX_VERTICES: u64 = 1 << 24;
 /// How far beyond the interpolated distance a VAL still counts as seen, as a share of it: a
@@ -40,7 +42,8 @@ pub struct CacheVisibility {
     /// Cells per side of each cache's octahedral grid.
     pub side: u32,
     /// Per cache, (`side` + 1)² grid vertices row-major: the distance to the nearest hit in
-    /// that direction, `far` where nothing was hit.
+    /// that direction, `far` where nothing was hit or the direction is below the cache's
+    /// surface.
     pub distances: Vec<f32>,
 }
 
@@ -71,7 +74,7 @@ pub fn ramp(seen: f32, distance: f32) -> f32 {
 }
 
 impl CacheVisibility {
-    /// Traces the maps of `caches` in `bvh`, `side`² texels each; rays start `offset` off
+    /// Traces the maps of `caches` in `bvh`, `side`² cells each; rays start `offset` off
     /// each cache's surface and count as hitting at `far` when they hit nothing.
     pub fn build(
         bvh: &SceneBvh,
@@ -132,11 +135,28 @@ fn trace_map(
     far: f32,
     map: &mut [f32],
 ) {
-    let origin = Vec3::from(cache.position) + Vec3::from(cache.normal) * offset;
+    let normal = Vec3::from(cache.normal);
+    let origin = Vec3::from(cache.position) + normal * offset;
     for (i, seen) in map.iter_mut().enumerate() {
         let (x, y) = (i as u32 % (side + 1), i as u32 / (side + 1));
         let dir = octahedral::decode(Vec2::new(x as f32, y as f32) / side as f32 * 2.0 - Vec2::ONE);
-        *seen = bvh.intersect(origin, dir, far).map_or(far, |h| h.t);
+        // Below its surface a cache receives nothing (cos θ_x = 0), and a ray there meets the
+        // surface itself a hair away: that distance, interpolated into the cells across the
+        // horizon, would hide the VALs just above it. Such a vertex holds what the cache sees
+        // just above the horizon in its azimuth instead (straight down: `far`), so that the
+        // cells across the horizon interpolate between distances above it.
+        let below = dir.dot(normal);
+        let dir = if below > 0.0 {
+            dir
+        } else {
+            (dir - normal * below).normalize_or_zero() + normal * HORIZON
+        };
+        *seen = if dir.length_squared() < HORIZON * HORIZON * 2.0 {
+            far
+        } else {
+            bvh.intersect(origin, dir.normalize(), far)
+                .map_or(far, |h| h.t)
+        };
     }
 }
 
@@ -201,6 +221,36 @@ mod tests {
             leaks * 5 < hits,
             "{leaks} of {hits} see twice as far as the surface"
         );
+    }
+
+    /// At a grid vertex's own direction the interpolation is that vertex's distance, and no
+    /// vertex below the cache's surface sees its own surface.
+    #[test]
+    fn the_grid_holds_its_rays_distances() {
+        let scene = procedural::cornell_box();
+        let bvh = SceneBvh::build(&scene).expect("bvh");
+        let cache = LightCache {
+            position: [0.3, 0.01, 0.4],
+            normal: [0.0, 1.0, 0.0],
+            ..bytemuck::Zeroable::zeroed()
+        };
+        let side = 8;
+        let maps =
+            CacheVisibility::build(&bvh, &[cache], side, 1e-4, 10.0, &mut |_| {}).expect("fits");
+        for (i, &seen) in maps.distances.iter().enumerate() {
+            let (x, y) = (i as u32 % (side + 1), i as u32 / (side + 1));
+            let uv = Vec2::new(x as f32, y as f32) / side as f32 * 2.0 - Vec2::ONE;
+            let dir = octahedral::decode(uv);
+            let at = interpolate(&maps.distances, side, dir);
+            assert!(
+                (at - seen).abs() <= 1e-4 * seen,
+                "vertex {i}: {at} vs {seen}"
+            );
+            // Below the surface a vertex holds what the cache sees just above the horizon.
+            if dir.y <= 0.0 {
+                assert!(seen > 0.1, "vertex {i} below the surface sees {seen}");
+            }
+        }
     }
 
     #[test]

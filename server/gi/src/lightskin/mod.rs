@@ -172,7 +172,7 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
                 format!(
                     "each cache's visibility map counts as {} caches more: use a smaller \
                      cache_visibility, or cache_distance >= {distance}",
-                    cache_visibility::vertices(side) / 16
+                    cache_visibility::vertices(side).div_ceil(16)
                 )
             }
         },
@@ -241,8 +241,9 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
 /// machine's 2 cores, 150 ns a ray at the 10 levels `cost` assumes for small scenes.
 const VISIBILITY_NS_PER_RAY_LEVEL: f64 = 15.0;
 
-/// The key of the light caches for `params`, with visibility maps of `visibility`² texels
-/// per cache (none for 0, which keeps the key of the sets stored before they existed).
+/// The key of the light caches for `params`, with visibility maps of `visibility`² cells
+/// ((visibility + 1)² rays) per cache (none for 0, which keeps the key the sets had before
+/// the maps existed).
 pub fn cache_key(params: &CacheParams, visibility: u32) -> PrecomputeKey {
     let mut params = vec![
         ("cache_distance", params.d_eps),
@@ -259,12 +260,12 @@ pub fn cache_key(params: &CacheParams, visibility: u32) -> PrecomputeKey {
 
 /// What `caches` caches with visibility maps of `side` cells per side count against the
 /// cache budgets: a cache is 64 bytes, its map (side + 1)² floats of 4, so a map counts as
-/// (side + 1)²/16 caches more (19 at 16², 69 at 32²).
+/// ⌈(side + 1)²/16⌉ caches more (20 in all at 16², 70 at 32²).
 fn budget_units(caches: u64, side: u32) -> u64 {
     if side == 0 {
         return caches;
     }
-    caches * (1 + cache_visibility::vertices(side) / 16)
+    caches * (1 + cache_visibility::vertices(side).div_ceil(16))
 }
 
 /// The caches `units` of the cache budgets hold with visibility maps of `side` (the inverse
@@ -273,7 +274,7 @@ fn caches_in(units: u64, side: u32) -> u64 {
     if side == 0 {
         return units;
     }
-    units / (1 + cache_visibility::vertices(side) / 16)
+    units / (1 + cache_visibility::vertices(side).div_ceil(16))
 }
 
 /// The side of the visibility maps a [`PRECOMPUTE`] key asks for (0: none).
@@ -518,5 +519,40 @@ impl Method for LightSkin {
 
     fn as_any(&self) -> &dyn Any {
         self
+    }
+}
+
+#[cfg(test)]
+mod visibility_key_tests {
+    use super::*;
+
+    const PARAMS: CacheParams = CacheParams {
+        d_eps: 0.25,
+        theta_eps_degrees: 30.0,
+    };
+
+    /// Without maps the key is the one stored sets were made with.
+    #[test]
+    fn keys_without_maps_are_unchanged() {
+        let key = cache_key(&PARAMS, 0);
+        assert_eq!(
+            key.params,
+            vec![("cache_distance", 0.25), ("cache_angle", 30.0)]
+        );
+        assert_eq!(visibility_side(&key), 0);
+        assert_eq!(visibility_side(&cache_key(&PARAMS, 16)), 16);
+        assert_eq!(cache_params(&cache_key(&PARAMS, 16)), PARAMS);
+    }
+
+    /// Budget units and the caches they hold invert each other.
+    #[test]
+    fn maps_count_as_caches() {
+        assert_eq!(budget_units(1000, 0), 1000);
+        assert_eq!(budget_units(1000, 16), 20_000);
+        assert_eq!(budget_units(1000, 32), 70_000);
+        assert_eq!(budget_units(1000, 1), 2000);
+        for side in [0, 1, 4, 16, 32] {
+            assert_eq!(caches_in(budget_units(7511, side), side), 7511);
+        }
     }
 }

@@ -16,13 +16,14 @@ pub const CACHE_VISIBILITY: Param = Param::integer(
     "cache_visibility",
     0,
     (0, 32),
-    "Weigh every VAL by whether its cache sees it (beyond the paper): n > 0 traces n² \
-     directions per cache (a ray each) against the scene's BVH once per scene and cache set \
-     and keeps how far the cache sees in each; a VAL beyond that (by more than half) lights \
-     the cache with nothing. Stops the light that reaches caches through buildings; \
-     0: off (the paper)",
+    "Weigh every VAL by whether its cache sees it (beyond the paper): n > 0 traces (n + 1)² \
+     rays per cache (an octahedral grid of n² cells) against the scene's BVH whenever the \
+     caches are built or loaded, and keeps how far the cache sees in each direction; a VAL \
+     beyond that (by more than half) lights the cache with nothing. Stops the light that \
+     reaches caches through buildings; each cache's map counts against the cache budgets as \
+     (n + 1)²/16 caches more. 0: off (the paper)",
 )
-.unit("directions per side");
+.unit("cells per side");
 
 pub const CACHE_DISTANCE: Param = Param::optional_number(
     "cache_distance",

@@ -10,7 +10,8 @@
 #     emissive surfaces alone against the reference (`bench/light_errors.py --case emitters`);
 #   - the street against the truth (issue 34, `bench/light_errors.py --case street`): every
 #     method as authored and all Lambertian, two views, against the full and the modelled
-#     transport's reference, the sun's maps over the scene and fitted to the view;
+#     transport's reference, the sun's maps over the scene and fitted to the view, glossy
+#     senders on and off;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080;
 #   - JPEG against H.264 (`bench/stream-codecs.sh`, issue 13): one camera path at 1280×720 and
@@ -161,9 +162,10 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
   "${cmd[@]}" > "$out/gpu-emitters-errors.md"
   # Issue 34: every method on the street as authored and all Lambertian, down its middle street
   # and one street over, against the full reference and the modelled transport's, with the
-  # sun's maps over the scene and fitted to the view.
+  # sun's maps over the scene and fitted to the view, and the RSM methods' glossy senders on
+  # and off (the same references: only the methods' renders double).
   if $quick; then truth_size=(--width 64 --height 36 --spp 16); else truth_size=(--width 1920 --height 1080 --spp 1024); fi
-  cmd=(python3 "$(dirname "$0")/light_errors.py" "$server" --case street "${truth_size[@]}")
+  cmd=(python3 "$(dirname "$0")/light_errors.py" "$server" --case street --senders full,diffuse "${truth_size[@]}")
   echo "command: ${cmd[*]} > $out/gpu-street-truth.md" >> "$out/environment.txt"
   "${cmd[@]}" > "$out/gpu-street-truth.md"
 fi

@@ -329,7 +329,14 @@ fn cache_visibility_matches_the_cpu_reference_and_exact_visibility() {
     let mut caches = precompute(&scene, &cache_params(&scene, 0.3), &mut |_| {}).expect("caches");
     let bvh = SceneBvh::build(&scene).expect("bvh");
     let r = scene.bounds.radius();
-    let maps = CacheVisibility::build(&bvh, &caches.caches, 8, 1e-4 * r, 4.0 * r, &mut |_| {});
+    let maps = CacheVisibility::build(
+        &bvh,
+        &caches.caches,
+        8,
+        (1e-4 * r, 4.0 * r),
+        &mut |_| {},
+        &|| false,
+    );
     caches.visibility = Some(maps.expect("maps fit"));
     let run = run_caches(
         scene,

@@ -75,14 +75,15 @@ pub fn ramp(seen: f32, distance: f32) -> f32 {
 
 impl CacheVisibility {
     /// Traces the maps of `caches` in `bvh`, `side`² cells each; rays start `offset` off
-    /// each cache's surface and count as hitting at `far` when they hit nothing.
+    /// each cache's surface and count as hitting at `far` when they hit nothing. Gives up
+    /// between chunks of caches once `cancelled` says nobody can use the maps.
     pub fn build(
         bvh: &SceneBvh,
         caches: &[LightCache],
         side: u32,
-        offset: f32,
-        far: f32,
+        (offset, far): (f32, f32),
         progress: &mut dyn FnMut(Progress),
+        cancelled: &dyn Fn() -> bool,
     ) -> Result<Self, String> {
         let total = caches.len() as u64 * vertices(side);
         if total > MAX_VERTICES {
@@ -102,6 +103,9 @@ impl CacheVisibility {
             .zip(caches.chunks(chunk))
             .enumerate()
         {
+            if cancelled() {
+                return Err("cancelled: the scene was deleted, or nobody waits for the set".into());
+            }
             progress(Progress {
                 step: "cache visibility",
                 done: (done * chunk) as u64,
@@ -189,8 +193,15 @@ mod tests {
             ..bytemuck::Zeroable::zeroed()
         };
         let r = scene.bounds.radius();
-        let maps = CacheVisibility::build(&bvh, &[cache], 16, 1e-4 * r, 4.0 * r, &mut |_| {})
-            .expect("fits");
+        let maps = CacheVisibility::build(
+            &bvh,
+            &[cache],
+            16,
+            (1e-4 * r, 4.0 * r),
+            &mut |_| {},
+            &|| false,
+        )
+        .expect("fits");
         assert_eq!(maps.distances.len(), 17 * 17);
         let origin = Vec3::from(cache.position) + Vec3::Y * 1e-4 * r;
         // Over directions up from the cache that hit something: a point on that surface is
@@ -236,7 +247,8 @@ mod tests {
         };
         let side = 8;
         let maps =
-            CacheVisibility::build(&bvh, &[cache], side, 1e-4, 10.0, &mut |_| {}).expect("fits");
+            CacheVisibility::build(&bvh, &[cache], side, (1e-4, 10.0), &mut |_| {}, &|| false)
+                .expect("fits");
         for (i, &seen) in maps.distances.iter().enumerate() {
             let (x, y) = (i as u32 % (side + 1), i as u32 / (side + 1));
             let uv = Vec2::new(x as f32, y as f32) / side as f32 * 2.0 - Vec2::ONE;
@@ -254,11 +266,20 @@ mod tests {
     }
 
     #[test]
+    fn a_cancelled_build_gives_up() {
+        let scene = procedural::cornell_box();
+        let bvh = SceneBvh::build(&scene).expect("bvh");
+        let caches = vec![bytemuck::Zeroable::zeroed(); 10];
+        let e = CacheVisibility::build(&bvh, &caches, 4, (1e-4, 10.0), &mut |_| {}, &|| true);
+        assert!(e.is_err_and(|e| e.starts_with("cancelled")));
+    }
+
+    #[test]
     fn maps_over_the_budget_are_refused() {
         let scene = procedural::cornell_box();
         let bvh = SceneBvh::build(&scene).expect("bvh");
         let caches = vec![bytemuck::Zeroable::zeroed(); 20_000];
-        let e = CacheVisibility::build(&bvh, &caches, 32, 1e-4, 10.0, &mut |_| {});
+        let e = CacheVisibility::build(&bvh, &caches, 32, (1e-4, 10.0), &mut |_| {}, &|| false);
         assert!(e.is_err_and(|e| e.contains("cache_visibility")));
     }
 }

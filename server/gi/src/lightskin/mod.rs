@@ -222,9 +222,9 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
                 &bvh,
                 &set.caches,
                 side,
-                1e-4 * radius,
-                4.0 * radius,
+                (1e-4 * radius, 4.0 * radius),
                 env.progress,
+                env.cancelled,
             )?);
         }
         Ok(Built {

@@ -18,6 +18,18 @@ pub fn encode(d: Vec3) -> Vec2 {
     (Vec2::ONE - Vec2::new(p.y.abs(), p.x.abs())) * sign
 }
 
+/// `count` Fibonacci-sphere points: nearly equal-area unit directions, the same every call
+/// (for quadratures and tests over all directions).
+pub fn fibonacci_sphere(count: usize) -> impl Iterator<Item = Vec3> {
+    let golden = std::f64::consts::PI * (3.0 - 5.0f64.sqrt());
+    (0..count).map(move |i| {
+        let z = 1.0 - (2.0 * i as f64 + 1.0) / count as f64;
+        let r = (1.0 - z * z).sqrt();
+        let phi = golden * i as f64;
+        Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32).normalize()
+    })
+}
+
 /// The unit direction of point `e` of [-1, 1]².
 pub fn decode(e: Vec2) -> Vec3 {
     let mut d = Vec3::new(e.x, e.y, 1.0 - e.x.abs() - e.y.abs());
@@ -33,15 +45,7 @@ mod tests {
 
     #[test]
     fn directions_round_trip() {
-        for i in 0..1000 {
-            let (u, v) = (
-                (i as f32 * 0.618_034).fract(),
-                (i as f32 * 0.754_878).fract(),
-            );
-            let z = 1.0 - 2.0 * u;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = std::f32::consts::TAU * v;
-            let d = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+        for d in fibonacci_sphere(1000) {
             let e = encode(d);
             assert!(e.abs().max_element() <= 1.0 + 1e-6, "{d} → {e}");
             assert!((decode(e) - d).length() < 1e-5, "{d} → {e} → {}", decode(e));

@@ -138,25 +138,14 @@ mod tests {
 
     const N: usize = 25;
 
-    /// 2¹⁶ Fibonacci-sphere points; each stands for 4π/2¹⁶ sr. Equal-area, so plain sums are
-    /// quadratures.
-    fn fibonacci(count: usize) -> impl Iterator<Item = Vec3> {
-        let golden = std::f64::consts::PI * (3.0 - 5.0f64.sqrt());
-        (0..count).map(move |i| {
-            let z = 1.0 - (2.0 * i as f64 + 1.0) / count as f64;
-            let r = (1.0 - z * z).sqrt();
-            let phi = golden * i as f64;
-            Vec3::new((r * phi.cos()) as f32, (r * phi.sin()) as f32, z as f32).normalize()
-        })
-    }
-
     /// ∫ f(ω) y_i(ω) dω for all 25 i, on the Fibonacci sphere.
     fn project_numerically(f: impl Fn(Vec3) -> f64) -> [f64; N] {
+        // 2¹⁶ points, each standing for 4π/2¹⁶ sr: equal-area, so plain sums are quadratures.
         let count = 1 << 16;
         let weight = 4.0 * std::f64::consts::PI / count as f64;
         let mut c = [0.0f64; N];
         let mut y = [0.0f32; N];
-        for w in fibonacci(count) {
+        for w in crate::scene::octahedral::fibonacci_sphere(count) {
             eval(MAX_BANDS, w, &mut y);
             let fw = f(w) * weight;
             for (c, y) in c.iter_mut().zip(y) {
@@ -186,11 +175,12 @@ mod tests {
 
     #[test]
     fn orthonormal_on_fibonacci_sphere() {
+        // 2¹⁶ points, each standing for 4π/2¹⁶ sr: equal-area, so plain sums are quadratures.
         let count = 1 << 16;
         let weight = 4.0 * std::f64::consts::PI / count as f64;
         let mut gram = [[0.0f64; N]; N];
         let mut y = [0.0f32; N];
-        for w in fibonacci(count) {
+        for w in crate::scene::octahedral::fibonacci_sphere(count) {
             eval(MAX_BANDS, w, &mut y);
             for (row, yi) in gram.iter_mut().zip(y) {
                 for (g, yj) in row.iter_mut().zip(y) {

@@ -186,24 +186,17 @@ def three_lights_case(base, args, methods):
 STREET_PITCH = 60.0
 
 
-def light_fits(info, method):
-    """The `light_fit` values to try for `method` ([None] where it has no such parameter)."""
+def values_to_try(info, method, name, values):
+    """`values` of parameter `name` to try for `method` ([None] where it has no such
+    parameter)."""
     m = next(m for m in info["gi_methods"] if m["method"] == method)
-    return ["scene", "view"] if any(p["name"] == "light_fit" for p in m["parameters"]) else [None]
+    return values if any(p["name"] == name for p in m["parameters"]) else [None]
 
 
 def moved(camera, dx):
     """`camera` moved `dx` metres along x."""
     return dict(camera, position=[camera["position"][0] + dx] + camera["position"][1:],
                 target=[camera["target"][0] + dx] + camera["target"][1:])
-
-
-def senders_of(info, method, wanted):
-    """The `senders` values of `wanted` to try for `method` ([None] where it has no such
-    parameter or it is the reference)."""
-    m = next(m for m in info["gi_methods"] if m["method"] == method)
-    has = any(p["name"] == "senders" for p in m["parameters"])
-    return wanted if has and method != "reference" else [None]
 
 
 def street_configs_case(base, args):
@@ -237,8 +230,8 @@ def street_case(base, args, methods, info):
         over = moved(own, STREET_PITCH)
         for view, camera in [("down its middle street", own), ("one street over", over)]:
             for method in methods:
-                for fit in light_fits(info, method):
-                    for senders in senders_of(info, method, args.senders.split(",")):
+                for fit in values_to_try(info, method, "light_fit", ["scene", "view"]):
+                    for senders in values_to_try(info, method, "senders", args.senders.split(",")):
                         gi = {"method": method}
                         if fit:
                             gi["light_fit"] = fit
@@ -275,7 +268,7 @@ def street_motion_case(base, args, methods, info):
     reference = {"method": "reference", "spp": args.spp}
     print(f"| `reference` ({args.spp} spp) | - | {frames(reference)} |")
     for method in methods:
-        for fit in light_fits(info, method):
+        for fit in values_to_try(info, method, "light_fit", ["scene", "view"]):
             gi = {"method": method}
             if fit:
                 gi["light_fit"] = fit

@@ -200,7 +200,11 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
                 caches * (side + 1.0) * (side + 1.0),
                 VISIBILITY_NS_PER_RAY_LEVEL * levels,
             );
-            cost.add("BVH build (triangles)", facts.triangles as f64, 1700.0);
+            cost.add(
+                "BVH build (triangles)",
+                facts.triangles as f64,
+                super::common::bvh::BUILD_NS_PER_TRIANGLE,
+            );
         }
     },
     knobs: &[],

@@ -133,8 +133,13 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
         advice: |_, _, _| "delete a scene, or use a GI method other than the reference".into(),
     }),
     estimate: |_, facts| facts.triangles,
-    // About 2 s per 1.2 M triangles (the street's), binned SAH.
-    cost: |_, facts, cost| cost.add("BVH build (triangles)", facts.triangles as f64, 1700.0),
+    cost: |_, facts, cost| {
+        cost.add(
+            "BVH build (triangles)",
+            facts.triangles as f64,
+            bvh::BUILD_NS_PER_TRIANGLE,
+        )
+    },
     knobs: &[],
     build: |scene, _, env| {
         let total = scene.triangle_count() as u64;

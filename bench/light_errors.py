@@ -15,6 +15,9 @@ with `compare_to: reference`. Loopback only, standard library only.
     python3 bench/light_errors.py target/release/lightcast-server --case street --spp 1024 \\
         --width 128 --height 72 --materials authored --senders full,diffuse \\
         > bench/results/lavapipe-street-glossy-senders.md
+    python3 bench/light_errors.py target/release/lightcast-server --case street --spp 1024 \\
+        --width 128 --height 72 --materials authored --senders full,diffuse --receivers \\
+        > bench/results/lavapipe-street-receivers.md
     python3 bench/light_errors.py target/release/lightcast-server --case street-motion \\
         --width 128 --height 72 --spp 512 > bench/results/lavapipe-street-motion.md
 
@@ -38,7 +41,8 @@ the full reference and (`compare_modelled`) against the reference of the light t
 models (diffuse senders, where a method has them): on the diffuse street the two are one; the RSM-based methods with
 the sun's maps over the whole scene (`light_fit: scene`) and fitted to the view (`view`), and
 (`--senders`) with each value of `senders` for the methods that have it: `full`, the default,
-sends an RSM texel's glossy lobe on, `diffuse` is the papers' diffuse VALs and VPLs.
+sends an RSM texel's glossy lobe on, `diffuse` is the papers' diffuse VALs and VPLs; with
+`--receivers` every cell is also split into diffuse and specular receivers (`comparison.receivers`).
 
 `street-motion` (issue 34): how much each method's indirect light changes between frames while
 the camera moves sideways down the middle of the Lambertian street (four frames 13 cm apart),
@@ -87,11 +91,19 @@ def cell_of(c):
             f"{100 * c['indirect_bias_relative']:+.1f} %")
 
 
-def compare(base, render, spp, what, noise=False, modelled=False):
+def with_receivers(c):
+    """`cell_of` and the same on diffuse and on specular receivers, each with its share of
+    the reference's light."""
+    kinds = [f"{kind} ({100 * r['reference_share']:.0f} % of the light) {cell_of(r)}"
+             for kind, r in c["receivers"].items()]
+    return f"{cell_of(c)}; " + "; ".join(kinds)
+
+
+def compare(base, render, spp, what, noise=False, modelled=False, cell_of=cell_of):
     """`render` compared with the reference: "block error / bias" (and, with `noise`, the
     reference's own estimated per-pixel error in parentheses), or why it was refused. With
     `modelled`, a pair: that and the same against the reference of the transport the method
-    models ("-" where it models the full one)."""
+    models ("-" where it models the full one). `cell_of` formats a comparison."""
     started = time.time()
     body = {"render": render, "format": "png", "compare_to": "reference", "compare_spp": spp}
     if modelled:
@@ -211,7 +223,8 @@ def street_configs_case(base, args):
             for gi in json.loads(args.gi_configs):
                 render = {"scene": entry["id"], "width": args.width, "height": args.height,
                           "camera": camera, "gi": gi}
-                cell = compare(base, render, args.spp, f"{materials} {view} {gi}")
+                cell = compare(base, render, args.spp, f"{materials} {view} {gi}",
+                               cell_of=with_receivers if args.receivers else cell_of)
                 print(f"| {materials} | {view} | `{json.dumps(gi)}` | {cell} |", flush=True)
 
 
@@ -219,6 +232,7 @@ def street_case(base, args, methods, info):
     if args.gi_configs:
         street_configs_case(base, args)
         return
+    cell = with_receivers if args.receivers else cell_of
     print("| street | view | method | sun's maps (`light_fit`) | `senders` | against the "
           "reference | against the reference of the transport it models |\n"
           "|---|---|---|---|---|---|---|")
@@ -241,7 +255,7 @@ def street_case(base, args, methods, info):
                                   "height": args.height, "camera": camera, "gi": gi}
                         full, modelled = compare(base, render, args.spp,
                                                  f"{materials} {view} {method} {fit} {senders}",
-                                                 modelled=True)
+                                                 modelled=True, cell_of=cell)
                         print(f"| {materials} | {view} | `{method}` | {fit or '-'} | "
                               f"{senders or '-'} | {full} | {modelled} |", flush=True)
 
@@ -290,6 +304,9 @@ def main():
     ap.add_argument("--gi-configs",
                     help="street: a JSON list of `render.gi` objects to compare instead of "
                          "every method at its defaults")
+    ap.add_argument("--receivers", action="store_true",
+                    help="street: each cell also split into diffuse and specular receivers "
+                         "(`comparison.receivers`)")
     ap.add_argument("--senders", default="full",
                     help="street: the `senders` values of the RSM-based methods, comma-separated")
     args = ap.parse_args()

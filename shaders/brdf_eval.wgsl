@@ -63,6 +63,17 @@ fn specular_albedo(s: SurfaceBrdf, mu: f32) -> vec3<f32> {
     return fresnel_f0(s) * t.x + fresnel_f90(s) * t.y;
 }
 
+// The share of what the surface reflects of light arriving at cosine `mu` that its specular
+// lobe carries, by Rec. 709 luminance (`Brdf::specular_share`); by reciprocity also the share
+// of what reaches a viewer at that cosine. Comparisons sort pixels into diffuse and specular
+// receivers by it.
+fn specular_share(s: SurfaceBrdf, mu: f32) -> f32 {
+    let rec709 = vec3<f32>(0.2126, 0.7152, 0.0722);
+    let specular = dot(specular_albedo(s, mu), rec709);
+    let total = specular + dot(diffuse_albedo(s, mu), rec709);
+    return select(0.0, specular / total, total > 0.0);
+}
+
 // The diffuse lobe's albedo for light arriving at cosine `mu` (`Brdf::diffuse_albedo`).
 fn diffuse_albedo(s: SurfaceBrdf, mu: f32) -> vec3<f32> {
     return s.base * ((1.0 - s.metallic) * (1.0 - s.specular * dielectric_albedo(mu, s.roughness)));

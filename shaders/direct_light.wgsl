@@ -4,6 +4,9 @@
 // `indirect_out` (what the frame reports as the light beyond the punctual lights' direct
 // light, as the reference's indirect buffer holds the environment's light). Where no
 // geometry covers a pixel the environment shows (alpha 1), or nothing (alpha 0).
+// `indirect_out`'s alpha is the surface's specular share seen from the camera
+// (`specular_share`), −1 where no geometry covers the pixel: what sorts a comparison's
+// pixels into diffuse and specular receivers (`quality::receiver_errors`).
 
 @group(0) @binding(0) var<storage, read> camera: CameraUniform;
 @group(0) @binding(1) var<storage, read> lights: Lights;
@@ -29,7 +32,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let position = textureLoad(g_position, texel, 0);
     let indirect_in = textureLoad(indirect, texel, 0);
     if position.w == 0.0 {
-        textureStore(indirect_out, texel, indirect_in);
+        textureStore(indirect_out, texel, vec4<f32>(indirect_in.rgb, -1.0));
         if env_enabled() {
             let ndc = vec2<f32>(
                 (f32(id.x) + 0.5) / f32(size.x) * 2.0 - 1.0,
@@ -66,5 +69,5 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let radiance = textureLoad(g_emissive_specular, texel, 0).rgb + punctual + beyond;
     textureStore(hdr_out, texel, vec4<f32>(radiance, 1.0));
-    textureStore(indirect_out, texel, vec4<f32>(beyond, indirect_in.a));
+    textureStore(indirect_out, texel, vec4<f32>(beyond, specular_share(surface.brdf, surface.nv)));
 }

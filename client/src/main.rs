@@ -400,6 +400,18 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
             c.indirect_block_mae_relative * 100.0,
             c.indirect_bias_relative * 100.0
         );
+        for (kind, r) in [
+            ("diffuse", &c.receivers.diffuse),
+            ("specular", &c.receivers.specular),
+        ] {
+            println!(
+                "  on {kind} receivers ({:.1} % of pixels, {:.1} % of the light): 8×8-block {:.2} %, bias {:+.2} %",
+                r.pixel_share * 100.0,
+                r.reference_share * 100.0,
+                r.indirect_block_mae_relative * 100.0,
+                r.indirect_bias_relative * 100.0
+            );
+        }
         match c.final_psnr_db {
             Some(p) => println!("  final image PSNR {p:.2} dB, FLIP {:.4}", c.final_flip),
             None => println!("  final image identical"),

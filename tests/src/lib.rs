@@ -434,3 +434,40 @@ pub fn triangle_glb() -> Vec<u8> {
     });
     glb(&doc, &bin)
 }
+
+/// A `.glb` of two triangles: a static root "ground" and its child "mover", which the
+/// animation "slide" translates 1 m along x over 2 s (issue 35's moving objects).
+pub fn animated_glb() -> Vec<u8> {
+    let floats = |v: &[f32]| v.iter().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>();
+    let bin = [
+        floats(&[0., 0., 0., 0., 0., 1., 1., 0., 0.]),
+        floats(&[0., 2.]),
+        floats(&[0., 0., 0., 1., 0., 0.]),
+    ]
+    .concat();
+    let view = |offset: usize, length: usize| json!({"buffer": 0, "byteOffset": offset, "byteLength": length});
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": [view(0, 36), view(36, 8), view(44, 24)],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 3,
+             "min": [0, 0, 0], "max": [1, 0, 1]},
+            {"bufferView": 1, "componentType": 5126, "type": "SCALAR", "count": 2,
+             "min": [0], "max": [2]},
+            {"bufferView": 2, "componentType": 5126, "type": "VEC3", "count": 2},
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "nodes": [
+            {"name": "ground", "mesh": 0, "children": [1]},
+            {"name": "mover", "mesh": 0, "translation": [0, 0.5, 0]},
+        ],
+        "scenes": [{"nodes": [0]}],
+        "animations": [{
+            "name": "slide",
+            "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}],
+            "samplers": [{"input": 1, "output": 2}],
+        }],
+    });
+    glb(&doc, &bin)
+}

@@ -13,7 +13,9 @@ pub enum ImageFormat {
     /// Linear float32 RGBA of the final HDR radiance (before exposure), little-endian, rows top
     /// to bottom.
     RawFinal,
-    /// Linear float32 RGBA of the indirect light alone.
+    /// Linear float32 RGBA of the indirect light alone; alpha is the share of what the
+    /// pixel's surface reflects towards the camera that its specular lobe carries (−1 where
+    /// no surface shows: see `Comparison::receivers`).
     RawIndirect,
 }
 
@@ -84,6 +86,36 @@ pub struct Comparison {
     /// Mean LDR-FLIP error of the same two final images (0: indistinguishable, 1: the
     /// largest perceived difference), at 67 pixels per degree.
     pub final_flip: f64,
+    /// The indirect buffer's errors over the pixels of each kind of receiving surface, sorted
+    /// by the share of what the surface reflects towards the camera that its specular lobe
+    /// carries (below one half: diffuse). A method that places incoming light right but
+    /// reflects it through a coarse model of a sharp lobe shows its error on `specular`.
+    pub receivers: ReceiverSplit,
+}
+
+/// [`Comparison::receivers`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ReceiverSplit {
+    /// Surfaces that reflect mostly by their diffuse lobe.
+    pub diffuse: ReceiverErrors,
+    /// Surfaces that reflect mostly by their specular lobe (metals, polished glass).
+    pub specular: ReceiverErrors,
+}
+
+/// Errors over one kind of receiver (see [`Comparison::receivers`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ReceiverErrors {
+    /// Share of the pixels that show a surface.
+    pub pixel_share: f64,
+    /// Share of the reference's indirect light (summed over the image) on these pixels.
+    pub reference_share: f64,
+    /// 8×8-block MAE over these pixels (each block's pixels of this kind) over their
+    /// reference light. Times `reference_share` it is their part of the image's
+    /// `indirect_block_mae_relative`; the two parts add up to at least it (within a block
+    /// that holds both kinds their errors can cancel).
+    pub indirect_block_mae_relative: f64,
+    /// Signed difference over these pixels' reference light (> 0: too bright).
+    pub indirect_bias_relative: f64,
 }
 
 /// The timing report of a one-shot render; sent in the `x-lightcast-report` header of the

@@ -114,6 +114,35 @@ pub struct EnvironmentImageInfo {
     pub kept_height: u32,
 }
 
+/// A node of a scene (`SceneInfo::nodes`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct NodeInfo {
+    pub id: u32,
+    /// As authored (may be empty or repeated).
+    pub name: String,
+    /// The parent's id; absent for a root.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parent: Option<u32>,
+    /// Whether it may move, with everything under it: a procedural scene's movable parts; in
+    /// a glTF file the nodes an animation targets or whose `extras` hold `"movable": true`,
+    /// and everything under them.
+    pub movable: bool,
+    /// World bounds of it and everything under it, at rest; absent without geometry.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bounds: Option<Bounds>,
+}
+
+/// A glTF animation of a scene (`SceneInfo::animations`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct AnimationInfo {
+    /// As authored, else `animation N` (its index in the file).
+    pub name: String,
+    /// Seconds from 0 to its last key.
+    pub duration: f32,
+    /// The ids of the nodes it moves.
+    pub nodes: Vec<u32>,
+}
+
 /// A scene as `GET /v1/scenes/{id}` shows it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct SceneInfo {
@@ -146,6 +175,14 @@ pub struct SceneInfo {
     /// `image` lights it with. Absent: none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub environment_image: Option<EnvironmentImageInfo>,
+    /// The node hierarchy, parents before children: glTF nodes (ids are the file's node
+    /// indices), or a procedural scene's parts (the Cornell box's boxes). Empty: the scene is
+    /// one static whole.
+    #[serde(default)]
+    pub nodes: Vec<NodeInfo>,
+    /// The glTF file's animations.
+    #[serde(default)]
+    pub animations: Vec<AnimationInfo>,
     /// Light caches: the default set first (the `light_caches` entries of `precomputed`).
     pub caches: Vec<CacheVariant>,
     /// Every precomputation of the scene (light caches, BVH) with its state, oldest first.

@@ -4,7 +4,7 @@
 
 use crate::passes::tonemap::tonemap_cpu;
 use crate::renderer::{Frame, FrameProgress};
-use lightcast_protocol::{Comparison, GiMethod};
+use lightcast_protocol::{Comparison, GiMethod, ReceiverErrors, ReceiverSplit};
 
 /// Errors of an indirect buffer against the reference's, per channel over all pixels.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -27,11 +27,27 @@ const BLOCK: usize = 8;
 
 /// Errors of `other` against `truth`, both `width` pixels wide (RGB channels).
 pub fn errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> ErrorStats {
+    errors_where(truth, other, width, |_| true)
+}
+
+/// [`errors`] over the pixels `keep` accepts (by index), relative to their own reference
+/// light; a block's error is that of its kept pixels.
+fn errors_where(
+    truth: &[[f32; 3]],
+    other: &[[f32; 4]],
+    width: usize,
+    keep: impl Fn(usize) -> bool,
+) -> ErrorStats {
     let (mut abs, mut sq, mut sum, mut other_sum) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
     let height = truth.len() / width.max(1);
     let (bw, bh) = (width.div_ceil(BLOCK), height.div_ceil(BLOCK));
     let mut blocks = vec![[0.0f64; 3]; bw * bh];
+    let mut kept = 0usize;
     for (i, (a, b)) in truth.iter().zip(other).enumerate() {
+        if !keep(i) {
+            continue;
+        }
+        kept += 1;
         let block = &mut blocks[(i / width / BLOCK) * bw + (i % width) / BLOCK];
         for k in 0..3 {
             let d = f64::from(a[k] - b[k]);
@@ -42,7 +58,7 @@ pub fn errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> ErrorStat
             block[k] += d;
         }
     }
-    let n = (truth.len() * 3).max(1) as f64;
+    let n = (kept * 3).max(1) as f64;
     let relative = |v: f64| if sum > 0.0 { v / sum } else { 0.0 };
     // Block sums of differences; their absolute values summed over the image's sum is the
     // MAE of block means over the mean.
@@ -53,6 +69,37 @@ pub fn errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> ErrorStat
         mae_relative: relative(abs),
         block_mae_relative: relative(block_abs),
         bias_relative: relative(other_sum - sum),
+    }
+}
+
+/// A pixel's specular share at or above which it counts as a specular receiver.
+const SPECULAR_RECEIVER: f32 = 0.5;
+
+/// [`errors`] split by receiver: `other`'s alpha is each pixel's specular share seen from the
+/// camera, negative where no surface shows (`shaders/direct_light.wgsl`).
+pub fn receiver_errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> ReceiverSplit {
+    let covered = other.iter().filter(|p| p[3] >= 0.0).count().max(1) as f64;
+    let total: f64 = truth.iter().flatten().map(|&c| f64::from(c)).sum();
+    let kind = |specular: bool| {
+        let keep = |i: usize| {
+            let share = other[i][3];
+            share >= 0.0 && (share >= SPECULAR_RECEIVER) == specular
+        };
+        let e = errors_where(truth, other, width, keep);
+        let light: f64 = (0..truth.len().min(other.len()))
+            .filter(|&i| keep(i))
+            .map(|i| truth[i].iter().map(|&c| f64::from(c)).sum::<f64>())
+            .sum();
+        ReceiverErrors {
+            pixel_share: (0..other.len()).filter(|&i| keep(i)).count() as f64 / covered,
+            reference_share: if total > 0.0 { light / total } else { 0.0 },
+            indirect_block_mae_relative: e.block_mae_relative,
+            indirect_bias_relative: e.bias_relative,
+        }
+    };
+    ReceiverSplit {
+        diffuse: kind(false),
+        specular: kind(true),
     }
 }
 
@@ -206,6 +253,7 @@ pub fn compare(
         indirect_bias_relative: e.bias_relative,
         final_psnr_db: finals.psnr_db,
         final_flip: finals.flip_mean,
+        receivers: receiver_errors(&truth.indirect, indirect, frame.width as usize),
     })
 }
 
@@ -231,6 +279,40 @@ mod tests {
         // All four pixels share one 8×8 block: red +1 and blue −1 do not cancel (per channel).
         assert!((e.block_mae_relative - 2.0 / 14.0).abs() < 1e-12);
         assert!(e.bias_relative.abs() < 1e-12);
+    }
+
+    #[test]
+    fn receivers_split_by_specular_share() {
+        // 16×8 pixels, two 8×8 blocks: the left block diffuse (share 0.1) and 25 % too bright,
+        // the right block specular (share 0.9) and half as bright, holding three times the
+        // light; one uncovered pixel (share −1) on the right, where both are dark.
+        let width = 16;
+        let mut truth = vec![[1.0f32; 3]; 128];
+        let mut other = vec![[0.0f32; 4]; 128];
+        for i in 0..128 {
+            let left = i % width < 8;
+            truth[i] = [if left { 1.0 } else { 3.0 }; 3];
+            let c = if left { 1.25 } else { 1.5 };
+            other[i] = [c, c, c, if left { 0.1 } else { 0.9 }];
+        }
+        truth[15] = [0.0; 3];
+        other[15] = [0.0, 0.0, 0.0, -1.0];
+        let split = receiver_errors(&truth, &other, width);
+        let (d, s) = (split.diffuse, split.specular);
+        assert!((d.pixel_share - 64.0 / 127.0).abs() < 1e-12, "{d:?}");
+        assert!((s.pixel_share - 63.0 / 127.0).abs() < 1e-12, "{s:?}");
+        let total = 64.0 + 63.0 * 3.0;
+        assert!((d.reference_share - 64.0 / total).abs() < 1e-12);
+        assert!((s.reference_share - 189.0 / total).abs() < 1e-12);
+        assert!((d.indirect_bias_relative - 0.25).abs() < 1e-12);
+        assert!((d.indirect_block_mae_relative - 0.25).abs() < 1e-12);
+        assert!((s.indirect_bias_relative + 0.5).abs() < 1e-12);
+        assert!((s.indirect_block_mae_relative - 0.5).abs() < 1e-12);
+        // The two parts add up to the whole image's block error (no block mixes them here).
+        let whole = errors(&truth, &other, width).block_mae_relative;
+        let parts = d.indirect_block_mae_relative * d.reference_share
+            + s.indirect_block_mae_relative * s.reference_share;
+        assert!((whole - parts).abs() < 1e-12, "{whole} vs {parts}");
     }
 
     #[test]

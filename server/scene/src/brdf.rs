@@ -151,6 +151,27 @@ impl Brdf {
         }
     }
 
+    /// The specular lobe's directional albedo for light arriving at cosine `mu`, F0·A + F90·B.
+    pub fn specular_albedo(&self, mu: f32) -> Vec3 {
+        let [a, b, _, _] = BrdfTable::get().terms(mu, self.roughness);
+        let (f0, f90) = self.fresnel_ends();
+        f0 * a + f90 * b
+    }
+
+    /// The share of what the surface reflects of light arriving at cosine `mu` that the
+    /// specular lobe carries, by Rec. 709 luminance (0 for a black surface); by reciprocity
+    /// also the share of what reaches a viewer at that cosine (`specular_share` in
+    /// `shaders/brdf_eval.wgsl`, which sorts a comparison's receivers).
+    pub fn specular_share(&self, mu: f32) -> f32 {
+        let specular = crate::environment::luminance(self.specular_albedo(mu).into());
+        let total = specular + crate::environment::luminance(self.diffuse_albedo(mu).into());
+        if total > 0.0 {
+            specular / total
+        } else {
+            0.0
+        }
+    }
+
     /// The diffuse lobe's albedo for light arriving at cosine `mu`: the fraction of the
     /// irradiance it reflects diffusely, whatever the direction it leaves in (what a reflective
     /// shadow map's texel sends on as a diffuse VAL).

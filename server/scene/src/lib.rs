@@ -13,6 +13,7 @@ pub mod environment_image;
 pub mod gltf_loader;
 pub mod halton;
 pub mod material;
+pub mod nodes;
 pub mod octahedral;
 pub mod procedural;
 
@@ -90,6 +91,8 @@ pub struct MaterialRange {
 pub enum SceneError {
     #[error("scene has no triangles")]
     Empty,
+    #[error(transparent)]
+    Nodes(#[from] nodes::NodeError),
     #[error("index count {0} is not a multiple of 3")]
     PartialTriangle(usize),
     #[error("index {index} at position {position} is out of range ({vertex_count} vertices)")]
@@ -148,6 +151,11 @@ pub struct Scene {
     /// The equirectangular HDR image uploaded with the scene, which `render.environment`
     /// of kind `image` lights it with.
     pub environment_image: Option<std::sync::Arc<environment_image::EnvironmentImage>>,
+    /// The node hierarchy (roots first, each node after its parent; empty: one static whole)
+    /// and which parts may move (see [`nodes`]).
+    pub nodes: Vec<nodes::Node>,
+    /// The glTF file's animations of its nodes.
+    pub animations: Vec<nodes::Animation>,
 }
 
 impl Scene {
@@ -248,7 +256,39 @@ impl Scene {
             lights_stand_in_for_emitters: false,
             camera_region: None,
             environment_image: None,
+            nodes: Vec::new(),
+            animations: Vec::new(),
         })
+    }
+
+    /// Gives the scene its node hierarchy and animations, checked against its vertices and
+    /// triangles ([`nodes::validate`]).
+    pub fn set_nodes(
+        &mut self,
+        nodes: Vec<nodes::Node>,
+        animations: Vec<nodes::Animation>,
+    ) -> Result<(), SceneError> {
+        nodes::validate(
+            &nodes,
+            &animations,
+            self.vertices.len() as u32,
+            &self.indices,
+        )?;
+        self.nodes = nodes;
+        self.animations = animations;
+        Ok(())
+    }
+
+    /// The node clients call `id`.
+    pub fn node(&self, id: u32) -> Option<&nodes::Node> {
+        self.nodes.iter().find(|n| n.id == id)
+    }
+
+    /// World bounds of every node's subtree at rest, in [`Self::nodes`]' order (`None`
+    /// without geometry).
+    pub fn node_bounds(&self) -> Vec<Option<Aabb>> {
+        let positions: Vec<Vec3> = self.vertices.iter().map(|v| v.position.into()).collect();
+        nodes::subtree_bounds(&self.nodes, &positions)
     }
 
     pub fn triangle_count(&self) -> usize {

@@ -12,8 +12,9 @@
 //! All geometry is Y up, in metres, with counter-clockwise winding seen from the side the
 //! normal points to.
 
+use super::nodes::{Node, Transform};
 use super::{Aabb, Material, Scene, SceneError, Vertex};
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use lightcast_protocol::{Camera, Light, LightKind};
 
 /// Scene names accepted by [`build`], as listed in error messages.
@@ -271,6 +272,13 @@ struct Mesh {
 }
 
 impl Mesh {
+    /// The vertices `add` appends: one movable part's.
+    fn part(&mut self, add: impl FnOnce(&mut Self)) -> std::ops::Range<u32> {
+        let start = self.vertices.len() as u32;
+        add(self);
+        start..self.vertices.len() as u32
+    }
+
     fn with_capacity(vertices: usize, triangles: usize) -> Self {
         Self {
             vertices: Vec::with_capacity(vertices),
@@ -461,9 +469,11 @@ pub fn cornell_box() -> Scene {
         )
     };
     let (sx, sz) = yawed(0.3, -0.29);
-    mesh.open_box(Vec3::new(0.33, 0.0, 0.37), sx, sz, 0.6, (4, 4), BLOCKS);
+    let short = Vec3::new(0.33, 0.0, 0.37);
+    let short_vertices = mesh.part(|m| m.open_box(short, sx, sz, 0.6, (4, 4), BLOCKS));
     let (tx, tz) = yawed(0.3, 0.29);
-    mesh.open_box(Vec3::new(-0.33, 0.0, -0.28), tx, tz, 1.2, (4, 8), BLOCKS);
+    let tall = Vec3::new(-0.33, 0.0, -0.28);
+    let tall_vertices = mesh.part(|m| m.open_box(tall, tx, tz, 1.2, (4, 8), BLOCKS));
 
     // Just under the ceiling so it does not z-fight with it; the classic lamp is 1.3 × 1.05 m.
     let lamp_y = ROOM - 0.005;
@@ -499,6 +509,42 @@ pub fn cornell_box() -> Scene {
         .into_scene("cornell".to_owned(), materials, vec![light], vec![camera])
         .expect("the built-in Cornell box is a valid scene");
     scene.lights_stand_in_for_emitters = true;
+    // The boxes move (issue 35: a box moved through the room); the room holds them. Each box's
+    // own frame stands on the floor at its centre.
+    let room = Node {
+        id: 0,
+        name: "room".into(),
+        parent: None,
+        movable: false,
+        local: Some(Transform::IDENTITY),
+        rest_world: Mat4::IDENTITY,
+        vertices: 0..scene.vertices.len() as u32,
+    };
+    let block = |id: u32, name: &str, base: Vec3, vertices| {
+        let local = Transform {
+            translation: base,
+            ..Transform::IDENTITY
+        };
+        Node {
+            id,
+            name: name.into(),
+            parent: Some(0),
+            movable: true,
+            local: Some(local),
+            rest_world: local.matrix(),
+            vertices,
+        }
+    };
+    scene
+        .set_nodes(
+            vec![
+                room,
+                block(1, "short box", short, short_vertices),
+                block(2, "tall box", tall, tall_vertices),
+            ],
+            Vec::new(),
+        )
+        .expect("the Cornell box's boxes are parts of it");
     // Inside the room, or in front of its open side (up to five times the default camera's
     // distance): from anywhere else some wall is seen from behind, black.
     scene.camera_region = Some(Aabb {
@@ -882,6 +928,34 @@ mod tests {
         let default = build("street").expect("default street");
         let params = StreetParams::default();
         assert_eq!(default.triangle_count() as u64, params.counts().1);
+    }
+
+    #[test]
+    fn cornell_boxes_are_movable_parts_standing_on_the_floor() {
+        let scene = cornell_box();
+        let names: Vec<_> = scene
+            .nodes
+            .iter()
+            .map(|n| (n.name.as_str(), n.movable))
+            .collect();
+        assert_eq!(
+            names,
+            [("room", false), ("short box", true), ("tall box", true)]
+        );
+        for (id, height) in [(1, 0.6), (2, 1.2)] {
+            let node = scene.node(id).expect("listed");
+            let b = scene.node_bounds()[id as usize].expect("geometry");
+            let base = node.local.expect("TRS").translation;
+            assert!(
+                b.min.y.abs() < 1e-6 && (b.max.y - height).abs() < 1e-5,
+                "{b:?}"
+            );
+            let centre = (b.min + b.max) * 0.5;
+            assert!((centre.x - base.x).abs() < 1e-5 && (centre.z - base.z).abs() < 1e-5);
+            // Only the blocks' material: the node holds the box and nothing else.
+            let range = node.vertices.start as usize..node.vertices.end as usize;
+            assert!(scene.vertices[range].iter().all(|v| v.material == 3));
+        }
     }
 
     #[test]

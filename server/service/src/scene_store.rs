@@ -419,6 +419,8 @@ mod tests {
             default_lights: vec![light],
             camera_region: None,
             environment_image: None,
+            nodes: Vec::new(),
+            animations: Vec::new(),
             caches: Vec::new(),
             precomputed: Vec::new(),
             sessions: 0,

@@ -424,3 +424,57 @@ fn view_fitted_sun_shadows_match_the_scene_fitted_ones_more_finely() {
     assert!(e_fitted < 0.05, "{e_fitted}");
     assert!(e_fitted < e_coarse, "{e_fitted} vs {e_coarse}");
 }
+
+/// The indirect buffer's alpha, which sorts a comparison's pixels into diffuse and specular
+/// receivers (`quality::receiver_errors`), is each pixel's specular share seen from the camera
+/// as `Brdf::specular_share` computes it (within 2·10⁻³: half floats), and −1 where no
+/// surface shows.
+#[test]
+fn the_indirect_alpha_is_the_receivers_specular_share() {
+    let camera = oblique_camera();
+    let materials = [
+        plain_material([0.6, 0.4, 0.2], 0.0, 1.0),
+        plain_material([0.3, 0.6, 0.9], 0.5, 0.5),
+        plain_material([0.5, 0.5, 0.55], 0.9, 0.2),
+    ];
+    let light = directional(Vec3::new(0.3, -1.0, -0.2), 3.0);
+    let mut shares = Vec::new();
+    for material in materials {
+        let scene = floor_scene(material.clone());
+        let frame = render(
+            scene.clone(),
+            &settings(W, H, camera.clone(), light.clone()),
+        );
+        let indirect = frame.indirect.as_ref().expect("captured");
+        let (mut floor, mut background, mut worst) = (0, 0, 0.0f32);
+        for y in 0..H {
+            for x in 0..W {
+                let got = indirect[(y * W + x) as usize][3];
+                match hit_plane(&camera, &scene, W, H, x, y, 0.0) {
+                    Some(p) if p.x.abs() < 1.9 && p.z.abs() < 1.9 => {
+                        let mu = (Vec3::from(camera.position) - p).normalize().y;
+                        let want = material.brdf().specular_share(mu);
+                        worst = worst.max((got - want).abs());
+                        shares.push(want);
+                        floor += 1;
+                    }
+                    Some(p) if p.x.abs() < 2.1 && p.z.abs() < 2.1 => {}
+                    _ => {
+                        assert_eq!(got, -1.0, "pixel ({x}, {y}) shows no surface");
+                        background += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            floor > (W * H / 3) as usize && background > 0,
+            "{floor} {background}"
+        );
+        assert!(worst < 2e-3, "specular share off by up to {worst}");
+    }
+    // The three floors span both kinds of receiver.
+    let (lo, hi) = shares
+        .iter()
+        .fold((1.0f32, 0.0f32), |(lo, hi), &s| (lo.min(s), hi.max(s)));
+    assert!(lo < 0.2 && hi > 0.8, "shares from {lo} to {hi}");
+}

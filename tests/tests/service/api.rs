@@ -643,6 +643,68 @@ async fn renders_compare_with_the_reference() {
     server.stop().await;
 }
 
+/// Issue 35 part 1: a scene lists its nodes (which may move, their bounds) and animations.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scenes_list_their_nodes_and_animations() {
+    let server = TestServer::start(&[]).await;
+    let cornell = server.get_json("/v1/scenes/default").await;
+    let nodes: Vec<(String, bool)> = cornell["nodes"]
+        .as_array()
+        .expect("nodes")
+        .iter()
+        .map(|n| {
+            (
+                n["name"].as_str().unwrap_or("").to_owned(),
+                n["movable"] == true,
+            )
+        })
+        .collect();
+    assert_eq!(
+        nodes,
+        [
+            ("room".to_owned(), false),
+            ("short box".to_owned(), true),
+            ("tall box".to_owned(), true)
+        ]
+    );
+    assert_eq!(cornell["nodes"][1]["parent"], 0);
+    assert!(
+        (cornell["nodes"][2]["bounds"]["max"][1]
+            .as_f64()
+            .unwrap_or(0.0)
+            - 1.2)
+            .abs()
+            < 1e-4
+    );
+    assert_eq!(cornell["animations"], json!([]));
+
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes?name=slide"))
+        .header("content-type", "model/gltf-binary")
+        .body(lightcast_e2e::animated_glb())
+        .send()
+        .await
+        .expect("upload");
+    assert_eq!(resp.status(), 201);
+    let info: Value = resp.json().await.expect("SceneInfo");
+    assert_eq!(
+        info["nodes"],
+        json!([
+            {"id": 0, "name": "ground", "movable": false,
+             "bounds": {"min": [0.0, 0.0, 0.0], "max": [1.0, 0.5, 1.0]}},
+            {"id": 1, "name": "mover", "parent": 0, "movable": true,
+             "bounds": {"min": [0.0, 0.5, 0.0], "max": [1.0, 0.5, 1.0]}},
+        ]),
+        "{info}"
+    );
+    assert_eq!(
+        info["animations"],
+        json!([{"name": "slide", "duration": 2.0, "nodes": [1]}])
+    );
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn scenes_upload_inspect_use_and_delete() {
     let server = TestServer::start(&[]).await;

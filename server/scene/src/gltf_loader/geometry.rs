@@ -136,16 +136,21 @@ impl Loader<'_> {
             .collect())
     }
 
-    pub(super) fn traverse(&mut self) -> Result<(), LoadError> {
+    /// Walks the hierarchy depth first, adding each node's mesh, camera and light in world
+    /// space, and returns the nodes in that (pre)order with their subtrees' vertex ranges;
+    /// `moving[i]` says glTF node `i` is animated.
+    pub(super) fn traverse(&mut self, moving: &[bool]) -> Result<Vec<Node>, LoadError> {
         let root = self.root;
         let mut visited = vec![false; root.nodes.len()];
-        let mut stack: Vec<(usize, Mat4)> = self
+        let mut nodes: Vec<Node> = Vec::new();
+        // (glTF index, parent's world transform, parent's position in `nodes`)
+        let mut stack: Vec<(usize, Mat4, Option<usize>)> = self
             .root_nodes()?
             .into_iter()
             .rev()
-            .map(|n| (n, Mat4::IDENTITY))
+            .map(|n| (n, Mat4::IDENTITY, None))
             .collect();
-        while let Some((index, parent)) = stack.pop() {
+        while let Some((index, parent, up)) = stack.pop() {
             let node = root
                 .nodes
                 .get(index)
@@ -161,10 +166,22 @@ impl Loader<'_> {
                     ))
                 }
             }
-            let world = local_transform(node)
-                .map(|local| parent * local)
-                .filter(Mat4::is_finite)
+            let local = local_transform(node)
+                .filter(|local| (parent * *local).is_finite())
                 .ok_or_else(|| invalid(&part, "transform is not finite"))?;
+            let world = parent * local;
+            let movable = moving.get(index).copied().unwrap_or(false)
+                || marked_movable(&node.extras)
+                || up.is_some_and(|p| nodes[p].movable);
+            let local = Transform::from_matrix(&local);
+            if movable && local.is_none() {
+                return Err(invalid(
+                    &part,
+                    "moves (an animation targets it, it is marked movable or under such a \
+                     node), but its matrix is no translation, rotation and scale",
+                ));
+            }
+            let start = self.vertices.len() as u32;
             if let Some(mesh) = node.mesh {
                 self.add_mesh(mesh.value(), &world)?;
             }
@@ -178,11 +195,35 @@ impl Loader<'_> {
             {
                 self.add_light(light.light.value(), &world, &part)?;
             }
+            let position = nodes.len();
+            nodes.push(Node {
+                id: index as u32,
+                name: node.name.clone().unwrap_or_default(),
+                parent: up.map(|p| nodes[p].id),
+                movable,
+                local,
+                rest_world: world,
+                vertices: start..self.vertices.len() as u32,
+            });
             for child in node.children.iter().flatten().rev() {
-                stack.push((child.value(), world));
+                stack.push((child.value(), world, Some(position)));
             }
         }
-        Ok(())
+        // Preorder: a subtree's vertices end where its last descendant's do.
+        let parents: Vec<Option<usize>> = {
+            let at: std::collections::HashMap<u32, usize> =
+                nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
+            nodes
+                .iter()
+                .map(|n| n.parent.and_then(|p| at.get(&p).copied()))
+                .collect()
+        };
+        for i in (0..nodes.len()).rev() {
+            if let Some(p) = parents[i] {
+                nodes[p].vertices.end = nodes[p].vertices.end.max(nodes[i].vertices.end);
+            }
+        }
+        Ok(nodes)
     }
 
     pub(super) fn add_mesh(&mut self, index: usize, world: &Mat4) -> Result<(), LoadError> {

@@ -9,8 +9,9 @@
 //! Here every failure is a [`LoadError`] that names the mesh, primitive, accessor, buffer, node,
 //! texture or extension concerned.
 //!
-//! Geometry is static: skins, morph targets and animations are ignored (meshes appear in their
-//! bind pose), as are tangents, vertex colours, texture sets other than `TEXCOORD_0`, samplers,
+//! Nodes are kept (`crate::nodes`: ids, names, which may move, the vertices of each subtree),
+//! and animations' channels are read and checked; skins and morph targets are ignored (meshes
+//! appear in their bind pose), as are tangents, vertex colours, texture sets other than `TEXCOORD_0`, samplers,
 //! and all textures except the base colour one.
 //!
 //! One file per job: `container` (GLB chunks, the JSON document, buffers and URIs),
@@ -20,6 +21,7 @@
 //! `Loader` they fill.
 
 mod accessors;
+mod animations;
 mod container;
 mod geometry;
 mod lights;
@@ -27,8 +29,10 @@ mod materials;
 #[cfg(test)]
 mod tests;
 
+use super::nodes::{Node, Transform};
 use super::{Material, Scene, SceneError, Texture, Vertex};
 use accessors::*;
+use animations::marked_movable;
 use container::*;
 use glam::{Mat3, Mat4, Quat, Vec3};
 use gltf::json::{
@@ -231,8 +235,20 @@ pub fn load_gltf_slice(
         lights: Vec::new(),
         cameras: Vec::new(),
     };
-    loader.traverse()?;
-    Scene::new(
+    let mut animations = loader.animations()?;
+    let mut moving = vec![false; root.nodes.len()];
+    for channel in animations.iter().flat_map(|a| &a.channels) {
+        if let Some(m) = moving.get_mut(channel.node as usize) {
+            *m = true;
+        }
+    }
+    let nodes = loader.traverse(&moving)?;
+    // Channels of nodes outside the scene drawn (another glTF scene's) move nothing seen.
+    let drawn: std::collections::HashSet<u32> = nodes.iter().map(|n| n.id).collect();
+    for animation in &mut animations {
+        animation.channels.retain(|c| drawn.contains(&c.node));
+    }
+    let mut scene = Scene::new(
         name,
         loader.vertices,
         loader.indices,
@@ -241,7 +257,11 @@ pub fn load_gltf_slice(
         loader.lights,
         loader.cameras,
     )
-    .map_err(LoadError::Scene)
+    .map_err(LoadError::Scene)?;
+    scene
+        .set_nodes(nodes, animations)
+        .map_err(LoadError::Scene)?;
+    Ok(scene)
 }
 
 /// Walks the node hierarchy and accumulates the scene's parts.

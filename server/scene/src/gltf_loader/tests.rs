@@ -1332,3 +1332,139 @@ fn decodes_uri_escapes() {
     assert!(has_scheme("http://x/y.bin") && has_scheme("file:x"));
     assert!(!has_scheme("dir/x.bin") && !has_scheme("C:\\x.bin"));
 }
+
+/// A root quad with two children (one with a grandchild), the first child's subtree animated
+/// by translation and rotation, the second marked movable in its `extras`; `anim` is merged
+/// into the animation (to break it).
+fn animated_document(anim: Value) -> (Value, Bin) {
+    let mut bin = Bin::default();
+    let primitive = quad_primitive(&mut bin, true);
+    let times = bin.floats(&[[0.0], [1.0], [2.5]], "SCALAR");
+    let moves = bin.vec3(&[[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]);
+    let turns = bin.floats(&[[0.0, 0.0, 0.0, 1.0]; 3], "VEC4");
+    let mut animation = json!({
+        "name": "slide",
+        "channels": [
+            {"sampler": 0, "target": {"node": 1, "path": "translation"}},
+            {"sampler": 1, "target": {"node": 1, "path": "rotation"}},
+        ],
+        "samplers": [
+            {"input": times, "output": moves},
+            {"input": times, "output": turns, "interpolation": "STEP"},
+        ],
+    });
+    if let (Some(a), Value::Object(rest)) = (animation.as_object_mut(), anim) {
+        a.extend(rest);
+    }
+    let doc = bin.document(
+        Some("data.bin"),
+        json!({
+            "scene": 0,
+            "scenes": [{"nodes": [0]}],
+            "nodes": [
+                {"name": "ground", "mesh": 0, "children": [1, 3]},
+                {"name": "cart", "mesh": 0, "translation": [0, 1, 0], "children": [2]},
+                {"name": "wheel", "mesh": 0, "translation": [0, 0.5, 0]},
+                {"name": "crate", "mesh": 0, "translation": [3, 0, 0], "extras": {"movable": true}},
+            ],
+            "meshes": [{"primitives": [primitive]}],
+            "animations": [animation],
+        }),
+    );
+    (doc, bin)
+}
+
+#[test]
+fn keeps_the_node_hierarchy_with_each_subtrees_vertices_and_its_animations() {
+    let (doc, bin) = animated_document(json!({}));
+    let scene = load_document(&doc, &bin.bytes).expect("loads");
+    let summary: Vec<_> = scene
+        .nodes
+        .iter()
+        .map(|n| {
+            (
+                n.id,
+                n.name.as_str(),
+                n.parent,
+                n.movable,
+                n.vertices.clone(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        summary,
+        [
+            (0, "ground", None, false, 0..16),
+            (1, "cart", Some(0), true, 4..12),
+            (2, "wheel", Some(1), true, 8..12),
+            (3, "crate", Some(0), true, 12..16),
+        ]
+    );
+    let cart = scene.node(1).expect("listed");
+    assert_eq!(
+        cart.local.expect("TRS").translation,
+        Vec3::new(0.0, 1.0, 0.0)
+    );
+    let wheel = scene.node_bounds()[2].expect("geometry");
+    assert_close(wheel.min, Vec3::new(0.0, 1.5, 0.0));
+    assert_close(wheel.max, Vec3::new(1.0, 1.5, 1.0));
+    let [slide] = scene.animations.as_slice() else {
+        panic!("one animation: {:?}", scene.animations)
+    };
+    assert_eq!((slide.name.as_str(), slide.duration()), ("slide", 2.5));
+    assert_eq!(
+        slide.channels[1].interpolation,
+        crate::nodes::Interpolation::Step
+    );
+    assert_eq!(slide.channels[1].width(), 4);
+}
+
+#[test]
+fn refuses_broken_animations_naming_the_channel() {
+    let cases = [
+        (
+            json!({"samplers": [{"input": 4, "output": 5}, {"input": 4, "output": 5}]}),
+            "animation 0 ('slide') channel 1: output accessor 5: type is Vec3, but output needs Vec4",
+        ),
+        (
+            json!({"channels": [{"sampler": 5, "target": {"node": 1, "path": "scale"}}]}),
+            "animations[0].channels[0].sampler: Index out of bounds",
+        ),
+    ];
+    for (change, want) in cases {
+        let (doc, bin) = animated_document(change);
+        let error = load_error(&doc, &bin.bytes);
+        assert!(error.contains(want), "{error}");
+    }
+    // Two translations for three keys.
+    let (mut doc, bin) = animated_document(json!({}));
+    doc["accessors"][5]["count"] = json!(2);
+    let error = load_error(&doc, &bin.bytes);
+    assert!(
+        error.contains("channel 0: output holds 6 components for 3 keys (3 per key)"),
+        "{error}"
+    );
+    // Keys out of order: the times (accessor 4, after the quad's four) 0, 3, 2.5.
+    let (doc, mut bin) = animated_document(json!({}));
+    assert_eq!(doc["samplers"], Value::Null);
+    let offset = doc["bufferViews"][4]["byteOffset"]
+        .as_u64()
+        .expect("offset") as usize;
+    bin.bytes[offset + 4..offset + 8].copy_from_slice(&3.0f32.to_le_bytes());
+    let error = load_error(&doc, &bin.bytes);
+    assert!(
+        error.contains("input key 2 does not come after key 1"),
+        "{error}"
+    );
+    // An animated node authored as a sheared matrix cannot move.
+    let (mut doc, bin) = animated_document(json!({}));
+    doc["nodes"][1] = json!({
+        "mesh": 0,
+        "matrix": [1, 0, 0, 0, 0.5, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1],
+    });
+    let error = load_error(&doc, &bin.bytes);
+    assert!(
+        error.contains("node 1") && error.contains("no translation, rotation and scale"),
+        "{error}"
+    );
+}

@@ -125,6 +125,8 @@ impl SceneEntry {
             default_lights: default_lights(&scene, max_lights.min(MAX_LIGHTS)),
             emitter_stand_in: emitter_stand_in(&scene),
             facts: SceneFacts::of(&scene),
+            nodes: node_infos(&scene),
+            animations: animation_infos(&scene),
             scene: Arc::new(scene),
             load_ms,
             variants: Mutex::new(Vec::new()),
@@ -170,6 +172,8 @@ impl SceneEntry {
                     kept_height: i.height,
                 }
             }),
+            nodes: self.nodes.clone(),
+            animations: self.animations.clone(),
             caches: precomputed
                 .iter()
                 .filter_map(CacheVariant::from_precomputed)
@@ -436,4 +440,39 @@ pub fn precompute_failed(scene: &SceneEntry, key: &PrecomputeKey, error: &str) -
             scene.id
         ),
     )
+}
+
+fn node_infos(scene: &Scene) -> Vec<lightcast_protocol::NodeInfo> {
+    scene
+        .nodes
+        .iter()
+        .zip(scene.node_bounds())
+        .map(|(n, b)| lightcast_protocol::NodeInfo {
+            id: n.id,
+            name: n.name.clone(),
+            parent: n.parent,
+            movable: n.movable,
+            bounds: b.map(|b| Bounds {
+                min: b.min.into(),
+                max: b.max.into(),
+            }),
+        })
+        .collect()
+}
+
+fn animation_infos(scene: &Scene) -> Vec<lightcast_protocol::AnimationInfo> {
+    scene
+        .animations
+        .iter()
+        .map(|a| {
+            let mut nodes: Vec<u32> = a.channels.iter().map(|c| c.node).collect();
+            nodes.sort_unstable();
+            nodes.dedup();
+            lightcast_protocol::AnimationInfo {
+                name: a.name.clone(),
+                duration: a.duration(),
+                nodes,
+            }
+        })
+        .collect()
 }

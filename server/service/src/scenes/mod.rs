@@ -99,6 +99,10 @@ pub struct SceneEntry {
     /// Summed once: checking a request's precomputation parameters against them happens per
     /// message.
     pub facts: SceneFacts,
+    /// `SceneInfo::nodes` and `animations`, worked out once (a node's bounds sum its
+    /// subtree's vertices).
+    nodes: Vec<lightcast_protocol::NodeInfo>,
+    animations: Vec<lightcast_protocol::AnimationInfo>,
     pub load_ms: f64,
     /// The SHA-256 of the token that uploaded the scene, the only one that may delete it
     /// (`None`: the server's own scenes, or auth off); the token itself is never kept.

@@ -284,6 +284,29 @@ async fn scenes(client: &Client, cmd: ScenesCommand, json: bool) -> anyhow::Resu
                 info.cameras.len(),
                 info.sessions
             );
+            // Movable nodes first: they are what a client may move; a large file's static
+            // hierarchy is summed up.
+            let movable: Vec<String> = info
+                .nodes
+                .iter()
+                .filter(|n| n.movable)
+                .map(|n| format!("{} '{}'", n.id, n.name))
+                .collect();
+            if !info.nodes.is_empty() {
+                println!(
+                    "  {} nodes, {} movable{}{}",
+                    info.nodes.len(),
+                    movable.len(),
+                    if movable.is_empty() { "" } else { ": " },
+                    movable.join(", ")
+                );
+            }
+            for a in &info.animations {
+                println!(
+                    "  animation '{}': {:.2} s, moves nodes {:?}",
+                    a.name, a.duration, a.nodes
+                );
+            }
             for p in &info.precomputed {
                 let params: Vec<String> = p
                     .params
@@ -403,7 +426,10 @@ async fn render(client: &Client, cmd: RenderCmd, json: bool) -> anyhow::Result<(
         for (kind, r) in [
             ("diffuse", &c.receivers.diffuse),
             ("specular", &c.receivers.specular),
-        ] {
+        ]
+        .into_iter()
+        .filter(|(_, r)| r.pixel_share > 0.0)
+        {
             println!(
                 "  on {kind} receivers ({:.1} % of pixels, {:.1} % of the light): 8×8-block {:.2} %, bias {:+.2} %",
                 r.pixel_share * 100.0,

@@ -88,8 +88,8 @@ pub fn receiver_errors(truth: &[[f32; 3]], other: &[[f32; 4]], width: usize) -> 
         let e = errors_where(truth, other, width, keep);
         let light: f64 = (0..truth.len().min(other.len()))
             .filter(|&i| keep(i))
-            .map(|i| truth[i].iter().map(|&c| f64::from(c)).sum::<f64>())
-            .sum();
+            .flat_map(|i| truth[i])
+            .fold(0.0, |s, c| s + f64::from(c));
         ReceiverErrors {
             pixel_share: (0..other.len()).filter(|&i| keep(i)).count() as f64 / covered,
             reference_share: if total > 0.0 { light / total } else { 0.0 },

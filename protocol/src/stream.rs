@@ -33,6 +33,13 @@ pub enum ClientMessage {
         #[serde(default)]
         input_id: u64,
     },
+    /// Pose movable nodes (`render.nodes`): each entry replaces the session's entry for its
+    /// node, others are kept (`{"node": 1}` alone puts node 1 back).
+    Nodes {
+        nodes: Vec<crate::NodePose>,
+        #[serde(default)]
+        input_id: u64,
+    },
     /// A JSON merge patch (RFC 7396) of the session's [`crate::SessionParams`], as for
     /// `PATCH /v1/sessions/{id}`.
     Update {

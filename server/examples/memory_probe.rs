@@ -179,6 +179,7 @@ fn main() -> anyhow::Result<()> {
                 history: None,
                 still: false,
                 yuv420: false,
+                poses: Vec::new(),
             };
             let set =
                 caches::precompute(&scene, &caches::CacheParams::for_scene(&scene), &mut |_| {})?;

@@ -28,6 +28,28 @@ pub struct RenderParams {
     pub shadow_map_size: u32,
     pub gi: GiParams,
     pub view: View,
+    /// Movable nodes posed away from where the scene has them (`GET /v1/scenes/{id}`'s
+    /// `nodes`, those with `movable`), at most one entry per node; a node not listed keeps
+    /// its own pose. Per session: one viewer moving a box does not move it for another.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub nodes: Vec<NodePose>,
+}
+
+/// A movable node's pose relative to its parent (glTF's translation, rotation, scale); a
+/// field left out keeps the node's own, so `{"node": 1}` puts node 1 back where it was.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NodePose {
+    /// The node's `id`.
+    pub node: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation: Option<[f32; 3]>,
+    /// A quaternion `[x, y, z, w]` (normalised by the server; not zero).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation: Option<[f32; 4]>,
+    /// Per axis, each within [10⁻³, 10³].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<[f32; 3]>,
 }
 
 impl Default for RenderParams {
@@ -44,6 +66,7 @@ impl Default for RenderParams {
             shadow_map_size: 2048,
             gi: GiParams::default(),
             view: View::FINAL,
+            nodes: Vec::new(),
         }
     }
 }

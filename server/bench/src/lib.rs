@@ -251,6 +251,7 @@ fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiParams) -> RenderSetting
         history: None,
         still: false,
         yuv420: false,
+        poses: Vec::new(),
     }
 }
 

@@ -41,6 +41,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: &[],
     downscales: false,
     samples_environment: false,
+    follows_moved_nodes: true,
     bench: None,
 };
 

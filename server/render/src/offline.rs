@@ -483,6 +483,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         history: None,
         still: false,
         yuv420: false,
+        poses: Vec::new(),
     }
 }
 

@@ -29,7 +29,8 @@ use crate::passes::{
     Target, INDIRECT_FORMAT,
 };
 use crate::scene::environment as env;
-use crate::scene::Scene;
+use crate::scene::nodes::{owners, posed_vertices, posed_worlds, Poses};
+use crate::scene::{Scene, Vertex};
 use glam::Vec3;
 use lightcast_protocol::{Camera, Environment, GiParams, Light, LightKind, View};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -82,6 +83,9 @@ pub struct RenderSettings {
     /// of RGBA8: 1.5 instead of 4 bytes per pixel cross the bus, and the CPU skips the colour
     /// conversion.
     pub yuv420: bool,
+    /// Movable nodes away from their own pose (`scene::nodes::resolve_poses`); every pass sees
+    /// them moved.
+    pub poses: crate::scene::nodes::Poses,
 }
 
 /// A rendered frame.
@@ -566,6 +570,10 @@ pub struct Renderer {
     environment_buffer: EnvironmentBuffer,
     /// The scene has emissive triangles (`scene::emitters::has_emitters`).
     has_emitters: bool,
+    /// The poses the vertex buffer holds its movable nodes in, and each vertex's innermost
+    /// node (`scene::nodes::owners`, worked out on the first pose).
+    poses: Poses,
+    owners: Option<Vec<u32>>,
 }
 
 /// What an environment's evaluation depends on: its parameters and, for a sky, its sun.
@@ -615,6 +623,8 @@ impl Renderer {
             methods: gi::REGISTRY.iter().map(|_| None).collect(),
             environment: None,
             environment_buffer: EnvironmentBuffer::new(device),
+            poses: Poses::new(),
+            owners: None,
             shared: SceneResources {
                 scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
                 camera: camera_buffer,
@@ -628,6 +638,43 @@ impl Renderer {
 
     pub fn context(&self) -> &GpuContext {
         &self.shared.ctx
+    }
+
+    /// Rewrites the vertices of the nodes whose world transform `poses` changes from what the
+    /// vertex buffer holds: the subtrees of the outermost such nodes, each one write (queued
+    /// before the next submission, so frames in flight keep what they were encoded with).
+    fn apply_poses(&mut self, poses: &Poses) {
+        if *poses == self.poses {
+            return;
+        }
+        let scene = &self.shared.scene;
+        let owners = self
+            .owners
+            .get_or_insert_with(|| owners(&scene.nodes, scene.vertices.len() as u32));
+        let before = posed_worlds(&scene.nodes, &self.poses);
+        let after = posed_worlds(&scene.nodes, poses);
+        let mut written_to = 0;
+        for (i, node) in scene.nodes.iter().enumerate() {
+            // A changed node's descendants lie in its range, written with it.
+            if before[i] == after[i] || node.vertices.start < written_to {
+                continue;
+            }
+            let moved = posed_vertices(
+                &scene.vertices,
+                &scene.nodes,
+                owners,
+                &after,
+                node.vertices.clone(),
+            );
+            let offset = u64::from(node.vertices.start) * std::mem::size_of::<Vertex>() as u64;
+            self.shared.ctx.queue.write_buffer(
+                &self.shared.scene_buffers.vertices,
+                offset,
+                bytemuck::cast_slice(&moved),
+            );
+            written_to = node.vertices.end;
+        }
+        self.poses = poses.clone();
     }
 
     pub fn scene(&self) -> &Scene {
@@ -887,6 +934,17 @@ impl Renderer {
         let (width, height) = (settings.width, settings.height);
         let environment = self.environment(settings)?;
         let (method_index, entry) = gi::entry(settings.gi.method);
+        if !settings.poses.is_empty() && !entry.follows_moved_nodes {
+            return Err(invalid(
+                "poses",
+                format!(
+                    "{} does not follow moved nodes yet; {} do",
+                    settings.gi.method,
+                    gi::following_moved_nodes().join(", ")
+                ),
+            ));
+        }
+        self.apply_poses(&settings.poses);
         // A method that does not sample the environment lights with its directions too.
         let mut lights = settings.lights.clone();
         if let (Some(e), false) = (&environment, entry.samples_environment) {

@@ -211,7 +211,7 @@ pub fn validate(
 /// Each vertex's innermost node (its position in `nodes`; `u32::MAX` for none), for nodes
 /// [`validate`] accepts: one sweep over the vertices with a stack of the open ranges, so a
 /// deep hierarchy costs no more than a flat one.
-fn owners(nodes: &[Node], vertex_count: u32) -> Vec<u32> {
+pub fn owners(nodes: &[Node], vertex_count: u32) -> Vec<u32> {
     let mut owner = vec![u32::MAX; vertex_count as usize];
     let mut open: Vec<usize> = Vec::new();
     let mut next = 0;
@@ -260,6 +260,240 @@ pub fn subtree_bounds(nodes: &[Node], positions: &[Vec3]) -> Vec<Option<Aabb>> {
     bounds
 }
 
+/// Movable nodes' local transforms replacing their own (a `render.nodes` list resolved by
+/// [`resolve_poses`]), sorted by node id.
+pub type Poses = Vec<(u32, Transform)>;
+
+/// Most entries `render.nodes` may hold.
+pub const MAX_POSES: usize = 1024;
+/// The range of each scale component of a pose.
+pub const SCALE_RANGE: (f32, f32) = (1e-3, 1e3);
+
+/// A `render.nodes` entry that cannot be used: `index` is its position (`None`: the list),
+/// `field` the field at fault.
+#[derive(Debug, PartialEq)]
+pub struct PoseError {
+    pub index: Option<usize>,
+    pub field: &'static str,
+    pub reason: String,
+}
+
+/// Checks `requested` against the scene's `nodes` (their subtree `bounds` at rest, from
+/// [`subtree_bounds`]) and resolves every entry to a whole local transform (fields left out
+/// are the node's own). A pose must keep its node within `scene_bounds`: the light and shadow
+/// maps are fitted to them, and beyond them would clip the node.
+pub fn resolve_poses(
+    nodes: &[Node],
+    bounds: &[Option<Aabb>],
+    scene_bounds: &Aabb,
+    requested: &[lightcast_protocol::NodePose],
+) -> Result<Poses, PoseError> {
+    let error = |index, field, reason: String| PoseError {
+        index: Some(index),
+        field,
+        reason,
+    };
+    if requested.len() > MAX_POSES {
+        return Err(PoseError {
+            index: None,
+            field: "",
+            reason: format!(
+                "{} entries; at most {MAX_POSES} (one per movable node)",
+                requested.len()
+            ),
+        });
+    }
+    let at: std::collections::HashMap<u32, usize> =
+        nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
+    let mut poses: Poses = Vec::with_capacity(requested.len());
+    for (i, pose) in requested.iter().enumerate() {
+        let Some(node) = at.get(&pose.node).map(|&n| &nodes[n]) else {
+            return Err(error(
+                i,
+                "node",
+                format!("the scene has no node {}", pose.node),
+            ));
+        };
+        let (true, Some(own)) = (node.movable, node.local) else {
+            return Err(error(
+                i,
+                "node",
+                format!("node {} ('{}') is not movable", node.id, node.name),
+            ));
+        };
+        if requested[..i].iter().any(|p| p.node == pose.node) {
+            return Err(error(
+                i,
+                "node",
+                format!("node {} is listed twice", pose.node),
+            ));
+        }
+        let limit = crate::MAX_SCENE_EXTENT;
+        let translation = match pose.translation.map(Vec3::from) {
+            None => own.translation,
+            Some(t) if t.is_finite() && t.abs().max_element() <= limit => t,
+            Some(t) => {
+                return Err(error(
+                    i,
+                    "translation",
+                    format!("{t} must be finite and within ±{limit:e}"),
+                ))
+            }
+        };
+        let rotation = match pose.rotation.map(Quat::from_array) {
+            None => own.rotation,
+            Some(q) if q.is_finite() && q.length() > 1e-6 => q.normalize(),
+            Some(q) => {
+                return Err(error(
+                    i,
+                    "rotation",
+                    format!("{q} must be a finite, non-zero quaternion [x, y, z, w]"),
+                ))
+            }
+        };
+        let (lo, hi) = SCALE_RANGE;
+        let scale = match pose.scale.map(Vec3::from) {
+            None => own.scale,
+            Some(s) if s.min_element() >= lo && s.max_element() <= hi => s,
+            Some(s) => {
+                return Err(error(
+                    i,
+                    "scale",
+                    format!("{s}: each component must be within [{lo}, {hi}]"),
+                ))
+            }
+        };
+        let posed = Transform {
+            translation,
+            rotation,
+            scale,
+        };
+        // A node put back where it is moves nothing (and needs no method that follows).
+        if posed != own {
+            poses.push((pose.node, posed));
+        }
+    }
+    poses.sort_by_key(|(id, _)| *id);
+    let worlds = posed_worlds(nodes, &poses);
+    let grown = {
+        let slack = Vec3::splat(1e-4 * (scene_bounds.max - scene_bounds.min).max_element());
+        Aabb {
+            min: scene_bounds.min - slack,
+            max: scene_bounds.max + slack,
+        }
+    };
+    for (i, pose) in requested.iter().enumerate() {
+        let Some(&n) = at.get(&pose.node) else {
+            continue;
+        };
+        let delta = worlds[n] * nodes[n].rest_world.inverse();
+        if delta.determinant() <= 0.0 {
+            return Err(error(
+                i,
+                "scale",
+                "would mirror the node (its own transform mirrors; give a scale that keeps it)"
+                    .into(),
+            ));
+        }
+        if let Some(b) = bounds[n] {
+            let moved = corners(&b).map(|c| delta.transform_point3(c));
+            if moved
+                .iter()
+                .any(|c| c.cmplt(grown.min).any() || c.cmpgt(grown.max).any())
+            {
+                return Err(error(
+                    i,
+                    "translation",
+                    format!(
+                        "moves node {} outside the scene's bounds ({} … {}), to which its light \
+                         and shadow maps are fitted",
+                        pose.node, scene_bounds.min, scene_bounds.max
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(poses)
+}
+
+fn corners(b: &Aabb) -> [Vec3; 8] {
+    std::array::from_fn(|k| {
+        Vec3::new(
+            if k & 1 == 0 { b.min.x } else { b.max.x },
+            if k & 2 == 0 { b.min.y } else { b.max.y },
+            if k & 4 == 0 { b.min.z } else { b.max.z },
+        )
+    })
+}
+
+/// Every node's world transform with `poses` (sorted by id) in place of their own local
+/// transforms, in `nodes`' order (parents before children).
+pub fn posed_worlds(nodes: &[Node], poses: &[(u32, Transform)]) -> Vec<Mat4> {
+    let mut worlds: Vec<Mat4> = Vec::with_capacity(nodes.len());
+    let at: std::collections::HashMap<u32, usize> =
+        nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
+    for node in nodes {
+        let parent = node.parent.and_then(|p| at.get(&p)).map(|&p| worlds[p]);
+        let posed = poses
+            .binary_search_by_key(&node.id, |(id, _)| *id)
+            .ok()
+            .map(|k| &poses[k].1);
+        let world = match (posed, parent) {
+            // Unposed: the rest pose, moved with its parent.
+            (None, None) => node.rest_world,
+            (None, Some(parent)) => {
+                let rest_parent = node
+                    .parent
+                    .and_then(|p| at.get(&p))
+                    .map_or(Mat4::IDENTITY, |&p| nodes[p].rest_world);
+                parent * rest_parent.inverse() * node.rest_world
+            }
+            (Some(t), parent) => {
+                // The parent's world at rest, as the node's own rest world implies it.
+                let parent = parent.unwrap_or_else(|| {
+                    node.rest_world * node.local.map_or(Mat4::IDENTITY, |l| l.matrix()).inverse()
+                });
+                parent * t.matrix()
+            }
+        };
+        worlds.push(world);
+    }
+    worlds
+}
+
+/// The scene's vertices `range` moved by `worlds` (from [`posed_worlds`]): each vertex by its
+/// innermost node's change from its rest world (`owner` from [`owners`]), its normal by that
+/// change's inverse transpose.
+pub fn posed_vertices(
+    vertices: &[crate::Vertex],
+    nodes: &[Node],
+    owner: &[u32],
+    worlds: &[Mat4],
+    range: Range<u32>,
+) -> Vec<crate::Vertex> {
+    let deltas: Vec<(Mat4, glam::Mat3)> = nodes
+        .iter()
+        .zip(worlds)
+        .map(|(n, w)| {
+            let delta = *w * n.rest_world.inverse();
+            (delta, glam::Mat3::from_mat4(delta).inverse().transpose())
+        })
+        .collect();
+    (range.start as usize..range.end as usize)
+        .map(|v| {
+            let mut out = vertices[v];
+            if let Some((delta, normals)) = deltas.get(owner[v] as usize) {
+                out.position = delta.transform_point3(out.position.into()).to_array();
+                out.normal = (*normals * Vec3::from(out.normal))
+                    .try_normalize()
+                    .unwrap_or(Vec3::Y)
+                    .to_array();
+            }
+            out
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -302,6 +536,119 @@ mod tests {
         assert_eq!(validate(&swapped, &[], 10, &[]), Err(NodeError::Order(2)));
         swapped.swap(1, 2);
         assert_eq!(validate(&swapped, &[], 10, &[]), Ok(()));
+    }
+
+    fn pose(node: u32) -> lightcast_protocol::NodePose {
+        lightcast_protocol::NodePose {
+            node,
+            translation: None,
+            rotation: None,
+            scale: None,
+        }
+    }
+
+    #[test]
+    fn a_posed_box_moves_its_vertices_and_normals_and_nothing_else() {
+        let scene = crate::procedural::cornell_box();
+        let bounds = scene.node_bounds();
+        let short = scene.node(1).expect("short box").clone();
+        let base = short.local.expect("TRS").translation;
+        // A quarter turn about its own vertical axis, 10 cm towards the back.
+        let requested = [lightcast_protocol::NodePose {
+            translation: Some((base - Vec3::Z * 0.1).to_array()),
+            rotation: Some(Quat::from_rotation_y(std::f32::consts::FRAC_PI_2).to_array()),
+            ..pose(1)
+        }];
+        let poses =
+            resolve_poses(&scene.nodes, &bounds, &scene.bounds, &requested).expect("a valid pose");
+        let worlds = posed_worlds(&scene.nodes, &poses);
+        let owner = owners(&scene.nodes, scene.vertices.len() as u32);
+        let all = 0..scene.vertices.len() as u32;
+        let moved = posed_vertices(&scene.vertices, &scene.nodes, &owner, &worlds, all);
+        let turn = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        for (i, (was, now)) in scene.vertices.iter().zip(&moved).enumerate() {
+            let (p, n) = (Vec3::from(was.position), Vec3::from(was.normal));
+            let (want_p, want_n) = if short.vertices.contains(&(i as u32)) {
+                (base - Vec3::Z * 0.1 + turn * (p - base), turn * n)
+            } else {
+                (p, n)
+            };
+            assert!(Vec3::from(now.position).abs_diff_eq(want_p, 1e-5), "{i}");
+            assert!(Vec3::from(now.normal).abs_diff_eq(want_n, 1e-5), "{i}");
+        }
+        // Unposed, every vertex is where it was.
+        let rest = posed_worlds(&scene.nodes, &[]);
+        let same = posed_vertices(&scene.vertices, &scene.nodes, &owner, &rest, 0..10);
+        assert_eq!(same, scene.vertices[..10]);
+    }
+
+    #[test]
+    fn poses_that_cannot_be_used_are_refused_naming_the_field() {
+        let scene = crate::procedural::cornell_box();
+        let bounds = scene.node_bounds();
+        let check = |requested: &[lightcast_protocol::NodePose]| {
+            resolve_poses(&scene.nodes, &bounds, &scene.bounds, requested)
+                .map(|_| ())
+                .map_err(|e| (e.index, e.field, e.reason))
+        };
+        let refused = |requested: &[lightcast_protocol::NodePose], index, field, says: &str| {
+            let (i, f, reason) = check(requested).expect_err("refused");
+            assert_eq!((i, f), (index, field), "{reason}");
+            assert!(reason.contains(says), "{reason}");
+        };
+        assert_eq!(check(&[pose(1), pose(2)]), Ok(()));
+        refused(&[pose(7)], Some(0), "node", "no node 7");
+        refused(
+            &[pose(1), pose(0)],
+            Some(1),
+            "node",
+            "node 0 ('room') is not movable",
+        );
+        refused(&[pose(2), pose(2)], Some(1), "node", "listed twice");
+        let with = |f: fn(&mut lightcast_protocol::NodePose)| {
+            let mut p = pose(1);
+            f(&mut p);
+            [p]
+        };
+        refused(
+            &with(|p| p.translation = Some([f32::NAN, 0.0, 0.0])),
+            Some(0),
+            "translation",
+            "finite",
+        );
+        refused(
+            &with(|p| p.translation = Some([0.0, 0.0, 1e9])),
+            Some(0),
+            "translation",
+            "within",
+        );
+        refused(
+            &with(|p| p.rotation = Some([0.0; 4])),
+            Some(0),
+            "rotation",
+            "non-zero",
+        );
+        refused(
+            &with(|p| p.scale = Some([1.0, 0.0, 1.0])),
+            Some(0),
+            "scale",
+            "within",
+        );
+        refused(
+            &with(|p| p.scale = Some([1.0, 1e6, 1.0])),
+            Some(0),
+            "scale",
+            "within",
+        );
+        // Out through the open front wall, past the room's bounds.
+        refused(
+            &with(|p| p.translation = Some([0.0, 0.0, 3.0])),
+            Some(0),
+            "translation",
+            "outside the scene's bounds",
+        );
+        let many: Vec<_> = (0..=MAX_POSES as u32).map(pose).collect();
+        refused(&many, None, "", "at most 1024");
     }
 
     #[test]

@@ -114,6 +114,29 @@ pub fn resolve(
         EMITTERS.name,
         emitters_for(asked, entry.emitter_stand_in.as_ref(), &lights),
     );
+    let poses = crate::scene::nodes::resolve_poses(
+        &entry.scene.nodes,
+        &entry.node_bounds,
+        &entry.scene.bounds,
+        &params.nodes,
+    )
+    .map_err(|e| {
+        let field = match (e.index, e.field) {
+            (None, _) => "nodes".to_owned(),
+            (Some(i), field) => format!("nodes[{i}].{field}"),
+        };
+        ApiError::field(field, e.reason)
+    })?;
+    if !poses.is_empty() && !crate::gi::entry(g.method).1.follows_moved_nodes {
+        return Err(ApiError::field(
+            "nodes",
+            format!(
+                "gi.method {} does not follow moved nodes yet; {} do",
+                g.method,
+                crate::gi::following_moved_nodes().join(", ")
+            ),
+        ));
+    }
     let settings = RenderSettings {
         width: params.width,
         height: params.height,
@@ -131,6 +154,7 @@ pub fn resolve(
         history: None,
         still: false,
         yuv420: false,
+        poses,
     };
     settings.validate_for(max_texture).map_err(|e| {
         // A request that gave the one-light shorthand hears about `light`, not `lights[0]`.

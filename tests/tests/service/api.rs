@@ -705,6 +705,107 @@ async fn scenes_list_their_nodes_and_animations() {
     server.stop().await;
 }
 
+/// Issue 35 part 2: `render.nodes` moves a movable node in a one-shot render (reproducibly)
+/// and in one session (over its WebSocket) without moving it for another session.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clients_move_nodes_per_render_and_per_session() {
+    let server = TestServer::start(&[]).await;
+    let moved = json!([{"node": 1, "translation": [-0.15, 0.0, 0.4]}]);
+    let raw = |nodes: Value| {
+        json!({"format": "raw_final", "render": {"width": 48, "height": 32,
+               "shadow_map_size": 256, "gi": {"method": "none"}, "nodes": nodes}})
+    };
+    let render = |body: Value| {
+        let server = &server;
+        async move {
+            let resp = server
+                .http
+                .post(server.url("/v1/render"))
+                .json(&body)
+                .send()
+                .await
+                .expect("render");
+            assert_eq!(resp.status(), 200);
+            let report: RenderReport = serde_json::from_str(
+                resp.headers()["x-lightcast-report"]
+                    .to_str()
+                    .expect("ASCII"),
+            )
+            .expect("report");
+            (report, resp.bytes().await.expect("image").to_vec())
+        }
+    };
+    let (rest, rest_pixels) = render(raw(json!([]))).await;
+    let (first, first_pixels) = render(raw(moved.clone())).await;
+    let (again, again_pixels) = render(raw(moved.clone())).await;
+    assert_ne!(first.request_hash, rest.request_hash);
+    assert_eq!(first.request_hash, again.request_hash);
+    assert_eq!(
+        first_pixels, again_pixels,
+        "a posed render replays bit for bit"
+    );
+    let floats = |b: &[u8]| -> Vec<f32> {
+        b.chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect()
+    };
+    let changed = floats(&rest_pixels)
+        .iter()
+        .zip(floats(&first_pixels))
+        .filter(|(a, b)| (*a - b).abs() > 1e-3)
+        .count();
+    assert!(changed > 100, "the box moved: {changed} values changed");
+    // `{"node": 1}` alone is the node where it is: the rest render.
+    let (_, back) = render(raw(json!([{"node": 1}]))).await;
+    assert_eq!(back, rest_pixels);
+    // More entries than movable nodes allow, inside the body limit.
+    let many: Vec<Value> = (0..2000).map(|_| json!({"node": 1})).collect();
+    let resp = server
+        .http
+        .post(server.url("/v1/render"))
+        .json(&raw(json!(many)))
+        .send()
+        .await
+        .expect("render");
+    assert_eq!(resp.status(), 400);
+    let body: Value = resp.json().await.expect("error");
+    assert_eq!(body["field"], "render.nodes", "{body}");
+
+    // Two sessions of one scene: one moves the tall box over its socket.
+    let session = |gi: &str| {
+        json!({"render": {"width": 32, "height": 32, "shadow_map_size": 256,
+               "gi": {"method": gi}}, "fps_cap": 60, "encoding": {"codec": "png"}})
+    };
+    let a = server.create_session(session("clustered"), None).await;
+    let b = server.create_session(session("clustered"), None).await;
+    let mut stream = server.connect(&a).await;
+    let mut events = Vec::new();
+    let before = stream.next_frame(&mut events).await;
+    stream
+        .send(json!({"type": "nodes", "input_id": 5,
+                     "nodes": [{"node": 2, "translation": [0.3, 0.0, -0.3]}]}))
+        .await;
+    let after = loop {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.input_id == 5 {
+            break f;
+        }
+    };
+    assert_ne!(before.rgba, after.rgba, "the frame shows the moved box");
+    let a_info = server
+        .get_json(&format!("/v1/sessions/{}", a.session.id))
+        .await;
+    assert_eq!(
+        a_info["params"]["render"]["nodes"][0]["node"], 2,
+        "{a_info}"
+    );
+    let b_info = server
+        .get_json(&format!("/v1/sessions/{}", b.session.id))
+        .await;
+    assert_eq!(b_info["params"]["render"].get("nodes"), None, "{b_info}");
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn scenes_upload_inspect_use_and_delete() {
     let server = TestServer::start(&[]).await;

@@ -538,6 +538,83 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             "invalid_field",
             Some("compare_to"),
         ),
+        // Moving nodes (issue 35): unknown, not movable, huge, degenerate, misspelt, too
+        // many, a method that does not follow them, a reference that does not either.
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"nodes":[{"node":7}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.nodes[0].node"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"nodes":[{"node":1},{"node":0,"translation":[0,0,0]}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.nodes[1].node"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"nodes":[{"node":1,"translation":[1e30,0,0]}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.nodes[0].translation"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"nodes":[{"node":1,"scale":[0,1,1]}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.nodes[0].scale"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"nodes":[{"node":1,"rotation":[0,0,0,0]}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.nodes[0].rotation"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"nodes":[{"node":1,"size":2}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.nodes[0].size"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            format!(
+                r#"{{"render":{{"nodes":[{}]}}}}"#,
+                vec![r#"{"node":1}"#; 10_000].join(",")
+            ),
+            413,
+            "too_large",
+            None,
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"render":{"gi":{"method":"lightskin"},"nodes":[{"node":1,"translation":[0,0.3,0]}]}}"#,
+            400,
+            "invalid_field",
+            Some("render.nodes"),
+        ),
+        case(
+            "POST",
+            "/v1/render",
+            r#"{"compare_to":"reference","render":{"gi":{"method":"clustered"},"nodes":[{"node":1,"translation":[0,0.3,0]}]}}"#,
+            400,
+            "invalid_field",
+            Some("compare_to"),
+        ),
         case(
             "POST",
             "/v1/render",
@@ -781,6 +858,19 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
     stream
         .send(json!({"type": "light", "index": 1, "light": {"kind": "point", "position": [0, 1, 0], "direction": [0, -1, 0], "color": [1, 1, 1], "intensity": 1, "inner_cone": 0, "outer_cone": 0}}))
         .await;
+    // Nodes (issue 35): an unknown one, a zero quaternion, and a pose the session's method
+    // (BRSM, which keeps light caches at rest) does not follow.
+    stream
+        .send(json!({"type": "nodes", "nodes": [{"node": 9}]}))
+        .await;
+    stream
+        .send(
+            json!({"type": "nodes", "nodes": [{"node": 1}, {"node": 2, "rotation": [0, 0, 0, 0]}]}),
+        )
+        .await;
+    stream
+        .send(json!({"type": "nodes", "nodes": [{"node": 1, "translation": [0, 0.3, 0]}]}))
+        .await;
     let expected = [
         ("binary_not_accepted", None),
         ("malformed_json", None),
@@ -795,6 +885,9 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
         ("invalid_field", Some("render.light.position[1]")),
         ("invalid_field", Some("input_id")),
         ("invalid_field", Some("index")),
+        ("invalid_field", Some("nodes[0].node")),
+        ("invalid_field", Some("nodes[1].rotation")),
+        ("invalid_field", Some("render.nodes")),
     ];
     for (kind, field) in expected {
         let error = stream.next_error().await;

@@ -362,6 +362,7 @@ fn measure_size(
         let frame = renderer.render(&lossless)?;
         let video = renderer.render(&RenderSettings {
             yuv420: true,
+            poses: Vec::new(),
             ..lossless
         })?;
         rgba8.add(&frame, frame.rgba8.len());
@@ -494,6 +495,7 @@ pub fn run(
         history: None,
         still: false,
         yuv420: false,
+        poses: Vec::new(),
     };
     let motion = CameraMotion {
         motion: args.motion,

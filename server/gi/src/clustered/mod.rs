@@ -89,6 +89,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: &[&crate::gi::common::limits::MAX_RSM_SIZE],
     downscales: true,
     samples_environment: false,
+    follows_moved_nodes: true,
     bench: Some(&bench::SWEEP),
 };
 

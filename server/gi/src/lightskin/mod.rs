@@ -86,6 +86,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: limits::LIMITS,
     downscales: true,
     samples_environment: false,
+    follows_moved_nodes: false,
     bench: Some(&bench::SWEEP),
 };
 

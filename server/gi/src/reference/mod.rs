@@ -96,6 +96,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: limits::LIMITS,
     downscales: false,
     samples_environment: true,
+    follows_moved_nodes: false,
     bench: None,
 };
 

@@ -91,6 +91,7 @@ fn render(
         history: None,
         still: false,
         yuv420: false,
+        poses: Vec::new(),
     };
     let frame = renderer.render(&s).expect("a frame");
     let readback = renderer

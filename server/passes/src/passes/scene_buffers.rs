@@ -77,7 +77,10 @@ impl SceneBuffers {
             label: Some("scene vertices"),
             contents: bytemuck::cast_slice(&scene.vertices),
             // Storage too: indirect light reads triangle corners to find barycentrics.
-            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::STORAGE,
+            // Written again where a frame poses movable nodes (`Renderer`'s poses).
+            usage: wgpu::BufferUsages::VERTEX
+                | wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_DST,
         });
         let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene indices"),

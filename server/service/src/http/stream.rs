@@ -429,6 +429,39 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
             )
             .await
         }
+        ClientMessage::Nodes { nodes, input_id } => {
+            let entry = session.scene();
+            // The message's own entries first, so an error names them (`nodes[2].scale`).
+            match crate::scene::nodes::resolve_poses(
+                &entry.scene.nodes,
+                &entry.node_bounds,
+                &entry.scene.bounds,
+                &nodes,
+            ) {
+                Err(e) => Err(ApiError::field(
+                    match e.index {
+                        None => "nodes".to_owned(),
+                        Some(i) => format!("nodes[{i}].{}", e.field),
+                    },
+                    e.reason,
+                )),
+                Ok(_) => {
+                    let mut merged = session.params().render.nodes;
+                    merged.retain(|kept| nodes.iter().all(|n| n.node != kept.node));
+                    // An entry without fields puts its node back: nothing left to keep.
+                    merged.extend(nodes.into_iter().filter(|n| {
+                        n.translation.is_some() || n.rotation.is_some() || n.scale.is_some()
+                    }));
+                    apply_patch(
+                        state,
+                        session,
+                        &json!({"render": {"nodes": merged}}),
+                        input_id,
+                    )
+                    .await
+                }
+            }
+        }
         ClientMessage::Update { patch, input_id } => {
             apply_patch(state, session, &patch, input_id).await
         }

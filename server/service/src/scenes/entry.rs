@@ -125,6 +125,7 @@ impl SceneEntry {
             default_lights: default_lights(&scene, max_lights.min(MAX_LIGHTS)),
             emitter_stand_in: emitter_stand_in(&scene),
             facts: SceneFacts::of(&scene),
+            node_bounds: scene.node_bounds(),
             nodes: node_infos(&scene),
             animations: animation_infos(&scene),
             scene: Arc::new(scene),

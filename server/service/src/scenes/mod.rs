@@ -103,6 +103,9 @@ pub struct SceneEntry {
     /// subtree's vertices).
     nodes: Vec<lightcast_protocol::NodeInfo>,
     animations: Vec<lightcast_protocol::AnimationInfo>,
+    /// Each node's subtree bounds at rest (`Scene::node_bounds`), which poses are checked
+    /// against.
+    pub node_bounds: Vec<Option<crate::scene::Aabb>>,
     pub load_ms: f64,
     /// The SHA-256 of the token that uploaded the scene, the only one that may delete it
     /// (`None`: the server's own scenes, or auth off); the token itself is never kept.

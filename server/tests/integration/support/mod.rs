@@ -117,6 +117,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         history: None,
         still: false,
         yuv420: false,
+        poses: Vec::new(),
     }
 }
 

@@ -1,0 +1,144 @@
+//! Issue 35 part 2: a frame's poses move the Cornell box's boxes for every pass that reads
+//! the renderer's vertex buffer (shadow map, G-buffer, RSM, VPLs, paraboloid maps). The truth
+//! is the same scene with its vertices moved on the CPU (`scene::nodes::posed_vertices`) and
+//! no poses: the two must render the same pixels (same adapter, same vertex values).
+
+use crate::support::*;
+use glam::{Quat, Vec3};
+use lightcast_server::gi::GiParams;
+use lightcast_server::passes::exposure::Exposure;
+use lightcast_server::renderer::{RenderSettings, Renderer};
+use lightcast_server::scene::default_light::{default_camera, default_light};
+use lightcast_server::scene::nodes::{owners, posed_vertices, posed_worlds, resolve_poses, Poses};
+use lightcast_server::scene::{procedural, Scene};
+
+const W: u32 = 64;
+const H: u32 = 48;
+
+/// The short box 45 cm to the left, turned a quarter about its vertical axis.
+fn moved_short_box(scene: &Scene) -> Poses {
+    let base = scene
+        .node(1)
+        .and_then(|n| n.local)
+        .expect("short box")
+        .translation;
+    let requested = [lightcast_protocol::NodePose {
+        node: 1,
+        translation: Some((base - Vec3::X * 0.45).to_array()),
+        rotation: Some(Quat::from_rotation_y(std::f32::consts::FRAC_PI_2).to_array()),
+        scale: None,
+    }];
+    resolve_poses(
+        &scene.nodes,
+        &scene.node_bounds(),
+        &scene.bounds,
+        &requested,
+    )
+    .expect("a pose inside the room")
+}
+
+/// `scene` with `poses` baked into its vertices.
+fn baked(scene: &Scene, poses: &Poses) -> Scene {
+    let mut moved = scene.clone();
+    let owner = owners(&scene.nodes, scene.vertices.len() as u32);
+    let worlds = posed_worlds(&scene.nodes, poses);
+    moved.vertices = posed_vertices(
+        &scene.vertices,
+        &scene.nodes,
+        &owner,
+        &worlds,
+        0..scene.vertices.len() as u32,
+    );
+    moved
+}
+
+fn settings_for(scene: &Scene, gi: GiParams) -> RenderSettings {
+    let mut s = settings(W, H, default_camera(scene), default_light(scene));
+    s.exposure = Exposure::Manual(1.0);
+    s.shadow_map_size = 256;
+    s.gi = gi;
+    s
+}
+
+fn hdr(frame: &lightcast_server::renderer::Frame) -> Vec<[f32; 4]> {
+    frame.hdr.clone().expect("HDR captured")
+}
+
+/// With `none` (direct light and shadows) and `clustered` (its RSM, VPLs and soft shadows
+/// every frame), a posed frame equals the frame of the scene moved on the CPU, differs from
+/// the unposed one where the box and its shadow were, and the same renderer goes back to the
+/// unposed image when the poses are dropped (as when it alternates between two sessions).
+#[test]
+fn posed_boxes_render_as_the_scene_moved_on_the_cpu() {
+    let scene = procedural::cornell_box();
+    let poses = moved_short_box(&scene);
+    let truth_scene = baked(&scene, &poses);
+    let methods = [
+        GiParams::new(lightcast_server::gi::none::NONE),
+        GiParams::new(lightcast_server::gi::clustered::CLUSTERED)
+            .with("rsm_size", 32)
+            .with("vpl_count", 256),
+    ];
+    for gi in methods {
+        let rest = settings_for(&scene, gi.clone());
+        let posed = RenderSettings {
+            poses: poses.clone(),
+            ..rest.clone()
+        };
+        let mut renderer = Renderer::new(gpu(), scene.clone());
+        let before = hdr(&renderer.render(&rest).expect("render"));
+        let moved = hdr(&renderer.render(&posed).expect("render"));
+        let back = hdr(&renderer.render(&rest).expect("render"));
+        let truth = hdr(&render(truth_scene.clone(), &rest));
+        assert_eq!(
+            moved, truth,
+            "{}: posed frame vs the scene moved on the CPU",
+            gi.method
+        );
+        assert_eq!(back, before, "{}: poses dropped", gi.method);
+        let changed = before
+            .iter()
+            .zip(&moved)
+            .filter(|(a, b)| (a[0] - b[0]).abs() > 0.05 * a[0].abs().max(1e-3))
+            .count();
+        assert!(
+            changed > (W * H / 20) as usize,
+            "{}: only {changed} pixels changed",
+            gi.method
+        );
+    }
+}
+
+/// Methods whose per-scene data is built from the geometry at rest refuse posed frames,
+/// naming the field; a node put back where it is is no pose at all.
+#[test]
+fn methods_that_do_not_follow_moved_nodes_refuse_poses() {
+    let scene = procedural::cornell_box();
+    let poses = moved_short_box(&scene);
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    let s = RenderSettings {
+        poses,
+        ..settings_for(
+            &scene,
+            GiParams::new(lightcast_server::gi::lightskin::LIGHTSKIN),
+        )
+    };
+    let error = renderer.render(&s).expect_err("refused").to_string();
+    assert!(
+        error.contains("poses") && error.contains("does not follow moved nodes"),
+        "{error}"
+    );
+    let own = resolve_poses(
+        &scene.nodes,
+        &scene.node_bounds(),
+        &scene.bounds,
+        &[lightcast_protocol::NodePose {
+            node: 2,
+            translation: None,
+            rotation: None,
+            scale: None,
+        }],
+    )
+    .expect("valid");
+    assert!(own.is_empty(), "{own:?}");
+}

@@ -1,5 +1,7 @@
-// The scene's BVH (group 1), built on the CPU by `gi::common::bvh`, and ray traversal.
-// `SceneBvh::intersect` in server/gi/src/common/bvh.rs is the CPU port of `trace`, without
+// The scene's two-level BVH (group 1), built on the CPU by `gi::common::bvh`, and ray
+// traversal: a top level over instances, each a bottom level (the triangles of one movable
+// node, or the static rest) placed by its node's pose. `SceneBvh::intersect` in
+// server/gi/src/common/bvh.rs is the CPU port of `trace`, without
 // the alpha test: hits `hit_masked(triangle, barycentrics)` rejects are skipped, and the module
 // that includes this file defines it (the path tracer's alpha masks in surfaces.wgsl; false in
 // the geometry-only traversal test).
@@ -14,8 +16,22 @@ struct BvhNode {
     first_index: u32,
 }
 
-// Deepest stack the traversal keeps (`bvh::MAX_STACK`; deeper trees are refused on the CPU).
+// Mirrored by `BvhInstance`: the rows of the affine map from the world into the bottom
+// level's rest pose (which keeps a ray's parameter, so hits' t are the world's) and its root.
+struct BvhInstance {
+    row0: vec4<f32>,
+    row1: vec4<f32>,
+    row2: vec4<f32>,
+    root: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
+}
+
+// Deepest stacks the traversal keeps (`bvh::MAX_STACK`, `MAX_TOP_STACK`; deeper trees are
+// refused on the CPU).
 const BVH_STACK: u32 = 48u;
+const TLAS_STACK: u32 = 32u;
 const NO_HIT: u32 = 0xffffffffu;
 // Whether any triangle of the scene is alpha-tested, set per scene when the pipeline is
 // created: without masks the test compiles away, which matters where divergent branches run
@@ -26,6 +42,9 @@ override ALPHA_TESTED: bool = true;
 // Three vec4 per triangle in leaf order: vertices in xyz; the first w holds the bits of the
 // triangle's index in the scene, the second's 1 when its material has an alpha mask.
 @group(1) @binding(1) var<storage, read> bvh_triangles: array<vec4<f32>>;
+// The top level: nodes whose leaves hold instances, and the instances in leaf order.
+@group(1) @binding(2) var<storage, read> tlas_nodes: array<BvhNode>;
+@group(1) @binding(3) var<storage, read> bvh_instances: array<BvhInstance>;
 
 struct RayHit {
     t: f32,
@@ -90,31 +109,83 @@ fn occluded(origin: vec3<f32>, dir: vec3<f32>, t_max: f32) -> bool {
     return bvh_traverse(origin, dir, t_max, true).triangle != NO_HIT;
 }
 
-// Nearer child first, the other on a stack; with `any_hit`, the first hit found ends it.
+// The top level's instances the ray's box test reaches, nearer first, each traced in its
+// bottom level; with `any_hit`, the first hit found ends it.
 fn bvh_traverse(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, any_hit: bool) -> RayHit {
     var best = RayHit(t_max, NO_HIT, vec2<f32>(0.0));
-    if arrayLength(&bvh_nodes) == 0u {
+    if arrayLength(&bvh_nodes) == 0u || arrayLength(&tlas_nodes) == 0u {
         return best;
     }
     let inv_dir = 1.0 / dir;
-    var stack: array<u32, BVH_STACK>;
+    var stack: array<u32, TLAS_STACK>;
     var depth = 0u;
     var node = 0u;
+    loop {
+        let n = tlas_nodes[node];
+        var next = false;
+        if n.prim_count > 0u {
+            for (var i = n.first_index; i < n.first_index + n.prim_count; i++) {
+                let inst = bvh_instances[i];
+                let o = vec3<f32>(
+                    dot(inst.row0.xyz, origin) + inst.row0.w,
+                    dot(inst.row1.xyz, origin) + inst.row1.w,
+                    dot(inst.row2.xyz, origin) + inst.row2.w,
+                );
+                let d = vec3<f32>(dot(inst.row0.xyz, dir), dot(inst.row1.xyz, dir), dot(inst.row2.xyz, dir));
+                blas_traverse(inst.root, o, d, any_hit, &best);
+                if any_hit && best.triangle != NO_HIT {
+                    return best;
+                }
+            }
+        } else {
+            let a = n.first_index;
+            let b = a + 1u;
+            let ta = bvh_slab(tlas_nodes[a], origin, inv_dir, best.t);
+            let tb = bvh_slab(tlas_nodes[b], origin, inv_dir, best.t);
+            let near = select(b, a, ta <= tb);
+            let far = select(a, b, ta <= tb);
+            if min(ta, tb) < 3.4e38 {
+                if max(ta, tb) < 3.4e38 && depth < TLAS_STACK {
+                    stack[depth] = far;
+                    depth++;
+                }
+                node = near;
+                next = true;
+            }
+        }
+        if !next {
+            if depth == 0u {
+                break;
+            }
+            depth--;
+            node = stack[depth];
+        }
+    }
+    return best;
+}
+
+// One bottom level from `root`, for a ray in its rest pose: nearer child first, the other on
+// a stack; with `any_hit`, the first hit found ends it.
+fn blas_traverse(root: u32, origin: vec3<f32>, dir: vec3<f32>, any_hit: bool, best: ptr<function, RayHit>) {
+    let inv_dir = 1.0 / dir;
+    var stack: array<u32, BVH_STACK>;
+    var depth = 0u;
+    var node = root;
     loop {
         let n = bvh_nodes[node];
         var next = false;
         if n.prim_count > 0u {
             for (var i = n.first_index; i < n.first_index + n.prim_count; i++) {
-                bvh_triangle(i, origin, dir, &best);
+                bvh_triangle(i, origin, dir, best);
             }
-            if any_hit && best.triangle != NO_HIT {
+            if any_hit && (*best).triangle != NO_HIT {
                 break;
             }
         } else {
             let a = n.first_index;
             let b = a + 1u;
-            let ta = bvh_slab(bvh_nodes[a], origin, inv_dir, best.t);
-            let tb = bvh_slab(bvh_nodes[b], origin, inv_dir, best.t);
+            let ta = bvh_slab(bvh_nodes[a], origin, inv_dir, (*best).t);
+            let tb = bvh_slab(bvh_nodes[b], origin, inv_dir, (*best).t);
             let near = select(b, a, ta <= tb);
             let far = select(a, b, ta <= tb);
             if min(ta, tb) < 3.4e38 {
@@ -134,5 +205,4 @@ fn bvh_traverse(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, any_hit: bool) ->
             node = stack[depth];
         }
     }
-    return best;
 }

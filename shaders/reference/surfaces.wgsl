@@ -16,14 +16,14 @@ struct SurfaceGpu {
 }
 
 // Nine floats per vertex (`scene::Vertex`): position, normal, uv, material bits.
-@group(1) @binding(2) var<storage, read> vertices: array<f32>;
-@group(1) @binding(3) var<storage, read> indices: array<u32>;
-@group(1) @binding(4) var<storage, read> surfaces: array<SurfaceGpu>;
+@group(1) @binding(4) var<storage, read> vertices: array<f32>;
+@group(1) @binding(5) var<storage, read> indices: array<u32>;
+@group(1) @binding(6) var<storage, read> surfaces: array<SurfaceGpu>;
 // Every texture's texels, rows top to bottom: RGBA8 in sRGB, red in the low byte (packed by
 // `gi::reference::PackedTextures`).
-@group(1) @binding(5) var<storage, read> texels: array<u32>;
+@group(1) @binding(7) var<storage, read> texels: array<u32>;
 // `scene::brdf::BrdfTable`, for brdf_eval.wgsl.
-@group(1) @binding(6) var<storage, read> brdf_table: array<vec4<f32>>;
+@group(1) @binding(8) var<storage, read> brdf_table: array<vec4<f32>>;
 
 fn vertex_position(i: u32) -> vec3<f32> {
     return vec3<f32>(vertices[9u * i], vertices[9u * i + 1u], vertices[9u * i + 2u]);

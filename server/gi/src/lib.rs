@@ -157,6 +157,9 @@ pub struct FrameInputs<'a> {
     pub history: Option<u64>,
     /// The frame is a session's still (see `RenderSettings::still`).
     pub still: bool,
+    /// The movable nodes' poses, which the renderer's vertex buffer holds them in (a method
+    /// with its own copy of the geometry, the reference's BVH, places it so).
+    pub poses: &'a crate::scene::nodes::Poses,
     /// The debug view the frame is read back for: a method may compute what only that view
     /// shows (to hand it over in [`Method::capture_debug`]).
     pub debug_view: View,

@@ -1040,6 +1040,7 @@ impl Renderer {
             indirect: reduced.map_or(&sized.indirect, |r| &r.indirect),
             history: settings.history,
             still: settings.still,
+            poses: &settings.poses,
             debug_view: settings.debug_view,
         };
         let Some(method) = self.methods[method_index].as_mut() else {

@@ -74,6 +74,16 @@ fn gpu_hits(ctx: &GpuContext, bvh: &SceneBvh, rays: &[(Vec3, Vec3)]) -> Vec<[f32
         bytemuck::cast_slice(&bvh.triangles),
         wgpu::BufferUsages::empty(),
     );
+    let top_nodes = storage(
+        "top nodes",
+        bytemuck::cast_slice(&bvh.top.nodes),
+        wgpu::BufferUsages::empty(),
+    );
+    let instances = storage(
+        "instances",
+        bytemuck::cast_slice(&bvh.top.instances),
+        wgpu::BufferUsages::empty(),
+    );
     let module = shaders::BVH_TEST.create_module(device);
     let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
         label: Some("bvh test"),
@@ -83,24 +93,23 @@ fn gpu_hits(ctx: &GpuContext, bvh: &SceneBvh, rays: &[(Vec3, Vec3)]) -> Vec<[f32
         compilation_options: Default::default(),
         cache: None,
     });
-    let group = |index, buffers: [&wgpu::Buffer; 2]| {
+    let group = |index, buffers: &[&wgpu::Buffer]| {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .enumerate()
+            .map(|(binding, b)| wgpu::BindGroupEntry {
+                binding: binding as u32,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
             layout: &pipeline.get_bind_group_layout(index),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: buffers[0].as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: buffers[1].as_entire_binding(),
-                },
-            ],
+            entries: &entries,
         })
     };
-    let io = group(0, [&rays_buffer, &hits]);
-    let scene = group(1, [&nodes, &triangles]);
+    let io = group(0, &[&rays_buffer, &hits]);
+    let scene = group(1, &[&nodes, &triangles, &top_nodes, &instances]);
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("hits readback"),
         size: hits.size(),
@@ -120,11 +129,40 @@ fn gpu_hits(ctx: &GpuContext, bvh: &SceneBvh, rays: &[(Vec3, Vec3)]) -> Vec<[f32
     bytemuck::pod_collect_to_vec(&map_read(ctx, &staging).expect("map"))
 }
 
+/// At rest and with the short box moved (the two-level BVH's top level placing its bottom
+/// level; issue 35).
 #[test]
 fn wgsl_traversal_finds_the_brute_force_hits() {
-    let ctx = support::gpu();
     let scene = lightcast_server::scene::procedural::cornell_box();
-    let bvh = SceneBvh::build(&scene).expect("bvh");
+    let rest = SceneBvh::build(&scene).expect("bvh");
+    let mut posed = rest.clone();
+    let base = scene
+        .node(1)
+        .and_then(|n| n.local)
+        .expect("box")
+        .translation;
+    let requested = [lightcast_protocol::NodePose {
+        node: 1,
+        translation: Some((base + Vec3::new(-0.5, 0.3, -0.2)).to_array()),
+        rotation: Some(glam::Quat::from_rotation_x(0.4).to_array()),
+        scale: None,
+    }];
+    let poses = lightcast_server::scene::nodes::resolve_poses(
+        &scene.nodes,
+        &scene.node_bounds(),
+        &scene.bounds,
+        &requested,
+    )
+    .expect("inside the room");
+    let worlds = lightcast_server::scene::nodes::posed_worlds(&scene.nodes, &poses);
+    posed.set_top(posed.top_level(&scene.nodes, &worlds).expect("top level"));
+    for bvh in [rest, posed] {
+        wgsl_traversal_matches(&scene, &bvh);
+    }
+}
+
+fn wgsl_traversal_matches(scene: &lightcast_server::scene::Scene, bvh: &SceneBvh) {
+    let ctx = support::gpu();
     // Rays from random points in and around the box to random directions.
     let mut state = 0x2545_f491_4f6c_dd1du64;
     let mut next = || {
@@ -141,7 +179,7 @@ fn wgsl_traversal_finds_the_brute_force_hits() {
             (o, d)
         })
         .collect();
-    let gpu = gpu_hits(&ctx, &bvh, &rays);
+    let gpu = gpu_hits(&ctx, bvh, &rays);
     let mut hits = 0;
     for ((o, d), g) in rays.iter().zip(&gpu) {
         let cpu = bvh.intersect_brute_force(*o, *d, f32::MAX);

@@ -758,6 +758,30 @@ async fn clients_move_nodes_per_render_and_per_session() {
     // `{"node": 1}` alone is the node where it is: the rest render.
     let (_, back) = render(raw(json!([{"node": 1}]))).await;
     assert_eq!(back, rest_pixels);
+    // A posed render compared with the reference of the same poses.
+    let resp = server
+        .http
+        .post(server.url("/v1/render"))
+        .json(
+            &json!({"render": {"width": 48, "height": 32, "shadow_map_size": 256,
+                      "gi": {"method": "clustered"}, "nodes": moved},
+                      "compare_to": "reference", "compare_spp": 16}),
+        )
+        .send()
+        .await
+        .expect("render");
+    assert_eq!(resp.status(), 200);
+    let report: RenderReport = serde_json::from_str(
+        resp.headers()["x-lightcast-report"]
+            .to_str()
+            .expect("ASCII"),
+    )
+    .expect("report");
+    let c = report.comparison.expect("compared");
+    assert!(
+        c.indirect_mae.is_finite() && c.reference_samples == 16,
+        "{c:?}"
+    );
     // More entries than movable nodes allow, inside the body limit.
     let many: Vec<Value> = (0..2000).map(|_| json!({"node": 1})).collect();
     let resp = server

@@ -539,7 +539,7 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             Some("compare_to"),
         ),
         // Moving nodes (issue 35): unknown, not movable, huge, degenerate, misspelt, too
-        // many, a method that does not follow them, a reference that does not either.
+        // many, a method that does not follow them.
         case(
             "POST",
             "/v1/render",
@@ -606,14 +606,6 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             400,
             "invalid_field",
             Some("render.nodes"),
-        ),
-        case(
-            "POST",
-            "/v1/render",
-            r#"{"compare_to":"reference","render":{"gi":{"method":"clustered"},"nodes":[{"node":1,"translation":[0,0.3,0]}]}}"#,
-            400,
-            "invalid_field",
-            Some("compare_to"),
         ),
         case(
             "POST",

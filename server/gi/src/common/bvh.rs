@@ -1,20 +1,29 @@
-//! The scene's triangles in a bounding volume hierarchy, for the reference path tracer.
+//! The scene's triangles in a two-level bounding volume hierarchy, for the reference path
+//! tracer and the precomputations' visibility rays.
 //!
-//! Built on the CPU with `obvhs` (PLOC with reinsertion: a well-kept builder made for GPU
-//! traversal, and faster than a hand-written binned SAH), then flattened into 32-byte nodes the
-//! WGSL traversal (`shaders/bvh.wgsl`) reads. Triangles are stored in leaf order so a
-//! leaf's triangles are contiguous. [`SceneBvh::intersect`] is the CPU port of that traversal
-//! and [`SceneBvh::intersect_brute_force`] the independent check it is tested against. Both
-//! are geometry only: the WGSL traversal also skips hits on alpha-masked texels, which needs
-//! the materials and textures (`shaders/reference/surfaces.wgsl`).
+//! Bottom levels: the triangles of each node that can move (issue 35: its innermost node is
+//! movable or under a movable one), and one for everything else, each built on the CPU with
+//! `obvhs` (PLOC with reinsertion: a well-kept builder made for GPU traversal, and faster
+//! than a hand-written binned SAH) in the rest pose, then flattened into 32-byte nodes the
+//! WGSL traversal (`shaders/bvh.wgsl`) reads, one array for all levels. The top level places
+//! each bottom level by its node's pose ([`BvhInstance`]: the inverse of its change from
+//! rest) in a small BVH over their posed bounds, rebuilt whenever the poses change
+//! ([`SceneBvh::top_level`]): a moved object costs that, not a rebuild of its triangles.
+//! Triangles are stored in leaf order so a leaf's triangles are contiguous.
+//! [`SceneBvh::intersect`] is the CPU port of the traversal and
+//! [`SceneBvh::intersect_brute_force`] the independent check it is tested against. Both are
+//! geometry only: the WGSL traversal also skips hits on alpha-masked texels, which needs the
+//! materials and textures (`shaders/reference/surfaces.wgsl`).
 
+use crate::scene::nodes::{owners, Node};
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 
 /// Mirrors `BvhNode` in `shaders/bvh.wgsl`. An inner node (`prim_count` 0) has its
 /// children at `first_index` and `first_index + 1`; a leaf's triangles are
-/// `first_index .. first_index + prim_count` of [`SceneBvh::triangles`].
+/// `first_index .. first_index + prim_count` of [`SceneBvh::triangles`] (in the top level:
+/// of its instances).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct BvhNode {
@@ -38,6 +47,58 @@ pub struct BvhTriangle {
     pub v2: [f32; 4],
 }
 
+/// Mirrors `BvhInstance` in `shaders/bvh.wgsl`: a bottom level placed in the world. A ray
+/// enters it through `to_rest` (the rows of the affine map from the world to the level's
+/// rest pose): an affine map keeps a ray's parameter, so its hits' `t` are the world's.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct BvhInstance {
+    pub to_rest: [[f32; 4]; 3],
+    /// The level's root in [`SceneBvh::nodes`].
+    pub root: u32,
+    pub pad: [u32; 3],
+}
+
+impl BvhInstance {
+    fn point(&self, p: Vec3) -> Vec3 {
+        let r = &self.to_rest;
+        Vec3::new(
+            Vec3::from_slice(&r[0][..3]).dot(p) + r[0][3],
+            Vec3::from_slice(&r[1][..3]).dot(p) + r[1][3],
+            Vec3::from_slice(&r[2][..3]).dot(p) + r[2][3],
+        )
+    }
+
+    fn direction(&self, d: Vec3) -> Vec3 {
+        let r = &self.to_rest;
+        Vec3::new(
+            Vec3::from_slice(&r[0][..3]).dot(d),
+            Vec3::from_slice(&r[1][..3]).dot(d),
+            Vec3::from_slice(&r[2][..3]).dot(d),
+        )
+    }
+}
+
+/// One bottom level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Level {
+    /// Its root in [`SceneBvh::nodes`].
+    pub root: u32,
+    /// The position in `Scene::nodes` of the node whose moves move it (`None`: static).
+    pub node: Option<usize>,
+    /// Its bounds at rest.
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+/// The top level for one set of poses.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TopLevel {
+    pub nodes: Vec<BvhNode>,
+    /// In the top level's leaf order.
+    pub instances: Vec<BvhInstance>,
+}
+
 /// The nearest intersection of a ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -49,51 +110,72 @@ pub struct Hit {
     pub v: f32,
 }
 
-/// Deepest traversal stack the WGSL traversal keeps; [`SceneBvh::build`] refuses deeper trees.
+/// Deepest traversal stack the WGSL traversal keeps in a bottom level; [`SceneBvh::build`]
+/// refuses deeper trees.
 pub const MAX_STACK: usize = 48;
+/// The same for the top level (`TLAS_STACK` in `shaders/bvh.wgsl`).
+pub const MAX_TOP_STACK: usize = 32;
 
 #[derive(Debug, thiserror::Error)]
 pub enum BvhError {
     #[error("the scene's BVH is {depth} levels deep; the traversal supports {MAX_STACK}")]
     TooDeep { depth: usize },
+    #[error(
+        "the scene's {levels} moving parts make a top level {depth} deep; the traversal \
+         supports {MAX_TOP_STACK}"
+    )]
+    TopTooDeep { levels: usize, depth: usize },
 }
 
 /// Reference ns per triangle of [`SceneBvh::build`] (binned SAH): about 2 s for the
 /// 1.2 M-triangle street. Every precomputation that builds one counts it with this.
 pub const BUILD_NS_PER_TRIANGLE: f64 = 1700.0;
 
-/// Nodes and leaf-ordered triangles of a scene.
+/// The bottom levels of a scene (nodes and leaf-ordered triangles of all of them) and the
+/// top level at rest.
 #[derive(Clone, Debug, Default)]
 pub struct SceneBvh {
     pub nodes: Vec<BvhNode>,
     pub triangles: Vec<BvhTriangle>,
+    pub levels: Vec<Level>,
+    /// The top level [`Self::intersect`] and [`Self::occluded`] trace: at rest after
+    /// [`Self::build`], posed by [`Self::set_top`].
+    pub top: TopLevel,
+}
+
+/// obvhs's triangle is three 16-byte glam `Vec3A`s; built from plain floats so this crate
+/// does not need obvhs's glam version by name.
+fn obvhs_triangle(scene: &Scene, t: &[u32]) -> obvhs::triangle::Triangle {
+    let mut f = [0f32; 12];
+    for (k, &i) in t.iter().enumerate() {
+        f[4 * k..4 * k + 3].copy_from_slice(&scene.vertices[i as usize].position);
+    }
+    bytemuck::cast(f)
 }
 
 impl SceneBvh {
     pub fn build(scene: &Scene) -> Result<Self, BvhError> {
-        // obvhs's triangle is three 16-byte glam `Vec3A`s; built from plain floats so this crate
-        // does not need obvhs's glam version by name.
-        let alpha_tested: Vec<u32> = scene
-            .indices
-            .chunks_exact(3)
-            .map(|t| {
-                let material = scene.vertices[t[0] as usize].material;
-                u32::from(scene.materials[material as usize].alpha_cutoff.is_some())
-            })
-            .collect();
-        let input: Vec<obvhs::triangle::Triangle> = scene
-            .indices
-            .chunks_exact(3)
-            .map(|t| {
-                let mut f = [0f32; 12];
-                for (k, &i) in t.iter().enumerate() {
-                    f[4 * k..4 * k + 3].copy_from_slice(&scene.vertices[i as usize].position);
-                }
-                bytemuck::cast(f)
-            })
+        let mut built = Self::default();
+        for (node, triangles) in groups(scene) {
+            built.add_level(scene, node, &triangles)?;
+        }
+        built.top = built.top_level(&scene.nodes, &[])?;
+        Ok(built)
+    }
+
+    /// Builds the bottom level of scene triangles `group` (indices into `Scene::indices` / 3).
+    fn add_level(
+        &mut self,
+        scene: &Scene,
+        node: Option<usize>,
+        group: &[u32],
+    ) -> Result<(), BvhError> {
+        let input: Vec<obvhs::triangle::Triangle> = group
+            .iter()
+            .map(|&t| obvhs_triangle(scene, &scene.indices[3 * t as usize..3 * t as usize + 3]))
             .collect();
         if input.is_empty() {
-            return Ok(Self::default());
+            return Ok(());
         }
         let mut build_time = std::time::Duration::ZERO;
         let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
@@ -101,104 +183,89 @@ impl SceneBvh {
             obvhs::BvhBuildParams::medium_build(),
             &mut build_time,
         );
-        let triangles: Vec<BvhTriangle> = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| {
+        let (node_base, triangle_base) = (self.nodes.len() as u32, self.triangles.len() as u32);
+        self.triangles
+            .extend(bvh.primitive_indices.iter().map(|&i| {
                 let f: [f32; 12] = bytemuck::cast(input[i as usize]);
+                let scene_triangle = group[i as usize];
+                let first = scene.indices[3 * scene_triangle as usize];
+                let material = scene.vertices[first as usize].material;
                 BvhTriangle {
                     v0: [f[0], f[1], f[2]],
-                    scene_triangle: i,
+                    scene_triangle,
                     v1: [f[4], f[5], f[6]],
-                    alpha_tested: alpha_tested[i as usize],
+                    alpha_tested: u32::from(
+                        scene.materials[material as usize].alpha_cutoff.is_some(),
+                    ),
                     v2: [f[8], f[9], f[10], 0.0],
                 }
-            })
-            .collect();
-        let nodes: Vec<BvhNode> = bvh
-            .nodes
-            .iter()
-            .map(|n| BvhNode {
-                min: n.aabb.min.to_array(),
-                prim_count: n.prim_count,
-                max: n.aabb.max.to_array(),
-                first_index: n.first_index,
-            })
-            .collect();
-        let built = Self { nodes, triangles };
-        let depth = built.depth(0);
+            }));
+        self.nodes.extend(bvh.nodes.iter().map(|n| BvhNode {
+            min: n.aabb.min.to_array(),
+            prim_count: n.prim_count,
+            max: n.aabb.max.to_array(),
+            first_index: n.first_index
+                + if n.prim_count > 0 {
+                    triangle_base
+                } else {
+                    node_base
+                },
+        }));
+        let depth = depth(&self.nodes, node_base as usize);
         if depth > MAX_STACK {
             return Err(BvhError::TooDeep { depth });
         }
-        Ok(built)
+        let root = &self.nodes[node_base as usize];
+        self.levels.push(Level {
+            root: node_base,
+            node,
+            min: root.min.into(),
+            max: root.max.into(),
+        });
+        Ok(())
     }
 
-    fn depth(&self, node: usize) -> usize {
-        let n = &self.nodes[node];
-        if n.prim_count > 0 {
-            1
-        } else {
-            let first = n.first_index as usize;
-            1 + self.depth(first).max(self.depth(first + 1))
-        }
+    /// [`top_level`] of this BVH's levels.
+    pub fn top_level(&self, nodes: &[Node], worlds: &[Mat4]) -> Result<TopLevel, BvhError> {
+        top_level(&self.levels, nodes, worlds)
     }
 
-    /// The nearest hit with `t` in (0, `t_max`), walking the tree as the WGSL traversal does:
-    /// the nearer child first, a stack for the other.
+    /// Traces [`Self::intersect`] and [`Self::occluded`] through `top` from now on.
+    pub fn set_top(&mut self, top: TopLevel) {
+        self.top = top;
+    }
+
+    /// The nearest hit with `t` in (0, `t_max`), walking the trees as the WGSL traversal
+    /// does: in each, the nearer child first, a stack for the other.
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
         self.traverse(origin, dir, t_max, false)
     }
 
     /// The nearest hit before `t_max`, or with `any` the first one found.
     fn traverse(&self, origin: Vec3, dir: Vec3, t_max: f32, any: bool) -> Option<Hit> {
-        if self.nodes.is_empty() {
-            return None;
-        }
-        let inv_dir = dir.recip();
         let mut best: Option<Hit> = None;
         let mut t_best = t_max;
-        let mut stack = [0u32; MAX_STACK];
-        let mut depth = 0;
-        let mut node = 0u32;
-        loop {
-            let n = &self.nodes[node as usize];
-            if n.prim_count > 0 {
-                for i in n.first_index..n.first_index + n.prim_count {
-                    if let Some(hit) = intersect_triangle(&self.triangles[i as usize], origin, dir)
-                    {
-                        if hit.t < t_best {
-                            if any {
-                                return Some(hit);
+        walk(&self.top.nodes, 0, origin, dir, t_best, |first, count| {
+            for instance in &self.top.instances[first as usize..(first + count) as usize] {
+                let (o, d) = (instance.point(origin), instance.direction(dir));
+                walk(&self.nodes, instance.root, o, d, t_best, |first, count| {
+                    for tri in &self.triangles[first as usize..(first + count) as usize] {
+                        if let Some(hit) = intersect_triangle(tri, o, d) {
+                            if hit.t < t_best {
+                                t_best = hit.t;
+                                best = Some(hit);
+                                if any {
+                                    return None;
+                                }
                             }
-                            t_best = hit.t;
-                            best = Some(hit);
                         }
                     }
-                }
-            } else {
-                let (a, b) = (n.first_index, n.first_index + 1);
-                let ta = slab(&self.nodes[a as usize], origin, inv_dir, t_best);
-                let tb = slab(&self.nodes[b as usize], origin, inv_dir, t_best);
-                let (near, far, t_near, t_far) = if ta <= tb {
-                    (a, b, ta, tb)
-                } else {
-                    (b, a, tb, ta)
-                };
-                if t_near < f32::INFINITY {
-                    if t_far < f32::INFINITY {
-                        stack[depth] = far;
-                        depth += 1;
-                    }
-                    node = near;
-                    continue;
-                }
+                    Some(t_best)
+                })?;
             }
-            if depth == 0 {
-                return best;
-            }
-            depth -= 1;
-            node = stack[depth];
-        }
+            Some(t_best)
+        });
+        best
     }
 
     /// Whether anything lies on the ray before `t_max`: a shadow ray, which stops at the
@@ -208,13 +275,218 @@ impl SceneBvh {
         self.traverse(origin, dir, t_max, true).is_some()
     }
 
-    /// The nearest hit by testing every triangle (the check for [`Self::intersect`]).
+    /// The nearest hit by testing every triangle where the top level places it (the check
+    /// for [`Self::intersect`]).
     pub fn intersect_brute_force(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
-        self.triangles
+        let mut best: Option<Hit> = None;
+        for instance in &self.top.instances {
+            let (o, d) = (instance.point(origin), instance.direction(dir));
+            let level = self
+                .levels
+                .iter()
+                .position(|l| l.root == instance.root)
+                .expect("every instance places a level");
+            let first = leaf_range(&self.nodes, self.levels[level].root);
+            for tri in &self.triangles[first] {
+                if let Some(hit) = intersect_triangle(tri, o, d) {
+                    if hit.t < t_max && best.is_none_or(|b| hit.t < b.t) {
+                        best = Some(hit);
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// The top level with `levels` placed by `worlds` (every scene node's world transform,
+/// `scene::nodes::posed_worlds`; empty: at rest).
+pub fn top_level(levels: &[Level], nodes: &[Node], worlds: &[Mat4]) -> Result<TopLevel, BvhError> {
+    let placed: Vec<(BvhInstance, obvhs::aabb::Aabb)> = levels
+        .iter()
+        .map(|level| {
+            let delta = match (level.node, worlds.is_empty()) {
+                (Some(n), false) => worlds[n] * nodes[n].rest_world.inverse(),
+                _ => Mat4::IDENTITY,
+            };
+            let rows = delta.inverse().transpose().to_cols_array_2d();
+            let instance = BvhInstance {
+                to_rest: [rows[0], rows[1], rows[2]],
+                root: level.root,
+                pad: [0; 3],
+            };
+            let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+            for k in 0..8 {
+                let corner = Vec3::select(
+                    glam::BVec3::new(k & 1 != 0, k & 2 != 0, k & 4 != 0),
+                    level.max,
+                    level.min,
+                );
+                let p = delta.transform_point3(corner);
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+            let aabb = obvhs::aabb::Aabb::new(lo.to_array().into(), hi.to_array().into());
+            (instance, aabb)
+        })
+        .collect();
+    if placed.len() <= 1 {
+        return Ok(TopLevel {
+            nodes: placed
+                .iter()
+                .map(|(_, b)| BvhNode {
+                    min: b.min.to_array(),
+                    prim_count: 1,
+                    max: b.max.to_array(),
+                    first_index: 0,
+                })
+                .collect(),
+            instances: placed.into_iter().map(|(i, _)| i).collect(),
+        });
+    }
+    let aabbs: Vec<obvhs::aabb::Aabb> = placed.iter().map(|(_, b)| *b).collect();
+    let mut build_time = std::time::Duration::ZERO;
+    let bvh = obvhs::bvh2::builder::build_bvh2(
+        &aabbs,
+        obvhs::BvhBuildParams::medium_build(),
+        &mut build_time,
+    );
+    let top = TopLevel {
+        nodes: bvh
+            .nodes
             .iter()
-            .filter_map(|t| intersect_triangle(t, origin, dir))
-            .filter(|h| h.t < t_max)
-            .min_by(|a, b| a.t.total_cmp(&b.t))
+            .map(|n| BvhNode {
+                min: n.aabb.min.to_array(),
+                prim_count: n.prim_count,
+                max: n.aabb.max.to_array(),
+                first_index: n.first_index,
+            })
+            .collect(),
+        instances: bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| placed[i as usize].0)
+            .collect(),
+    };
+    let depth = depth(&top.nodes, 0);
+    if depth > MAX_TOP_STACK {
+        return Err(BvhError::TopTooDeep {
+            levels: levels.len(),
+            depth,
+        });
+    }
+    Ok(top)
+}
+
+/// The triangles of the level rooted at `root`: leaves hold contiguous ranges, a level's
+/// leaves one range.
+fn leaf_range(nodes: &[BvhNode], root: u32) -> std::ops::Range<usize> {
+    let (mut lo, mut hi) = (usize::MAX, 0);
+    let mut stack = vec![root];
+    while let Some(n) = stack.pop() {
+        let node = &nodes[n as usize];
+        if node.prim_count > 0 {
+            lo = lo.min(node.first_index as usize);
+            hi = hi.max((node.first_index + node.prim_count) as usize);
+        } else {
+            stack.extend([node.first_index, node.first_index + 1]);
+        }
+    }
+    lo.min(hi)..hi
+}
+
+/// The scene's triangles by bottom level: those whose innermost node can move (it or an
+/// ancestor is movable), per node, and the rest (`None`), static first.
+fn groups(scene: &Scene) -> Vec<(Option<usize>, Vec<u32>)> {
+    let mut moves = vec![false; scene.nodes.len()];
+    let at: std::collections::HashMap<u32, usize> = scene
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.id, i))
+        .collect();
+    for (i, node) in scene.nodes.iter().enumerate() {
+        moves[i] = node.movable
+            || node
+                .parent
+                .and_then(|p| at.get(&p))
+                .is_some_and(|&p| moves[p]);
+    }
+    let owner = owners(&scene.nodes, scene.vertices.len() as u32);
+    let mut by_node: Vec<Vec<u32>> = vec![Vec::new(); scene.nodes.len()];
+    let mut still = Vec::new();
+    for (t, tri) in scene.indices.chunks_exact(3).enumerate() {
+        match owner.get(tri[0] as usize).map(|&o| o as usize) {
+            Some(o) if o < moves.len() && moves[o] => by_node[o].push(t as u32),
+            _ => still.push(t as u32),
+        }
+    }
+    std::iter::once((None, still))
+        .chain(
+            by_node
+                .into_iter()
+                .enumerate()
+                .filter(|(_, g)| !g.is_empty())
+                .map(|(n, g)| (Some(n), g)),
+        )
+        .collect()
+}
+
+fn depth(nodes: &[BvhNode], node: usize) -> usize {
+    let n = &nodes[node];
+    if n.prim_count > 0 {
+        1
+    } else {
+        let first = n.first_index as usize;
+        1 + depth(nodes, first).max(depth(nodes, first + 1))
+    }
+}
+
+/// Walks the tree of `nodes` from `root` for a ray: nearer child first, the other on a
+/// stack; `leaf(first, count)` answers the nearest `t` so far, or `None` to stop.
+fn walk(
+    nodes: &[BvhNode],
+    root: u32,
+    origin: Vec3,
+    dir: Vec3,
+    t_max: f32,
+    mut leaf: impl FnMut(u32, u32) -> Option<f32>,
+) -> Option<()> {
+    if nodes.is_empty() {
+        return Some(());
+    }
+    let inv_dir = dir.recip();
+    let mut t_best = t_max;
+    let mut stack = [0u32; MAX_STACK];
+    let mut depth = 0;
+    let mut node = root;
+    loop {
+        let n = &nodes[node as usize];
+        if n.prim_count > 0 {
+            t_best = leaf(n.first_index, n.prim_count)?;
+        } else {
+            let (a, b) = (n.first_index, n.first_index + 1);
+            let ta = slab(&nodes[a as usize], origin, inv_dir, t_best);
+            let tb = slab(&nodes[b as usize], origin, inv_dir, t_best);
+            let (near, far, t_near, t_far) = if ta <= tb {
+                (a, b, ta, tb)
+            } else {
+                (b, a, tb, ta)
+            };
+            if t_near < f32::INFINITY {
+                if t_far < f32::INFINITY {
+                    stack[depth] = far;
+                    depth += 1;
+                }
+                node = near;
+                continue;
+            }
+        }
+        if depth == 0 {
+            return Some(());
+        }
+        depth -= 1;
+        node = stack[depth];
     }
 }
 
@@ -352,6 +624,68 @@ mod tests {
         })
         .expect("street");
         check_against_brute_force(&street);
+    }
+
+    /// The Cornell box with its short box moved and turned: the bottom levels stay, the top
+    /// level places the box's; its hits are those of the scene moved on the CPU.
+    #[test]
+    fn a_posed_top_level_finds_what_the_moved_scene_holds() {
+        use crate::scene::nodes::{owners, posed_vertices, posed_worlds, resolve_poses};
+        let scene = procedural::cornell_box();
+        let base = scene
+            .node(1)
+            .and_then(|n| n.local)
+            .expect("short box")
+            .translation;
+        let requested = [lightcast_protocol::NodePose {
+            node: 1,
+            translation: Some((base + Vec3::new(-0.5, 0.2, -0.3)).to_array()),
+            rotation: Some(glam::Quat::from_rotation_y(0.8).to_array()),
+            scale: Some([1.2, 0.8, 1.0]),
+        }];
+        let poses = resolve_poses(
+            &scene.nodes,
+            &scene.node_bounds(),
+            &scene.bounds,
+            &requested,
+        )
+        .expect("inside the room");
+        let worlds = posed_worlds(&scene.nodes, &poses);
+        let mut bvh = SceneBvh::build(&scene).expect("bvh");
+        assert_eq!(bvh.levels.len(), 3, "the room and each box");
+        let rest = bvh.clone();
+        bvh.set_top(bvh.top_level(&scene.nodes, &worlds).expect("top level"));
+        let mut moved = scene.clone();
+        let owner = owners(&scene.nodes, scene.vertices.len() as u32);
+        let all = 0..scene.vertices.len() as u32;
+        moved.vertices = posed_vertices(&scene.vertices, &scene.nodes, &owner, &worlds, all);
+        let truth = SceneBvh::build(&moved).expect("bvh");
+        let (mut hits, mut changed) = (0, 0);
+        for (origin, dir) in rays(&scene, 3000, 5) {
+            let got = bvh.intersect(origin, dir, f32::INFINITY);
+            let want = truth.intersect_brute_force(origin, dir, f32::INFINITY);
+            match (got, want) {
+                (None, None) => {}
+                (Some(a), Some(b)) => {
+                    hits += 1;
+                    assert!((a.t - b.t).abs() <= 1e-4 * b.t.max(1.0), "{a:?} vs {b:?}");
+                }
+                (a, b) => panic!("ray {origin} {dir}: posed {a:?}, moved scene {b:?}"),
+            }
+            let t = want.map_or(1.0, |h| h.t);
+            for limit in [0.5 * t, 2.0 * t] {
+                assert_eq!(
+                    bvh.occluded(origin, dir, limit),
+                    truth.intersect_brute_force(origin, dir, limit).is_some()
+                );
+            }
+            let at_rest = rest.intersect(origin, dir, f32::INFINITY).map(|h| h.t);
+            changed += usize::from(at_rest != want.map(|h| h.t));
+        }
+        assert!(
+            hits > 300 && changed > 30,
+            "{hits} hits, {changed} changed by the move"
+        );
     }
 
     #[test]

@@ -49,6 +49,7 @@ use crate::passes::scene_buffers::MaterialGpu;
 use crate::passes::tonemap::luminance;
 use crate::passes::ShaderPass;
 use crate::passes::{self, ParamSlots};
+use crate::scene::nodes::{posed_worlds, Node, Poses};
 use crate::scene::{brdf::Brdf, Material, Scene, Texture};
 use bytemuck::{Pod, Zeroable};
 use lightcast_protocol::{Camera, GiMethod, GiParams, Light};
@@ -96,7 +97,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: limits::LIMITS,
     downscales: false,
     samples_environment: true,
-    follows_moved_nodes: false,
+    follows_moved_nodes: true,
     bench: None,
 };
 
@@ -339,9 +340,10 @@ pub fn packed_texture_bytes(textures: &[Texture]) -> u64 {
     4 + textures.iter().map(|t| t.rgba8.len() as u64).sum::<u64>()
 }
 
-/// Storage buffers the path-tracing shader binds: params, light, accumulation and environment
-/// (group 0), BVH nodes and triangles, vertices, indices, surfaces and texels (group 1).
-const STORAGE_BUFFERS: u32 = 10;
+/// Storage buffers the path-tracing shader binds: params, lights, accumulation and
+/// environment (group 0), the BVH's nodes, triangles, top-level nodes and instances,
+/// vertices, indices, surfaces, texels and the BRDF table (group 1).
+const STORAGE_BUFFERS: u32 = 13;
 
 /// Refuses a device that cannot bind the tracer's buffers: the packed textures
 /// (`texture_bytes`, from [`packed_texture_bytes`]) must fit one storage binding and be
@@ -449,6 +451,8 @@ struct AccumKey {
     lights: Vec<Light>,
     environment: Option<Arc<FrameEnvironment>>,
     settings: ReferenceSettings,
+    /// The movable nodes' poses the BVH's top level placed them in.
+    poses: Poses,
 }
 
 /// Per-scene GPU state of the reference path tracer.
@@ -457,6 +461,12 @@ pub struct PathTracer {
     pipeline: wgpu::ComputePipeline,
     pass_layout: wgpu::BindGroupLayout,
     scene_group: wgpu::BindGroup,
+    /// The BVH's bottom levels, and the top level's buffers (rewritten when poses change)
+    /// with the poses they hold.
+    levels: Vec<bvh::Level>,
+    top_nodes: wgpu::Buffer,
+    instances: wgpu::Buffer,
+    poses: Poses,
     params: ParamSlots,
     lights: wgpu::Buffer,
     environment: EnvironmentBuffer,
@@ -491,6 +501,8 @@ bind_group! {
     pub struct SceneResources as SCENE_GROUP("reference scene", wgpu::ShaderStages::COMPUTE) {
         bvh_nodes: bind::STORAGE,
         bvh_triangles: bind::STORAGE,
+        tlas_nodes: bind::STORAGE,
+        bvh_instances: bind::STORAGE,
         vertices: bind::STORAGE,
         indices: bind::STORAGE,
         surfaces: bind::STORAGE,
@@ -507,15 +519,48 @@ fn storage_init(device: &wgpu::Device, label: &str, contents: &[u8]) -> wgpu::Bu
     })
 }
 
-/// The scene's BVH, vertices, indices, surfaces and texels on the GPU, bound as group 1.
+/// The top level's buffers, sized for the most nodes and instances `levels` can need (a
+/// binary tree over them), at rest.
+fn top_buffers(device: &wgpu::Device, bvh: &bvh::SceneBvh) -> (wgpu::Buffer, wgpu::Buffer) {
+    let usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+    let padded = |label, bytes: &[u8], capacity: usize| {
+        let mut contents = bytes.to_vec();
+        contents.resize(capacity.max(bytes.len()).max(16), 0);
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &contents,
+            usage,
+        })
+    };
+    let levels = bvh.levels.len().max(1);
+    (
+        padded(
+            "tlas nodes",
+            bytemuck::cast_slice(&bvh.top.nodes),
+            (2 * levels) * std::mem::size_of::<bvh::BvhNode>(),
+        ),
+        padded(
+            "bvh instances",
+            bytemuck::cast_slice(&bvh.top.instances),
+            levels * std::mem::size_of::<bvh::BvhInstance>(),
+        ),
+    )
+}
+
+/// The scene's BVH, vertices (`vertices`: the renderer's, which it poses, or else a copy at
+/// rest), indices, surfaces and texels on the GPU, bound as group 1.
+#[allow(clippy::too_many_arguments)]
 fn scene_group(
     device: &wgpu::Device,
     layout: &wgpu::BindGroupLayout,
     scene: &Scene,
     bvh: &bvh::SceneBvh,
+    top: (&wgpu::Buffer, &wgpu::Buffer),
+    vertices: Option<&wgpu::Buffer>,
     surfaces: &[SurfaceGpu],
     texels: &[u32],
 ) -> wgpu::BindGroup {
+    let own_vertices;
     SceneResources {
         bvh_nodes: &storage_init(device, "bvh nodes", bytemuck::cast_slice(&bvh.nodes)),
         bvh_triangles: &storage_init(
@@ -523,7 +568,16 @@ fn scene_group(
             "bvh triangles",
             bytemuck::cast_slice(&bvh.triangles),
         ),
-        vertices: &storage_init(device, "vertices", bytemuck::cast_slice(&scene.vertices)),
+        tlas_nodes: top.0,
+        bvh_instances: top.1,
+        vertices: match vertices {
+            Some(v) => v,
+            None => {
+                own_vertices =
+                    storage_init(device, "vertices", bytemuck::cast_slice(&scene.vertices));
+                &own_vertices
+            }
+        },
         indices: &storage_init(device, "indices", bytemuck::cast_slice(&scene.indices)),
         surfaces: &storage_init(device, "surfaces", bytemuck::cast_slice(surfaces)),
         texels: &storage_init(device, "texels", bytemuck::cast_slice(texels)),
@@ -547,14 +601,16 @@ impl PathTracer {
     ) -> Result<Self, ReferenceError> {
         check_device(&ctx.device.limits(), packed_texture_bytes(&scene.textures))?;
         let bvh = bvh::SceneBvh::build(scene)?;
-        Self::with_bvh(ctx, scene, &bvh, surfaces)
+        Self::with_bvh(ctx, scene, &bvh, None, surfaces)
     }
 
-    /// [`Self::with_surfaces`] with the scene's BVH built already.
+    /// [`Self::with_surfaces`] with the scene's BVH built already; shading reads `vertices`
+    /// (the renderer's, which holds moved nodes where they are) or a copy of the scene's.
     pub fn with_bvh(
         ctx: GpuContext,
         scene: &Scene,
         bvh: &bvh::SceneBvh,
+        vertices: Option<&wgpu::Buffer>,
         surfaces: impl FnOnce(&PackedTextures) -> Vec<SurfaceGpu>,
     ) -> Result<Self, ReferenceError> {
         check_device(&ctx.device.limits(), packed_texture_bytes(&scene.textures))?;
@@ -562,11 +618,14 @@ impl PathTracer {
         let surfaces = surfaces(&textures);
         let device = &ctx.device;
         let scene_layout = SCENE_GROUP.layout(device);
+        let (top_nodes, instances) = top_buffers(device, bvh);
         let scene_group = scene_group(
             device,
             &scene_layout,
             scene,
             bvh,
+            (&top_nodes, &instances),
+            vertices,
             &surfaces,
             &textures.texels,
         );
@@ -592,6 +651,10 @@ impl PathTracer {
             pipeline,
             pass_layout,
             scene_group,
+            levels: bvh.levels.clone(),
+            top_nodes,
+            instances,
+            poses: Poses::new(),
             params,
             lights,
             bounds: scene.bounds,
@@ -607,6 +670,21 @@ impl PathTracer {
     pub fn with_band_rays(mut self, rays: u64) -> Self {
         self.band_rays = rays.max(1);
         self
+    }
+
+    /// Places the BVH's movable levels by `poses` (of the scene's `nodes`): the top level is
+    /// rebuilt and written where they changed; the bottom levels stay.
+    pub fn set_poses(&mut self, nodes: &[Node], poses: &Poses) -> Result<(), ReferenceError> {
+        if *poses == self.poses {
+            return Ok(());
+        }
+        let worlds = posed_worlds(nodes, poses);
+        let top = bvh::top_level(&self.levels, nodes, &worlds)?;
+        let queue = &self.ctx.queue;
+        queue.write_buffer(&self.top_nodes, 0, bytemuck::cast_slice(&top.nodes));
+        queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&top.instances));
+        self.poses = poses.clone();
+        Ok(())
     }
 
     /// Samples per pixel accumulated by [`Self::accumulate`] for its last key.
@@ -706,6 +784,7 @@ impl PathTracer {
             lights: lights.to_vec(),
             environment: environment.cloned(),
             settings: *settings,
+            poses: self.poses.clone(),
         };
         self.ensure_accumulation(&mut encoder, key);
         self.encode_samples(&mut encoder, samples);
@@ -826,6 +905,7 @@ impl PathTracer {
         let gi = frame.settings;
         let g = params::Settings::of(gi)?;
         check_counts(g.bounces, g.spp)?;
+        self.set_poses(&frame.resources.scene.nodes, frame.poses)?;
         let key = AccumKey {
             history: frame.history,
             width: frame.width,
@@ -840,6 +920,7 @@ impl PathTracer {
                 emitters: emitters(gi),
                 senders: g.senders,
             },
+            poses: frame.poses.clone(),
         };
         stages.stage(stages::PATH_TRACE, |e| {
             self.ensure_accumulation(e, key);
@@ -872,6 +953,9 @@ impl PathTracer {
 pub struct Reference {
     ctx: GpuContext,
     scene: Arc<Scene>,
+    /// The renderer's vertex buffer, which holds moved nodes where a frame poses them: what
+    /// the tracer shades hits with.
+    vertices: wgpu::Buffer,
     tracer: Option<PathTracer>,
 }
 
@@ -885,6 +969,7 @@ impl Reference {
         Ok(Self {
             ctx: r.ctx.clone(),
             scene: Arc::clone(&r.scene),
+            vertices: r.scene_buffers.vertices.clone(),
             tracer: None,
         })
     }
@@ -910,6 +995,7 @@ impl Method for Reference {
             self.ctx.clone(),
             &self.scene,
             bvh,
+            Some(&self.vertices),
             |textures| material_surfaces(&self.scene, textures),
         )?);
         Ok(())

@@ -42,6 +42,8 @@ bind_group! {
     pub struct BvhResources as BVH_GROUP("surfel link bvh", wgpu::ShaderStages::COMPUTE) {
         bvh_nodes: bind::STORAGE,
         bvh_triangles: bind::STORAGE,
+        tlas_nodes: bind::STORAGE,
+        bvh_instances: bind::STORAGE,
     }
 }
 
@@ -160,6 +162,12 @@ impl LinkRays {
             bvh_triangles: &storage(
                 "link ray bvh triangles",
                 bytemuck::cast_slice(&bvh.triangles),
+            ),
+            // Surfel links are built at rest: the BVH's own top level.
+            tlas_nodes: &storage("link ray tlas nodes", bytemuck::cast_slice(&bvh.top.nodes)),
+            bvh_instances: &storage(
+                "link ray bvh instances",
+                bytemuck::cast_slice(&bvh.top.instances),
             ),
         }
         .bind(device, &bvh_layout);

@@ -40,6 +40,19 @@ pub enum ClientMessage {
         #[serde(default)]
         input_id: u64,
     },
+    /// Play, pause or scrub one of the scene's animations (`render.animation`); `name` alone
+    /// plays it from the start.
+    Animation {
+        name: String,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        time: Option<f32>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        playing: Option<bool>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        speed: Option<f32>,
+        #[serde(default)]
+        input_id: u64,
+    },
     /// A JSON merge patch (RFC 7396) of the session's [`crate::SessionParams`], as for
     /// `PATCH /v1/sessions/{id}`.
     Update {

@@ -33,6 +33,32 @@ pub struct RenderParams {
     /// its own pose. Per session: one viewer moving a box does not move it for another.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub nodes: Vec<NodePose>,
+    /// One of the scene's glTF animations (`GET /v1/scenes/{id}`'s `animations`) posing the
+    /// nodes it moves; `render.nodes` entries override it for their nodes. `null`: none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub animation: Option<AnimationParams>,
+}
+
+/// `RenderParams::animation`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AnimationParams {
+    pub name: String,
+    /// Seconds into the animation: a one-shot render shows it at this time (clamped to its
+    /// duration); a session starts playing from it.
+    #[serde(default)]
+    pub time: f32,
+    /// A session plays it (looping) from `time` at `speed`; a one-shot render ignores this.
+    /// A patch that stops it without giving `time` keeps the time it had reached.
+    #[serde(default)]
+    pub playing: bool,
+    /// Seconds of animation per second, −100 … 100 (negative plays backwards).
+    #[serde(default = "one")]
+    pub speed: f32,
+}
+
+fn one() -> f32 {
+    1.0
 }
 
 /// A movable node's pose relative to its parent (glTF's translation, rotation, scale); a
@@ -67,6 +93,7 @@ impl Default for RenderParams {
             gi: GiParams::default(),
             view: View::FINAL,
             nodes: Vec::new(),
+            animation: None,
         }
     }
 }

@@ -274,6 +274,21 @@ impl Scene {
             self.vertices.len() as u32,
             &self.indices,
         )?;
+        // The bounds hold every pose the animations reach: the light and shadow maps are
+        // fitted to them.
+        let positions: Vec<Vec3> = self.vertices.iter().map(|v| v.position.into()).collect();
+        let subtrees = nodes::subtree_bounds(&nodes, &positions);
+        if let Some(reach) = nodes::animation_reach(&nodes, &animations, &subtrees) {
+            let bounds = Aabb {
+                min: self.bounds.min.min(reach.min),
+                max: self.bounds.max.max(reach.max),
+            };
+            let extent = (bounds.max - bounds.min).max_element();
+            if extent.is_nan() || extent > MAX_SCENE_EXTENT {
+                return Err(SceneError::TooLarge(extent));
+            }
+            self.bounds = bounds;
+        }
         self.nodes = nodes;
         self.animations = animations;
         Ok(())

@@ -110,6 +110,65 @@ impl Channel {
     }
 }
 
+impl Channel {
+    /// The value at time `t` (seconds; before the first key the first value, after the last
+    /// the last), interpolated as glTF 2.0 §3.11 says: linear (spherical for rotations), step,
+    /// or the cubic Hermite spline through the keys with their tangents; rotations come out
+    /// normalised.
+    pub fn sample(&self, t: f32) -> Vec<f32> {
+        let w = self.width();
+        let cubic = self.interpolation == Interpolation::CubicSpline;
+        // Key k's value (the middle of in-tangent, value, out-tangent for a spline).
+        let value = |k: usize, part: usize| -> &[f32] {
+            let start = if cubic { (3 * k + part) * w } else { k * w };
+            &self.values[start..start + w]
+        };
+        let last = self.times.len() - 1;
+        let k = self.times.partition_point(|&key| key <= t);
+        let out: Vec<f32> = if k == 0 {
+            value(0, 1).to_vec()
+        } else if k > last {
+            value(last, 1).to_vec()
+        } else {
+            let (t0, t1) = (self.times[k - 1], self.times[k]);
+            let dt = t1 - t0;
+            let s = ((t - t0) / dt).clamp(0.0, 1.0);
+            match self.interpolation {
+                Interpolation::Step => value(k - 1, 1).to_vec(),
+                Interpolation::Linear if self.property == Property::Rotation => {
+                    let (a, b) = (value(k - 1, 1), value(k, 1));
+                    let qa = Quat::from_slice(a).normalize();
+                    let qb = Quat::from_slice(b).normalize();
+                    qa.slerp(qb, s).to_array().to_vec()
+                }
+                Interpolation::Linear => {
+                    let (a, b) = (value(k - 1, 1), value(k, 1));
+                    a.iter().zip(b).map(|(a, b)| a + (b - a) * s).collect()
+                }
+                Interpolation::CubicSpline => {
+                    let (s2, s3) = (s * s, s * s * s);
+                    let (h00, h10) = (2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + s);
+                    let (h01, h11) = (-2.0 * s3 + 3.0 * s2, s3 - s2);
+                    let (v0, b0) = (value(k - 1, 1), value(k - 1, 2));
+                    let (v1, a1) = (value(k, 1), value(k, 0));
+                    (0..w)
+                        .map(|i| h00 * v0[i] + h10 * dt * b0[i] + h01 * v1[i] + h11 * dt * a1[i])
+                        .collect()
+                }
+            }
+        };
+        if self.property == Property::Rotation {
+            let q = Quat::from_slice(&out);
+            return if q.length() > 0.0 {
+                q.normalize().to_array().to_vec()
+            } else {
+                Quat::IDENTITY.to_array().to_vec()
+            };
+        }
+        out
+    }
+}
+
 /// A glTF animation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Animation {
@@ -124,6 +183,36 @@ impl Animation {
             .iter()
             .filter_map(|c| c.times.last().copied())
             .fold(0.0, f32::max)
+    }
+
+    /// The local transforms of the nodes it moves at time `t`: each node's own, with the
+    /// properties its channels drive sampled at `t` (morph weights are not played).
+    pub fn locals_at(&self, nodes: &[Node], t: f32) -> Vec<(u32, Transform)> {
+        let mut out: Vec<(u32, Transform)> = Vec::new();
+        for c in &self.channels {
+            if c.property == Property::Weights {
+                continue;
+            }
+            let Some(own) = nodes.iter().find(|n| n.id == c.node).and_then(|n| n.local) else {
+                continue;
+            };
+            let slot = match out.iter().position(|(id, _)| *id == c.node) {
+                Some(i) => i,
+                None => {
+                    out.push((c.node, own));
+                    out.len() - 1
+                }
+            };
+            let v = c.sample(t);
+            let t = &mut out[slot].1;
+            match c.property {
+                Property::Translation => t.translation = Vec3::from_slice(&v),
+                Property::Rotation => t.rotation = Quat::from_slice(&v),
+                Property::Scale => t.scale = Vec3::from_slice(&v),
+                Property::Weights => {}
+            }
+        }
+        out
     }
 }
 
@@ -416,6 +505,78 @@ pub fn resolve_poses(
     Ok(poses)
 }
 
+/// An animation's poses (`Animation::locals_at`) with `explicit` ones (from
+/// [`resolve_poses`]) over them, sorted by id, without the entries that leave a node where
+/// it is.
+pub fn merge_poses(nodes: &[Node], animated: Vec<(u32, Transform)>, explicit: &Poses) -> Poses {
+    let mut out: Poses = animated
+        .into_iter()
+        .filter(|(id, _)| explicit.binary_search_by_key(id, |(e, _)| *e).is_err())
+        .chain(explicit.iter().copied())
+        .filter(|(id, t)| {
+            nodes
+                .iter()
+                .find(|n| n.id == *id)
+                .is_some_and(|n| n.local != Some(*t))
+        })
+        .collect();
+    out.sort_by_key(|(id, _)| *id);
+    out
+}
+
+/// Most times [`animation_reach`] places an animation's nodes at: the work is that times the
+/// node count, and a file's keys are not bounded otherwise.
+const REACH_SAMPLES: usize = 256;
+
+/// The world bounds every animation moves its nodes through: their subtrees' `bounds` (from
+/// [`subtree_bounds`]) placed at each key and half-way between keys (a slerp or a spline can
+/// leave the keys' hull a little; the half-way samples catch most of that), at most
+/// [`REACH_SAMPLES`] of those times per animation, evenly spread.
+pub fn animation_reach(
+    nodes: &[Node],
+    animations: &[Animation],
+    bounds: &[Option<Aabb>],
+) -> Option<Aabb> {
+    let mut reach: Option<Aabb> = None;
+    for animation in animations {
+        let mut times: Vec<f32> = animation
+            .channels
+            .iter()
+            .flat_map(|c| {
+                c.times
+                    .iter()
+                    .copied()
+                    .chain(c.times.windows(2).map(|w| 0.5 * (w[0] + w[1])))
+            })
+            .collect();
+        times.sort_by(f32::total_cmp);
+        times.dedup();
+        let step = times.len().div_ceil(REACH_SAMPLES).max(1);
+        for t in times.into_iter().step_by(step) {
+            let poses = merge_poses(nodes, animation.locals_at(nodes, t), &Poses::new());
+            let worlds = posed_worlds(nodes, &poses);
+            // A moved node's subtree holds everything that moves with it.
+            for (n, node) in nodes.iter().enumerate() {
+                if poses.binary_search_by_key(&node.id, |(id, _)| *id).is_err() {
+                    continue;
+                }
+                let Some(b) = bounds[n] else { continue };
+                let delta = worlds[n] * node.rest_world.inverse();
+                for c in corners(&b).map(|c| delta.transform_point3(c)) {
+                    reach = Some(match reach {
+                        None => Aabb { min: c, max: c },
+                        Some(r) => Aabb {
+                            min: r.min.min(c),
+                            max: r.max.max(c),
+                        },
+                    });
+                }
+            }
+        }
+    }
+    reach
+}
+
 fn corners(b: &Aabb) -> [Vec3; 8] {
     std::array::from_fn(|k| {
         Vec3::new(
@@ -649,6 +810,81 @@ mod tests {
         );
         let many: Vec<_> = (0..=MAX_POSES as u32).map(pose).collect();
         refused(&many, None, "", "at most 1024");
+    }
+
+    fn channel(
+        property: Property,
+        interpolation: Interpolation,
+        times: &[f32],
+        values: &[f32],
+    ) -> Channel {
+        Channel {
+            node: 1,
+            property,
+            interpolation,
+            times: times.to_vec(),
+            values: values.to_vec(),
+        }
+    }
+
+    /// glTF 2.0 §3.11's interpolations against values worked out by hand.
+    #[test]
+    fn channels_sample_as_gltf_interpolates() {
+        let slide = channel(
+            Property::Translation,
+            Interpolation::Linear,
+            &[1.0, 3.0],
+            &[0.0, 0.0, 0.0, 4.0, 2.0, -2.0],
+        );
+        assert_eq!(slide.sample(2.0), [2.0, 1.0, -1.0]);
+        assert_eq!(slide.sample(0.0), [0.0, 0.0, 0.0], "before the first key");
+        assert_eq!(slide.sample(9.0), [4.0, 2.0, -2.0], "after the last key");
+        let step = channel(
+            Property::Scale,
+            Interpolation::Step,
+            &[0.0, 1.0],
+            &[1.0, 1.0, 1.0, 2.0, 2.0, 2.0],
+        );
+        assert_eq!(step.sample(0.99), [1.0; 3]);
+        assert_eq!(step.sample(1.0), [2.0; 3]);
+        let quarter = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        let turn = channel(
+            Property::Rotation,
+            Interpolation::Linear,
+            &[0.0, 1.0],
+            &[Quat::IDENTITY.to_array(), quarter.to_array()].concat(),
+        );
+        let half = Quat::from_slice(&turn.sample(0.5));
+        assert!(
+            half.abs_diff_eq(Quat::from_rotation_y(std::f32::consts::FRAC_PI_4), 1e-6),
+            "{half}"
+        );
+        // A spline from 0 to 0 over 2 s leaving with slope 1: the Hermite basis at s = ½ gives
+        // h10·Δt·b₀ = ⅛·2·1 = ¼.
+        let spline = channel(
+            Property::Translation,
+            Interpolation::CubicSpline,
+            &[0.0, 2.0],
+            &[
+                0.0, 0.0, 0.0, /* key 0: in */ 0.0, 0.0, 0.0, /* value */ 1.0, 0.0,
+                0.0, /* out */
+                0.0, 0.0, 0.0, /* key 1: in */ 0.0, 0.0, 0.0, /* value */ 0.0, 0.0,
+                0.0, /* out */
+            ],
+        );
+        assert_eq!(spline.sample(1.0), [0.25, 0.0, 0.0]);
+        assert_eq!(spline.sample(2.0), [0.0, 0.0, 0.0]);
+        let animation = Animation {
+            name: "a".into(),
+            channels: vec![slide, turn],
+        };
+        let nodes = [node(1, None, 0..0)];
+        let [(1, local)] = animation.locals_at(&nodes, 2.0)[..] else {
+            panic!("one node moved")
+        };
+        assert_eq!(local.translation, Vec3::new(2.0, 1.0, -1.0));
+        assert!(local.rotation.abs_diff_eq(quarter, 1e-6));
+        assert_eq!(local.scale, Vec3::ONE, "the node's own");
     }
 
     #[test]

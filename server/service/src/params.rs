@@ -9,6 +9,7 @@ use crate::gi::precompute::PrecomputeKey;
 use crate::passes::exposure::Exposure;
 use crate::renderer::{RenderError, RenderSettings};
 use crate::scene::default_light::emitters_for;
+use crate::scene::nodes::{merge_poses, Poses};
 use crate::service::video::{VideoConfig, VideoError};
 use lightcast_protocol::{Encoding, GiParams, Light, Limits, RenderParams, SessionParams, View};
 use std::sync::Arc;
@@ -23,6 +24,78 @@ pub struct Resolved {
     /// The claim on it that keeps it building while the session or request holds these
     /// settings.
     pub demand: Option<Arc<Demand>>,
+    /// The animation a session plays: its poses are worked out per frame.
+    pub playing: Option<Playing>,
+}
+
+/// A playing animation (`render.animation` with `playing`), which a session poses its frames
+/// with at the time each is planned.
+#[derive(Clone, Debug)]
+pub struct Playing {
+    /// Index in the scene's animations.
+    pub animation: usize,
+    /// Seconds into it when it was set, and seconds of animation per second.
+    pub time: f32,
+    pub speed: f32,
+    /// `render.nodes`, which override it.
+    pub explicit: Poses,
+}
+
+impl Playing {
+    /// The frame's poses `elapsed` seconds after it was set: the animation loops.
+    pub fn poses(&self, scene: &crate::scene::Scene, elapsed: f32) -> Poses {
+        let animation = &scene.animations[self.animation];
+        let duration = animation.duration();
+        let t = if duration > 0.0 {
+            (self.time + self.speed * elapsed).rem_euclid(duration)
+        } else {
+            0.0
+        };
+        merge_poses(
+            &scene.nodes,
+            animation.locals_at(&scene.nodes, t),
+            &self.explicit,
+        )
+    }
+}
+
+/// Most seconds of animation per second a session plays.
+const MAX_ANIMATION_SPEED: f32 = 100.0;
+
+/// `render.animation` checked against the scene: its index there, and its time clamped to
+/// its duration.
+fn animation(
+    a: &lightcast_protocol::AnimationParams,
+    scene: &crate::scene::Scene,
+) -> Result<(usize, f32), ApiError> {
+    let Some(index) = scene.animations.iter().position(|x| x.name == a.name) else {
+        let names: Vec<&str> = scene.animations.iter().map(|x| x.name.as_str()).collect();
+        return Err(ApiError::field(
+            "animation.name",
+            if names.is_empty() {
+                format!("'{:.64}': the scene has no animations", a.name)
+            } else {
+                format!(
+                    "'{:.64}' is not one of the scene's: {}",
+                    a.name,
+                    names.join(", ")
+                )
+            },
+        ));
+    };
+    if !(a.time.is_finite() && a.time >= 0.0) {
+        return Err(ApiError::field(
+            "animation.time",
+            format!("{} must be a finite number of seconds ≥ 0", a.time),
+        ));
+    }
+    if !(a.speed.is_finite() && a.speed.abs() <= MAX_ANIMATION_SPEED) {
+        return Err(ApiError::field(
+            "animation.speed",
+            format!("{} is outside ±{MAX_ANIMATION_SPEED}", a.speed),
+        ));
+    }
+    Ok((index, a.time.min(scene.animations[index].duration())))
 }
 
 /// The renderer's own field names, as paths of the request's `render` object: a GI
@@ -127,9 +200,30 @@ pub fn resolve(
         };
         ApiError::field(field, e.reason)
     })?;
-    if !poses.is_empty() && !crate::gi::entry(g.method).1.follows_moved_nodes {
+    let explicit = poses;
+    let (poses, playing) = match &params.animation {
+        None => (explicit.clone(), None),
+        Some(a) => {
+            let (index, time) = animation(a, &entry.scene)?;
+            let scene = &entry.scene;
+            let at = scene.animations[index].locals_at(&scene.nodes, time);
+            let playing = a.playing.then(|| Playing {
+                animation: index,
+                time,
+                speed: a.speed,
+                explicit: explicit.clone(),
+            });
+            (merge_poses(&scene.nodes, at, &explicit), playing)
+        }
+    };
+    let moves = !poses.is_empty() || playing.is_some();
+    if moves && !crate::gi::entry(g.method).1.follows_moved_nodes {
         return Err(ApiError::field(
-            "nodes",
+            if explicit.is_empty() {
+                "animation"
+            } else {
+                "nodes"
+            },
             format!(
                 "gi.method {} does not follow moved nodes yet; {} do",
                 g.method,
@@ -177,6 +271,7 @@ pub fn resolve(
         view: params.view,
         demand: precompute.as_ref().map(|key| Arc::new(entry.demand(key))),
         precompute,
+        playing,
     })
 }
 

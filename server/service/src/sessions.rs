@@ -106,6 +106,8 @@ struct State {
     streamed_codec: Option<lightcast_protocol::Codec>,
     /// The (scene, kind) of the precomputation the client was last told its frames wait for.
     pending_told: Option<(String, String)>,
+    /// When `render.animation` was last set: a playing animation's clock starts there.
+    animation_from: Instant,
 }
 
 /// One client's stream.
@@ -160,6 +162,7 @@ impl Session {
                 last_change: now,
                 next_due: now,
                 pending_told: None,
+                animation_from: now,
                 streamed_codec: None,
             }),
             stats: Mutex::new(SessionStats::default()),
@@ -264,6 +267,9 @@ impl Session {
     pub fn apply(&self, params: SessionParams, resolved: Resolved, lease: SceneLease, input: u64) {
         {
             let mut s = lock(&self.state);
+            if s.params.render.animation != params.render.animation {
+                s.animation_from = Instant::now();
+            }
             s.params = params;
             s.resolved = resolved;
             s.lease = lease;
@@ -276,6 +282,19 @@ impl Session {
         let _ = self.events.send(ServerEvent::Updated {
             session: Box::new(self.info()),
         });
+    }
+
+    /// Seconds into the animation the session plays at `now` (`None`: none plays).
+    pub fn animation_time(&self, now: Instant) -> Option<f32> {
+        let s = lock(&self.state);
+        let playing = s.resolved.playing.as_ref()?;
+        let duration = s.lease.0.scene.animations[playing.animation].duration();
+        let elapsed = now.duration_since(s.animation_from).as_secs_f32();
+        Some(if duration > 0.0 {
+            (playing.time + playing.speed * elapsed).rem_euclid(duration)
+        } else {
+            0.0
+        })
     }
 
     pub fn set_paused(&self, paused: bool) {
@@ -306,10 +325,12 @@ impl Session {
         let enc = s.params.encoding.clone();
         let changed = s.version != s.rendered_version;
         let rest = Duration::from_millis(u64::from(enc.still_after_ms));
-        let rested = now.duration_since(s.last_change) >= rest;
+        // A playing animation changes every frame: never at rest.
+        let playing = s.resolved.playing.is_some();
+        let rested = !playing && now.duration_since(s.last_change) >= rest;
         let want_still = s.still_requested
             || (enc.still_after_ms > 0 && rested && !changed && s.still_version != s.version);
-        let due = want_still || changed || s.params.mode == StreamMode::Continuous;
+        let due = want_still || changed || playing || s.params.mode == StreamMode::Continuous;
         if !due {
             if enc.still_after_ms > 0 && s.still_version != s.version {
                 return Err(Some(rest.saturating_sub(now.duration_since(s.last_change))));
@@ -345,6 +366,10 @@ impl Session {
         }
         s.rendered_version = s.version;
         let mut resolved = s.resolved.clone();
+        if let Some(p) = &resolved.playing {
+            let elapsed = now.duration_since(s.animation_from).as_secs_f32();
+            resolved.settings.poses = p.poses(&s.lease.0.scene, elapsed);
+        }
         if moving && !want_still {
             let settings = &mut resolved.settings;
             (settings.width, settings.height) =

@@ -155,7 +155,7 @@ fn wgsl_traversal_finds_the_brute_force_hits() {
     )
     .expect("inside the room");
     let worlds = lightcast_server::scene::nodes::posed_worlds(&scene.nodes, &poses);
-    posed.set_top(posed.top_level(&scene.nodes, &worlds).expect("top level"));
+    posed.set_top(posed.top_level(&scene.nodes, &worlds));
     for bvh in [rest, posed] {
         wgsl_traversal_matches(&scene, &bvh);
     }

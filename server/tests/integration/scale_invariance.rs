@@ -46,7 +46,7 @@ fn scaled(scene: &Scene, s: f32) -> Scene {
     for v in &mut vertices {
         v.position = v.position.map(|c| c * s);
     }
-    Scene::new(
+    let mut scaled = Scene::new(
         scene.name.clone(),
         vertices,
         scene.indices.clone(),
@@ -55,7 +55,28 @@ fn scaled(scene: &Scene, s: f32) -> Scene {
         scene.lights.iter().map(|l| scaled_light(l, s)).collect(),
         scene.cameras.iter().map(|c| scaled_camera(c, s)).collect(),
     )
-    .expect("a scaled valid scene is valid")
+    .expect("a scaled valid scene is valid");
+    // Its nodes too (their translations are lengths): the same bottom levels of the BVH.
+    let (up, down) = (
+        glam::Mat4::from_scale(glam::Vec3::splat(s)),
+        glam::Mat4::from_scale(glam::Vec3::splat(1.0 / s)),
+    );
+    let nodes = scene
+        .nodes
+        .iter()
+        .map(|n| lightcast_server::scene::nodes::Node {
+            local: n.local.map(|l| lightcast_server::scene::nodes::Transform {
+                translation: l.translation * s,
+                ..l
+            }),
+            rest_world: up * n.rest_world * down,
+            ..n.clone()
+        })
+        .collect();
+    scaled
+        .set_nodes(nodes, scene.animations.clone())
+        .expect("the same hierarchy");
+    scaled
 }
 
 /// One frame per registered method at its small setting for `scene` lit by `light` and seen by

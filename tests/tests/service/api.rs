@@ -830,6 +830,149 @@ async fn clients_move_nodes_per_render_and_per_session() {
     server.stop().await;
 }
 
+/// Issue 35: a glTF animation poses a one-shot render at the time asked (the same pixels as
+/// the node posed by hand, bit for bit on replay), and a session plays, pauses and scrubs it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn animations_pose_renders_and_play_in_sessions() {
+    let server = TestServer::start(&[]).await;
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes?name=slide"))
+        .header("content-type", "model/gltf-binary")
+        .body(lightcast_e2e::animated_glb())
+        .send()
+        .await
+        .expect("upload");
+    assert_eq!(resp.status(), 201);
+    let scene = resp.json::<Value>().await.expect("info")["id"]
+        .as_str()
+        .expect("id")
+        .to_owned();
+    let camera =
+        json!({"position": [0.5, 2.0, 2.5], "target": [0.5, 0.0, 0.5], "fov_y_degrees": 60});
+    let raw = |extra: Value| {
+        let mut render = json!({"scene": scene, "width": 32, "height": 32, "camera": camera,
+                                "shadow_map_size": 256, "gi": {"method": "none"}});
+        if let (Some(r), Value::Object(extra)) = (render.as_object_mut(), extra) {
+            r.extend(extra);
+        }
+        json!({"format": "raw_final", "render": render})
+    };
+    let post = |body: Value| {
+        let server = &server;
+        async move {
+            let resp = server
+                .http
+                .post(server.url("/v1/render"))
+                .json(&body)
+                .send()
+                .await
+                .expect("render");
+            let status = resp.status().as_u16();
+            (status, resp.bytes().await.expect("body").to_vec())
+        }
+    };
+    let at = |t: f32| raw(json!({"animation": {"name": "slide", "time": t}}));
+    let (s0, start) = post(at(0.0)).await;
+    let (s1, halfway) = post(at(1.0)).await;
+    let (_, again) = post(at(1.0)).await;
+    assert_eq!((s0, s1), (200, 200));
+    assert!(start != halfway, "the mover moved");
+    assert!(halfway == again, "a render at time t replays bit for bit");
+    // At 1 s the channel has the mover at x = 0.5 on the ground's plane: as posed by hand.
+    let (status, by_hand) = post(raw(
+        json!({"nodes": [{"node": 1, "translation": [0.5, 0.0, 0.0]}]}),
+    ))
+    .await;
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&by_hand));
+    assert!(
+        halfway == by_hand,
+        "the animation at 1 s is the node posed so"
+    );
+    for (animation, field) in [
+        (json!({"name": "spin"}), "render.animation.name"),
+        (
+            json!({"name": "slide", "time": -1.0}),
+            "render.animation.time",
+        ),
+        (
+            json!({"name": "slide", "speed": 1000.0}),
+            "render.animation.speed",
+        ),
+        (
+            json!({"name": "slide", "loop": true}),
+            "render.animation.loop",
+        ),
+    ] {
+        let (status, body) = post(raw(json!({"animation": animation}))).await;
+        let body: Value = serde_json::from_slice(&body).expect("error");
+        assert_eq!(
+            (status, body["field"].as_str()),
+            (400, Some(field)),
+            "{body}"
+        );
+    }
+    let (status, body) = post(raw(json!({"animation": {"name": "slide", "time": 1.0},
+                                         "gi": {"method": "lightskin"}})))
+    .await;
+    let body: Value = serde_json::from_slice(&body).expect("error");
+    assert_eq!(
+        (status, body["field"].as_str()),
+        (400, Some("render.animation")),
+        "{body}"
+    );
+
+    // A session plays it, and a pause keeps the time it reached.
+    let created = server
+        .create_session(
+            json!({"render": {"scene": scene, "width": 32, "height": 32, "camera": camera,
+                              "shadow_map_size": 256, "gi": {"method": "none"}},
+                   "fps_cap": 30, "mode": "on_change", "encoding": {"codec": "png"}}),
+            None,
+        )
+        .await;
+    let mut stream = server.connect(&created).await;
+    let mut events = Vec::new();
+    stream.next_frame(&mut events).await;
+    stream
+        .send(json!({"type": "animation", "name": "slide", "input_id": 3}))
+        .await;
+    let mut frames = Vec::new();
+    while frames.len() < 4 {
+        let f = stream.next_frame(&mut events).await;
+        if f.header.input_id == 3 {
+            frames.push(f.rgba);
+        }
+    }
+    assert!(
+        frames.windows(2).any(|w| w[0] != w[1]),
+        "frames keep changing while it plays"
+    );
+    stream
+        .send(json!({"type": "animation", "name": "slide", "playing": false}))
+        .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let info = server
+        .get_json(&format!("/v1/sessions/{}", created.session.id))
+        .await;
+    let a = &info["params"]["render"]["animation"];
+    assert_eq!(a["playing"], false, "{info}");
+    assert!(
+        a["time"].as_f64().unwrap_or(0.0) > 0.0,
+        "paused where it had reached: {a}"
+    );
+    stream
+        .send(json!({"type": "animation", "name": "spin"}))
+        .await;
+    let error = stream.next_error().await;
+    assert_eq!(
+        error.field.as_deref(),
+        Some("render.animation.name"),
+        "{error:?}"
+    );
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn scenes_upload_inspect_use_and_delete() {
     let server = TestServer::start(&[]).await;

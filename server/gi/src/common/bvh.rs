@@ -113,18 +113,14 @@ pub struct Hit {
 /// Deepest traversal stack the WGSL traversal keeps in a bottom level; [`SceneBvh::build`]
 /// refuses deeper trees.
 pub const MAX_STACK: usize = 48;
-/// The same for the top level (`TLAS_STACK` in `shaders/bvh.wgsl`).
+/// The same for the top level (`TLAS_STACK` in `shaders/bvh.wgsl`): its median splits keep it
+/// ⌈log₂ n⌉ + 1 deep, 32 for up to 2³¹ movable nodes.
 pub const MAX_TOP_STACK: usize = 32;
 
 #[derive(Debug, thiserror::Error)]
 pub enum BvhError {
     #[error("the scene's BVH is {depth} levels deep; the traversal supports {MAX_STACK}")]
     TooDeep { depth: usize },
-    #[error(
-        "the scene's {levels} moving parts make a top level {depth} deep; the traversal \
-         supports {MAX_TOP_STACK}"
-    )]
-    TopTooDeep { levels: usize, depth: usize },
 }
 
 /// Reference ns per triangle of [`SceneBvh::build`] (binned SAH): about 2 s for the
@@ -159,7 +155,7 @@ impl SceneBvh {
         for (node, triangles) in groups(scene) {
             built.add_level(scene, node, &triangles)?;
         }
-        built.top = built.top_level(&scene.nodes, &[])?;
+        built.top = built.top_level(&scene.nodes, &[]);
         Ok(built)
     }
 
@@ -226,7 +222,7 @@ impl SceneBvh {
     }
 
     /// [`top_level`] of this BVH's levels.
-    pub fn top_level(&self, nodes: &[Node], worlds: &[Mat4]) -> Result<TopLevel, BvhError> {
+    pub fn top_level(&self, nodes: &[Node], worlds: &[Mat4]) -> TopLevel {
         top_level(&self.levels, nodes, worlds)
     }
 
@@ -301,8 +297,8 @@ impl SceneBvh {
 
 /// The top level with `levels` placed by `worlds` (every scene node's world transform,
 /// `scene::nodes::posed_worlds`; empty: at rest).
-pub fn top_level(levels: &[Level], nodes: &[Node], worlds: &[Mat4]) -> Result<TopLevel, BvhError> {
-    let placed: Vec<(BvhInstance, obvhs::aabb::Aabb)> = levels
+pub fn top_level(levels: &[Level], nodes: &[Node], worlds: &[Mat4]) -> TopLevel {
+    let placed: Vec<(BvhInstance, (Vec3, Vec3))> = levels
         .iter()
         .map(|level| {
             let delta = match (level.node, worlds.is_empty()) {
@@ -326,56 +322,65 @@ pub fn top_level(levels: &[Level], nodes: &[Node], worlds: &[Mat4]) -> Result<To
                 lo = lo.min(p);
                 hi = hi.max(p);
             }
-            let aabb = obvhs::aabb::Aabb::new(lo.to_array().into(), hi.to_array().into());
-            (instance, aabb)
+            (instance, (lo, hi))
         })
         .collect();
-    if placed.len() <= 1 {
-        return Ok(TopLevel {
-            nodes: placed
-                .iter()
-                .map(|(_, b)| BvhNode {
-                    min: b.min.to_array(),
-                    prim_count: 1,
-                    max: b.max.to_array(),
-                    first_index: 0,
-                })
-                .collect(),
-            instances: placed.into_iter().map(|(i, _)| i).collect(),
-        });
+    let bounds: Vec<(Vec3, Vec3)> = placed.iter().map(|(_, b)| *b).collect();
+    let (nodes, order) = median_split(&bounds);
+    TopLevel {
+        nodes,
+        instances: order.iter().map(|&i| placed[i as usize].0).collect(),
     }
-    let aabbs: Vec<obvhs::aabb::Aabb> = placed.iter().map(|(_, b)| *b).collect();
-    let mut build_time = std::time::Duration::ZERO;
-    let bvh = obvhs::bvh2::builder::build_bvh2(
-        &aabbs,
-        obvhs::BvhBuildParams::medium_build(),
-        &mut build_time,
-    );
-    let top = TopLevel {
-        nodes: bvh
-            .nodes
-            .iter()
-            .map(|n| BvhNode {
-                min: n.aabb.min.to_array(),
-                prim_count: n.prim_count,
-                max: n.aabb.max.to_array(),
-                first_index: n.first_index,
-            })
-            .collect(),
-        instances: bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| placed[i as usize].0)
-            .collect(),
-    };
-    let depth = depth(&top.nodes, 0);
-    if depth > MAX_TOP_STACK {
-        return Err(BvhError::TopTooDeep {
-            levels: levels.len(),
-            depth,
-        });
+}
+
+/// A tree over `boxes` by median splits of their centres along the longest axis, one box per
+/// leaf, and the boxes in leaf order. The top level holds a few boxes and is rebuilt whenever
+/// poses change; unlike obvhs's builder (whose SAH collapse weighs areas against constants)
+/// it builds the same tree at any power-of-two scale, so scaled scenes trace the same rays
+/// in the same order. Its depth is ⌈log₂ n⌉ + 1.
+fn median_split(boxes: &[(Vec3, Vec3)]) -> (Vec<BvhNode>, Vec<u32>) {
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    let mut nodes = vec![BvhNode::default()];
+    // (node, range of `order` it holds)
+    let mut work = vec![(0usize, 0..order.len())];
+    while let Some((node, range)) = work.pop() {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        let (mut c_lo, mut c_hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for &i in &order[range.clone()] {
+            let (a, b) = boxes[i as usize];
+            lo = lo.min(a);
+            hi = hi.max(b);
+            c_lo = c_lo.min((a + b) * 0.5);
+            c_hi = c_hi.max((a + b) * 0.5);
+        }
+        nodes[node].min = lo.to_array();
+        nodes[node].max = hi.to_array();
+        if range.len() <= 1 {
+            nodes[node].prim_count = range.len() as u32;
+            nodes[node].first_index = range.start as u32;
+            continue;
+        }
+        let extent = c_hi - c_lo;
+        let axis = if extent.x >= extent.y && extent.x >= extent.z {
+            0
+        } else if extent.y >= extent.z {
+            1
+        } else {
+            2
+        };
+        let centre = |i: u32| {
+            let (a, b) = boxes[i as usize];
+            (a[axis] + b[axis]) * 0.5
+        };
+        order[range.clone()].sort_by(|&x, &y| centre(x).total_cmp(&centre(y)).then(x.cmp(&y)));
+        let mid = range.start + range.len() / 2;
+        let left = nodes.len();
+        nodes.extend([BvhNode::default(), BvhNode::default()]);
+        nodes[node].first_index = left as u32;
+        work.push((left, range.start..mid));
+        work.push((left + 1, mid..range.end));
     }
-    Ok(top)
+    (nodes, order)
 }
 
 /// The triangles of the level rooted at `root`: leaves hold contiguous ranges, a level's
@@ -654,7 +659,7 @@ mod tests {
         let mut bvh = SceneBvh::build(&scene).expect("bvh");
         assert_eq!(bvh.levels.len(), 3, "the room and each box");
         let rest = bvh.clone();
-        bvh.set_top(bvh.top_level(&scene.nodes, &worlds).expect("top level"));
+        bvh.set_top(bvh.top_level(&scene.nodes, &worlds));
         let mut moved = scene.clone();
         let owner = owners(&scene.nodes, scene.vertices.len() as u32);
         let all = 0..scene.vertices.len() as u32;

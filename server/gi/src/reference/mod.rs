@@ -674,17 +674,16 @@ impl PathTracer {
 
     /// Places the BVH's movable levels by `poses` (of the scene's `nodes`): the top level is
     /// rebuilt and written where they changed; the bottom levels stay.
-    pub fn set_poses(&mut self, nodes: &[Node], poses: &Poses) -> Result<(), ReferenceError> {
+    pub fn set_poses(&mut self, nodes: &[Node], poses: &Poses) {
         if *poses == self.poses {
-            return Ok(());
+            return;
         }
         let worlds = posed_worlds(nodes, poses);
-        let top = bvh::top_level(&self.levels, nodes, &worlds)?;
+        let top = bvh::top_level(&self.levels, nodes, &worlds);
         let queue = &self.ctx.queue;
         queue.write_buffer(&self.top_nodes, 0, bytemuck::cast_slice(&top.nodes));
         queue.write_buffer(&self.instances, 0, bytemuck::cast_slice(&top.instances));
         self.poses = poses.clone();
-        Ok(())
     }
 
     /// Samples per pixel accumulated by [`Self::accumulate`] for its last key.
@@ -905,7 +904,7 @@ impl PathTracer {
         let gi = frame.settings;
         let g = params::Settings::of(gi)?;
         check_counts(g.bounces, g.spp)?;
-        self.set_poses(&frame.resources.scene.nodes, frame.poses)?;
+        self.set_poses(&frame.resources.scene.nodes, frame.poses);
         let key = AccumKey {
             history: frame.history,
             width: frame.width,

@@ -65,7 +65,18 @@ pub async fn apply_patch(
             .or_insert(Value::Object(Default::default()));
         state.defaults.fill_render(render)?;
     }
-    let params: SessionParams = from_value(merged)?;
+    let mut params: SessionParams = from_value(merged)?;
+    // A patch that stops the animation without giving its time keeps the time it reached.
+    if let (Some(old), Some(new)) = (
+        &session.params().render.animation,
+        &mut params.render.animation,
+    ) {
+        if old.playing && !new.playing && old.name == new.name && old.time == new.time {
+            if let Some(t) = session.animation_time(std::time::Instant::now()) {
+                new.time = t;
+            }
+        }
+    }
     // Camera and light messages keep the scene: only a change of scene looks it up (in the
     // scene store too, a file read per message otherwise).
     let current = session.scene();

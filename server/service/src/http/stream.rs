@@ -462,6 +462,45 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
                 }
             }
         }
+        ClientMessage::Animation {
+            name,
+            time,
+            playing,
+            speed,
+            input_id,
+        } => {
+            // Another animation (or the first) starts from its beginning, playing, unless the
+            // message says otherwise; the one playing keeps what the message leaves out.
+            let same = session
+                .params()
+                .render
+                .animation
+                .is_some_and(|a| a.name == name);
+            let mut patch = serde_json::Map::new();
+            patch.insert("name".into(), json!(name));
+            for (field, given, fresh) in [
+                ("time", time.map(|t| json!(t)), json!(0.0)),
+                ("playing", playing.map(|p| json!(p)), json!(true)),
+                ("speed", speed.map(|s| json!(s)), json!(1.0)),
+            ] {
+                match (given, same) {
+                    (Some(v), _) => {
+                        patch.insert(field.into(), v);
+                    }
+                    (None, false) => {
+                        patch.insert(field.into(), fresh);
+                    }
+                    (None, true) => {}
+                }
+            }
+            apply_patch(
+                state,
+                session,
+                &json!({"render": {"animation": patch}}),
+                input_id,
+            )
+            .await
+        }
         ClientMessage::Update { patch, input_id } => {
             apply_patch(state, session, &patch, input_id).await
         }

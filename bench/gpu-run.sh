@@ -12,6 +12,9 @@
 #     method as authored and all Lambertian, two views, against the full and the modelled
 #     transport's reference, the sun's maps over the scene and fitted to the view, glossy
 #     senders on and off;
+#   - moving objects (issue 35, `bench/light_errors.py --case moving`): the Cornell box's short
+#     box slid along a path, each method's error against the reference of every pose, its
+#     change between poses against the reference's, and its GI ms at rest and moving;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080;
 #   - JPEG against H.264 (`bench/stream-codecs.sh`, issue 13): one camera path at 1280×720 and
@@ -24,7 +27,7 @@
 # OUT_DIR: gpu-street.{md,json}, gpu-street-{error,fps}.png, gpu-surfels-{cornell,street}.{md,json,
 # …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png},
 # gpu-light-counts-{cornell,street}-{brsm,clustered,surfels,rsm_gather}.md, gpu-emitters-errors.md,
-# gpu-street-truth.md,
+# gpu-street-truth.md, gpu-moving-box.md,
 # gpu-service.md,
 # gpu-stream-codecs.{md,json}, environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
@@ -168,6 +171,11 @@ if [ "$what" = gi ] || [ "$what" = all ]; then
   cmd=(python3 "$(dirname "$0")/light_errors.py" "$server" --case street --senders full,diffuse "${truth_size[@]}")
   echo "command: ${cmd[*]} > $out/gpu-street-truth.md" >> "$out/environment.txt"
   "${cmd[@]}" > "$out/gpu-street-truth.md"
+  # Issue 35: the short box moving through the Cornell box.
+  if $quick; then moving_size=(--width 64 --height 48 --spp 16); else moving_size=(--width 1280 --height 720 --spp 1024); fi
+  cmd=(python3 "$(dirname "$0")/light_errors.py" "$server" --case moving "${moving_size[@]}")
+  echo "command: ${cmd[*]} > $out/gpu-moving-box.md" >> "$out/environment.txt"
+  "${cmd[@]}" > "$out/gpu-moving-box.md"
 fi
 
 if [ "$what" = service ] || [ "$what" = all ]; then

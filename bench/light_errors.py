@@ -20,6 +20,8 @@ with `compare_to: reference`. Loopback only, standard library only.
         > bench/results/lavapipe-street-receivers.md
     python3 bench/light_errors.py target/release/lightcast-server --case street-motion \\
         --width 128 --height 72 --spp 512 > bench/results/lavapipe-street-motion.md
+    python3 bench/light_errors.py target/release/lightcast-server --case moving \\
+        --width 128 --height 96 --spp 256 > bench/results/lavapipe-moving-box.md
 
 `environment` (part 3): with and without an environment, the Cornell box under a uniform sky
 (it has no directional light for a daylight sky; its open front lets the sky in) and the
@@ -49,6 +51,13 @@ the camera moves sideways down the middle of the Lambertian street (four frames 
 the mean absolute change of a pixel between consecutive frames over the mean, with the sun's
 maps over the scene and fitted to the view: a fitted map that slid under the VPLs would make
 them flicker. The reference's change (at `--spp`) includes its own noise.
+
+`moving` (issue 35): the Cornell box's short box slid in steps along −x at its fixed light,
+one one-shot render per pose (`render.nodes`): each method's error against the reference of
+each pose (at rest, and the mean over the path), how much its indirect light changes from
+pose to pose over its mean against the reference's change (which includes its own noise),
+and its GI time per frame (the report's stages other than the shared ones) at rest and
+moving. A method that does not follow moved nodes shows its refusal.
 
 `three-lights` (part 2): the Cornell box lit by three lights of different kinds (its ceiling
 spot, a point light low in a back corner, a sun through the open front), each alone and all
@@ -289,11 +298,74 @@ def street_motion_case(base, args, methods, info):
             print(f"| `{method}` | {fit or '-'} | {frames(gi)} |", flush=True)
 
 
+# The stages every frame runs whatever its GI method (`passes::stages`): the rest is GI time.
+SHARED_STAGES = {"shadow_map", "gbuffer", "direct_light", "exposure", "tonemap",
+                 "readback_copy", "yuv420"}
+
+
+def moving_case(base, args, methods, info):
+    """`--case moving` (issue 35): the Cornell box's short box slid along a path at a fixed
+    light, one one-shot render per pose."""
+    import numpy as np
+
+    scene = json.loads(request(base + "/v1/scenes/default")[1])
+    box = next(n for n in scene["nodes"] if n["name"] == "short box")
+    lo, hi = box["bounds"]["min"], box["bounds"]["max"]
+    centre = [(a + b) / 2 for a, b in zip(lo, hi)]
+    path = [[centre[0] - args.step * i, 0.0, centre[2]] for i in range(args.steps)]
+
+    def run(gi, pose):
+        """(indirect light, GI ms, comparison) of `gi` with the box at `pose` (None: at
+        rest), or the refusal."""
+        render = {"width": args.width, "height": args.height, "gi": gi}
+        if pose is not None:
+            render["nodes"] = [{"node": box["id"], "translation": pose}]
+        body = {"render": render, "format": "raw_indirect"}
+        if gi["method"] != "reference":
+            body.update({"compare_to": "reference", "compare_spp": args.spp})
+        try:
+            headers, raw = request(base + "/v1/render", body)
+        except urllib.error.HTTPError as e:
+            return None, None, f"refused: {json.loads(e.read()).get('message', '')[:100]}"
+        report = json.loads(headers["x-lightcast-report"])
+        gi_ms = sum(s["ms"] for s in report["stages"] if s["stage"] not in SHARED_STAGES)
+        image = np.frombuffer(raw, "<f4").reshape(-1, 4)[:, :3].astype(np.float64)
+        return image, gi_ms, report.get("comparison")
+
+    def change(images):
+        steps = [np.abs(b - a).mean() for a, b in zip(images, images[1:])]
+        return 100 * np.mean(steps) / np.mean([i.mean() for i in images])
+
+    print(f"The short box ({box['id']}) slid {args.steps - 1} × {100 * args.step:.0f} cm along "
+          f"−x from its place; reference {args.spp} spp per pose.\n")
+    print("| method | error at rest (8×8-block / bias) | error moving, mean over the path | "
+          "change between poses / mean | reference's change | GI ms at rest | GI ms moving "
+          "(median) |\n|---|---|---|---|---|---|---|")
+    reference = {"method": "reference", "spp": args.spp}
+    ref_images = [run(reference, p)[0] for p in path]
+    ref_change = f"{change(ref_images):.2f} %"
+    for method in methods:
+        gi = {"method": method}
+        rest_image, rest_ms, rest_c = run(gi, None)
+        if rest_image is None:
+            print(f"| `{method}` | {rest_c} | | | | | |", flush=True)
+            continue
+        moving = [run(gi, p) for p in path]
+        if moving[0][0] is None:
+            print(f"| `{method}` | {cell_of(rest_c)} | {moving[0][2]} | | | | |", flush=True)
+            continue
+        block = np.mean([c["indirect_block_mae_relative"] for _, _, c in moving])
+        bias = np.mean([c["indirect_bias_relative"] for _, _, c in moving])
+        print(f"| `{method}` | {cell_of(rest_c)} | {100 * block:.1f} % / {100 * bias:+.1f} % | "
+              f"{change([m[0] for m in moving]):.2f} % | {ref_change} | {rest_ms:.2f} | "
+              f"{np.median([m[1] for m in moving]):.2f} |", flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("server", help="path to lightcast-server")
     ap.add_argument("--case", choices=["environment", "emitters", "three-lights", "street",
-                                       "street-motion"],
+                                       "street-motion", "moving"],
                     default="environment")
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--height", type=int, default=96)
@@ -307,6 +379,9 @@ def main():
     ap.add_argument("--receivers", action="store_true",
                     help="street: each cell also split into diffuse and specular receivers "
                          "(`comparison.receivers`)")
+    ap.add_argument("--steps", type=int, default=6, help="moving: poses along the path")
+    ap.add_argument("--step", type=float, default=0.05,
+                    help="moving: metres between poses")
     ap.add_argument("--senders", default="full",
                     help="street: the `senders` values of the RSM-based methods, comma-separated")
     args = ap.parse_args()
@@ -340,6 +415,8 @@ def main():
             street_case(base, args, methods, info)
         elif args.case == "street-motion":
             street_motion_case(base, args, methods, info)
+        elif args.case == "moving":
+            moving_case(base, args, methods, info)
         else:
             three_lights_case(base, args, methods)
     finally:

@@ -189,3 +189,65 @@ fn methods_that_do_not_follow_moved_nodes_refuse_poses() {
     .expect("valid");
     assert!(own.is_empty(), "{own:?}");
 }
+
+/// The test: with the short box moved, each method that follows moved nodes is as
+/// close to the reference of the moved scene as it is to the reference at rest (8×8-block
+/// error within 1.5× its error at rest plus 5 points: the reference's own noise at 256 spp
+/// and the box's new shadows on the floor), the reference of the moved scene being the
+/// posed reference (checked against the CPU-moved scene above).
+#[test]
+fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
+    let scene = procedural::cornell_box();
+    let poses = moved_short_box(&scene);
+    let truth_gi = GiParams::new(lightcast_server::gi::reference::REFERENCE)
+        .with("spp", 256)
+        .with("bounces", 1);
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    precompute(&mut renderer, &truth_gi);
+    let mut indirect = |gi: &GiParams, poses: &Poses| -> Vec<[f32; 4]> {
+        let s = RenderSettings {
+            poses: poses.clone(),
+            ..settings_for(&scene, gi.clone())
+        };
+        renderer
+            .render(&s)
+            .expect("render")
+            .indirect
+            .expect("captured")
+    };
+    let truths = [Poses::new(), poses.clone()].map(|p| {
+        indirect(&truth_gi, &p)
+            .iter()
+            .map(|c| [c[0], c[1], c[2]])
+            .collect::<Vec<_>>()
+    });
+    for gi in [
+        GiParams::new(lightcast_server::gi::clustered::CLUSTERED)
+            .with("rsm_size", 64)
+            .with("vpl_count", 1024),
+        GiParams::new(lightcast_server::gi::rsm_gather::RSM_GATHER).with("rsm_size", 64),
+    ] {
+        let [rest, moved] = [Poses::new(), poses.clone()].map(|p| indirect(&gi, &p));
+        let e_rest = lightcast_server::quality::errors(&truths[0], &rest, W as usize);
+        let e_moved = lightcast_server::quality::errors(&truths[1], &moved, W as usize);
+        // The moved method against the reference at rest: the move must matter.
+        let e_stale = lightcast_server::quality::errors(&truths[0], &moved, W as usize);
+        eprintln!(
+            "{}: block error at rest {:.3}, moved {:.3} (against the reference at rest {:.3})",
+            gi.method,
+            e_rest.block_mae_relative,
+            e_moved.block_mae_relative,
+            e_stale.block_mae_relative
+        );
+        assert!(
+            e_moved.block_mae_relative <= 1.5 * e_rest.block_mae_relative + 0.05,
+            "{}: moved {e_moved:?} vs at rest {e_rest:?}",
+            gi.method
+        );
+        assert!(
+            e_stale.block_mae_relative > e_moved.block_mae_relative,
+            "{}: the moved frame is closer to the reference at rest",
+            gi.method
+        );
+    }
+}

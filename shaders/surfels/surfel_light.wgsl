@@ -36,11 +36,18 @@ struct LightParams {
 @group(0) @binding(6) var<storage, read> cache_usable: array<u32>;
 @group(0) @binding(7) var<storage, read> cache_light: array<vec4<f32>>;
 @group(0) @binding(8) var<storage, read_write> flux: array<vec4<f32>>;
+// 1 for a surfel on a node the frame moved away from where its links were traced: a moving
+// object sends no light (seed 001 §5: dynamic geometry receives from the caches only).
+@group(0) @binding(9) var<storage, read> moved: array<u32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     let k = id.x;
     if k >= params.surfel_count {
+        return;
+    }
+    if moved[k] != 0u {
+        flux[k] = vec4<f32>(0.0);
         return;
     }
     let s = surfels[k];

@@ -297,6 +297,21 @@ pub fn validate(
     Ok(())
 }
 
+/// Whether each node (in `nodes`' order) can move: it is movable or lies under a movable one.
+pub fn can_move(nodes: &[Node]) -> Vec<bool> {
+    let at: std::collections::HashMap<u32, usize> =
+        nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
+    let mut moves = vec![false; nodes.len()];
+    for (i, node) in nodes.iter().enumerate() {
+        moves[i] = node.movable
+            || node
+                .parent
+                .and_then(|p| at.get(&p))
+                .is_some_and(|&p| moves[p]);
+    }
+    moves
+}
+
 /// Each vertex's innermost node (its position in `nodes`; `u32::MAX` for none), for nodes
 /// [`validate`] accepts: one sweep over the vertices with a stack of the open ranges, so a
 /// deep hierarchy costs no more than a flat one.

@@ -156,6 +156,37 @@ fn the_reference_follows_a_posed_box() {
     );
 }
 
+/// Surfels on a moved node send no light (seed 001 §5): with the short box moved, the
+/// surfels on it are dark in the frame's flux, the others lit as at rest.
+#[test]
+fn surfels_on_a_moved_box_send_no_light() {
+    let scene = procedural::cornell_box();
+    let poses = moved_short_box(&scene);
+    let gi = GiParams::new(lightcast_server::gi::surfels::SURFELS);
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    precompute(&mut renderer, &gi);
+    let rest = settings_for(&scene, gi.clone());
+    let posed = RenderSettings {
+        poses,
+        ..rest.clone()
+    };
+    let [at_rest, moved] = [rest, posed].map(|s| {
+        renderer
+            .render(&s)
+            .expect("render")
+            .indirect
+            .expect("captured")
+    });
+    let sum = |img: &[[f32; 4]]| img.iter().map(|c| c[0] + c[1] + c[2]).sum::<f32>();
+    // The box's light on the room is gone and the room's light on the box is the caches':
+    // the indirect light changes, and stays finite and positive.
+    let (a, b) = (sum(&at_rest), sum(&moved));
+    assert!(
+        b.is_finite() && b > 0.0 && (a - b).abs() > 1e-3 * a,
+        "{a} vs {b}"
+    );
+}
+
 /// Methods whose per-scene data is built from the geometry at rest refuse posed frames,
 /// naming the field; a node put back where it is is no pose at all.
 #[test]
@@ -194,7 +225,11 @@ fn methods_that_do_not_follow_moved_nodes_refuse_poses() {
 /// close to the reference of the moved scene as it is to the reference at rest (8×8-block
 /// error within 1.5× its error at rest plus 5 points: the reference's own noise at 256 spp
 /// and the box's new shadows on the floor), the reference of the moved scene being the
-/// posed reference (checked against the CPU-moved scene above).
+/// posed reference (checked against the CPU-moved scene above). `surfels` is held to 2.5×:
+/// as seed 001 §5 has it, a moving object only receives (its own light on the room, about
+/// 14 points of the reference's here, is missing) and the links keep the box's occlusion
+/// where it was (measured on lavapipe: 12.2 % at rest, 26.2 % moved; clustered 25.5 → 17.5 %,
+/// rsm_gather 18.5 → 18.4 %).
 #[test]
 fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
     let scene = procedural::cornell_box();
@@ -204,7 +239,7 @@ fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
         .with("bounces", 1);
     let mut renderer = Renderer::new(gpu(), scene.clone());
     precompute(&mut renderer, &truth_gi);
-    let mut indirect = |gi: &GiParams, poses: &Poses| -> Vec<[f32; 4]> {
+    let indirect = |renderer: &mut Renderer, gi: &GiParams, poses: &Poses| -> Vec<[f32; 4]> {
         let s = RenderSettings {
             poses: poses.clone(),
             ..settings_for(&scene, gi.clone())
@@ -216,18 +251,26 @@ fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
             .expect("captured")
     };
     let truths = [Poses::new(), poses.clone()].map(|p| {
-        indirect(&truth_gi, &p)
+        indirect(&mut renderer, &truth_gi, &p)
             .iter()
             .map(|c| [c[0], c[1], c[2]])
             .collect::<Vec<_>>()
     });
-    for gi in [
-        GiParams::new(lightcast_server::gi::clustered::CLUSTERED)
-            .with("rsm_size", 64)
-            .with("vpl_count", 1024),
-        GiParams::new(lightcast_server::gi::rsm_gather::RSM_GATHER).with("rsm_size", 64),
+    for (gi, band) in [
+        (
+            GiParams::new(lightcast_server::gi::clustered::CLUSTERED)
+                .with("rsm_size", 64)
+                .with("vpl_count", 1024),
+            1.5,
+        ),
+        (
+            GiParams::new(lightcast_server::gi::rsm_gather::RSM_GATHER).with("rsm_size", 64),
+            1.5,
+        ),
+        (GiParams::new(lightcast_server::gi::surfels::SURFELS), 2.5),
     ] {
-        let [rest, moved] = [Poses::new(), poses.clone()].map(|p| indirect(&gi, &p));
+        precompute(&mut renderer, &gi);
+        let [rest, moved] = [Poses::new(), poses.clone()].map(|p| indirect(&mut renderer, &gi, &p));
         let e_rest = lightcast_server::quality::errors(&truths[0], &rest, W as usize);
         let e_moved = lightcast_server::quality::errors(&truths[1], &moved, W as usize);
         // The moved method against the reference at rest: the move must matter.
@@ -240,7 +283,7 @@ fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
             e_stale.block_mae_relative
         );
         assert!(
-            e_moved.block_mae_relative <= 1.5 * e_rest.block_mae_relative + 0.05,
+            e_moved.block_mae_relative <= band * e_rest.block_mae_relative + 0.05,
             "{}: moved {e_moved:?} vs at rest {e_rest:?}",
             gi.method
         );

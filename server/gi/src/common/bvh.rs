@@ -15,7 +15,7 @@
 //! geometry only: the WGSL traversal also skips hits on alpha-masked texels, which needs the
 //! materials and textures (`shaders/reference/surfaces.wgsl`).
 
-use crate::scene::nodes::{owners, Node};
+use crate::scene::nodes::{can_move, owners, Node};
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
@@ -403,20 +403,7 @@ fn leaf_range(nodes: &[BvhNode], root: u32) -> std::ops::Range<usize> {
 /// The scene's triangles by bottom level: those whose innermost node can move (it or an
 /// ancestor is movable), per node, and the rest (`None`), static first.
 fn groups(scene: &Scene) -> Vec<(Option<usize>, Vec<u32>)> {
-    let mut moves = vec![false; scene.nodes.len()];
-    let at: std::collections::HashMap<u32, usize> = scene
-        .nodes
-        .iter()
-        .enumerate()
-        .map(|(i, n)| (n.id, i))
-        .collect();
-    for (i, node) in scene.nodes.iter().enumerate() {
-        moves[i] = node.movable
-            || node
-                .parent
-                .and_then(|p| at.get(&p))
-                .is_some_and(|&p| moves[p]);
-    }
+    let moves = can_move(&scene.nodes);
     let owner = owners(&scene.nodes, scene.vertices.len() as u32);
     let mut by_node: Vec<Vec<u32>> = vec![Vec::new(); scene.nodes.len()];
     let mut still = Vec::new();

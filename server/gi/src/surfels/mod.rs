@@ -104,7 +104,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: limits::LIMITS,
     downscales: true,
     samples_environment: false,
-    follows_moved_nodes: false,
+    follows_moved_nodes: true,
     bench: Some(&bench::SWEEP),
 };
 
@@ -418,6 +418,7 @@ struct LitBy {
     shadow_map_size: u32,
     bounces: u32,
     emitters: bool,
+    poses: crate::scene::nodes::Poses,
 }
 
 /// One image history's caches: two cache-light buffers a bounce reads and writes in turn.
@@ -546,11 +547,12 @@ impl Method for Surfels {
         frame: &FrameInputs,
         stages: &mut FrameStages,
     ) -> Result<Option<ProgressBuffer>, GiError> {
-        let set = self.set.take().ok_or_else(|| {
+        let mut set = self.set.take().ok_or_else(|| {
             GiError::Scene(
                 "surfels needs the scene's surfel set; call Surfels::set_surfels first".into(),
             )
         })?;
+        set.set_poses(&self.ctx.queue, &self.scene, frame.poses);
         let result = self.encode_with(&set, frame, stages);
         self.set = Some(set);
         result.map(|()| None)
@@ -669,6 +671,7 @@ impl Surfels {
             shadow_map_size: frame.shadow.size,
             bounces: wanted,
             emitters: emitters(frame.settings),
+            poses: frame.poses.clone(),
         };
         // A render, and a session's still, show every bounce.
         let one_shot = frame.history.is_none() || frame.still;

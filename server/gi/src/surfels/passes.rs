@@ -15,6 +15,7 @@ use crate::passes::bind::{self, bind_group, BindKind};
 use crate::passes::{
     gbuffer::GBuffer, params_buffer, shadow_map::ShadowMap, ParamSlots, Target, INDIRECT_FORMAT,
 };
+use crate::scene::nodes::{can_move, owners, posed_worlds, Poses};
 use crate::scene::Scene;
 use bytemuck::{Pod, Zeroable};
 use glam::{Vec2, Vec3};
@@ -95,6 +96,7 @@ bind_group! {
         cache_usable: bind::STORAGE,
         cache_light: bind::STORAGE,
         flux: bind::STORAGE_RW,
+        moved: bind::STORAGE,
     }
 }
 
@@ -211,6 +213,12 @@ pub struct SurfelBuffers {
     link_coeffs: wgpu::Buffer,
     /// Radiosity of every leaf, then the pulled flux of every internal node.
     pub flux: wgpu::Buffer,
+    /// Per surfel: the position in `Scene::nodes` of the node that moves it (`u32::MAX`:
+    /// static), and 1 where the frame's poses moved it (`moved`, for `surfel_light`), for
+    /// `poses`.
+    surfel_nodes: Vec<u32>,
+    moved: wgpu::Buffer,
+    poses: Poses,
 }
 
 /// Why a surfel set cannot go to the GPU.
@@ -332,7 +340,34 @@ impl SurfelBuffers {
                 bytemuck::cast_slice(&set.links.coeffs),
             ),
             flux,
+            moved: storage("surfels moved", &vec![0u8; 4 * surfels.len().max(1)]),
+            surfel_nodes: surfel_nodes(scene, set),
+            poses: Poses::new(),
         })
+    }
+
+    /// Marks the surfels on nodes `poses` moves from where they were sampled (see `moved`).
+    pub fn set_poses(&mut self, queue: &wgpu::Queue, scene: &Scene, poses: &Poses) {
+        if *poses == self.poses {
+            return;
+        }
+        let worlds = posed_worlds(&scene.nodes, poses);
+        let moved: Vec<u32> = self
+            .surfel_nodes
+            .iter()
+            .map(|&n| {
+                u32::from(
+                    scene
+                        .nodes
+                        .get(n as usize)
+                        .is_some_and(|node| worlds[n as usize] != node.rest_world),
+                )
+            })
+            .collect();
+        if !moved.is_empty() {
+            queue.write_buffer(&self.moved, 0, bytemuck::cast_slice(&moved));
+        }
+        self.poses = poses.clone();
     }
 
     /// A buffer for one cache lighting: `coefficients` RGB(A) values per cache.
@@ -480,6 +515,7 @@ impl SurfelPasses {
             cache_usable: &buffers.cache_usable,
             cache_light: bounce.previous.unwrap_or(&self.no_caches),
             flux: &buffers.flux,
+            moved: &buffers.moved,
         }
         .bind(device, &self.light_layout);
         let mut pass = crate::passes::begin_compute(encoder, "surfel light");
@@ -609,6 +645,23 @@ pub fn sh_view_buffer(device: &wgpu::Device, width: u32, height: u32) -> wgpu::B
         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     })
+}
+
+/// Per surfel, the position in `Scene::nodes` of the innermost node of its triangle when that
+/// node can move (`u32::MAX`: static geometry).
+fn surfel_nodes(scene: &Scene, set: &SurfelSet) -> Vec<u32> {
+    let moves = can_move(&scene.nodes);
+    let owner = owners(&scene.nodes, scene.vertices.len() as u32);
+    set.surfels
+        .iter()
+        .map(|s| {
+            let vertex = scene.indices[3 * s.triangle as usize] as usize;
+            match owner.get(vertex) {
+                Some(&n) if moves.get(n as usize).copied().unwrap_or(false) => n,
+                _ => u32::MAX,
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -178,7 +178,7 @@ fn load_cache(i: u32) -> LightCache {
     if i < params.cache_count {
         return caches[i];
     }
-    return LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
+    return LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0xffffffffu);
 }
 
 @compute @workgroup_size(64)

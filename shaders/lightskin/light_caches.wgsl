@@ -9,7 +9,8 @@ struct LightCache {
     diffuse: vec3<f32>,
     exponent: f32,
     glossy: vec3<f32>,
-    pad0: f32,
+    // The model it moves with (unused on the GPU: the CPU places moved caches).
+    model: u32,
 }
 
 // Mirrored by `CacheLighting` in server/passes/src/passes/cache_lighting.rs. Each proxy light is a

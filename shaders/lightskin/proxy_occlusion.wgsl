@@ -22,7 +22,7 @@ const TILE_CACHES: u32 = 64u;
 var<workgroup> tile: array<LightCache, 64>;
 
 fn empty_cache() -> LightCache {
-    return LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0.0);
+    return LightCache(vec3<f32>(0.0), 0.0, vec3<f32>(0.0, 1.0, 0.0), 0.0, vec3<f32>(0.0), 1.0, vec3<f32>(0.0), 0xffffffffu);
 }
 
 @compute @workgroup_size(64)

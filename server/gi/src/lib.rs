@@ -297,24 +297,19 @@ pub struct MethodEntry {
     /// (`passes::environment::FrameEnvironment::lights`) to its lights, and it lights with
     /// them as with any light.
     pub samples_environment: bool,
-    /// Whether the method follows movable nodes a frame poses (`RenderSettings::poses`): it
-    /// reads the scene's geometry from the renderer's vertex buffer, which holds them moved,
-    /// every frame (its RSM, VPLs, maps); a method with per-scene data built from the
-    /// geometry at rest (light caches, surfels, a BVH) refuses posed nodes until that data
-    /// follows them.
-    pub follows_moved_nodes: bool,
+    /// Checks that the method, with these parameters, follows movable nodes a frame poses
+    /// (`RenderSettings::poses`); every method does, each as its seed paper has it (see the
+    /// README), except with parameters whose per-scene data only holds the rest pose
+    /// (LightSkin's `cache_visibility` maps).
+    pub follows_moved_nodes: fn(&GiParams) -> Result<(), InvalidSetting>,
     /// What `lightcast-server bench --gi <method>` measures (`gi/<method>/bench.rs`, see
     /// [`bench`]); `None`: the method has no evaluation.
     pub bench: Option<&'static bench::Sweep>,
 }
 
-/// The methods whose entries follow moved nodes ([`MethodEntry::follows_moved_nodes`]).
-pub fn following_moved_nodes() -> Vec<String> {
-    REGISTRY
-        .iter()
-        .filter(|e| e.follows_moved_nodes)
-        .flat_map(|e| e.tables.iter().map(|t| t.method.to_string()))
-        .collect()
+/// [`MethodEntry::follows_moved_nodes`] of a method with nothing held at rest.
+pub fn follows_every_pose(_: &GiParams) -> Result<(), InvalidSetting> {
+    Ok(())
 }
 
 impl MethodEntry {

@@ -41,7 +41,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: &[],
     downscales: false,
     samples_environment: false,
-    follows_moved_nodes: true,
+    follows_moved_nodes: super::follows_every_pose,
     bench: None,
 };
 

@@ -29,7 +29,7 @@ use crate::passes::{
     Target, INDIRECT_FORMAT,
 };
 use crate::scene::environment as env;
-use crate::scene::nodes::{owners, posed_vertices, posed_worlds, Poses};
+use crate::scene::nodes::{deltas, owners, posed_vertices, posed_worlds, Poses};
 use crate::scene::{Scene, Vertex};
 use glam::Vec3;
 use lightcast_protocol::{Camera, Environment, GiParams, Light, LightKind, View};
@@ -653,19 +653,14 @@ impl Renderer {
             .get_or_insert_with(|| owners(&scene.nodes, scene.vertices.len() as u32));
         let before = posed_worlds(&scene.nodes, &self.poses);
         let after = posed_worlds(&scene.nodes, poses);
+        let deltas = deltas(&scene.nodes, &after);
         let mut written_to = 0;
         for (i, node) in scene.nodes.iter().enumerate() {
             // A changed node's descendants lie in its range, written with it.
             if before[i] == after[i] || node.vertices.start < written_to {
                 continue;
             }
-            let moved = posed_vertices(
-                &scene.vertices,
-                &scene.nodes,
-                owners,
-                &after,
-                node.vertices.clone(),
-            );
+            let moved = posed_vertices(&scene.vertices, owners, &deltas, node.vertices.clone());
             let offset = u64::from(node.vertices.start) * std::mem::size_of::<Vertex>() as u64;
             self.shared.ctx.queue.write_buffer(
                 &self.shared.scene_buffers.vertices,
@@ -934,15 +929,8 @@ impl Renderer {
         let (width, height) = (settings.width, settings.height);
         let environment = self.environment(settings)?;
         let (method_index, entry) = gi::entry(settings.gi.method);
-        if !settings.poses.is_empty() && !entry.follows_moved_nodes {
-            return Err(invalid(
-                "poses",
-                format!(
-                    "{} does not follow moved nodes yet; {} do",
-                    settings.gi.method,
-                    gi::following_moved_nodes().join(", ")
-                ),
-            ));
+        if !settings.poses.is_empty() {
+            (entry.follows_moved_nodes)(&settings.gi).map_err(|e| invalid(e.field, e.reason))?;
         }
         self.apply_poses(&settings.poses);
         // A method that does not sample the environment lights with its directions too.

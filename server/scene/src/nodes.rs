@@ -189,11 +189,13 @@ impl Animation {
     /// properties its channels drive sampled at `t` (morph weights are not played).
     pub fn locals_at(&self, nodes: &[Node], t: f32) -> Vec<(u32, Transform)> {
         let mut out: Vec<(u32, Transform)> = Vec::new();
+        let at: std::collections::HashMap<u32, usize> =
+            nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
         for c in &self.channels {
             if c.property == Property::Weights {
                 continue;
             }
-            let Some(own) = nodes.iter().find(|n| n.id == c.node).and_then(|n| n.local) else {
+            let Some(own) = at.get(&c.node).and_then(|&n| nodes[n].local) else {
                 continue;
             };
             let slot = match out.iter().position(|(id, _)| *id == c.node) {
@@ -458,7 +460,7 @@ pub fn resolve_poses(
         let (lo, hi) = SCALE_RANGE;
         let scale = match pose.scale.map(Vec3::from) {
             None => own.scale,
-            Some(s) if s.min_element() >= lo && s.max_element() <= hi => s,
+            Some(s) if s.is_finite() && s.min_element() >= lo && s.max_element() <= hi => s,
             Some(s) => {
                 return Err(error(
                     i,
@@ -491,7 +493,8 @@ pub fn resolve_poses(
             continue;
         };
         let delta = worlds[n] * nodes[n].rest_world.inverse();
-        if delta.determinant() <= 0.0 {
+        // `!(… > 0)`: a singular rest world (a zero-scale ancestor) makes NaNs, refused too.
+        if !(delta.determinant() > 0.0 && delta.is_finite()) {
             return Err(error(
                 i,
                 "scale",
@@ -524,29 +527,29 @@ pub fn resolve_poses(
 /// [`resolve_poses`]) over them, sorted by id, without the entries that leave a node where
 /// it is.
 pub fn merge_poses(nodes: &[Node], animated: Vec<(u32, Transform)>, explicit: &Poses) -> Poses {
+    let at: std::collections::HashMap<u32, usize> =
+        nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
     let mut out: Poses = animated
         .into_iter()
         .filter(|(id, _)| explicit.binary_search_by_key(id, |(e, _)| *e).is_err())
         .chain(explicit.iter().copied())
-        .filter(|(id, t)| {
-            nodes
-                .iter()
-                .find(|n| n.id == *id)
-                .is_some_and(|n| n.local != Some(*t))
-        })
+        .filter(|(id, t)| at.get(id).is_some_and(|&n| nodes[n].local != Some(*t)))
         .collect();
     out.sort_by_key(|(id, _)| *id);
     out
 }
 
-/// Most times [`animation_reach`] places an animation's nodes at: the work is that times the
-/// node count, and a file's keys are not bounded otherwise.
+/// Most times [`animation_reach`] places an animation's nodes at.
 const REACH_SAMPLES: usize = 256;
+/// Most node placements [`animation_reach`] does over all animations (a time costs one per
+/// node): about a second of work whatever a file holds.
+const REACH_WORK: usize = 1 << 26;
 
 /// The world bounds every animation moves its nodes through: their subtrees' `bounds` (from
 /// [`subtree_bounds`]) placed at each key and half-way between keys (a slerp or a spline can
 /// leave the keys' hull a little; the half-way samples catch most of that), at most
-/// [`REACH_SAMPLES`] of those times per animation, evenly spread.
+/// [`REACH_SAMPLES`] of those times per animation and [`REACH_WORK`] placements in all,
+/// evenly spread, the last key always.
 pub fn animation_reach(
     nodes: &[Node],
     animations: &[Animation],
@@ -566,8 +569,13 @@ pub fn animation_reach(
             .collect();
         times.sort_by(f32::total_cmp);
         times.dedup();
-        let step = times.len().div_ceil(REACH_SAMPLES).max(1);
-        for t in times.into_iter().step_by(step) {
+        let budget =
+            (REACH_WORK / nodes.len().max(1) / animations.len().max(1)).clamp(1, REACH_SAMPLES);
+        let step = times.len().div_ceil(budget).max(1);
+        let last = times.last().copied();
+        // Evenly spread, and the last key (often the farthest pose) always.
+        let sampled = times.iter().copied().step_by(step).chain(last);
+        for t in sampled {
             let poses = merge_poses(nodes, animation.locals_at(nodes, t), &Poses::new());
             let worlds = posed_worlds(nodes, &poses);
             // A moved node's subtree holds everything that moves with it.
@@ -606,14 +614,19 @@ fn corners(b: &Aabb) -> [Vec3; 8] {
 /// transforms, in `nodes`' order (parents before children).
 pub fn posed_worlds(nodes: &[Node], poses: &[(u32, Transform)]) -> Vec<Mat4> {
     let mut worlds: Vec<Mat4> = Vec::with_capacity(nodes.len());
+    // Whether a node or an ancestor is posed: the others keep their rest world bit for bit
+    // (a product through the parents would be a few ulps off it).
+    let mut moved: Vec<bool> = Vec::with_capacity(nodes.len());
     let at: std::collections::HashMap<u32, usize> =
         nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
     for node in nodes {
-        let parent = node.parent.and_then(|p| at.get(&p)).map(|&p| worlds[p]);
+        let up = node.parent.and_then(|p| at.get(&p)).copied();
+        let parent = up.filter(|&p| moved[p]).map(|p| worlds[p]);
         let posed = poses
             .binary_search_by_key(&node.id, |(id, _)| *id)
             .ok()
             .map(|k| &poses[k].1);
+        moved.push(posed.is_some() || parent.is_some());
         let world = match (posed, parent) {
             // Unposed: the rest pose, moved with its parent.
             (None, None) => node.rest_world,
@@ -626,7 +639,7 @@ pub fn posed_worlds(nodes: &[Node], poses: &[(u32, Transform)]) -> Vec<Mat4> {
             }
             (Some(t), parent) => {
                 // The parent's world at rest, as the node's own rest world implies it.
-                let parent = parent.unwrap_or_else(|| {
+                let parent = parent.or(up.map(|p| worlds[p])).unwrap_or_else(|| {
                     node.rest_world * node.local.map_or(Mat4::IDENTITY, |l| l.matrix()).inverse()
                 });
                 parent * t.matrix()
@@ -637,28 +650,36 @@ pub fn posed_worlds(nodes: &[Node], poses: &[(u32, Transform)]) -> Vec<Mat4> {
     worlds
 }
 
-/// The scene's vertices `range` moved by `worlds` (from [`posed_worlds`]): each vertex by its
-/// innermost node's change from its rest world (`owner` from [`owners`]), its normal by that
-/// change's inverse transpose.
-pub fn posed_vertices(
-    vertices: &[crate::Vertex],
-    nodes: &[Node],
-    owner: &[u32],
-    worlds: &[Mat4],
-    range: Range<u32>,
-) -> Vec<crate::Vertex> {
-    let deltas: Vec<(Mat4, glam::Mat3)> = nodes
+/// A node's change from its rest world, and that change's inverse transpose for normals.
+pub type Delta = (Mat4, glam::Mat3);
+
+/// Every node's [`Delta`] for `worlds` (from [`posed_worlds`]); `None` where the node is at
+/// rest (its vertices stay bit for bit).
+pub fn deltas(nodes: &[Node], worlds: &[Mat4]) -> Vec<Option<Delta>> {
+    nodes
         .iter()
         .zip(worlds)
         .map(|(n, w)| {
-            let delta = *w * n.rest_world.inverse();
-            (delta, glam::Mat3::from_mat4(delta).inverse().transpose())
+            (*w != n.rest_world).then(|| {
+                let delta = *w * n.rest_world.inverse();
+                (delta, glam::Mat3::from_mat4(delta).inverse().transpose())
+            })
         })
-        .collect();
+        .collect()
+}
+
+/// The scene's vertices `range` moved by `deltas` (from [`deltas`]): each vertex by its
+/// innermost node's (`owner` from [`owners`]), its normal by the inverse transpose.
+pub fn posed_vertices(
+    vertices: &[crate::Vertex],
+    owner: &[u32],
+    deltas: &[Option<Delta>],
+    range: Range<u32>,
+) -> Vec<crate::Vertex> {
     (range.start as usize..range.end as usize)
         .map(|v| {
             let mut out = vertices[v];
-            if let Some((delta, normals)) = deltas.get(owner[v] as usize) {
+            if let Some(Some((delta, normals))) = deltas.get(owner[v] as usize) {
                 out.position = delta.transform_point3(out.position.into()).to_array();
                 out.normal = (*normals * Vec3::from(out.normal))
                     .try_normalize()
@@ -740,7 +761,7 @@ mod tests {
         let worlds = posed_worlds(&scene.nodes, &poses);
         let owner = owners(&scene.nodes, scene.vertices.len() as u32);
         let all = 0..scene.vertices.len() as u32;
-        let moved = posed_vertices(&scene.vertices, &scene.nodes, &owner, &worlds, all);
+        let moved = posed_vertices(&scene.vertices, &owner, &deltas(&scene.nodes, &worlds), all);
         let turn = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
         for (i, (was, now)) in scene.vertices.iter().zip(&moved).enumerate() {
             let (p, n) = (Vec3::from(was.position), Vec3::from(was.normal));
@@ -754,7 +775,7 @@ mod tests {
         }
         // Unposed, every vertex is where it was.
         let rest = posed_worlds(&scene.nodes, &[]);
-        let same = posed_vertices(&scene.vertices, &scene.nodes, &owner, &rest, 0..10);
+        let same = posed_vertices(&scene.vertices, &owner, &deltas(&scene.nodes, &rest), 0..10);
         assert_eq!(same, scene.vertices[..10]);
     }
 

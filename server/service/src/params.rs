@@ -42,15 +42,21 @@ pub struct Playing {
 }
 
 impl Playing {
-    /// The frame's poses `elapsed` seconds after it was set: the animation loops.
-    pub fn poses(&self, scene: &crate::scene::Scene, elapsed: f32) -> Poses {
-        let animation = &scene.animations[self.animation];
-        let duration = animation.duration();
-        let t = if duration > 0.0 {
-            (self.time + self.speed * elapsed).rem_euclid(duration)
+    /// Seconds into the animation `elapsed` seconds after it was set: it loops (in f64, so
+    /// a session playing for days keeps its precision).
+    pub fn time_at(&self, scene: &crate::scene::Scene, elapsed: f64) -> f32 {
+        let duration = f64::from(scene.animations[self.animation].duration());
+        if duration > 0.0 {
+            (f64::from(self.time) + f64::from(self.speed) * elapsed).rem_euclid(duration) as f32
         } else {
             0.0
-        };
+        }
+    }
+
+    /// The frame's poses `elapsed` seconds after it was set.
+    pub fn poses(&self, scene: &crate::scene::Scene, elapsed: f64) -> Poses {
+        let t = self.time_at(scene, elapsed);
+        let animation = &scene.animations[self.animation];
         merge_poses(
             &scene.nodes,
             animation.locals_at(&scene.nodes, t),
@@ -217,19 +223,18 @@ pub fn resolve(
         }
     };
     let moves = !poses.is_empty() || playing.is_some();
-    if moves && !crate::gi::entry(g.method).1.follows_moved_nodes {
-        return Err(ApiError::field(
-            if explicit.is_empty() {
+    if moves {
+        (crate::gi::entry(g.method).1.follows_moved_nodes)(g).map_err(|e| {
+            let with = if explicit.is_empty() {
                 "animation"
             } else {
                 "nodes"
-            },
-            format!(
-                "gi.method {} does not follow moved nodes yet; {} do",
-                g.method,
-                crate::gi::following_moved_nodes().join(", ")
-            ),
-        ));
+            };
+            ApiError::field(
+                format!("gi.{}", e.field),
+                format!("{} (render.{with} moves nodes)", e.reason),
+            )
+        })?;
     }
     let settings = RenderSettings {
         width: params.width,

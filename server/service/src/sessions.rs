@@ -288,13 +288,8 @@ impl Session {
     pub fn animation_time(&self, now: Instant) -> Option<f32> {
         let s = lock(&self.state);
         let playing = s.resolved.playing.as_ref()?;
-        let duration = s.lease.0.scene.animations[playing.animation].duration();
-        let elapsed = now.duration_since(s.animation_from).as_secs_f32();
-        Some(if duration > 0.0 {
-            (playing.time + playing.speed * elapsed).rem_euclid(duration)
-        } else {
-            0.0
-        })
+        let elapsed = now.duration_since(s.animation_from).as_secs_f64();
+        Some(playing.time_at(&s.lease.0.scene, elapsed))
     }
 
     pub fn set_paused(&self, paused: bool) {
@@ -367,7 +362,7 @@ impl Session {
         s.rendered_version = s.version;
         let mut resolved = s.resolved.clone();
         if let Some(p) = &resolved.playing {
-            let elapsed = now.duration_since(s.animation_from).as_secs_f32();
+            let elapsed = now.duration_since(s.animation_from).as_secs_f64();
             resolved.settings.poses = p.poses(&s.lease.0.scene, elapsed);
         }
         if moving && !want_still {

@@ -9,7 +9,9 @@ use lightcast_server::gi::GiParams;
 use lightcast_server::passes::exposure::Exposure;
 use lightcast_server::renderer::{RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
-use lightcast_server::scene::nodes::{owners, posed_vertices, posed_worlds, resolve_poses, Poses};
+use lightcast_server::scene::nodes::{
+    deltas, owners, posed_vertices, posed_worlds, resolve_poses, Poses,
+};
 use lightcast_server::scene::{procedural, Scene};
 
 const W: u32 = 64;
@@ -44,9 +46,8 @@ fn baked(scene: &Scene, poses: &Poses) -> Scene {
     let worlds = posed_worlds(&scene.nodes, poses);
     moved.vertices = posed_vertices(
         &scene.vertices,
-        &scene.nodes,
         &owner,
-        &worlds,
+        &deltas(&scene.nodes, &worlds),
         0..scene.vertices.len() as u32,
     );
     moved
@@ -187,10 +188,10 @@ fn surfels_on_a_moved_box_send_no_light() {
     );
 }
 
-/// Methods whose per-scene data is built from the geometry at rest refuse posed frames,
-/// naming the field; a node put back where it is is no pose at all.
+/// LightSkin's visibility maps are traced with every node at rest: a posed frame with them is
+/// refused naming the parameter; a node put back where it is is no pose at all.
 #[test]
-fn methods_that_do_not_follow_moved_nodes_refuse_poses() {
+fn cache_visibility_maps_refuse_poses() {
     let scene = procedural::cornell_box();
     let poses = moved_short_box(&scene);
     let mut renderer = Renderer::new(gpu(), scene.clone());
@@ -198,12 +199,12 @@ fn methods_that_do_not_follow_moved_nodes_refuse_poses() {
         poses,
         ..settings_for(
             &scene,
-            GiParams::new(lightcast_server::gi::lightskin::LIGHTSKIN),
+            GiParams::new(lightcast_server::gi::lightskin::LIGHTSKIN).with("cache_visibility", 8),
         )
     };
     let error = renderer.render(&s).expect_err("refused").to_string();
     assert!(
-        error.contains("poses") && error.contains("does not follow moved nodes"),
+        error.contains("cache_visibility") && error.contains("at rest"),
         "{error}"
     );
     let own = resolve_poses(
@@ -268,6 +269,16 @@ fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
             1.5,
         ),
         (GiParams::new(lightcast_server::gi::surfels::SURFELS), 2.5),
+        (
+            GiParams::new(lightcast_server::gi::lightskin::LIGHTSKIN).with("rsm_size", 64),
+            1.5,
+        ),
+        (
+            GiParams::new(lightcast_server::gi::lightskin::BRSM)
+                .with("rsm_size", 64)
+                .with("val_count", 1024),
+            1.5,
+        ),
     ] {
         precompute(&mut renderer, &gi);
         let [rest, moved] = [Poses::new(), poses.clone()].map(|p| indirect(&mut renderer, &gi, &p));

@@ -913,12 +913,12 @@ async fn animations_pose_renders_and_play_in_sessions() {
         );
     }
     let (status, body) = post(raw(json!({"animation": {"name": "slide", "time": 1.0},
-                                         "gi": {"method": "lightskin"}})))
+                                         "gi": {"method": "lightskin", "cache_visibility": 8}})))
     .await;
     let body: Value = serde_json::from_slice(&body).expect("error");
     assert_eq!(
         (status, body["field"].as_str()),
-        (400, Some("render.animation")),
+        (400, Some("render.gi.cache_visibility")),
         "{body}"
     );
 

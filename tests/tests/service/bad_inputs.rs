@@ -539,7 +539,7 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
             Some("compare_to"),
         ),
         // Moving nodes (issue 35): unknown, not movable, huge, degenerate, misspelt, too
-        // many, a method that does not follow them.
+        // many, parameters whose data holds the rest pose only.
         case(
             "POST",
             "/v1/render",
@@ -602,10 +602,10 @@ async fn bad_inputs_get_precise_errors_and_the_server_keeps_serving() {
         case(
             "POST",
             "/v1/render",
-            r#"{"render":{"gi":{"method":"lightskin"},"nodes":[{"node":1,"translation":[0,0.3,0]}]}}"#,
+            r#"{"render":{"gi":{"method":"lightskin","cache_visibility":8},"nodes":[{"node":1,"translation":[0,0.3,0]}]}}"#,
             400,
             "invalid_field",
-            Some("render.nodes"),
+            Some("render.gi.cache_visibility"),
         ),
         case(
             "POST",
@@ -850,8 +850,7 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
     stream
         .send(json!({"type": "light", "index": 1, "light": {"kind": "point", "position": [0, 1, 0], "direction": [0, -1, 0], "color": [1, 1, 1], "intensity": 1, "inner_cone": 0, "outer_cone": 0}}))
         .await;
-    // Nodes (issue 35): an unknown one, a zero quaternion, and a pose the session's method
-    // (BRSM, which keeps light caches at rest) does not follow.
+    // Nodes (issue 35): an unknown one, a zero quaternion, a zero scale.
     stream
         .send(json!({"type": "nodes", "nodes": [{"node": 9}]}))
         .await;
@@ -861,7 +860,7 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
         )
         .await;
     stream
-        .send(json!({"type": "nodes", "nodes": [{"node": 1, "translation": [0, 0.3, 0]}]}))
+        .send(json!({"type": "nodes", "nodes": [{"node": 1, "scale": [0, 1, 1]}]}))
         .await;
     let expected = [
         ("binary_not_accepted", None),
@@ -879,7 +878,7 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
         ("invalid_field", Some("index")),
         ("invalid_field", Some("nodes[0].node")),
         ("invalid_field", Some("nodes[1].rotation")),
-        ("invalid_field", Some("render.nodes")),
+        ("invalid_field", Some("nodes[0].scale")),
     ];
     for (kind, field) in expected {
         let error = stream.next_error().await;

@@ -622,7 +622,7 @@ mod tests {
     /// level places the box's; its hits are those of the scene moved on the CPU.
     #[test]
     fn a_posed_top_level_finds_what_the_moved_scene_holds() {
-        use crate::scene::nodes::{owners, posed_vertices, posed_worlds, resolve_poses};
+        use crate::scene::nodes::{deltas, owners, posed_vertices, posed_worlds, resolve_poses};
         let scene = procedural::cornell_box();
         let base = scene
             .node(1)
@@ -650,7 +650,8 @@ mod tests {
         let mut moved = scene.clone();
         let owner = owners(&scene.nodes, scene.vertices.len() as u32);
         let all = 0..scene.vertices.len() as u32;
-        moved.vertices = posed_vertices(&scene.vertices, &scene.nodes, &owner, &worlds, all);
+        moved.vertices =
+            posed_vertices(&scene.vertices, &owner, &deltas(&scene.nodes, &worlds), all);
         let truth = SceneBvh::build(&moved).expect("bvh");
         let (mut hits, mut changed) = (0, 0);
         for (origin, dir) in rays(&scene, 3000, 5) {

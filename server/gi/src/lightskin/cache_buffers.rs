@@ -1,8 +1,9 @@
 //! Light caches on the GPU: the caches, each vertex's 16 nearest caches, and the proxy
 //! lights written every frame by cache lighting.
 
-use super::caches::{CacheSet, LightCache, NEIGHBOURS};
+use super::caches::{CacheSet, LightCache, NEIGHBOURS, STATIC};
 use crate::gi::lightskin::cache_lighting::{CacheAccum, CacheLighting};
+use crate::scene::nodes::{posed_worlds, Node, Poses};
 use wgpu::util::DeviceExt;
 
 pub struct CacheBuffers {
@@ -19,6 +20,10 @@ pub struct CacheBuffers {
     /// Their side; 0: none.
     pub visibility_side: u32,
     pub count: u32,
+    /// The caches of movable models as the precomputation placed them (index, cache), and
+    /// the poses `caches` holds them in.
+    moving: Vec<(u32, LightCache)>,
+    poses: Poses,
 }
 
 impl CacheBuffers {
@@ -42,7 +47,8 @@ impl CacheBuffers {
             caches: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("light caches"),
                 contents: bytemuck::cast_slice(caches),
-                usage: storage,
+                // Moving models' caches are written again where a frame poses them.
+                usage: storage | wgpu::BufferUsages::COPY_DST,
             }),
             vertex_caches: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("vertex caches"),
@@ -80,6 +86,56 @@ impl CacheBuffers {
             }),
             visibility_side: set.visibility.as_ref().map_or(0, |v| v.side),
             count: set.caches.len() as u32,
+            moving: set
+                .caches
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.model != STATIC)
+                .map(|(i, c)| (i as u32, *c))
+                .collect(),
+            poses: Poses::new(),
         }
+    }
+
+    /// Places the moving models' caches by `poses` (seed 004 §3: a model's caches live in its
+    /// space and move with it): position by the model's change from rest, normal by its
+    /// inverse transpose; written where they changed.
+    pub fn set_poses(&mut self, queue: &wgpu::Queue, nodes: &[Node], poses: &Poses) {
+        if *poses == self.poses {
+            return;
+        }
+        let worlds = posed_worlds(nodes, poses);
+        let placed: Vec<(u32, LightCache)> = self
+            .moving
+            .iter()
+            .map(|&(index, rest)| {
+                let Some(node) = nodes.get(rest.model as usize) else {
+                    return (index, rest);
+                };
+                let delta = worlds[rest.model as usize] * node.rest_world.inverse();
+                let normals = glam::Mat3::from_mat4(delta).inverse().transpose();
+                let moved = LightCache {
+                    position: delta.transform_point3(rest.position.into()).to_array(),
+                    normal: (normals * glam::Vec3::from(rest.normal))
+                        .try_normalize()
+                        .unwrap_or(glam::Vec3::Y)
+                        .to_array(),
+                    ..rest
+                };
+                (index, moved)
+            })
+            .collect();
+        // A model's caches are contiguous (the distribution goes model by model): one write
+        // per run of consecutive indices.
+        let size = std::mem::size_of::<LightCache>() as u64;
+        for run in placed.chunk_by(|a, b| b.0 == a.0 + 1) {
+            let caches: Vec<LightCache> = run.iter().map(|(_, c)| *c).collect();
+            queue.write_buffer(
+                &self.caches,
+                u64::from(run[0].0) * size,
+                bytemuck::cast_slice(&caches),
+            );
+        }
+        self.poses = poses.clone();
     }
 }

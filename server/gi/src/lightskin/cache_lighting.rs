@@ -282,7 +282,7 @@ mod tests {
                 ("diffuse", offset_of!(LightCache, diffuse)),
                 ("exponent", offset_of!(LightCache, exponent)),
                 ("glossy", offset_of!(LightCache, glossy)),
-                ("pad0", offset_of!(LightCache, pad0)),
+                ("model", offset_of!(LightCache, model)),
             ],
         );
     }

@@ -20,7 +20,8 @@ use std::time::Duration;
 /// Bump whenever the file layout or the cache algorithm's output changes.
 /// Extension of the stored light-cache files (`<key>.lcc`).
 pub const EXTENSION: &str = "lcc";
-const FORMAT_VERSION: u32 = 1;
+/// 2: caches distributed per model, each with its model (issue 35).
+const FORMAT_VERSION: u32 = 2;
 const MAGIC: [u8; 8] = *b"LCLCACHE";
 /// Written in native byte order: a store shared with a machine of the other endianness reads
 /// as foreign instead of as garbage (the arrays are stored in native order).
@@ -382,7 +383,7 @@ mod tests {
             diffuse: [0.7, 0.6, 0.5],
             exponent: 1.0,
             glossy: [0.04; 3],
-            pad0: 0.0,
+            model: 3,
         };
         let mut entry = [u32::MAX; NEIGHBOURS];
         entry[0] = 1;

@@ -86,7 +86,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: limits::LIMITS,
     downscales: true,
     samples_environment: false,
-    follows_moved_nodes: false,
+    follows_moved_nodes,
     bench: Some(&bench::SWEEP),
 };
 
@@ -245,6 +245,19 @@ pub static PRECOMPUTE: PrecomputeEntry = PrecomputeEntry {
 /// 4-block street's 2.17 M rays (7,511 caches at 16², 1,088 triangles) took 0.33 s on this
 /// machine's 2 cores, 150 ns a ray at the 10 levels `cost` assumes for small scenes.
 const VISIBILITY_NS_PER_RAY_LEVEL: f64 = 15.0;
+
+/// [`MethodEntry::follows_moved_nodes`]: the caches of a movable model move with it (seed 004
+/// §3), but visibility maps are traced with every node at rest.
+fn follows_moved_nodes(gi: &GiParams) -> Result<(), InvalidSetting> {
+    if CACHE_VISIBILITY.u32(gi) > 0 {
+        return Err(InvalidSetting {
+            field: CACHE_VISIBILITY.name,
+            reason: "visibility maps are traced with every node at rest; set 0 to move nodes"
+                .into(),
+        });
+    }
+    Ok(())
+}
 
 /// The key of the light caches for `params`, with visibility maps of `visibility`² cells
 /// ((visibility + 1)² rays) per cache (none for 0, which keeps the key the sets had before
@@ -406,12 +419,14 @@ impl Method for LightSkin {
         frame: &FrameInputs,
         stages: &mut FrameStages,
     ) -> Result<Option<ProgressBuffer>, GiError> {
-        let caches = self.caches.as_ref().ok_or_else(|| {
+        let r = frame.resources;
+        let caches = self.caches.as_mut().ok_or_else(|| {
             GiError::Scene(
                 "LightSkin needs the scene's light caches; call LightSkin::set_caches first".into(),
             )
         })?;
-        let r = frame.resources;
+        caches.set_poses(&r.ctx.queue, &r.scene.nodes, frame.poses);
+        let caches = &*caches;
         let method = frame.settings.method;
         let gi = &Settings::of(frame.settings)?;
         let queue = &r.ctx.queue;

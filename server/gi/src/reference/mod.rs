@@ -97,7 +97,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: limits::LIMITS,
     downscales: false,
     samples_environment: true,
-    follows_moved_nodes: true,
+    follows_moved_nodes: super::follows_every_pose,
     bench: None,
 };
 

@@ -65,7 +65,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: &[&crate::gi::common::limits::MAX_RSM_SIZE],
     downscales: true,
     samples_environment: false,
-    follows_moved_nodes: true,
+    follows_moved_nodes: super::follows_every_pose,
     bench: Some(&bench::SWEEP),
 };
 

@@ -104,7 +104,7 @@ pub const ENTRY: MethodEntry = MethodEntry {
     limits: limits::LIMITS,
     downscales: true,
     samples_environment: false,
-    follows_moved_nodes: true,
+    follows_moved_nodes: super::follows_every_pose,
     bench: Some(&bench::SWEEP),
 };
 

@@ -346,7 +346,8 @@ impl SurfelBuffers {
         })
     }
 
-    /// Marks the surfels on nodes `poses` moves from where they were sampled (see `moved`).
+    /// Marks the surfels on nodes `poses` moves from where they were sampled (see `moved`):
+    /// `posed_worlds` keeps an unmoved node's rest world bit for bit, so equality tells.
     pub fn set_poses(&mut self, queue: &wgpu::Queue, scene: &Scene, poses: &Poses) {
         if *poses == self.poses {
             return;

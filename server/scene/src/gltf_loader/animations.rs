@@ -4,6 +4,9 @@
 use super::*;
 use crate::nodes::{Animation, Channel, Interpolation, Property};
 
+/// Most key values (times and components, 16 M: 64 MB decoded) a file's animations may hold.
+const MAX_ANIMATION_VALUES: u64 = 1 << 24;
+
 /// Whether a node's `extras` mark it movable (`{"movable": true}`): a static file's part a
 /// client may drag.
 pub(super) fn marked_movable(extras: &json::Extras) -> bool {
@@ -19,11 +22,24 @@ impl Loader<'_> {
     /// values finite and as many as the times ask for.
     pub(super) fn animations(&self) -> Result<Vec<Animation>, LoadError> {
         let mut out = Vec::with_capacity(self.root.animations.len());
+        // Channels may share one large accessor: the decoded keys are counted before reading.
+        let mut values = 0u64;
         for (index, animation) in self.root.animations.iter().enumerate() {
             let part = named("animation", index, animation.name.as_deref());
             let mut channels = Vec::with_capacity(animation.channels.len());
             for (c, channel) in animation.channels.iter().enumerate() {
-                channels.push(self.channel(animation, channel, &format!("{part} channel {c}"))?);
+                let part = format!("{part} channel {c}");
+                values = values.saturating_add(self.channel_values(animation, channel));
+                if values > MAX_ANIMATION_VALUES {
+                    return Err(invalid(
+                        part,
+                        format!(
+                            "the file's animations would hold more than {MAX_ANIMATION_VALUES} \
+                             key values"
+                        ),
+                    ));
+                }
+                channels.push(self.channel(animation, channel, &part)?);
             }
             out.push(Animation {
                 name: animation
@@ -35,6 +51,25 @@ impl Loader<'_> {
             });
         }
         Ok(out)
+    }
+
+    /// An upper bound on the components a channel's input and output accessors decode to
+    /// (their element counts, four components each at most).
+    fn channel_values(
+        &self,
+        animation: &json::Animation,
+        channel: &json::animation::Channel,
+    ) -> u64 {
+        let count = |accessor: usize| {
+            self.root
+                .accessors
+                .get(accessor)
+                .map_or(0, |a| a.count.0 * 4)
+        };
+        animation
+            .samplers
+            .get(channel.sampler.value())
+            .map_or(0, |s| count(s.input.value()) + count(s.output.value()))
     }
 
     fn channel(

@@ -240,18 +240,6 @@ pub async fn render(
     };
     let mut resolved = resolve(&req.render, &entry, &state.limits, state.max_texture)
         .map_err(|e| e.within("render"))?;
-    if let Some(c) = &compare {
-        if !resolved.settings.poses.is_empty() && !crate::gi::entry(c.method).1.follows_moved_nodes
-        {
-            return Err(ApiError::field(
-                "compare_to",
-                format!(
-                    "{} does not follow moved nodes yet (render.nodes)",
-                    c.method
-                ),
-            ));
-        }
-    }
     let shape = frame_shape(&resolved.settings, &entry);
     let set_units = |g: &lightcast_protocol::GiParams| entry.estimated_set_units(g);
     let comparing = compare.map(|c| Compared {

@@ -66,12 +66,13 @@ pub async fn apply_patch(
         state.defaults.fill_render(render)?;
     }
     let mut params: SessionParams = from_value(merged)?;
-    // A patch that stops the animation without giving its time keeps the time it reached.
+    // A patch that changes the playing animation (stops it, changes its speed) without
+    // giving its time carries on from the time it reached.
     if let (Some(old), Some(new)) = (
         &session.params().render.animation,
         &mut params.render.animation,
     ) {
-        if old.playing && !new.playing && old.name == new.name && old.time == new.time {
+        if old.playing && old != new && old.name == new.name && old.time == new.time {
             if let Some(t) = session.animation_time(std::time::Instant::now()) {
                 new.time = t;
             }

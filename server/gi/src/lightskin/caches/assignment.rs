@@ -21,7 +21,8 @@ pub(super) fn assign(
         let s = &samples[i];
         let mut best = Nearest::new(1);
         tree.nearest(s.position, d2, &mut best, &|c| {
-            joined[c as usize].normal.dot(s.normal) > setup.cos_theta
+            let c = &joined[c as usize];
+            c.model == s.model && c.normal.dot(s.normal) > setup.cos_theta
         });
         let nearest = best.ids().next();
         nearest.unwrap_or(owner[i])
@@ -59,7 +60,7 @@ pub(super) fn assign(
                 diffuse: (s.diffuse / s.area).as_vec3().to_array(),
                 exponent: (s.exponent / s.area) as f32,
                 glossy: (s.glossy / s.area).as_vec3().to_array(),
-                pad0: 0.0,
+                model: c.model,
             }
         })
         .collect()
@@ -75,9 +76,12 @@ pub(super) fn vertex_neighbours(
 ) -> Vec<[u32; NEIGHBOURS]> {
     let positions: Vec<Vec3> = caches.iter().map(|c| Vec3::from(c.position)).collect();
     let normals: Vec<Vec3> = caches.iter().map(|c| Vec3::from(c.normal)).collect();
+    let models = vertex_models(scene);
     let tree = KdTree::new(&positions);
     par_map_chunked(scene.vertices.len(), "neighbours", progress, |v| {
         let vertex = &scene.vertices[v];
+        // Only its own model's caches: they move together.
+        let model = models[v];
         let p = Vec3::from(vertex.position);
         // A broken (non-finite) vertex normal faces every cache (dot 0) rather than none.
         let n = Some(Vec3::from(vertex.normal))
@@ -86,7 +90,7 @@ pub(super) fn vertex_neighbours(
         let mut out = [u32::MAX; NEIGHBOURS];
         let mut facing = Nearest::new(NEIGHBOURS);
         tree.nearest(p, f32::INFINITY, &mut facing, &|c| {
-            normals[c as usize].dot(n) >= 0.0
+            caches[c as usize].model == model && normals[c as usize].dot(n) >= 0.0
         });
         let mut len = 0;
         for id in facing.ids() {
@@ -96,7 +100,7 @@ pub(super) fn vertex_neighbours(
         if len < NEIGHBOURS {
             let mut others = Nearest::new(NEIGHBOURS - len);
             tree.nearest(p, f32::INFINITY, &mut others, &|c| {
-                normals[c as usize].dot(n) < 0.0
+                caches[c as usize].model == model && normals[c as usize].dot(n) < 0.0
             });
             for id in others.ids() {
                 out[len] = id;

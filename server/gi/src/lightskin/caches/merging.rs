@@ -7,6 +7,7 @@ use super::*;
 pub(super) struct Joined {
     pub position: Vec3,
     pub normal: Vec3,
+    pub model: u32,
 }
 
 /// Step 5: caches from different voxels closer than d_eps/4 whose normals differ by less than
@@ -38,6 +39,8 @@ pub(super) fn merge(
             .then(a.cmp(&b))
     });
     let member_ids = |p: &Proto| &members[p.first as usize..(p.first + p.count) as usize];
+    // A proto's samples share its voxel, and so its model.
+    let model = |p: &Proto| samples[members[p.first as usize] as usize].model;
 
     let mut taken = vec![false; n];
     // (anchor, group) in anchor order of processing; sorted by anchor afterwards.
@@ -61,6 +64,7 @@ pub(super) fn merge(
             let other = &protos[j as usize];
             if !taken[j as usize]
                 && other.voxel != anchor.voxel
+                && model(other) == model(anchor)
                 && other.normal.dot(anchor.normal) > setup.cos_half_theta
             {
                 candidates.push(j);
@@ -108,6 +112,7 @@ pub(super) fn merge(
                 return Joined {
                     position: first.position,
                     normal: first.normal,
+                    model: model(first),
                 };
             }
             let (mut position_sum, mut normal_sum, mut area) = (DVec3::ZERO, DVec3::ZERO, 0.0);
@@ -129,6 +134,7 @@ pub(super) fn merge(
             Joined {
                 position,
                 normal: normal_sum.as_vec3().try_normalize().unwrap_or(first.normal),
+                model: model(first),
             }
         })
         .collect();

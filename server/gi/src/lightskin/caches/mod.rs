@@ -16,6 +16,11 @@
 //! Voronoi area on the surface and its area-weighted material, and every scene vertex gets its
 //! [`NEIGHBOURS`] nearest caches for interpolation.
 //!
+//! The paper distributes caches per model, in model space, so that a moving model's caches
+//! move with it: every step here keeps to one model (`LightCache::model`: a movable node's
+//! geometry, or the static rest of the scene). Voxels, joins, the samples a cache represents
+//! and a vertex's neighbours never mix two models.
+//!
 //! The output is bit-identical for the same input whatever the thread count: parallel work is
 //! split into fixed chunks whose results are concatenated in order, floating-point sums run
 //! sequentially in a fixed order, and every sort has a total order with an index tie-break.
@@ -200,7 +205,35 @@ pub struct LightCache {
     pub exponent: f32,
     /// Area-weighted glossy colour ρ_g.
     pub glossy: [f32; 3],
-    pub pad0: f32,
+    /// The model it belongs to and moves with (seed 004 §3: caches are distributed per model,
+    /// in model space): the position in `Scene::nodes` of the innermost node of its surface
+    /// when that node can move, [`STATIC`] for the static rest of the scene.
+    pub model: u32,
+}
+
+/// [`LightCache::model`] of the scene's static geometry.
+pub const STATIC: u32 = u32::MAX;
+
+/// Per triangle, its model (see [`LightCache::model`]).
+pub fn triangle_models(scene: &Scene) -> Vec<u32> {
+    let vertices = vertex_models(scene);
+    scene
+        .indices
+        .chunks_exact(3)
+        .map(|t| vertices[t[0] as usize])
+        .collect()
+}
+
+/// Per scene vertex, its model (see [`LightCache::model`]).
+pub fn vertex_models(scene: &Scene) -> Vec<u32> {
+    let moves = crate::scene::nodes::can_move(&scene.nodes);
+    crate::scene::nodes::owners(&scene.nodes, scene.vertices.len() as u32)
+        .into_iter()
+        .map(|n| match moves.get(n as usize) {
+            Some(true) => n,
+            _ => STATIC,
+        })
+        .collect()
 }
 
 /// Wall-clock time of each step of [`precompute`].
@@ -272,6 +305,8 @@ struct Sample {
     normal: Vec3,
     area: f32,
     material: u32,
+    /// Its triangle's model: caches never gather samples of two models.
+    model: u32,
 }
 
 /// A cache as steps 3–5 build it; `members` of the clustering output are its samples.

@@ -97,6 +97,7 @@ pub(super) fn sample_surfaces(
         return Err(CacheError::TooManySamples { d_eps });
     };
 
+    let models = triangle_models(scene);
     let per_block = par_map_chunked(blocks, "sampling", progress, |b| {
         let mut stack = Vec::new();
         let mut out = Vec::new();
@@ -115,6 +116,7 @@ pub(super) fn sample_surfaces(
                     // Keep every weight positive so weighted means never divide by zero.
                     area: (a as f32).max(f32::MIN_POSITIVE),
                     material,
+                    model: models[t],
                 })
             });
         }
@@ -129,9 +131,10 @@ pub(super) fn sample_surfaces(
     Ok((samples, degenerate))
 }
 
-/// Step 1: bins samples into voxels of edge `h`. Returns the sample indices ordered by voxel and
-/// each voxel's range in that order. Sorting by (voxel, sample) instead of filling a hash map
-/// gives a deterministic voxel order for free.
+/// Step 1: bins samples into voxels of edge `h`, one set of voxels per model (so the voxels,
+/// and the caches made of them, come model by model). Returns the sample indices ordered by
+/// voxel and each voxel's range in that order. Sorting by (model, voxel, sample) instead of
+/// filling a hash map gives a deterministic voxel order for free.
 pub(super) fn voxelise(
     samples: &[Sample],
     h: f32,
@@ -144,14 +147,14 @@ pub(super) fn voxelise(
         total: n,
     });
     let h = f64::from(h);
-    let mut keyed: Vec<([i64; 3], u32)> = samples
+    let mut keyed: Vec<((u32, [i64; 3]), u32)> = samples
         .par_iter()
         .enumerate()
         .map(|(i, s)| {
             let p = s.position.as_dvec3() / h;
             // Saturating float-to-int casts keep absurd coordinates from wrapping.
             let key = [p.x.floor() as i64, p.y.floor() as i64, p.z.floor() as i64];
-            (key, i as u32)
+            ((s.model, key), i as u32)
         })
         .collect();
     keyed.par_sort_unstable();

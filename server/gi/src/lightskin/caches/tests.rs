@@ -87,3 +87,40 @@ fn rounding_keeps_three_significant_digits() {
     assert!((round_significant(45.678, 3) - 45.7).abs() < 1e-9);
     assert!((round_up_significant(45.612, 3) - 45.7).abs() < 1e-9);
 }
+
+/// Seed 004 §3 distributes caches per model: in the Cornell box each movable box gets its own
+/// caches, on its own surface, and its vertices interpolate only those (so they move with
+/// it); the room's vertices never see a box's caches.
+#[test]
+fn caches_are_distributed_per_model() {
+    let scene = crate::scene::procedural::cornell_box();
+    let params = CacheParams::for_scene(&scene);
+    let set = precompute(&scene, &params, &mut |_| {}).expect("caches");
+    let bounds = scene.node_bounds();
+    let models = vertex_models(&scene);
+    for (n, node) in scene.nodes.iter().enumerate() {
+        let mine: Vec<&LightCache> = set.caches.iter().filter(|c| c.model == n as u32).collect();
+        if !node.movable {
+            assert!(mine.is_empty(), "the room is static");
+            continue;
+        }
+        assert!(mine.len() > 10, "{}: {} caches", node.name, mine.len());
+        let b = bounds[n].expect("geometry");
+        for c in mine {
+            let p = Vec3::from(c.position);
+            assert!(
+                p.cmpge(b.min - 1e-4).all() && p.cmple(b.max + 1e-4).all(),
+                "{}: a cache at {p} off the box {b:?}",
+                node.name
+            );
+        }
+    }
+    let mut box_vertices = 0;
+    for (v, entry) in set.vertex_caches.iter().enumerate() {
+        for &c in entry.iter().filter(|&&c| c != u32::MAX) {
+            assert_eq!(set.caches[c as usize].model, models[v], "vertex {v}");
+        }
+        box_vertices += usize::from(models[v] != STATIC);
+    }
+    assert!(box_vertices > 0);
+}

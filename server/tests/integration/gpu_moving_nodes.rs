@@ -230,7 +230,7 @@ fn cache_visibility_maps_refuse_poses() {
 /// as seed 001 §5 has it, a moving object only receives (its own light on the room, about
 /// 14 points of the reference's here, is missing) and the links keep the box's occlusion
 /// where it was (measured on lavapipe: 12.2 % at rest, 26.2 % moved; clustered 25.5 → 17.5 %,
-/// rsm_gather 18.5 → 18.4 %).
+/// rsm_gather 18.5 → 18.4 %, LightSkin 10.3 → 11.4 %, BRSM 10.3 → 11.5 %).
 #[test]
 fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
     let scene = procedural::cornell_box();

@@ -782,6 +782,31 @@ async fn clients_move_nodes_per_render_and_per_session() {
         c.indirect_mae.is_finite() && c.reference_samples == 16,
         "{c:?}"
     );
+    // Moving a node reruns no precomputation: each method's per-scene data (light caches,
+    // BVH, surfels) is built once, whatever the poses.
+    let mut built: Option<Value> = None;
+    for x in [-0.15, 0.0, 0.1] {
+        for gi in ["lightskin", "reference", "surfels"] {
+            let resp = server
+                .http
+                .post(server.url("/v1/render"))
+                .json(
+                    &json!({"render": {"width": 32, "height": 32, "shadow_map_size": 256,
+                              "gi": {"method": gi, "spp": 1},
+                              "nodes": [{"node": 1, "translation": [x, 0.0, 0.4]}]},
+                              "format": "png"}),
+                )
+                .send()
+                .await
+                .expect("render");
+            assert_eq!(resp.status(), 200, "{gi} at {x}");
+        }
+        let precomputed = server.get_json("/v1/scenes/default").await["precomputed"].clone();
+        match &built {
+            None => built = Some(precomputed),
+            Some(first) => assert_eq!(&precomputed, first, "built once, whatever the poses"),
+        }
+    }
     // More entries than movable nodes allow, inside the body limit.
     let many: Vec<Value> = (0..2000).map(|_| json!({"node": 1})).collect();
     let resp = server

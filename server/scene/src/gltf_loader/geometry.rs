@@ -84,6 +84,21 @@ pub(super) fn generated_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> V
         .collect()
 }
 
+/// A node's authored translation, rotation (normalised; identity if degenerate, as
+/// [`local_transform`] refuses it first) and scale.
+pub(super) fn local_trs(node: &json::Node) -> Transform {
+    Transform {
+        translation: node.translation.map_or(Vec3::ZERO, Vec3::from),
+        rotation: node
+            .rotation
+            .as_ref()
+            .map(|q| Quat::from_array(q.0))
+            .filter(|q| q.is_finite() && q.length_squared() > 0.0)
+            .map_or(Quat::IDENTITY, Quat::normalize),
+        scale: node.scale.map_or(Vec3::ONE, Vec3::from),
+    }
+}
+
 pub(super) fn local_transform(node: &json::Node) -> Option<Mat4> {
     if let Some(matrix) = node.matrix {
         return Some(Mat4::from_cols_array(&matrix));
@@ -170,17 +185,24 @@ impl Loader<'_> {
                 .filter(|local| (parent * *local).is_finite())
                 .ok_or_else(|| invalid(&part, "transform is not finite"))?;
             let world = parent * local;
-            let movable = moving.get(index).copied().unwrap_or(false)
-                || marked_movable(&node.extras)
-                || up.is_some_and(|p| nodes[p].movable);
-            let local = Transform::from_matrix(&local);
-            if movable && local.is_none() {
+            // The authored translation, rotation and scale where there is no matrix (a
+            // decomposition would move a negative scale's sign to another axis).
+            let local = match node.matrix {
+                Some(_) => Transform::from_matrix(&local),
+                None => Some(local_trs(node)),
+            };
+            // Moved directly: an animation's translation, rotation or scale, or its extras.
+            let moved = moving.get(index).copied().unwrap_or(false) || marked_movable(&node.extras);
+            if moved && local.is_none() {
                 return Err(invalid(
                     &part,
-                    "moves (an animation targets it, it is marked movable or under such a \
-                     node), but its matrix is no translation, rotation and scale",
+                    "moves (an animation targets it or it is marked movable), but its matrix \
+                     is no translation, rotation and scale",
                 ));
             }
+            // Under a movable node it moves with it, and clients may pose it too where it has
+            // a translation, rotation and scale to set.
+            let movable = moved || (up.is_some_and(|p| nodes[p].movable) && local.is_some());
             let start = self.vertices.len() as u32;
             if let Some(mesh) = node.mesh {
                 self.add_mesh(mesh.value(), &world)?;

@@ -237,7 +237,9 @@ pub fn load_gltf_slice(
     };
     let mut animations = loader.animations()?;
     let mut moving = vec![false; root.nodes.len()];
-    for channel in animations.iter().flat_map(|a| &a.channels) {
+    // Morph weights are not played: they move no node.
+    let posing = |c: &&crate::nodes::Channel| c.property != crate::nodes::Property::Weights;
+    for channel in animations.iter().flat_map(|a| &a.channels).filter(posing) {
         if let Some(m) = moving.get_mut(channel.node as usize) {
             *m = true;
         }

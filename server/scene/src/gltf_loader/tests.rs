@@ -1468,3 +1468,26 @@ fn refuses_broken_animations_naming_the_channel() {
         "{error}"
     );
 }
+
+/// Under an animated node any matrix moves with it: a sheared child loads (it is not posed
+/// on its own), and a node authored with a negative scale keeps it on its own axis.
+#[test]
+fn children_of_moving_nodes_need_no_decomposable_matrix() {
+    let (mut doc, bin) = animated_document(json!({}));
+    doc["nodes"][2] = json!({
+        "name": "wheel",
+        "mesh": 0,
+        "matrix": [1, 0, 0, 0, 0.5, 1, 0, 0, 0, 0, 1, 0, 0, 0.5, 0, 1],
+    });
+    doc["nodes"][3]["scale"] = json!([1.0, -1.0, 1.0]);
+    let scene = load_document(&doc, &bin.bytes).expect("loads");
+    let wheel = scene.node(2).expect("listed");
+    assert!(!wheel.movable && wheel.local.is_none(), "{wheel:?}");
+    let moves = crate::nodes::can_move(&scene.nodes);
+    assert!(moves[2], "it moves with the cart");
+    let crate_node = scene.node(3).expect("listed");
+    assert_eq!(
+        crate_node.local.expect("TRS").scale,
+        Vec3::new(1.0, -1.0, 1.0)
+    );
+}

@@ -85,6 +85,13 @@ pub struct RenderFlags {
     /// each method's views, and the server refuses one its method does not draw).
     #[arg(long)]
     pub view: Option<View>,
+    /// Move a movable node (`render.nodes`; `lightcast scenes show` lists them) to a
+    /// translation relative to its parent, as ID=X,Y,Z; repeatable.
+    #[arg(long = "node", value_name = "ID=X,Y,Z", value_parser = parse_node, allow_hyphen_values = true)]
+    pub nodes: Vec<(u32, [f32; 3])>,
+    /// One of the scene's animations at a time, as NAME@SECONDS (`render.animation`).
+    #[arg(long, value_name = "NAME@SECONDS", value_parser = parse_animation)]
+    pub animation: Option<(String, f32)>,
 }
 
 /// Inserts `value` under `key` when it is given.
@@ -163,6 +170,20 @@ impl RenderFlags {
         if !gi.is_empty() {
             render.insert("gi".into(), gi.into());
         }
+        if !self.nodes.is_empty() {
+            let nodes: Vec<serde_json::Value> = self
+                .nodes
+                .iter()
+                .map(|(node, t)| serde_json::json!({"node": node, "translation": t}))
+                .collect();
+            render.insert("nodes".into(), nodes.into());
+        }
+        if let Some((name, time)) = &self.animation {
+            render.insert(
+                "animation".into(),
+                serde_json::json!({"name": name, "time": time}),
+            );
+        }
         render.into()
     }
 
@@ -177,6 +198,33 @@ impl RenderFlags {
             || self.light_color.is_some()
             || self.light_intensity.is_some()
     }
+}
+
+/// `ID=X,Y,Z` of `--node`.
+fn parse_node(s: &str) -> Result<(u32, [f32; 3]), String> {
+    let (id, at) = s
+        .split_once('=')
+        .ok_or_else(|| format!("'{s}' is not ID=X,Y,Z"))?;
+    let id = id
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{id}' is not a node id (a whole number)"))?;
+    Ok((id, parse_vec3(at)?))
+}
+
+/// `NAME@SECONDS` of `--animation` (the name may hold `@`: the last one splits).
+fn parse_animation(s: &str) -> Result<(String, f32), String> {
+    let (name, time) = s
+        .rsplit_once('@')
+        .ok_or_else(|| format!("'{s}' is not NAME@SECONDS"))?;
+    let time: f32 = time
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{time}' is not a number of seconds"))?;
+    if name.is_empty() {
+        return Err(format!("'{s}': name one of the scene's animations"));
+    }
+    Ok((name.to_string(), time))
 }
 
 /// `NAME=VALUE` of `--gi-param`: VALUE is read as JSON, else taken as a string. The server
@@ -226,6 +274,36 @@ mod tests {
             .get("lights")
             .is_none());
         assert!(Wrapper::try_parse_from(["t", "--no-lights", "--light-intensity", "2"]).is_err());
+    }
+
+    #[test]
+    fn nodes_and_animation_flags_pose_the_render() {
+        use clap::Parser;
+        let w = Wrapper::parse_from([
+            "t",
+            "--node",
+            "1=-0.25,0,0.5",
+            "--node",
+            "2=0.375,0,-0.125",
+            "--animation",
+            "walk@cycle@1.5",
+        ]);
+        let render = w.flags.params(None, None);
+        assert_eq!(
+            render["nodes"],
+            serde_json::json!([
+                {"node": 1, "translation": [-0.25, 0.0, 0.5]},
+                {"node": 2, "translation": [0.375, 0.0, -0.125]},
+            ])
+        );
+        assert_eq!(
+            render["animation"],
+            serde_json::json!({"name": "walk@cycle", "time": 1.5})
+        );
+        assert!(parse_node("x=1,2,3").is_err());
+        assert!(parse_node("1=1,2").is_err());
+        assert!(parse_animation("walk").is_err());
+        assert!(parse_animation("@2").is_err());
     }
 
     #[test]

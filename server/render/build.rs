@@ -5,7 +5,9 @@
 use std::path::PathBuf;
 
 fn main() {
-    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    // Read when the script runs, not baked in when it is compiled: a build script binary is
+    // reused by checkouts that share a target directory.
+    let manifest = PathBuf::from(std::env::var_os("CARGO_MANIFEST_DIR").expect("set by Cargo"));
     let methods = manifest.join("../gi/src");
     println!("cargo:rerun-if-changed={}", methods.display());
     let mut modules = Vec::new();

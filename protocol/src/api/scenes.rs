@@ -123,9 +123,10 @@ pub struct NodeInfo {
     /// The parent's id; absent for a root.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub parent: Option<u32>,
-    /// Whether it may move, with everything under it: a procedural scene's movable parts; in
-    /// a glTF file the nodes an animation targets or whose `extras` hold `"movable": true`,
-    /// and everything under them.
+    /// Whether clients may pose it (everything under it moves with it): a procedural scene's
+    /// movable parts; in a glTF file the nodes an animation's translation, rotation or scale
+    /// targets or whose `extras` hold `"movable": true`, and the nodes under them that have a
+    /// translation, rotation and scale (not a general matrix).
     pub movable: bool,
     /// World bounds of it and everything under it, at rest; absent without geometry.
     #[serde(default, skip_serializing_if = "Option::is_none")]

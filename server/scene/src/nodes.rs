@@ -55,9 +55,10 @@ pub struct Node {
     pub name: String,
     /// The parent's id (`None` for a root).
     pub parent: Option<u32>,
-    /// Whether clients may move it (with its subtree): a procedural scene's movable parts,
-    /// and in a glTF file every node an animation targets or whose `extras` say
-    /// `"movable": true`, with their descendants.
+    /// Whether clients may pose it (its subtree moves with it): a procedural scene's movable
+    /// parts, and in a glTF file every node an animation's translation, rotation or scale
+    /// targets or whose `extras` say `"movable": true`, and their descendants that have a
+    /// translation, rotation and scale (the others move with them: see [`can_move`]).
     pub movable: bool,
     /// Relative to the parent, as authored (its rest pose); `None` for a glTF `matrix` that
     /// is no translation, rotation and scale (such a node cannot be movable).

@@ -65,6 +65,27 @@ impl Playing {
     }
 }
 
+/// `nodes` (a `render.nodes` list, or a WebSocket `nodes` message's) checked against the
+/// scene and resolved; errors name `nodes[i].field`.
+pub fn poses(
+    nodes: &[lightcast_protocol::NodePose],
+    entry: &SceneEntry,
+) -> Result<Poses, ApiError> {
+    crate::scene::nodes::resolve_poses(
+        &entry.scene.nodes,
+        &entry.node_bounds,
+        &entry.scene.bounds,
+        nodes,
+    )
+    .map_err(|e| {
+        let field = match e.index {
+            None => "nodes".to_owned(),
+            Some(i) => format!("nodes[{i}].{}", e.field),
+        };
+        ApiError::field(field, e.reason)
+    })
+}
+
 /// Most seconds of animation per second a session plays.
 const MAX_ANIMATION_SPEED: f32 = 100.0;
 
@@ -193,20 +214,7 @@ pub fn resolve(
         EMITTERS.name,
         emitters_for(asked, entry.emitter_stand_in.as_ref(), &lights),
     );
-    let poses = crate::scene::nodes::resolve_poses(
-        &entry.scene.nodes,
-        &entry.node_bounds,
-        &entry.scene.bounds,
-        &params.nodes,
-    )
-    .map_err(|e| {
-        let field = match (e.index, e.field) {
-            (None, _) => "nodes".to_owned(),
-            (Some(i), field) => format!("nodes[{i}].{field}"),
-        };
-        ApiError::field(field, e.reason)
-    })?;
-    let explicit = poses;
+    let explicit = poses(&params.nodes, entry)?;
     let (poses, playing) = match &params.animation {
         None => (explicit.clone(), None),
         Some(a) => {

@@ -432,19 +432,8 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
         ClientMessage::Nodes { nodes, input_id } => {
             let entry = session.scene();
             // The message's own entries first, so an error names them (`nodes[2].scale`).
-            match crate::scene::nodes::resolve_poses(
-                &entry.scene.nodes,
-                &entry.node_bounds,
-                &entry.scene.bounds,
-                &nodes,
-            ) {
-                Err(e) => Err(ApiError::field(
-                    match e.index {
-                        None => "nodes".to_owned(),
-                        Some(i) => format!("nodes[{i}].{}", e.field),
-                    },
-                    e.reason,
-                )),
+            match crate::service::params::poses(&nodes, &entry) {
+                Err(e) => Err(e),
                 Ok(_) => {
                     let mut merged = session.params().render.nodes;
                     merged.retain(|kept| nodes.iter().all(|n| n.node != kept.node));

@@ -36,7 +36,9 @@ declare -A sweeps=(
   [surfels]="--gi-param surfel_count=$surfels --gi-param surfel_links=64 --sweep-surfels $surfels --sweep-links 64 --sweep-bands 3"
   [rsm_gather]="--gi-param rsm_size=$rsm --gather-samples 400 --gather-radii 100"
 )
-read -r -a scenes <<< "${LIGHT_COUNT_SCENES:-procedural:cornell procedural:street?blocks=4}"
+# cars=0: the street as it was before its parked car (issue 35), which the recorded results were
+# measured on.
+read -r -a scenes <<< "${LIGHT_COUNT_SCENES:-procedural:cornell procedural:street?blocks=4&cars=0}"
 read -r -a methods <<< "${LIGHT_COUNT_METHODS:-brsm clustered surfels rsm_gather}"
 for scene in "${scenes[@]}"; do
   name=$(case "$scene" in *cornell*) echo cornell ;; *) echo street ;; esac)

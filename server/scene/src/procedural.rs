@@ -5,9 +5,10 @@
 //!
 //! * `cornell` (alias `cornell-box`): a Cornell-box-like room, the default scene.
 //! * `street`: a city grid whose triangle count scales from thousands to tens of millions, for
-//!   stress tests. Parameters `blocks` (grid side), `seed`, `detail` (face subdivision) and
+//!   stress tests. Parameters `blocks` (grid side), `seed`, `detail` (face subdivision),
 //!   `materials` (`authored`, or `diffuse`: every surface Lambertian of its base colour, the
-//!   light transport the RSM-based methods model, for measuring what the rest costs them).
+//!   light transport the RSM-based methods model, for measuring what the rest costs them) and
+//!   `cars` (0 to 4 parked cars in view of the default camera, each a movable node; default 1).
 //!
 //! All geometry is Y up, in metres, with counter-clockwise winding seen from the side the
 //! normal points to.
@@ -19,10 +20,12 @@ use lightcast_protocol::{Camera, Light, LightKind};
 
 /// Scene names accepted by [`build`], as listed in error messages.
 const KNOWN_SCENES: &str = "cornell (alias cornell-box), street";
-const STREET_PARAMETERS: &str = "blocks, seed, detail, materials";
+const STREET_PARAMETERS: &str = "blocks, seed, detail, materials, cars";
 
 const BLOCKS_RANGE: (u64, u64) = (1, 2000);
 const DETAIL_RANGE: (u64, u64) = (1, 64);
+/// Parked cars: a row along one curb of the block beside the default camera, all in its view.
+const CARS_RANGE: (u64, u64) = (0, 4);
 /// Beyond this the vertex and index buffers alone pass several GiB.
 pub const MAX_TRIANGLES: u64 = 50_000_000;
 
@@ -173,6 +176,9 @@ pub struct StreetParams {
     /// Every building face, sidewalk and street cell is split into `detail × detail` quads.
     pub detail: u32,
     pub materials: StreetMaterials,
+    /// Cars parked along the curb in front of the default camera (at most 4), each a movable
+    /// node named `car` (the first), `car 2`, ... under the static root `street`.
+    pub cars: u32,
 }
 
 /// The street's surfaces: as designed (glass and steel facades, glossy signs) or all
@@ -210,6 +216,7 @@ impl Default for StreetParams {
             seed: 1,
             detail: 1,
             materials: StreetMaterials::Authored,
+            cars: 1,
         }
     }
 }
@@ -231,6 +238,11 @@ impl StreetParams {
                 }
                 "seed" => params.seed = parse_u64("seed", value)?,
                 "materials" => params.materials = StreetMaterials::parse(value)?,
+                "cars" => {
+                    let v = parse_u64("cars", value)?;
+                    check_range("cars", v, CARS_RANGE)?;
+                    params.cars = v as u32;
+                }
                 _ => {
                     return Err(ProceduralError::UnknownParameter {
                         scene: "street",
@@ -257,9 +269,18 @@ impl StreetParams {
         let per_block_vertices = slab_vertices + BUILDINGS_PER_BLOCK * building_vertices;
         let per_block_triangles = slab_triangles + BUILDINGS_PER_BLOCK * building_triangles;
         let blocks = u64::from(self.blocks) * u64::from(self.blocks);
+        // A car: six bottomless boxes of one quad a face (body, cabin, four wheels) and the
+        // body's underside.
+        let car_vertices = CAR_BOXES * 5 * 4 + 4;
+        let car_triangles = CAR_BOXES * 5 * 2 + 2;
+        let cars = u64::from(self.cars);
         (
-            blocks.saturating_mul(per_block_vertices),
-            blocks.saturating_mul(per_block_triangles),
+            blocks
+                .saturating_mul(per_block_vertices)
+                .saturating_add(cars * car_vertices),
+            blocks
+                .saturating_mul(per_block_triangles)
+                .saturating_add(cars * car_triangles),
         )
     }
 }
@@ -573,8 +594,22 @@ const PAVEMENT: u32 = 1;
 /// Facade materials are `FACADES.start..FACADES.end`, sign materials follow.
 const FACADES: std::ops::Range<u32> = 2..10;
 const SIGNS: std::ops::Range<u32> = 10..16;
+/// The cars' materials follow the signs', only in streets with cars (so that a street without
+/// them is the street as it was before them, material for material).
+const CAR_PAINT: u32 = 16;
+const CAR_GLASS: u32 = 17;
+const CAR_TYRE: u32 = 18;
 
-fn street_materials(kind: StreetMaterials) -> Vec<Material> {
+/// A car's size: a compact saloon, 4.2 m long (along z), 1.8 m wide, 1.4 m tall.
+const CAR_LENGTH: f32 = 4.2;
+const CAR_WIDTH: f32 = 1.8;
+const CAR_HEIGHT: f32 = 1.4;
+/// Body, cabin and four wheels.
+const CAR_BOXES: u64 = 6;
+/// Centre to centre, cars stand this far apart along the curb (2.8 m between bumpers).
+const CAR_SPACING: f32 = 7.0;
+
+fn street_materials(kind: StreetMaterials, cars: bool) -> Vec<Material> {
     let mut materials = vec![
         material("asphalt", [0.06, 0.06, 0.065], 0.0, 0.9),
         material("sidewalk", [0.55, 0.55, 0.52], 0.0, 0.85),
@@ -594,6 +629,15 @@ fn street_materials(kind: StreetMaterials) -> Vec<Material> {
         material("sign-gold", [0.95, 0.65, 0.25], 1.0, 0.25),
     ];
     debug_assert_eq!(materials.len() as u32, SIGNS.end);
+    if cars {
+        materials.extend([
+            // Glossy red paint: a dielectric clear coat over the pigment.
+            material("car-paint", [0.60, 0.04, 0.03], 0.0, 0.3),
+            material("car-glass", [0.08, 0.09, 0.10], 0.0, 0.1),
+            material("car-tyre", [0.03, 0.03, 0.03], 0.0, 0.9),
+        ]);
+        debug_assert_eq!(materials.len() as u32, CAR_TYRE + 1);
+    }
     if kind == StreetMaterials::Diffuse {
         for m in &mut materials {
             m.metallic = 0.0;
@@ -637,6 +681,7 @@ impl SplitMix64 {
 pub fn street(params: &StreetParams) -> Result<Scene, ProceduralError> {
     check_range("blocks", u64::from(params.blocks), BLOCKS_RANGE)?;
     check_range("detail", u64::from(params.detail), DETAIL_RANGE)?;
+    check_range("cars", u64::from(params.cars), CARS_RANGE)?;
     let (vertex_count, triangle_count) = params.counts();
     if triangle_count > MAX_TRIANGLES {
         return Err(ProceduralError::TooLarge {
@@ -732,6 +777,19 @@ pub fn street(params: &StreetParams) -> Result<Scene, ProceduralError> {
     // Down the street nearest the middle, from just beyond the grid's edge at first-floor
     // height, so the view runs between facades towards the far end of the city.
     let street_x = -0.5 * width + (params.blocks / 2) as f32 * PITCH;
+    // Parked along that street's +x curb (on the camera's right), front towards −z, 30 cm from
+    // the curb, the first 25 m ahead of the camera; all stand beside the first block, short of
+    // the cross street beyond it (54 m into the grid). With one block the street is the
+    // grid's edge: its asphalt is the 6 m on the curb's side, which is where they park.
+    let car_x = street_x + 0.5 * STREET - 0.3 - 0.5 * CAR_WIDTH;
+    let car_bases: Vec<Vec3> = (0..params.cars)
+        .map(|k| Vec3::new(car_x, 0.0, 0.5 * width - 20.0 - k as f32 * CAR_SPACING))
+        .collect();
+    let car_vertices: Vec<_> = car_bases
+        .iter()
+        .map(|&base| mesh.part(|m| car(m, base)))
+        .collect();
+
     let camera = Camera {
         position: [street_x, 12.0, 0.5 * width + 5.0],
         target: [street_x, 4.0, -0.5 * width],
@@ -750,12 +808,92 @@ pub fn street(params: &StreetParams) -> Result<Scene, ProceduralError> {
         StreetMaterials::Authored => "",
         StreetMaterials::Diffuse => ", materials=diffuse",
     };
+    let car_count = if params.cars == StreetParams::default().cars {
+        String::new()
+    } else {
+        format!(", cars={}", params.cars)
+    };
     let name = format!(
-        "street (blocks={}, seed={}, detail={}{diffuse})",
+        "street (blocks={}, seed={}, detail={}{diffuse}{car_count})",
         params.blocks, params.seed, params.detail
     );
-    let materials = street_materials(params.materials);
-    Ok(mesh.into_scene(name, materials, vec![sun], vec![camera])?)
+    let materials = street_materials(params.materials, params.cars > 0);
+    let mut scene = mesh.into_scene(name, materials, vec![sun], vec![camera])?;
+    if params.cars > 0 {
+        // The cars move (issue 35); the street holds them. Each car's own frame stands on the
+        // road under its centre.
+        let street = Node {
+            id: 0,
+            name: "street".into(),
+            parent: None,
+            movable: false,
+            local: Some(Transform::IDENTITY),
+            rest_world: Mat4::IDENTITY,
+            vertices: 0..scene.vertices.len() as u32,
+        };
+        let cars =
+            car_bases
+                .into_iter()
+                .zip(car_vertices)
+                .enumerate()
+                .map(|(k, (base, vertices))| {
+                    let local = Transform {
+                        translation: base,
+                        ..Transform::IDENTITY
+                    };
+                    Node {
+                        id: k as u32 + 1,
+                        name: if k == 0 {
+                            "car".into()
+                        } else {
+                            format!("car {}", k + 1)
+                        },
+                        parent: Some(0),
+                        movable: true,
+                        local: Some(local),
+                        rest_world: local.matrix(),
+                        vertices,
+                    }
+                });
+        scene.set_nodes(std::iter::once(street).chain(cars).collect(), Vec::new())?;
+    }
+    Ok(scene)
+}
+
+/// A parked car standing on the road at `base` (the point under its centre), front towards −z:
+/// a body on four wheels and a cabin, each a box of one quad a face.
+fn car(mesh: &mut Mesh, base: Vec3) {
+    let (half_width, half_length) = (0.5 * CAR_WIDTH, 0.5 * CAR_LENGTH);
+    // Wheels 64 cm tall and 22 cm wide, their outer faces 4 cm inside the body's sides so the
+    // two do not z-fight; their upper part is hidden in the body.
+    let (wheel_x, wheel_z) = (half_width - 0.04 - 0.11, 1.35);
+    for (sx, sz) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+        mesh.open_box(
+            base + Vec3::new(sx * wheel_x, 0.0, sz * wheel_z),
+            Vec3::X * 0.11,
+            Vec3::Z * 0.32,
+            0.64,
+            (1, 1),
+            CAR_TYRE,
+        );
+    }
+    // The body clears the road by 30 cm, so it is closed underneath: the road's bounced light
+    // and low views reach its underside.
+    let (clearance, body_height) = (0.3, 0.65);
+    let body = base + Vec3::Y * clearance;
+    let (half_x, half_z) = (Vec3::X * half_width, Vec3::Z * half_length);
+    mesh.open_box(body, half_x, half_z, body_height, (1, 1), CAR_PAINT);
+    mesh.quad(body, half_x, half_z, -Vec3::Y, (1, 1), CAR_PAINT);
+    // The cabin (tinted windows all round and a glass roof), narrower than the body and set
+    // back from its front.
+    mesh.open_box(
+        base + Vec3::new(0.0, clearance + body_height, 0.25),
+        Vec3::X * (half_width - 0.08),
+        Vec3::Z * 1.15,
+        CAR_HEIGHT - clearance - body_height,
+        (1, 1),
+        CAR_GLASS,
+    );
 }
 
 /// A coloured plane attached to the street-facing `wall` point (centre of a wall's base) of a
@@ -888,6 +1026,14 @@ mod tests {
         );
         let e = err("cornell?blocks=2");
         assert!(e.contains("cornell") && e.contains("blocks"), "{e}");
+        let e = err("street?cars=5");
+        assert!(e.contains("cars") && e.contains("0..=4"), "{e}");
+        let e = err("street?cars=one");
+        assert!(e.contains("cars") && e.contains("\"one\""), "{e}");
+        let e = err("street?cars=-1");
+        assert!(e.contains("cars") && e.contains("-1"), "{e}");
+        let e = err("street?foo=1");
+        assert!(e.contains("cars"), "{e}");
         let e = err("street?materials=matte");
         assert!(
             e.contains("materials") && e.contains("\"matte\"") && e.contains("authored, diffuse"),
@@ -1039,6 +1185,174 @@ mod tests {
         }
     }
 
+    /// Whether the open boxes `a` and `b` overlap by more than `eps` along every axis
+    /// (touching is not overlapping).
+    fn overlap(a: &Aabb, b: &Aabb, eps: f32) -> bool {
+        (a.min.cmplt(b.max - eps) & b.min.cmplt(a.max - eps)).all()
+    }
+
+    fn triangle_bounds(scene: &Scene, t: &[u32]) -> Aabb {
+        let p = |k: usize| Vec3::from(scene.vertices[t[k] as usize].position);
+        Aabb {
+            min: p(0).min(p(1)).min(p(2)),
+            max: p(0).max(p(1)).max(p(2)),
+        }
+    }
+
+    /// Where the segment `from`→`to` crosses the triangle `t` strictly between its ends
+    /// (Möller–Trumbore), as a fraction of the segment.
+    fn crosses(scene: &Scene, t: &[u32], from: Vec3, to: Vec3) -> Option<f32> {
+        let [a, b, c] = [0, 1, 2].map(|k| Vec3::from(scene.vertices[t[k] as usize].position));
+        let d = to - from;
+        let (e1, e2) = (b - a, c - a);
+        let p = d.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        let s = from - a;
+        let u = s.dot(p) / det;
+        let q = s.cross(e1);
+        let v = d.dot(q) / det;
+        let f = e2.dot(q) / det;
+        (u >= 0.0 && v >= 0.0 && u + v <= 1.0 && f > 1e-4 && f < 1.0 - 1e-4).then_some(f)
+    }
+
+    /// The street's cars, as (node, its subtree's bounds at rest).
+    fn cars(scene: &Scene) -> Vec<(Node, Aabb)> {
+        let bounds = scene.node_bounds();
+        scene
+            .nodes
+            .iter()
+            .zip(bounds)
+            .filter(|(n, _)| n.movable)
+            .map(|(n, b)| (n.clone(), b.expect("a car has geometry")))
+            .collect()
+    }
+
+    #[test]
+    fn street_cars_are_movable_parts_parked_on_the_road_in_view() {
+        let scene = build("street").expect("default street");
+        let names: Vec<_> = scene
+            .nodes
+            .iter()
+            .map(|n| (n.id, n.name.as_str(), n.parent, n.movable))
+            .collect();
+        assert_eq!(
+            names,
+            [(0, "street", None, false), (1, "car", Some(0), true)]
+        );
+        assert_eq!(scene.nodes[0].vertices, 0..scene.vertices.len() as u32);
+        let car_materials = CAR_PAINT..CAR_TYRE + 1;
+        assert_eq!(
+            &scene.materials[CAR_PAINT as usize].name, "car-paint",
+            "the car has its own paint"
+        );
+
+        for (blocks, count) in [(8, 1), (1, 4), (2, 4), (3, 2), (8, 4)] {
+            let scene = build(&format!("street?blocks={blocks}&cars={count}")).expect("street");
+            let cars = cars(&scene);
+            assert_eq!(cars.len(), count, "blocks={blocks}");
+            let in_cars = |v: u32| cars.iter().any(|(n, _)| n.vertices.contains(&v));
+            // Every car vertex is in a car node, and a car node holds nothing else.
+            for (v, vertex) in scene.vertices.iter().enumerate() {
+                assert_eq!(
+                    car_materials.contains(&vertex.material),
+                    in_cars(v as u32),
+                    "vertex {v}"
+                );
+            }
+            let camera = &scene.cameras[0];
+            let eye = Vec3::from(camera.position);
+            let forward = (Vec3::from(camera.target) - eye).normalize();
+            let right = forward.cross(Vec3::Y).normalize();
+            let up = right.cross(forward);
+            let half_fov = (camera.fov_y_degrees * 0.5).to_radians();
+            for (k, (node, b)) in cars.iter().enumerate() {
+                let what = format!("blocks={blocks}, car {k}");
+                let local = node.local.expect("TRS");
+                assert_eq!(node.rest_world, local.matrix(), "{what}");
+                let base = local.translation;
+                // On the road (the asphalt is at y = 0), standing on its wheels, of the size
+                // of a car, its frame under its centre.
+                assert_eq!(base.y, 0.0, "{what}");
+                assert!(b.min.y.abs() < 1e-6, "{what}: {b:?}");
+                let size = b.max - b.min;
+                let expected = Vec3::new(CAR_WIDTH, CAR_HEIGHT, CAR_LENGTH);
+                // (Within f32 rounding of coordinates a few hundred metres from the origin.)
+                assert!(size.abs_diff_eq(expected, 1e-4), "{what}: {size}");
+                let centre = (b.min + b.max) * 0.5;
+                assert!(
+                    (centre.x - base.x).abs() < 1e-4 && (centre.z - base.z).abs() < 1e-4,
+                    "{what}: {centre} against {base}"
+                );
+                assert!(
+                    (b.min.cmpge(scene.bounds.min) & b.max.cmple(scene.bounds.max)).all(),
+                    "{what}: {b:?} outside {:?}",
+                    scene.bounds
+                );
+                // Nothing else (buildings, sidewalks and their curbs, signs, other cars)
+                // reaches into it; the road only touches its wheels.
+                for t in scene.indices.chunks_exact(3) {
+                    if node.vertices.contains(&t[0]) {
+                        continue;
+                    }
+                    let tb = triangle_bounds(&scene, t);
+                    assert!(!overlap(&tb, b, 1e-4), "{what}: {b:?} meets {tb:?}");
+                }
+                // In the default camera's view (assuming a square image: wider ones see
+                // more), and its roof and body seen past everything else.
+                for corner in b.corners() {
+                    let d = corner - eye;
+                    let depth = d.dot(forward);
+                    assert!(depth > 0.0, "{what}");
+                    assert!(
+                        (d.dot(up).abs() / depth).atan() <= half_fov,
+                        "{what}: {corner}"
+                    );
+                    assert!(
+                        (d.dot(right).abs() / depth).atan() <= half_fov,
+                        "{what}: {corner}"
+                    );
+                }
+                let roof = Vec3::new(centre.x, b.max.y, centre.z + 0.25);
+                let shoulders = [-1.0, 1.0].map(|s| base + Vec3::new(s * 0.8, 0.95, -1.9));
+                for target in std::iter::once(roof).chain(shoulders) {
+                    let hidden = scene.indices.chunks_exact(3).find(|t| {
+                        !node.vertices.contains(&t[0]) && crosses(&scene, t, eye, target).is_some()
+                    });
+                    assert!(hidden.is_none(), "{what}: {target} hidden by {hidden:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_street_without_cars_is_the_street_before_them() {
+        for (blocks, detail) in [(1, 1), (3, 2), (4, 1)] {
+            let spec = format!("street?blocks={blocks}&detail={detail}");
+            let without = build(&format!("{spec}&cars=0")).expect("street");
+            let with = build(&spec).expect("street");
+            assert_eq!(
+                without.name,
+                format!("street (blocks={blocks}, seed=1, detail={detail}, cars=0)")
+            );
+            assert!(without.nodes.is_empty());
+            // The triangle count the street had before its cars: N² · (44·D² + 8·D + 16).
+            let (n, d) = (blocks as usize, detail as usize);
+            assert_eq!(without.triangle_count(), n * n * (44 * d * d + 8 * d + 16));
+            assert_eq!(without.materials.len(), SIGNS.end as usize);
+            // The same city, with the car after it.
+            let (v, m) = (without.vertices.len(), without.materials.len());
+            assert_eq!(without.vertices, with.vertices[..v]);
+            assert_eq!(without.materials, with.materials[..m]);
+            assert_eq!(without.bounds, with.bounds);
+            assert_eq!(without.cameras, with.cameras);
+            assert_eq!(without.lights, with.lights);
+            assert_eq!(with.nodes[1].vertices, v as u32..with.vertices.len() as u32);
+        }
+    }
+
     #[test]
     fn street_counts_are_exact_and_scale_quadratically() {
         let small = StreetParams {
@@ -1055,6 +1369,18 @@ mod tests {
             let (vertices, triangles) = params.counts();
             assert_eq!(scene.vertices.len() as u64, vertices);
             assert_eq!(scene.triangle_count() as u64, triangles);
+        }
+        for cars in 0..=4 {
+            let params = StreetParams {
+                blocks: 2,
+                detail: 3,
+                cars,
+                ..StreetParams::default()
+            };
+            let scene = street(&params).expect("street");
+            let (vertices, triangles) = params.counts();
+            assert_eq!(scene.vertices.len() as u64, vertices, "cars={cars}");
+            assert_eq!(scene.triangle_count() as u64, triangles, "cars={cars}");
         }
         let ratio = large_scene.triangle_count() as f64 / small_scene.triangle_count() as f64;
         assert!((3.0..=5.0).contains(&ratio), "{ratio}");

@@ -242,8 +242,8 @@ async fn memory_budgets_are_shared_by_every_scene_shown_and_given_back() {
         message_is(&body, |m| m.contains("--max-total-texture-bytes")),
         "{body}"
     );
-    // A street block has 68 triangles: more than the 8 left beside the default scene and
-    // the quad.
+    // A one-block street has 130 triangles (68 for the block, 62 for its parked car): more
+    // than the 8 left beside the default scene and the quad.
     let street = json!({"procedural": "street?blocks=1"});
     let (status, body) = post_json(&server, "/v1/scenes", street, "").await;
     assert_eq!(

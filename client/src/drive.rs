@@ -2,6 +2,7 @@
 //! frames and measure input→frame latency. Shared by `stream` and `loadtest`.
 
 use crate::api::{Client, ClientError, Incoming};
+use crate::node_path::NodePath;
 use crate::stats::{unix_us, FrameSplit, Latencies};
 use lightcast_protocol::frame::FLAG_KEYFRAME;
 use lightcast_protocol::{Camera, ClientMessage, FrameHeader, SessionStats};
@@ -28,45 +29,83 @@ pub struct CameraPath {
 
 impl CameraPath {
     pub fn load(path: &std::path::Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let parsed: Self =
-            serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
-        if parsed.keyframes.is_empty() {
-            return Err(format!("{}: no keyframes", path.display()));
-        }
-        let finite = parsed.keyframes.iter().all(|k| k.t.is_finite());
-        if !finite || parsed.keyframes.windows(2).any(|w| w[1].t <= w[0].t) {
-            return Err(format!("{}: keyframe times must rise", path.display()));
-        }
+        let parsed: Self = read_json(path)?;
+        let times: Vec<f64> = parsed.keyframes.iter().map(|k| k.t).collect();
+        check_times(&times).map_err(|e| format!("{}: {e}", path.display()))?;
         Ok(parsed)
     }
 
     /// The camera at `t` seconds (held at the ends).
     pub fn at(&self, t: f64) -> Camera {
-        let k = &self.keyframes;
-        let i = k.partition_point(|f| f.t <= t);
-        if i == 0 {
-            return k[0].camera.clone();
-        }
-        if i == k.len() {
-            return k[i - 1].camera.clone();
-        }
-        let (a, b) = (&k[i - 1], &k[i]);
-        let s = ((t - a.t) / (b.t - a.t)) as f32;
-        let lerp3 = |p: [f32; 3], q: [f32; 3]| {
-            [
-                p[0] + (q[0] - p[0]) * s,
-                p[1] + (q[1] - p[1]) * s,
-                p[2] + (q[2] - p[2]) * s,
-            ]
-        };
-        Camera {
-            position: lerp3(a.camera.position, b.camera.position),
-            target: lerp3(a.camera.target, b.camera.target),
-            fov_y_degrees: a.camera.fov_y_degrees
-                + (b.camera.fov_y_degrees - a.camera.fov_y_degrees) * s,
-        }
+        sample(
+            &self.keyframes,
+            t,
+            |k| k.t,
+            |k| k.camera.clone(),
+            |a, b, s| Camera {
+                position: lerp3(a.camera.position, b.camera.position, s),
+                target: lerp3(a.camera.target, b.camera.target, s),
+                fov_y_degrees: a.camera.fov_y_degrees
+                    + (b.camera.fov_y_degrees - a.camera.fov_y_degrees) * s,
+            },
+        )
     }
+}
+
+/// A path file (`--camera-path`, `--node-path`) as `T`; errors start with the file's name.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &std::path::Path) -> Result<T, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// A path's keyframe times: at least one, each a finite number after the one before.
+pub fn check_times(times: &[f64]) -> Result<(), String> {
+    if times.is_empty() {
+        return Err("no keyframes".into());
+    }
+    if let Some(i) = times.iter().position(|t| !t.is_finite()) {
+        return Err(format!("keyframes[{i}].t is not a finite number"));
+    }
+    match times.windows(2).position(|w| w[1] <= w[0]) {
+        Some(i) => Err(format!(
+            "keyframe times must rise: keyframes[{}].t = {} is not after keyframes[{i}].t = {}",
+            i + 1,
+            times[i + 1],
+            times[i]
+        )),
+        None => Ok(()),
+    }
+}
+
+/// A keyframed value at `t` seconds: `mix(a, b, s)` between the keyframes `a` and `b` around
+/// `t`, `s` in [0, 1) the fraction of the way from `a` to `b`; the first or last keyframe's
+/// own value before the first and after the last. `keys` is not empty and its `time`s rise
+/// ([`check_times`]).
+pub fn sample<K, T>(
+    keys: &[K],
+    t: f64,
+    time: impl Fn(&K) -> f64,
+    value: impl Fn(&K) -> T,
+    mix: impl Fn(&K, &K, f32) -> T,
+) -> T {
+    let i = keys.partition_point(|k| time(k) <= t);
+    if i == 0 {
+        return value(&keys[0]);
+    }
+    if i == keys.len() {
+        return value(&keys[i - 1]);
+    }
+    let (a, b) = (&keys[i - 1], &keys[i]);
+    mix(a, b, ((t - time(a)) / (time(b) - time(a))) as f32)
+}
+
+/// `p + (q − p)·s` per component.
+pub fn lerp3(p: [f32; 3], q: [f32; 3], s: f32) -> [f32; 3] {
+    [
+        p[0] + (q[0] - p[0]) * s,
+        p[1] + (q[1] - p[1]) * s,
+        p[2] + (q[2] - p[2]) * s,
+    ]
 }
 
 /// How the camera moves while driving.
@@ -109,7 +148,10 @@ pub struct DriveOptions {
     /// `SessionParams` as JSON.
     pub params: serde_json::Value,
     pub motion: Motion,
-    /// Camera messages per second (0: none).
+    /// Movable nodes' poses to replay (`nodes` messages), on the camera's ticks.
+    pub node_path: Option<NodePath>,
+    /// Input ticks per second (0: none): each sends the camera (unless [`Motion::Still`]) and
+    /// the nodes of [`DriveOptions::node_path`] as they are at that time.
     pub input_hz: f64,
     /// Stop after this many frames inside the measuring window.
     pub max_frames: Option<u64>,
@@ -120,6 +162,29 @@ pub struct DriveOptions {
     /// Frames and bytes count from this instant (after a load test's ramp-up).
     pub measure_from: Instant,
     pub deadline: Instant,
+}
+
+impl DriveOptions {
+    /// The messages of one input tick at `t` seconds, each with its own input id from
+    /// `next_id` on (a frame's header echoes the last one it shows): the camera, unless it is
+    /// still, then the node path's poses.
+    fn inputs(&self, t: f64, next_id: &mut u64) -> Vec<(u64, ClientMessage)> {
+        let mut take_id = || {
+            *next_id += 1;
+            *next_id - 1
+        };
+        let mut messages = Vec::new();
+        if let Some(camera) = self.motion.camera(t) {
+            let input_id = take_id();
+            messages.push((input_id, ClientMessage::Camera { camera, input_id }));
+        }
+        if let Some(path) = &self.node_path {
+            let input_id = take_id();
+            let nodes = path.at(t);
+            messages.push((input_id, ClientMessage::Nodes { nodes, input_id }));
+        }
+        messages
+    }
 }
 
 /// What one driven session measured.
@@ -236,10 +301,9 @@ pub async fn drive(
             // Ctrl-C (SIGINT) ends the run early with its summary, as the deadline would.
             _ = tokio::signal::ctrl_c() => break,
             _ = ticker.tick(), if opts.input_hz > 0.0 => {
-                if let Some(camera) = opts.motion.camera(started.elapsed().as_secs_f64()) {
-                    stream.send(&ClientMessage::Camera { camera, input_id: next_input }).await?;
-                    pending.push_back((next_input, Instant::now()));
-                    next_input += 1;
+                for (input_id, message) in opts.inputs(started.elapsed().as_secs_f64(), &mut next_input) {
+                    stream.send(&message).await?;
+                    pending.push_back((input_id, Instant::now()));
                     // A client that outpaces the server must not grow this without bound.
                     if pending.len() > 10_000 {
                         pending.pop_front();
@@ -344,6 +408,63 @@ mod tests {
         assert_eq!(path.at(-1.0), cam(0.0, 40.0));
         assert_eq!(path.at(1.0), cam(1.0, 50.0));
         assert_eq!(path.at(5.0), cam(2.0, 60.0));
+    }
+
+    #[test]
+    fn a_tick_sends_the_camera_and_the_node_path_with_their_own_input_ids() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let file = dir.path().join("nodes.json");
+        std::fs::write(
+            &file,
+            r#"{"keyframes": [{"t": 0, "nodes": [{"node": 1, "translation": [0, 0, 0]}]},
+                              {"t": 2, "nodes": [{"node": 1, "translation": [0.2, 0, 0]}]}]}"#,
+        )
+        .expect("write");
+        let path = CameraPath {
+            keyframes: vec![Keyframe {
+                t: 0.0,
+                camera: cam(0.0, 40.0),
+            }],
+        };
+        let mut opts = DriveOptions {
+            params: serde_json::json!({}),
+            motion: Motion::Path(path),
+            node_path: Some(NodePath::load(&file).expect("loads")),
+            input_hz: 10.0,
+            max_frames: None,
+            save_dir: None,
+            video_out: None,
+            measure_from: Instant::now(),
+            deadline: Instant::now(),
+        };
+        let mut next = 7;
+        let sent = opts.inputs(1.0, &mut next);
+        assert_eq!(next, 9);
+        assert_eq!(sent.len(), 2);
+        assert_eq!(
+            sent[0],
+            (
+                7,
+                ClientMessage::Camera {
+                    camera: cam(0.0, 40.0),
+                    input_id: 7
+                }
+            )
+        );
+        let ClientMessage::Nodes { nodes, input_id: 8 } = &sent[1].1 else {
+            panic!("{:?}", sent[1]);
+        };
+        assert_eq!(sent[1].0, 8);
+        assert_eq!(nodes.len(), 1);
+        assert_eq!(nodes[0].translation, Some([0.1, 0.0, 0.0]));
+        // A still camera sends nothing of its own; the nodes go on.
+        opts.motion = Motion::Still;
+        let sent = opts.inputs(3.0, &mut next);
+        assert_eq!(sent.len(), 1);
+        assert!(
+            matches!(&sent[0], (9, ClientMessage::Nodes { nodes, input_id: 9 }) if nodes[0].translation == Some([0.2, 0.0, 0.0])),
+            "{sent:?}"
+        );
     }
 
     #[test]

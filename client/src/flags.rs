@@ -89,8 +89,11 @@ pub struct RenderFlags {
     /// translation relative to its parent, as ID=X,Y,Z; repeatable.
     #[arg(long = "node", value_name = "ID=X,Y,Z", value_parser = parse_node, allow_hyphen_values = true)]
     pub nodes: Vec<(u32, [f32; 3])>,
-    /// One of the scene's animations at a time, as NAME@SECONDS (`render.animation`).
-    #[arg(long, value_name = "NAME@SECONDS", value_parser = parse_animation)]
+    /// One of the scene's glTF animations (`render.animation`; `lightcast scenes show` lists
+    /// them), as NAME or NAME@SECONDS (from 0 s without one): `render` poses it at that time,
+    /// `stream` and `loadtest` play it in the session from there, looping. A name that holds
+    /// `@` needs the @SECONDS.
+    #[arg(long, value_name = "NAME[@SECONDS]", value_parser = parse_animation)]
     pub animation: Option<(String, f32)>,
 }
 
@@ -212,15 +215,21 @@ fn parse_node(s: &str) -> Result<(u32, [f32; 3]), String> {
     Ok((id, parse_vec3(at)?))
 }
 
-/// `NAME@SECONDS` of `--animation` (the name may hold `@`: the last one splits).
+/// `NAME[@SECONDS]` of `--animation`: a name alone is at 0 s; the name may hold `@` (the
+/// last one splits, so such a name needs the @SECONDS).
 fn parse_animation(s: &str) -> Result<(String, f32), String> {
-    let (name, time) = s
-        .rsplit_once('@')
-        .ok_or_else(|| format!("'{s}' is not NAME@SECONDS"))?;
-    let time: f32 = time
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{time}' is not a number of seconds"))?;
+    let (name, time) = match s.rsplit_once('@') {
+        Some((name, time)) => {
+            let time: f32 = time
+                .trim()
+                .parse()
+                .ok()
+                .filter(|t: &f32| t.is_finite())
+                .ok_or_else(|| format!("'{time}' is not a number of seconds"))?;
+            (name, time)
+        }
+        None => (s, 0.0),
+    };
     if name.is_empty() {
         return Err(format!("'{s}': name one of the scene's animations"));
     }
@@ -302,8 +311,16 @@ mod tests {
         );
         assert!(parse_node("x=1,2,3").is_err());
         assert!(parse_node("1=1,2").is_err());
-        assert!(parse_animation("walk").is_err());
+        assert_eq!(parse_animation("walk"), Ok(("walk".into(), 0.0)));
+        assert_eq!(parse_animation("walk@0.25"), Ok(("walk".into(), 0.25)));
+        assert!(parse_animation("walk@").is_err());
+        assert!(
+            parse_animation("walk@cycle").is_err(),
+            "a name with @ needs @SECONDS"
+        );
+        assert!(parse_animation("walk@inf").is_err());
         assert!(parse_animation("@2").is_err());
+        assert!(parse_animation("").is_err());
     }
 
     #[test]

@@ -202,6 +202,7 @@ async fn run_one(
                 ),
                 degrees_per_second: cmd.orbit_degrees_per_second,
             },
+            node_path: None,
             input_hz: cmd.input_hz,
             max_frames: cmd.frames,
             save_dir: None,

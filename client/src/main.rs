@@ -5,6 +5,7 @@ mod api;
 mod drive;
 mod flags;
 mod loadtest;
+mod node_path;
 mod stats;
 
 use anyhow::Context;
@@ -147,7 +148,15 @@ struct StreamCmd {
     /// Replay a camera path: JSON `{"keyframes": [{"t": SECONDS, "camera": {...}}, ...]}`.
     #[arg(long)]
     camera_path: Option<PathBuf>,
-    /// Camera messages per second while replaying a path.
+    /// Replay a path of movable nodes (`lightcast scenes show` lists them): JSON
+    /// `{"keyframes": [{"t": SECONDS, "nodes": [{"node": ID, "translation": [X, Y, Z],
+    /// "rotation": [X, Y, Z, W], "scale": [X, Y, Z]}, ...]}, ...]}`, each field optional (one
+    /// left out keeps the node's own). Per node, translation and scale interpolate linearly
+    /// and rotation by slerp between the keyframes that give them, held at the ends; sent on
+    /// the --camera-path's ticks, with which it combines.
+    #[arg(long)]
+    node_path: Option<PathBuf>,
+    /// Input messages per second while replaying a camera or node path.
     #[arg(long, default_value_t = 30.0)]
     input_hz: f64,
     /// Most frames per second the server sends (default the server's, 30).
@@ -167,13 +176,17 @@ struct StreamCmd {
 }
 
 /// Session parameters for streaming commands: a continuous stream without stills, and only
-/// what was asked for besides (the server fills in its defaults).
+/// what was asked for besides (the server fills in its defaults). A session plays the
+/// `--animation` it is given (from its time), so the first frame is already under way.
 pub fn session_params(
-    render: serde_json::Value,
+    mut render: serde_json::Value,
     fps_cap: Option<f32>,
     codec: Codec,
     quality: Option<u8>,
 ) -> serde_json::Value {
+    if let Some(animation) = render.get_mut("animation").filter(|a| a.is_object()) {
+        animation["playing"] = true.into();
+    }
     let mut params = serde_json::json!({
         "render": render,
         "mode": StreamMode::Continuous,
@@ -202,6 +215,46 @@ async fn scene_defaults(
     }
     let scene = client.scene(&flags.scene).await?;
     Ok((Some(scene.default_camera), Some(scene.default_light)))
+}
+
+/// That a `--node-path` poses only the scene's movable nodes, and none a `--node` flag poses
+/// too (the path would take it over after its first tick).
+async fn check_node_path(
+    client: &Client,
+    flags: &RenderFlags,
+    path: &node_path::NodePath,
+    file: &std::path::Path,
+) -> anyhow::Result<()> {
+    if let Some(id) = path
+        .node_ids()
+        .find(|id| flags.nodes.iter().any(|(n, _)| n == id))
+    {
+        anyhow::bail!(
+            "{}: node {id} is posed by --node too; give it in one of the two",
+            file.display()
+        );
+    }
+    let scene = client.scene(&flags.scene).await?;
+    let movable = |id: u32| scene.nodes.iter().any(|n| n.id == id && n.movable);
+    if let Some(id) = path.node_ids().find(|&id| !movable(id)) {
+        let list: Vec<String> = scene
+            .nodes
+            .iter()
+            .filter(|n| n.movable)
+            .map(|n| format!("{} '{}'", n.id, n.name))
+            .collect();
+        anyhow::bail!(
+            "{}: node {id} is not a movable node of scene {} ({})",
+            file.display(),
+            scene.id,
+            if list.is_empty() {
+                "it has none".to_string()
+            } else {
+                format!("movable: {}", list.join(", "))
+            }
+        );
+    }
+    Ok(())
 }
 
 async fn run(cli: Cli) -> anyhow::Result<()> {
@@ -476,28 +529,40 @@ async fn stream(client: &Client, cmd: StreamCmd, json: bool) -> anyhow::Result<(
         Some(p) => drive::Motion::Path(drive::CameraPath::load(p).map_err(anyhow::Error::msg)?),
         None => drive::Motion::Still,
     };
+    let node_path = match &cmd.node_path {
+        Some(p) => Some(node_path::NodePath::load(p).map_err(anyhow::Error::msg)?),
+        None => None,
+    };
     if !cmd.codec.is_video() && (cmd.video.is_some() || cmd.bitrate_kbps.is_some()) {
         anyhow::bail!("--video and --bitrate-kbps need --codec h264");
     }
+    if let (Some(path), Some(file)) = (&node_path, &cmd.node_path) {
+        check_node_path(client, &cmd.render, path, file).await?;
+    }
     let (camera, light) = scene_defaults(client, &cmd.render).await?;
     let now = Instant::now();
-    let mut params = session_params(
-        cmd.render.params(camera.as_ref(), light.as_ref()),
-        cmd.fps_cap,
-        cmd.codec,
-        cmd.quality,
-    );
+    let mut render = cmd.render.params(camera.as_ref(), light.as_ref());
+    if let Some(path) = &node_path {
+        // The path's first poses from the first frame on (the flags' --node entries are for
+        // other nodes: checked above).
+        let mut nodes = render["nodes"].as_array().cloned().unwrap_or_default();
+        nodes.extend(
+            path.at(0.0)
+                .iter()
+                .filter_map(|n| serde_json::to_value(n).ok()),
+        );
+        render["nodes"] = nodes.into();
+    }
+    let mut params = session_params(render, cmd.fps_cap, cmd.codec, cmd.quality);
     if let Some(kbps) = cmd.bitrate_kbps {
         params["encoding"]["bitrate_kbps"] = kbps.into();
     }
+    let replaying = cmd.camera_path.is_some() || node_path.is_some();
     let opts = drive::DriveOptions {
         params,
         motion,
-        input_hz: if cmd.camera_path.is_some() {
-            cmd.input_hz
-        } else {
-            0.0
-        },
+        node_path,
+        input_hz: if replaying { cmd.input_hz } else { 0.0 },
         max_frames: cmd.frames,
         save_dir: cmd.save.clone(),
         video_out: cmd.video.clone(),
@@ -618,5 +683,48 @@ mod tests {
         assert_eq!(set["encoding"]["moving_quality"], 70);
         // What the client sends is a valid session for the server's own type.
         serde_json::from_value::<lightcast_protocol::SessionParams>(params).expect("parses");
+    }
+
+    #[test]
+    fn a_session_plays_its_animation_from_the_time_given() {
+        #[derive(Parser)]
+        struct Wrapper {
+            #[command(flatten)]
+            flags: RenderFlags,
+        }
+        for (arg, time) in [("walk", 0.0), ("walk@1.5", 1.5)] {
+            let flags = Wrapper::parse_from(["t", "--animation", arg]).flags;
+            let params = session_params(flags.params(None, None), None, Codec::Jpeg, None);
+            assert_eq!(
+                params["render"]["animation"],
+                serde_json::json!({"name": "walk", "time": time, "playing": true}),
+                "{arg}"
+            );
+            let parsed: lightcast_protocol::SessionParams =
+                serde_json::from_value(params).expect("parses");
+            let animation = parsed.render.animation.expect("an animation");
+            assert!(animation.playing && animation.time == time);
+        }
+    }
+
+    #[test]
+    fn stream_takes_a_node_path_with_a_camera_path() {
+        let cli = Cli::try_parse_from([
+            "lightcast",
+            "stream",
+            "--camera-path",
+            "cam.json",
+            "--node-path",
+            "nodes.json",
+            "--animation",
+            "spin",
+        ])
+        .unwrap_or_else(|e| panic!("{e}"));
+        let Command::Stream(cmd) = cli.command else {
+            panic!("not stream");
+        };
+        assert_eq!(cmd.node_path, Some(PathBuf::from("nodes.json")));
+        assert_eq!(cmd.camera_path, Some(PathBuf::from("cam.json")));
+        assert_eq!(cmd.render.animation, Some(("spin".into(), 0.0)));
     }
 }

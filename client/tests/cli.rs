@@ -255,6 +255,77 @@ async fn stream_replays_a_camera_path_and_saves_frames() {
     server.stop().await;
 }
 
+/// `stream --node-path` moves the Cornell box's boxes (node 1 the short box at rest at
+/// (0.33, 0, 0.37), node 2 the tall one at (−0.33, 0, −0.28)) by 0.2 m and a quarter turn
+/// while a camera path plays; the server takes every `nodes` message (no error comes back).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn stream_replays_a_node_path_with_a_camera_path() {
+    let server = TestServer::start(&[]).await;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let nodes = dir.path().join("nodes.json");
+    std::fs::write(
+        &nodes,
+        r#"{"keyframes": [
+            {"t": 0, "nodes": [{"node": 1, "translation": [0.33, 0, 0.37]},
+                               {"node": 2, "translation": [-0.33, 0, -0.28], "rotation": [0, 0, 0, 1]}]},
+            {"t": 0.5, "nodes": [{"node": 1, "translation": [0.13, 0, 0.37], "scale": [1, 0.8, 1]}]},
+            {"t": 1, "nodes": [{"node": 2, "translation": [-0.13, 0, -0.28], "rotation": [0, 0.70710677, 0, 0.70710677]}]}]}"#,
+    )
+    .expect("node path file");
+    let camera = dir.path().join("camera.json");
+    std::fs::write(
+        &camera,
+        r#"{"keyframes": [
+            {"t": 0, "camera": {"position": [0, 1, 3.9], "target": [0, 1, 0], "fov_y_degrees": 40}},
+            {"t": 1, "camera": {"position": [0.5, 1, 3.8], "target": [0, 1, 0], "fov_y_degrees": 40}}]}"#,
+    )
+    .expect("camera path file");
+    let args = with(
+        &[
+            "--json",
+            "stream",
+            "--frames",
+            "3",
+            "--duration",
+            "120",
+            "--node-path",
+            nodes.to_str().unwrap(),
+            "--camera-path",
+            camera.to_str().unwrap(),
+            "--input-hz",
+            "10",
+            "--gi",
+            "none",
+        ],
+        SMALL,
+    );
+    let summary = json(&lightcast(&server.base, &args).await);
+    assert_eq!(summary["frames"], 3);
+    assert_eq!(summary["errors"], serde_json::json!([]), "{summary}");
+    // A node the scene does not let move is refused before any session opens, naming the
+    // file and the nodes that do move.
+    let bad = dir.path().join("bad.json");
+    std::fs::write(
+        &bad,
+        r#"{"keyframes": [{"t": 0, "nodes": [{"node": 0, "translation": [0, 0.1, 0]}]}]}"#,
+    )
+    .expect("write");
+    let refused = lightcast(
+        &server.base,
+        &["stream", "--node-path", bad.to_str().unwrap()],
+    )
+    .await;
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("bad.json")
+            && stderr.contains("node 0 is not a movable node")
+            && stderr.contains("1 'short box'"),
+        "{stderr}"
+    );
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn loadtest_reports_latency_fps_and_refuses_remote_targets() {
     let server = TestServer::start(&[]).await;

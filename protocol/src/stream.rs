@@ -61,6 +61,15 @@ pub enum ClientMessage {
         #[serde(default)]
         input_id: u64,
     },
+    /// What the view shows at a point: answered by a `picked` event (with the same `nonce`)
+    /// from the next frame's G-buffer. `x`, `y` are fractions of the frame's width and height
+    /// from its top left corner, in [0, 1].
+    Pick {
+        x: f32,
+        y: f32,
+        #[serde(default)]
+        nonce: u64,
+    },
     /// Stop rendering until `resume`.
     Pause,
     Resume,
@@ -126,6 +135,23 @@ pub enum ServerEvent {
     },
     Pong {
         nonce: u64,
+    },
+    /// What a `pick` found at its point. Without `position` no surface shows there.
+    Picked {
+        nonce: u64,
+        x: f32,
+        y: f32,
+        /// World position of the surface seen (as posed in that frame).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        position: Option<[f32; 3]>,
+        /// The innermost node holding the surface (`SceneInfo::nodes`).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        node: Option<u32>,
+        /// The movable node a drag of this surface moves (`render.nodes`): the outermost
+        /// movable node holding it (clicking a wheel drags its car). Absent: nothing there
+        /// moves.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        movable: Option<u32>,
     },
     /// The session is ending (deleted, or the server is shutting down); the socket closes next.
     Closing {

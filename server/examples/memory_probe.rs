@@ -180,6 +180,7 @@ fn main() -> anyhow::Result<()> {
                 still: false,
                 yuv420: false,
                 poses: Vec::new(),
+                pick: None,
             };
             let set =
                 caches::precompute(&scene, &caches::CacheParams::for_scene(&scene), &mut |_| {})?;

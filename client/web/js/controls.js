@@ -1,5 +1,6 @@
-// Mouse, touch and keyboard on the frame: orbit, pan, zoom and WASD fly for the camera, and
-// dragging the light (a sun's azimuth/elevation, a spot or point light's position).
+// Mouse, touch and keyboard on the frame: orbit, pan, zoom and WASD fly for the camera,
+// dragging the light (a sun's azimuth/elevation, a spot or point light's position), and in
+// objects mode handing one-finger drags to the scene's movable nodes (`objects.js`).
 // The camera is kept as an orbit (target, yaw, pitch, radius) and sent as the protocol's
 // position/target pair; +Y is up, as in glTF.
 
@@ -44,6 +45,8 @@ export class Controls {
     this.onCamera = onCamera;
     this.onLight = onLight;
     this.mode = 'camera';
+    /** Takes drags in objects mode (`ObjectDrag`), set by the page. */
+    this.objects = null;
     this.orbit = null;
     this.light = null;
     this.sceneSize = 1;
@@ -148,9 +151,16 @@ export class Controls {
     this.pointers.set(e.pointerId, { x: e.clientX, y: e.clientY, button: e.button, shift: e.shiftKey, ctrl: e.ctrlKey });
     this.canvas.focus();
     e.preventDefault();
+    if (this.grabsObjects(e)) this.objects.down(e);
+  }
+
+  /** A left-button or one-finger drag in objects mode moves an object, not the camera. */
+  grabsObjects(e) {
+    return this.mode === 'objects' && this.objects && e.button === 0 && this.pointers.size === 1;
   }
 
   pointerUp(e) {
+    if (this.mode === 'objects' && this.objects) this.objects.up(e);
     this.pointers.delete(e.pointerId);
   }
 
@@ -165,7 +175,9 @@ export class Controls {
     }
     p.x = e.clientX;
     p.y = e.clientY;
-    if (this.mode === 'light' || p.ctrl) {
+    if (this.grabsObjects(p) && !p.ctrl) {
+      this.objects.move(e);
+    } else if (this.mode === 'light' || p.ctrl) {
       this.dragLight(dx, dy);
     } else if (p.button === 2 || p.button === 1 || p.shift) {
       this.pan(dx, dy);

@@ -10,6 +10,7 @@ import { Panel, patchFor } from './panel.js';
 import { Stats } from './stats.js';
 import { download, renderStill } from './still.js';
 import { H264Decoder, canDecodeH264 } from './video.js';
+import { ObjectDrag } from './objects.js';
 
 const $ = (id) => document.getElementById(id);
 const MAX_MESSAGES = 4;
@@ -22,6 +23,8 @@ const MAX_PENDING_INPUTS = 1000;
 // 144 Hz displays and at high fps caps.
 const MIN_INPUT_INTERVAL_MS = 16;
 const ACK_EVERY_MS = 100;
+// A pick is answered by the next frame; lavapipe's can take seconds.
+const PICK_TIMEOUT_MS = 30000;
 
 const canvas = $('frame');
 const context = canvas.getContext('2d');
@@ -34,7 +37,7 @@ const state = {
   inputId: 0,
   sentInputs: new Map(),
   drawnSeq: 0,
-  queued: { camera: null, light: null },
+  queued: { camera: null, light: null, nodes: null, animation: null },
   lastFlush: 0,
   lastAck: 0,
   /** The session's punctual lights as this page last sent them, and the selected one's index
@@ -49,6 +52,13 @@ const state = {
   decodesH264: false,
   /** The codecs the server encodes, from `/v1/server` and then each `hello`. */
   serverCodecs: ['jpeg', 'png'],
+  /** `pick` messages awaiting their `picked` event, by nonce. */
+  picks: new Map(),
+  pickNonce: 0,
+  /** The session's node poses as this page last sent or heard them, by node id. */
+  poses: new Map(),
+  /** The movable node last picked (its `nodes` entry of the scene), or null. */
+  node: null,
 };
 
 const stats = new Stats({
@@ -73,6 +83,13 @@ const controls = new Controls(canvas, {
     showLight();
     queueInput('light', { index: state.selected, light });
   },
+});
+controls.objects = new ObjectDrag(canvas, controls, {
+  pick: requestPick,
+  scene: () => state.scene,
+  pose: (id) => state.poses.get(id),
+  onPose: queuePose,
+  onSelect: selectNode,
 });
 
 function message(text, kind = 'error', ttlMs = 10000) {
@@ -99,10 +116,20 @@ function setStatus(kind, text) {
   if (kind === 'unauthorized') askToken(text);
 }
 
-// ---- input: at most one camera and one light message per animation frame ----
+// ---- input: at most one message of each kind per animation frame ----
+
+/** Each queued kind's message. */
+const INPUT_MESSAGES = {
+  camera: (camera) => ({ type: 'camera', camera }),
+  // The selected light, by its index (the others stay).
+  light: (value) => ({ type: 'light', light: value.light, index: value.index }),
+  // One node's pose (the session keeps the others').
+  nodes: (pose) => ({ type: 'nodes', nodes: [pose] }),
+  animation: (value) => ({ type: 'animation', ...value }),
+};
 
 function queueInput(kind, value) {
-  const idle = !state.queued.camera && !state.queued.light;
+  const idle = Object.values(state.queued).every((v) => !v);
   state.queued[kind] = value;
   if (idle) requestAnimationFrame(flushInput);
 }
@@ -113,12 +140,11 @@ function flushInput(now) {
     return;
   }
   state.lastFlush = now;
-  for (const kind of ['camera', 'light']) {
+  for (const [kind, message] of Object.entries(INPUT_MESSAGES)) {
     const value = state.queued[kind];
     if (!value) continue;
     state.queued[kind] = null;
-    // The selected light, by its index (the others stay).
-    send(kind === 'light' ? { type: kind, light: value.light, index: value.index } : { type: kind, [kind]: value });
+    send(message(value));
   }
 }
 
@@ -227,7 +253,12 @@ function onSession(session) {
   panel.show(session.params);
   $('scene-select').value = session.params.render.scene;
   $('pause').textContent = session.params.paused ? 'Resume' : 'Pause';
+  // Poses the page has queued but not sent yet stay; the session's are the rest.
+  const queued = state.queued.nodes;
+  state.poses = new Map((session.params.render.nodes || []).map((n) => [n.node, n]));
+  if (queued) state.poses.set(queued.node, queued);
   if (first) useScene(session.params.render.scene, session.params.render);
+  else showAnimation();
 }
 
 async function useScene(id, render) {
@@ -253,6 +284,7 @@ async function useScene(id, render) {
   controls.setCamera(render.camera || scene.default_camera);
   state.lights = structuredClone(render.lights || (render.light ? [render.light] : scene.default_lights || [scene.default_light]));
   selectLight(0);
+  showObjects(scene);
   watchScene(id);
 }
 
@@ -302,7 +334,8 @@ async function refreshScenes() {
 }
 
 function switchScene(id) {
-  sendUpdate({ render: { scene: id, camera: null, light: null, lights: null } });
+  // Node ids and animation names belong to the scene they came from.
+  sendUpdate({ render: { scene: id, camera: null, light: null, lights: null, nodes: null, animation: null } });
 }
 
 async function uploadScene(files) {
@@ -432,6 +465,107 @@ function changeLight(mutate) {
   showLight();
   $('light-select').options[state.selected].text = `${state.selected + 1}: ${state.light.kind}`;
   queueInput('light', { index: state.selected, light: structuredClone(state.light) });
+}
+
+// ---- objects: movable nodes and animations ----
+
+/** Asks the server what the view shows at `fx`, `fy` (fractions from the top left); resolves
+ * to its `picked` event. */
+function requestPick(fx, fy) {
+  const nonce = ++state.pickNonce;
+  return new Promise((resolve, reject) => {
+    if (!state.connection || !state.connection.send({ type: 'pick', x: fx, y: fy, nonce })) {
+      reject(new Error('not connected'));
+      return;
+    }
+    const timer = setTimeout(() => {
+      state.picks.delete(nonce);
+      message('no answer to the pick: is the session paused or the server busy?');
+      reject(new Error('pick timed out'));
+    }, PICK_TIMEOUT_MS);
+    state.picks.set(nonce, { resolve, timer });
+  });
+}
+
+function onPicked(event) {
+  const waiting = state.picks.get(event.nonce);
+  if (!waiting) return;
+  state.picks.delete(event.nonce);
+  clearTimeout(waiting.timer);
+  waiting.resolve(event);
+}
+
+const nodeName = (node) => `${node.name || 'node'} (node ${node.id})`;
+
+/** Shows what a press picked: a movable node becomes the one the editor turns and resets. */
+function selectNode(node, picked) {
+  state.node = node;
+  const line = $('node-selected');
+  line.dataset.node = node ? String(node.id) : '';
+  if (node) line.textContent = `Picked ${nodeName(node)}: drag to move it`;
+  else if (picked.position) {
+    const seen = state.scene && (state.scene.nodes || []).find((n) => n.id === picked.node);
+    line.textContent = `${seen ? nodeName(seen) : 'That surface'} does not move`;
+  } else line.textContent = 'Nothing shows there';
+  $('node-editor').hidden = !node;
+  if (node) $('node-turn').value = String(turnOf(node));
+  $('node-turn-value').textContent = `${$('node-turn').value}°`;
+}
+
+/** A pose entry sent for a node, remembered as the node's current one. */
+function queuePose(pose) {
+  state.poses.set(pose.node, pose);
+  queueInput('nodes', pose);
+}
+
+/** Quaternion (x, y, z, w) products and the turn about the vertical the slider sets. */
+const quatMul = ([ax, ay, az, aw], [bx, by, bz, bw]) => [
+  aw * bx + ax * bw + ay * bz - az * by,
+  aw * by - ax * bz + ay * bw + az * bx,
+  aw * bz + ax * by - ay * bx + az * bw,
+  aw * bw - ax * bx - ay * by - az * bz,
+];
+const turnQuat = (degrees) => [0, Math.sin((degrees * DEGREES) / 2), 0, Math.cos((degrees * DEGREES) / 2)];
+
+/** The slider's turn of `node`: its pose's rotation about the vertical relative to its rest
+ * rotation (0 when unposed). */
+function turnOf(node) {
+  const pose = state.poses.get(node.id);
+  if (!pose || !pose.rotation) return 0;
+  const rest = node.rotation || [0, 0, 0, 1];
+  // pose = turn · rest, so turn = pose · rest⁻¹.
+  const turn = quatMul(pose.rotation, [-rest[0], -rest[1], -rest[2], rest[3]]);
+  return Math.round((2 * Math.atan2(turn[1], turn[3])) / DEGREES);
+}
+
+/** The scene's movable nodes and animations as the Objects section offers them. */
+function showObjects(scene) {
+  const movable = (scene.nodes || []).some((n) => n.movable);
+  const animations = scene.animations || [];
+  $('objects-controls').hidden = !movable;
+  $('animation-controls').hidden = animations.length === 0;
+  $('objects-none').hidden = movable || animations.length > 0;
+  selectNode(null, {});
+  $('node-selected').textContent = 'No object picked.';
+  const select = $('animation-select');
+  select.replaceChildren(...animations.map((a) => new Option(`${a.name} (${a.duration.toFixed(2)} s)`, a.name)));
+  showAnimation();
+}
+
+/** The session's animation (or the selected one, stopped) on the play button and slider. */
+function showAnimation() {
+  const scene = state.scene;
+  const playing = state.params && state.params.render.animation;
+  const select = $('animation-select');
+  if (playing && document.activeElement !== select) select.value = playing.name;
+  const info = scene && (scene.animations || []).find((a) => a.name === select.value);
+  if (!info) return;
+  const time = playing && playing.name === info.name ? playing.time || 0 : 0;
+  $('animation-play').textContent = playing && playing.name === info.name && playing.playing !== false ? 'Pause' : 'Play';
+  const slider = $('animation-time');
+  slider.max = String(info.duration || 1);
+  if (document.activeElement !== slider) slider.value = String(time);
+  $('animation-time-value').textContent = `${Number(slider.value).toFixed(2)} s`;
 }
 
 // ---- sizing ----
@@ -568,6 +702,7 @@ async function boot() {
       if (event.type === 'hello') negotiate(event);
       else if (event.type === 'error') showError(event.error, 'refused');
       else if (event.type === 'render_error') showError(event.error, 'render failed');
+      else if (event.type === 'picked') onPicked(event);
       else if (event.type === 'caches_pending') {
         message(`computing the ${event.what} of ${event.scene}: direct light until ready`, 'info');
         watchScene(event.scene);
@@ -645,6 +780,43 @@ for (const id of ['light-outer-cone', 'light-inner-cone']) {
     changeLight((l) => { l.outer_cone = outer * DEGREES; l.inner_cone = inner * DEGREES; });
   });
 }
+$('node-turn').addEventListener('input', () => {
+  const node = state.node;
+  if (!node) return;
+  const degrees = Number($('node-turn').value);
+  $('node-turn-value').textContent = `${degrees}°`;
+  const rotation = quatMul(turnQuat(degrees), node.rotation || [0, 0, 0, 1]);
+  queuePose({ ...(state.poses.get(node.id) || {}), node: node.id, rotation });
+});
+$('node-reset').addEventListener('click', () => {
+  if (!state.node) return;
+  state.poses.delete(state.node.id);
+  state.queued.nodes = null;
+  send({ type: 'nodes', nodes: [{ node: state.node.id }] });
+  selectNode(state.node, {});
+});
+$('nodes-reset').addEventListener('click', () => {
+  state.queued.nodes = null;
+  state.poses.clear();
+  sendUpdate({ render: { nodes: null } });
+  if (state.node) selectNode(state.node, {});
+});
+$('animation-select').addEventListener('change', showAnimation);
+$('animation-play').addEventListener('click', () => {
+  const name = $('animation-select').value;
+  if (!name) return;
+  const current = state.params && state.params.render.animation;
+  const playing = Boolean(current && current.name === name && current.playing !== false);
+  // A paused animation goes on from where it stopped; another starts from its beginning.
+  send({ type: 'animation', name, playing: !playing });
+});
+$('animation-time').addEventListener('input', () => {
+  const name = $('animation-select').value;
+  if (!name) return;
+  const time = Number($('animation-time').value);
+  $('animation-time-value').textContent = `${time.toFixed(2)} s`;
+  queueInput('animation', { name, time, playing: false });
+});
 $('resolution-scale').addEventListener('change', onResize);
 new ResizeObserver(onResize).observe(canvas);
 $('still').addEventListener('click', async () => {

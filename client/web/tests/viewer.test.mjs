@@ -7,6 +7,7 @@
 // and the downloaded still go; default ./test-artifacts), CHROMIUM (default /usr/bin/chromium);
 // LIGHTCAST_METHODS: {method: {gi, stages}} for every method the server lists (a small setting
 // and the method's stage names); LIGHTCAST_UPLOAD_SCENE (optional): a .glb to upload through the page;
+// LIGHTCAST_ANIMATED_SCENE (optional): a .glb whose animation `slide` the page plays;
 // LIGHTCAST_AUTH_URL and LIGHTCAST_AUTH_TOKEN (optional): a second server with auth on, where
 // the page must ask for the token. Exits non-zero with the failing step named.
 
@@ -112,6 +113,24 @@ async function changeAfter(page, act, what) {
     throw new Error(`no frame showed the input of ${what}`);
   });
   return meanAbsDiff(before, await snapshot(page));
+}
+
+/** Where `point` shows in the session's view, as fractions of the frame from its top left (the
+ * server's perspective: vertical field of view, +Y up). */
+function project(render, point) {
+  const { position, target, fov_y_degrees: fov } = render.camera;
+  const sub = (a, b) => a.map((v, i) => v - b[i]);
+  const dot = (a, b) => a.reduce((s, v, i) => s + v * b[i], 0);
+  const unit = (a) => a.map((v) => v / Math.hypot(...a));
+  const cross = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+  const forward = unit(sub(target, position));
+  const right = unit(cross(forward, [0, 1, 0]));
+  const up = cross(right, forward);
+  const d = sub(point, position);
+  const h = Math.tan((fov * Math.PI) / 360);
+  const x = dot(d, right) / dot(d, forward) / (h * (render.width / render.height));
+  const y = dot(d, up) / dot(d, forward) / h;
+  return [(x + 1) / 2, (1 - y) / 2];
 }
 
 const meanAbsDiff = (a, b) => a.grey.reduce((s, v, i) => s + Math.abs(v - b.grey[i]), 0) / a.grey.length;
@@ -473,6 +492,55 @@ async function main() {
       await page.check('input[name="drag-mode"][value="camera"]');
     });
 
+    await step('objects mode: a press picks the short box, a drag slides it along the floor, and it goes back', async () => {
+      await page.click('#reset-camera');
+      await page.waitForFunction(() => !document.getElementById('objects-controls').hidden, null, { timeout: PATIENCE_MS });
+      let session = await pageSession(page);
+      for (const started = Date.now(); session.params.render.camera != null; session = await pageSession(page)) {
+        assert.ok(Date.now() - started < PATIENCE_MS, 'the camera was never reset');
+        await page.waitForTimeout(100);
+      }
+      const scene = await api('GET', `/v1/scenes/${session.params.render.scene}`);
+      const short = scene.nodes.find((n) => n.name === 'short box');
+      assert.ok(short && short.movable, JSON.stringify(scene.nodes));
+      const { min, max } = short.bounds;
+      const top = [(min[0] + max[0]) / 2, max[1], (min[2] + max[2]) / 2];
+      const [fx, fy] = project({ ...session.params.render, camera: scene.default_camera }, top);
+      const box = await page.locator('#frame').boundingBox();
+      const [x, y] = [box.x + fx * box.width, box.y + fy * box.height];
+      await page.check('input[name="drag-mode"][value="objects"]');
+      const diff = await changeAfter(page, async () => {
+        await page.mouse.move(x, y);
+        await page.mouse.down();
+        await page.waitForFunction((id) => document.getElementById('node-selected').dataset.node === id,
+          String(short.id), { timeout: PATIENCE_MS });
+        for (let i = 1; i <= 8; i++) await page.mouse.move(x - i * 6, y);
+        await page.mouse.up();
+      }, 'the object drag');
+      assert.ok(diff > 1, `sliding the short box hardly changed the image: ${diff.toFixed(2)}`);
+      const moved = (await pageSession(page)).params.render.nodes;
+      assert.equal(moved.length, 1, JSON.stringify(moved));
+      assert.equal(moved[0].node, short.id);
+      const [dx, dy, dz] = moved[0].translation.map((v, i) => v - short.translation[i]);
+      // Dragged leftwards on screen: towards −x, on the floor (the camera looks down −z).
+      assert.ok(dx < -0.02 && Math.abs(dy) < 1e-4 && Math.abs(dz) < 0.05, `moved by ${[dx, dy, dz]}`);
+      assert.match(await page.textContent('#node-selected'), /short box/);
+      const back = await changeAfter(page, () => page.click('#node-reset'), 'putting it back');
+      assert.ok(back > 1, `putting the box back hardly changed the image: ${back.toFixed(2)}`);
+      assert.equal((await pageSession(page)).params.render.nodes, undefined, 'no poses left');
+      // The back wall is the room's: it does not move, and a drag there moves nothing.
+      const [wx, wy] = project({ ...session.params.render, camera: scene.default_camera },
+        [0, scene.bounds.max[1] * 0.8, scene.bounds.min[2]]);
+      await page.mouse.move(box.x + wx * box.width, box.y + wy * box.height);
+      await page.mouse.down();
+      await page.waitForFunction(() => /does not move/.test(document.getElementById('node-selected').textContent),
+        null, { timeout: PATIENCE_MS });
+      await page.mouse.move(box.x + wx * box.width + 40, box.y + wy * box.height);
+      await page.mouse.up();
+      assert.equal((await pageSession(page)).params.render.nodes, undefined, 'the room stayed');
+      await page.check('input[name="drag-mode"][value="camera"]');
+    });
+
     await step('a GI parameter change shows up in the timings', async () => {
       assert.equal(await page.locator('#stage-rows tr[data-stage="importance"]').count(), 0, 'no BRSM stage with GI off');
       await page.selectOption('[data-field="render.gi.method"]', 'brsm');
@@ -653,6 +721,31 @@ async function main() {
         assert.notEqual(session.params.render.scene, previous);
         await page.waitForFunction(() => /\d light caches/.test(document.getElementById('scene-state').textContent),
           null, { timeout: PATIENCE_MS });
+      });
+    }
+
+    if (process.env.LIGHTCAST_ANIMATED_SCENE) {
+      await step('an animated scene plays, pauses and scrubs from the Objects section', async () => {
+        const previous = await page.inputValue('#scene-select');
+        await page.setInputFiles('#scene-upload', process.env.LIGHTCAST_ANIMATED_SCENE);
+        await waitForSceneSwitch(page, previous);
+        await page.waitForFunction(() => !document.getElementById('animation-controls').hidden, null, { timeout: PATIENCE_MS });
+        const animation = async () => (await pageSession(page)).params.render.animation;
+        const until = async (test, what) => {
+          for (const started = Date.now(); Date.now() - started < PATIENCE_MS; await page.waitForTimeout(100)) {
+            const a = await animation();
+            if (test(a)) return a;
+          }
+          throw new Error(`the session's animation never ${what}: ${JSON.stringify(await animation())}`);
+        };
+        await page.click('#animation-play');
+        await until((a) => a && a.name === 'slide' && a.playing !== false, 'played');
+        await page.waitForFunction(() => document.getElementById('animation-play').textContent === 'Pause', null, { timeout: PATIENCE_MS });
+        await page.click('#animation-play');
+        await until((a) => a && a.playing === false, 'paused');
+        await page.$eval('#animation-time', (e) => { e.value = '1.5'; e.dispatchEvent(new Event('input')); });
+        const scrubbed = await until((a) => a && Math.abs(a.time - 1.5) < 1e-3, 'scrubbed to 1.5 s');
+        assert.equal(scrubbed.playing, false);
       });
     }
 

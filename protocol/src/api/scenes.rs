@@ -86,7 +86,7 @@ pub struct CacheVariant {
 /// JSON body of `POST /v1/scenes` that builds a procedural scene instead of uploading one.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct ProceduralScene {
-    /// `cornell`, or `street?blocks=N&detail=D&seed=S`.
+    /// `cornell`, or `street?blocks=N&detail=D&seed=S&materials=M&cars=C` (see the README).
     pub procedural: String,
     /// Display name; default: the spec.
     #[serde(default)]
@@ -131,6 +131,17 @@ pub struct NodeInfo {
     /// World bounds of it and everything under it, at rest; absent without geometry.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub bounds: Option<Bounds>,
+    /// Its own translation, rotation (quaternion x, y, z, w) and scale in its parent's space,
+    /// at rest: what a pose's fields replace. Absent for a node given as a general matrix.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub translation: Option<[f32; 3]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation: Option<[f32; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<[f32; 3]>,
+    /// Its transform to world space at rest, a column-major 4×4 matrix (a viewer turns a drag
+    /// in world space into a translation in the parent's space with the parent's).
+    pub world: [f32; 16],
 }
 
 /// A glTF animation of a scene (`SceneInfo::animations`).

@@ -252,6 +252,7 @@ fn base_settings(args: &BenchArgs, scene: &Scene, gi: GiParams) -> RenderSetting
         still: false,
         yuv420: false,
         poses: Vec::new(),
+        pick: None,
     }
 }
 

@@ -484,6 +484,7 @@ pub fn settings_from_args(args: &RenderArgs, scene: &Scene) -> RenderSettings {
         still: false,
         yuv420: false,
         poses: Vec::new(),
+        pick: None,
     }
 }
 

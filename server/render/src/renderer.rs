@@ -86,6 +86,9 @@ pub struct RenderSettings {
     /// Movable nodes away from their own pose (`scene::nodes::resolve_poses`); every pass sees
     /// them moved.
     pub poses: crate::scene::nodes::Poses,
+    /// Also read back what the G-buffer holds at this texel (x, y from the top left):
+    /// [`Frame::pick`], what a viewer's click picks.
+    pub pick: Option<[u32; 2]>,
 }
 
 /// A rendered frame.
@@ -113,6 +116,53 @@ pub struct Frame {
     pub progress: Option<FrameProgress>,
     /// The GI method's data for [`RenderSettings::debug_view`], when it has any.
     pub debug: Option<DebugData>,
+    /// What [`RenderSettings::pick`] asked for.
+    pub pick: Option<Picked>,
+}
+
+/// What the G-buffer holds at a picked texel ([`RenderSettings::pick`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Picked {
+    pub texel: [u32; 2],
+    /// The surface seen there; `None` where no geometry covers the texel.
+    pub surface: Option<PickedSurface>,
+}
+
+/// A surface a texel shows, found from the G-buffer's id.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PickedSurface {
+    /// World position (as posed in the frame).
+    pub position: [f32; 3],
+    /// A vertex of the triangle seen (an index into the scene's vertices).
+    pub vertex: u32,
+    /// The innermost node holding it and the movable node dragging it moves (ids; see
+    /// [`crate::scene::nodes::picked`]).
+    pub node: Option<u32>,
+    pub movable: Option<u32>,
+}
+
+impl PickedSurface {
+    /// Reads the G-buffer's `id` (a triangle, or a provoking vertex without primitive
+    /// indices) and `position` texels back into the scene's terms.
+    fn from_texels(scene: &Scene, triangle_ids: bool, id: u32, position: [f32; 4]) -> Option<Self> {
+        // w = 0 is the G-buffer's clear value: background.
+        if position[3] == 0.0 {
+            return None;
+        }
+        let vertex = if triangle_ids {
+            *scene.indices.get(id as usize * 3)?
+        } else {
+            id
+        };
+        let ids = crate::scene::nodes::picked(&scene.nodes, vertex);
+        let id_of = |i: usize| scene.nodes[i].id;
+        Some(Self {
+            position: [position[0], position[1], position[2]],
+            vertex,
+            node: ids.map(|(inner, _)| id_of(inner)),
+            movable: ids.and_then(|(_, mover)| mover.map(id_of)),
+        })
+    }
 }
 
 /// Convergence of a progressive method's image.
@@ -261,6 +311,17 @@ impl RenderSettings {
                 ),
             ));
         }
+        if let Some([x, y]) = self.pick {
+            if x >= self.width || y >= self.height {
+                return Err(invalid(
+                    "pick",
+                    format!(
+                        "texel ({x}, {y}) is outside the {}×{} frame",
+                        self.width, self.height
+                    ),
+                ));
+            }
+        }
         // None is a frame lit by emissive surfaces or an environment alone.
         if self.lights.len() > MAX_LIGHTS {
             return Err(invalid(
@@ -393,6 +454,8 @@ struct ReadbackSet {
     timestamps: wgpu::Buffer,
     /// The GI method's [`ProgressSums`], when it is progressive.
     progress: wgpu::Buffer,
+    /// A picked texel's G-buffer id (offset 0) and position (offset [`PICK_POSITION`]).
+    pick: wgpu::Buffer,
     /// Held by the [`PendingFrame`] using the set.
     busy: Arc<AtomicBool>,
 }
@@ -422,10 +485,20 @@ impl ReadbackSet {
                 usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
                 mapped_at_creation: false,
             }),
+            pick: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pick readback"),
+                size: PICK_POSITION + 16,
+                usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+                mapped_at_creation: false,
+            }),
             busy: Arc::new(AtomicBool::new(false)),
         }
     }
 }
+
+/// Where a picked texel's position lies in [`ReadbackSet::pick`]: texture-to-buffer copies
+/// start at multiples of 256 bytes.
+const PICK_POSITION: u64 = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64;
 
 /// Marks a readback set free again when the frame using it is done (or abandoned).
 struct SetLease(Arc<AtomicBool>);
@@ -451,10 +524,32 @@ pub struct PendingFrame {
     progress: Option<(u32, wgpu::Buffer)>,
     /// The GI method's staged copies for the debug view.
     debug: Option<Box<dyn DebugCapture>>,
+    pick: Option<PendingPick>,
     timings: PendingTimings,
     timing_source: TimingSource,
     submission: Option<wgpu::SubmissionIndex>,
     _lease: SetLease,
+}
+
+/// A picked texel's staging buffer and what turns its id into the scene's terms.
+struct PendingPick {
+    texel: [u32; 2],
+    buffer: wgpu::Buffer,
+    scene: Arc<Scene>,
+    triangle_ids: bool,
+}
+
+impl PendingPick {
+    fn read(self, map: PendingMap) -> Result<Picked, GpuError> {
+        let bytes = map.finish()?;
+        let id: u32 = bytemuck::pod_read_unaligned(&bytes[..4]);
+        let at = PICK_POSITION as usize;
+        let position: [f32; 4] = bytemuck::pod_read_unaligned(&bytes[at..at + 16]);
+        Ok(Picked {
+            texel: self.texel,
+            surface: PickedSurface::from_texels(&self.scene, self.triangle_ids, id, position),
+        })
+    }
 }
 
 /// Where a frame's output is read back from.
@@ -492,6 +587,7 @@ impl PendingFrame {
             .progress
             .as_ref()
             .map(|(samples, buffer)| (*samples, PendingMap::new(buffer)));
+        let pick = self.pick.as_ref().map(|p| PendingMap::new(&p.buffer));
         let timings = self.timings.begin();
         self.ctx.wait_for(self.submission.as_ref())?;
         let (rgba8, yuv420) = match output {
@@ -526,6 +622,10 @@ impl PendingFrame {
             Some(capture) => Some(capture.read(&self.ctx, self.submission.as_ref())?),
             None => None,
         };
+        let pick = match (self.pick, pick) {
+            (Some(p), Some(map)) => Some(p.read(map)?),
+            _ => None,
+        };
         Ok(Frame {
             width: self.width,
             height: self.height,
@@ -539,6 +639,7 @@ impl PendingFrame {
             readback_ms: started.elapsed().as_secs_f64() * 1e3,
             progress,
             debug,
+            pick,
         })
     }
 }
@@ -1074,6 +1175,9 @@ impl Renderer {
             if let Some(p) = &progress {
                 e.copy_buffer_to_buffer(&p.buffer, 0, &set.progress, 0, None);
             }
+            if let Some(texel) = settings.pick {
+                encode_pick_copy(e, &sized.gbuffer, texel, &set.pick);
+            }
         })?;
         let (timings, submission) = stages.submit_frame(&set.timestamps);
         Ok(PendingFrame {
@@ -1091,11 +1195,53 @@ impl Renderer {
             exposure: set.exposure.clone(),
             progress: progress.map(|p| (p.samples, set.progress.clone())),
             debug,
+            pick: settings.pick.map(|texel| PendingPick {
+                texel,
+                buffer: set.pick.clone(),
+                scene: Arc::clone(&self.shared.scene),
+                triangle_ids: self.triangle_ids(),
+            }),
             timings,
             timing_source: self.timer.source(),
             submission,
             _lease: lease,
         })
+    }
+}
+
+/// Copies the G-buffer's id and position at `texel` into `staging` ([`ReadbackSet::pick`]).
+fn encode_pick_copy(
+    encoder: &mut wgpu::CommandEncoder,
+    gbuffer: &GBuffer,
+    texel: [u32; 2],
+    staging: &wgpu::Buffer,
+) {
+    for (target, offset) in [(&gbuffer.id, 0), (&gbuffer.position, PICK_POSITION)] {
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &target.texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d {
+                    x: texel[0],
+                    y: texel[1],
+                    z: 0,
+                },
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: staging,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset,
+                    bytes_per_row: None,
+                    rows_per_image: None,
+                },
+            },
+            wgpu::Extent3d {
+                width: 1,
+                height: 1,
+                depth_or_array_layers: 1,
+            },
+        );
     }
 }
 

@@ -315,6 +315,26 @@ pub fn can_move(nodes: &[Node]) -> Vec<bool> {
     moves
 }
 
+/// What a click on a surface of `vertex` picks (positions in `nodes`' order): the innermost
+/// node holding the vertex, and the node dragging it moves, its outermost movable ancestor or
+/// itself (`None` where nothing above it moves: a wheel drags its car). `None` where no node
+/// holds the vertex.
+pub fn picked(nodes: &[Node], vertex: u32) -> Option<(usize, Option<usize>)> {
+    // Preorder with nested ranges: the last node holding the vertex is the innermost.
+    let inner = nodes.iter().rposition(|n| n.vertices.contains(&vertex))?;
+    let mut mover = None;
+    let mut at = Some(inner);
+    while let Some(i) = at {
+        if nodes[i].movable {
+            mover = Some(i);
+        }
+        at = nodes[i]
+            .parent
+            .and_then(|p| nodes[..i].iter().rposition(|n| n.id == p));
+    }
+    Some((inner, mover))
+}
+
 /// Each vertex's innermost node (its position in `nodes`; `u32::MAX` for none), for nodes
 /// [`validate`] accepts: one sweep over the vertices with a stack of the open ranges, so a
 /// deep hierarchy costs no more than a flat one.
@@ -734,6 +754,29 @@ mod tests {
         assert_eq!(validate(&swapped, &[], 10, &[]), Err(NodeError::Order(2)));
         swapped.swap(1, 2);
         assert_eq!(validate(&swapped, &[], 10, &[]), Ok(()));
+    }
+
+    #[test]
+    fn a_click_picks_the_innermost_node_and_drags_its_outermost_movable_one() {
+        // 0 static world [0, 10) ⊃ 1 car [2, 8) ⊃ 2 wheel [4, 6); 3 static shed [8, 10).
+        let mut nodes = vec![
+            node(0, None, 0..10),
+            node(1, Some(0), 2..8),
+            node(2, Some(1), 4..6),
+            node(3, Some(0), 8..10),
+        ];
+        nodes[0].movable = false;
+        nodes[3].movable = false;
+        assert_eq!(validate(&nodes, &[], 10, &[]), Ok(()));
+        assert_eq!(picked(&nodes, 5), Some((2, Some(1))));
+        assert_eq!(picked(&nodes, 3), Some((1, Some(1))));
+        assert_eq!(picked(&nodes, 1), Some((0, None)));
+        assert_eq!(picked(&nodes, 9), Some((3, None)));
+        assert_eq!(picked(&nodes, 10), None);
+        // A movable wheel on a static car drags itself.
+        nodes[1].movable = false;
+        nodes[2].movable = true;
+        assert_eq!(picked(&nodes, 5), Some((2, Some(2))));
     }
 
     fn pose(node: u32) -> lightcast_protocol::NodePose {

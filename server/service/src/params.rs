@@ -262,6 +262,7 @@ pub fn resolve(
         still: false,
         yuv420: false,
         poses,
+        pick: None,
     };
     settings.validate_for(max_texture).map_err(|e| {
         // A request that gave the one-light shorthand hears about `light`, not `lights[0]`.

@@ -16,9 +16,9 @@ use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::passes::yuv420::Yuv420;
 use crate::quality::Truth;
-use crate::renderer::{Frame, FrameProgress, PendingFrame, Renderer};
+use crate::renderer::{Frame, FrameProgress, PendingFrame, Picked, Renderer};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_KEYFRAME, FLAG_MOVING, FLAG_STILL};
-use lightcast_protocol::{Comparison, FrameHeader, GiMethod, Senders, StageMs, View};
+use lightcast_protocol::{Comparison, FrameHeader, GiMethod, Senders, ServerEvent, StageMs, View};
 use std::collections::{HashMap, VecDeque};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
@@ -187,6 +187,8 @@ pub struct Rendered {
     pub gi_pending: bool,
     /// Convergence of a progressive GI method (`reference`).
     pub progress: Option<FrameProgress>,
+    /// What the settings' `pick` texel shows.
+    pub pick: Option<Picked>,
 }
 
 impl Rendered {
@@ -706,6 +708,8 @@ impl Loop {
         plan.resolved.settings.history = Some(history_id(&session.id));
         plan.resolved.settings.still = plan.still;
         plan.resolved.settings.yuv420 = plan.codec.is_video();
+        let settings = &mut plan.resolved.settings;
+        settings.pick = plan.pick.map(|p| p.texel(settings.width, settings.height));
         match self.submit(&plan.lease_scene, &plan.resolved) {
             // The wait for the GPU happens on the readback thread while this one encodes the
             // next frame.
@@ -990,11 +994,12 @@ fn finish(
     };
     let timings = std::mem::take(&mut frame.timings);
     let yuv420 = frame.yuv420.take();
-    let (timing_source, readback_ms, exposure_scale, progress) = (
+    let (timing_source, readback_ms, exposure_scale, progress, pick) = (
         frame.timing_source,
         frame.readback_ms,
         frame.exposure_scale,
         frame.progress,
+        frame.pick,
     );
     let image = image(view, frame).map_err(|e| ApiError::internal(e.to_string()))?;
     Ok(Rendered {
@@ -1008,6 +1013,7 @@ fn finish(
         indirect,
         gi_pending,
         progress,
+        pick,
     })
 }
 
@@ -1028,6 +1034,18 @@ fn deliver(
         )
     });
     session.note_precomputed(needed, rendered.gi_pending);
+    if let (Some(request), Some(picked)) = (plan.pick, rendered.pick) {
+        let surface = picked.surface;
+        // Nobody listening is no error: the client may have gone.
+        let _ = session.events.send(ServerEvent::Picked {
+            nonce: request.nonce,
+            x: request.x,
+            y: request.y,
+            position: surface.map(|s| s.position),
+            node: surface.and_then(|s| s.node),
+            movable: surface.and_then(|s| s.movable),
+        });
+    }
     metrics::counter!(super::metrics::FRAMES_RENDERED).increment(1);
     session.record_render(&rendered.stages());
     let mut flags = 0;

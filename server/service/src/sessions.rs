@@ -77,6 +77,8 @@ pub struct FramePlan {
     pub version: u64,
     pub input_id: u64,
     pub still: bool,
+    /// A `pick` the frame answers.
+    pub pick: Option<PickRequest>,
     pub moving: bool,
     pub codec: lightcast_protocol::Codec,
     /// The frame starts the video again after frames of another codec: a client that
@@ -86,6 +88,22 @@ pub struct FramePlan {
     /// The session's encoding (video settings) and fps cap when the frame was planned.
     pub encoding: lightcast_protocol::Encoding,
     pub fps: f32,
+}
+
+/// A client's `pick`: a point of the view, as fractions of the frame from its top left.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PickRequest {
+    pub x: f32,
+    pub y: f32,
+    pub nonce: u64,
+}
+
+impl PickRequest {
+    /// The texel of a `width` × `height` frame under the point.
+    pub fn texel(&self, width: u32, height: u32) -> [u32; 2] {
+        let at = |f: f32, n: u32| ((f * n as f32) as u32).min(n.saturating_sub(1));
+        [at(self.x, width), at(self.y, height)]
+    }
 }
 
 struct State {
@@ -99,6 +117,8 @@ struct State {
     /// Version shown by the last still (0: none yet).
     still_version: u64,
     still_requested: bool,
+    /// The latest `pick` not yet rendered (a newer one replaces it).
+    pick: Option<PickRequest>,
     input_id: u64,
     last_change: Instant,
     next_due: Instant,
@@ -158,6 +178,7 @@ impl Session {
                 rendered_version: 0,
                 still_version: 0,
                 still_requested: false,
+                pick: None,
                 input_id: 0,
                 last_change: now,
                 next_due: now,
@@ -304,6 +325,20 @@ impl Session {
         lock(&self.state).still_requested = true;
     }
 
+    /// Asks the next frame to read back what shows at (`x`, `y`), fractions of the frame.
+    pub fn request_pick(&self, pick: PickRequest) -> Result<(), ApiError> {
+        for (field, v) in [("x", pick.x), ("y", pick.y)] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(ApiError::field(
+                    field,
+                    format!("{v} is not a fraction of the frame in [0, 1]"),
+                ));
+            }
+        }
+        lock(&self.state).pick = Some(pick);
+        Ok(())
+    }
+
     /// Decides whether the session wants a frame at `now`. `Err(wait)` says how long until it
     /// might; `Ok(None)` that nothing is due until something changes.
     pub fn plan(&self, now: Instant) -> Result<FramePlan, Option<Duration>> {
@@ -311,7 +346,7 @@ impl Session {
             return Err(None);
         }
         let mut s = lock(&self.state);
-        if s.params.paused && !s.still_requested {
+        if s.params.paused && !s.still_requested && s.pick.is_none() {
             return Err(None);
         }
         if now < s.next_due {
@@ -325,7 +360,11 @@ impl Session {
         let rested = !playing && now.duration_since(s.last_change) >= rest;
         let want_still = s.still_requested
             || (enc.still_after_ms > 0 && rested && !changed && s.still_version != s.version);
-        let due = want_still || changed || playing || s.params.mode == StreamMode::Continuous;
+        let due = want_still
+            || changed
+            || playing
+            || s.pick.is_some()
+            || s.params.mode == StreamMode::Continuous;
         if !due {
             if enc.still_after_ms > 0 && s.still_version != s.version {
                 return Err(Some(rest.saturating_sub(now.duration_since(s.last_change))));
@@ -378,6 +417,7 @@ impl Session {
             version: s.version,
             input_id: s.input_id,
             still: want_still,
+            pick: s.pick.take(),
             moving,
             codec,
             video_restarts,

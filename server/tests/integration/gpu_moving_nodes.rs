@@ -305,3 +305,70 @@ fn methods_that_follow_a_moved_box_stay_within_their_error_at_rest() {
         );
     }
 }
+
+/// A viewer's click (issue 35 part 4) reads the G-buffer back at one texel: the short box's
+/// top, at rest and where a pose put it, picks node 1 (also the node a drag moves) at the
+/// position seen; the back wall picks the room, which nothing drags; a texel outside the
+/// frame is refused naming `pick`.
+#[test]
+fn a_pick_finds_the_node_a_texel_shows_where_it_is_posed() {
+    use lightcast_server::passes::frame_uniforms::camera_view_proj;
+    use lightcast_server::renderer::RenderError;
+    let scene = procedural::cornell_box();
+    let poses = moved_short_box(&scene);
+    let rest = settings_for(&scene, GiParams::new(lightcast_server::gi::none::NONE));
+    let view_proj = camera_view_proj(&rest.camera, W as f32 / H as f32, &scene.bounds);
+    let texel_of = |p: Vec3| {
+        let clip = view_proj * p.extend(1.0);
+        let ndc = clip.truncate() / clip.w;
+        let at = |f: f32, n: u32| (f * n as f32) as u32;
+        [at(ndc.x * 0.5 + 0.5, W), at(0.5 - ndc.y * 0.5, H)]
+    };
+    let short = scene.node_bounds()[1].expect("the short box has geometry");
+    let centre = (short.min + short.max) * 0.5;
+    // The pose turns the box about its own vertical axis: its top's centre moves only 45 cm.
+    let top = Vec3::new(centre.x, short.max.y, centre.z);
+    let moved_top = top - Vec3::X * 0.45;
+    let mut renderer = Renderer::new(gpu(), scene.clone());
+    let mut pick = |settings: &RenderSettings, at: Vec3| {
+        let frame = renderer
+            .render(&RenderSettings {
+                pick: Some(texel_of(at)),
+                ..settings.clone()
+            })
+            .expect("render");
+        let picked = frame.pick.expect("the pick was read back");
+        assert_eq!(picked.texel, texel_of(at));
+        picked.surface.expect("a surface shows there")
+    };
+    let posed = RenderSettings {
+        poses,
+        ..rest.clone()
+    };
+    for (settings, at) in [(&rest, top), (&posed, moved_top)] {
+        let box_top = pick(settings, at);
+        assert_eq!((box_top.node, box_top.movable), (Some(1), Some(1)));
+        let seen = Vec3::from(box_top.position);
+        // A texel spans about 4 cm of the top here; the top is flat.
+        assert!((seen.y - at.y).abs() < 1e-3, "{seen} vs {at}");
+        assert!(seen.distance(at) < 0.1, "{seen} vs {at}");
+    }
+    let room = scene.bounds;
+    let wall = Vec3::new(0.0, room.max.y * 0.8, room.min.z);
+    let back = pick(&rest, wall);
+    assert_eq!((back.node, back.movable), (Some(0), None));
+    assert!(
+        (back.position[2] - wall.z).abs() < 1e-3,
+        "{:?}",
+        back.position
+    );
+    let outside = renderer.render(&RenderSettings {
+        pick: Some([W, 0]),
+        ..rest.clone()
+    });
+    assert!(
+        matches!(&outside, Err(RenderError::InvalidSetting { field, .. }) if field == "pick"),
+        "{:?}",
+        outside.err()
+    );
+}

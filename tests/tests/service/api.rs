@@ -841,6 +841,41 @@ async fn clients_move_nodes_per_render_and_per_session() {
         }
     };
     assert_ne!(before.rgba, after.rgba, "the frame shows the moved box");
+    // Clicks over the view (one at a time: a newer pick replaces one not yet rendered) find
+    // the moved tall box, the short box and the room, which nothing drags.
+    let mut found = std::collections::BTreeSet::new();
+    for (i, (x, y)) in (1..8)
+        .flat_map(|y| (1..8).map(move |x| (x as f32 / 8.0, y as f32 / 8.0)))
+        .enumerate()
+    {
+        let nonce = 100 + i as u64;
+        stream
+            .send(json!({"type": "pick", "x": x, "y": y, "nonce": nonce}))
+            .await;
+        let picked = loop {
+            match stream.next_event().await {
+                ServerEvent::Picked {
+                    nonce: n,
+                    x: px,
+                    y: py,
+                    position,
+                    node,
+                    movable,
+                } if n == nonce => {
+                    assert_eq!((px, py), (x, y));
+                    break (position, node, movable);
+                }
+                _ => {}
+            }
+        };
+        if let (Some(p), Some(node)) = (picked.0, picked.1) {
+            assert!(p.iter().all(|c| c.is_finite()), "{p:?}");
+            found.insert((node, picked.2));
+        }
+    }
+    assert!(found.contains(&(2, Some(2))), "{found:?}");
+    assert!(found.contains(&(1, Some(1))), "{found:?}");
+    assert!(found.contains(&(0, None)), "{found:?}");
     let a_info = server
         .get_json(&format!("/v1/sessions/{}", a.session.id))
         .await;

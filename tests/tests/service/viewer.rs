@@ -57,6 +57,10 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
     let upload = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/cornell-box/cornell-box.glb");
     assert!(upload.exists(), "{} is missing", upload.display());
     let artifacts = Path::new(env!("CARGO_TARGET_TMPDIR")).join("viewer");
+    std::fs::create_dir_all(&artifacts).expect("artifacts folder");
+    // A glTF animation for the page's play/pause control (issue 35).
+    let animated = artifacts.join("slide.glb");
+    std::fs::write(&animated, lightcast_e2e::animated_glb()).expect("animated scene written");
     let methods = method_settings();
     let server = TestServer::start(&[]).await;
     let token = "viewer-test-token-0123456789";
@@ -68,6 +72,7 @@ async fn the_viewer_streams_follows_input_and_recovers_in_chromium() {
         .env("LIGHTCAST_ARTIFACTS", &artifacts)
         .env("CHROMIUM", &browser)
         .env("LIGHTCAST_UPLOAD_SCENE", &upload)
+        .env("LIGHTCAST_ANIMATED_SCENE", &animated)
         .env("LIGHTCAST_METHODS", methods.to_string())
         .env("LIGHTCAST_AUTH_URL", &auth_server.base)
         .env("LIGHTCAST_AUTH_TOKEN", token)

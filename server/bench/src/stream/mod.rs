@@ -496,6 +496,7 @@ pub fn run(
         still: false,
         yuv420: false,
         poses: Vec::new(),
+        pick: None,
     };
     let motion = CameraMotion {
         motion: args.motion,

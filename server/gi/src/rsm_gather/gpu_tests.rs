@@ -92,6 +92,7 @@ fn render(
         still: false,
         yuv420: false,
         poses: Vec::new(),
+        pick: None,
     };
     let frame = renderer.render(&s).expect("a frame");
     let readback = renderer

@@ -47,12 +47,21 @@ impl GBuffer {
         usage: wgpu::TextureUsages,
     ) -> Self {
         let t = |label, format| Target::new(device, label, width, height, format, usage);
+        // A viewer's click reads one texel of these back (`RenderSettings::pick`).
+        let picked = usage | wgpu::TextureUsages::COPY_SRC;
         Self {
-            position: t("gbuffer position", FORMATS[0]),
+            position: Target::new(
+                device,
+                "gbuffer position",
+                width,
+                height,
+                FORMATS[0],
+                picked,
+            ),
             normal_roughness: t("gbuffer normal", FORMATS[1]),
             base_metallic: t("gbuffer base colour", FORMATS[2]),
             emissive_specular: t("gbuffer emissive", FORMATS[3]),
-            id: t("gbuffer id", FORMATS[4]),
+            id: Target::new(device, "gbuffer id", width, height, FORMATS[4], picked),
             depth: Target::new(
                 device,
                 "gbuffer depth",

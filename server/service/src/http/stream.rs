@@ -507,6 +507,9 @@ async fn handle(state: &AppState, session: &Session, text: &[u8]) -> Option<Serv
             state.wake();
             Ok(())
         }
+        ClientMessage::Pick { x, y, nonce } => session
+            .request_pick(crate::service::sessions::PickRequest { x, y, nonce })
+            .map(|()| state.wake()),
         ClientMessage::Keyframe => {
             session.request_keyframe();
             Ok(())

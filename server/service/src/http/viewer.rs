@@ -43,6 +43,7 @@ const ASSETS: &[Asset] = &[
     asset!("js/stats.js", "text/javascript; charset=utf-8"),
     asset!("js/still.js", "text/javascript; charset=utf-8"),
     asset!("js/video.js", "text/javascript; charset=utf-8"),
+    asset!("js/objects.js", "text/javascript; charset=utf-8"),
 ];
 
 /// The page may load only its own files, draw decoded frames (blob URLs) and talk to this

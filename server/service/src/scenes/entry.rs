@@ -457,6 +457,10 @@ fn node_infos(scene: &Scene) -> Vec<lightcast_protocol::NodeInfo> {
                 min: b.min.into(),
                 max: b.max.into(),
             }),
+            translation: n.local.map(|t| t.translation.into()),
+            rotation: n.local.map(|t| t.rotation.into()),
+            scale: n.local.map(|t| t.scale.into()),
+            world: n.rest_world.to_cols_array(),
         })
         .collect()
 }

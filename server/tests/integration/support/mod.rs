@@ -118,6 +118,7 @@ pub fn settings(width: u32, height: u32, camera: Camera, light: Light) -> Render
         still: false,
         yuv420: false,
         poses: Vec::new(),
+        pick: None,
     }
 }
 

@@ -152,6 +152,10 @@ pub enum ServerEvent {
         /// moves.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         movable: Option<u32>,
+        /// The `movable` node's translation, rotation and scale (in its parent's space) as
+        /// that frame posed it, an animation's pose included: where a drag starts from.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        pose: Option<crate::NodePose>,
     },
     /// The session is ending (deleted, or the server is shutting down); the socket closes next.
     Closing {

@@ -131,11 +131,14 @@ export class Controls {
     return { position: add(o.target, offset), target: [...o.target], fov_y_degrees: o.fov };
   }
 
-  /** Camera basis: forward (towards the target), right and up. */
+  /** Camera basis: forward (towards the target), right and up, as the server's view matrix
+   * has them (`stable_up` in frame_uniforms.rs: +Z for up when looking almost straight up or
+   * down). */
   basis() {
     const c = this.camera();
     const forward = normalize(sub(c.target, c.position));
-    const right = normalize(cross(forward, [0, 1, 0]));
+    const up = Math.abs(forward[1]) > 0.999 ? [0, 0, Math.sign(forward[1])] : [0, 1, 0];
+    const right = normalize(cross(forward, up));
     return { forward, right, up: cross(right, forward), position: c.position };
   }
 
@@ -151,12 +154,13 @@ export class Controls {
     this.pointers.set(e.pointerId, { x: e.clientX, y: e.clientY, button: e.button, shift: e.shiftKey, ctrl: e.ctrlKey });
     this.canvas.focus();
     e.preventDefault();
-    if (this.grabsObjects(e)) this.objects.down(e);
+    if (this.grabsObjects(e.button, e.ctrlKey)) this.objects.down(e);
   }
 
-  /** A left-button or one-finger drag in objects mode moves an object, not the camera. */
-  grabsObjects(e) {
-    return this.mode === 'objects' && this.objects && e.button === 0 && this.pointers.size === 1;
+  /** A left-button or one-finger drag in objects mode moves an object, not the camera (a
+   * ctrl-drag moves the light there too). */
+  grabsObjects(button, ctrl) {
+    return this.mode === 'objects' && this.objects && button === 0 && !ctrl && this.pointers.size === 1;
   }
 
   pointerUp(e) {
@@ -175,7 +179,7 @@ export class Controls {
     }
     p.x = e.clientX;
     p.y = e.clientY;
-    if (this.grabsObjects(p) && !p.ctrl) {
+    if (this.grabsObjects(p.button, p.ctrl)) {
       this.objects.move(e);
     } else if (this.mode === 'light' || p.ctrl) {
       this.dragLight(dx, dy);

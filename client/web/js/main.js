@@ -10,7 +10,7 @@ import { Panel, patchFor } from './panel.js';
 import { Stats } from './stats.js';
 import { download, renderStill } from './still.js';
 import { H264Decoder, canDecodeH264 } from './video.js';
-import { ObjectDrag } from './objects.js';
+import { ObjectDrag, intoSpace, quatMul } from './objects.js';
 
 const $ = (id) => document.getElementById(id);
 const MAX_MESSAGES = 4;
@@ -52,13 +52,16 @@ const state = {
   decodesH264: false,
   /** The codecs the server encodes, from `/v1/server` and then each `hello`. */
   serverCodecs: ['jpeg', 'png'],
-  /** `pick` messages awaiting their `picked` event, by nonce. */
+  /** `pick` messages awaiting their `picked` event, by nonce; nonces start at random, as
+   * every page on a session hears every `picked`. */
   picks: new Map(),
-  pickNonce: 0,
+  pickNonce: Math.floor(Math.random() * 2 ** 40),
   /** The session's node poses as this page last sent or heard them, by node id. */
   poses: new Map(),
-  /** The movable node last picked (its `nodes` entry of the scene), or null. */
+  /** The movable node last picked (its `nodes` entry of the scene), or null, and its pose in
+   * the frame that answered the pick. */
   node: null,
+  shownPose: null,
 };
 
 const stats = new Stats({
@@ -87,7 +90,8 @@ const controls = new Controls(canvas, {
 controls.objects = new ObjectDrag(canvas, controls, {
   pick: requestPick,
   scene: () => state.scene,
-  pose: (id) => state.poses.get(id),
+  // The frame's own aspect: the stream's size is clamped per side, the canvas's is not.
+  aspect: () => (state.params ? state.params.render.width / state.params.render.height : 1),
   onPose: queuePose,
   onSelect: selectNode,
 });
@@ -472,6 +476,8 @@ function changeLight(mutate) {
 /** Asks the server what the view shows at `fx`, `fy` (fractions from the top left); resolves
  * to its `picked` event. */
 function requestPick(fx, fy) {
+  // A newer pick replaces one the server has not rendered yet: the older ones end here.
+  dropPicks();
   const nonce = ++state.pickNonce;
   return new Promise((resolve, reject) => {
     if (!state.connection || !state.connection.send({ type: 'pick', x: fx, y: fy, nonce })) {
@@ -480,11 +486,20 @@ function requestPick(fx, fy) {
     }
     const timer = setTimeout(() => {
       state.picks.delete(nonce);
-      message('no answer to the pick: is the session paused or the server busy?');
+      message('no answer to the pick: no frame was rendered for it (is the server busy?)');
       reject(new Error('pick timed out'));
     }, PICK_TIMEOUT_MS);
-    state.picks.set(nonce, { resolve, timer });
+    state.picks.set(nonce, { resolve, reject, timer });
   });
+}
+
+/** Ends every pick still waiting (a newer one, or a frame that failed, answers none of them). */
+function dropPicks() {
+  for (const { reject, timer } of state.picks.values()) {
+    clearTimeout(timer);
+    reject(new Error('superseded'));
+  }
+  state.picks.clear();
 }
 
 function onPicked(event) {
@@ -500,6 +515,9 @@ const nodeName = (node) => `${node.name || 'node'} (node ${node.id})`;
 /** Shows what a press picked: a movable node becomes the one the editor turns and resets. */
 function selectNode(node, picked) {
   state.node = node;
+  // Where the frame showed it (an animation's pose included), for a node this page has not
+  // posed itself.
+  if (picked.pose) state.shownPose = picked.pose;
   const line = $('node-selected');
   line.dataset.node = node ? String(node.id) : '';
   if (node) line.textContent = `Picked ${nodeName(node)}: drag to move it`;
@@ -512,30 +530,42 @@ function selectNode(node, picked) {
   $('node-turn-value').textContent = `${$('node-turn').value}°`;
 }
 
+/** The pose this page knows `node` by: its own entry, else as the picked frame showed it. */
+function poseOf(node) {
+  const shown = state.shownPose && state.shownPose.node === node.id ? state.shownPose : null;
+  return state.poses.get(node.id) || shown;
+}
+
 /** A pose entry sent for a node, remembered as the node's current one. */
 function queuePose(pose) {
   state.poses.set(pose.node, pose);
   queueInput('nodes', pose);
 }
 
-/** Quaternion (x, y, z, w) products and the turn about the vertical the slider sets. */
-const quatMul = ([ax, ay, az, aw], [bx, by, bz, bw]) => [
-  aw * bx + ax * bw + ay * bz - az * by,
-  aw * by - ax * bz + ay * bw + az * bx,
-  aw * bz + ax * by - ay * bx + az * bw,
-  aw * bw - ax * bx - ay * by - az * bz,
-];
-const turnQuat = (degrees) => [0, Math.sin((degrees * DEGREES) / 2), 0, Math.cos((degrees * DEGREES) / 2)];
+/** The world's vertical in the space of `node`'s parent (what the turn slider turns about). */
+function verticalFor(node) {
+  const parent = state.scene && (state.scene.nodes || []).find((n) => n.id === node.parent);
+  const up = intoSpace(parent ? parent.world : null, [0, 1, 0]);
+  const length = Math.hypot(...up) || 1;
+  return up.map((v) => v / length);
+}
+
+/** A turn of `degrees` about the vertical of `node`'s parent, as a quaternion (x, y, z, w). */
+function turnQuat(node, degrees) {
+  const s = Math.sin((degrees * DEGREES) / 2);
+  return [...verticalFor(node).map((v) => v * s), Math.cos((degrees * DEGREES) / 2)];
+}
 
 /** The slider's turn of `node`: its pose's rotation about the vertical relative to its rest
  * rotation (0 when unposed). */
 function turnOf(node) {
-  const pose = state.poses.get(node.id);
+  const pose = poseOf(node);
   if (!pose || !pose.rotation) return 0;
   const rest = node.rotation || [0, 0, 0, 1];
   // pose = turn · rest, so turn = pose · rest⁻¹.
   const turn = quatMul(pose.rotation, [-rest[0], -rest[1], -rest[2], rest[3]]);
-  return Math.round((2 * Math.atan2(turn[1], turn[3])) / DEGREES);
+  const along = verticalFor(node).reduce((sum, v, i) => sum + v * turn[i], 0);
+  return Math.round((2 * Math.atan2(along, turn[3])) / DEGREES);
 }
 
 /** The scene's movable nodes and animations as the Objects section offers them. */
@@ -701,7 +731,10 @@ async function boot() {
     onEvent: (event) => {
       if (event.type === 'hello') negotiate(event);
       else if (event.type === 'error') showError(event.error, 'refused');
-      else if (event.type === 'render_error') showError(event.error, 'render failed');
+      else if (event.type === 'render_error') {
+        showError(event.error, 'render failed');
+        dropPicks();
+      }
       else if (event.type === 'picked') onPicked(event);
       else if (event.type === 'caches_pending') {
         message(`computing the ${event.what} of ${event.scene}: direct light until ready`, 'info');
@@ -785,8 +818,8 @@ $('node-turn').addEventListener('input', () => {
   if (!node) return;
   const degrees = Number($('node-turn').value);
   $('node-turn-value').textContent = `${degrees}°`;
-  const rotation = quatMul(turnQuat(degrees), node.rotation || [0, 0, 0, 1]);
-  queuePose({ ...(state.poses.get(node.id) || {}), node: node.id, rotation });
+  const rotation = quatMul(turnQuat(node, degrees), node.rotation || [0, 0, 0, 1]);
+  queuePose({ ...(poseOf(node) || {}), node: node.id, rotation });
 });
 $('node-reset').addEventListener('click', () => {
   if (!state.node) return;

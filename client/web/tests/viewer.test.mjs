@@ -528,6 +528,14 @@ async function main() {
       const back = await changeAfter(page, () => page.click('#node-reset'), 'putting it back');
       assert.ok(back > 1, `putting the box back hardly changed the image: ${back.toFixed(2)}`);
       assert.equal((await pageSession(page)).params.render.nodes, undefined, 'no poses left');
+      // A click without a drag picks the box and moves nothing.
+      await page.mouse.move(x, y);
+      await page.mouse.down();
+      await page.waitForFunction(() => /short box/.test(document.getElementById('node-selected').textContent),
+        null, { timeout: PATIENCE_MS });
+      await page.mouse.up();
+      await page.waitForTimeout(300);
+      assert.equal((await pageSession(page)).params.render.nodes, undefined, 'a click moved the box');
       // The back wall is the room's: it does not move, and a drag there moves nothing.
       const [wx, wy] = project({ ...session.params.render, camera: scene.default_camera },
         [0, scene.bounds.max[1] * 0.8, scene.bounds.min[2]]);

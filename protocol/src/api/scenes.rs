@@ -140,7 +140,9 @@ pub struct NodeInfo {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale: Option<[f32; 3]>,
     /// Its transform to world space at rest, a column-major 4×4 matrix (a viewer turns a drag
-    /// in world space into a translation in the parent's space with the parent's).
+    /// in world space into a translation in the parent's space with the parent's). Zeros
+    /// from a server older than it.
+    #[serde(default)]
     pub world: [f32; 16],
 }
 

@@ -204,7 +204,8 @@ pub struct PrecomputeError {
 /// Options of `lightcast-server render`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct RenderArgs {
-    /// Scene: a .gltf/.glb file, or `procedural:cornell` / `procedural:street?blocks=N&detail=D&seed=S`.
+    /// Scene: a .gltf/.glb file, or `procedural:cornell` /
+    /// `procedural:street?blocks=N&detail=D&seed=S&materials=M&cars=C` (see the README).
     /// Default: the built-in Cornell box.
     #[arg(long)]
     pub scene: Option<String>,

@@ -496,8 +496,9 @@ impl ReadbackSet {
     }
 }
 
-/// Where a picked texel's position lies in [`ReadbackSet::pick`]: texture-to-buffer copies
-/// start at multiples of 256 bytes.
+/// Where a picked texel's position lies in [`ReadbackSet::pick`], after the id: a
+/// texture-to-buffer copy starts at a multiple of its texel size (16 bytes here); 256 keeps
+/// the two copies apart whatever the formats.
 const PICK_POSITION: u64 = wgpu::COPY_BYTES_PER_ROW_ALIGNMENT as u64;
 
 /// Marks a readback set free again when the frame using it is done (or abandoned).

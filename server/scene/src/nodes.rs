@@ -408,7 +408,10 @@ pub struct PoseError {
 /// Checks `requested` against the scene's `nodes` (their subtree `bounds` at rest, from
 /// [`subtree_bounds`]) and resolves every entry to a whole local transform (fields left out
 /// are the node's own). A pose must keep its node within `scene_bounds`: the light and shadow
-/// maps are fitted to them, and beyond them would clip the node.
+/// maps are fitted to them, and beyond them would clip the node. An entry without fields
+/// puts its node back (it is left out); one whose fields leave the node where it is stays in
+/// the list: it pins the node against an animation, and [`merge_poses`] drops it from a
+/// frame's poses.
 pub fn resolve_poses(
     nodes: &[Node],
     bounds: &[Option<Aabb>],
@@ -469,6 +472,9 @@ pub fn resolve_poses(
         };
         let rotation = match pose.rotation.map(Quat::from_array) {
             None => own.rotation,
+            // A unit quaternion is kept as given: normalising it again may change its last
+            // bit, and a node's own rotation sent back must leave it where it is.
+            Some(q) if q.is_finite() && (q.length() - 1.0).abs() < 1e-6 => q,
             Some(q) if q.is_finite() && q.length() > 1e-6 => q.normalize(),
             Some(q) => {
                 return Err(error(
@@ -490,14 +496,15 @@ pub fn resolve_poses(
                 ))
             }
         };
-        let posed = Transform {
-            translation,
-            rotation,
-            scale,
-        };
-        // A node put back where it is moves nothing (and needs no method that follows).
-        if posed != own {
-            poses.push((pose.node, posed));
+        if pose.translation.is_some() || pose.rotation.is_some() || pose.scale.is_some() {
+            poses.push((
+                pose.node,
+                Transform {
+                    translation,
+                    rotation,
+                    scale,
+                },
+            ));
         }
     }
     poses.sort_by_key(|(id, _)| *id);
@@ -544,9 +551,9 @@ pub fn resolve_poses(
     Ok(poses)
 }
 
-/// An animation's poses (`Animation::locals_at`) with `explicit` ones (from
-/// [`resolve_poses`]) over them, sorted by id, without the entries that leave a node where
-/// it is.
+/// A frame's poses: an animation's (`Animation::locals_at`; none without one) with `explicit`
+/// ones (from [`resolve_poses`]) over them, sorted by id, without the entries that leave a
+/// node where it is (a node put back moves nothing, and needs no method that follows).
 pub fn merge_poses(nodes: &[Node], animated: Vec<(u32, Transform)>, explicit: &Poses) -> Poses {
     let at: std::collections::HashMap<u32, usize> =
         nodes.iter().enumerate().map(|(i, n)| (n.id, i)).collect();
@@ -965,6 +972,60 @@ mod tests {
         assert_eq!(local.translation, Vec3::new(2.0, 1.0, -1.0));
         assert!(local.rotation.abs_diff_eq(quarter, 1e-6));
         assert_eq!(local.scale, Vec3::ONE, "the node's own");
+    }
+
+    /// `render.nodes` entries override an animation for their nodes, one that gives the node's
+    /// own pose too (it pins the node at rest); without an animation that moves nothing.
+    #[test]
+    fn explicit_poses_override_an_animation_even_at_rest() {
+        let mut nodes = vec![
+            node(0, None, 0..9),
+            node(1, Some(0), 3..6),
+            node(2, Some(0), 6..9),
+        ];
+        nodes[0].movable = false;
+        let bounds = vec![None; 3];
+        let room = Aabb {
+            min: Vec3::splat(-10.0),
+            max: Vec3::splat(10.0),
+        };
+        let back = resolve_poses(&nodes, &bounds, &room, &[pose(1)]).expect("valid");
+        assert_eq!(
+            back,
+            Poses::new(),
+            "an entry without fields puts its node back"
+        );
+        let own = lightcast_protocol::NodePose {
+            translation: Some([0.0; 3]),
+            rotation: Some([0.0, 0.0, 0.0, 1.0]),
+            ..pose(1)
+        };
+        let pin = resolve_poses(&nodes, &bounds, &room, &[own]).expect("valid");
+        assert_eq!(pin, vec![(1, Transform::IDENTITY)]);
+        assert_eq!(merge_poses(&nodes, Vec::new(), &pin), Poses::new());
+        let slid = |x: f32| Transform {
+            translation: Vec3::X * x,
+            ..Transform::IDENTITY
+        };
+        let animated = vec![(1, slid(1.0)), (2, slid(2.0))];
+        assert_eq!(
+            merge_poses(&nodes, animated.clone(), &pin),
+            vec![(2, slid(2.0))]
+        );
+        let moved = resolve_poses(
+            &nodes,
+            &bounds,
+            &room,
+            &[lightcast_protocol::NodePose {
+                translation: Some([3.0, 0.0, 0.0]),
+                ..pose(2)
+            }],
+        )
+        .expect("valid");
+        assert_eq!(
+            merge_poses(&nodes, animated, &moved),
+            vec![(1, slid(1.0)), (2, slid(3.0))]
+        );
     }
 
     #[test]

@@ -216,7 +216,7 @@ pub fn resolve(
     );
     let explicit = poses(&params.nodes, entry)?;
     let (poses, playing) = match &params.animation {
-        None => (explicit.clone(), None),
+        None => (merge_poses(&entry.scene.nodes, Vec::new(), &explicit), None),
         Some(a) => {
             let (index, time) = animation(a, &entry.scene)?;
             let scene = &entry.scene;
@@ -233,7 +233,7 @@ pub fn resolve(
     let moves = !poses.is_empty() || playing.is_some();
     if moves {
         (crate::gi::entry(g.method).1.follows_moved_nodes)(g).map_err(|e| {
-            let with = if explicit.is_empty() {
+            let with = if merge_poses(&entry.scene.nodes, Vec::new(), &explicit).is_empty() {
                 "animation"
             } else {
                 "nodes"

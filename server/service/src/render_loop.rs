@@ -1017,6 +1017,20 @@ fn finish(
     })
 }
 
+/// Node `id`'s local transform as the frame `plan` posed it (its own where no pose moved it).
+fn framed_pose(plan: &FramePlan, id: u32) -> Option<lightcast_protocol::NodePose> {
+    let posed = plan.resolved.settings.poses.iter().find(|(n, _)| *n == id);
+    let local = posed
+        .map(|(_, t)| *t)
+        .or_else(|| plan.lease_scene.scene.node(id)?.local)?;
+    Some(lightcast_protocol::NodePose {
+        node: id,
+        translation: Some(local.translation.into()),
+        rotation: Some(local.rotation.into()),
+        scale: Some(local.scale.into()),
+    })
+}
+
 /// Records a session frame and encodes it on the pool; the encoded frame lands in the
 /// session's latest-frame slot.
 fn deliver(
@@ -1036,6 +1050,7 @@ fn deliver(
     session.note_precomputed(needed, rendered.gi_pending);
     if let (Some(request), Some(picked)) = (plan.pick, rendered.pick) {
         let surface = picked.surface;
+        let movable = surface.and_then(|s| s.movable);
         // Nobody listening is no error: the client may have gone.
         let _ = session.events.send(ServerEvent::Picked {
             nonce: request.nonce,
@@ -1043,7 +1058,8 @@ fn deliver(
             y: request.y,
             position: surface.map(|s| s.position),
             node: surface.and_then(|s| s.node),
-            movable: surface.and_then(|s| s.movable),
+            movable,
+            pose: movable.and_then(|id| framed_pose(plan, id)),
         });
     }
     metrics::counter!(super::metrics::FRAMES_RENDERED).increment(1);

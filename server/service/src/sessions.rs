@@ -126,8 +126,55 @@ struct State {
     streamed_codec: Option<lightcast_protocol::Codec>,
     /// The (scene, kind) of the precomputation the client was last told its frames wait for.
     pending_told: Option<(String, String)>,
-    /// When `render.animation` was last set: a playing animation's clock starts there.
-    animation_from: Instant,
+    clock: AnimationClock,
+}
+
+impl State {
+    fn set_paused(&mut self, paused: bool, now: Instant) {
+        self.clock.set_paused(paused, now);
+        self.params.paused = paused;
+    }
+}
+
+/// How long a session's animation has played: from when `render.animation` was last set,
+/// standing still while the session is paused.
+#[derive(Clone, Copy, Debug)]
+struct AnimationClock {
+    from: Instant,
+    paused_at: Option<Instant>,
+}
+
+impl AnimationClock {
+    fn new(now: Instant, paused: bool) -> Self {
+        Self {
+            from: now,
+            paused_at: paused.then_some(now),
+        }
+    }
+
+    /// Starts again from 0 at `now` (a new animation or time was set).
+    fn restart(&mut self, now: Instant) {
+        *self = Self::new(now, self.paused_at.is_some());
+    }
+
+    /// Seconds played by `now`.
+    fn elapsed(&self, now: Instant) -> f64 {
+        self.paused_at
+            .unwrap_or(now)
+            .saturating_duration_since(self.from)
+            .as_secs_f64()
+    }
+
+    fn set_paused(&mut self, paused: bool, now: Instant) {
+        match (self.paused_at, paused) {
+            (None, true) => self.paused_at = Some(now),
+            (Some(since), false) => {
+                self.from += now.saturating_duration_since(since);
+                self.paused_at = None;
+            }
+            _ => {}
+        }
+    }
 }
 
 /// One client's stream.
@@ -166,6 +213,7 @@ impl Session {
         lease: SceneLease,
     ) -> Arc<Self> {
         let now = Instant::now();
+        let clock = AnimationClock::new(now, params.paused);
         Arc::new(Self {
             id,
             owner,
@@ -183,7 +231,7 @@ impl Session {
                 last_change: now,
                 next_due: now,
                 pending_told: None,
-                animation_from: now,
+                clock,
                 streamed_codec: None,
             }),
             stats: Mutex::new(SessionStats::default()),
@@ -288,10 +336,13 @@ impl Session {
     pub fn apply(&self, params: SessionParams, resolved: Resolved, lease: SceneLease, input: u64) {
         {
             let mut s = lock(&self.state);
+            let now = Instant::now();
             if s.params.render.animation != params.render.animation {
-                s.animation_from = Instant::now();
+                s.clock.restart(now);
             }
+            let paused = params.paused;
             s.params = params;
+            s.set_paused(paused, now);
             s.resolved = resolved;
             s.lease = lease;
             s.version += 1;
@@ -309,14 +360,13 @@ impl Session {
     pub fn animation_time(&self, now: Instant) -> Option<f32> {
         let s = lock(&self.state);
         let playing = s.resolved.playing.as_ref()?;
-        let elapsed = now.duration_since(s.animation_from).as_secs_f64();
-        Some(playing.time_at(&s.lease.0.scene, elapsed))
+        Some(playing.time_at(&s.lease.0.scene, s.clock.elapsed(now)))
     }
 
     pub fn set_paused(&self, paused: bool) {
         let mut s = lock(&self.state);
         if s.params.paused != paused {
-            s.params.paused = paused;
+            s.set_paused(paused, Instant::now());
             s.version += 1;
         }
     }
@@ -358,8 +408,12 @@ impl Session {
         // A playing animation changes every frame: never at rest.
         let playing = s.resolved.playing.is_some();
         let rested = !playing && now.duration_since(s.last_change) >= rest;
+        // A pick on a resting view renders its still again: the lossy frame would replace it.
         let want_still = s.still_requested
-            || (enc.still_after_ms > 0 && rested && !changed && s.still_version != s.version);
+            || (enc.still_after_ms > 0
+                && rested
+                && !changed
+                && (s.still_version != s.version || s.pick.is_some()));
         let due = want_still
             || changed
             || playing
@@ -401,7 +455,7 @@ impl Session {
         s.rendered_version = s.version;
         let mut resolved = s.resolved.clone();
         if let Some(p) = &resolved.playing {
-            let elapsed = now.duration_since(s.animation_from).as_secs_f64();
+            let elapsed = s.clock.elapsed(now);
             resolved.settings.poses = p.poses(&s.lease.0.scene, elapsed);
         }
         if moving && !want_still {
@@ -652,5 +706,32 @@ impl SessionRegistry {
         let removed = all.remove(id);
         metrics::gauge!(super::metrics::SESSIONS).set(all.len() as f64);
         removed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::AnimationClock;
+    use std::time::{Duration, Instant};
+
+    /// A paused session's animation stands still and goes on from there when it resumes; a
+    /// new animation starts from 0, still paused.
+    #[test]
+    fn the_animation_clock_stands_still_while_paused() {
+        let t0 = Instant::now();
+        let at = |s: f64| t0 + Duration::from_secs_f64(s);
+        let mut clock = AnimationClock::new(t0, false);
+        assert_eq!(clock.elapsed(at(1.0)), 1.0);
+        clock.set_paused(true, at(1.0));
+        assert_eq!(clock.elapsed(at(5.0)), 1.0);
+        clock.set_paused(true, at(6.0));
+        clock.set_paused(false, at(7.0));
+        assert_eq!(clock.elapsed(at(7.5)), 1.5);
+        clock.set_paused(true, at(8.0));
+        clock.restart(at(9.0));
+        assert_eq!(clock.elapsed(at(20.0)), 0.0);
+        clock.set_paused(false, at(20.0));
+        assert_eq!(clock.elapsed(at(22.0)), 2.0);
+        assert_eq!(AnimationClock::new(t0, true).elapsed(at(3.0)), 0.0);
     }
 }

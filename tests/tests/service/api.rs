@@ -692,9 +692,17 @@ async fn scenes_list_their_nodes_and_animations() {
         info["nodes"],
         json!([
             {"id": 0, "name": "ground", "movable": false,
-             "bounds": {"min": [0.0, 0.0, 0.0], "max": [1.0, 0.5, 1.0]}},
+             "bounds": {"min": [0.0, 0.0, 0.0], "max": [1.0, 0.5, 1.0]},
+             "translation": [0.0, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0, 1.0],
+             "scale": [1.0, 1.0, 1.0],
+             "world": [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+                       0.0, 0.0, 0.0, 1.0]},
             {"id": 1, "name": "mover", "parent": 0, "movable": true,
-             "bounds": {"min": [0.0, 0.5, 0.0], "max": [1.0, 0.5, 1.0]}},
+             "bounds": {"min": [0.0, 0.5, 0.0], "max": [1.0, 0.5, 1.0]},
+             "translation": [0.0, 0.5, 0.0], "rotation": [0.0, 0.0, 0.0, 1.0],
+             "scale": [1.0, 1.0, 1.0],
+             "world": [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+                       0.0, 0.5, 0.0, 1.0]},
         ]),
         "{info}"
     );
@@ -861,8 +869,17 @@ async fn clients_move_nodes_per_render_and_per_session() {
                     position,
                     node,
                     movable,
+                    pose,
                 } if n == nonce => {
                     assert_eq!((px, py), (x, y));
+                    // A drag starts from the node as that frame posed it: the tall box where
+                    // the socket moved it, the short box at rest.
+                    let translation = pose.as_ref().and_then(|p| p.translation);
+                    match movable {
+                        Some(2) => assert_eq!(translation, Some([0.3, 0.0, -0.3])),
+                        Some(1) => assert_eq!(translation, Some([0.33, 0.0, 0.37])),
+                        _ => assert_eq!(pose, None),
+                    }
                     break (position, node, movable);
                 }
                 _ => {}

@@ -862,9 +862,12 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
     stream
         .send(json!({"type": "nodes", "nodes": [{"node": 1, "scale": [0, 1, 1]}]}))
         .await;
-    // A pick outside the frame.
+    // Picks outside the frame.
     stream
         .send(json!({"type": "pick", "x": 1.5, "y": 0.5}))
+        .await;
+    stream
+        .send(json!({"type": "pick", "x": 0.5, "y": -0.1}))
         .await;
     let expected = [
         ("binary_not_accepted", None),
@@ -884,6 +887,7 @@ async fn bad_websocket_messages_get_precise_errors_and_the_server_keeps_serving(
         ("invalid_field", Some("nodes[1].rotation")),
         ("invalid_field", Some("nodes[0].scale")),
         ("invalid_field", Some("x")),
+        ("invalid_field", Some("y")),
     ];
     for (kind, field) in expected {
         let error = stream.next_error().await;

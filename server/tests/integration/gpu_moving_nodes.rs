@@ -372,3 +372,61 @@ fn a_pick_finds_the_node_a_texel_shows_where_it_is_posed() {
         outside.err()
     );
 }
+
+/// Seed 004 §3, as the test has it: a moved model's light caches on the GPU equal its
+/// caches at rest carried by the pose (the short box's frame stands at `base` unturned, so a
+/// cache at p goes to t + q·(p − base), its normal to q·n), every other cache is unchanged
+/// bit for bit (the tall box's too), and back at rest all are as distributed, bit for bit.
+#[test]
+fn posed_light_caches_are_the_rest_caches_carried_by_the_pose() {
+    use lightcast_server::gi::lightskin::cache_buffers::CacheBuffers;
+    use lightcast_server::gi::lightskin::caches::{precompute, CacheParams, LightCache};
+    use lightcast_server::gpu::readback::read_buffer;
+    let ctx = gpu();
+    let scene = procedural::cornell_box();
+    let set = precompute(&scene, &CacheParams::for_scene(&scene), &mut |_| {}).expect("caches");
+    let mut buffers = CacheBuffers::new(&ctx.device, &set);
+    let read = |buffers: &CacheBuffers| -> Vec<LightCache> {
+        let bytes = read_buffer(&ctx, &buffers.caches).expect("caches read back");
+        bytemuck::pod_collect_to_vec(&bytes)
+    };
+    let short = scene
+        .nodes
+        .iter()
+        .position(|n| n.id == 1)
+        .expect("the short box");
+    let base = scene.nodes[short].local.expect("TRS").translation;
+    let (to, turn) = (
+        base - Vec3::X * 0.45,
+        Quat::from_rotation_y(std::f32::consts::FRAC_PI_2),
+    );
+    buffers.set_poses(&ctx.queue, &scene.nodes, &moved_short_box(&scene));
+    let posed = read(&buffers);
+    let mut moved = 0;
+    for (got, rest) in posed.iter().zip(&set.caches) {
+        if rest.model != short as u32 {
+            assert_eq!(got, rest, "a cache of another model moved");
+            continue;
+        }
+        moved += 1;
+        let want_p = to + turn * (Vec3::from(rest.position) - base);
+        let want_n = turn * Vec3::from(rest.normal);
+        assert!(
+            Vec3::from(got.position).abs_diff_eq(want_p, 1e-5),
+            "{got:?} vs {want_p}"
+        );
+        assert!(
+            Vec3::from(got.normal).abs_diff_eq(want_n, 1e-5),
+            "{got:?} vs {want_n}"
+        );
+        let carried = LightCache {
+            position: got.position,
+            normal: got.normal,
+            ..*rest
+        };
+        assert_eq!(*got, carried, "only position and normal move");
+    }
+    assert!(moved > 10, "{moved} caches on the short box");
+    buffers.set_poses(&ctx.queue, &scene.nodes, &Poses::new());
+    assert_eq!(read(&buffers), set.caches, "back at rest");
+}

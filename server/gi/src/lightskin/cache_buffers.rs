@@ -47,8 +47,9 @@ impl CacheBuffers {
             caches: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("light caches"),
                 contents: bytemuck::cast_slice(caches),
-                // Moving models' caches are written again where a frame poses them.
-                usage: storage | wgpu::BufferUsages::COPY_DST,
+                // Moving models' caches are written again where a frame poses them (and read
+                // back by the test of that).
+                usage: storage | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
             }),
             vertex_caches: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("vertex caches"),
@@ -109,7 +110,12 @@ impl CacheBuffers {
             .moving
             .iter()
             .map(|&(index, rest)| {
-                let Some(node) = nodes.get(rest.model as usize) else {
+                // An unmoved model keeps its caches bit for bit (posed_worlds leaves its rest
+                // transform as it is; renormalising a normal could change its last bit).
+                let Some(node) = nodes
+                    .get(rest.model as usize)
+                    .filter(|n| worlds[rest.model as usize] != n.rest_world)
+                else {
                     return (index, rest);
                 };
                 let delta = worlds[rest.model as usize] * node.rest_world.inverse();

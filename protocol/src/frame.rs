@@ -20,7 +20,9 @@
 //!     56    4  f32 readback ms (waiting for the GPU copy to be mapped)
 //!     60    4  f32 GPU ms of all stages
 //!     64    4  payload length in bytes
-//!     68  8·N  per stage: u16 index into `/v1/server`'s `stages`, u16 zero, f32 GPU ms
+//!     68  8·N  per stage: u16 index into `/v1/server`'s `stages`, u16 flags (bit 0 reused:
+//!                its output came from an earlier frame made from the same inputs, no GPU
+//!                work this frame; 0 from servers before it), f32 GPU ms
 //! 68+8N    4  samples per pixel accumulated so far (progressive methods: `reference`; else 0)
 //! 72+8N    4  f32 relative standard error of that accumulation (0 when not progressive)
 //! ```
@@ -42,6 +44,8 @@ pub const FLAG_GI_PENDING: u8 = 2;
 pub const FLAG_MOVING: u8 = 4;
 /// An H.264 keyframe (IDR access unit with SPS and PPS): a decoder can start here.
 pub const FLAG_KEYFRAME: u8 = 8;
+/// A stage's flag: its output was reused from an earlier frame (see [`FrameHeader::reused`]).
+pub const STAGE_REUSED: u16 = 1;
 
 /// The decoded header of a binary frame message.
 #[derive(Clone, Debug, PartialEq)]
@@ -61,6 +65,9 @@ pub struct FrameHeader {
     pub payload_len: u32,
     /// (index into `/v1/server`'s `stages`, GPU ms).
     pub stages: Vec<(u16, f32)>,
+    /// The indices of `stages` entries whose output was reused from an earlier frame with
+    /// the same inputs (their ms are 0): work the server shared between frames.
+    pub reused: Vec<u16>,
     /// Samples per pixel a progressive method has accumulated for this image (0: the method
     /// is not progressive).
     pub samples: u32,
@@ -113,7 +120,12 @@ impl FrameHeader {
         out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
         for &(index, ms) in stages {
             out.extend_from_slice(&index.to_le_bytes());
-            out.extend_from_slice(&0u16.to_le_bytes());
+            let flags = if self.reused.contains(&index) {
+                STAGE_REUSED
+            } else {
+                0
+            };
+            out.extend_from_slice(&flags.to_le_bytes());
             out.extend_from_slice(&ms.to_le_bytes());
         }
         out.extend_from_slice(&self.samples.to_le_bytes());
@@ -164,11 +176,16 @@ impl FrameHeader {
                 actual: payload.len(),
             });
         }
-        let stages = (0..stage_count)
+        let stages: Vec<(u16, f32)> = (0..stage_count)
             .map(|i| {
                 let o = FIXED_LEN + STAGE_LEN * i;
                 (u16_at(o), f32_at(o + 4))
             })
+            .collect();
+        let reused = (0..stage_count)
+            .map(|i| FIXED_LEN + STAGE_LEN * i)
+            .filter(|&o| u16_at(o + 2) & STAGE_REUSED != 0)
+            .map(u16_at)
             .collect();
         let progress = FIXED_LEN + STAGE_LEN * stage_count;
         let (samples, relative_error) = if header_len >= progress + PROGRESS_LEN {
@@ -191,6 +208,7 @@ impl FrameHeader {
             gpu_ms: f32_at(60),
             payload_len,
             stages,
+            reused,
             samples,
             relative_error,
         };
@@ -231,7 +249,8 @@ mod tests {
             readback_ms: 0.25,
             gpu_ms: 3.75,
             payload_len: 5,
-            stages: vec![(0, 0.5), (12, 0.125)],
+            stages: vec![(0, 0.5), (12, 0.125), (2, 0.0)],
+            reused: vec![2],
             samples: 96,
             relative_error: 0.03125,
         }
@@ -244,9 +263,12 @@ mod tests {
         assert_eq!(&bytes[0..4], b"LCFR");
         assert_eq!(
             u16::from_le_bytes([bytes[6], bytes[7]]) as usize,
-            68 + 16 + 8
+            68 + 24 + 8
         );
-        assert_eq!(u32::from_le_bytes(bytes[84..88].try_into().unwrap()), 96);
+        assert_eq!(u32::from_le_bytes(bytes[92..96].try_into().unwrap()), 96);
+        // Stage flags: the third stage's bit 0 (reused), the others' 0.
+        let flags = |i: usize| u16::from_le_bytes([bytes[70 + 8 * i], bytes[71 + 8 * i]]);
+        assert_eq!([flags(0), flags(1), flags(2)], [0, 0, STAGE_REUSED]);
         assert_eq!(u64::from_le_bytes(bytes[8..16].try_into().unwrap()), 42);
         assert_eq!(u32::from_le_bytes(bytes[40..44].try_into().unwrap()), 320);
         assert_eq!(bytes[48], 1);

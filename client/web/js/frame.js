@@ -45,7 +45,8 @@ export function decodeFrame(buffer) {
   const stages = [];
   for (let i = 0; i < stageCount; i++) {
     const o = FIXED_LEN + STAGE_LEN * i;
-    stages.push({ index: v.getUint16(o, true), ms: v.getFloat32(o + 4, true) });
+    // Flags bit 0: the stage's output was reused from an earlier frame (0 ms, no GPU work).
+    stages.push({ index: v.getUint16(o, true), ms: v.getFloat32(o + 4, true), reused: (v.getUint16(o + 2, true) & 1) !== 0 });
   }
   const progress = FIXED_LEN + STAGE_LEN * stageCount;
   const hasProgress = headerLen >= progress + PROGRESS_LEN;

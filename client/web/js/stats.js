@@ -155,7 +155,9 @@ export class Stats {
       const name = document.createElement('td');
       name.textContent = this.stageName(s.index);
       const now = document.createElement('td');
-      now.textContent = s.ms.toFixed(3);
+      now.textContent = s.reused ? 'reused' : s.ms.toFixed(3);
+      if (s.reused) now.title = 'the output of an earlier frame with the same lights and poses';
+      tr.dataset.reused = String(s.reused);
       const avg = document.createElement('td');
       avg.textContent = recent.length ? ((sums.get(s.index) || 0) / recent.length).toFixed(3) : '–';
       tr.append(swatch, name, now, avg);

@@ -287,6 +287,10 @@ pub struct SessionStats {
 pub struct StageMs {
     pub stage: String,
     pub ms: f64,
+    /// Its output was reused from an earlier frame made from the same inputs (lights, poses):
+    /// no GPU work this frame, `ms` 0.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub reused: bool,
 }
 
 /// A session as `GET /v1/sessions/{id}` shows it.

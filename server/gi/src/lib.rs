@@ -160,6 +160,10 @@ pub struct FrameInputs<'a> {
     /// The movable nodes' poses, which the renderer's vertex buffer holds them in (a method
     /// with its own copy of the geometry, the reference's BVH, places it so).
     pub poses: &'a crate::scene::nodes::Poses,
+    /// The frame's lights and poses as bytes: a pass that does not depend on the camera
+    /// reuses its target where the target was made from the same (`passes::reuse`, as
+    /// `RsmPass::encode_stage` does); `None`: reuse is off, every pass runs.
+    pub shared: Option<&'a [u8]>,
     /// The debug view the frame is read back for: a method may compute what only that view
     /// shows (to hand it over in [`Method::capture_debug`]).
     pub debug_view: View,

@@ -676,6 +676,9 @@ pub struct Renderer {
     /// node (`scene::nodes::owners`, worked out on the first pose).
     poses: Poses,
     owners: Option<Vec<u32>>,
+    /// Passes that do not depend on the camera reuse their targets while the lights and
+    /// poses stay the same (`passes::reuse`); off: every pass runs every frame.
+    reuse: bool,
 }
 
 /// What an environment's evaluation depends on: its parameters and, for a sky, its sun.
@@ -727,6 +730,7 @@ impl Renderer {
             environment_buffer: EnvironmentBuffer::new(device),
             poses: Poses::new(),
             owners: None,
+            reuse: true,
             shared: SceneResources {
                 scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
                 camera: camera_buffer,
@@ -776,6 +780,12 @@ impl Renderer {
 
     pub fn scene(&self) -> &Scene {
         &self.shared.scene
+    }
+
+    /// Turns reuse of the camera-independent passes' targets on or off (on by default; off
+    /// measures what it saves): the images are the same either way, bit for bit.
+    pub fn set_reuse(&mut self, on: bool) {
+        self.reuse = on;
     }
 
     /// Whether indirect light blends the light caches of each triangle's three vertices
@@ -1096,13 +1106,28 @@ impl Renderer {
             },
         );
 
+        // What the passes that do not depend on the camera are made from: the lights uniform
+        // (their faces' matrices included) and the poses the vertex buffer holds.
+        let shared: Option<Vec<u8>> = self.reuse.then(|| {
+            [
+                bytemuck::bytes_of(&lights_uniform),
+                &crate::passes::reuse::pose_bytes(&settings.poses),
+            ]
+            .concat()
+        });
         let set = free_set(&self.shared.ctx, &sized.readbacks)?;
         let lease = SetLease(Arc::clone(&set.busy));
         let mut stages = self.timer.begin(&self.shared.ctx);
-        stages.stage(crate::passes::stages::SHADOW_MAP, |e| {
-            self.shadow_pass
-                .encode(e, shadow_map, &self.shared.scene_buffers)
-        })?;
+        if shadow_map.made.holds(shared.as_deref()) {
+            stages.reused(crate::passes::stages::SHADOW_MAP);
+        } else {
+            stages
+                .stage(crate::passes::stages::SHADOW_MAP, |e| {
+                    self.shadow_pass
+                        .encode(e, shadow_map, &self.shared.scene_buffers)
+                })
+                .inspect_err(|_| shadow_map.made.forget())?;
+        }
         stages.stage(crate::passes::stages::GBUFFER, |e| {
             self.gbuffer_pass
                 .encode(e, &sized.gbuffer, &self.shared.scene_buffers)
@@ -1131,6 +1156,7 @@ impl Renderer {
             history: settings.history,
             still: settings.still,
             poses: &settings.poses,
+            shared: shared.as_deref(),
             debug_view: settings.debug_view,
         };
         let Some(method) = self.methods[method_index].as_mut() else {

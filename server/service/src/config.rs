@@ -66,6 +66,11 @@ pub struct ServeArgs {
     /// (software, always built in). `/v1/server` says which is used.
     #[arg(long, value_enum, env = "LIGHTCAST_ENCODER", default_value = "auto")]
     pub encoder: super::video::EncoderChoice,
+    /// Render every pass of every frame: by default the shadow map and RSM passes are reused
+    /// from the frame before while the lights and poses are the same (sessions of one scene
+    /// share them; the images are the same bit for bit). For measuring what that saves.
+    #[arg(long, env = "LIGHTCAST_NO_PASS_REUSE")]
+    pub no_pass_reuse: bool,
     /// Log lines for people (`text`) or one JSON object per line for log collectors (`json`).
     #[arg(long, value_enum, env = "LIGHTCAST_LOG_FORMAT", default_value = "text")]
     pub log_format: LogFormat,

@@ -178,6 +178,7 @@ impl Service {
             Arc::clone(&scenes),
             Arc::clone(&sessions),
             encoder,
+            !args.no_pass_reuse,
         );
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await

@@ -203,6 +203,7 @@ impl Rendered {
             .map(|t| StageMs {
                 stage: t.stage.to_string(),
                 ms: t.ms,
+                reused: t.reused,
             })
             .collect()
     }
@@ -273,6 +274,8 @@ struct Loop {
     in_flight: Arc<InFlight>,
     /// Comparison renders by a hash of what they rendered (filled by the readback thread).
     comparisons: Arc<ComparisonCache>,
+    /// Renderers reuse the camera-independent passes' targets (`passes::reuse`).
+    reuse: bool,
 }
 
 /// Starts the render loop thread.
@@ -281,6 +284,7 @@ pub fn spawn(
     scenes: Arc<SceneRegistry>,
     sessions: Arc<SessionRegistry>,
     encoder: Arc<EncodePool>,
+    reuse: bool,
 ) -> (mpsc::Sender<Command>, std::thread::JoinHandle<()>) {
     let (tx, rx) = mpsc::channel();
     // Double buffering: one frame is read back while the loop encodes and submits the next,
@@ -307,6 +311,7 @@ pub fn spawn(
                 next_session: 0,
                 one_shot_turn: false,
                 comparisons: Arc::new(ComparisonCache::default()),
+                reuse,
             };
             l.run(&rx);
             // Closing the channel lets the readback thread finish the frames in flight.
@@ -423,10 +428,15 @@ impl Loop {
                 .filter(|key| key.has_variants())
                 .cloned(),
         );
-        let slot = self.renderers.entry(renderer_key).or_insert_with(|| Slot {
-            renderer: Renderer::new(self.ctx.clone(), Arc::clone(&scene.scene)),
-            applied: Vec::new(),
-            last_used: Instant::now(),
+        let reuse = self.reuse;
+        let slot = self.renderers.entry(renderer_key).or_insert_with(|| {
+            let mut renderer = Renderer::new(self.ctx.clone(), Arc::clone(&scene.scene));
+            renderer.set_reuse(reuse);
+            Slot {
+                renderer,
+                applied: Vec::new(),
+                last_used: Instant::now(),
+            }
         });
         slot.last_used = Instant::now();
         if let Some((key, data)) = &data {
@@ -1097,6 +1107,12 @@ fn deliver(
             .timings
             .iter()
             .map(|t| (t.stage.index(), t.ms as f32))
+            .collect(),
+        reused: rendered
+            .timings
+            .iter()
+            .filter(|t| t.reused)
+            .map(|t| t.stage.index())
             .collect(),
         samples: rendered.progress.map_or(0, |p| p.samples),
         relative_error: rendered.progress.map_or(0.0, |p| p.relative_standard_error),

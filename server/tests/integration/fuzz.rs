@@ -288,6 +288,7 @@ fn frame_header() -> impl Strategy<Value = FrameHeader> {
     let stage = (
         0..lightcast_server::gi::stages::all().len() as u16,
         any::<f32>(),
+        any::<bool>(),
     );
     (
         (any::<u64>(), any::<u64>(), any::<u64>(), any::<u64>()),
@@ -328,7 +329,13 @@ fn frame_header() -> impl Strategy<Value = FrameHeader> {
                     readback_ms: r,
                     gpu_ms: g,
                     payload_len: 0,
-                    stages,
+                    // A stage index is reused or not, every time it is listed.
+                    reused: stages
+                        .iter()
+                        .filter(|&&(i, _, _)| stages.iter().any(|&(j, _, r)| j == i && r))
+                        .map(|&(i, _, _)| i)
+                        .collect(),
+                    stages: stages.iter().map(|&(i, ms, _)| (i, ms)).collect(),
                     samples,
                     relative_error: err,
                 }

@@ -16,6 +16,7 @@ mod gpu_environment;
 mod gpu_glossy_senders;
 mod gpu_indirect_resolution;
 mod gpu_moving_nodes;
+mod gpu_pass_reuse;
 mod gpu_reference;
 mod gpu_scenes;
 mod gpu_stream_bench;

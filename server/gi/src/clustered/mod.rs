@@ -634,9 +634,8 @@ impl Method for Clustered {
         .bind(device, &self.blur.layout);
         self.encoded = true;
         self.visibility_mode = g.visibility;
-        stages.stage(crate::passes::stages::RSM, |e| {
-            self.rsm_pass.encode(e, rsm, &r.scene_buffers)
-        })?;
+        self.rsm_pass
+            .encode_stage(stages, rsm, &r.scene_buffers, frame.shared)?;
         stages.stage(stages::VPL_GENERATION, |e| {
             self.clustering
                 .encode_vpls(e, &clustering_group, g.vpl_count)

@@ -477,9 +477,7 @@ impl Method for LightSkin {
         );
         self.sampled = true;
         let sampling = &self.sampling;
-        stages.stage(crate::passes::stages::RSM, |e| {
-            sampling.encode_rsm(e, &r.scene_buffers)
-        })?;
+        sampling.encode_rsm(stages, &r.scene_buffers, frame.shared)?;
         if method == crate::gi::lightskin::BRSM {
             stages.stage(stages::IMPORTANCE, |e| sampling.encode_importance(e, gi))?;
             stages.stage(stages::CUMULATIVE_SUMS, |e| {

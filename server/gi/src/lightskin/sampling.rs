@@ -235,8 +235,16 @@ impl ValSampling {
         &self.res().vals
     }
 
-    pub fn encode_rsm(&self, encoder: &mut wgpu::CommandEncoder, scene: &SceneBuffers) {
-        self.rsm_pass.encode(encoder, &self.res().rsm, scene);
+    /// The `rsm` stage (reused where the RSM holds this frame's already, see
+    /// `RsmPass::encode_stage`).
+    pub fn encode_rsm(
+        &self,
+        stages: &mut crate::gpu::timing::FrameStages,
+        scene: &SceneBuffers,
+        shared: Option<&[u8]>,
+    ) -> Result<(), crate::gpu::GpuError> {
+        self.rsm_pass
+            .encode_stage(stages, &self.res().rsm, scene, shared)
     }
 
     pub fn encode_importance(&self, encoder: &mut wgpu::CommandEncoder, settings: &Settings) {

@@ -315,9 +315,8 @@ impl Method for RsmGather {
             rsm_glossy: &rsm.glossy,
         }
         .bind(device, &self.layout);
-        stages.stage(crate::passes::stages::RSM, |e| {
-            self.rsm_pass.encode(e, rsm, &r.scene_buffers)
-        })?;
+        self.rsm_pass
+            .encode_stage(stages, rsm, &r.scene_buffers, frame.shared)?;
         stages.stage(stages::RSM_GATHER, |e| {
             crate::passes::dispatch_2d(
                 e,

@@ -68,6 +68,20 @@ impl TimingSource {
 pub struct StageTiming {
     pub stage: Stage,
     pub ms: f64,
+    /// The stage's output was reused from an earlier frame made from the same inputs
+    /// ([`crate::passes::reuse`]): no GPU work this frame, `ms` 0.
+    pub reused: bool,
+}
+
+impl StageTiming {
+    /// A stage that ran this frame.
+    pub fn ran(stage: Stage, ms: f64) -> Self {
+        Self {
+            stage,
+            ms,
+            reused: false,
+        }
+    }
 }
 
 /// Most stages a frame may time, a repeated one counted each time (a multi-bounce render may
@@ -104,6 +118,7 @@ pub fn timestamp_staging(device: &wgpu::Device) -> wgpu::Buffer {
 pub struct PendingTimings {
     names: Vec<Stage>,
     ready: Vec<StageTiming>,
+    reused: Vec<Stage>,
     staging: Option<(wgpu::Buffer, f64)>,
 }
 
@@ -116,6 +131,7 @@ impl PendingTimings {
                 .map(|(buffer, period)| (super::readback::PendingMap::new(&buffer), period)),
             names: self.names,
             ready: self.ready,
+            reused: self.reused,
         }
     }
 }
@@ -124,15 +140,21 @@ impl PendingTimings {
 pub struct TimingsMap {
     names: Vec<Stage>,
     ready: Vec<StageTiming>,
+    reused: Vec<Stage>,
     map: Option<(super::readback::PendingMap, f64)>,
 }
 
 impl TimingsMap {
     /// The stage times, in the order each stage first ran, once the GPU work they time has
-    /// finished (the caller polled).
+    /// finished (the caller polled); then the reused stages, at 0 ms.
     pub fn finish(self) -> Result<Vec<StageTiming>, GpuError> {
+        let reused = self.reused.into_iter().map(|stage| StageTiming {
+            stage,
+            ms: 0.0,
+            reused: true,
+        });
         let Some((map, period_ns)) = self.map else {
-            return Ok(sum_repeated(self.ready));
+            return Ok(sum_repeated(self.ready.into_iter().chain(reused).collect()));
         };
         let bytes = map.finish()?;
         let ticks: &[u64] = bytemuck::cast_slice(&bytes);
@@ -140,10 +162,11 @@ impl TimingsMap {
             self.names
                 .iter()
                 .enumerate()
-                .map(|(i, &stage)| StageTiming {
-                    stage,
-                    ms: ticks[2 * i + 1].saturating_sub(ticks[2 * i]) as f64 * period_ns / 1e6,
+                .map(|(i, &stage)| {
+                    let ticks = ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
+                    StageTiming::ran(stage, ticks as f64 * period_ns / 1e6)
                 })
+                .chain(reused)
                 .collect(),
         ))
     }
@@ -200,6 +223,7 @@ impl FrameTimer {
             encoder: None,
             names: Vec::new(),
             wall: Vec::new(),
+            reused: Vec::new(),
             submitted: None,
         }
     }
@@ -212,6 +236,7 @@ pub struct FrameStages<'a> {
     encoder: Option<wgpu::CommandEncoder>,
     names: Vec<Stage>,
     wall: Vec<StageTiming>,
+    reused: Vec<Stage>,
     submitted: Option<wgpu::SubmissionIndex>,
 }
 
@@ -223,6 +248,11 @@ impl FrameStages<'_> {
                 label: Some("frame"),
             })
         })
+    }
+
+    /// Records that a stage's output is reused from an earlier frame: nothing is encoded.
+    pub fn reused(&mut self, name: Stage) {
+        self.reused.push(name);
     }
 
     /// Encodes one named stage.
@@ -248,10 +278,8 @@ impl FrameStages<'_> {
                 encode(self.encoder());
                 self.submit();
                 self.ctx.wait_idle()?;
-                self.wall.push(StageTiming {
-                    stage: name,
-                    ms: start.elapsed().as_secs_f64() * 1e3,
-                });
+                self.wall
+                    .push(StageTiming::ran(name, start.elapsed().as_secs_f64() * 1e3));
             }
         }
         Ok(())
@@ -296,6 +324,7 @@ impl FrameStages<'_> {
             PendingTimings {
                 names: self.names,
                 ready: self.wall,
+                reused: self.reused,
                 staging,
             },
             self.submitted,
@@ -309,7 +338,7 @@ mod tests {
 
     #[test]
     fn a_repeated_stage_reports_its_sum_where_it_first_ran() {
-        let t = |stage, ms| StageTiming { stage, ms };
+        let t = StageTiming::ran;
         let [first, light, pull, shade] = [0, 1, 2, 3].map(|i| Stage::new(i, "stage"));
         let frame = vec![
             t(first, 1.0),

@@ -23,6 +23,7 @@ pub mod exposure;
 pub mod frame_uniforms;
 pub mod gbuffer;
 pub mod indirect_resolution;
+pub mod reuse;
 pub mod rsm;
 pub mod scene_buffers;
 pub mod shadow_map;

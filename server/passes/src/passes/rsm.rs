@@ -10,6 +10,7 @@ use super::scene_buffers::SceneBuffers;
 use super::{ParamSlots, Target};
 use crate::gpu::readback::padded_bytes_per_row;
 use crate::gpu::shaders;
+use crate::gpu::{timing::FrameStages, GpuError};
 use crate::scene::{emitters, Scene};
 use bytemuck::{Pod, Zeroable};
 use lightcast_protocol::Senders;
@@ -161,6 +162,8 @@ pub struct Rsm {
     pub flux_area: Target,
     pub glossy: Target,
     depth: Target,
+    /// What its faces were last drawn from ([`RsmPass::encode_stage`]).
+    made: super::reuse::MadeFrom,
 }
 
 impl Rsm {
@@ -188,6 +191,7 @@ impl Rsm {
                 DEPTH_FORMAT,
                 wgpu::TextureUsages::RENDER_ATTACHMENT,
             ),
+            made: Default::default(),
         }
     }
 
@@ -240,6 +244,8 @@ pub struct RsmPass {
     emitter_face: bool,
     /// Faces drawn from the lights ([`Self::set_faces`]); the emitter face follows them.
     light_faces: u32,
+    /// Those faces as written, part of what an RSM is made from.
+    face_bytes: Vec<u8>,
 }
 
 /// Most emitter samples an emitter face holds: 256² points stand for the emitters finer than
@@ -388,6 +394,7 @@ impl RsmPass {
             emitters: None,
             emitter_face: false,
             light_faces: 0,
+            face_bytes: Vec::new(),
         }
     }
 
@@ -395,6 +402,7 @@ impl RsmPass {
     pub fn set_faces(&mut self, queue: &wgpu::Queue, faces: &[RsmFace]) {
         self.faces.write(queue, faces);
         self.light_faces = faces.len() as u32;
+        self.face_bytes = bytemuck::cast_slice(faces).to_vec();
     }
 
     /// Whether the next frame's RSM of `size`² faces ends with the emitter face: when `on`
@@ -411,6 +419,34 @@ impl RsmPass {
         }
         self.emitter_face = on && matches!(self.emitters, Some((_, Some(_))));
         self.emitter_face
+    }
+
+    /// The `rsm` stage of a frame: [`Self::encode`], or nothing where `rsm` already holds
+    /// what this frame's faces make from `shared` (the frame's lights and poses as bytes;
+    /// `None`: reuse off), the stage then reported as reused ([`super::reuse`]).
+    pub fn encode_stage(
+        &self,
+        stages: &mut FrameStages,
+        rsm: &Rsm,
+        scene: &SceneBuffers,
+        shared: Option<&[u8]>,
+    ) -> Result<(), GpuError> {
+        let inputs = shared.map(|s| {
+            [
+                s,
+                &self.face_bytes,
+                &[u8::from(self.emitter_face)],
+                &rsm.size.to_le_bytes(),
+            ]
+            .concat()
+        });
+        if rsm.made.holds(inputs.as_deref()) {
+            stages.reused(super::stages::RSM);
+            return Ok(());
+        }
+        stages
+            .stage(super::stages::RSM, |e| self.encode(e, rsm, scene))
+            .inspect_err(|_| rsm.made.forget())
     }
 
     /// Draws the lights' faces of `rsm` and, if [`Self::prepare_emitters`] said so, copies

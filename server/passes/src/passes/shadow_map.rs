@@ -17,6 +17,8 @@ pub struct ShadowMap {
     pub array_view: wgpu::TextureView,
     face_views: Vec<wgpu::TextureView>,
     pub size: u32,
+    /// The light faces and poses its depth was last drawn with ([`super::reuse`]).
+    pub made: super::reuse::MadeFrom,
 }
 
 impl ShadowMap {
@@ -56,6 +58,7 @@ impl ShadowMap {
             array_view,
             face_views,
             size,
+            made: Default::default(),
         }
     }
 

@@ -221,6 +221,13 @@ if [ "$what" = service ] || [ "$what" = all ]; then
   wait $server_pid || true
   trap - EXIT
   rm "$out/server.log"
+  # Issue 36: sessions of one scene with the camera-independent passes reused and not, under
+  # one light and under a light each (the control).
+  if ! $quick; then
+    echo "gpu-run: pass reuse at 1280×720" >&2
+    LIGHTCAST_SERVER_BIN="$server" LIGHTCAST_CLIENT_BIN="$client" \
+      "$(dirname "$0")/pass-reuse.sh" 10 1280 720 > "$out/gpu-pass-reuse.md"
+  fi
 fi
 if [ "$what" = stream ] || [ "$what" = all ]; then
   # The same flags as bench/results/lavapipe-stream-codecs.md, so the two compare: a drive

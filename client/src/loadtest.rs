@@ -51,6 +51,12 @@ pub struct LoadtestCmd {
     /// Allow a server that is not on this machine (load tests are for your own servers).
     #[arg(long)]
     allow_remote: bool,
+    /// Give each session a light of its own: the scene's default light (or `--light`'s) with
+    /// its intensity raised by 0.01 % per session index, so that no two sessions can share
+    /// passes (the server reuses a shadow map or RSM only for the same lights): the control
+    /// run for measuring what sharing saves.
+    #[arg(long)]
+    distinct_lights: bool,
     #[command(flatten)]
     render: RenderFlags,
 }
@@ -192,8 +198,12 @@ async fn run_one(
     for i in 0..sessions {
         let client = client.clone();
         let offset = ramp.mul_f64(f64::from(i) / f64::from(sessions));
+        let mut params = params.clone();
+        if cmd.distinct_lights {
+            distinct_light(&mut params, &scene.default_light, i);
+        }
         let opts = DriveOptions {
-            params: params.clone(),
+            params,
             // Spread the sessions around the orbit so they render different views.
             motion: Motion::Orbit {
                 base: orbit_start(
@@ -259,6 +269,16 @@ async fn run_one(
         );
     }
     Ok(report)
+}
+
+/// Session `index`'s own light in `params` (`--distinct-lights`): the one the params give,
+/// else `default`, its intensity raised by 0.01 % per index.
+fn distinct_light(params: &mut serde_json::Value, default: &lightcast_protocol::Light, index: u32) {
+    let render = &mut params["render"];
+    let mut light: lightcast_protocol::Light =
+        serde_json::from_value(render["light"].clone()).unwrap_or_else(|_| default.clone());
+    light.intensity *= 1.0 + 1e-4 * index as f32;
+    render["light"] = serde_json::json!(light);
 }
 
 /// `base` rotated `degrees` about its target's vertical axis.
@@ -388,6 +408,30 @@ fn print_table(r: &LoadReport) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn distinct_lights_differ_by_session_and_keep_the_rest() {
+        let light = lightcast_protocol::Light {
+            kind: lightcast_protocol::LightKind::Spot,
+            position: [0.0, 1.9, 0.0],
+            direction: [0.0, -1.0, 0.0],
+            color: [1.0; 3],
+            intensity: 10.0,
+            inner_cone: 0.5,
+            outer_cone: 0.7,
+        };
+        let lit = |index| {
+            let mut params = serde_json::json!({"render": {"width": 32}});
+            distinct_light(&mut params, &light, index);
+            serde_json::from_value::<lightcast_protocol::Light>(params["render"]["light"].clone())
+                .expect("a light")
+        };
+        assert_eq!(lit(0), light);
+        let third = lit(3);
+        assert!((third.intensity - 10.003).abs() < 1e-5, "{third:?}");
+        assert_eq!((third.position, third.kind), (light.position, light.kind));
+        assert_ne!(lit(1), lit(2));
+    }
 
     fn rendered() -> Rendered {
         Rendered {

@@ -26,21 +26,28 @@ run() { # $1: label, $2…: server flags
   LIGHTCAST_CACHE_DIR="$work/cache" "$server" --listen "127.0.0.1:$port" --allow-cpu-adapter "$@" \
     >"$work/server-$label.log" 2>&1 &
   pid=$!
+  local up=false
   for _ in $(seq 120); do
-    curl -fsS "http://127.0.0.1:$port/healthz" >/dev/null 2>&1 && break
+    kill -0 "$pid" 2>/dev/null || break
+    curl -fsS "http://127.0.0.1:$port/readyz" >/dev/null 2>&1 && { up=true; break; }
     sleep 1
   done
+  $up || { cat "$work/server-$label.log" >&2; echo "pass-reuse: the server did not start" >&2; exit 1; }
   curl -fsS "http://127.0.0.1:$port/v1/server" >"$work/server.json"
+  # One BRSM frame first, which waits for the scene's light caches: no run measures their build.
+  curl -fsS -o /dev/null -X POST "http://127.0.0.1:$port/v1/render" \
+    -d '{"render": {"width": 64, "height": 36, "gi": {"method": "brsm"}}}'
   for lights in shared distinct; do
     local extra=()
     [ "$lights" = distinct ] && extra=(--distinct-lights)
     echo "running: reuse $label, lights $lights" >&2
     "$client" --server "http://127.0.0.1:$port" --json loadtest --sessions 1,4,16 \
       --duration "$seconds" --ramp 2 --input-hz 20 --fps-cap 240 --width "$width" --height "$height" \
-      --gi brsm "${extra[@]}" >"$work/$label-$lights.json"
+      --gi brsm ${extra[@]+"${extra[@]}"} >"$work/$label-$lights.json"
   done
   kill "$pid"
   wait "$pid" 2>/dev/null || true
+  pid=""
 }
 run on
 run off --no-pass-reuse

@@ -271,14 +271,23 @@ async fn run_one(
     Ok(report)
 }
 
-/// Session `index`'s own light in `params` (`--distinct-lights`): the one the params give,
-/// else `default`, its intensity raised by 0.01 % per index.
+/// Session `index`'s own lights in `params` (`--distinct-lights`): those the params give
+/// (`render.lights`, else `render.light`), else `default`, each one's intensity raised by
+/// 0.01 % per index.
 fn distinct_light(params: &mut serde_json::Value, default: &lightcast_protocol::Light, index: u32) {
     let render = &mut params["render"];
-    let mut light: lightcast_protocol::Light =
+    let raise = |mut light: lightcast_protocol::Light| {
+        light.intensity *= 1.0 + 1e-4 * index as f32;
+        light
+    };
+    let lights = serde_json::from_value::<Vec<lightcast_protocol::Light>>(render["lights"].clone());
+    if let Ok(lights) = lights {
+        render["lights"] = serde_json::json!(lights.into_iter().map(raise).collect::<Vec<_>>());
+        return;
+    }
+    let light: lightcast_protocol::Light =
         serde_json::from_value(render["light"].clone()).unwrap_or_else(|_| default.clone());
-    light.intensity *= 1.0 + 1e-4 * index as f32;
-    render["light"] = serde_json::json!(light);
+    render["light"] = serde_json::json!(raise(light));
 }
 
 /// `base` rotated `degrees` about its target's vertical axis.
@@ -431,6 +440,18 @@ mod tests {
         assert!((third.intensity - 10.003).abs() < 1e-5, "{third:?}");
         assert_eq!((third.position, third.kind), (light.position, light.kind));
         assert_ne!(lit(1), lit(2));
+        let mut two = serde_json::json!({"render": {"lights": [light.clone(), light.clone()]}});
+        distinct_light(&mut two, &light, 2);
+        let lights: Vec<lightcast_protocol::Light> =
+            serde_json::from_value(two["render"]["lights"].clone()).expect("lights");
+        assert!(
+            lights.iter().all(|l| (l.intensity - 10.002).abs() < 1e-5),
+            "{lights:?}"
+        );
+        assert!(
+            two["render"].get("light").is_none(),
+            "no second light field"
+        );
     }
 
     fn rendered() -> Rendered {

@@ -65,8 +65,9 @@ pub struct FrameHeader {
     pub payload_len: u32,
     /// (index into `/v1/server`'s `stages`, GPU ms).
     pub stages: Vec<(u16, f32)>,
-    /// The indices of `stages` entries whose output was reused from an earlier frame with
-    /// the same inputs (their ms are 0): work the server shared between frames.
+    /// The stage indices (as in `stages`) whose output was reused from an earlier frame with
+    /// the same inputs (their ms are 0): work the server shared between frames. Decoded one
+    /// per flagged entry of `stages`.
     pub reused: Vec<u16>,
     /// Samples per pixel a progressive method has accumulated for this image (0: the method
     /// is not progressive).

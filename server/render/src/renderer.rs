@@ -679,6 +679,12 @@ pub struct Renderer {
     /// Passes that do not depend on the camera reuse their targets while the lights and
     /// poses stay the same (`passes::reuse`); off: every pass runs every frame.
     reuse: bool,
+    /// Part of what those targets are made from: bumped after a frame whose encoding failed
+    /// part-way (its passes were recorded as made but never submitted), so nothing made
+    /// before it is reused.
+    reuse_epoch: u64,
+    /// A frame is being encoded (set until [`Self::submit`] returns it).
+    encoding: bool,
 }
 
 /// What an environment's evaluation depends on: its parameters and, for a sky, its sun.
@@ -731,6 +737,8 @@ impl Renderer {
             poses: Poses::new(),
             owners: None,
             reuse: true,
+            reuse_epoch: 0,
+            encoding: false,
             shared: SceneResources {
                 scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
                 camera: camera_buffer,
@@ -1028,6 +1036,9 @@ impl Renderer {
     /// Encodes and submits one frame without waiting for it. Up to [`READBACK_RING`] frames
     /// of one size may be pending; beyond that this waits for the oldest to be read.
     pub fn submit(&mut self, settings: &RenderSettings) -> Result<PendingFrame, RenderError> {
+        if std::mem::take(&mut self.encoding) {
+            self.reuse_epoch += 1;
+        }
         settings.validate(&self.shared.ctx)?;
         // Emissive surfaces are one RSM face more in the methods that light from them
         // (`passes::rsm::EmitterFace`), where the scene has any.
@@ -1110,11 +1121,13 @@ impl Renderer {
         // (their faces' matrices included) and the poses the vertex buffer holds.
         let shared: Option<Vec<u8>> = self.reuse.then(|| {
             [
+                &self.reuse_epoch.to_le_bytes(),
                 bytemuck::bytes_of(&lights_uniform),
                 &crate::passes::reuse::pose_bytes(&settings.poses),
             ]
             .concat()
         });
+        self.encoding = true;
         let set = free_set(&self.shared.ctx, &sized.readbacks)?;
         let lease = SetLease(Arc::clone(&set.busy));
         let mut stages = self.timer.begin(&self.shared.ctx);
@@ -1207,6 +1220,7 @@ impl Renderer {
             }
         })?;
         let (timings, submission) = stages.submit_frame(&set.timestamps);
+        self.encoding = false;
         Ok(PendingFrame {
             ctx: self.shared.ctx.clone(),
             width,

@@ -66,9 +66,9 @@ pub struct ServeArgs {
     /// (software, always built in). `/v1/server` says which is used.
     #[arg(long, value_enum, env = "LIGHTCAST_ENCODER", default_value = "auto")]
     pub encoder: super::video::EncoderChoice,
-    /// Render every pass of every frame: by default the shadow map and RSM passes are reused
-    /// from the frame before while the lights and poses are the same (sessions of one scene
-    /// share them; the images are the same bit for bit). For measuring what that saves.
+    /// Render every pass of every frame: by default a shadow map or RSM an earlier frame drew
+    /// from the same lights and poses is reused (sessions of one scene share them; the images
+    /// are the same bit for bit). For measuring what that saves.
     #[arg(long, env = "LIGHTCAST_NO_PASS_REUSE")]
     pub no_pass_reuse: bool,
     /// Log lines for people (`text`) or one JSON object per line for log collectors (`json`).

@@ -225,7 +225,8 @@ pub enum Command {
 }
 
 fn record_metrics(frame: &Frame) {
-    for t in &frame.timings {
+    // A reused stage did no work: its 0 ms would drag the stage's quantiles down.
+    for t in frame.timings.iter().filter(|t| !t.reused) {
         super::metrics::record_stage(t.stage.name(), t.ms);
     }
     use super::metrics::{

@@ -96,3 +96,66 @@ fn reused_passes_leave_every_frame_as_it_was() {
         }
     }
 }
+
+/// A frame whose encoding fails part-way (LightSkin without its light caches) recorded its
+/// shadow map as drawn for its lights but never submitted it: the next frame with those lights
+/// draws it again (reuse equals no reuse), and frames of another size or under a uniform sky are
+/// what they are without reuse too.
+#[test]
+fn nothing_is_reused_from_a_frame_that_failed_or_of_other_inputs() {
+    let scene = procedural::cornell_box();
+    let facts = SceneFacts::of(&scene);
+    let gi = (gi::table(gi::lightskin::LIGHTSKIN).testing.small)(&facts);
+    let lit = settings(W, H, default_camera(&scene), default_light(&scene));
+    let mut moved_light = lit.clone();
+    moved_light.lights[0].position[2] -= 0.3;
+    let none = RenderSettings {
+        gi: gi::GiParams::new(gi::none::NONE),
+        ..lit.clone()
+    };
+    let lightskin = RenderSettings {
+        gi: gi.clone(),
+        ..moved_light.clone()
+    };
+    let mut on = Renderer::new(gpu(), scene.clone());
+    on.render(&none).expect("render");
+    assert!(
+        on.render(&lightskin).is_err(),
+        "LightSkin without its caches"
+    );
+    precompute(&mut on, &gi);
+    let mut off = Renderer::new(gpu(), scene.clone());
+    off.set_reuse(false);
+    precompute(&mut off, &gi);
+    let smaller = RenderSettings {
+        width: 32,
+        height: 24,
+        ..lightskin.clone()
+    };
+    let sky = RenderSettings {
+        environment: Some(lightcast_protocol::Environment {
+            kind: lightcast_protocol::EnvironmentKind::Uniform,
+            ..Default::default()
+        }),
+        ..lightskin.clone()
+    };
+    for (i, s) in [&lightskin, &smaller, &sky, &sky, &lightskin]
+        .into_iter()
+        .enumerate()
+    {
+        let (a, b) = (
+            on.render(s).expect("render"),
+            off.render(s).expect("render"),
+        );
+        assert!(a.hdr == b.hdr, "frame {i}: reuse changed the image");
+        if i == 0 {
+            assert_eq!(reused(&a), Vec::<&str>::new(), "after the failed frame");
+        }
+        if i == 3 {
+            assert!(
+                reused(&a).contains(&SHADOW_MAP.name()),
+                "the same sky again"
+            );
+        }
+    }
+}

@@ -118,7 +118,7 @@ pub fn timestamp_staging(device: &wgpu::Device) -> wgpu::Buffer {
 pub struct PendingTimings {
     names: Vec<Stage>,
     ready: Vec<StageTiming>,
-    reused: Vec<Stage>,
+    reused: Vec<(usize, Stage)>,
     staging: Option<(wgpu::Buffer, f64)>,
 }
 
@@ -140,36 +140,54 @@ impl PendingTimings {
 pub struct TimingsMap {
     names: Vec<Stage>,
     ready: Vec<StageTiming>,
-    reused: Vec<Stage>,
+    reused: Vec<(usize, Stage)>,
     map: Option<(super::readback::PendingMap, f64)>,
 }
 
 impl TimingsMap {
-    /// The stage times, in the order each stage first ran, once the GPU work they time has
-    /// finished (the caller polled); then the reused stages, at 0 ms.
+    /// The stage times, in the order each stage first ran (a reused one, at 0 ms, where it
+    /// would have run), once the GPU work they time has finished (the caller polled).
     pub fn finish(self) -> Result<Vec<StageTiming>, GpuError> {
-        let reused = self.reused.into_iter().map(|stage| StageTiming {
-            stage,
-            ms: 0.0,
-            reused: true,
-        });
-        let Some((map, period_ns)) = self.map else {
-            return Ok(sum_repeated(self.ready.into_iter().chain(reused).collect()));
+        let ran = match self.map {
+            None => self.ready,
+            Some((map, period_ns)) => {
+                let bytes = map.finish()?;
+                let ticks: &[u64] = bytemuck::cast_slice(&bytes);
+                self.names
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &stage)| {
+                        let ticks = ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
+                        StageTiming::ran(stage, ticks as f64 * period_ns / 1e6)
+                    })
+                    .collect()
+            }
         };
-        let bytes = map.finish()?;
-        let ticks: &[u64] = bytemuck::cast_slice(&bytes);
-        Ok(sum_repeated(
-            self.names
-                .iter()
-                .enumerate()
-                .map(|(i, &stage)| {
-                    let ticks = ticks[2 * i + 1].saturating_sub(ticks[2 * i]);
-                    StageTiming::ran(stage, ticks as f64 * period_ns / 1e6)
-                })
-                .chain(reused)
-                .collect(),
-        ))
+        Ok(sum_repeated(with_reused(ran, self.reused)))
     }
+}
+
+/// `ran` (one entry per stage run, in order) with each reused stage put back where it came
+/// (`(n, stage)`: after the first n stages that ran).
+fn with_reused(ran: Vec<StageTiming>, reused: Vec<(usize, Stage)>) -> Vec<StageTiming> {
+    let mut out = Vec::with_capacity(ran.len() + reused.len());
+    let mut reused = reused.into_iter().peekable();
+    for (i, t) in ran.into_iter().enumerate() {
+        while let Some((_, stage)) = reused.next_if(|(at, _)| *at <= i) {
+            out.push(StageTiming {
+                stage,
+                ms: 0.0,
+                reused: true,
+            });
+        }
+        out.push(t);
+    }
+    out.extend(reused.map(|(_, stage)| StageTiming {
+        stage,
+        ms: 0.0,
+        reused: true,
+    }));
+    out
 }
 
 /// One entry per stage: a stage that ran several times in a frame (a bounce each) reports the
@@ -236,7 +254,8 @@ pub struct FrameStages<'a> {
     encoder: Option<wgpu::CommandEncoder>,
     names: Vec<Stage>,
     wall: Vec<StageTiming>,
-    reused: Vec<Stage>,
+    /// Stages reused from an earlier frame, each after how many stages had run.
+    reused: Vec<(usize, Stage)>,
     submitted: Option<wgpu::SubmissionIndex>,
 }
 
@@ -252,7 +271,7 @@ impl FrameStages<'_> {
 
     /// Records that a stage's output is reused from an earlier frame: nothing is encoded.
     pub fn reused(&mut self, name: Stage) {
-        self.reused.push(name);
+        self.reused.push((self.names.len(), name));
     }
 
     /// Encodes one named stage.
@@ -335,6 +354,30 @@ impl FrameStages<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_reused_stage_is_listed_where_it_would_have_run() {
+        let [shadow, gbuffer, rsm, light] = [0, 1, 2, 3].map(|i| Stage::new(i, "stage"));
+        let reused = |stage| StageTiming {
+            stage,
+            ms: 0.0,
+            reused: true,
+        };
+        let ran = vec![StageTiming::ran(gbuffer, 1.0), StageTiming::ran(light, 2.0)];
+        assert_eq!(
+            with_reused(ran.clone(), vec![(0, shadow), (1, rsm)]),
+            vec![
+                reused(shadow),
+                StageTiming::ran(gbuffer, 1.0),
+                reused(rsm),
+                StageTiming::ran(light, 2.0)
+            ]
+        );
+        assert_eq!(
+            with_reused(ran.clone(), vec![(2, rsm)]),
+            vec![ran[0].clone(), ran[1].clone(), reused(rsm)]
+        );
+    }
 
     #[test]
     fn a_repeated_stage_reports_its_sum_where_it_first_ran() {

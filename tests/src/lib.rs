@@ -471,3 +471,48 @@ pub fn animated_glb() -> Vec<u8> {
     });
     glb(&doc, &bin)
 }
+
+/// A `.glb` of a ground triangle (4 m legs, facing up) lit by a spot light on the node "lamp",
+/// 1 m above it and aiming down, which the animation "swing" carries from (0.5, 1, 0.5) to
+/// (2.5, 1, 2.5) over 2 s (issue 35: lights move with the nodes carrying them).
+pub fn lamp_glb() -> Vec<u8> {
+    let floats = |v: &[f32]| v.iter().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>();
+    let bin = [
+        floats(&[0., 0., 0., 0., 0., 4., 4., 0., 0.]),
+        floats(&[0., 2.]),
+        floats(&[0.5, 1., 0.5, 2.5, 1., 2.5]),
+    ]
+    .concat();
+    let view = |offset: usize, length: usize| json!({"buffer": 0, "byteOffset": offset, "byteLength": length});
+    let down = -std::f32::consts::FRAC_1_SQRT_2;
+    let doc = json!({
+        "asset": {"version": "2.0"},
+        "extensionsUsed": ["KHR_lights_punctual"],
+        "extensions": {"KHR_lights_punctual": {"lights": [
+            {"type": "spot", "intensity": 20, "spot": {"innerConeAngle": 0.3, "outerConeAngle": 0.6}}
+        ]}},
+        "buffers": [{"byteLength": bin.len()}],
+        "bufferViews": [view(0, 36), view(36, 8), view(44, 24)],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 3,
+             "min": [0, 0, 0], "max": [4, 0, 4]},
+            {"bufferView": 1, "componentType": 5126, "type": "SCALAR", "count": 2,
+             "min": [0], "max": [2]},
+            {"bufferView": 2, "componentType": 5126, "type": "VEC3", "count": 2},
+        ],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+        "nodes": [
+            {"name": "ground", "mesh": 0, "children": [1]},
+            // −90° about x turns the light's −z axis down.
+            {"name": "lamp", "translation": [0.5, 1, 0.5], "rotation": [down, 0, 0, -down],
+             "extensions": {"KHR_lights_punctual": {"light": 0}}},
+        ],
+        "scenes": [{"nodes": [0]}],
+        "animations": [{
+            "name": "swing",
+            "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}],
+            "samplers": [{"input": 1, "output": 2}],
+        }],
+    });
+    glb(&doc, &bin)
+}

@@ -156,6 +156,9 @@ pub struct Scene {
     pub nodes: Vec<nodes::Node>,
     /// The glTF file's animations of its nodes.
     pub animations: Vec<nodes::Animation>,
+    /// The node carrying each of [`Self::lights`] (by index; shorter or `None`: a light of the
+    /// scene as a whole): a light under a movable node moves with it.
+    pub light_nodes: Vec<Option<u32>>,
 }
 
 impl Scene {
@@ -258,6 +261,7 @@ impl Scene {
             environment_image: None,
             nodes: Vec::new(),
             animations: Vec::new(),
+            light_nodes: Vec::new(),
         })
     }
 

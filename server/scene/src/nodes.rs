@@ -315,6 +315,47 @@ pub fn can_move(nodes: &[Node]) -> Vec<bool> {
     moves
 }
 
+/// `lights` (a scene's first lights, carried by `light_nodes`: [`crate::Scene::light_nodes`])
+/// where `poses` put the nodes carrying them: position and direction moved by the node's change
+/// from rest. A light whose node stays where it is comes back as it was, bit for bit.
+pub fn posed_lights(
+    nodes: &[Node],
+    lights: &[lightcast_protocol::Light],
+    light_nodes: &[Option<u32>],
+    poses: &Poses,
+) -> Vec<lightcast_protocol::Light> {
+    if poses.is_empty() || light_nodes.iter().all(Option::is_none) {
+        return lights.to_vec();
+    }
+    let worlds = posed_worlds(nodes, poses);
+    lights
+        .iter()
+        .enumerate()
+        .map(|(i, light)| {
+            let carrier = light_nodes
+                .get(i)
+                .copied()
+                .flatten()
+                .and_then(|id| nodes.iter().position(|n| n.id == id))
+                .filter(|&n| worlds[n] != nodes[n].rest_world);
+            let Some(n) = carrier else {
+                return light.clone();
+            };
+            let delta = worlds[n] * nodes[n].rest_world.inverse();
+            let direction = Vec3::from(light.direction);
+            lightcast_protocol::Light {
+                position: delta.transform_point3(light.position.into()).to_array(),
+                direction: delta
+                    .transform_vector3(direction)
+                    .try_normalize()
+                    .unwrap_or(direction)
+                    .to_array(),
+                ..light.clone()
+            }
+        })
+        .collect()
+}
+
 /// What a click on a surface of `vertex` picks (positions in `nodes`' order): the innermost
 /// node holding the vertex, and the node dragging it moves, its outermost movable ancestor or
 /// itself (`None` where nothing above it moves: a wheel drags its car). `None` where no node
@@ -1025,6 +1066,62 @@ mod tests {
         assert_eq!(
             merge_poses(&nodes, animated, &moved),
             vec![(1, slid(1.0)), (2, slid(3.0))]
+        );
+    }
+
+    /// A light carried by a moved node goes where the node takes it; one of an unmoved node,
+    /// or of the scene as a whole, stays bit for bit.
+    #[test]
+    fn lights_of_moved_nodes_move_with_them() {
+        let mut nodes = vec![
+            node(0, None, 0..9),
+            node(1, Some(0), 3..6),
+            node(2, Some(0), 6..9),
+        ];
+        nodes[0].movable = false;
+        let spot = lightcast_protocol::Light {
+            kind: lightcast_protocol::LightKind::Spot,
+            position: [1.0, 2.0, 0.0],
+            direction: [0.0, 0.0, -1.0],
+            color: [1.0; 3],
+            intensity: 5.0,
+            inner_cone: 0.2,
+            outer_cone: 0.4,
+        };
+        let lights = vec![spot.clone(), spot.clone(), spot.clone()];
+        let carried = [Some(1), Some(2), None];
+        let turn = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+        let poses = vec![(
+            1,
+            Transform {
+                translation: Vec3::new(0.0, 0.0, 3.0),
+                rotation: turn,
+                scale: Vec3::ONE,
+            },
+        )];
+        let moved = posed_lights(&nodes, &lights, &carried, &poses);
+        // Node 1 was at the origin unturned: p → t + q·p, d → q·d.
+        let want_p = Vec3::new(0.0, 0.0, 3.0) + turn * Vec3::new(1.0, 2.0, 0.0);
+        assert!(
+            Vec3::from(moved[0].position).abs_diff_eq(want_p, 1e-6),
+            "{:?}",
+            moved[0]
+        );
+        let want_d = turn * Vec3::NEG_Z;
+        assert!(
+            Vec3::from(moved[0].direction).abs_diff_eq(want_d, 1e-6),
+            "{:?}",
+            moved[0]
+        );
+        assert_eq!(
+            (moved[0].intensity, moved[0].kind),
+            (spot.intensity, spot.kind)
+        );
+        assert_eq!(moved[1], spot, "node 2 stays");
+        assert_eq!(moved[2], spot, "the scene's own light");
+        assert_eq!(
+            posed_lights(&nodes, &lights, &carried, &Poses::new()),
+            lights
         );
     }
 

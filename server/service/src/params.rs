@@ -39,6 +39,8 @@ pub struct Playing {
     pub speed: f32,
     /// `render.nodes`, which override it.
     pub explicit: Poses,
+    /// The frame's lights are the scene's: those carried by moving nodes move with them.
+    pub scene_lights: bool,
 }
 
 impl Playing {
@@ -53,6 +55,15 @@ impl Playing {
         }
     }
 
+    /// Poses `settings` `elapsed` seconds after the animation was set (and moves the scene's
+    /// lights with their nodes where the frame has the scene's lights).
+    pub fn pose(&self, settings: &mut RenderSettings, entry: &SceneEntry, elapsed: f64) {
+        settings.poses = self.poses(&entry.scene, elapsed);
+        if self.scene_lights {
+            settings.lights = scene_lights(entry, &settings.poses);
+        }
+    }
+
     /// The frame's poses `elapsed` seconds after it was set.
     pub fn poses(&self, scene: &crate::scene::Scene, elapsed: f64) -> Poses {
         let t = self.time_at(scene, elapsed);
@@ -63,6 +74,17 @@ impl Playing {
             &self.explicit,
         )
     }
+}
+
+/// The scene's lights (its default ones) with those carried by nodes moved by `poses`.
+fn scene_lights(entry: &SceneEntry, poses: &Poses) -> Vec<Light> {
+    let scene = &entry.scene;
+    crate::scene::nodes::posed_lights(
+        &scene.nodes,
+        &entry.default_lights,
+        &scene.light_nodes,
+        poses,
+    )
 }
 
 /// `nodes` (a `render.nodes` list, or a WebSocket `nodes` message's) checked against the
@@ -215,6 +237,8 @@ pub fn resolve(
         emitters_for(asked, entry.emitter_stand_in.as_ref(), &lights),
     );
     let explicit = poses(&params.nodes, entry)?;
+    // Without lights of its own the frame has the scene's, which move with their nodes.
+    let from_scene = params.light.is_none() && params.lights.is_none();
     let (poses, playing) = match &params.animation {
         None => (merge_poses(&entry.scene.nodes, Vec::new(), &explicit), None),
         Some(a) => {
@@ -226,9 +250,15 @@ pub fn resolve(
                 time,
                 speed: a.speed,
                 explicit: explicit.clone(),
+                scene_lights: from_scene,
             });
             (merge_poses(&scene.nodes, at, &explicit), playing)
         }
+    };
+    let lights = if from_scene {
+        scene_lights(entry, &poses)
+    } else {
+        lights
     };
     let moves = !poses.is_empty() || playing.is_some();
     if moves {

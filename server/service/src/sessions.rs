@@ -455,8 +455,7 @@ impl Session {
         s.rendered_version = s.version;
         let mut resolved = s.resolved.clone();
         if let Some(p) = &resolved.playing {
-            let elapsed = s.clock.elapsed(now);
-            resolved.settings.poses = p.poses(&s.lease.0.scene, elapsed);
+            p.pose(&mut resolved.settings, &s.lease.0, s.clock.elapsed(now));
         }
         if moving && !want_still {
             let settings = &mut resolved.settings;

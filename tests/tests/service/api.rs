@@ -907,6 +907,63 @@ async fn clients_move_nodes_per_render_and_per_session() {
     server.stop().await;
 }
 
+/// Issue 35: a light carried by an animated node moves with it: one-shot renders at the
+/// animation's start and end differ where only the lamp moved, bit for bit the same when the
+/// request brings a light of its own (which no node carries).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn lights_move_with_the_nodes_carrying_them() {
+    let server = TestServer::start(&[]).await;
+    let resp = server
+        .http
+        .post(server.url("/v1/scenes?name=lamp"))
+        .header("content-type", "model/gltf-binary")
+        .body(lightcast_e2e::lamp_glb())
+        .send()
+        .await
+        .expect("upload");
+    assert_eq!(resp.status(), 201);
+    let scene = resp.json::<Value>().await.expect("info")["id"]
+        .as_str()
+        .expect("id")
+        .to_owned();
+    let render = |time: f32, own_light: bool| {
+        let mut render = json!({"scene": scene, "width": 32, "height": 32,
+            "camera": {"position": [1.5, 3.0, 4.0], "target": [1.5, 0.0, 1.5], "fov_y_degrees": 60},
+            "shadow_map_size": 256, "gi": {"method": "none"},
+            "animation": {"name": "swing", "time": time}});
+        if own_light {
+            render["light"] = json!({"kind": "spot", "position": [1.5, 1.0, 1.5],
+                "direction": [0, -1, 0], "color": [1, 1, 1], "intensity": 20,
+                "inner_cone": 0.3, "outer_cone": 0.6});
+        }
+        let server = &server;
+        async move {
+            let resp = server
+                .http
+                .post(server.url("/v1/render"))
+                .json(&json!({"render": render}))
+                .send()
+                .await
+                .expect("render");
+            assert_eq!(resp.status(), 200);
+            resp.bytes().await.expect("png").to_vec()
+        }
+    };
+    let (start, end) = (render(0.0, false).await, render(2.0, false).await);
+    assert_ne!(start, end, "the lamp's light moved with it");
+    assert_eq!(
+        start,
+        render(0.0, false).await,
+        "the same time, the same pixels"
+    );
+    assert_eq!(
+        render(0.0, true).await,
+        render(2.0, true).await,
+        "a request's own light stays where it is"
+    );
+    server.stop().await;
+}
+
 /// Issue 35: a glTF animation poses a one-shot render at the time asked (the same pixels as
 /// the node posed by hand, bit for bit on replay), and a session plays, pauses and scrubs it.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -216,6 +216,7 @@ impl Loader<'_> {
                 .and_then(|e| e.khr_lights_punctual.as_ref())
             {
                 self.add_light(light.light.value(), &world, &part)?;
+                self.light_nodes.push(index as u32);
             }
             let position = nodes.len();
             nodes.push(Node {

@@ -233,6 +233,7 @@ pub fn load_gltf_slice(
         vertices: Vec::new(),
         indices: Vec::new(),
         lights: Vec::new(),
+        light_nodes: Vec::new(),
         cameras: Vec::new(),
     };
     let mut animations = loader.animations()?;
@@ -250,6 +251,7 @@ pub fn load_gltf_slice(
     for animation in &mut animations {
         animation.channels.retain(|c| drawn.contains(&c.node));
     }
+    let light_nodes = loader.light_nodes.into_iter().map(Some).collect();
     let mut scene = Scene::new(
         name,
         loader.vertices,
@@ -260,6 +262,7 @@ pub fn load_gltf_slice(
         loader.cameras,
     )
     .map_err(LoadError::Scene)?;
+    scene.light_nodes = light_nodes;
     scene
         .set_nodes(nodes, animations)
         .map_err(LoadError::Scene)?;
@@ -286,5 +289,7 @@ struct Loader<'a> {
     vertices: Vec<Vertex>,
     indices: Vec<u32>,
     lights: Vec<Light>,
+    /// The node carrying each light (its glTF index).
+    light_nodes: Vec<u32>,
     cameras: Vec<Camera>,
 }

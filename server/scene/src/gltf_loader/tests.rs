@@ -574,6 +574,8 @@ fn places_spot_and_point_lights_from_their_nodes() {
         (point.inner_cone, point.outer_cone),
         (0.0, std::f32::consts::FRAC_PI_4)
     );
+    // Each light knows the node carrying it, so it can move with it.
+    assert_eq!(scene.light_nodes, vec![Some(2), Some(3)]);
 }
 
 /// A file with five lights on five nodes: all five are the scene's lights and its default

@@ -104,6 +104,20 @@ impl TestServer {
         }
     }
 
+    /// POST /v1/scenes of a `.glb` named `name`; panics unless 201. The scene's info.
+    pub async fn upload_glb(&self, name: &str, glb: Vec<u8>) -> Value {
+        let resp = self
+            .http
+            .post(self.url(&format!("/v1/scenes?name={name}")))
+            .header("content-type", "model/gltf-binary")
+            .body(glb)
+            .send()
+            .await
+            .expect("upload");
+        assert_eq!(resp.status(), 201, "uploading {name}");
+        resp.json().await.expect("SceneInfo")
+    }
+
     /// POST /v1/sessions with `params`; panics unless 201.
     pub async fn create_session(&self, params: Value, token: Option<&str>) -> SessionCreated {
         let mut req = self.http.post(self.url("/v1/sessions")).json(&params);
@@ -435,84 +449,90 @@ pub fn triangle_glb() -> Vec<u8> {
     glb(&doc, &bin)
 }
 
-/// A `.glb` of two triangles: a static root "ground" and its child "mover", which the
-/// animation "slide" translates 1 m along x over 2 s (issue 35's moving objects).
-pub fn animated_glb() -> Vec<u8> {
+/// A `.glb` of one triangle (`corners`: x, y, z of each corner) on the root node "ground",
+/// the node `child` under it (as written) and the animation `animation` translating that
+/// child from `from` to `to` over 2 s; `extra` adds top-level fields (extensions).
+fn one_slide_glb(
+    corners: [f32; 9],
+    child: Value,
+    animation: &str,
+    (from, to): ([f32; 3], [f32; 3]),
+    extra: Value,
+) -> Vec<u8> {
     let floats = |v: &[f32]| v.iter().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>();
     let bin = [
-        floats(&[0., 0., 0., 0., 0., 1., 1., 0., 0.]),
+        floats(&corners),
         floats(&[0., 2.]),
-        floats(&[0., 0., 0., 1., 0., 0.]),
+        floats(&[from, to].concat()),
     ]
     .concat();
     let view = |offset: usize, length: usize| json!({"buffer": 0, "byteOffset": offset, "byteLength": length});
-    let doc = json!({
+    let corner = |i: usize| [corners[i], corners[3 + i], corners[6 + i]];
+    let (min, max): (Vec<f32>, Vec<f32>) = (0..3)
+        .map(|i| {
+            let c = corner(i);
+            (
+                c.iter().copied().fold(f32::MAX, f32::min),
+                c.iter().copied().fold(f32::MIN, f32::max),
+            )
+        })
+        .unzip();
+    let mut doc = json!({
         "asset": {"version": "2.0"},
         "buffers": [{"byteLength": bin.len()}],
         "bufferViews": [view(0, 36), view(36, 8), view(44, 24)],
         "accessors": [
             {"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 3,
-             "min": [0, 0, 0], "max": [1, 0, 1]},
+             "min": min, "max": max},
             {"bufferView": 1, "componentType": 5126, "type": "SCALAR", "count": 2,
              "min": [0], "max": [2]},
             {"bufferView": 2, "componentType": 5126, "type": "VEC3", "count": 2},
         ],
         "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
-        "nodes": [
-            {"name": "ground", "mesh": 0, "children": [1]},
-            {"name": "mover", "mesh": 0, "translation": [0, 0.5, 0]},
-        ],
+        "nodes": [{"name": "ground", "mesh": 0, "children": [1]}, child],
         "scenes": [{"nodes": [0]}],
         "animations": [{
-            "name": "slide",
+            "name": animation,
             "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}],
             "samplers": [{"input": 1, "output": 2}],
         }],
     });
+    if let (Some(doc), Value::Object(extra)) = (doc.as_object_mut(), extra) {
+        doc.extend(extra);
+    }
     glb(&doc, &bin)
+}
+
+/// A `.glb` of two triangles: a static root "ground" and its child "mover", which the
+/// animation "slide" translates 1 m along x over 2 s (issue 35's moving objects).
+pub fn animated_glb() -> Vec<u8> {
+    one_slide_glb(
+        [0., 0., 0., 0., 0., 1., 1., 0., 0.],
+        json!({"name": "mover", "mesh": 0, "translation": [0, 0.5, 0]}),
+        "slide",
+        ([0., 0., 0.], [1., 0., 0.]),
+        json!({}),
+    )
 }
 
 /// A `.glb` of a ground triangle (4 m legs, facing up) lit by a spot light on the node "lamp",
 /// 1 m above it and aiming down, which the animation "swing" carries from (0.5, 1, 0.5) to
 /// (2.5, 1, 2.5) over 2 s (issue 35: lights move with the nodes carrying them).
 pub fn lamp_glb() -> Vec<u8> {
-    let floats = |v: &[f32]| v.iter().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>();
-    let bin = [
-        floats(&[0., 0., 0., 0., 0., 4., 4., 0., 0.]),
-        floats(&[0., 2.]),
-        floats(&[0.5, 1., 0.5, 2.5, 1., 2.5]),
-    ]
-    .concat();
-    let view = |offset: usize, length: usize| json!({"buffer": 0, "byteOffset": offset, "byteLength": length});
     let down = -std::f32::consts::FRAC_1_SQRT_2;
-    let doc = json!({
-        "asset": {"version": "2.0"},
-        "extensionsUsed": ["KHR_lights_punctual"],
-        "extensions": {"KHR_lights_punctual": {"lights": [
-            {"type": "spot", "intensity": 20, "spot": {"innerConeAngle": 0.3, "outerConeAngle": 0.6}}
-        ]}},
-        "buffers": [{"byteLength": bin.len()}],
-        "bufferViews": [view(0, 36), view(36, 8), view(44, 24)],
-        "accessors": [
-            {"bufferView": 0, "componentType": 5126, "type": "VEC3", "count": 3,
-             "min": [0, 0, 0], "max": [4, 0, 4]},
-            {"bufferView": 1, "componentType": 5126, "type": "SCALAR", "count": 2,
-             "min": [0], "max": [2]},
-            {"bufferView": 2, "componentType": 5126, "type": "VEC3", "count": 2},
-        ],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
-        "nodes": [
-            {"name": "ground", "mesh": 0, "children": [1]},
-            // −90° about x turns the light's −z axis down.
-            {"name": "lamp", "translation": [0.5, 1, 0.5], "rotation": [down, 0, 0, -down],
-             "extensions": {"KHR_lights_punctual": {"light": 0}}},
-        ],
-        "scenes": [{"nodes": [0]}],
-        "animations": [{
-            "name": "swing",
-            "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}],
-            "samplers": [{"input": 1, "output": 2}],
-        }],
-    });
-    glb(&doc, &bin)
+    one_slide_glb(
+        [0., 0., 0., 0., 0., 4., 4., 0., 0.],
+        // −90° about x turns the light's −z axis down.
+        json!({"name": "lamp", "translation": [0.5, 1, 0.5], "rotation": [down, 0, 0, -down],
+               "extensions": {"KHR_lights_punctual": {"light": 0}}}),
+        "swing",
+        ([0.5, 1., 0.5], [2.5, 1., 2.5]),
+        json!({
+            "extensionsUsed": ["KHR_lights_punctual"],
+            "extensions": {"KHR_lights_punctual": {"lights": [
+                {"type": "spot", "intensity": 20,
+                 "spot": {"innerConeAngle": 0.3, "outerConeAngle": 0.6}}
+            ]}},
+        }),
+    )
 }

@@ -678,16 +678,9 @@ async fn scenes_list_their_nodes_and_animations() {
     );
     assert_eq!(cornell["animations"], json!([]));
 
-    let resp = server
-        .http
-        .post(server.url("/v1/scenes?name=slide"))
-        .header("content-type", "model/gltf-binary")
-        .body(lightcast_e2e::animated_glb())
-        .send()
-        .await
-        .expect("upload");
-    assert_eq!(resp.status(), 201);
-    let info: Value = resp.json().await.expect("SceneInfo");
+    let info = server
+        .upload_glb("slide", lightcast_e2e::animated_glb())
+        .await;
     assert_eq!(
         info["nodes"],
         json!([
@@ -913,19 +906,8 @@ async fn clients_move_nodes_per_render_and_per_session() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn lights_move_with_the_nodes_carrying_them() {
     let server = TestServer::start(&[]).await;
-    let resp = server
-        .http
-        .post(server.url("/v1/scenes?name=lamp"))
-        .header("content-type", "model/gltf-binary")
-        .body(lightcast_e2e::lamp_glb())
-        .send()
-        .await
-        .expect("upload");
-    assert_eq!(resp.status(), 201);
-    let scene = resp.json::<Value>().await.expect("info")["id"]
-        .as_str()
-        .expect("id")
-        .to_owned();
+    let info = server.upload_glb("lamp", lightcast_e2e::lamp_glb()).await;
+    let scene = info["id"].as_str().expect("id").to_owned();
     let render = |time: f32, own_light: bool| {
         let mut render = json!({"scene": scene, "width": 32, "height": 32,
             "camera": {"position": [1.5, 3.0, 4.0], "target": [1.5, 0.0, 1.5], "fov_y_degrees": 60},
@@ -969,19 +951,10 @@ async fn lights_move_with_the_nodes_carrying_them() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn animations_pose_renders_and_play_in_sessions() {
     let server = TestServer::start(&[]).await;
-    let resp = server
-        .http
-        .post(server.url("/v1/scenes?name=slide"))
-        .header("content-type", "model/gltf-binary")
-        .body(lightcast_e2e::animated_glb())
-        .send()
-        .await
-        .expect("upload");
-    assert_eq!(resp.status(), 201);
-    let scene = resp.json::<Value>().await.expect("info")["id"]
-        .as_str()
-        .expect("id")
-        .to_owned();
+    let info = server
+        .upload_glb("slide", lightcast_e2e::animated_glb())
+        .await;
+    let scene = info["id"].as_str().expect("id").to_owned();
     let camera =
         json!({"position": [0.5, 2.0, 2.5], "target": [0.5, 0.0, 0.5], "fov_y_degrees": 60});
     let raw = |extra: Value| {

@@ -20,7 +20,9 @@ struct CacheLightingParams {
     glossy_exponent: f32,
     // Side of each cache's visibility map (`cache_visibility`); 0: none.
     visibility_side: u32,
-    pad2: u32,
+    // Cameras in `views` the proxies are shared by (server/gi/src/lightskin/shared.rs); 0 or 1:
+    // `camera` alone.
+    view_count: u32,
 }
 
 @group(0) @binding(0) var<storage, read> params: CacheLightingParams;
@@ -35,6 +37,23 @@ struct CacheLightingParams {
 // Per cache, (visibility_side + 1)² octahedral grid vertices: how far the cache sees in each
 // direction (server/gi/src/lightskin/cache_visibility.rs).
 @group(0) @binding(9) var<storage, read> visibility: array<f32>;
+// The camera positions (xyz) of the sessions sharing these proxies: `view_count` of them.
+@group(0) @binding(10) var<storage, read> views: array<vec4<f32>>;
+
+// The direction v towards the viewer that eq. 14/15's glossy lobe is taken about: the camera,
+// or for proxies shared by sessions seeing the cache from several cameras the mean of their
+// unit directions (the rule of server/gi/src/lightskin/shared.rs; zero, so no glossy proxy,
+// where they cancel).
+fn view_direction(c: LightCache) -> vec3<f32> {
+    if params.view_count <= 1u {
+        return direction(params.camera - c.position);
+    }
+    var sum = vec3<f32>(0.0);
+    for (var j = 0u; j < params.view_count; j++) {
+        sum += direction(views[j].xyz - c.position);
+    }
+    return direction(sum);
+}
 
 // Mirrored by `cache_visibility::{SLACK, RAMP}`.
 const VISIBILITY_SLACK: f32 = 0.25;
@@ -189,7 +208,7 @@ fn accumulate_vals(
     let i = id.x;
     let in_range = i < params.cache_count;
     let c = load_cache(i);
-    let v = direction(params.camera - c.position);
+    let v = view_direction(c);
     var acc = zero_accum();
     if in_range && params.first_val > 0u {
         acc = accum[i];
@@ -217,7 +236,7 @@ fn finish_proxies(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let c = caches[i];
-    let v = direction(params.camera - c.position);
+    let v = view_direction(c);
     var acc = zero_accum();
     if params.val_count > 0u {
         acc = accum[i];

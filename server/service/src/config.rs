@@ -67,8 +67,9 @@ pub struct ServeArgs {
     #[arg(long, value_enum, env = "LIGHTCAST_ENCODER", default_value = "auto")]
     pub encoder: super::video::EncoderChoice,
     /// Render every pass of every frame: by default a shadow map or RSM an earlier frame drew
-    /// from the same lights and poses is reused (sessions of one scene share them; the images
-    /// are the same bit for bit). For measuring what that saves.
+    /// from the same lights and poses is reused (the images are the same bit for bit), and
+    /// sessions of one scene share LightSkin's and BRSM's light-side stages per tick (pooling
+    /// their views where they differ). For measuring what that saves.
     #[arg(long, env = "LIGHTCAST_NO_PASS_REUSE")]
     pub no_pass_reuse: bool,
     /// Log lines for people (`text`) or one JSON object per line for log collectors (`json`).

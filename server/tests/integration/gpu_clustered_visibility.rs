@@ -335,10 +335,6 @@ fn visibility_error_falls_with_the_val_count() {
     );
 }
 
-fn rgb(image: &[[f32; 4]]) -> Vec<[f32; 3]> {
-    image.iter().map(|p| [p[0], p[1], p[2]]).collect()
-}
-
 /// Figure 10 against the truth: a spot light aimed into the back corner behind the tall
 /// block, so that much of the indirect light must pass the blocks (the paper's Figure 9 lights
 /// a corner too). Against the path-traced reference with the same light source (`emitters`

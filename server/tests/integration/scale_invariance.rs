@@ -112,19 +112,6 @@ fn buffers<'a>(method: gi::GiMethod, frame: &'a Frame, want: &'a Frame) -> Vec<C
     out
 }
 
-/// Σ|a − b| / Σ|b| over the RGB of every pixel.
-fn relative_mae(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
-    assert_eq!(a.len(), b.len());
-    let (mut diff, mut total) = (0.0f64, 0.0f64);
-    for (p, q) in a.iter().zip(b) {
-        for c in 0..3 {
-            diff += f64::from((p[c] - q[c]).abs());
-            total += f64::from(q[c].abs());
-        }
-    }
-    (diff / total.max(f64::MIN_POSITIVE)) as f32
-}
-
 #[test]
 fn cornell_box_scaled_by_a_hundredth_and_a_thousand_renders_the_same_for_every_method() {
     let base = procedural::cornell_box();

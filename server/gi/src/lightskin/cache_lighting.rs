@@ -35,7 +35,8 @@ pub struct CacheLightingParams {
     pub glossy_exponent: f32,
     /// Side of each cache's visibility map (`cache_visibility`); 0: none.
     pub visibility_side: u32,
-    pub pad2: u32,
+    /// Cameras in the views buffer the proxies are shared by; 0 or 1: `camera` alone.
+    pub view_count: u32,
 }
 
 /// Mirrors `Accum` in `shaders/cache_lighting.wgsl`: per-cache sums carried between the
@@ -81,6 +82,7 @@ bind_group! {
         accum: bind::STORAGE_RW,
         rsm_glossy: bind::UINT_TEXTURE,
         visibility: bind::STORAGE,
+        views: bind::STORAGE,
     }
 }
 
@@ -89,6 +91,8 @@ pub struct CacheLightingPass {
     finish: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
     params: crate::passes::ParamSlots,
+    /// The camera positions of the sessions sharing the proxies (`shared::MAX_POOLED_VIEWS`).
+    views: wgpu::Buffer,
 }
 
 impl CacheLightingPass {
@@ -117,6 +121,12 @@ impl CacheLightingPass {
             ),
             layout,
             params,
+            views: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("shared views"),
+                size: (super::shared::MAX_POOLED_VIEWS * 16) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
         }
     }
 
@@ -138,15 +148,18 @@ impl CacheLightingPass {
             accum: &caches.accum,
             rsm_glossy: &rsm.glossy,
             visibility: &caches.visibility,
+            views: &self.views,
         }
         .bind(device, &self.layout)
     }
 
     /// Writes one parameter slot per chunk of VALs; returns the number of chunks to encode.
+    /// `views`: the camera of the frame, or of every session the proxies are shared by (the
+    /// glossy lobe's direction is then their mean, see `shared`).
     pub fn prepare(
         &self,
         queue: &wgpu::Queue,
-        camera: [f32; 3],
+        views: &[[f32; 3]],
         caches: &CacheBuffers,
         rsm: &Rsm,
         source: ValSource,
@@ -159,6 +172,12 @@ impl CacheLightingPass {
         };
         let chunks =
             crate::passes::chunk_ranges(val_count, u64::from(cache_count.max(1)), WORKGROUP);
+        let views = &views[..views.len().min(super::shared::MAX_POOLED_VIEWS)];
+        let camera = views.first().copied().unwrap_or_default();
+        if views.len() > 1 {
+            let positions: Vec<[f32; 4]> = views.iter().map(|&[x, y, z]| [x, y, z, 0.0]).collect();
+            queue.write_buffer(&self.views, 0, bytemuck::cast_slice(&positions));
+        }
         let params: Vec<CacheLightingParams> = chunks
             .iter()
             .map(|range| CacheLightingParams {
@@ -171,7 +190,7 @@ impl CacheLightingPass {
                 end_val: range.end,
                 glossy_exponent: glossy_exponent.unwrap_or(0.0),
                 visibility_side: caches.visibility_side,
-                pad2: 0,
+                view_count: views.len() as u32,
             })
             .collect();
         self.params.write(queue, &params);
@@ -248,7 +267,7 @@ mod tests {
                     "visibility_side",
                     offset_of!(CacheLightingParams, visibility_side),
                 ),
-                ("pad2", offset_of!(CacheLightingParams, pad2)),
+                ("view_count", offset_of!(CacheLightingParams, view_count)),
             ],
         );
         assert_struct(

@@ -124,8 +124,21 @@ impl ImportancePass {
         bands
     }
 
-    /// Gathers the view samples, then estimates importance band by band.
-    pub fn encode(
+    /// Gathers the view samples from the G-buffer into the bind group's `samples`.
+    pub fn encode_gather(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        bind_group: &wgpu::BindGroup,
+        sample_count: u32,
+    ) {
+        let mut pass = crate::passes::begin_compute(encoder, "view samples");
+        pass.set_bind_group(0, bind_group, &[crate::passes::ParamSlots::offset(0)]);
+        pass.set_pipeline(&self.gather);
+        pass.dispatch_workgroups(sample_count.div_ceil(64), 1, 1);
+    }
+
+    /// Estimates importance from the bind group's `samples`, band by band.
+    pub fn encode_estimate(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         bind_group: &wgpu::BindGroup,
@@ -133,9 +146,6 @@ impl ImportancePass {
         bands: &[std::ops::Range<u32>],
     ) {
         let mut pass = crate::passes::begin_compute(encoder, "importance");
-        pass.set_bind_group(0, bind_group, &[crate::passes::ParamSlots::offset(0)]);
-        pass.set_pipeline(&self.gather);
-        pass.dispatch_workgroups(params.sample_count.div_ceil(64), 1, 1);
         pass.set_pipeline(&self.estimate);
         for (b, rows) in bands.iter().enumerate() {
             pass.set_bind_group(

@@ -20,6 +20,7 @@ pub mod params;
 pub mod proxy_occlusion;
 pub mod sampling;
 pub mod shaders;
+pub mod shared;
 pub mod stages;
 pub mod val_select;
 pub mod views;
@@ -46,6 +47,7 @@ use lightcast_protocol::{GiMethod, GiParams, View};
 use params::CACHE_VISIBILITY;
 use proxy_occlusion::ProxyOcclusionPass;
 use sampling::{SamplingReadback, ValSampling};
+use shared::{Plan, Sharer, Sharing};
 use std::any::{Any, TypeId};
 use std::sync::Arc;
 
@@ -315,6 +317,26 @@ fn validate(gi: &GiParams, faces: u32) -> Result<(), InvalidSetting> {
     InvalidSetting::check_range("rsm_size", g.rsm_size, 16, max_rsm_size(faces))
 }
 
+/// How `frame` shares the light-side stages (`shared`'s rule): `None` where it does not.
+fn sharer(frame: &FrameInputs, cache_sets: u64) -> Option<Sharer> {
+    let (session, inputs) = frame.history.zip(frame.shared)?;
+    if frame.debug_view != View::FINAL {
+        return None;
+    }
+    let mut key = serde_json::to_vec(frame.settings).ok()?;
+    key.extend_from_slice(inputs);
+    key.extend_from_slice(&cache_sets.to_le_bytes());
+    let mut view = serde_json::to_vec(frame.camera).ok()?;
+    view.extend_from_slice(&frame.width.to_le_bytes());
+    view.extend_from_slice(&frame.height.to_le_bytes());
+    Some(Sharer {
+        session,
+        key,
+        view,
+        camera: frame.camera.position,
+    })
+}
+
 impl DebugCapture for sampling::SamplingCapture {
     fn read(
         self: Box<Self>,
@@ -356,6 +378,10 @@ pub struct LightSkin {
     vertices: usize,
     /// Whether the last frame ran the sampling stages (their buffers hold its results).
     sampled: bool,
+    /// Sessions sharing the light-side stages (`shared`).
+    sharing: Sharing,
+    /// Counts the cache sets loaded: a sharing key names the one its proxies were made for.
+    cache_sets: u64,
 }
 
 impl LightSkin {
@@ -370,6 +396,8 @@ impl LightSkin {
             caches: None,
             vertices: r.scene.vertices.len(),
             sampled: false,
+            sharing: Sharing::default(),
+            cache_sets: 0,
         }
     }
 
@@ -383,6 +411,7 @@ impl LightSkin {
             )));
         }
         self.caches = Some(CacheBuffers::new(&self.ctx.device, set));
+        self.cache_sets += 1;
         Ok(())
     }
 
@@ -444,25 +473,10 @@ impl Method for LightSkin {
             },
             _ => ValSource::EveryTexel,
         };
-        let lighting_chunks = self.cache_pass.prepare(
-            queue,
-            frame.camera.position,
-            caches,
-            self.sampling.rsm(),
-            source,
-            // The exponent the pixels' lobes take from the overridden roughness (within
-            // [1, 4096]), so caches and pixels agree.
-            roughness_override(frame.settings).map(crate::scene::brdf::phong_exponent),
-        );
-        let occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
+        let sharer = sharer(frame, self.cache_sets);
+        let plan = self.sharing.plan(sharer.as_ref(), frame.camera.position);
         self.indirect_pass
             .prepare(queue, true, r.ctx.primitive_index);
-        let lighting_group =
-            self.cache_pass
-                .bind(device, caches, self.sampling.vals(), self.sampling.rsm());
-        let occlusion_group =
-            self.occlusion_pass
-                .bind(device, &caches.caches, &caches.lighting, &caches.coverage);
         let indirect_group = self.indirect_pass.bind(
             device,
             &r.camera,
@@ -476,24 +490,82 @@ impl Method for LightSkin {
             frame.indirect,
         );
         self.sampled = true;
+        let brsm = method == crate::gi::lightskin::BRSM;
         let sampling = &self.sampling;
-        sampling.encode_rsm(stages, &r.scene_buffers, frame.shared)?;
-        if method == crate::gi::lightskin::BRSM {
-            stages.stage(stages::IMPORTANCE, |e| sampling.encode_importance(e, gi))?;
-            stages.stage(stages::CUMULATIVE_SUMS, |e| {
-                sampling.encode_cumulative_sums(e)
+        if brsm {
+            let sharing = &mut self.sharing;
+            stages.stage(stages::VIEW_SAMPLES, |e| {
+                sampling.encode_gather(e, gi);
+                if let Some(s) = &sharer {
+                    sharing.keep_samples(device, e, s.session, sampling.samples(), gi.view_samples);
+                }
             })?;
-            stages.stage(stages::VAL_SELECT, |e| sampling.encode_selection(e, gi))?;
         }
-        stages.stage(stages::CACHE_LIGHTING, |e| {
-            self.cache_pass
-                .encode(e, &lighting_group, caches.count, lighting_chunks)
-        })?;
-        if gi.occlusion {
-            stages.stage(stages::PROXY_OCCLUSION, |e| {
-                self.occlusion_pass
-                    .encode(e, &occlusion_group, caches.count, occlusion_chunks)
-            })?;
+        match plan {
+            // Another session's frame made them this tick for the same inputs.
+            Plan::Reuse => {
+                stages.reused(crate::passes::stages::RSM);
+                let sampled = [
+                    stages::IMPORTANCE,
+                    stages::CUMULATIVE_SUMS,
+                    stages::VAL_SELECT,
+                ];
+                let lit = [stages::CACHE_LIGHTING, stages::PROXY_OCCLUSION];
+                for stage in sampled
+                    .iter()
+                    .filter(|_| brsm)
+                    .chain(&lit[..1 + usize::from(gi.occlusion)])
+                {
+                    stages.reused(*stage);
+                }
+            }
+            Plan::Make(pool) => {
+                let lighting_chunks = self.cache_pass.prepare(
+                    queue,
+                    &pool.cameras,
+                    caches,
+                    sampling.rsm(),
+                    source,
+                    // The exponent the pixels' lobes take from the overridden roughness (within
+                    // [1, 4096]), so caches and pixels agree.
+                    roughness_override(frame.settings).map(crate::scene::brdf::phong_exponent),
+                );
+                let occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
+                let lighting_group =
+                    self.cache_pass
+                        .bind(device, caches, sampling.vals(), sampling.rsm());
+                let occlusion_group = self.occlusion_pass.bind(
+                    device,
+                    &caches.caches,
+                    &caches.lighting,
+                    &caches.coverage,
+                );
+                sampling.encode_rsm(stages, &r.scene_buffers, frame.shared)?;
+                if brsm {
+                    let ranges = self.sharing.sample_ranges(&pool);
+                    stages.stage(stages::IMPORTANCE, |e| {
+                        sampling.encode_importance(e, gi, ranges.as_deref())
+                    })?;
+                    stages.stage(stages::CUMULATIVE_SUMS, |e| {
+                        sampling.encode_cumulative_sums(e)
+                    })?;
+                    stages.stage(stages::VAL_SELECT, |e| sampling.encode_selection(e, gi))?;
+                }
+                stages.stage(stages::CACHE_LIGHTING, |e| {
+                    self.cache_pass
+                        .encode(e, &lighting_group, caches.count, lighting_chunks)
+                })?;
+                if gi.occlusion {
+                    stages.stage(stages::PROXY_OCCLUSION, |e| {
+                        self.occlusion_pass.encode(
+                            e,
+                            &occlusion_group,
+                            caches.count,
+                            occlusion_chunks,
+                        )
+                    })?;
+                }
+            }
         }
         stages.stage(stages::INDIRECT_LIGHT, |e| {
             self.indirect_pass

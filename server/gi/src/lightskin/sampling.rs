@@ -38,11 +38,18 @@ const MAX_SETS: usize = 4;
 struct Resources {
     key: Key,
     rsm: Rsm,
+    /// This frame's view samples, gathered from its G-buffer.
     samples: wgpu::Buffer,
+    /// The view samples importance is estimated from: this frame's, or those of every session
+    /// sharing the frame's VALs (`shared`), copied in.
+    pooled: wgpu::Buffer,
     importance: wgpu::Buffer,
     column_sums: wgpu::Buffer,
     row_sums: wgpu::Buffer,
     vals: wgpu::Buffer,
+    /// The importance pass bound to `samples` (the gather writes them).
+    gather_group: wgpu::BindGroup,
+    /// The importance pass bound to `pooled` (the estimate reads them).
     importance_group: wgpu::BindGroup,
     sums_group: wgpu::BindGroup,
     select_group: wgpu::BindGroup,
@@ -83,10 +90,22 @@ fn storage(device: &wgpu::Device, label: &str, bytes: u64) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some(label),
         size: bytes.max(16),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        usage: wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_SRC
+            | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
 }
+
+/// View samples to copy into the ones importance is estimated from: `count` of them from
+/// sample `first` of `buffer` on.
+pub struct SampleRange<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub first: u32,
+    pub count: u32,
+}
+
+const SAMPLE_BYTES: u64 = std::mem::size_of::<ViewSample>() as u64;
 
 impl ValSampling {
     pub fn new(
@@ -180,7 +199,12 @@ impl ValSampling {
         let samples = storage(
             device,
             "view samples",
-            u64::from(settings.view_samples) * std::mem::size_of::<ViewSample>() as u64,
+            u64::from(settings.view_samples) * SAMPLE_BYTES,
+        );
+        let pooled = storage(
+            device,
+            "pooled view samples",
+            u64::from(settings.view_samples) * SAMPLE_BYTES,
         );
         let importance = storage(device, "importance", texels * 4);
         let column_sums = storage(device, "column sums", texels * 4);
@@ -190,9 +214,12 @@ impl ValSampling {
             "selected vals",
             u64::from(settings.val_count) * std::mem::size_of::<Val>() as u64,
         );
+        let gather_group = self
+            .importance_pass
+            .bind(device, gbuffer, &rsm, &samples, &importance);
         let importance_group =
             self.importance_pass
-                .bind(device, gbuffer, &rsm, &samples, &importance);
+                .bind(device, gbuffer, &rsm, &pooled, &importance);
         let sums_group = self
             .sums_pass
             .bind(device, &importance, &column_sums, &row_sums);
@@ -210,10 +237,12 @@ impl ValSampling {
             key,
             rsm,
             samples,
+            pooled,
             importance,
             column_sums,
             row_sums,
             vals,
+            gather_group,
             importance_group,
             sums_group,
             select_group,
@@ -247,9 +276,47 @@ impl ValSampling {
             .encode_stage(stages, &self.res().rsm, scene, shared)
     }
 
-    pub fn encode_importance(&self, encoder: &mut wgpu::CommandEncoder, settings: &Settings) {
+    /// This frame's view samples (after [`Self::encode_gather`]).
+    pub fn samples(&self) -> &wgpu::Buffer {
+        &self.res().samples
+    }
+
+    /// Gathers this frame's N_VS view samples from its G-buffer.
+    pub fn encode_gather(&self, encoder: &mut wgpu::CommandEncoder, settings: &Settings) {
+        self.importance_pass.encode_gather(
+            encoder,
+            &self.res().gather_group,
+            settings.view_samples,
+        );
+    }
+
+    /// Eq. 10–11's importance from the view samples of `sources`, copied in order (N_VS in
+    /// all; `None`: this frame's own).
+    pub fn encode_importance(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        settings: &Settings,
+        sources: Option<&[SampleRange]>,
+    ) {
         let res = self.res();
-        self.importance_pass.encode(
+        let own = [SampleRange {
+            buffer: &res.samples,
+            first: 0,
+            count: settings.view_samples,
+        }];
+        let mut at = 0;
+        for s in sources.unwrap_or(&own) {
+            let count = s.count.min(settings.view_samples - at);
+            encoder.copy_buffer_to_buffer(
+                s.buffer,
+                u64::from(s.first) * SAMPLE_BYTES,
+                &res.pooled,
+                u64::from(at) * SAMPLE_BYTES,
+                Some(u64::from(count) * SAMPLE_BYTES),
+            );
+            at += count;
+        }
+        self.importance_pass.encode_estimate(
             encoder,
             &res.importance_group,
             &importance_params(&res.rsm, settings),
@@ -300,7 +367,7 @@ impl ValSampling {
             ],
             rsm_glossy: readback(encoder, &rsm.glossy.texture, 16),
             buffers: [
-                &res.samples,
+                &res.pooled,
                 &res.importance,
                 &res.column_sums,
                 &res.row_sums,

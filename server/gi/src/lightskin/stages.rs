@@ -2,6 +2,9 @@
 
 use crate::gpu::timing::Stage;
 
+/// The frame's view samples gathered from its G-buffer (`brsm`, eq. 10–11; per session,
+/// also where the light-side stages are shared, see `shared`).
+pub const VIEW_SAMPLES: Stage = Stage::new(30, "view_samples");
 /// Importance of every RSM texel from the view samples (`brsm`, eq. 10).
 pub const IMPORTANCE: Stage = Stage::new(3, "importance");
 /// Cumulative importance (`brsm`).
@@ -16,6 +19,7 @@ pub const PROXY_OCCLUSION: Stage = Stage::new(7, "proxy_occlusion");
 pub const INDIRECT_LIGHT: Stage = Stage::new(8, "indirect_light");
 
 pub const ALL: &[Stage] = &[
+    VIEW_SAMPLES,
     IMPORTANCE,
     CUMULATIVE_SUMS,
     VAL_SELECT,

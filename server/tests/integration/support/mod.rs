@@ -423,3 +423,21 @@ pub fn not_exercised(reason: &str) {
     );
     eprintln!("{reason}: not exercised here");
 }
+
+/// Σ|a − b| / Σ|b| over the RGB of every pixel.
+pub fn relative_mae(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    let (mut diff, mut total) = (0.0f64, 0.0f64);
+    for (p, q) in a.iter().zip(b) {
+        for c in 0..3 {
+            diff += f64::from((p[c] - q[c]).abs());
+            total += f64::from(q[c].abs());
+        }
+    }
+    (diff / total.max(f64::MIN_POSITIVE)) as f32
+}
+
+/// The RGB of an RGBA image (what `quality::errors` compares with its truth).
+pub fn rgb(image: &[[f32; 4]]) -> Vec<[f32; 3]> {
+    image.iter().map(|p| [p[0], p[1], p[2]]).collect()
+}

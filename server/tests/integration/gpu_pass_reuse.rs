@@ -225,13 +225,22 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
         off.set_reuse(false);
         precompute(&mut on, &base.gi);
         precompute(&mut off, &base.gi);
-        // Session, its settings, whether it reuses what another session's frame made.
+        // Session, its settings, whether it reuses what another session's frame made: sessions
+        // 2 and 3 join (each makes them again with its view added), session 1's next frame
+        // starts a tick the others reuse, session 2's new light makes its own, and so do the
+        // others' next frames (the proxies now hold session 2's).
         let sequence = [
+            (1, &base, false),
+            (2, &base, false),
+            (3, &base, false),
             (1, &base, false),
             (2, &base, true),
             (3, &base, true),
             (1, &base, false),
+            (3, &base, true),
             (2, &other_light, false),
+            (3, &base, false),
+            (1, &base, false),
             (3, &base, false),
             (1, &base, true),
         ];
@@ -316,8 +325,13 @@ fn sessions_of_two_views_pool_them_within_a_stated_tolerance() {
             first == alone[0],
             "{method}: one view is the unshared frame"
         );
-        session(2, &far);
+        // Session 2 joins: its first frame is made with its view pooled, as the next tick's.
+        let joined = session(2, &far);
         let pooled = [session(1, &near), session(2, &far)];
+        assert!(
+            joined == pooled[1],
+            "{method}: the newcomer's view was pooled at once"
+        );
         for (v, name) in ["near", "far"].iter().enumerate() {
             let change = relative_mae(&pooled[v], &alone[v]);
             let error = |image: &[[f32; 4]]| errors(&truths[v], image, w as usize).mae_relative;

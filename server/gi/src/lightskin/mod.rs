@@ -489,7 +489,8 @@ impl Method for LightSkin {
             },
             frame.indirect,
         );
-        self.sampled = true;
+        // What the sampling buffers and proxies hold is this frame's only where it makes them.
+        self.sampled = matches!(plan, Plan::Make(_));
         let brsm = method == crate::gi::lightskin::BRSM;
         let sampling = &self.sampling;
         if brsm {

@@ -8,24 +8,31 @@
 //!
 //! **The rule.** A frame shares when it is a session's (it has a history id), pass reuse is
 //! on and it shows the final image. Its *key* is every input of the shared stages that is not
-//! the camera: the method and its parameters, the lights uniform and poses (`passes::reuse`,
-//! with the renderer's epoch) and which cache set is loaded. What the proxies hold was made
-//! for one key; a frame with that key uses them unless its session has already used them
-//! since they were made (then a tick has passed: they are made again), and a frame with
-//! another key makes them for its own (so a session that changes its light stops sharing at
-//! once, and its frame is what it would be alone). Two inputs do depend on the camera, and
-//! are pooled over the *views* (camera and size) of the sessions that shared the last tick
-//! or this one, identical views counted once:
-//! - BRSM's N_VS view samples (eq. 10–11): view j of m gives its first N_VS/m Halton
-//!   samples, so the VALs are drawn for what every sharing session sees;
-//! - the direction v of the glossy proxies' lobe (eq. 14/15): the mean of the unit directions
-//!   from the cache to each view's camera.
+//! the camera: the method and its (resolved) parameters, the lights uniform and poses
+//! (`passes::reuse`, with the renderer's epoch) and which cache set is loaded; it is
+//! conservative (a parameter only the per-view stages read, such as `indirect_downscale`,
+//! separates sessions too). The proxies hold what one key made, from the views of a set of
+//! sessions; a frame with that key
+//! - reuses them if its session's view was among those and it has not used them yet;
+//! - makes them again, adding its view, if its session is new to them (a session joining);
+//! - starts a new *tick* if its session has used them already: they are made from the views of
+//!   every session that rendered with this key in the last tick (their latest frames' views);
 //!
-//! With one view (one session, or sessions looking through the same camera) this is exactly
-//! the unshared frame, bit for bit; with several, a session's indirect light differs from its
-//! unshared frame by what `bench/results/*-shared-views.md` measures. Frames that do not
-//! share (one-shot renders, reuse off, debug views) use their own view alone and leave
-//! nothing to share.
+//! and a frame with another key makes them from its own view alone (so a session that changes
+//! its light stops sharing at once, and its frame is what it would be alone). The proxies hold
+//! one key's at a time: sessions of two keys taking turns make them every frame, each from its
+//! key's sessions' views. Two inputs depend on the camera and are pooled over
+//! the *views* (camera and frame size) of those sessions, equal views counted once:
+//! - BRSM's N_VS view samples (eq. 10–11): view j of m gives its first N_VS/m Halton
+//!   samples, so the VALs are drawn for what every sharing session saw;
+//! - the direction v of the glossy proxies' lobe (eq. 14/15): the mean of the unit directions
+//!   from the cache to each view's camera (zero, so no glossy proxy, where they cancel).
+//!
+//! With one view (one session, or sessions whose cameras and sizes are equal and stay so) this
+//! is exactly the unshared frame, bit for bit; with several, a session's indirect light differs
+//! from its unshared frame by what `bench/results/lavapipe-shared-views.md` measures. A moving
+//! camera's view joins the pool at the next tick. Frames that do not share (one-shot renders,
+//! reuse off, debug views) use their own view alone and leave nothing to share.
 
 use super::sampling::SampleRange;
 
@@ -59,6 +66,15 @@ pub struct Pool {
     pub slots: Option<Vec<usize>>,
 }
 
+/// What the proxies hold, made by a sharing frame.
+struct Made {
+    key: Vec<u8>,
+    /// The sessions whose views they were made from.
+    pooled: Vec<u64>,
+    /// The sessions that rendered with them (their maker first).
+    users: Vec<u64>,
+}
+
 struct Slot {
     session: u64,
     key: Vec<u8>,
@@ -71,9 +87,9 @@ struct Slot {
 /// The state of sharing on one `LightSkin`.
 #[derive(Default)]
 pub struct Sharing {
-    /// The key the proxies were last made for by a sharing frame, and the sessions that used
-    /// them since (its maker first).
-    made: Option<(Vec<u8>, Vec<u64>)>,
+    /// What the proxies hold, if a sharing frame made them.
+    made: Option<Made>,
+    /// Counts the ticks: a tick starts where a session comes again to the proxies it used.
     tick: u64,
     slots: Vec<Slot>,
     /// Every slot's view samples, `per_slot` each, copied in after each sharing frame's gather.
@@ -91,17 +107,43 @@ impl Sharing {
                 slots: None,
             });
         };
-        if let Some((key, users)) = &mut self.made {
-            if *key == s.key && !users.contains(&s.session) {
-                users.push(s.session);
+        let (pooled, users) = match self.made.take().filter(|m| m.key == s.key) {
+            // Made from this session's view this tick, and not used by it yet.
+            Some(mut m) if m.pooled.contains(&s.session) && !m.users.contains(&s.session) => {
+                m.users.push(s.session);
+                self.made = Some(m);
                 self.record(s);
                 return Plan::Reuse;
             }
-        }
-        self.tick += 1;
-        self.made = Some((s.key.clone(), vec![s.session]));
-        self.record(s);
-        Plan::Make(self.pool(&s.key))
+            // A session new to this tick: made again within the tick, its view added.
+            Some(mut m) if !m.users.contains(&s.session) => {
+                m.pooled.push(s.session);
+                m.users.push(s.session);
+                self.record(s);
+                (m.pooled, m.users)
+            }
+            // Its own proxies again: a new tick, from the views of every session that rendered
+            // with the same inputs in the last one.
+            Some(_) => {
+                self.tick += 1;
+                self.record(s);
+                (self.live(&s.key), vec![s.session])
+            }
+            // Other inputs: made for this frame alone, as nothing shares them yet (sessions of
+            // two inputs taking turns make their own every frame, without pooling).
+            None => {
+                self.tick += 1;
+                self.record(s);
+                (vec![s.session], vec![s.session])
+            }
+        };
+        let pool = self.pool(&pooled);
+        self.made = Some(Made {
+            key: s.key.clone(),
+            pooled,
+            users,
+        });
+        Plan::Make(pool)
     }
 
     /// The slot of `s`'s session, now holding its view at this tick.
@@ -138,14 +180,22 @@ impl Sharing {
         slot.seen = tick;
     }
 
-    /// The views of the sessions with `key` seen in the last tick or this one, by session,
-    /// equal views once.
-    fn pool(&self, key: &[u8]) -> Pool {
+    /// The sessions with `key` that rendered in the last tick or this one.
+    fn live(&self, key: &[u8]) -> Vec<u64> {
+        self.slots
+            .iter()
+            .filter(|s| s.key == key && s.seen + 1 >= self.tick)
+            .map(|s| s.session)
+            .collect()
+    }
+
+    /// The views of `sessions` (those with a slot), by session, equal views once.
+    fn pool(&self, sessions: &[u64]) -> Pool {
         let mut live: Vec<(usize, &Slot)> = self
             .slots
             .iter()
             .enumerate()
-            .filter(|(_, s)| s.key == key && s.seen + 1 >= self.tick)
+            .filter(|(_, s)| sessions.contains(&s.session))
             .collect();
         live.sort_by_key(|(_, s)| s.session);
         let mut views: Vec<(usize, &Slot)> = Vec::with_capacity(live.len());
@@ -253,24 +303,39 @@ mod tests {
         }
     }
 
-    /// Sessions in turn: the first of a tick makes the stages, the others reuse them, and the
-    /// first one's next frame starts a tick pooling every view that shared the last one.
+    fn reuses(s: &mut Sharing, session: u64, key: &[u8], view: &[u8]) -> bool {
+        matches!(
+            s.plan(Some(&sharer(session, key, view)), [0.0; 3]),
+            Plan::Reuse
+        )
+    }
+
+    /// Sessions joining make the stages again with their views added; then the first of a tick
+    /// makes them from every view of the last one and the others reuse them.
     #[test]
     fn a_tick_makes_the_shared_stages_once_from_every_sharing_view() {
         let mut s = Sharing::default();
         let pool = made(s.plan(Some(&sharer(1, b"k", b"a")), [1.0, 0.0, 0.0]));
         assert_eq!(pool.cameras, vec![[1.0, 0.0, 0.0]]);
-        assert!(matches!(
-            s.plan(Some(&sharer(2, b"k", b"b")), [0.0; 3]),
-            Plan::Reuse
-        ));
-        assert!(matches!(
-            s.plan(Some(&sharer(3, b"k", b"a")), [0.0; 3]),
-            Plan::Reuse
-        ));
-        // Session 1 again: a new tick, pooling views a and b (session 3's equals session 1's).
+        // Session 2 joins: made again for views a and b; session 3's view equals 1's.
+        let pool = made(s.plan(Some(&sharer(2, b"k", b"b")), [0.0; 3]));
+        assert_eq!(pool.cameras, vec![[1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]);
+        assert_eq!(
+            made(s.plan(Some(&sharer(3, b"k", b"a")), [0.0; 3]))
+                .cameras
+                .len(),
+            2
+        );
+        // Session 1 again: a new tick from the three sessions' two views; 2 and 3 reuse it.
         let pool = made(s.plan(Some(&sharer(1, b"k", b"a")), [0.0; 3]));
         assert_eq!(pool.cameras, vec![[1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]);
+        assert!(reuses(&mut s, 2, b"k", b"b"));
+        assert!(reuses(&mut s, 3, b"k", b"a"));
+        assert!(
+            !reuses(&mut s, 3, b"k", b"a"),
+            "session 3 used them already"
+        );
+        assert!(reuses(&mut s, 1, b"k", b"a"));
         // Another key: made for itself, from its own view only.
         let pool = made(s.plan(Some(&sharer(2, b"other", b"b")), [0.0; 3]));
         assert_eq!(pool.cameras, vec![[2.0, 0.0, 0.0]]);
@@ -279,27 +344,32 @@ mod tests {
         made(s.plan(Some(&sharer(3, b"other", b"c")), [0.0; 3]));
     }
 
+    /// Sessions of two keys taking turns make the stages every frame (the proxies hold one
+    /// key's at a time), each key's from its own sessions' views only.
+    #[test]
+    fn two_keys_taking_turns_make_their_own() {
+        let mut s = Sharing::default();
+        for _ in 0..3 {
+            for (session, key) in [(1, b"k"), (2, b"j"), (3, b"k")] {
+                let frame = sharer(session, key, &[session as u8]);
+                let pool = made(s.plan(Some(&frame), [0.0; 3]));
+                assert_eq!(pool.cameras.contains(&[2.0, 0.0, 0.0]), session == 2);
+            }
+        }
+    }
+
     /// A session gone for a whole tick is no longer pooled.
     #[test]
     fn views_of_sessions_gone_a_tick_are_left_out() {
         let mut s = Sharing::default();
-        made(s.plan(Some(&sharer(1, b"k", b"a")), [0.0; 3]));
-        assert!(matches!(
-            s.plan(Some(&sharer(2, b"k", b"b")), [0.0; 3]),
-            Plan::Reuse
-        ));
-        assert_eq!(
-            made(s.plan(Some(&sharer(1, b"k", b"a")), [0.0; 3]))
-                .cameras
-                .len(),
-            2
-        );
-        assert_eq!(
-            made(s.plan(Some(&sharer(1, b"k", b"a")), [0.0; 3]))
-                .cameras
-                .len(),
-            1
-        );
+        let mut views = |session| {
+            made(s.plan(Some(&sharer(session, b"k", &[session as u8])), [0.0; 3])).cameras
+        };
+        views(1);
+        views(2);
+        // Session 2 rendered in the first tick: pooled into the second, not the third.
+        assert_eq!(views(1).len(), 2);
+        assert_eq!(views(1).len(), 1);
     }
 
     #[test]

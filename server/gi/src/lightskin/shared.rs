@@ -16,7 +16,9 @@
 //! - reuses them if its session's view was among those and it has not used them yet;
 //! - makes them again, adding its view, if its session is new to them (a session joining);
 //! - starts a new *tick* if its session has used them already: they are made from the views of
-//!   every session that rendered with this key in the last tick (their latest frames' views);
+//!   every session that rendered with this key in the last two ticks (their latest frames'
+//!   views: a session the render loop skipped for one tick, throttled by its client, stays
+//!   pooled and reuses the next tick's rather than making them again);
 //!
 //! and a frame with another key makes them from its own view alone (so a session that changes
 //! its light stops sharing at once, and its frame is what it would be alone). The proxies hold
@@ -123,7 +125,7 @@ impl Sharing {
                 (m.pooled, m.users)
             }
             // Its own proxies again: a new tick, from the views of every session that rendered
-            // with the same inputs in the last one.
+            // with the same inputs in the last two.
             Some(_) => {
                 self.tick += 1;
                 self.record(s);
@@ -180,11 +182,11 @@ impl Sharing {
         slot.seen = tick;
     }
 
-    /// The sessions with `key` that rendered in the last tick or this one.
+    /// The sessions with `key` that rendered in the last two ticks or this one.
     fn live(&self, key: &[u8]) -> Vec<u64> {
         self.slots
             .iter()
-            .filter(|s| s.key == key && s.seen + 1 >= self.tick)
+            .filter(|s| s.key == key && s.seen + 2 >= self.tick)
             .map(|s| s.session)
             .collect()
     }
@@ -358,16 +360,18 @@ mod tests {
         }
     }
 
-    /// A session gone for a whole tick is no longer pooled.
+    /// A session gone for two whole ticks is no longer pooled.
     #[test]
-    fn views_of_sessions_gone_a_tick_are_left_out() {
+    fn views_of_sessions_gone_two_ticks_are_left_out() {
         let mut s = Sharing::default();
         let mut views = |session| {
             made(s.plan(Some(&sharer(session, b"k", &[session as u8])), [0.0; 3])).cameras
         };
         views(1);
         views(2);
-        // Session 2 rendered in the first tick: pooled into the second, not the third.
+        // Session 2 rendered in the first tick: pooled into the second and third, not the
+        // fourth.
+        assert_eq!(views(1).len(), 2);
         assert_eq!(views(1).len(), 2);
         assert_eq!(views(1).len(), 1);
     }

@@ -4,17 +4,6 @@
 // caches. The fragment entry point comes from gbuffer_triangle_ids.wgsl (scene-wide triangle
 // ids, needs the primitive_index extension) or gbuffer_vertex_ids.wgsl (provoking vertex).
 
-@group(0) @binding(0) var<storage, read> camera: CameraUniform;
-
-@vertex
-fn vs_main(
-    v: VertexInput,
-    @builtin(vertex_index) vertex: u32,
-    @builtin(instance_index) first_triangle: u32,
-) -> SurfaceVaryings {
-    return surface_varyings(v, vertex, first_triangle, camera.view_proj);
-}
-
 struct GBufferOut {
     @location(0) position: vec4<f32>,
     @location(1) normal_roughness: vec4<f32>,

@@ -33,3 +33,9 @@ fn shade_material(m: MaterialGpu, texel: vec4<f32>) -> MaterialSample {
         base.a >= m.alpha_cutoff,
     );
 }
+
+// The shading normal: back faces (glTF allows double-sided materials) use the flipped one.
+fn facing_normal(normal: vec3<f32>, front: bool) -> vec3<f32> {
+    let n = normalize(normal);
+    return select(-n, n, front);
+}

@@ -41,8 +41,3 @@ fn surface_varyings(v: VertexInput, vertex: u32, first_triangle: u32, view_proj:
     return SurfaceVaryings(view_proj * vec4<f32>(v.position, 1.0), v.position, v.normal, v.uv, v.material, vertex, first_triangle);
 }
 
-// The shading normal: back faces (glTF allows double-sided materials) use the flipped one.
-fn facing_normal(normal: vec3<f32>, front: bool) -> vec3<f32> {
-    let n = normalize(normal);
-    return select(-n, n, front);
-}

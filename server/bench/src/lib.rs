@@ -123,6 +123,19 @@ pub struct BenchArgs {
     /// lighting of 10⁷ multiply-adds read 0.03 ms; `gpu` elsewhere).
     #[arg(long, value_enum, default_value = "auto")]
     pub stage_clock: StageClock,
+    /// The G-buffer as a visibility buffer and its `gbuffer_resolve` (`on`, needs triangle
+    /// ids) or every target rasterised (`off`); `auto`: on except on a CPU adapter, as the
+    /// service renders. `bench/visibility-buffer.sh` runs both to measure what it saves.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub visibility_buffer: VisibilityBuffer,
+}
+
+/// See [`BenchArgs::visibility_buffer`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum VisibilityBuffer {
+    Auto,
+    On,
+    Off,
 }
 
 /// See [`BenchArgs::stage_clock`].
@@ -620,7 +633,12 @@ pub fn run(
     };
     let base = base_settings(args, &scene, base_gi.clone());
     let (name, triangles) = (scene.name.clone(), scene.triangle_count());
-    let renderer = Renderer::new(ctx, scene.clone());
+    let mut renderer = Renderer::new(ctx, scene.clone());
+    match args.visibility_buffer {
+        VisibilityBuffer::Auto => {}
+        VisibilityBuffer::On => renderer.set_visibility_buffer(true),
+        VisibilityBuffer::Off => renderer.set_visibility_buffer(false),
+    }
     let timing_source = renderer.timing_source();
     let mut bench = Bench {
         args,

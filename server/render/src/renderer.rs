@@ -42,7 +42,7 @@ pub const MAX_SHADOW_MAP_SIZE: u32 = 8192;
 /// Most shadow-map texels over all faces (a point light's six faces share this budget): 256 MiB
 /// of depth.
 pub const MAX_SHADOW_TEXELS: u64 = 8192 * 8192;
-/// Most output pixels: the frame's targets take about 84 bytes per pixel (5.2 GiB at this size;
+/// Most output pixels: the frame's targets take about 92 bytes per pixel (5.7 GiB at this size;
 /// 6 of them the video planes and their read-back copies).
 pub const MAX_OUTPUT_PIXELS: u64 = 8192 * 8192;
 
@@ -685,6 +685,12 @@ pub struct Renderer {
     reuse_epoch: u64,
     /// A frame is being encoded (set until [`Self::submit`] returns it).
     encoding: bool,
+    /// The G-buffer is rasterised as a visibility buffer and resolved by a compute pass
+    /// where the device has triangle ids (`passes::gbuffer`); off: rasterised whole. On by
+    /// default except on CPU adapters, where the resolve costs more than the raster output
+    /// it saves (lavapipe, 1280×720: raster 11.5 → 5.9 ms, resolve 22.9 ms;
+    /// bench/results/lavapipe-visibility-buffer.md).
+    visibility_buffer: bool,
 }
 
 /// What an environment's evaluation depends on: its parameters and, for a sky, its sun.
@@ -739,6 +745,7 @@ impl Renderer {
             reuse: true,
             reuse_epoch: 0,
             encoding: false,
+            visibility_buffer: ctx.info.device_type != wgpu::DeviceType::Cpu,
             shared: SceneResources {
                 scene_buffers: SceneBuffers::new(device, &ctx.queue, &scene, &material_layout),
                 camera: camera_buffer,
@@ -794,6 +801,13 @@ impl Renderer {
     /// measures what it saves): the images are the same either way, bit for bit.
     pub fn set_reuse(&mut self, on: bool) {
         self.reuse = on;
+    }
+
+    /// Turns the visibility-buffer G-buffer on or off (by default on except on CPU adapters;
+    /// it needs triangle ids; off rasterises every G-buffer target): the images agree within
+    /// `gpu_visibility_buffer.rs`'s tolerances.
+    pub fn set_visibility_buffer(&mut self, on: bool) {
+        self.visibility_buffer = on;
     }
 
     /// Whether indirect light blends the light caches of each triangle's three vertices
@@ -1141,10 +1155,25 @@ impl Renderer {
                 })
                 .inspect_err(|_| shadow_map.made.forget())?;
         }
+        let mut resolve = false;
         stages.stage(crate::passes::stages::GBUFFER, |e| {
-            self.gbuffer_pass
-                .encode(e, &sized.gbuffer, &self.shared.scene_buffers)
+            resolve = self.gbuffer_pass.encode(
+                e,
+                &sized.gbuffer,
+                &self.shared.scene_buffers,
+                self.visibility_buffer,
+            );
         })?;
+        if resolve {
+            stages.stage(crate::passes::stages::GBUFFER_RESOLVE, |e| {
+                self.gbuffer_pass.encode_resolve(
+                    &self.shared.ctx.device,
+                    e,
+                    &sized.gbuffer,
+                    &self.shared.scene_buffers,
+                )
+            })?;
+        }
         // A downscaled frame's GI method sees only the reduced G-buffer and target.
         let reduced = sized.reduced.as_ref().filter(|_| downscale > 1);
         if let Some(r) = reduced {

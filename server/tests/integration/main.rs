@@ -22,6 +22,7 @@ mod gpu_scenes;
 mod gpu_stream_bench;
 mod gpu_surfel_links;
 mod gpu_surfels;
+mod gpu_visibility_buffer;
 mod gpu_yuv420;
 mod render_cli;
 mod scale_invariance;

@@ -33,6 +33,7 @@ pub const GBUFFER: ShaderSource = ShaderSource {
         wgsl!("brdf.wgsl"),
         wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),
+        wgsl!("gbuffer_vertex.wgsl"),
         wgsl!("gbuffer.wgsl"),
         wgsl!("gbuffer_vertex_ids.wgsl"),
     ],
@@ -47,8 +48,35 @@ pub const GBUFFER_TRIANGLE_IDS: ShaderSource = ShaderSource {
         wgsl!("brdf.wgsl"),
         wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),
+        wgsl!("gbuffer_vertex.wgsl"),
         wgsl!("gbuffer.wgsl"),
         wgsl!("gbuffer_triangle_ids.wgsl"),
+    ],
+};
+
+/// The thin G-buffer raster: a visibility buffer of triangle ids and base colours (needs
+/// `Features::PRIMITIVE_INDEX`), resolved by [`GBUFFER_RESOLVE`].
+pub const GBUFFER_VISIBILITY: ShaderSource = ShaderSource {
+    name: "gbuffer_visibility",
+    files: &[
+        wgsl!("enable_primitive_index.wgsl"),
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("material_model.wgsl"),
+        wgsl!("materials.wgsl"),
+        wgsl!("gbuffer_vertex.wgsl"),
+        wgsl!("gbuffer_visibility.wgsl"),
+    ],
+};
+
+/// The visibility buffer resolved into the G-buffer's targets.
+pub const GBUFFER_RESOLVE: ShaderSource = ShaderSource {
+    name: "gbuffer_resolve",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("material_model.wgsl"),
+        wgsl!("gbuffer_resolve.wgsl"),
     ],
 };
 

@@ -1,4 +1,9 @@
-//! G-buffer pass: rasterises the scene from the camera (`shaders/gbuffer.wgsl`).
+//! G-buffer pass: rasterises the scene from the camera. With triangle ids (issue 36) the
+//! raster writes a visibility buffer, the triangle id and the base colour
+//! (`shaders/gbuffer_visibility.wgsl`, 12 bytes a pixel), and a compute pass resolves it into
+//! the G-buffer's targets (`shaders/gbuffer_resolve.wgsl`); without them, or with the
+//! visibility buffer turned off, the raster writes every target (`shaders/gbuffer.wgsl`, 44
+//! bytes a pixel). Every later pass reads the same targets either way.
 
 use super::bind::{self, bind_group};
 use super::{scene_buffers::SceneBuffers, Target};
@@ -16,6 +21,9 @@ pub const FORMATS: [wgpu::TextureFormat; 5] = [
     wgpu::TextureFormat::R32Uint,     // triangle or provoking-vertex id (finds the light caches)
 ];
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+/// The visibility buffer's base colour (half floats, as [`FORMATS`]' base colour), with the
+/// facing in alpha (1 front, 0.5 back, 0 background).
+pub const BASE_FACING_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 
 /// The G-buffer's textures for one output size.
 pub struct GBuffer {
@@ -26,16 +34,31 @@ pub struct GBuffer {
     /// Scene-wide triangle id, or the provoking vertex without primitive indices.
     pub id: Target,
     pub depth: Target,
+    /// The visibility buffer's base colour and facing (a frame's G-buffer; not the reduced
+    /// ones, which a compute pass fills from it).
+    pub base_facing: Option<Target>,
 }
 
 impl GBuffer {
+    /// A frame's G-buffer: rasterised into, or resolved from its visibility buffer.
     pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
-        Self::with_usage(
-            device,
-            width,
-            height,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        )
+        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        Self {
+            base_facing: Some(Target::new(
+                device,
+                "gbuffer base colour and facing",
+                width,
+                height,
+                BASE_FACING_FORMAT,
+                usage,
+            )),
+            ..Self::with_usage(
+                device,
+                width,
+                height,
+                usage | wgpu::TextureUsages::STORAGE_BINDING,
+            )
+        }
     }
 
     /// A G-buffer whose colour targets have `usage` (a compute pass writing them, as
@@ -70,6 +93,7 @@ impl GBuffer {
                 DEPTH_FORMAT,
                 wgpu::TextureUsages::RENDER_ATTACHMENT,
             ),
+            base_facing: None,
         }
     }
 
@@ -94,8 +118,38 @@ bind_group! {
     }
 }
 
+bind_group! {
+    /// Group 0 of `shaders/gbuffer_resolve.wgsl`.
+    pub struct ResolveResources as RESOLVE_GROUP(
+        "gbuffer resolve",
+        wgpu::ShaderStages::COMPUTE
+    ) {
+        camera: bind::PARAMS,
+        vis_id: bind::UINT_TEXTURE,
+        vis_base: bind::TEXTURE,
+        indices: bind::STORAGE,
+        vertices: bind::STORAGE,
+        materials: bind::STORAGE,
+        out_position: bind::storage_texture(FORMATS[0]),
+        out_normal_roughness: bind::storage_texture(FORMATS[1]),
+        out_base_metallic: bind::storage_texture(FORMATS[2]),
+        out_emissive_specular: bind::storage_texture(FORMATS[3]),
+    }
+}
+
+/// The visibility buffer's raster and resolve.
+struct Visibility {
+    raster: wgpu::RenderPipeline,
+    resolve: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+}
+
 pub struct GBufferPass {
+    /// Rasterises every target.
     pipeline: wgpu::RenderPipeline,
+    /// With triangle ids: the visibility buffer.
+    visibility: Option<Visibility>,
+    camera: wgpu::Buffer,
     camera_bind_group: wgpu::BindGroup,
 }
 
@@ -114,40 +168,116 @@ impl GBufferPass {
             bind_group_layouts: &[Some(&camera_layout), Some(material_layout)],
             immediate_size: 0,
         });
+        let raster = |label: &str, source: &shaders::ShaderSource, formats| {
+            super::scene_buffers::material_pipeline(
+                device,
+                label,
+                &layout,
+                &source.create_module(device),
+                formats,
+                DEPTH_FORMAT,
+            )
+        };
         let source = if triangle_ids {
             &shaders::GBUFFER_TRIANGLE_IDS
         } else {
             &shaders::GBUFFER
         };
-        let module = source.create_module(device);
-        let pipeline = super::scene_buffers::material_pipeline(
-            device,
-            "gbuffer",
-            &layout,
-            &module,
-            &FORMATS,
-            DEPTH_FORMAT,
-        );
+        let visibility = triangle_ids.then(|| {
+            let resolve_layout = RESOLVE_GROUP.layout(device);
+            Visibility {
+                raster: raster(
+                    "gbuffer visibility",
+                    &shaders::GBUFFER_VISIBILITY,
+                    &[FORMATS[4], BASE_FACING_FORMAT],
+                ),
+                resolve: super::compute_pipeline(
+                    device,
+                    "gbuffer resolve",
+                    &resolve_layout,
+                    &shaders::GBUFFER_RESOLVE.create_module(device),
+                    "resolve",
+                ),
+                layout: resolve_layout,
+            }
+        });
         Self {
-            pipeline,
+            pipeline: raster("gbuffer", source, &FORMATS),
+            visibility,
+            camera: camera.clone(),
             camera_bind_group,
         }
     }
 
+    /// Whether [`Self::encode`] can rasterise a visibility buffer (the device has triangle
+    /// ids).
+    pub fn has_visibility_buffer(&self) -> bool {
+        self.visibility.is_some()
+    }
+
+    /// Rasterises the scene: the visibility buffer where `visibility` asks and the device has
+    /// triangle ids ([`Self::encode_resolve`] then fills the targets), else every target.
+    /// Returns whether it drew the visibility buffer.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         gbuffer: &GBuffer,
         scene: &SceneBuffers,
-    ) {
+        visibility: bool,
+    ) -> bool {
+        let thin = self
+            .visibility
+            .as_ref()
+            .filter(|_| visibility)
+            .zip(gbuffer.base_facing.as_ref());
+        let (pipeline, views) = match thin {
+            Some((v, base)) => (&v.raster, vec![&gbuffer.id.view, &base.view]),
+            None => (&self.pipeline, gbuffer.colour_views().to_vec()),
+        };
         let mut pass = super::scene_buffers::begin_material_pass(
             encoder,
             "gbuffer",
-            &gbuffer.colour_views(),
+            &views,
             &gbuffer.depth.view,
         );
-        pass.set_pipeline(&self.pipeline);
+        pass.set_pipeline(pipeline);
         pass.set_bind_group(0, &self.camera_bind_group, &[]);
         scene.draw_with_materials(&mut pass, &scene.ranges);
+        thin.is_some()
+    }
+
+    /// Resolves the visibility buffer [`Self::encode`] drew into the G-buffer's targets.
+    pub fn encode_resolve(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        gbuffer: &GBuffer,
+        scene: &SceneBuffers,
+    ) {
+        let (Some(v), Some(base)) = (&self.visibility, &gbuffer.base_facing) else {
+            return;
+        };
+        let group = ResolveResources {
+            camera: &self.camera,
+            vis_id: &gbuffer.id,
+            vis_base: base,
+            indices: &scene.indices,
+            vertices: &scene.vertices,
+            materials: &scene.material_table,
+            out_position: &gbuffer.position,
+            out_normal_roughness: &gbuffer.normal_roughness,
+            out_base_metallic: &gbuffer.base_metallic,
+            out_emissive_specular: &gbuffer.emissive_specular,
+        }
+        .bind(device, &v.layout);
+        let mut pass = super::begin_compute(encoder, "gbuffer resolve");
+        pass.set_pipeline(&v.resolve);
+        pass.set_bind_group(0, &group, &[]);
+        let size = gbuffer.id.texture.size();
+        pass.dispatch_workgroups(
+            size.width.div_ceil(super::TILE),
+            size.height.div_ceil(super::TILE),
+            1,
+        );
     }
 }

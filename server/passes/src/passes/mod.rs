@@ -331,6 +331,11 @@ pub const SHADERS: &[ShaderPass] = &[
         &[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP],
     ),
     ShaderPass::new(
+        &shaders::GBUFFER_VISIBILITY,
+        &[&gbuffer::CAMERA_GROUP, &scene_buffers::MATERIAL_GROUP],
+    ),
+    ShaderPass::new(&shaders::GBUFFER_RESOLVE, &[&gbuffer::RESOLVE_GROUP]),
+    ShaderPass::new(
         &shaders::SHADOW_MAP,
         &[&shadow_map::GROUP, &scene_buffers::MATERIAL_GROUP],
     ),

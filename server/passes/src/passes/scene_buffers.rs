@@ -48,6 +48,8 @@ pub struct SceneBuffers {
     pub shadow_opaque: Vec<MaterialRange>,
     /// Group 1 of `shaders/materials.wgsl`, indexed by material.
     pub materials: Vec<wgpu::BindGroup>,
+    /// The material table ([`MaterialGpu`] per material) the groups bind as `materials`.
+    pub material_table: wgpu::Buffer,
     /// `scene::brdf::BrdfTable` (`[f32; 4]` entries): what every pass that evaluates the BRDF
     /// binds as `brdf_table` (`shaders/brdf_eval.wgsl`).
     pub brdf_table: wgpu::Buffer,
@@ -97,6 +99,17 @@ impl SceneBuffers {
             .iter()
             .partition(|r| scene.materials[r.material as usize].alpha_cutoff.is_some());
         let brdf_table = brdf_table(device);
+        let material_table = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("materials"),
+            contents: bytemuck::cast_slice(
+                &scene
+                    .materials
+                    .iter()
+                    .map(MaterialGpu::from)
+                    .collect::<Vec<_>>(),
+            ),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
         Self {
             vertices,
             indices,
@@ -104,7 +117,14 @@ impl SceneBuffers {
             shadow_casting,
             shadow_masked,
             shadow_opaque,
-            materials: material_bind_groups(device, queue, scene, material_layout, &brdf_table),
+            materials: material_bind_groups(
+                device,
+                queue,
+                scene,
+                material_layout,
+                (&material_table, &brdf_table),
+            ),
+            material_table,
             brdf_table,
         }
     }
@@ -237,14 +257,8 @@ fn material_bind_groups(
     queue: &wgpu::Queue,
     scene: &Scene,
     layout: &wgpu::BindGroupLayout,
-    brdf_table: &wgpu::Buffer,
+    (table, brdf_table): (&wgpu::Buffer, &wgpu::Buffer),
 ) -> Vec<wgpu::BindGroup> {
-    let table: Vec<MaterialGpu> = scene.materials.iter().map(MaterialGpu::from).collect();
-    let table = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("materials"),
-        contents: bytemuck::cast_slice(&table),
-        usage: wgpu::BufferUsages::STORAGE,
-    });
     let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
         label: Some("base colour"),
         address_mode_u: wgpu::AddressMode::Repeat,
@@ -270,7 +284,7 @@ fn material_bind_groups(
             MaterialResources {
                 base_color_texture: view,
                 base_color_sampler: &sampler,
-                materials: &table,
+                materials: table,
                 brdf_table,
             }
             .bind(device, layout)

@@ -8,6 +8,9 @@ use crate::gpu::timing::Stage;
 pub const SHADOW_MAP: Stage = Stage::new(0, "shadow_map");
 /// Position, normal, material and triangle id from the camera.
 pub const GBUFFER: Stage = Stage::new(1, "gbuffer");
+/// The visibility buffer (triangle id, base colour) resolved into position, normal and
+/// material terms (`gbuffer` then rasterises only those two; needs triangle ids).
+pub const GBUFFER_RESOLVE: Stage = Stage::new(31, "gbuffer_resolve");
 /// The reflective shadow map (the RSM-based methods).
 pub const RSM: Stage = Stage::new(2, "rsm");
 /// Emission, direct light with shadows, plus the indirect buffer.
@@ -29,6 +32,7 @@ pub const YUV420: Stage = Stage::new(26, "yuv420");
 pub const EVERY_FRAME: &[Stage] = &[
     SHADOW_MAP,
     GBUFFER,
+    GBUFFER_RESOLVE,
     DIRECT_LIGHT,
     EXPOSURE,
     TONEMAP,
@@ -40,6 +44,7 @@ pub const EVERY_FRAME: &[Stage] = &[
 pub const ALL: &[Stage] = &[
     SHADOW_MAP,
     GBUFFER,
+    GBUFFER_RESOLVE,
     RSM,
     DIRECT_LIGHT,
     EXPOSURE,

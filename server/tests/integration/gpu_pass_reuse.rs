@@ -282,8 +282,9 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
 /// Two sessions looking from two cameras pool their views (`lightskin::shared`'s rule):
 /// BRSM draws its VALs from both sessions' view samples and both methods take the glossy
 /// proxies' lobe about the mean view direction. A session's indirect light then differs from
-/// its unshared frame by at most [`POOLED_TOLERANCE`] (relative MAE), and its error against
-/// the path-traced reference stays within 10 % of the unshared frame's (both printed, and
+/// its unshared frame by at most [`POOLED_TOLERANCE`] (relative MAE; where every lobe is
+/// sharp, [`GLOSSY_POOLED_TOLERANCE`]), and its error against the path-traced reference stays
+/// within 10 % of the unshared frame's (both printed, and
 /// recorded in bench/results/lavapipe-shared-views.md). Until the other view has been seen
 /// the first session's frame is its own view's, bit for bit.
 #[test]
@@ -300,9 +301,29 @@ fn sessions_of_two_views_pool_them_within_a_stated_tolerance() {
     let reference = GiParams::new(lightcast_server::gi::reference::REFERENCE)
         .with("spp", 256)
         .with("emitters", false);
-    let truths = [&near, &far].map(|s| rgb(&indirect_with(&mut truth, s, reference.clone())));
-    for method in [LIGHTSKIN, BRSM] {
-        let gi = small_with_importance(method, &facts).with("emitters", false);
+    let mut truths = |reference: &GiParams| {
+        [&near, &far].map(|s| rgb(&indirect_with(&mut truth, s, reference.clone())))
+    };
+    let (diffuse_truths, glossy_truths) = (
+        truths(&reference),
+        truths(&reference.clone().with("glossy_exponent", 64.0)),
+    );
+    // The third: every material's lobe sharpened to a Phong exponent of 64, where the glossy
+    // proxies' lobe direction matters most.
+    for (method, glossy) in [(LIGHTSKIN, None), (BRSM, None), (LIGHTSKIN, Some(64.0))] {
+        let truths = if glossy.is_some() {
+            &glossy_truths
+        } else {
+            &diffuse_truths
+        };
+        let mut gi = small_with_importance(method, &facts).with("emitters", false);
+        if let Some(k) = glossy {
+            gi = gi.with("glossy_exponent", k);
+        }
+        let method = match glossy {
+            Some(k) => format!("{method} (glossy_exponent {k})"),
+            None => method.to_string(),
+        };
         let [near, far] = [&near, &far].map(|s| RenderSettings {
             gi: gi.clone(),
             ..s.clone()
@@ -342,7 +363,7 @@ fn sessions_of_two_views_pool_them_within_a_stated_tolerance() {
             );
             assert!(change > 0.0, "{method}, {name}: the views were pooled");
             assert!(
-                change <= POOLED_TOLERANCE,
+                change <= glossy.map_or(POOLED_TOLERANCE, |_| GLOSSY_POOLED_TOLERANCE),
                 "{method}, {name}: pooled frame {change} away from the unshared one"
             );
             assert!(
@@ -352,6 +373,12 @@ fn sessions_of_two_views_pool_them_within_a_stated_tolerance() {
         }
     }
 }
+
+/// How far pooling two views may move a session's frame where every lobe is sharp (Phong
+/// exponent 64): the glossy proxies' lobe about the two views' mean direction matches neither
+/// (measured 0.038 and 0.039, near and far view, the error against the reference 0.266 → 0.278
+/// and 0.298 → 0.308).
+const GLOSSY_POOLED_TOLERANCE: f32 = 0.1;
 
 /// How far (relative MAE of the indirect light) pooling two views may move a session's frame:
 /// measured 0.0015 and 0.0016 (`lightskin`, near and far view), 0.0100 and 0.0131 (`brsm`) on

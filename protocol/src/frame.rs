@@ -22,7 +22,10 @@
 //!     64    4  payload length in bytes
 //!     68  8·N  per stage: u16 index into `/v1/server`'s `stages`, u16 flags (bit 0 reused:
 //!                its output came from an earlier frame made from the same inputs, no GPU
-//!                work this frame; 0 from servers before it), f32 GPU ms
+//!                work this frame; bits 8–15 shared: the number of sessions whose frames its
+//!                output serves, made once for them all, so each frame's share of the ms its
+//!                maker reports is that over this number, 0 for this frame alone; all 0 from
+//!                servers before them), f32 GPU ms
 //! 68+8N    4  samples per pixel accumulated so far (progressive methods: `reference`; else 0)
 //! 72+8N    4  f32 relative standard error of that accumulation (0 when not progressive)
 //! ```
@@ -46,6 +49,8 @@ pub const FLAG_MOVING: u8 = 4;
 pub const FLAG_KEYFRAME: u8 = 8;
 /// A stage's flag: its output was reused from an earlier frame (see [`FrameHeader::reused`]).
 pub const STAGE_REUSED: u16 = 1;
+/// Where a stage's flags hold the sessions its output serves (see [`FrameHeader::shared`]).
+pub const STAGE_SHARED_SHIFT: u16 = 8;
 
 /// The decoded header of a binary frame message.
 #[derive(Clone, Debug, PartialEq)]
@@ -69,6 +74,11 @@ pub struct FrameHeader {
     /// the same inputs (their ms are 0): work the server shared between frames. Decoded one
     /// per flagged entry of `stages`.
     pub reused: Vec<u16>,
+    /// The stage indices (as in `stages`) whose output serves several sessions' frames, each
+    /// with how many (at most 255): made once for them all by one of those frames, which
+    /// reports its whole ms, while the others reuse it. Each frame's share of the cost is the
+    /// maker's ms over the count.
+    pub shared: Vec<(u16, u8)>,
     /// Samples per pixel a progressive method has accumulated for this image (0: the method
     /// is not progressive).
     pub samples: u32,
@@ -121,11 +131,17 @@ impl FrameHeader {
         out.extend_from_slice(&(payload.len() as u32).to_le_bytes());
         for &(index, ms) in stages {
             out.extend_from_slice(&index.to_le_bytes());
-            let flags = if self.reused.contains(&index) {
+            let reused = if self.reused.contains(&index) {
                 STAGE_REUSED
             } else {
                 0
             };
+            let sessions = self
+                .shared
+                .iter()
+                .find(|(i, _)| *i == index)
+                .map_or(0, |&(_, n)| u16::from(n));
+            let flags = reused | sessions << STAGE_SHARED_SHIFT;
             out.extend_from_slice(&flags.to_le_bytes());
             out.extend_from_slice(&ms.to_le_bytes());
         }
@@ -188,6 +204,11 @@ impl FrameHeader {
             .filter(|&o| u16_at(o + 2) & STAGE_REUSED != 0)
             .map(u16_at)
             .collect();
+        let shared = (0..stage_count)
+            .map(|i| FIXED_LEN + STAGE_LEN * i)
+            .map(|o| (u16_at(o), (u16_at(o + 2) >> STAGE_SHARED_SHIFT) as u8))
+            .filter(|&(_, n)| n > 0)
+            .collect();
         let progress = FIXED_LEN + STAGE_LEN * stage_count;
         let (samples, relative_error) = if header_len >= progress + PROGRESS_LEN {
             (u32_at(progress), f32_at(progress + 4))
@@ -210,6 +231,7 @@ impl FrameHeader {
             payload_len,
             stages,
             reused,
+            shared,
             samples,
             relative_error,
         };
@@ -252,6 +274,7 @@ mod tests {
             payload_len: 5,
             stages: vec![(0, 0.5), (12, 0.125), (2, 0.0)],
             reused: vec![2],
+            shared: vec![(2, 16)],
             samples: 96,
             relative_error: 0.03125,
         }
@@ -267,9 +290,13 @@ mod tests {
             68 + 24 + 8
         );
         assert_eq!(u32::from_le_bytes(bytes[92..96].try_into().unwrap()), 96);
-        // Stage flags: the third stage's bit 0 (reused), the others' 0.
+        // Stage flags: the third stage's bit 0 (reused) and 16 sessions sharing it in bits
+        // 8–15, the others' 0.
         let flags = |i: usize| u16::from_le_bytes([bytes[70 + 8 * i], bytes[71 + 8 * i]]);
-        assert_eq!([flags(0), flags(1), flags(2)], [0, 0, STAGE_REUSED]);
+        assert_eq!(
+            [flags(0), flags(1), flags(2)],
+            [0, 0, STAGE_REUSED | 16 << 8]
+        );
         assert_eq!(u64::from_le_bytes(bytes[8..16].try_into().unwrap()), 42);
         assert_eq!(u32::from_le_bytes(bytes[40..44].try_into().unwrap()), 320);
         assert_eq!(bytes[48], 1);

@@ -45,8 +45,10 @@ export function decodeFrame(buffer) {
   const stages = [];
   for (let i = 0; i < stageCount; i++) {
     const o = FIXED_LEN + STAGE_LEN * i;
-    // Flags bit 0: the stage's output was reused from an earlier frame (0 ms, no GPU work).
-    stages.push({ index: v.getUint16(o, true), ms: v.getFloat32(o + 4, true), reused: (v.getUint16(o + 2, true) & 1) !== 0 });
+    // Flags bit 0: the stage's output was reused from an earlier frame (0 ms, no GPU work);
+    // bits 8–15: the sessions whose frames its output serves (0: this frame alone).
+    const flags = v.getUint16(o + 2, true);
+    stages.push({ index: v.getUint16(o, true), ms: v.getFloat32(o + 4, true), reused: (flags & 1) !== 0, sharedBy: flags >> 8 });
   }
   const progress = FIXED_LEN + STAGE_LEN * stageCount;
   const hasProgress = headerLen >= progress + PROGRESS_LEN;

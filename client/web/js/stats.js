@@ -157,6 +157,11 @@ export class Stats {
       const now = document.createElement('td');
       now.textContent = s.reused ? 'reused' : s.ms.toFixed(3);
       if (s.reused) now.title = 'the output of an earlier frame with the same lights and poses';
+      if (s.sharedBy > 1) {
+        now.textContent += ` ÷ ${s.sharedBy}`;
+        now.title = `made once for ${s.sharedBy} sessions' frames`
+          + (s.reused ? ' by another session\'s frame' : ': this frame paid for it all, each frame\'s share is this over ' + s.sharedBy);
+      }
       tr.dataset.reused = String(s.reused);
       const avg = document.createElement('td');
       avg.textContent = recent.length ? ((sums.get(s.index) || 0) / recent.length).toFixed(3) : '–';

@@ -291,6 +291,16 @@ pub struct StageMs {
     /// no GPU work this frame, `ms` 0.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub reused: bool,
+    /// Its output serves this many sessions' frames, made once for them all (sessions of one
+    /// scene sharing LightSkin's and BRSM's light-side stages): the frame that made it reports
+    /// its whole `ms`, the others reuse it; each frame's share is `ms` over this. 0 (left
+    /// out): this frame alone.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub shared_by: u32,
+}
+
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 /// A session as `GET /v1/sessions/{id}` shows it.

@@ -173,6 +173,11 @@ pub enum BenchError {
     },
     #[error("--frames must be at least 1")]
     NoFrames,
+    #[error(
+        "--visibility-buffer on: this adapter has no triangle ids (PRIMITIVE_INDEX), or the \
+         scene's vertex or index buffer exceeds its storage binding size"
+    )]
+    NoVisibilityBuffer,
     #[error("--environment: {0}")]
     Environment(String),
     #[error("reference: {0}")]
@@ -636,7 +641,12 @@ pub fn run(
     let mut renderer = Renderer::new(ctx, scene.clone());
     match args.visibility_buffer {
         VisibilityBuffer::Auto => {}
-        VisibilityBuffer::On => renderer.set_visibility_buffer(true),
+        VisibilityBuffer::On => {
+            renderer.set_visibility_buffer(true);
+            if !renderer.visibility_buffer() {
+                return Err(BenchError::NoVisibilityBuffer);
+            }
+        }
         VisibilityBuffer::Off => renderer.set_visibility_buffer(false),
     }
     let timing_source = renderer.timing_source();

@@ -728,6 +728,7 @@ impl Renderer {
                 &camera_buffer,
                 &material_layout,
                 ctx.primitive_index,
+                resolve_fits(device, &scene),
             ),
             shadow_pass: ShadowMapPass::new(device, &material_layout),
             direct_pass: DirectLightPass::new(device),
@@ -807,7 +808,20 @@ impl Renderer {
     /// it needs triangle ids; off rasterises every G-buffer target): the images agree within
     /// `gpu_visibility_buffer.rs`'s tolerances.
     pub fn set_visibility_buffer(&mut self, on: bool) {
-        self.visibility_buffer = on;
+        if on != self.visibility_buffer {
+            // The G-buffers are made for one or the other: made again at the next frame.
+            self.visibility_buffer = on;
+            self.sized.clear();
+            for method in self.methods.iter_mut().flatten() {
+                method.retain_targets(&[]);
+            }
+        }
+    }
+
+    /// Whether frames resolve the G-buffer from a visibility buffer: asked for, and the device
+    /// and scene allow it (triangle ids; vertex and index buffers within a storage binding).
+    pub fn visibility_buffer(&self) -> bool {
+        self.visibility_buffer && self.gbuffer_pass.has_visibility_buffer()
     }
 
     /// Whether indirect light blends the light caches of each triangle's three vertices
@@ -864,6 +878,7 @@ impl Renderer {
 
     /// Makes the targets of `width`×`height` the first of [`Self::sized`].
     fn ensure_targets(&mut self, width: u32, height: u32) -> Result<(), GpuError> {
+        let thin = self.visibility_buffer();
         if let Some(i) = self
             .sized
             .iter()
@@ -931,7 +946,7 @@ impl Renderer {
         let sized = SizedTargets {
             width,
             height,
-            gbuffer: GBuffer::new(device, width, height),
+            gbuffer: GBuffer::new(device, width, height, thin),
             readbacks: (0..READBACK_RING)
                 .map(|_| ReadbackSet::new(device, width, height))
                 .collect(),
@@ -1144,6 +1159,7 @@ impl Renderer {
         self.encoding = true;
         let set = free_set(&self.shared.ctx, &sized.readbacks)?;
         let lease = SetLease(Arc::clone(&set.busy));
+        let thin = self.visibility_buffer();
         let mut stages = self.timer.begin(&self.shared.ctx);
         if shadow_map.made.holds(shared.as_deref()) {
             stages.reused(crate::passes::stages::SHADOW_MAP);
@@ -1157,12 +1173,9 @@ impl Renderer {
         }
         let mut resolve = false;
         stages.stage(crate::passes::stages::GBUFFER, |e| {
-            resolve = self.gbuffer_pass.encode(
-                e,
-                &sized.gbuffer,
-                &self.shared.scene_buffers,
-                self.visibility_buffer,
-            );
+            resolve = self
+                .gbuffer_pass
+                .encode(e, &sized.gbuffer, &self.shared.scene_buffers, thin);
         })?;
         if resolve {
             stages.stage(crate::passes::stages::GBUFFER_RESOLVE, |e| {
@@ -1355,4 +1368,13 @@ fn rgba16f_to_f32(bytes: &[u8]) -> Vec<[f32; 4]> {
         .chunks_exact(4)
         .map(|c| [c[0].to_f32(), c[1].to_f32(), c[2].to_f32(), c[3].to_f32()])
         .collect()
+}
+
+/// Whether the visibility buffer's resolve can bind `scene`'s vertex and index buffers whole
+/// (a scene beyond the device's storage binding size keeps the rasterised G-buffer).
+fn resolve_fits(device: &wgpu::Device, scene: &Scene) -> bool {
+    let max = device.limits().max_storage_buffer_binding_size;
+    let bytes = |n: usize, each: usize| (n as u64).saturating_mul(each as u64);
+    bytes(scene.vertices.len(), std::mem::size_of::<Vertex>()) <= max
+        && bytes(scene.indices.len(), 4) <= max
 }

@@ -204,6 +204,7 @@ impl Rendered {
                 stage: t.stage.to_string(),
                 ms: t.ms,
                 reused: t.reused,
+                shared_by: u32::from(t.shared_by),
             })
             .collect()
     }
@@ -1114,6 +1115,12 @@ fn deliver(
             .iter()
             .filter(|t| t.reused)
             .map(|t| t.stage.index())
+            .collect(),
+        shared: rendered
+            .timings
+            .iter()
+            .filter(|t| t.shared_by > 1)
+            .map(|t| (t.stage.index(), t.shared_by.min(255) as u8))
             .collect(),
         samples: rendered.progress.map_or(0, |p| p.samples),
         relative_error: rendered.progress.map_or(0.0, |p| p.relative_standard_error),

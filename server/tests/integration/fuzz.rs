@@ -335,6 +335,13 @@ fn frame_header() -> impl Strategy<Value = FrameHeader> {
                         .filter(|&&(i, _, _)| stages.iter().any(|&(j, _, r)| j == i && r))
                         .map(|&(i, _, _)| i)
                         .collect(),
+                    // Every third stage index serves several sessions, as many as its index
+                    // says (2 to 251), every time it is listed.
+                    shared: stages
+                        .iter()
+                        .filter(|&&(i, _, _)| i % 3 == 0)
+                        .map(|&(i, _, _)| (i, (i % 250 + 2) as u8))
+                        .collect(),
                     stages: stages.iter().map(|&(i, ms, _)| (i, ms)).collect(),
                     samples,
                     relative_error: err,

@@ -271,6 +271,19 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
             if shares {
                 assert!(reused(&a).contains(&RSM.name()), "{method}, frame {i}");
             }
+            // How many sessions' frames the cache lighting serves: none but its own for the
+            // first (alone), the three sessions' for the fourth (a tick after they joined).
+            let shared_by = a
+                .timings
+                .iter()
+                .find(|t| t.stage == stages::CACHE_LIGHTING)
+                .map(|t| t.shared_by);
+            match i {
+                0 => assert_eq!(shared_by, Some(0), "{method}: alone"),
+                3..=5 => assert_eq!(shared_by, Some(3), "{method}, frame {i}"),
+                _ if shares => assert!(shared_by >= Some(2), "{method}, frame {i}"),
+                _ => {}
+            }
             assert!(
                 !reused(&a).contains(&stages::VIEW_SAMPLES.name()),
                 "every session gathers its own view samples"

@@ -24,10 +24,19 @@ const H: u32 = 48;
 /// could turn into a neighbouring texel on another adapter.
 const TOLERANCE: f32 = 1e-4;
 
+/// Whether this adapter draws visibility buffers (triangle ids); if not, says so (and fails in
+/// CI, whose lavapipe has them).
+fn exercised() -> bool {
+    let ids = gpu().primitive_index;
+    if !ids {
+        not_exercised("this adapter has no triangle ids (PRIMITIVE_INDEX)");
+    }
+    ids
+}
+
 /// Renders `s` with the visibility buffer on and off: (on, off).
 fn both(scene: &Scene, s: &RenderSettings) -> (Frame, Frame) {
     let ctx = gpu();
-    let triangle_ids = ctx.primitive_index;
     let render = |on: bool| {
         let mut r = Renderer::new(ctx.clone(), scene.clone());
         r.set_visibility_buffer(on);
@@ -36,11 +45,7 @@ fn both(scene: &Scene, s: &RenderSettings) -> (Frame, Frame) {
     };
     let (on, off) = (render(true), render(false));
     let resolved = |f: &Frame| f.timings.iter().any(|t| t.stage == GBUFFER_RESOLVE);
-    assert_eq!(
-        resolved(&on),
-        triangle_ids,
-        "the visibility buffer is resolved where the device has triangle ids"
-    );
+    assert!(resolved(&on), "the visibility buffer is resolved");
     assert!(!resolved(&off), "off rasterises every target");
     assert!(on.timings.iter().any(|t| t.stage == GBUFFER));
     (on, off)
@@ -77,6 +82,9 @@ fn agree(label: &str, on: &Frame, off: &Frame) -> f32 {
 /// and with the short box moved.
 #[test]
 fn every_method_renders_the_cornell_box_as_with_the_fat_gbuffer() {
+    if !exercised() {
+        return;
+    }
     let scene = procedural::cornell_box();
     let facts = SceneFacts::of(&scene);
     let base = settings(W, H, default_camera(&scene), default_light(&scene));
@@ -123,6 +131,9 @@ fn every_method_renders_the_cornell_box_as_with_the_fat_gbuffer() {
 /// flipped, as the fat G-buffer has them.
 #[test]
 fn textures_masks_and_back_faces_resolve_as_rasterised() {
+    if !exercised() {
+        return;
+    }
     let texture = Texture {
         name: "stripes".into(),
         width: 4,
@@ -172,6 +183,9 @@ fn textures_masks_and_back_faces_resolve_as_rasterised() {
 /// vertex's w).
 #[test]
 fn triangles_cut_by_the_near_plane_resolve_as_rasterised() {
+    if !exercised() {
+        return;
+    }
     let scene = procedural::build("street?blocks=2&cars=0").expect("the street");
     let s = settings(W, H, default_camera(&scene), default_light(&scene));
     let (on, off) = both(&scene, &s);

@@ -502,22 +502,29 @@ impl Method for LightSkin {
                 }
             })?;
         }
+        // The light-side stages this frame's method and parameters run.
+        let sampled = [
+            crate::passes::stages::RSM,
+            stages::IMPORTANCE,
+            stages::CUMULATIVE_SUMS,
+            stages::VAL_SELECT,
+        ];
+        let lit = [stages::CACHE_LIGHTING, stages::PROXY_OCCLUSION];
+        let light_side = sampled[..if brsm { 4 } else { 1 }]
+            .iter()
+            .chain(&lit[..1 + usize::from(gi.occlusion)]);
+        let sessions = match &plan {
+            Plan::Reuse { sessions } => *sessions,
+            Plan::Make(pool) => pool.sessions,
+        };
+        for &stage in light_side.clone().filter(|_| sessions > 1) {
+            stages.shared(stage, sessions.min(usize::from(u16::MAX)) as u16);
+        }
         match plan {
             // Another session's frame made them this tick for the same inputs.
-            Plan::Reuse => {
-                stages.reused(crate::passes::stages::RSM);
-                let sampled = [
-                    stages::IMPORTANCE,
-                    stages::CUMULATIVE_SUMS,
-                    stages::VAL_SELECT,
-                ];
-                let lit = [stages::CACHE_LIGHTING, stages::PROXY_OCCLUSION];
-                for stage in sampled
-                    .iter()
-                    .filter(|_| brsm)
-                    .chain(&lit[..1 + usize::from(gi.occlusion)])
-                {
-                    stages.reused(*stage);
+            Plan::Reuse { .. } => {
+                for &stage in light_side {
+                    stages.reused(stage);
                 }
             }
             Plan::Make(pool) => {

@@ -55,8 +55,9 @@ pub struct Sharer {
 
 /// What a frame does with the shared stages.
 pub enum Plan {
-    /// The proxies hold what this frame's inputs make: skip the shared stages.
-    Reuse,
+    /// The proxies hold what this frame's inputs make, for this many sessions: skip the
+    /// shared stages.
+    Reuse { sessions: usize },
     /// Make them, from these views.
     Make(Pool),
 }
@@ -68,6 +69,8 @@ pub struct Pool {
     pub cameras: Vec<[f32; 3]>,
     /// Per view, the slot its view samples are kept in (`None`: the frame's own alone).
     pub slots: Option<Vec<usize>>,
+    /// The sessions whose views they are (0: a frame that does not share).
+    pub sessions: usize,
 }
 
 /// What the proxies hold, made by a sharing frame.
@@ -109,15 +112,17 @@ impl Sharing {
             return Plan::Make(Pool {
                 cameras: vec![camera],
                 slots: None,
+                sessions: 0,
             });
         };
         let (pooled, users) = match self.made.take().filter(|m| m.key == s.key) {
             // Made from this session's view this tick, and not used by it yet.
             Some(mut m) if m.pooled.contains(&s.session) && !m.users.contains(&s.session) => {
                 m.users.push(s.session);
+                let sessions = m.pooled.len();
                 self.made = Some(m);
                 self.record(s);
-                return Plan::Reuse;
+                return Plan::Reuse { sessions };
             }
             // A session new to this tick: made again within the tick, its view added.
             Some(mut m) if !m.users.contains(&s.session) => {
@@ -211,6 +216,7 @@ impl Sharing {
         Pool {
             cameras: views.iter().map(|(_, s)| s.camera).collect(),
             slots: Some(views.iter().map(|&(at, _)| at).collect()),
+            sessions: sessions.len(),
         }
     }
 
@@ -303,14 +309,14 @@ mod tests {
     fn made(plan: Plan) -> Pool {
         match plan {
             Plan::Make(pool) => pool,
-            Plan::Reuse => panic!("expected the stages to be made"),
+            Plan::Reuse { .. } => panic!("expected the stages to be made"),
         }
     }
 
     fn reuses(s: &mut Sharing, session: u64, key: &[u8], view: &[u8]) -> bool {
         matches!(
             s.plan(Some(&sharer(session, key, view)), [0.0; 3]),
-            Plan::Reuse
+            Plan::Reuse { .. }
         )
     }
 

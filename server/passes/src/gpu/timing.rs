@@ -71,6 +71,10 @@ pub struct StageTiming {
     /// The stage's output was reused from an earlier frame made from the same inputs
     /// ([`crate::passes::reuse`]): no GPU work this frame, `ms` 0.
     pub reused: bool,
+    /// The stage's output serves this many sessions' frames (made once for them all:
+    /// `gi::lightskin::shared`), so each frame's share of its cost is its maker's `ms` over
+    /// this; 0: it serves this frame alone.
+    pub shared_by: u16,
 }
 
 impl StageTiming {
@@ -80,6 +84,17 @@ impl StageTiming {
             stage,
             ms,
             reused: false,
+            shared_by: 0,
+        }
+    }
+
+    /// A stage whose output an earlier frame made.
+    pub fn reused(stage: Stage) -> Self {
+        Self {
+            stage,
+            ms: 0.0,
+            reused: true,
+            shared_by: 0,
         }
     }
 }
@@ -119,6 +134,7 @@ pub struct PendingTimings {
     names: Vec<Stage>,
     ready: Vec<StageTiming>,
     reused: Vec<(usize, Stage)>,
+    shared: Vec<(Stage, u16)>,
     staging: Option<(wgpu::Buffer, f64)>,
 }
 
@@ -132,6 +148,7 @@ impl PendingTimings {
             names: self.names,
             ready: self.ready,
             reused: self.reused,
+            shared: self.shared,
         }
     }
 }
@@ -141,6 +158,7 @@ pub struct TimingsMap {
     names: Vec<Stage>,
     ready: Vec<StageTiming>,
     reused: Vec<(usize, Stage)>,
+    shared: Vec<(Stage, u16)>,
     map: Option<(super::readback::PendingMap, f64)>,
 }
 
@@ -163,7 +181,13 @@ impl TimingsMap {
                     .collect()
             }
         };
-        Ok(sum_repeated(with_reused(ran, self.reused)))
+        let mut timings = sum_repeated(with_reused(ran, self.reused));
+        for (stage, sessions) in self.shared {
+            for t in timings.iter_mut().filter(|t| t.stage == stage) {
+                t.shared_by = sessions;
+            }
+        }
+        Ok(timings)
     }
 }
 
@@ -174,19 +198,11 @@ fn with_reused(ran: Vec<StageTiming>, reused: Vec<(usize, Stage)>) -> Vec<StageT
     let mut reused = reused.into_iter().peekable();
     for (i, t) in ran.into_iter().enumerate() {
         while let Some((_, stage)) = reused.next_if(|(at, _)| *at <= i) {
-            out.push(StageTiming {
-                stage,
-                ms: 0.0,
-                reused: true,
-            });
+            out.push(StageTiming::reused(stage));
         }
         out.push(t);
     }
-    out.extend(reused.map(|(_, stage)| StageTiming {
-        stage,
-        ms: 0.0,
-        reused: true,
-    }));
+    out.extend(reused.map(|(_, stage)| StageTiming::reused(stage)));
     out
 }
 
@@ -242,6 +258,7 @@ impl FrameTimer {
             names: Vec::new(),
             wall: Vec::new(),
             reused: Vec::new(),
+            shared: Vec::new(),
             submitted: None,
         }
     }
@@ -256,6 +273,8 @@ pub struct FrameStages<'a> {
     wall: Vec<StageTiming>,
     /// Stages reused from an earlier frame, each after how many stages had run.
     reused: Vec<(usize, Stage)>,
+    /// Stages whose output serves several sessions' frames, with how many.
+    shared: Vec<(Stage, u16)>,
     submitted: Option<wgpu::SubmissionIndex>,
 }
 
@@ -272,6 +291,12 @@ impl FrameStages<'_> {
     /// Records that a stage's output is reused from an earlier frame: nothing is encoded.
     pub fn reused(&mut self, name: Stage) {
         self.reused.push((self.names.len(), name));
+    }
+
+    /// Records that a stage's output (made or reused by this frame) serves `sessions`
+    /// sessions' frames ([`StageTiming::shared_by`]).
+    pub fn shared(&mut self, name: Stage, sessions: u16) {
+        self.shared.push((name, sessions));
     }
 
     /// Encodes one named stage.
@@ -344,6 +369,7 @@ impl FrameStages<'_> {
                 names: self.names,
                 ready: self.wall,
                 reused: self.reused,
+                shared: self.shared,
                 staging,
             },
             self.submitted,
@@ -358,11 +384,7 @@ mod tests {
     #[test]
     fn a_reused_stage_is_listed_where_it_would_have_run() {
         let [shadow, gbuffer, rsm, light] = [0, 1, 2, 3].map(|i| Stage::new(i, "stage"));
-        let reused = |stage| StageTiming {
-            stage,
-            ms: 0.0,
-            reused: true,
-        };
+        let reused = StageTiming::reused;
         let ran = vec![StageTiming::ran(gbuffer, 1.0), StageTiming::ran(light, 2.0)];
         assert_eq!(
             with_reused(ran.clone(), vec![(0, shadow), (1, rsm)]),

@@ -40,9 +40,13 @@ pub struct GBuffer {
 }
 
 impl GBuffer {
-    /// A frame's G-buffer: rasterised into, or resolved from its visibility buffer.
-    pub fn new(device: &wgpu::Device, width: u32, height: u32) -> Self {
+    /// A frame's G-buffer: rasterised into, or with `visibility` resolved from its visibility
+    /// buffer (which it then holds, and its targets take storage writes).
+    pub fn new(device: &wgpu::Device, width: u32, height: u32, visibility: bool) -> Self {
         let usage = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        if !visibility {
+            return Self::with_usage(device, width, height, usage);
+        }
         Self {
             base_facing: Some(Target::new(
                 device,
@@ -154,12 +158,15 @@ pub struct GBufferPass {
 }
 
 impl GBufferPass {
-    /// `triangle_ids` needs `Features::PRIMITIVE_INDEX` on the device.
+    /// `triangle_ids` needs `Features::PRIMITIVE_INDEX` on the device; `visibility`: the pass
+    /// can draw the visibility buffer (with triangle ids, and where the resolve can bind the
+    /// scene's vertex and index buffers whole).
     pub fn new(
         device: &wgpu::Device,
         camera: &wgpu::Buffer,
         material_layout: &wgpu::BindGroupLayout,
         triangle_ids: bool,
+        visibility: bool,
     ) -> Self {
         let camera_layout = CAMERA_GROUP.layout(device);
         let camera_bind_group = CameraResources { camera }.bind(device, &camera_layout);
@@ -183,7 +190,7 @@ impl GBufferPass {
         } else {
             &shaders::GBUFFER
         };
-        let visibility = triangle_ids.then(|| {
+        let visibility = (triangle_ids && visibility).then(|| {
             let resolve_layout = RESOLVE_GROUP.layout(device);
             Visibility {
                 raster: raster(

@@ -304,6 +304,59 @@ async fn concurrent_sessions_each_get_their_own_frames() {
     server.stop().await;
 }
 
+/// Issue 36: sessions of one scene under one light share BRSM's light-side stages, and their
+/// frame headers say so: a frame that reuses the cache lighting another session's frame made
+/// flags it reused, and the frames of a tick say how many sessions' frames it serves.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sessions_of_one_scene_share_the_light_side_stages_and_say_so() {
+    let server = TestServer::start(&[]).await;
+    server.wait_caches_ready("default").await;
+    let cache_lighting =
+        lightcast_server::gi::stages::index_of("cache_lighting").expect("a registered stage");
+    let mut tasks = Vec::new();
+    for _ in 0..3 {
+        let created = server.create_session(small_session(64, 48), None).await;
+        let mut stream = server.connect(&created).await;
+        tasks.push(tokio::spawn(async move {
+            let mut events = Vec::new();
+            let mut seen = Vec::new();
+            for _ in 0..8 {
+                let f = stream.next_frame(&mut events).await;
+                let reused = f.header.reused.contains(&cache_lighting);
+                let shared = f
+                    .header
+                    .shared
+                    .iter()
+                    .find(|(i, _)| *i == cache_lighting)
+                    .map_or(0, |&(_, n)| n);
+                seen.push((reused, shared));
+            }
+            seen
+        }));
+    }
+    let mut frames = Vec::new();
+    for t in tasks {
+        frames.extend(t.await.expect("session task"));
+    }
+    assert!(
+        frames.iter().any(|&(reused, shared)| reused && shared >= 2),
+        "a frame reused the cache lighting another session's frame made: {frames:?}"
+    );
+    assert!(
+        frames
+            .iter()
+            .any(|&(reused, shared)| !reused && shared >= 2),
+        "a frame made it for several sessions: {frames:?}"
+    );
+    assert!(
+        frames
+            .iter()
+            .all(|&(reused, shared)| !reused || shared >= 2),
+        "a reused cache lighting serves several sessions: {frames:?}"
+    );
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shutdown_sends_closing_to_open_streams() {
     let server = TestServer::start(&[]).await;

@@ -227,8 +227,8 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
         precompute(&mut off, &base.gi);
         // Session, its settings, whether it reuses what another session's frame made: sessions
         // 2 and 3 join (each makes them again with its view added), session 1's next frame
-        // starts a tick the others reuse, session 2's new light makes its own, and so do the
-        // others' next frames (the proxies now hold session 2's).
+        // starts a tick the others reuse, session 2's new light makes its own (in a lighting
+        // buffer of its own), and sessions 1 and 3 go on sharing theirs.
         let sequence = [
             (1, &base, false),
             (2, &base, false),
@@ -240,9 +240,10 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
             (3, &base, true),
             (2, &other_light, false),
             (3, &base, false),
-            (1, &base, false),
+            (1, &base, true),
             (3, &base, false),
             (1, &base, true),
+            (2, &other_light, false),
         ];
         for (i, &(session, s, shares)) in sequence.iter().enumerate() {
             let s = RenderSettings {
@@ -288,6 +289,49 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
                 !reused(&a).contains(&stages::VIEW_SAMPLES.name()),
                 "every session gathers its own view samples"
             );
+        }
+    }
+}
+
+/// Two groups of sessions under two lights, taking turns: each group shares its own light-side
+/// stages (a lighting buffer per light), and every frame is its unshared frame bit for bit.
+#[test]
+fn two_lights_are_each_shared_by_their_sessions() {
+    let scene = procedural::cornell_box();
+    let facts = SceneFacts::of(&scene);
+    let method = BRSM;
+    let lit = RenderSettings {
+        gi: small_with_importance(method, &facts),
+        ..settings(W, H, default_camera(&scene), default_light(&scene))
+    };
+    let mut other = lit.clone();
+    other.lights[0].position[2] -= 0.3;
+    let mut on = Renderer::new(gpu(), scene.clone());
+    let mut off = Renderer::new(gpu(), scene.clone());
+    off.set_reuse(false);
+    precompute(&mut on, &lit.gi);
+    precompute(&mut off, &lit.gi);
+    for round in 0..3 {
+        for (session, s) in [(1, &lit), (2, &other), (3, &lit), (4, &other)] {
+            let s = RenderSettings {
+                history: Some(session),
+                ..s.clone()
+            };
+            let (a, b) = (
+                on.render(&s).expect("render"),
+                off.render(&s).expect("render"),
+            );
+            assert!(
+                a.hdr == b.hdr,
+                "round {round}, session {session}: sharing changed the image"
+            );
+            // After the first round the second session of each light reuses the first's.
+            let want = if round > 0 && session > 2 {
+                light_side_of(method)
+            } else {
+                vec![]
+            };
+            assert_eq!(shared_stages(&a), want, "round {round}, session {session}");
         }
     }
 }

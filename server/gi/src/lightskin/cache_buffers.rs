@@ -9,7 +9,11 @@ use wgpu::util::DeviceExt;
 pub struct CacheBuffers {
     pub caches: wgpu::Buffer,
     pub vertex_caches: wgpu::Buffer,
+    /// The proxy lights of frames that do not share them.
     pub lighting: wgpu::Buffer,
+    /// The proxy lights of each input sessions share (`shared::MAX_SHARED_INPUTS`, made when
+    /// first used: 64 bytes a cache each).
+    shared_lighting: Vec<wgpu::Buffer>,
     /// Sums carried between the chunked cache-lighting dispatches.
     pub accum: wgpu::Buffer,
     /// Covered proxy areas carried between the chunked occlusion dispatches.
@@ -27,6 +31,22 @@ pub struct CacheBuffers {
 }
 
 impl CacheBuffers {
+    /// Makes lighting buffer `at` (see [`Self::lighting_at`]) if it is not yet.
+    pub fn ensure_lighting(&mut self, device: &wgpu::Device, at: usize) {
+        while self.shared_lighting.len() < at {
+            self.shared_lighting
+                .push(lighting_buffer(device, self.count as usize));
+        }
+    }
+
+    /// Lighting buffer `at`: 0 holds the proxies of frames that do not share them, 1 onwards
+    /// those of one shared input each (made by [`Self::ensure_lighting`]; 0's otherwise).
+    pub fn lighting_at(&self, at: usize) -> &wgpu::Buffer {
+        at.checked_sub(1)
+            .and_then(|i| self.shared_lighting.get(i))
+            .unwrap_or(&self.lighting)
+    }
+
     pub fn new(device: &wgpu::Device, set: &CacheSet) -> Self {
         // Storage bindings may not be empty; a scene without caches binds one dummy cache that
         // no vertex refers to.
@@ -56,12 +76,8 @@ impl CacheBuffers {
                 contents: bytemuck::cast_slice(vertex_caches),
                 usage: storage,
             }),
-            lighting: device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("cache lighting"),
-                size: (caches.len() * std::mem::size_of::<CacheLighting>()) as u64,
-                usage: storage | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            }),
+            lighting: lighting_buffer(device, caches.len()),
+            shared_lighting: Vec::new(),
             accum: device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("cache lighting sums"),
                 size: (caches.len() * std::mem::size_of::<CacheAccum>()) as u64,
@@ -144,4 +160,14 @@ impl CacheBuffers {
         }
         self.poses = poses.clone();
     }
+}
+
+/// A buffer of `caches` proxy-light pairs.
+fn lighting_buffer(device: &wgpu::Device, caches: usize) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("cache lighting"),
+        size: (caches.max(1) * std::mem::size_of::<CacheLighting>()) as u64,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    })
 }

@@ -130,10 +130,12 @@ impl CacheLightingPass {
         }
     }
 
+    /// Binds the passes to `caches`, writing the proxies into its lighting buffer `lighting`
+    /// (`CacheBuffers::lighting_at`).
     pub fn bind(
         &self,
         device: &wgpu::Device,
-        caches: &CacheBuffers,
+        (caches, lighting): (&CacheBuffers, usize),
         vals: &wgpu::Buffer,
         rsm: &Rsm,
     ) -> wgpu::BindGroup {
@@ -144,7 +146,7 @@ impl CacheLightingPass {
             rsm_position: &rsm.position,
             rsm_normal: &rsm.normal,
             rsm_flux_area: &rsm.flux_area,
-            lighting: &caches.lighting,
+            lighting: caches.lighting_at(lighting),
             accum: &caches.accum,
             rsm_glossy: &rsm.glossy,
             visibility: &caches.visibility,

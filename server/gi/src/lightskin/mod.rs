@@ -382,6 +382,8 @@ pub struct LightSkin {
     sharing: Sharing,
     /// Counts the cache sets loaded: a sharing key names the one its proxies were made for.
     cache_sets: u64,
+    /// The lighting buffer the last frame's proxies are in (`CacheBuffers::lighting_at`).
+    lighting: usize,
 }
 
 impl LightSkin {
@@ -398,6 +400,7 @@ impl LightSkin {
             sampled: false,
             sharing: Sharing::default(),
             cache_sets: 0,
+            lighting: 0,
         }
     }
 
@@ -420,8 +423,10 @@ impl LightSkin {
         let Some(caches) = self.caches.as_ref().filter(|_| self.sampled) else {
             return Ok(None);
         };
-        let mut lighting: Vec<CacheLighting> =
-            bytemuck::pod_collect_to_vec(&read_buffer(&self.ctx, &caches.lighting)?);
+        let mut lighting: Vec<CacheLighting> = bytemuck::pod_collect_to_vec(&read_buffer(
+            &self.ctx,
+            caches.lighting_at(self.lighting),
+        )?);
         lighting.truncate(caches.count as usize);
         Ok(Some(lighting))
     }
@@ -449,12 +454,20 @@ impl Method for LightSkin {
         stages: &mut FrameStages,
     ) -> Result<Option<ProgressBuffer>, GiError> {
         let r = frame.resources;
+        let sharer = sharer(frame, self.cache_sets);
+        let plan = self.sharing.plan(sharer.as_ref(), frame.camera.position);
+        let lighting = match &plan {
+            Plan::Reuse { lighting, .. } => *lighting,
+            Plan::Make(pool) => pool.lighting,
+        };
+        self.lighting = lighting;
         let caches = self.caches.as_mut().ok_or_else(|| {
             GiError::Scene(
                 "LightSkin needs the scene's light caches; call LightSkin::set_caches first".into(),
             )
         })?;
         caches.set_poses(&r.ctx.queue, &r.scene.nodes, frame.poses);
+        caches.ensure_lighting(&r.ctx.device, lighting);
         let caches = &*caches;
         let method = frame.settings.method;
         let gi = &Settings::of(frame.settings)?;
@@ -473,8 +486,6 @@ impl Method for LightSkin {
             },
             _ => ValSource::EveryTexel,
         };
-        let sharer = sharer(frame, self.cache_sets);
-        let plan = self.sharing.plan(sharer.as_ref(), frame.camera.position);
         self.indirect_pass
             .prepare(queue, true, r.ctx.primitive_index);
         let indirect_group = self.indirect_pass.bind(
@@ -483,7 +494,7 @@ impl Method for LightSkin {
             frame.gbuffer,
             &CacheInputs {
                 caches: &caches.caches,
-                lighting: &caches.lighting,
+                lighting: caches.lighting_at(lighting),
                 vertex_caches: &caches.vertex_caches,
                 scene: &r.scene_buffers,
             },
@@ -514,7 +525,7 @@ impl Method for LightSkin {
             .iter()
             .chain(&lit[..1 + usize::from(gi.occlusion)]);
         let sessions = match &plan {
-            Plan::Reuse { sessions } => *sessions,
+            Plan::Reuse { sessions, .. } => *sessions,
             Plan::Make(pool) => pool.sessions,
         };
         for &stage in light_side.clone().filter(|_| sessions > 1) {
@@ -539,13 +550,16 @@ impl Method for LightSkin {
                     roughness_override(frame.settings).map(crate::scene::brdf::phong_exponent),
                 );
                 let occlusion_chunks = self.occlusion_pass.prepare(queue, caches.count);
-                let lighting_group =
-                    self.cache_pass
-                        .bind(device, caches, sampling.vals(), sampling.rsm());
+                let lighting_group = self.cache_pass.bind(
+                    device,
+                    (caches, lighting),
+                    sampling.vals(),
+                    sampling.rsm(),
+                );
                 let occlusion_group = self.occlusion_pass.bind(
                     device,
                     &caches.caches,
-                    &caches.lighting,
+                    caches.lighting_at(lighting),
                     &caches.coverage,
                 );
                 sampling.encode_rsm(stages, &r.scene_buffers, frame.shared)?;
@@ -600,7 +614,7 @@ impl Method for LightSkin {
         if view == views::CACHES.name {
             let caches = self.caches.as_ref()?;
             return Some(Box::new(LightingCapture {
-                staged: stage_buffer(device, encoder, &caches.lighting),
+                staged: stage_buffer(device, encoder, caches.lighting_at(self.lighting)),
                 count: caches.count as usize,
             }));
         }

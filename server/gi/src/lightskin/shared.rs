@@ -20,10 +20,12 @@
 //!   views: a session the render loop skipped for one tick, throttled by its client, stays
 //!   pooled and reuses the next tick's rather than making them again);
 //!
-//! and a frame with another key makes them from its own view alone (so a session that changes
-//! its light stops sharing at once, and its frame is what it would be alone). The proxies hold
-//! one key's at a time: sessions of two keys taking turns make them every frame, each from its
-//! key's sessions' views. Two inputs depend on the camera and are pooled over
+//! and a frame with a key no proxies hold makes them from its own view alone (so a session that
+//! changes its light stops sharing at once, and its frame is what it would be alone). The
+//! proxies of up to [`MAX_SHARED_INPUTS`] keys are kept at once, each in a lighting buffer of
+//! its own (made when first used, the least recently used one given to a new key), so groups
+//! of sessions under different lights each share theirs; frames that do not share use a buffer
+//! of their own. Two inputs depend on the camera and are pooled over
 //! the *views* (camera and frame size) of those sessions, equal views counted once:
 //! - BRSM's N_VS view samples (eq. 10–11): view j of m gives its first N_VS/m Halton
 //!   samples, so the VALs are drawn for what every sharing session saw;
@@ -53,11 +55,15 @@ pub struct Sharer {
     pub camera: [f32; 3],
 }
 
+/// Distinct light-side inputs whose proxies are kept at once (each in a lighting buffer of
+/// its own), so groups of sessions under different lights each share theirs.
+pub const MAX_SHARED_INPUTS: usize = 4;
+
 /// What a frame does with the shared stages.
 pub enum Plan {
-    /// The proxies hold what this frame's inputs make, for this many sessions: skip the
-    /// shared stages.
-    Reuse { sessions: usize },
+    /// The proxies in lighting buffer `lighting` hold what this frame's inputs make, for
+    /// `sessions` sessions: skip the shared stages.
+    Reuse { sessions: usize, lighting: usize },
     /// Make them, from these views.
     Make(Pool),
 }
@@ -71,15 +77,26 @@ pub struct Pool {
     pub slots: Option<Vec<usize>>,
     /// The sessions whose views they are (0: a frame that does not share).
     pub sessions: usize,
+    /// The lighting buffer the proxies go to: 0 for a frame that does not share, 1 to
+    /// [`MAX_SHARED_INPUTS`] for one input's.
+    pub lighting: usize,
 }
 
-/// What the proxies hold, made by a sharing frame.
+/// What one lighting buffer's proxies hold, made by sharing frames.
 struct Made {
     key: Vec<u8>,
+    /// Its lighting buffer (1 to [`MAX_SHARED_INPUTS`]).
+    lighting: usize,
     /// The sessions whose views they were made from.
     pooled: Vec<u64>,
     /// The sessions that rendered with them (their maker first).
     users: Vec<u64>,
+    /// This tick and the one two before it (ticks are numbered across all inputs).
+    tick: u64,
+    earlier: u64,
+    previous: u64,
+    /// When a frame last used them (the least recent gives its buffer to new inputs).
+    used: u64,
 }
 
 struct Slot {
@@ -94,10 +111,12 @@ struct Slot {
 /// The state of sharing on one `LightSkin`.
 #[derive(Default)]
 pub struct Sharing {
-    /// What the proxies hold, if a sharing frame made them.
-    made: Option<Made>,
-    /// Counts the ticks: a tick starts where a session comes again to the proxies it used.
+    /// What the shared lighting buffers hold.
+    made: Vec<Made>,
+    /// Numbers the ticks: a tick starts where a session comes again to the proxies it used.
     tick: u64,
+    /// Counts sharing frames (for [`Made::used`]).
+    frames: u64,
     slots: Vec<Slot>,
     /// Every slot's view samples, `per_slot` each, copied in after each sharing frame's gather.
     samples: Option<(wgpu::Buffer, u32)>,
@@ -105,59 +124,98 @@ pub struct Sharing {
 
 impl Sharing {
     /// Decides what this frame does, and records its view. `sharer`: `None` for a frame that
-    /// does not share (it makes the stages from its own view and leaves nothing to share).
+    /// does not share (it makes the stages from its own view, in lighting buffer 0, and leaves
+    /// nothing to share).
     pub fn plan(&mut self, sharer: Option<&Sharer>, camera: [f32; 3]) -> Plan {
         let Some(s) = sharer else {
-            self.made = None;
             return Plan::Make(Pool {
                 cameras: vec![camera],
                 slots: None,
                 sessions: 0,
+                lighting: 0,
             });
         };
-        let (pooled, users) = match self.made.take().filter(|m| m.key == s.key) {
-            // Made from this session's view this tick, and not used by it yet.
-            Some(mut m) if m.pooled.contains(&s.session) && !m.users.contains(&s.session) => {
-                m.users.push(s.session);
-                let sessions = m.pooled.len();
-                self.made = Some(m);
-                self.record(s);
-                return Plan::Reuse { sessions };
-            }
-            // A session new to this tick: made again within the tick, its view added.
-            Some(mut m) if !m.users.contains(&s.session) => {
-                m.pooled.push(s.session);
-                m.users.push(s.session);
-                self.record(s);
-                (m.pooled, m.users)
-            }
-            // Its own proxies again: a new tick, from the views of every session that rendered
-            // with the same inputs in the last two.
-            Some(_) => {
-                self.tick += 1;
-                self.record(s);
-                (self.live(&s.key), vec![s.session])
-            }
-            // Other inputs: made for this frame alone, as nothing shares them yet (sessions of
-            // two inputs taking turns make their own every frame, without pooling).
+        self.frames += 1;
+        let frames = self.frames;
+        let at = match self.made.iter().position(|m| m.key == s.key) {
+            Some(at) => at,
+            // New inputs: made for this frame alone, in the least recently used buffer.
             None => {
                 self.tick += 1;
-                self.record(s);
-                (vec![s.session], vec![s.session])
+                let made = Made {
+                    key: s.key.clone(),
+                    lighting: self.made.len() + 1,
+                    pooled: vec![s.session],
+                    users: vec![s.session],
+                    tick: self.tick,
+                    earlier: self.tick,
+                    previous: self.tick,
+                    used: frames,
+                };
+                let at = if self.made.len() < MAX_SHARED_INPUTS {
+                    self.made.push(made);
+                    self.made.len() - 1
+                } else {
+                    let (at, _) = self
+                        .made
+                        .iter()
+                        .enumerate()
+                        .min_by_key(|(_, m)| m.used)
+                        .unwrap_or((0, &self.made[0]));
+                    let lighting = self.made[at].lighting;
+                    self.made[at] = Made { lighting, ..made };
+                    at
+                };
+                self.record(s, self.tick);
+                return self.make(at);
             }
         };
-        let pool = self.pool(&pooled);
-        self.made = Some(Made {
-            key: s.key.clone(),
-            pooled,
-            users,
-        });
-        Plan::Make(pool)
+        let m = &mut self.made[at];
+        m.used = frames;
+        let tick = m.tick;
+        if m.pooled.contains(&s.session) && !m.users.contains(&s.session) {
+            // Made from this session's view this tick, and not used by it yet.
+            m.users.push(s.session);
+            let plan = Plan::Reuse {
+                sessions: m.pooled.len(),
+                lighting: m.lighting,
+            };
+            self.record(s, tick);
+            return plan;
+        }
+        if !m.users.contains(&s.session) {
+            // A session new to this tick: made again within the tick, its view added.
+            m.pooled.push(s.session);
+            m.users.push(s.session);
+            self.record(s, tick);
+            return self.make(at);
+        }
+        // Its own proxies again: a new tick, from the views of every session that rendered
+        // with the same inputs in this tick or the two before.
+        self.tick += 1;
+        let m = &mut self.made[at];
+        m.earlier = m.previous;
+        m.previous = m.tick;
+        m.tick = self.tick;
+        m.users = vec![s.session];
+        let (key, earlier) = (m.key.clone(), m.earlier);
+        self.record(s, self.tick);
+        let live = self.live(&key, earlier);
+        self.made[at].pooled = live;
+        self.make(at)
     }
 
-    /// The slot of `s`'s session, now holding its view at this tick.
-    fn record(&mut self, s: &Sharer) {
-        let tick = self.tick;
+    /// Makes the proxies of `made[at]` from its pooled sessions' views.
+    fn make(&self, at: usize) -> Plan {
+        let m = &self.made[at];
+        Plan::Make(Pool {
+            lighting: m.lighting,
+            ..self.pool(&m.pooled)
+        })
+    }
+
+    /// The slot of `s`'s session, now holding its view as of `tick`.
+    fn record(&mut self, s: &Sharer, tick: u64) {
         let at = match self.slots.iter().position(|slot| slot.session == s.session) {
             Some(at) => at,
             None if self.slots.len() < MAX_POOLED_VIEWS => {
@@ -189,11 +247,11 @@ impl Sharing {
         slot.seen = tick;
     }
 
-    /// The sessions with `key` that rendered in the last two ticks or this one.
-    fn live(&self, key: &[u8]) -> Vec<u64> {
+    /// The sessions with `key` that rendered since tick `since`.
+    fn live(&self, key: &[u8], since: u64) -> Vec<u64> {
         self.slots
             .iter()
-            .filter(|s| s.key == key && s.seen + 2 >= self.tick)
+            .filter(|s| s.key == key && s.seen >= since)
             .map(|s| s.session)
             .collect()
     }
@@ -217,6 +275,7 @@ impl Sharing {
             cameras: views.iter().map(|(_, s)| s.camera).collect(),
             slots: Some(views.iter().map(|&(at, _)| at).collect()),
             sessions: sessions.len(),
+            lighting: 0,
         }
     }
 
@@ -349,23 +408,59 @@ mod tests {
         // Another key: made for itself, from its own view only.
         let pool = made(s.plan(Some(&sharer(2, b"other", b"b")), [0.0; 3]));
         assert_eq!(pool.cameras, vec![[2.0, 0.0, 0.0]]);
-        // A frame that does not share leaves nothing to reuse.
-        made(s.plan(None, [5.0, 0.0, 0.0]));
-        made(s.plan(Some(&sharer(3, b"other", b"c")), [0.0; 3]));
+        // A frame that does not share makes its own in lighting buffer 0, leaving the shared
+        // ones as they were: session 2, back at key k, reuses this tick's (made by session 3
+        // from its view too).
+        assert_eq!(made(s.plan(None, [5.0, 0.0, 0.0])).lighting, 0);
+        assert!(reuses(&mut s, 2, b"k", b"b"));
     }
 
-    /// Sessions of two keys taking turns make the stages every frame (the proxies hold one
-    /// key's at a time), each key's from its own sessions' views only.
+    /// Sessions of two keys taking turns share within each key, in a lighting buffer per key,
+    /// each key's pool holding its own sessions' views only.
     #[test]
-    fn two_keys_taking_turns_make_their_own() {
+    fn two_keys_taking_turns_share_within_each() {
         let mut s = Sharing::default();
-        for _ in 0..3 {
-            for (session, key) in [(1, b"k"), (2, b"j"), (3, b"k")] {
+        let sessions = [(1, b"k"), (2, b"j"), (3, b"k"), (4, b"j")];
+        for round in 0..3 {
+            for (session, key) in sessions {
                 let frame = sharer(session, key, &[session as u8]);
-                let pool = made(s.plan(Some(&frame), [0.0; 3]));
-                assert_eq!(pool.cameras.contains(&[2.0, 0.0, 0.0]), session == 2);
+                match s.plan(Some(&frame), [0.0; 3]) {
+                    Plan::Make(pool) => {
+                        assert!(
+                            round == 0 || session <= 2,
+                            "round {round}, session {session}"
+                        );
+                        assert_eq!(pool.lighting, if key == b"k" { 1 } else { 2 });
+                        let other = if key == b"k" { [2.0, 4.0] } else { [1.0, 3.0] };
+                        assert!(pool.cameras.iter().all(|c| !other.contains(&c[0])));
+                    }
+                    Plan::Reuse { sessions, lighting } => {
+                        assert!(round > 0 && session > 2, "round {round}, session {session}");
+                        assert_eq!((sessions, lighting), (2, if key == b"k" { 1 } else { 2 }));
+                    }
+                }
             }
         }
+    }
+
+    /// More inputs than lighting buffers: the least recently used gives its buffer up.
+    #[test]
+    fn new_inputs_take_the_least_recently_used_buffer() {
+        let mut s = Sharing::default();
+        let keys: Vec<Vec<u8>> = (0..=MAX_SHARED_INPUTS as u8).map(|k| vec![k]).collect();
+        let buffers: Vec<usize> = keys
+            .iter()
+            .enumerate()
+            .map(|(i, key)| made(s.plan(Some(&sharer(i as u64, key, b"v")), [0.0; 3])).lighting)
+            .collect();
+        let mut want: Vec<usize> = (1..=MAX_SHARED_INPUTS).collect();
+        want.push(1);
+        assert_eq!(buffers, want, "the first input's buffer went to the last");
+        // The first input comes again: made anew (its proxies are gone), in the next oldest.
+        assert_eq!(
+            made(s.plan(Some(&sharer(0, &keys[0], b"v")), [0.0; 3])).lighting,
+            2
+        );
     }
 
     /// A session gone for two whole ticks is no longer pooled.

@@ -19,24 +19,7 @@ const H: u32 = 48;
 
 /// The short box 45 cm to the left, turned a quarter about its vertical axis.
 fn moved_short_box(scene: &Scene) -> Poses {
-    let base = scene
-        .node(1)
-        .and_then(|n| n.local)
-        .expect("short box")
-        .translation;
-    let requested = [lightcast_protocol::NodePose {
-        node: 1,
-        translation: Some((base - Vec3::X * 0.45).to_array()),
-        rotation: Some(Quat::from_rotation_y(std::f32::consts::FRAC_PI_2).to_array()),
-        scale: None,
-    }];
-    resolve_poses(
-        &scene.nodes,
-        &scene.node_bounds(),
-        &scene.bounds,
-        &requested,
-    )
-    .expect("a pose inside the room")
+    short_box_posed(scene, 0.45, std::f32::consts::FRAC_PI_2)
 }
 
 /// `scene` with `poses` baked into its vertices.

@@ -13,11 +13,40 @@ use lightcast_server::passes::stages::{RSM, SHADOW_MAP};
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
-use lightcast_server::scene::nodes::resolve_poses;
 use lightcast_server::scene::procedural;
+use lightcast_server::scene::Scene;
 
 const W: u32 = 48;
 const H: u32 = 36;
+
+/// Two renderers of `scene` ready for `gi`: reuse (and sharing) on, and off.
+fn reuse_on_and_off(scene: &Scene, gi: &GiParams) -> (Renderer, Renderer) {
+    let mut on = Renderer::new(gpu(), scene.clone());
+    let mut off = Renderer::new(gpu(), scene.clone());
+    off.set_reuse(false);
+    precompute(&mut on, gi);
+    precompute(&mut off, gi);
+    (on, off)
+}
+
+/// `session`'s frame of `s` rendered with sharing on and off, which must be equal bit for bit.
+fn session_frames(
+    (on, off): (&mut Renderer, &mut Renderer),
+    session: u64,
+    s: &RenderSettings,
+    label: &str,
+) -> (Frame, Frame) {
+    let s = RenderSettings {
+        history: Some(session),
+        ..s.clone()
+    };
+    let (a, b) = (
+        on.render(&s).expect("render"),
+        off.render(&s).expect("render"),
+    );
+    assert!(a.hdr == b.hdr, "{label}: sharing changed the image");
+    (a, b)
+}
 
 fn reused(frame: &Frame) -> Vec<&'static str> {
     let mut names: Vec<&'static str> = frame
@@ -43,20 +72,8 @@ fn reused_passes_leave_every_frame_as_it_was() {
         (Vec3::from(base.camera.position) + Vec3::new(0.4, -0.2, -0.5)).to_array();
     let mut other_light = base.clone();
     other_light.lights[0].position[0] += 0.1;
-    let node = scene.node(1).and_then(|n| n.local).expect("the short box");
     let posed = RenderSettings {
-        poses: resolve_poses(
-            &scene.nodes,
-            &scene.node_bounds(),
-            &scene.bounds,
-            &[lightcast_protocol::NodePose {
-                node: 1,
-                translation: Some((node.translation - Vec3::X * 0.2).to_array()),
-                rotation: None,
-                scale: None,
-            }],
-        )
-        .expect("a pose inside the room"),
+        poses: short_box_posed(&scene, 0.2, 0.0),
         ..base.clone()
     };
     // Which frames may reuse: after the same lights and poses, whatever the camera.
@@ -71,11 +88,7 @@ fn reused_passes_leave_every_frame_as_it_was() {
     ];
     for method in gi::methods() {
         let gi = (gi::table(method).testing.small)(&facts);
-        let mut on = Renderer::new(gpu(), scene.clone());
-        let mut off = Renderer::new(gpu(), scene.clone());
-        off.set_reuse(false);
-        precompute(&mut on, &gi);
-        precompute(&mut off, &gi);
+        let (mut on, mut off) = reuse_on_and_off(&scene, &gi);
         for (i, &(frame_settings, may_reuse)) in sequence.iter().enumerate() {
             let s = RenderSettings {
                 gi: gi.clone(),
@@ -220,11 +233,7 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
         };
         let mut other_light = base.clone();
         other_light.lights[0].position[0] += 0.1;
-        let mut on = Renderer::new(gpu(), scene.clone());
-        let mut off = Renderer::new(gpu(), scene.clone());
-        off.set_reuse(false);
-        precompute(&mut on, &base.gi);
-        precompute(&mut off, &base.gi);
+        let (mut on, mut off) = reuse_on_and_off(&scene, &base.gi);
         // Session, its settings, whether it reuses what another session's frame made: sessions
         // 2 and 3 join (each makes them again with its view added), session 1's next frame
         // starts a tick the others reuse, session 2's new light makes its own (in a lighting
@@ -246,17 +255,11 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
             (2, &other_light, false),
         ];
         for (i, &(session, s, shares)) in sequence.iter().enumerate() {
-            let s = RenderSettings {
-                history: Some(session),
-                ..s.clone()
-            };
-            let (a, b) = (
-                on.render(&s).expect("render"),
-                off.render(&s).expect("render"),
-            );
-            assert!(
-                a.hdr == b.hdr,
-                "{method}, frame {i}: sharing changed the image"
+            let (a, b) = session_frames(
+                (&mut on, &mut off),
+                session,
+                s,
+                &format!("{method}, frame {i}"),
             );
             assert_eq!(
                 shared_stages(&b),
@@ -306,24 +309,14 @@ fn two_lights_are_each_shared_by_their_sessions() {
     };
     let mut other = lit.clone();
     other.lights[0].position[2] -= 0.3;
-    let mut on = Renderer::new(gpu(), scene.clone());
-    let mut off = Renderer::new(gpu(), scene.clone());
-    off.set_reuse(false);
-    precompute(&mut on, &lit.gi);
-    precompute(&mut off, &lit.gi);
+    let (mut on, mut off) = reuse_on_and_off(&scene, &lit.gi);
     for round in 0..3 {
         for (session, s) in [(1, &lit), (2, &other), (3, &lit), (4, &other)] {
-            let s = RenderSettings {
-                history: Some(session),
-                ..s.clone()
-            };
-            let (a, b) = (
-                on.render(&s).expect("render"),
-                off.render(&s).expect("render"),
-            );
-            assert!(
-                a.hdr == b.hdr,
-                "round {round}, session {session}: sharing changed the image"
+            let (a, _) = session_frames(
+                (&mut on, &mut off),
+                session,
+                s,
+                &format!("round {round}, session {session}"),
             );
             // After the first round the second session of each light reuses the first's.
             let want = if round > 0 && session > 2 {
@@ -385,11 +378,7 @@ fn sessions_of_two_views_pool_them_within_a_stated_tolerance() {
             gi: gi.clone(),
             ..s.clone()
         });
-        let mut on = Renderer::new(gpu(), scene.clone());
-        let mut off = Renderer::new(gpu(), scene.clone());
-        off.set_reuse(false);
-        precompute(&mut on, &gi);
-        precompute(&mut off, &gi);
+        let (mut on, mut off) = reuse_on_and_off(&scene, &gi);
         let alone = [&near, &far].map(|s| off.render(s).expect("render").indirect.expect("hdr"));
         let mut session = |id: u64, s: &RenderSettings| {
             let s = RenderSettings {

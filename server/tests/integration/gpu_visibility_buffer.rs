@@ -96,20 +96,8 @@ fn every_method_renders_the_cornell_box_as_with_the_fat_gbuffer() {
         let (on, off) = both(&scene, &s);
         agree(&format!("cornell, {method}"), &on, &off);
     }
-    let node = scene.node(1).and_then(|n| n.local).expect("the short box");
     let moved = RenderSettings {
-        poses: lightcast_server::scene::nodes::resolve_poses(
-            &scene.nodes,
-            &scene.node_bounds(),
-            &scene.bounds,
-            &[lightcast_protocol::NodePose {
-                node: 1,
-                translation: Some((node.translation - Vec3::X * 0.2).to_array()),
-                rotation: None,
-                scale: None,
-            }],
-        )
-        .expect("a pose inside the room"),
+        poses: short_box_posed(&scene, 0.2, 0.0),
         ..base
     };
     let picked = RenderSettings {

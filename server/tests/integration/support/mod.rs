@@ -441,3 +441,30 @@ pub fn relative_mae(a: &[[f32; 4]], b: &[[f32; 4]]) -> f32 {
 pub fn rgb(image: &[[f32; 4]]) -> Vec<[f32; 3]> {
     image.iter().map(|p| [p[0], p[1], p[2]]).collect()
 }
+
+/// The Cornell box's short box (node 1) slid `slide` to the left (−x) and turned `turn`
+/// radians about its vertical axis.
+pub fn short_box_posed(
+    scene: &Scene,
+    slide: f32,
+    turn: f32,
+) -> lightcast_server::scene::nodes::Poses {
+    let base = scene
+        .node(1)
+        .and_then(|n| n.local)
+        .expect("the short box")
+        .translation;
+    let requested = [lightcast_protocol::NodePose {
+        node: 1,
+        translation: Some((base - Vec3::X * slide).to_array()),
+        rotation: (turn != 0.0).then(|| glam::Quat::from_rotation_y(turn).to_array()),
+        scale: None,
+    }];
+    lightcast_server::scene::nodes::resolve_poses(
+        &scene.nodes,
+        &scene.node_bounds(),
+        &scene.bounds,
+        &requested,
+    )
+    .expect("a pose inside the room")
+}

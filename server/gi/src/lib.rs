@@ -167,6 +167,10 @@ pub struct FrameInputs<'a> {
     /// The debug view the frame is read back for: a method may compute what only that view
     /// shows (to hand it over in [`Method::capture_debug`]).
     pub debug_view: View,
+    /// The frame's raster passes draw visibility buffers and resolve them (the G-buffer has;
+    /// an RSM does likewise: `passes::rsm::Rsm::new`). Set only where the device has triangle
+    /// ids and the scene's buffers fit a storage binding.
+    pub visibility_buffer: bool,
 }
 
 /// One GI method's per-scene GPU state and per-frame passes.

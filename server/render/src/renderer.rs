@@ -1213,6 +1213,7 @@ impl Renderer {
             poses: &settings.poses,
             shared: shared.as_deref(),
             debug_view: settings.debug_view,
+            visibility_buffer: thin,
         };
         let Some(method) = self.methods[method_index].as_mut() else {
             unreachable!("the method was just created");

@@ -347,7 +347,13 @@ impl FrameTargets {
         g: &Settings,
         faces: u32,
     ) -> Prepared<'_> {
-        let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, faces);
+        let rsm = Rsm::reuse_or_new(
+            &mut self.rsm,
+            device,
+            g.rsm_size,
+            faces,
+            frame.visibility_buffer,
+        );
         if !self
             .buffers
             .as_ref()

@@ -479,6 +479,7 @@ impl Method for LightSkin {
             frame.light_faces,
             (&r.scene, emitters(frame.settings)),
             gi,
+            frame.visibility_buffer,
         );
         let source = match method {
             crate::gi::lightskin::BRSM => ValSource::Selected {
@@ -514,15 +515,19 @@ impl Method for LightSkin {
             })?;
         }
         // The light-side stages this frame's method and parameters run.
-        let sampled = [
+        let rsm = [
             crate::passes::stages::RSM,
+            crate::passes::stages::RSM_RESOLVE,
+        ];
+        let sampled = [
             stages::IMPORTANCE,
             stages::CUMULATIVE_SUMS,
             stages::VAL_SELECT,
         ];
         let lit = [stages::CACHE_LIGHTING, stages::PROXY_OCCLUSION];
-        let light_side = sampled[..if brsm { 4 } else { 1 }]
+        let light_side = rsm[..1 + usize::from(sampling.rsm().visibility())]
             .iter()
+            .chain(&sampled[..if brsm { 3 } else { 0 }])
             .chain(&lit[..1 + usize::from(gi.occlusion)]);
         let sessions = match &plan {
             Plan::Reuse { sessions, .. } => *sessions,

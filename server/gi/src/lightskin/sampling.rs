@@ -25,6 +25,8 @@ use crate::scene::Scene;
 struct Key {
     rsm_size: u32,
     faces: u32,
+    /// The RSM is resolved from a visibility buffer.
+    visibility: bool,
     view_samples: u32,
     val_count: u32,
     gbuffer: wgpu::Texture,
@@ -127,6 +129,7 @@ impl ValSampling {
     /// and writes the uniforms.
     /// `emitters`: the scene's emissive surfaces light the frame too, as VALs of one more
     /// RSM face (`passes::rsm::EmitterFace`), sampled and selected like any other texel.
+    /// `visibility`: the RSM is drawn as a visibility buffer (`FrameInputs::visibility_buffer`).
     pub fn prepare(
         &mut self,
         ctx: &GpuContext,
@@ -134,6 +137,7 @@ impl ValSampling {
         faces: &[(u32, LightFace)],
         (scene, emitters): (&Scene, bool),
         settings: &Settings,
+        visibility: bool,
     ) {
         let emitter_face =
             self.rsm_pass
@@ -141,6 +145,7 @@ impl ValSampling {
         let key = Key {
             rsm_size: settings.rsm_size,
             faces: faces.len() as u32 + u32::from(emitter_face),
+            visibility,
             view_samples: settings.view_samples,
             val_count: settings.val_count,
             gbuffer: gbuffer.position.texture.clone(),
@@ -194,7 +199,7 @@ impl ValSampling {
         settings: &Settings,
     ) -> Resources {
         let device = &ctx.device;
-        let rsm = Rsm::new(device, settings.rsm_size, key.faces);
+        let rsm = Rsm::new(device, settings.rsm_size, key.faces, key.visibility);
         let texels = u64::from(rsm.texels());
         let samples = storage(
             device,

@@ -247,7 +247,13 @@ impl Method for RsmGather {
             self.rsm_pass
                 .prepare_emitters(device, &r.scene, g.rsm_size, emitters(frame.settings));
         let face_count = faces.len() as u32 + u32::from(emitter_face);
-        let rsm = Rsm::reuse_or_new(&mut self.rsm, device, g.rsm_size, face_count);
+        let rsm = Rsm::reuse_or_new(
+            &mut self.rsm,
+            device,
+            g.rsm_size,
+            face_count,
+            frame.visibility_buffer,
+        );
         let rsm_faces = RsmFace::all(faces, g.rsm_size, g.senders);
         self.rsm_pass.set_faces(queue, &rsm_faces);
         let view_proj: Vec<(u32, glam::Mat4)> = faces

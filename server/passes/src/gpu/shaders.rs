@@ -76,6 +76,7 @@ pub const GBUFFER_RESOLVE: ShaderSource = ShaderSource {
         wgsl!("common.wgsl"),
         wgsl!("brdf.wgsl"),
         wgsl!("material_model.wgsl"),
+        wgsl!("visible_point.wgsl"),
         wgsl!("gbuffer_resolve.wgsl"),
     ],
 };
@@ -132,6 +133,7 @@ pub const INDIRECT_UPSAMPLE: ShaderSource = ShaderSource {
     files: &[wgsl!("common.wgsl"), wgsl!("indirect_upsample.wgsl")],
 };
 
+/// The RSM rasterising every target.
 pub const RSM: ShaderSource = ShaderSource {
     name: "rsm",
     files: &[
@@ -143,7 +145,46 @@ pub const RSM: ShaderSource = ShaderSource {
         wgsl!("materials.wgsl"),
         wgsl!("octahedral.wgsl"),
         wgsl!("rsm_glossy.wgsl"),
+        wgsl!("rsm_texel.wgsl"),
+        wgsl!("rsm_vertex.wgsl"),
         wgsl!("rsm.wgsl"),
+    ],
+};
+
+/// The thin RSM raster: a visibility buffer of triangle ids and base colours (needs
+/// `Features::PRIMITIVE_INDEX`), resolved by [`RSM_RESOLVE`].
+pub const RSM_VISIBILITY: ShaderSource = ShaderSource {
+    name: "rsm_visibility",
+    files: &[
+        wgsl!("enable_primitive_index.wgsl"),
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("lights.wgsl"),
+        wgsl!("material_model.wgsl"),
+        wgsl!("materials.wgsl"),
+        wgsl!("octahedral.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
+        wgsl!("rsm_texel.wgsl"),
+        wgsl!("rsm_vertex.wgsl"),
+        wgsl!("rsm_visibility.wgsl"),
+    ],
+};
+
+/// The RSM's visibility buffer resolved into its targets.
+pub const RSM_RESOLVE: ShaderSource = ShaderSource {
+    name: "rsm_resolve",
+    files: &[
+        wgsl!("common.wgsl"),
+        wgsl!("brdf.wgsl"),
+        wgsl!("brdf_eval.wgsl"),
+        wgsl!("lights.wgsl"),
+        wgsl!("material_model.wgsl"),
+        wgsl!("octahedral.wgsl"),
+        wgsl!("rsm_glossy.wgsl"),
+        wgsl!("rsm_texel.wgsl"),
+        wgsl!("visible_point.wgsl"),
+        wgsl!("rsm_resolve.wgsl"),
     ],
 };
 

@@ -278,6 +278,13 @@ pub struct FrameStages<'a> {
     submitted: Option<wgpu::SubmissionIndex>,
 }
 
+impl<'a> FrameStages<'a> {
+    /// The device the frame is encoded for (a stage making bind groups for its targets).
+    pub fn device(&self) -> &'a wgpu::Device {
+        &self.ctx.device
+    }
+}
+
 impl FrameStages<'_> {
     fn encoder(&mut self) -> &mut wgpu::CommandEncoder {
         let device = &self.ctx.device;

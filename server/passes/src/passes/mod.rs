@@ -355,6 +355,11 @@ pub const SHADERS: &[ShaderPass] = &[
         &shaders::RSM,
         &[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP],
     ),
+    ShaderPass::new(
+        &shaders::RSM_VISIBILITY,
+        &[&rsm::GROUP, &scene_buffers::MATERIAL_GROUP],
+    ),
+    ShaderPass::new(&shaders::RSM_RESOLVE, &[&rsm::RESOLVE_GROUP]),
 ];
 
 #[cfg(test)]

@@ -1,8 +1,14 @@
-//! Reflective shadow map (`shaders/rsm.wgsl`): VAL position, normal, flux and disk area per
-//! texel and the glossy lobe it sends on ([`GlossySender`]), the faces of every light of the
-//! frame side by side in one atlas, and, when emissive surfaces light the frame, one face more
-//! holding samples of the emitters ([`EmitterFace`]), so that every RSM-based method lights
-//! from them as from any texel.
+//! Reflective shadow map (`shaders/rsm_texel.wgsl`): VAL position, normal, flux and disk area
+//! per texel and the glossy lobe it sends on ([`GlossySender`]), the faces of every light of
+//! the frame side by side in one atlas, and, when emissive surfaces light the frame, one face
+//! more holding samples of the emitters ([`EmitterFace`]), so that every RSM-based method
+//! lights from them as from any texel.
+//!
+//! With triangle ids the atlas can be rasterised as a visibility buffer (issue 36), the
+//! triangle id and the base colour (`shaders/rsm_visibility.wgsl`, 12 bytes a texel), which a
+//! compute pass resolves into the targets (`shaders/rsm_resolve.wgsl`, stage `rsm_resolve`);
+//! otherwise the raster writes every target (`shaders/rsm.wgsl`, 56 bytes a texel). The
+//! methods read the same targets either way.
 
 use super::bind::{self, bind_group};
 use super::frame_uniforms::{face_index, LightFace};
@@ -27,7 +33,7 @@ const MAX_FACES: u32 = 6 * super::frame_uniforms::MAX_LIGHTS as u32;
 /// Largest RSM side per light face.
 pub const MAX_RSM_SIZE: u32 = 4096;
 /// Most RSM texels over all faces (each costs ~66 bytes across the sampling stages: 60 in
-/// the RSM's targets and depth).
+/// the RSM's targets and depth, 12 more with a visibility buffer).
 pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
 /// Widest atlas: the texture width every Vulkan adapter we run on allows (lavapipe and
 /// desktop GPUs: 16,384 or more).
@@ -42,7 +48,7 @@ pub fn max_rsm_size(faces: u32) -> u32 {
         .min(MAX_ATLAS_WIDTH / faces)
 }
 
-/// Mirrors `RsmFace` in `shaders/rsm.wgsl`.
+/// Mirrors `RsmFace` in `shaders/rsm_texel.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct RsmFace {
@@ -153,6 +159,12 @@ impl GlossySender {
     }
 }
 
+/// The visibility buffer's id format (scene-wide triangle ids, as the G-buffer's).
+pub const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
+/// The visibility buffer's base colour (half floats: within 2^-11 of the material's, which the
+/// fat raster lights at f32), with the facing in alpha (1 front, 0.5 back, 0 empty).
+pub const BASE_FACING_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
 /// The RSM atlas: `faces` squares of `size`² side by side.
 pub struct Rsm {
     pub size: u32,
@@ -162,20 +174,29 @@ pub struct Rsm {
     pub flux_area: Target,
     pub glossy: Target,
     depth: Target,
+    /// The visibility buffer's triangle id and base colour with facing, where the atlas is
+    /// resolved from one.
+    visibility: Option<[Target; 2]>,
     /// What its faces were last drawn from ([`RsmPass::encode_stage`]).
     made: super::reuse::MadeFrom,
 }
 
 impl Rsm {
     /// `faces` faces (one at least, left empty where a frame has no light and no emitters:
-    /// a texture needs a texel).
-    pub fn new(device: &wgpu::Device, size: u32, faces: u32) -> Self {
+    /// a texture needs a texel); with `visibility` rasterised as a visibility buffer and
+    /// resolved (which needs triangle ids: `Features::PRIMITIVE_INDEX`).
+    pub fn new(device: &wgpu::Device, size: u32, faces: u32, visibility: bool) -> Self {
         let faces = faces.max(1);
         let (w, h) = (size * faces, size);
-        let usage = wgpu::TextureUsages::RENDER_ATTACHMENT
-            | wgpu::TextureUsages::TEXTURE_BINDING
+        let drawn = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let usage = drawn
             | wgpu::TextureUsages::COPY_SRC
-            | wgpu::TextureUsages::COPY_DST;
+            | wgpu::TextureUsages::COPY_DST
+            | if visibility {
+                wgpu::TextureUsages::STORAGE_BINDING
+            } else {
+                wgpu::TextureUsages::empty()
+            };
         Self {
             size,
             faces,
@@ -191,25 +212,36 @@ impl Rsm {
                 DEPTH_FORMAT,
                 wgpu::TextureUsages::RENDER_ATTACHMENT,
             ),
+            visibility: visibility.then(|| {
+                [
+                    Target::new(device, "rsm triangle id", w, h, ID_FORMAT, drawn),
+                    Target::new(device, "rsm base colour", w, h, BASE_FACING_FORMAT, drawn),
+                ]
+            }),
             made: Default::default(),
         }
     }
 
-    /// The RSM in `slot` if it has `size` and `faces`, else a new one there (the old one
-    /// released before the new one is allocated).
+    /// The RSM in `slot` if it has `size`, `faces` and `visibility`, else a new one there (the
+    /// old one released before the new one is allocated).
     pub fn reuse_or_new<'a>(
         slot: &'a mut Option<Rsm>,
         device: &wgpu::Device,
         size: u32,
         faces: u32,
+        visibility: bool,
     ) -> &'a Rsm {
-        if !slot
-            .as_ref()
-            .is_some_and(|r| r.size == size && r.faces == faces.max(1))
-        {
+        if !slot.as_ref().is_some_and(|r| {
+            r.size == size && r.faces == faces.max(1) && r.visibility() == visibility
+        }) {
             *slot = None;
         }
-        slot.get_or_insert_with(|| Self::new(device, size, faces))
+        slot.get_or_insert_with(|| Self::new(device, size, faces, visibility))
+    }
+
+    /// Whether the atlas is resolved from a visibility buffer.
+    pub fn visibility(&self) -> bool {
+        self.visibility.is_some()
     }
 
     pub fn width(&self) -> u32 {
@@ -226,17 +258,48 @@ impl Rsm {
 }
 
 bind_group! {
-    /// Group 0 of `shaders/rsm.wgsl` (group 1 is [`super::scene_buffers::MATERIAL_GROUP`]).
+    /// Group 0 of `shaders/rsm_vertex.wgsl` (group 1 is
+    /// [`super::scene_buffers::MATERIAL_GROUP`]).
     pub struct Resources as GROUP("rsm", wgpu::ShaderStages::VERTEX_FRAGMENT) {
         face: bind::param_slot::<RsmFace>(),
         lights: bind::PARAMS,
     }
 }
 
+bind_group! {
+    /// Group 0 of `shaders/rsm_resolve.wgsl`.
+    pub struct ResolveResources as RESOLVE_GROUP("rsm resolve", wgpu::ShaderStages::COMPUTE) {
+        faces: bind::STORAGE,
+        lights: bind::PARAMS,
+        vis_id: bind::UINT_TEXTURE,
+        vis_base: bind::TEXTURE,
+        indices: bind::STORAGE,
+        vertices: bind::STORAGE,
+        materials: bind::STORAGE,
+        out_position: bind::storage_texture(POSITION_FORMAT),
+        out_normal: bind::storage_texture(NORMAL_FORMAT),
+        out_flux_area: bind::storage_texture(FLUX_FORMAT),
+        out_glossy: bind::storage_texture(GLOSSY_FORMAT),
+        brdf_table: bind::STORAGE,
+    }
+}
+
+/// The visibility buffer's raster and resolve, and the faces as one array for the resolve.
+struct Visibility {
+    raster: wgpu::RenderPipeline,
+    resolve: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    faces: wgpu::Buffer,
+}
+
 pub struct RsmPass {
+    /// Rasterises every target.
     pipeline: wgpu::RenderPipeline,
+    /// With triangle ids: the visibility buffer.
+    visibility: Option<Visibility>,
     faces: ParamSlots,
     bind_group: wgpu::BindGroup,
+    lights: wgpu::Buffer,
     /// The emitter face of the last size asked for, by that size (kept while the size stays;
     /// `None` inside where the scene has no emitters), and whether the frame being prepared
     /// has it as the atlas's last face.
@@ -378,19 +441,51 @@ impl RsmPass {
             bind_group_layouts: &[Some(&layout), Some(material_layout)],
             immediate_size: 0,
         });
-        let module = shaders::RSM.create_module(device);
-        let pipeline = super::scene_buffers::material_pipeline(
-            device,
-            "rsm",
-            &pipeline_layout,
-            &module,
-            &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT, GLOSSY_FORMAT],
-            DEPTH_FORMAT,
-        );
+        let raster = |label: &str, source: &shaders::ShaderSource, formats| {
+            super::scene_buffers::material_pipeline(
+                device,
+                label,
+                &pipeline_layout,
+                &source.create_module(device),
+                formats,
+                DEPTH_FORMAT,
+            )
+        };
+        let triangle_ids = device.features().contains(wgpu::Features::PRIMITIVE_INDEX);
+        let visibility = triangle_ids.then(|| {
+            let layout = RESOLVE_GROUP.layout(device);
+            Visibility {
+                raster: raster(
+                    "rsm visibility",
+                    &shaders::RSM_VISIBILITY,
+                    &[ID_FORMAT, BASE_FACING_FORMAT],
+                ),
+                resolve: super::compute_pipeline(
+                    device,
+                    "rsm resolve",
+                    &layout,
+                    &shaders::RSM_RESOLVE.create_module(device),
+                    "resolve",
+                ),
+                layout,
+                faces: device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("rsm resolve faces"),
+                    size: u64::from(MAX_FACES) * std::mem::size_of::<RsmFace>() as u64,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                }),
+            }
+        });
         Self {
-            pipeline,
+            pipeline: raster(
+                "rsm",
+                &shaders::RSM,
+                &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT, GLOSSY_FORMAT],
+            ),
+            visibility,
             faces,
             bind_group,
+            lights: lights.clone(),
             emitters: None,
             emitter_face: false,
             light_faces: 0,
@@ -401,6 +496,10 @@ impl RsmPass {
     /// The lights' faces of the next frame, drawn in this order at the atlas's start.
     pub fn set_faces(&mut self, queue: &wgpu::Queue, faces: &[RsmFace]) {
         self.faces.write(queue, faces);
+        if let Some(v) = &self.visibility {
+            let drawn = &faces[..faces.len().min(MAX_FACES as usize)];
+            queue.write_buffer(&v.faces, 0, bytemuck::cast_slice(drawn));
+        }
         self.light_faces = faces.len() as u32;
         self.face_bytes = bytemuck::cast_slice(faces).to_vec();
     }
@@ -421,9 +520,11 @@ impl RsmPass {
         self.emitter_face
     }
 
-    /// The `rsm` stage of a frame: [`Self::encode`], or nothing where `rsm` already holds
-    /// what this frame's faces make from `shared` (the frame's lights and poses as bytes;
-    /// `None`: reuse off), the stage then reported as reused ([`super::reuse`]).
+    /// The `rsm` stage of a frame, which draws the lights' faces of `rsm` (as a visibility
+    /// buffer where `rsm` has one, resolved in stage `rsm_resolve`) and copies the emitter face
+    /// in after them if [`Self::prepare_emitters`] said so; or nothing where `rsm` already
+    /// holds what this frame's faces make from `shared` (the frame's lights and poses as bytes;
+    /// `None`: reuse off), the stages then reported as reused ([`super::reuse`]).
     pub fn encode_stage(
         &self,
         stages: &mut FrameStages,
@@ -440,40 +541,105 @@ impl RsmPass {
             ]
             .concat()
         });
+        let thin = self.visibility.as_ref().zip(rsm.visibility.as_ref());
         if rsm.made.holds(inputs.as_deref()) {
             stages.reused(super::stages::RSM);
+            if thin.is_some() {
+                stages.reused(super::stages::RSM_RESOLVE);
+            }
             return Ok(());
         }
-        stages
-            .stage(super::stages::RSM, |e| self.encode(e, rsm, scene))
-            .inspect_err(|_| rsm.made.forget())
+        let made = match thin {
+            None => stages.stage(super::stages::RSM, |e| {
+                let targets = [
+                    &rsm.position.view,
+                    &rsm.normal.view,
+                    &rsm.flux_area.view,
+                    &rsm.glossy.view,
+                ];
+                self.draw(e, rsm, scene, &self.pipeline, &targets);
+                self.copy_emitters(e, rsm);
+            }),
+            Some((v, [id, base])) => {
+                let device = stages.device();
+                stages
+                    .stage(super::stages::RSM, |e| {
+                        self.draw(e, rsm, scene, &v.raster, &[&id.view, &base.view])
+                    })
+                    .and_then(|()| {
+                        stages.stage(super::stages::RSM_RESOLVE, |e| {
+                            self.encode_resolve(device, e, v, rsm, scene);
+                            self.copy_emitters(e, rsm);
+                        })
+                    })
+            }
+        };
+        made.inspect_err(|_| rsm.made.forget())
     }
 
-    /// Draws the lights' faces of `rsm` and, if [`Self::prepare_emitters`] said so, copies
-    /// the emitter face in after them.
-    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm, scene: &SceneBuffers) {
-        let light_faces = self.light_faces.min(rsm.faces);
-        let mut pass = super::scene_buffers::begin_material_pass(
-            encoder,
-            "rsm",
-            &[
-                &rsm.position.view,
-                &rsm.normal.view,
-                &rsm.flux_area.view,
-                &rsm.glossy.view,
-            ],
-            &rsm.depth.view,
-        );
-        pass.set_pipeline(&self.pipeline);
-        for face in 0..light_faces {
+    /// Rasterises the lights' faces of `rsm` into `targets` with `pipeline` (every target, or
+    /// the visibility buffer).
+    fn draw(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        rsm: &Rsm,
+        scene: &SceneBuffers,
+        pipeline: &wgpu::RenderPipeline,
+        targets: &[&wgpu::TextureView],
+    ) {
+        let mut pass =
+            super::scene_buffers::begin_material_pass(encoder, "rsm", targets, &rsm.depth.view);
+        pass.set_pipeline(pipeline);
+        for face in 0..self.light_faces.min(rsm.faces) {
             let size = rsm.size as f32;
             pass.set_viewport(face as f32 * size, 0.0, size, size, 0.0, 1.0);
             pass.set_bind_group(0, &self.bind_group, &[ParamSlots::offset(face)]);
             scene.draw_with_materials(&mut pass, &scene.shadow_casting);
         }
-        drop(pass);
+    }
+
+    /// Fills `rsm`'s targets from its visibility buffer (empty texels cleared).
+    fn encode_resolve(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        v: &Visibility,
+        rsm: &Rsm,
+        scene: &SceneBuffers,
+    ) {
+        let Some([id, base]) = &rsm.visibility else {
+            return;
+        };
+        let group = ResolveResources {
+            faces: &v.faces,
+            lights: &self.lights,
+            vis_id: id,
+            vis_base: base,
+            indices: &scene.indices,
+            vertices: &scene.vertices,
+            materials: &scene.material_table,
+            out_position: &rsm.position,
+            out_normal: &rsm.normal,
+            out_flux_area: &rsm.flux_area,
+            out_glossy: &rsm.glossy,
+            brdf_table: &scene.brdf_table,
+        }
+        .bind(device, &v.layout);
+        let mut pass = super::begin_compute(encoder, "rsm resolve");
+        pass.set_pipeline(&v.resolve);
+        pass.set_bind_group(0, &group, &[]);
+        pass.dispatch_workgroups(
+            rsm.width().div_ceil(super::TILE),
+            rsm.height().div_ceil(super::TILE),
+            1,
+        );
+    }
+
+    /// If [`Self::prepare_emitters`] said so, copies the emitter face in after the lights'
+    /// faces.
+    fn copy_emitters(&self, encoder: &mut wgpu::CommandEncoder, rsm: &Rsm) {
         if let (true, Some((_, Some(emitters)))) = (self.emitter_face, &self.emitters) {
-            emitters.encode(encoder, rsm, light_faces);
+            emitters.encode(encoder, rsm, self.light_faces.min(rsm.faces));
         }
     }
 }

@@ -13,6 +13,9 @@ pub const GBUFFER: Stage = Stage::new(1, "gbuffer");
 pub const GBUFFER_RESOLVE: Stage = Stage::new(31, "gbuffer_resolve");
 /// The reflective shadow map (the RSM-based methods).
 pub const RSM: Stage = Stage::new(2, "rsm");
+/// The RSM's visibility buffer (triangle id, base colour) resolved into its targets (`rsm`
+/// then rasterises only those two; needs triangle ids), and the emitter face copied in.
+pub const RSM_RESOLVE: Stage = Stage::new(32, "rsm_resolve");
 /// Emission, direct light with shadows, plus the indirect buffer.
 pub const DIRECT_LIGHT: Stage = Stage::new(10, "direct_light");
 /// Automatic exposure.
@@ -46,6 +49,7 @@ pub const ALL: &[Stage] = &[
     GBUFFER,
     GBUFFER_RESOLVE,
     RSM,
+    RSM_RESOLVE,
     DIRECT_LIGHT,
     EXPOSURE,
     TONEMAP,

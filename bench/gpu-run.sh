@@ -17,9 +17,10 @@
 #     change between poses against the reference's, and its GI ms at rest and moving;
 #   - the service under load (`lightcast loadtest`, issue 4): 1, 4, 16 and 32 sessions at
 #     1280×720 and 1920×1080;
-#   - sessions sharing work (issue 36, `bench/pass-reuse.sh` at 1280×720) and the G-buffer as a
-#     visibility buffer against every target rasterised (`bench/visibility-buffer.sh`, 1080p
-#     street), both after the service runs;
+#   - sessions sharing work (issue 36, `bench/pass-reuse.sh` at 1280×720), the render loop's
+#     frames in flight (`bench/frames-in-flight.sh`, 16 sessions at 1280×720) and the G-buffer
+#     and RSM as visibility buffers against every target rasterised
+#     (`bench/visibility-buffer.sh`, 1080p street, 2048² RSM), all after the service runs;
 #   - JPEG against H.264 (`bench/stream-codecs.sh`, issue 13): one camera path at 1280×720 and
 #     1920×1080, in process (bytes, encode ms, PSNR/FLIP, the targets) and through the service
 #     (input→frame latency); needs python3 for its tables.
@@ -31,7 +32,7 @@
 # …png}, gpu-clustered-{cornell,cornell-800,street}.{md,json,…png},
 # gpu-light-counts-{cornell,street}-{brsm,clustered,surfels,rsm_gather}.md, gpu-emitters-errors.md,
 # gpu-street-truth.md, gpu-moving-box.md,
-# gpu-service.md, gpu-pass-reuse.md, gpu-visibility-buffer.md,
+# gpu-service.md, gpu-pass-reuse.md, gpu-frames-in-flight.md, gpu-visibility-buffer.md,
 # gpu-stream-codecs.{md,json}, environment.txt and
 # run.log; copy them to bench/results/ with the GPU's name. --quick runs tiny sizes on any
 # adapter (a software one included) to check this script; its numbers mean nothing.
@@ -231,11 +232,18 @@ if [ "$what" = service ] || [ "$what" = all ]; then
     LIGHTCAST_SERVER_BIN="$server" LIGHTCAST_CLIENT_BIN="$client" \
       "$(dirname "$0")/pass-reuse.sh" 10 1280 720 > "$out/gpu-pass-reuse.md" \
       || echo "gpu-run: the pass-reuse run failed (the parts after it still run)" >&2
-    # The G-buffer as a visibility buffer and its resolve against every target rasterised, at
-    # 1080p on the 1.2 M-triangle street (the H200 run on record: gbuffer 7.7 ms).
+    # The render loop's queue depth: 16 sessions at 720p with 1, 2 and 3 frames in flight,
+    # and how long the GPU waited for the loop.
+    echo "gpu-run: frames in flight at 1280×720" >&2
+    LIGHTCAST_SERVER_BIN="$server" LIGHTCAST_CLIENT_BIN="$client" \
+      "$(dirname "$0")/frames-in-flight.sh" 10 1280 720 16 > "$out/gpu-frames-in-flight.md" \
+      || echo "gpu-run: the frames-in-flight run failed (the parts after it still run)" >&2
+    # The G-buffer and the RSM as visibility buffers and their resolves against every target
+    # rasterised, at 1080p on the 1.2 M-triangle street with a 2048² RSM (the H200 run on
+    # record: gbuffer 7.7 ms, rsm 13.5 ms).
     echo "gpu-run: visibility buffer at 1920×1080" >&2
     LIGHTCAST_SERVER_BIN="$server" "$(dirname "$0")/visibility-buffer.sh" 1920 1080 \
-      'procedural:street?blocks=40&detail=4&cars=0' 30 \
+      'procedural:street?blocks=40&detail=4&cars=0' 30 2048 \
       > "$out/gpu-visibility-buffer.md" \
       || echo "gpu-run: the visibility-buffer run failed (the parts after it still run)" >&2
   fi

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Issue 36, thin raster passes: the G-buffer and the RSM rasterised whole (44 and 56 bytes a
 # texel from the rasteriser) against their visibility buffers (12 bytes a texel) and compute
-# resolves, in one run: `lightcast-server bench` twice on the same scene, size and a small BRSM
-# configuration (neither raster depends on the method; the RSM's side is RSM), with
-# --visibility-buffer on and off. Prints a markdown report of the stage medians and ratios.
+# resolves, in one run: `lightcast-server bench` twice on the same scene and size under
+# `rsm_gather` with one sample count and radius (neither raster depends on the method, and
+# rsm_gather's gather is cheap at any RSM side; the RSM's side is RSM), with --visibility-buffer
+# on and off. Prints a markdown report of the stage medians and ratios.
 #
 #   bench/visibility-buffer.sh [WIDTH HEIGHT [SCENE [FRAMES [RSM]]]] > bench/results/<adapter>-visibility-buffer.md
 #
@@ -21,8 +22,8 @@ trap 'rm -rf "$work"' EXIT
 for mode in thin fat; do
   extra=(--visibility-buffer on)
   [ "$mode" = fat ] && extra=(--visibility-buffer off)
-  cmd=("$server" bench --gi brsm --scene "$scene" --width "$width" --height "$height"
-    --rsm-sizes "$rsm" --vals 256 --view-samples 16 --frames "$frames" --warmup 2
+  cmd=("$server" bench --gi rsm_gather --scene "$scene" --width "$width" --height "$height"
+    --gi-param rsm_size="$rsm" --gather-samples 16 --gather-radii 10 --frames "$frames" --warmup 2
     --reference-spp 1 --json "$work/$mode.json" "${extra[@]}")
   echo "running: ${cmd[*]}" >&2
   echo "${cmd[*]}" >> "$work/commands.txt"
@@ -32,11 +33,10 @@ python3 - "$work" <<'PY'
 import json, sys, pathlib
 work = pathlib.Path(sys.argv[1])
 runs = {m: json.loads((work / f"{m}.json").read_text()) for m in ("thin", "fat")}
-# The BRSM row (the sweep measures LightSkin at the same RSM size first).
-row = lambda run: next(r for r in run["rows"] if r["method"] == "brsm")
+row = lambda run: run["rows"][0]
 thin, fat = runs["thin"], runs["fat"]
 print(f"Adapter: {thin['adapter']}; timing: {thin['timing_source']}; scene {thin['scene']} "
-      f"({thin['triangles']} triangles), {thin['width']}×{thin['height']}, BRSM with an RSM "
+      f"({thin['triangles']} triangles), {thin['width']}×{thin['height']}, rsm_gather with an RSM "
       f"of {row(thin)['params'].get('rsm_size', '?')}² a face, {thin['frames']} timed frames each.")
 print()
 print("Commands:")

@@ -123,19 +123,12 @@ pub struct BenchArgs {
     /// lighting of 10⁷ multiply-adds read 0.03 ms; `gpu` elsewhere).
     #[arg(long, value_enum, default_value = "auto")]
     pub stage_clock: StageClock,
-    /// The G-buffer as a visibility buffer and its `gbuffer_resolve` (`on`, needs triangle
-    /// ids) or every target rasterised (`off`); `auto`: on except on a CPU adapter, as the
-    /// service renders. `bench/visibility-buffer.sh` runs both to measure what it saves.
+    /// The G-buffer and the RSM as visibility buffers and their `gbuffer_resolve` and
+    /// `rsm_resolve` (`on`, needs triangle ids) or every target rasterised (`off`); `auto`: on
+    /// except on a CPU adapter, as the service renders by default.
+    /// `bench/visibility-buffer.sh` runs both to measure what it saves.
     #[arg(long, value_enum, default_value = "auto")]
-    pub visibility_buffer: VisibilityBuffer,
-}
-
-/// See [`BenchArgs::visibility_buffer`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum VisibilityBuffer {
-    Auto,
-    On,
-    Off,
+    pub visibility_buffer: crate::renderer::VisibilityBuffer,
 }
 
 /// See [`BenchArgs::stage_clock`].
@@ -173,11 +166,8 @@ pub enum BenchError {
     },
     #[error("--frames must be at least 1")]
     NoFrames,
-    #[error(
-        "--visibility-buffer on: this adapter has no triangle ids (PRIMITIVE_INDEX), or the \
-         scene's vertex or index buffer exceeds its storage binding size"
-    )]
-    NoVisibilityBuffer,
+    #[error(transparent)]
+    NoVisibilityBuffer(#[from] crate::renderer::NoVisibilityBuffer),
     #[error("--environment: {0}")]
     Environment(String),
     #[error("reference: {0}")]
@@ -639,16 +629,7 @@ pub fn run(
     let base = base_settings(args, &scene, base_gi.clone());
     let (name, triangles) = (scene.name.clone(), scene.triangle_count());
     let mut renderer = Renderer::new(ctx, scene.clone());
-    match args.visibility_buffer {
-        VisibilityBuffer::Auto => {}
-        VisibilityBuffer::On => {
-            renderer.set_visibility_buffer(true);
-            if !renderer.visibility_buffer() {
-                return Err(BenchError::NoVisibilityBuffer);
-            }
-        }
-        VisibilityBuffer::Off => renderer.set_visibility_buffer(false),
-    }
+    renderer.choose_visibility_buffer(args.visibility_buffer)?;
     let timing_source = renderer.timing_source();
     let mut bench = Bench {
         args,

@@ -441,7 +441,27 @@ impl SizedTargets {
 }
 
 /// Frames of one size that may be in flight at once (submitted, not yet read back).
-const READBACK_RING: usize = 3;
+pub const READBACK_RING: usize = 3;
+
+/// Whether the G-buffer and the RSM are rasterised as visibility buffers and resolved
+/// (`gbuffer_resolve`, `rsm_resolve`: `on`, needs triangle ids and a scene whose buffers fit a
+/// storage binding) or every target rasterised (`off`); `auto`: on except on a CPU adapter
+/// (measured slower there: `bench/results/lavapipe-visibility-buffer.md`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum VisibilityBuffer {
+    #[default]
+    Auto,
+    On,
+    Off,
+}
+
+/// [`VisibilityBuffer::On`] where the adapter or scene cannot.
+#[derive(Clone, Copy, Debug, thiserror::Error)]
+#[error(
+    "--visibility-buffer on: this adapter has no triangle ids (PRIMITIVE_INDEX), or the \
+     scene's vertex or index buffer exceeds its storage binding size"
+)]
+pub struct NoVisibilityBuffer;
 
 /// Where one frame's results are copied for reading back.
 struct ReadbackSet {
@@ -816,6 +836,25 @@ impl Renderer {
                 method.retain_targets(&[]);
             }
         }
+    }
+
+    /// Applies an operator's or a benchmark's choice: `auto` leaves the default, `on` fails
+    /// where the device or scene cannot ([`Self::visibility_buffer`] stays false).
+    pub fn choose_visibility_buffer(
+        &mut self,
+        choice: VisibilityBuffer,
+    ) -> Result<(), NoVisibilityBuffer> {
+        match choice {
+            VisibilityBuffer::Auto => {}
+            VisibilityBuffer::On => {
+                self.set_visibility_buffer(true);
+                if !self.visibility_buffer() {
+                    return Err(NoVisibilityBuffer);
+                }
+            }
+            VisibilityBuffer::Off => self.set_visibility_buffer(false),
+        }
+        Ok(())
     }
 
     /// Whether frames resolve the G-buffer from a visibility buffer: asked for, and the device

@@ -72,6 +72,29 @@ pub struct ServeArgs {
     /// their views where they differ). For measuring what that saves.
     #[arg(long, env = "LIGHTCAST_NO_PASS_REUSE")]
     pub no_pass_reuse: bool,
+    /// Frames submitted to the GPU and not yet read back at once (1 to 3, the frames of one
+    /// size a renderer can read back at once): with 3 the render loop encodes and submits the
+    /// next frame while one is read back and another renders, so the GPU finds work queued
+    /// (`lightcast_gpu_idle_seconds` measures what it still waits). Default: 3 on a GPU, 2
+    /// on a CPU adapter (whose "GPU" shares the CPUs with the loop). After a frame slower than
+    /// 100 ms the next waits until none is in flight whatever this says.
+    #[arg(
+        long,
+        env = "LIGHTCAST_FRAMES_IN_FLIGHT",
+        value_parser = clap::value_parser!(u8).range(1..=crate::renderer::READBACK_RING as i64)
+    )]
+    pub frames_in_flight: Option<u8>,
+    /// Rasterise the G-buffer and the RSM as visibility buffers (triangle id and base colour)
+    /// and resolve them by compute (`on`; needs triangle ids, the server refuses to start on
+    /// an adapter without), or rasterise every target (`off`); `auto`: on except on a CPU
+    /// adapter, where it measured slower. The images agree within 2^-11 either way.
+    #[arg(
+        long,
+        value_enum,
+        env = "LIGHTCAST_VISIBILITY_BUFFER",
+        default_value = "auto"
+    )]
+    pub visibility_buffer: crate::renderer::VisibilityBuffer,
     /// Log lines for people (`text`) or one JSON object per line for log collectors (`json`).
     #[arg(long, value_enum, env = "LIGHTCAST_LOG_FORMAT", default_value = "text")]
     pub log_format: LogFormat,

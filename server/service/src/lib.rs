@@ -64,6 +64,8 @@ pub enum ServeError {
     Task(String),
     #[error(transparent)]
     SceneStore(#[from] scene_store::StoreError),
+    #[error(transparent)]
+    NoVisibilityBuffer(#[from] crate::renderer::NoVisibilityBuffer),
 }
 
 /// A running service.
@@ -93,6 +95,9 @@ impl Service {
         let adapter = crate::gpu::context::AdapterSummary(&ctx.info).to_string();
         log(&format!("adapter: {adapter}"));
         let is_cpu = ctx.info.device_type == wgpu::DeviceType::Cpu;
+        if args.visibility_buffer == crate::renderer::VisibilityBuffer::On && !ctx.primitive_index {
+            return Err(crate::renderer::NoVisibilityBuffer.into());
+        }
         limits.adapter_speed = args.limits.adapter_speed.resolve(is_cpu);
         limits.max_frame_seconds = args.limits.max_frame_cost.resolve(is_cpu);
         log(&format!(
@@ -178,7 +183,17 @@ impl Service {
             Arc::clone(&scenes),
             Arc::clone(&sessions),
             encoder,
-            !args.no_pass_reuse,
+            render_loop::LoopOptions {
+                reuse: !args.no_pass_reuse,
+                frames_in_flight: args.frames_in_flight.map_or_else(
+                    || match ctx.info.device_type {
+                        wgpu::DeviceType::Cpu => 2,
+                        _ => 3,
+                    },
+                    usize::from,
+                ),
+                visibility_buffer: args.visibility_buffer,
+            },
         );
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await

@@ -20,6 +20,9 @@ pub const STAGE_SECONDS: &str = "lightcast_stage_seconds";
 pub const GPU_FRAME_SECONDS: &str = "lightcast_gpu_frame_seconds";
 pub const READBACK_SECONDS: &str = "lightcast_readback_seconds";
 pub const ENCODE_SECONDS: &str = "lightcast_encode_seconds";
+/// Per frame, how long the GPU sat idle before it for want of it (`render_loop::Queued`): its
+/// sum over the run's wall time is the share of time the render loop left the GPU idle.
+pub const GPU_IDLE_SECONDS: &str = "lightcast_gpu_idle_seconds";
 pub const STAGE_MS: &str = "lightcast_stage_ms";
 pub const GPU_FRAME_MS: &str = "lightcast_gpu_frame_ms";
 pub const READBACK_MS: &str = "lightcast_readback_ms";
@@ -115,6 +118,11 @@ fn describe() {
         "Wait for the frame to be mapped after its GPU work"
     );
     describe_histogram!(ENCODE_SECONDS, Unit::Seconds, "Encode time per frame");
+    describe_histogram!(
+        GPU_IDLE_SECONDS,
+        Unit::Seconds,
+        "Per frame, how long the GPU sat idle before it while the render loop prepared it (at least)"
+    );
     for (name, what) in [
         (STAGE_MS, STAGE_SECONDS),
         (GPU_FRAME_MS, GPU_FRAME_SECONDS),

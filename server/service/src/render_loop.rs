@@ -16,7 +16,7 @@ use crate::gpu::timing::{StageTiming, TimingSource};
 use crate::gpu::GpuContext;
 use crate::passes::yuv420::Yuv420;
 use crate::quality::Truth;
-use crate::renderer::{Frame, FrameProgress, PendingFrame, Picked, Renderer};
+use crate::renderer::{Frame, FrameProgress, PendingFrame, Picked, Renderer, VisibilityBuffer};
 use lightcast_protocol::frame::{FLAG_GI_PENDING, FLAG_KEYFRAME, FLAG_MOVING, FLAG_STILL};
 use lightcast_protocol::{Comparison, FrameHeader, GiMethod, Senders, ServerEvent, StageMs, View};
 use std::collections::{HashMap, VecDeque};
@@ -42,21 +42,32 @@ const COMPARISON_CACHE_BYTES: usize = 256 << 20;
 /// is heavy: the next is not submitted behind it (see [`InFlight`]).
 const HEAVY_FRAME: Duration = Duration::from_millis(100);
 
-/// The frames handed to the readback thread and not finished yet, and whether the last one
-/// was heavy. Double buffering (one frame read back while the next renders) pays where frames
-/// take milliseconds; behind a heavy frame (lavapipe's take up to `--max-frame-cost`) a second
+/// The frames submitted and not yet handed on by the readback thread, and whether the last one
+/// was heavy. Up to `depth` are in flight (`--frames-in-flight`): while the readback thread
+/// waits for one frame and the GPU renders the next, the loop encodes and submits a third, so
+/// the GPU finds the next session's work queued when it finishes a frame (issue 36; two, one
+/// read back while the next renders, on CPU adapters, where deeper queues only made frames
+/// wait longer). Behind a heavy frame (lavapipe's take up to `--max-frame-cost`) a second
 /// queued one only makes whatever comes next wait for both: a session's first frame of a new
 /// method, a newcomer's tiny render after a stream ended (issue 31: 1.3 s after an 800×450
 /// stream, with two in flight). So after a heavy frame the loop submits the next only once the
 /// readback thread is idle, and nothing waits behind work it no longer needs.
-#[derive(Default)]
 struct InFlight {
     /// (frames in flight, whether the last finished one was heavy).
     state: std::sync::Mutex<(usize, bool)>,
     idle: std::sync::Condvar,
+    depth: usize,
 }
 
 impl InFlight {
+    fn new(depth: usize) -> Self {
+        Self {
+            state: Default::default(),
+            idle: Default::default(),
+            depth: depth.max(1),
+        }
+    }
+
     fn lock(&self) -> std::sync::MutexGuard<'_, (usize, bool)> {
         self.state
             .lock()
@@ -75,11 +86,11 @@ impl InFlight {
         self.idle.notify_all();
     }
 
-    /// Returns once the next frame may be submitted: at once after a light frame, else when
-    /// nothing is in flight.
+    /// Returns once the next frame may be submitted: when fewer than `depth` frames are in
+    /// flight after a light frame, when none is after a heavy one.
     fn wait_turn(&self) {
         let mut state = self.lock();
-        while state.1 && state.0 > 0 {
+        while state.0 >= if state.1 { 1 } else { self.depth } {
             state = self
                 .idle
                 .wait(state)
@@ -276,8 +287,19 @@ struct Loop {
     in_flight: Arc<InFlight>,
     /// Comparison renders by a hash of what they rendered (filled by the readback thread).
     comparisons: Arc<ComparisonCache>,
-    /// Renderers reuse the camera-independent passes' targets (`passes::reuse`).
-    reuse: bool,
+    options: LoopOptions,
+}
+
+/// How the render loop renders and queues frames (`serve`'s flags).
+#[derive(Clone, Copy, Debug)]
+pub struct LoopOptions {
+    /// Renderers reuse the camera-independent passes' targets (`passes::reuse`) and share
+    /// light-side stages between sessions (`--no-pass-reuse` turns it off).
+    pub reuse: bool,
+    /// Frames submitted and not yet read back at once (`--frames-in-flight`, see [`InFlight`]).
+    pub frames_in_flight: usize,
+    /// The G-buffer and the RSM as visibility buffers (`--visibility-buffer`).
+    pub visibility_buffer: VisibilityBuffer,
 }
 
 /// Starts the render loop thread.
@@ -286,14 +308,13 @@ pub fn spawn(
     scenes: Arc<SceneRegistry>,
     sessions: Arc<SessionRegistry>,
     encoder: Arc<EncodePool>,
-    reuse: bool,
+    options: LoopOptions,
 ) -> (mpsc::Sender<Command>, std::thread::JoinHandle<()>) {
     let (tx, rx) = mpsc::channel();
-    // Double buffering: one frame is read back while the loop encodes and submits the next,
-    // which it hands over once the readback thread is free. Deeper queues only made the
-    // frames wait longer on lavapipe (where the "GPU" shares the CPU).
-    let (readback, readback_rx) = mpsc::sync_channel(0);
-    let in_flight = Arc::new(InFlight::default());
+    // `InFlight` bounds the frames submitted and not read back; the channel holds those
+    // waiting behind the one being read back, so handing one over never blocks the loop.
+    let in_flight = Arc::new(InFlight::new(options.frames_in_flight));
+    let (readback, readback_rx) = mpsc::sync_channel(in_flight.depth);
     let finished = Arc::clone(&in_flight);
     let readback_thread = std::thread::Builder::new()
         .name("readback".into())
@@ -313,7 +334,7 @@ pub fn spawn(
                 next_session: 0,
                 one_shot_turn: false,
                 comparisons: Arc::new(ComparisonCache::default()),
-                reuse,
+                options,
             };
             l.run(&rx);
             // Closing the channel lets the readback thread finish the frames in flight.
@@ -402,6 +423,7 @@ impl Loop {
         scene: &Arc<SceneEntry>,
         resolved: &Resolved,
     ) -> Result<Submitted, ApiError> {
+        let ready = Instant::now();
         self.in_flight.wait_turn();
         let mut settings = resolved.settings.clone();
         let (data, gi_pending) = match &resolved.precompute {
@@ -430,10 +452,15 @@ impl Loop {
                 .filter(|key| key.has_variants())
                 .cloned(),
         );
-        let reuse = self.reuse;
+        let options = self.options;
         let slot = self.renderers.entry(renderer_key).or_insert_with(|| {
             let mut renderer = Renderer::new(self.ctx.clone(), Arc::clone(&scene.scene));
-            renderer.set_reuse(reuse);
+            renderer.set_reuse(options.reuse);
+            // `on` was checked against the adapter at start; a scene too large for the
+            // resolve's storage bindings keeps the rasterised targets.
+            if let Err(e) = renderer.choose_visibility_buffer(options.visibility_buffer) {
+                tracing::warn!(scene = %scene.id, "{e}; rasterising every target");
+            }
             Slot {
                 renderer,
                 applied: Vec::new(),
@@ -455,6 +482,10 @@ impl Loop {
             .map_err(|e| render_error(&e).within("render"))?;
         Ok(Submitted {
             pending,
+            queued: Queued {
+                ready,
+                submitted: Instant::now(),
+            },
             view,
             gi_pending,
             camera: settings.camera,
@@ -744,6 +775,7 @@ impl Loop {
 /// A submitted frame and what composing its view needs, on its way to the readback thread.
 struct FrameJob {
     pending: PendingFrame,
+    queued: Queued,
     /// The view to compose (debug views from the data read back with the frame).
     view: View,
     camera: lightcast_protocol::Camera,
@@ -757,6 +789,7 @@ impl FrameJob {
     fn from_submitted(s: Submitted, scene: Arc<SceneEntry>) -> Self {
         Self {
             pending: s.pending,
+            queued: s.queued,
             view: s.view,
             camera: s.camera,
             scene,
@@ -920,6 +953,27 @@ impl ComparisonCache {
     }
 }
 
+/// When the render loop took a frame up (before waiting for its turn) and when it submitted it.
+#[derive(Clone, Copy, Debug)]
+struct Queued {
+    ready: Instant,
+    submitted: Instant,
+}
+
+impl Queued {
+    /// How long the GPU sat idle before this frame for want of it, at least: from when the
+    /// frame before it was read back (`previous`: the GPU was done with it by then) or, if
+    /// later, from when the loop took this one up, to its submission. Zero where it was
+    /// submitted before the previous one finished (it was queued behind it), or where nothing
+    /// was due meanwhile (the GPU had no work to do, not work held back).
+    fn gpu_idle_before(&self, previous: Option<Instant>) -> Duration {
+        previous.map_or(Duration::ZERO, |done| {
+            self.submitted
+                .saturating_duration_since(done.max(self.ready))
+        })
+    }
+}
+
 /// Waits for frames in submission order: session frames go to the encoder pool, one-shot
 /// renders (compared first if asked) to their requests.
 fn readback_thread(
@@ -927,10 +981,14 @@ fn readback_thread(
     encoder: Arc<EncodePool>,
     in_flight: &InFlight,
 ) {
+    let mut previous = None;
     for job in jobs {
+        let idle = job.frame.queued.gpu_idle_before(previous);
+        metrics::histogram!(super::metrics::GPU_IDLE_SECONDS).record(idle.as_secs_f64());
         let started = Instant::now();
         read_back(job, &encoder);
         in_flight.done(started.elapsed());
+        previous = Some(Instant::now());
     }
 }
 
@@ -1179,6 +1237,7 @@ fn deliver(
 /// A frame submitted by the render loop.
 struct Submitted {
     pending: PendingFrame,
+    queued: Queued,
     view: View,
     gi_pending: bool,
     camera: lightcast_protocol::Camera,
@@ -1198,11 +1257,70 @@ fn history_id(session_id: &str) -> u64 {
 mod tests {
     use super::*;
 
-    /// Light frames are double-buffered; after a heavy one the next waits until nothing is in
-    /// flight (issue 31), and the readback thread's finishing the frame lets it go.
+    /// Whether `wait_turn` on `in_flight` returns within `within`; it is let go by `release`
+    /// (run after the first wait, which must block) when it does not.
+    fn turn_comes(in_flight: &Arc<InFlight>, within: Duration) -> bool {
+        let (tx, rx) = mpsc::channel();
+        let waiter = {
+            let in_flight = Arc::clone(in_flight);
+            std::thread::spawn(move || {
+                in_flight.wait_turn();
+                let _ = tx.send(());
+            })
+        };
+        let came = rx.recv_timeout(within).is_ok();
+        if !came {
+            in_flight.done(Duration::ZERO);
+            rx.recv_timeout(Duration::from_secs(60))
+                .expect("a finished frame lets the turn come");
+        }
+        waiter.join().expect("joins");
+        came
+    }
+
+    /// Up to `depth` light frames are in flight (issue 36: the GPU finds the next queued); the
+    /// next waits until one is read back.
+    #[test]
+    fn light_frames_are_submitted_until_depth_are_in_flight() {
+        let in_flight = Arc::new(InFlight::new(3));
+        for _ in 0..3 {
+            assert!(turn_comes(&in_flight, Duration::from_secs(60)));
+            in_flight.sent();
+        }
+        assert!(
+            !turn_comes(&in_flight, Duration::from_millis(200)),
+            "a fourth waits for the readback"
+        );
+        assert_eq!(in_flight.lock().0, 2, "it went once one was read back");
+    }
+
+    /// The GPU's idle time before a frame counts only what it waited for a frame the loop was
+    /// preparing, not a frame queued behind another nor a time with nothing due.
+    #[test]
+    fn gpu_idle_time_counts_only_waits_for_a_frame_in_preparation() {
+        let t0 = Instant::now();
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        let queued = |ready, submitted| Queued {
+            ready: at(ready),
+            submitted: at(submitted),
+        };
+        let ms = |d: Duration| d.as_millis();
+        // The first frame: nothing came before it.
+        assert_eq!(ms(queued(0, 5).gpu_idle_before(None)), 0);
+        // Submitted before the previous frame was done: queued behind it.
+        assert_eq!(ms(queued(0, 5).gpu_idle_before(Some(at(8)))), 0);
+        // Taken up before the previous was done, submitted 4 ms after: 4 ms idle.
+        assert_eq!(ms(queued(6, 12).gpu_idle_before(Some(at(8)))), 4);
+        // Nothing was due until 20 ms: only its 3 ms of preparation count.
+        assert_eq!(ms(queued(20, 23).gpu_idle_before(Some(at(8)))), 3);
+    }
+
+    /// Light frames are double-buffered at depth 2; after a heavy one the next waits until
+    /// nothing is in flight (issue 31), and the readback thread's finishing the frame lets it
+    /// go.
     #[test]
     fn after_a_heavy_frame_the_next_waits_for_the_readback_to_be_idle() {
-        let in_flight = Arc::new(InFlight::default());
+        let in_flight = Arc::new(InFlight::new(2));
         in_flight.sent();
         in_flight.wait_turn();
         in_flight.sent();

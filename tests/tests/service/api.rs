@@ -1478,9 +1478,20 @@ async fn metrics_openapi_and_readiness_describe_the_service() {
         "lightcast_stage_ms_bucket{stage=\"gbuffer\",le=\"4\"}",
         "lightcast_encode_ms_bucket",
         "lightcast_gpu_frame_ms_count",
+        "lightcast_gpu_idle_seconds_sum",
     ] {
         assert!(metrics.contains(name), "/metrics lacks {name}:\n{metrics}");
     }
+    // Every frame read back says how long the GPU waited for it.
+    let idle_frames: f64 = metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("lightcast_gpu_idle_seconds_count "))
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("/metrics lacks the GPU idle count:\n{metrics}"));
+    assert!(
+        idle_frames >= 2.0,
+        "{idle_frames} frames timed for GPU idle"
+    );
     // Live GPU objects: a rendering server holds buffers, textures and bind groups.
     for gauge in [
         "lightcast_gpu_buffers",

@@ -705,10 +705,11 @@ pub struct Renderer {
     reuse_epoch: u64,
     /// A frame is being encoded (set until [`Self::submit`] returns it).
     encoding: bool,
-    /// The G-buffer is rasterised as a visibility buffer and resolved by a compute pass
-    /// where the device has triangle ids (`passes::gbuffer`); off: rasterised whole. On by
-    /// default except on CPU adapters, where the resolve costs more than the raster output
-    /// it saves (lavapipe, Cornell box at 1280×720: raster 15.7 → 6.8 ms, resolve 23.7 ms;
+    /// The G-buffer and the RSM are rasterised as visibility buffers and resolved by compute
+    /// passes where the device has triangle ids (`passes::gbuffer`, `passes::rsm`); off:
+    /// rasterised whole. On by default except on CPU adapters, where the resolves cost more
+    /// than the raster output they save (lavapipe, Cornell box at 1280×720: G-buffer raster
+    /// 15.7 → 6.8 ms, resolve 23.7 ms; RSM at 1024² raster 34.7 → 13.4 ms, resolve 47.2 ms;
     /// bench/results/lavapipe-visibility-buffer.md).
     visibility_buffer: bool,
 }
@@ -824,12 +825,13 @@ impl Renderer {
         self.reuse = on;
     }
 
-    /// Turns the visibility-buffer G-buffer on or off (by default on except on CPU adapters;
-    /// it needs triangle ids; off rasterises every G-buffer target): the images agree within
+    /// Turns the visibility-buffer G-buffer and RSM on or off (by default on except on CPU
+    /// adapters; they need triangle ids; off rasterises every target): the images agree within
     /// `gpu_visibility_buffer.rs`'s tolerances.
     pub fn set_visibility_buffer(&mut self, on: bool) {
         if on != self.visibility_buffer {
-            // The G-buffers are made for one or the other: made again at the next frame.
+            // The G-buffers are made for one or the other: made again at the next frame (the
+            // methods' RSMs are remade when a frame asks for the other kind).
             self.visibility_buffer = on;
             self.sized.clear();
             for method in self.methods.iter_mut().flatten() {
@@ -857,8 +859,9 @@ impl Renderer {
         Ok(())
     }
 
-    /// Whether frames resolve the G-buffer from a visibility buffer: asked for, and the device
-    /// and scene allow it (triangle ids; vertex and index buffers within a storage binding).
+    /// Whether frames resolve the G-buffer and the RSM from visibility buffers: asked for, and
+    /// the device and scene allow it (triangle ids; vertex and index buffers within a storage
+    /// binding).
     pub fn visibility_buffer(&self) -> bool {
         self.visibility_buffer && self.gbuffer_pass.has_visibility_buffer()
     }
@@ -1410,8 +1413,8 @@ fn rgba16f_to_f32(bytes: &[u8]) -> Vec<[f32; 4]> {
         .collect()
 }
 
-/// Whether the visibility buffer's resolve can bind `scene`'s vertex and index buffers whole
-/// (a scene beyond the device's storage binding size keeps the rasterised G-buffer).
+/// Whether the visibility buffers' resolves can bind `scene`'s vertex and index buffers whole
+/// (a scene beyond the device's storage binding size keeps the rasterised G-buffer and RSM).
 fn resolve_fits(device: &wgpu::Device, scene: &Scene) -> bool {
     let max = device.limits().max_storage_buffer_binding_size;
     let bytes = |n: usize, each: usize| (n as u64).saturating_mul(each as u64);

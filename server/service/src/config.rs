@@ -72,8 +72,9 @@ pub struct ServeArgs {
     /// their views where they differ). For measuring what that saves.
     #[arg(long, env = "LIGHTCAST_NO_PASS_REUSE")]
     pub no_pass_reuse: bool,
-    /// Frames submitted to the GPU and not yet read back at once (1 to 3, the frames of one
-    /// size a renderer can read back at once): with 3 the render loop encodes and submits the
+    /// Frames handed to the readback thread and not yet read back at once (a one-shot render's
+    /// comparison frames travel with it; 1 to 3, the frames of one size a renderer keeps
+    /// read-back buffers for): with 3 the render loop encodes and submits the
     /// next frame while one is read back and another renders, so the GPU finds work queued
     /// (`lightcast_gpu_idle_seconds` measures what it still waits). Default: 3 on a GPU, 2
     /// on a CPU adapter (whose "GPU" shares the CPUs with the loop). After a frame slower than

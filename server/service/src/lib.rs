@@ -185,13 +185,9 @@ impl Service {
             encoder,
             render_loop::LoopOptions {
                 reuse: !args.no_pass_reuse,
-                frames_in_flight: args.frames_in_flight.map_or_else(
-                    || match ctx.info.device_type {
-                        wgpu::DeviceType::Cpu => 2,
-                        _ => 3,
-                    },
-                    usize::from,
-                ),
+                frames_in_flight: args
+                    .frames_in_flight
+                    .map_or(if is_cpu { 2 } else { 3 }, usize::from),
                 visibility_buffer: args.visibility_buffer,
             },
         );

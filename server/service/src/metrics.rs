@@ -21,7 +21,8 @@ pub const GPU_FRAME_SECONDS: &str = "lightcast_gpu_frame_seconds";
 pub const READBACK_SECONDS: &str = "lightcast_readback_seconds";
 pub const ENCODE_SECONDS: &str = "lightcast_encode_seconds";
 /// Per frame, how long the GPU sat idle before it for want of it (`render_loop::Queued`): its
-/// sum over the run's wall time is the share of time the render loop left the GPU idle.
+/// sum over the run's wall time is the share of time the render loop left the GPU idle
+/// between session frames (at least; one-shot renders' chunks and comparisons are not seen).
 pub const GPU_IDLE_SECONDS: &str = "lightcast_gpu_idle_seconds";
 pub const STAGE_MS: &str = "lightcast_stage_ms";
 pub const GPU_FRAME_MS: &str = "lightcast_gpu_frame_ms";

@@ -42,21 +42,42 @@ const COMPARISON_CACHE_BYTES: usize = 256 << 20;
 /// is heavy: the next is not submitted behind it (see [`InFlight`]).
 const HEAVY_FRAME: Duration = Duration::from_millis(100);
 
-/// The frames submitted and not yet handed on by the readback thread, and whether the last one
-/// was heavy. Up to `depth` are in flight (`--frames-in-flight`): while the readback thread
-/// waits for one frame and the GPU renders the next, the loop encodes and submits a third, so
-/// the GPU finds the next session's work queued when it finishes a frame (issue 36; two, one
-/// read back while the next renders, on CPU adapters, where deeper queues only made frames
-/// wait longer). Behind a heavy frame (lavapipe's take up to `--max-frame-cost`) a second
-/// queued one only makes whatever comes next wait for both: a session's first frame of a new
-/// method, a newcomer's tiny render after a stream ended (issue 31: 1.3 s after an 800×450
-/// stream, with two in flight). So after a heavy frame the loop submits the next only once the
-/// readback thread is idle, and nothing waits behind work it no longer needs.
+/// The jobs handed to the readback thread and not yet handed on (a session's frame, or a
+/// one-shot render with the frames it is compared with), and whether the last one was heavy.
+/// Up to `depth` are in flight (`--frames-in-flight`): while the readback thread waits for one
+/// frame and the GPU renders the next, the loop encodes and submits a third, so the GPU finds
+/// the next session's work queued when it finishes a frame (issue 36; two, one read back while
+/// the next renders, on CPU adapters, where deeper queues only made frames wait longer).
+/// Behind a heavy frame (lavapipe's take up to `--max-frame-cost`) a frame queued only makes
+/// whatever comes next wait for both: a session's first frame of a new method, a newcomer's
+/// tiny render after a stream ended (issue 31: 1.3 s after an 800×450 stream, with two in
+/// flight). So after a heavy frame the loop submits the next only once the readback thread is
+/// idle, and nothing waits behind work it no longer needs; while the heavy frame is still in
+/// flight (not yet known to be heavy) up to `depth - 1` may queue behind it.
 struct InFlight {
-    /// (frames in flight, whether the last finished one was heavy).
-    state: std::sync::Mutex<(usize, bool)>,
+    state: std::sync::Mutex<Queue>,
     idle: std::sync::Condvar,
     depth: usize,
+}
+
+#[derive(Default)]
+struct Queue {
+    jobs: usize,
+    /// The last job handed on was heavy.
+    heavy: bool,
+    /// The readback thread has ended (it panicked, or the loop is stopping): nothing in flight
+    /// will be handed on, and the loop must not wait for it.
+    stopped: bool,
+}
+
+/// Marks the readback thread's end however it ends (`InFlight::stopped`).
+struct StopOnDrop<'a>(&'a InFlight);
+
+impl Drop for StopOnDrop<'_> {
+    fn drop(&mut self) {
+        self.0.lock().stopped = true;
+        self.0.idle.notify_all();
+    }
 }
 
 impl InFlight {
@@ -68,29 +89,30 @@ impl InFlight {
         }
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, (usize, bool)> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Queue> {
         self.state
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
     fn sent(&self) {
-        self.lock().0 += 1;
+        self.lock().jobs += 1;
     }
 
-    /// A frame was handed on after `took` on the readback thread.
+    /// A job was handed on after `took` on the readback thread.
     fn done(&self, took: Duration) {
         let mut state = self.lock();
-        state.0 = state.0.saturating_sub(1);
-        state.1 = took > HEAVY_FRAME;
+        state.jobs = state.jobs.saturating_sub(1);
+        state.heavy = took > HEAVY_FRAME;
         self.idle.notify_all();
     }
 
-    /// Returns once the next frame may be submitted: when fewer than `depth` frames are in
-    /// flight after a light frame, when none is after a heavy one.
+    /// Returns once the next frame may be submitted: when fewer than `depth` jobs are in
+    /// flight after a light frame, when none is after a heavy one; at once when the readback
+    /// thread has ended (handing the frame over then fails, and its session is told).
     fn wait_turn(&self) {
         let mut state = self.lock();
-        while state.0 >= if state.1 { 1 } else { self.depth } {
+        while !state.stopped && state.jobs >= if state.heavy { 1 } else { self.depth } {
             state = self
                 .idle
                 .wait(state)
@@ -961,11 +983,14 @@ struct Queued {
 }
 
 impl Queued {
-    /// How long the GPU sat idle before this frame for want of it, at least: from when the
-    /// frame before it was read back (`previous`: the GPU was done with it by then) or, if
-    /// later, from when the loop took this one up, to its submission. Zero where it was
-    /// submitted before the previous one finished (it was queued behind it), or where nothing
-    /// was due meanwhile (the GPU had no work to do, not work held back).
+    /// How long the GPU sat idle before this frame for want of it: from when the job before it
+    /// was handed on (`previous`: the GPU was done with its frame by then) or, if later, from
+    /// when the loop took this one up, to its submission. Zero where it was submitted before
+    /// the previous one finished (it was queued behind it), or where nothing was due meanwhile
+    /// (the GPU had no work to do, not work held back). Between session frames a lower bound:
+    /// the GPU finished before the readback ended. GPU work no job carries is not seen: a chunk
+    /// of a long path-traced render, or a one-shot's comparison frames (submitted before
+    /// `ready`), so around those it may count time the GPU was busy.
     fn gpu_idle_before(&self, previous: Option<Instant>) -> Duration {
         previous.map_or(Duration::ZERO, |done| {
             self.submitted
@@ -981,6 +1006,7 @@ fn readback_thread(
     encoder: Arc<EncodePool>,
     in_flight: &InFlight,
 ) {
+    let _stop = StopOnDrop(in_flight);
     let mut previous = None;
     for job in jobs {
         let idle = job.frame.queued.gpu_idle_before(previous);
@@ -1257,8 +1283,8 @@ fn history_id(session_id: &str) -> u64 {
 mod tests {
     use super::*;
 
-    /// Whether `wait_turn` on `in_flight` returns within `within`; it is let go by `release`
-    /// (run after the first wait, which must block) when it does not.
+    /// Whether `wait_turn` on `in_flight` returns within `within`; when it does not, a frame
+    /// handed on lets it go.
     fn turn_comes(in_flight: &Arc<InFlight>, within: Duration) -> bool {
         let (tx, rx) = mpsc::channel();
         let waiter = {
@@ -1291,7 +1317,7 @@ mod tests {
             !turn_comes(&in_flight, Duration::from_millis(200)),
             "a fourth waits for the readback"
         );
-        assert_eq!(in_flight.lock().0, 2, "it went once one was read back");
+        assert_eq!(in_flight.lock().jobs, 2, "it went once one was read back");
     }
 
     /// The GPU's idle time before a frame counts only what it waited for a frame the loop was
@@ -1344,6 +1370,23 @@ mod tests {
         // Light again: frames in flight do not hold the next back.
         in_flight.sent();
         in_flight.wait_turn();
+    }
+
+    /// A readback thread that ends with frames in flight (a panic) lets the loop go on: it
+    /// does not wait for frames nobody will hand on.
+    #[test]
+    fn a_readback_thread_that_ended_holds_nothing_back() {
+        let in_flight = Arc::new(InFlight::new(1));
+        in_flight.sent();
+        let ended = {
+            let in_flight = Arc::clone(&in_flight);
+            std::thread::spawn(move || {
+                let _stop = StopOnDrop(&in_flight);
+                panic!("a readback that failed");
+            })
+        };
+        assert!(ended.join().is_err(), "the thread panicked");
+        assert!(turn_comes(&in_flight, Duration::from_secs(60)));
     }
 
     #[test]

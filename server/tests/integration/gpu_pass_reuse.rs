@@ -9,7 +9,7 @@ use crate::support::*;
 use glam::Vec3;
 use lightcast_server::gi::lightskin::{stages, BRSM, LIGHTSKIN};
 use lightcast_server::gi::{self, precompute::SceneFacts, GiParams};
-use lightcast_server::passes::stages::{RSM, SHADOW_MAP};
+use lightcast_server::passes::stages::{RSM, RSM_RESOLVE, SHADOW_MAP};
 use lightcast_server::quality::errors;
 use lightcast_server::renderer::{Frame, RenderSettings, Renderer};
 use lightcast_server::scene::default_light::{default_camera, default_light};
@@ -221,12 +221,19 @@ fn small_with_importance(method: gi::GiMethod, facts: &SceneFacts) -> gi::GiPara
 
 /// Sessions looking through one camera: the first of a tick makes the light-side stages and
 /// the others reuse them, a session that changes its light makes its own at once, and every
-/// frame is what it is with sharing off, bit for bit.
+/// frame is what it is with sharing off, bit for bit; with the RSM drawn whole and, where the
+/// adapter has triangle ids, as a visibility buffer (whose resolve is shared with it).
 #[test]
 fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
     let scene = procedural::cornell_box();
     let facts = SceneFacts::of(&scene);
-    for method in [LIGHTSKIN, BRSM] {
+    let thin = [false, true]
+        .into_iter()
+        .filter(|&v| !v || gpu().primitive_index);
+    for (method, visibility) in [LIGHTSKIN, BRSM]
+        .into_iter()
+        .flat_map(|m| thin.clone().map(move |v| (m, v)))
+    {
         let base = RenderSettings {
             gi: small_with_importance(method, &facts),
             ..settings(W, H, default_camera(&scene), default_light(&scene))
@@ -234,6 +241,9 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
         let mut other_light = base.clone();
         other_light.lights[0].position[0] += 0.1;
         let (mut on, mut off) = reuse_on_and_off(&scene, &base.gi);
+        on.set_visibility_buffer(visibility);
+        off.set_visibility_buffer(visibility);
+        let label = format!("{method}, visibility buffer {visibility}");
         // Session, its settings, whether it reuses what another session's frame made: sessions
         // 2 and 3 join (each makes them again with its view added), session 1's next frame
         // starts a tick the others reuse, session 2's new light makes its own (in a lighting
@@ -259,21 +269,26 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
                 (&mut on, &mut off),
                 session,
                 s,
-                &format!("{method}, frame {i}"),
+                &format!("{label}, frame {i}"),
             );
             assert_eq!(
                 shared_stages(&b),
                 Vec::<&str>::new(),
-                "{method}: sharing off"
+                "{label}: sharing off"
             );
             let want = if shares {
                 light_side_of(method)
             } else {
                 vec![]
             };
-            assert_eq!(shared_stages(&a), want, "{method}, frame {i}");
+            assert_eq!(shared_stages(&a), want, "{label}, frame {i}");
             if shares {
-                assert!(reused(&a).contains(&RSM.name()), "{method}, frame {i}");
+                assert!(reused(&a).contains(&RSM.name()), "{label}, frame {i}");
+                assert_eq!(
+                    reused(&a).contains(&RSM_RESOLVE.name()),
+                    visibility,
+                    "{label}, frame {i}: the RSM's resolve is shared with it"
+                );
             }
             // How many sessions' frames the cache lighting serves: none but its own for the
             // first (alone), the three sessions' for the fourth (a tick after they joined).
@@ -283,9 +298,9 @@ fn sessions_of_one_view_share_the_light_side_stages_bit_for_bit() {
                 .find(|t| t.stage == stages::CACHE_LIGHTING)
                 .map(|t| t.shared_by);
             match i {
-                0 => assert_eq!(shared_by, Some(0), "{method}: alone"),
-                3..=5 => assert_eq!(shared_by, Some(3), "{method}, frame {i}"),
-                _ if shares => assert!(shared_by >= Some(2), "{method}, frame {i}"),
+                0 => assert_eq!(shared_by, Some(0), "{label}: alone"),
+                3..=5 => assert_eq!(shared_by, Some(3), "{label}, frame {i}"),
+                _ if shares => assert!(shared_by >= Some(2), "{label}, frame {i}"),
                 _ => {}
             }
             assert!(

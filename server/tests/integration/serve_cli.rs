@@ -133,6 +133,9 @@ fn refuses_bad_options_with_a_reason() {
             &["serve", "--backend", "gl"],
             "OpenGL backend is not supported",
         ),
+        (&["serve", "--frames-in-flight", "4"], "--frames-in-flight"),
+        (&["serve", "--frames-in-flight", "0"], "--frames-in-flight"),
+        (&["serve", "--visibility-buffer", "maybe"], "auto, on, off"),
     ];
     for (args, needle) in cases {
         let mut all = args.to_vec();

@@ -515,31 +515,32 @@ impl Method for LightSkin {
             })?;
         }
         // The light-side stages this frame's method and parameters run.
-        let rsm = [
-            crate::passes::stages::RSM,
-            crate::passes::stages::RSM_RESOLVE,
-        ];
-        let sampled = [
-            stages::IMPORTANCE,
-            stages::CUMULATIVE_SUMS,
-            stages::VAL_SELECT,
-        ];
-        let lit = [stages::CACHE_LIGHTING, stages::PROXY_OCCLUSION];
-        let light_side = rsm[..1 + usize::from(sampling.rsm().visibility())]
-            .iter()
-            .chain(&sampled[..if brsm { 3 } else { 0 }])
-            .chain(&lit[..1 + usize::from(gi.occlusion)]);
+        let mut light_side = vec![crate::passes::stages::RSM];
+        if sampling.rsm().visibility() {
+            light_side.push(crate::passes::stages::RSM_RESOLVE);
+        }
+        if brsm {
+            light_side.extend([
+                stages::IMPORTANCE,
+                stages::CUMULATIVE_SUMS,
+                stages::VAL_SELECT,
+            ]);
+        }
+        light_side.push(stages::CACHE_LIGHTING);
+        if gi.occlusion {
+            light_side.push(stages::PROXY_OCCLUSION);
+        }
         let sessions = match &plan {
             Plan::Reuse { sessions, .. } => *sessions,
             Plan::Make(pool) => pool.sessions,
         };
-        for &stage in light_side.clone().filter(|_| sessions > 1) {
+        for &stage in light_side.iter().filter(|_| sessions > 1) {
             stages.shared(stage, sessions.min(usize::from(u16::MAX)) as u16);
         }
         match plan {
             // Another session's frame made them this tick for the same inputs.
             Plan::Reuse { .. } => {
-                for &stage in light_side {
+                for stage in light_side {
                     stages.reused(stage);
                 }
             }

@@ -32,8 +32,8 @@ const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 const MAX_FACES: u32 = 6 * super::frame_uniforms::MAX_LIGHTS as u32;
 /// Largest RSM side per light face.
 pub const MAX_RSM_SIZE: u32 = 4096;
-/// Most RSM texels over all faces (each costs ~66 bytes across the sampling stages: 60 in
-/// the RSM's targets and depth, 12 more with a visibility buffer).
+/// Most RSM texels over all faces (each costs ~66 bytes across the sampling stages, 60 in
+/// the RSM's targets and depth, and 12 more with a visibility buffer: 78).
 pub const MAX_RSM_TEXELS: u64 = 4096 * 4096;
 /// Widest atlas: the texture width every Vulkan adapter we run on allows (lavapipe and
 /// desktop GPUs: 16,384 or more).
@@ -284,20 +284,25 @@ bind_group! {
     }
 }
 
-/// The visibility buffer's raster and resolve, and the faces as one array for the resolve.
+/// The visibility buffer's raster and resolve.
 struct Visibility {
     raster: wgpu::RenderPipeline,
     resolve: wgpu::ComputePipeline,
     layout: wgpu::BindGroupLayout,
-    faces: wgpu::Buffer,
 }
 
 pub struct RsmPass {
     /// Rasterises every target.
     pipeline: wgpu::RenderPipeline,
-    /// With triangle ids: the visibility buffer.
-    visibility: Option<Visibility>,
+    pipeline_layout: wgpu::PipelineLayout,
+    /// The device has triangle ids, which the visibility buffer needs.
+    triangle_ids: bool,
+    /// Made for the first RSM drawn as a visibility buffer (a CPU adapter, which keeps the
+    /// fat targets by default, never compiles them).
+    visibility: std::sync::OnceLock<Visibility>,
     faces: ParamSlots,
+    /// The faces again as one array, for the resolve.
+    face_array: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     lights: wgpu::Buffer,
     /// The emitter face of the last size asked for, by that size (kept while the size stays;
@@ -325,9 +330,10 @@ pub fn emitter_samples(size: u32) -> u32 {
 /// Emissive surfaces as VALs: [`emitter_samples`] samples of the scene's emitters
 /// ([`crate::scene::emitters::sample`]), in the texel layout of an RSM face, copied into the
 /// atlas's last face after the lights' faces are drawn. A texel holds a sample's position
-/// (w = 1), normal and flux with its disk area: what `shaders/rsm.wgsl` writes for a surface a
-/// light reflects from, here the light the emitter sends itself. Emitters are Lambertian: the
-/// face's glossy texels stay as the pass cleared them (no glossy lobe).
+/// (w = 1), normal and flux with its disk area: what `shaders/rsm_texel.wgsl` makes of a
+/// surface a light reflects from, here the light the emitter sends itself. Emitters are
+/// Lambertian: the face's glossy texels stay zero as the raster's clear (or the resolve, which
+/// clears texels the raster left empty) left them (no glossy lobe).
 pub struct EmitterFace {
     pub size: u32,
     /// Rows of the face the samples fill (the copy's height).
@@ -441,49 +447,23 @@ impl RsmPass {
             bind_group_layouts: &[Some(&layout), Some(material_layout)],
             immediate_size: 0,
         });
-        let raster = |label: &str, source: &shaders::ShaderSource, formats| {
-            super::scene_buffers::material_pipeline(
-                device,
-                label,
-                &pipeline_layout,
-                &source.create_module(device),
-                formats,
-                DEPTH_FORMAT,
-            )
-        };
-        let triangle_ids = device.features().contains(wgpu::Features::PRIMITIVE_INDEX);
-        let visibility = triangle_ids.then(|| {
-            let layout = RESOLVE_GROUP.layout(device);
-            Visibility {
-                raster: raster(
-                    "rsm visibility",
-                    &shaders::RSM_VISIBILITY,
-                    &[ID_FORMAT, BASE_FACING_FORMAT],
-                ),
-                resolve: super::compute_pipeline(
-                    device,
-                    "rsm resolve",
-                    &layout,
-                    &shaders::RSM_RESOLVE.create_module(device),
-                    "resolve",
-                ),
-                layout,
-                faces: device.create_buffer(&wgpu::BufferDescriptor {
-                    label: Some("rsm resolve faces"),
-                    size: u64::from(MAX_FACES) * std::mem::size_of::<RsmFace>() as u64,
-                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-                    mapped_at_creation: false,
-                }),
-            }
-        });
         Self {
-            pipeline: raster(
-                "rsm",
+            pipeline: raster_pipeline(
+                device,
+                &pipeline_layout,
                 &shaders::RSM,
                 &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT, GLOSSY_FORMAT],
             ),
-            visibility,
+            pipeline_layout,
+            triangle_ids: device.features().contains(wgpu::Features::PRIMITIVE_INDEX),
+            visibility: std::sync::OnceLock::new(),
             faces,
+            face_array: device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("rsm resolve faces"),
+                size: u64::from(MAX_FACES) * std::mem::size_of::<RsmFace>() as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }),
             bind_group,
             lights: lights.clone(),
             emitters: None,
@@ -496,10 +476,8 @@ impl RsmPass {
     /// The lights' faces of the next frame, drawn in this order at the atlas's start.
     pub fn set_faces(&mut self, queue: &wgpu::Queue, faces: &[RsmFace]) {
         self.faces.write(queue, faces);
-        if let Some(v) = &self.visibility {
-            let drawn = &faces[..faces.len().min(MAX_FACES as usize)];
-            queue.write_buffer(&v.faces, 0, bytemuck::cast_slice(drawn));
-        }
+        let drawn = &faces[..faces.len().min(MAX_FACES as usize)];
+        queue.write_buffer(&self.face_array, 0, bytemuck::cast_slice(drawn));
         self.light_faces = faces.len() as u32;
         self.face_bytes = bytemuck::cast_slice(faces).to_vec();
     }
@@ -541,7 +519,7 @@ impl RsmPass {
             ]
             .concat()
         });
-        let thin = self.visibility.as_ref().zip(rsm.visibility.as_ref());
+        let thin = rsm.visibility.as_ref().filter(|_| self.triangle_ids);
         if rsm.made.holds(inputs.as_deref()) {
             stages.reused(super::stages::RSM);
             if thin.is_some() {
@@ -560,15 +538,19 @@ impl RsmPass {
                 self.draw(e, rsm, scene, &self.pipeline, &targets);
                 self.copy_emitters(e, rsm);
             }),
-            Some((v, [id, base])) => {
+            Some(ids_and_base) => {
                 let device = stages.device();
+                let v = self
+                    .visibility
+                    .get_or_init(|| Visibility::new(device, &self.pipeline_layout));
+                let [id, base] = ids_and_base;
                 stages
                     .stage(super::stages::RSM, |e| {
                         self.draw(e, rsm, scene, &v.raster, &[&id.view, &base.view])
                     })
                     .and_then(|()| {
                         stages.stage(super::stages::RSM_RESOLVE, |e| {
-                            self.encode_resolve(device, e, v, rsm, scene);
+                            self.encode_resolve(device, e, v, (rsm, ids_and_base), scene);
                             self.copy_emitters(e, rsm);
                         })
                     })
@@ -598,20 +580,18 @@ impl RsmPass {
         }
     }
 
-    /// Fills `rsm`'s targets from its visibility buffer (empty texels cleared).
+    /// Fills `rsm`'s targets from its visibility buffer, the triangle ids and base colours
+    /// `[id, base]` (empty texels cleared).
     fn encode_resolve(
         &self,
         device: &wgpu::Device,
         encoder: &mut wgpu::CommandEncoder,
         v: &Visibility,
-        rsm: &Rsm,
+        (rsm, [id, base]): (&Rsm, &[Target; 2]),
         scene: &SceneBuffers,
     ) {
-        let Some([id, base]) = &rsm.visibility else {
-            return;
-        };
         let group = ResolveResources {
-            faces: &v.faces,
+            faces: &self.face_array,
             lights: &self.lights,
             vis_id: id,
             vis_base: base,
@@ -642,6 +622,45 @@ impl RsmPass {
             emitters.encode(encoder, rsm, self.light_faces.min(rsm.faces));
         }
     }
+}
+
+impl Visibility {
+    fn new(device: &wgpu::Device, pipeline_layout: &wgpu::PipelineLayout) -> Self {
+        let layout = RESOLVE_GROUP.layout(device);
+        Self {
+            raster: raster_pipeline(
+                device,
+                pipeline_layout,
+                &shaders::RSM_VISIBILITY,
+                &[ID_FORMAT, BASE_FACING_FORMAT],
+            ),
+            resolve: super::compute_pipeline(
+                device,
+                "rsm resolve",
+                &layout,
+                &shaders::RSM_RESOLVE.create_module(device),
+                "resolve",
+            ),
+            layout,
+        }
+    }
+}
+
+/// An RSM raster of `source` into `formats`.
+fn raster_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    source: &shaders::ShaderSource,
+    formats: &[wgpu::TextureFormat],
+) -> wgpu::RenderPipeline {
+    super::scene_buffers::material_pipeline(
+        device,
+        source.name,
+        layout,
+        &source.create_module(device),
+        formats,
+        DEPTH_FORMAT,
+    )
 }
 
 #[cfg(test)]

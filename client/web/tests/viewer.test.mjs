@@ -214,7 +214,10 @@ async function withoutWebCodecs(browser) {
       await page.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
       await waitForFrames(page, 3, 'JPEG frames');
       assert.equal(await page.$eval('body', (b) => b.dataset.decodesH264), 'false');
-      assert.equal(await page.$eval('#frame', (c) => c.dataset.codec), 'jpeg');
+      // The last frame painted is a JPEG, or the PNG still a resting view gets after 300 ms
+      // (`still_after_ms`; seen once in ten runs on a loaded machine).
+      const painted = await page.$eval('#frame', (c) => c.dataset.codec);
+      assert.ok(['jpeg', 'png'].includes(painted), `the page painted ${painted}`);
       assert.equal((await pageSession(page)).params.encoding.codec, 'jpeg');
       const disabled = await page.$eval('select[data-field="encoding.codec"] option[value="h264"]', (o) => o.disabled);
       assert.ok(disabled, 'h264 is not offered where it cannot be decoded');
@@ -294,17 +297,24 @@ async function everyMethod(browser, methods) {
           try {
             await other.goto(page.url());
             await other.waitForSelector('#status[data-state="live"]', { timeout: PATIENCE_MS });
-            // The stages whose "now" cell ends in "÷ 2" (an empty list is not an answer yet).
+            // The stages whose "now" cell ends in "÷ 2", and whether there is one.
             const shared = () => [...document.querySelectorAll('#stage-rows tr')]
               .filter((tr) => /÷ 2$/.test(tr.children[2].textContent)).map((tr) => tr.dataset.stage);
+            const anyShared = () => [...document.querySelectorAll('#stage-rows tr')]
+              .some((tr) => /÷ 2$/.test(tr.children[2].textContent));
             const rows = (p) => p.$$eval('#stage-rows tr', (trs) => trs.map((tr) => tr.textContent).join(' | '));
-            await page.waitForFunction(`(${shared})().length > 0`, null, { timeout: PATIENCE_MS })
-              .catch(async () => {
-                throw new Error(`no stage of the first page showed ÷ 2: ${await rows(page)}; the second's: ${await rows(other)}`);
-              });
-            const stagesShared = await page.evaluate(shared);
+            // Either page's table may show it first (the two sessions take turns making the
+            // shared stages); polled by time, as a page in the background gets no animation
+            // frames.
+            const showing = (p) => p.waitForFunction(anyShared, null, { timeout: PATIENCE_MS, polling: 200 })
+              .then(() => p);
+            const first = await Promise.any([showing(page), showing(other)]).catch(async (e) => {
+              throw new Error(`no page showed ÷ 2 (${e.errors.map((x) => x.message).join('; ')}): `
+                + `${await rows(page)}; the second's: ${await rows(other)}`);
+            });
+            const stagesShared = await first.evaluate(shared);
             assert.ok(stagesShared.includes('cache_lighting'), `shared: ${stagesShared.join(', ')}`);
-            return `shared: ${stagesShared.join(', ')}`;
+            return `shared (${first === page ? 'first' : 'second'} page): ${stagesShared.join(', ')}`;
           } finally {
             await other.close({ runBeforeUnload: true });
             await otherContext.close();

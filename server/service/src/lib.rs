@@ -178,18 +178,33 @@ impl Service {
         } else {
             "cpu_wall_clock"
         };
+        let options = render_loop::LoopOptions {
+            reuse: !args.no_pass_reuse,
+            frames_in_flight: args
+                .frames_in_flight
+                .map_or(if is_cpu { 2 } else { 3 }, usize::from),
+            visibility_buffer: args.visibility_buffer,
+        };
+        let thin = match options.visibility_buffer {
+            crate::renderer::VisibilityBuffer::Auto if is_cpu => "off (auto: a CPU adapter)",
+            crate::renderer::VisibilityBuffer::Auto => {
+                "on where the device has triangle ids (auto)"
+            }
+            crate::renderer::VisibilityBuffer::On => "on",
+            crate::renderer::VisibilityBuffer::Off => "off",
+        };
+        log(&format!(
+            "render loop: up to {} frames in flight (--frames-in-flight), visibility buffers \
+             {thin} (--visibility-buffer), pass reuse and sharing {} (--no-pass-reuse)",
+            options.frames_in_flight,
+            if options.reuse { "on" } else { "off" }
+        ));
         let (render_tx, render_thread) = render_loop::spawn(
             ctx.clone(),
             Arc::clone(&scenes),
             Arc::clone(&sessions),
             encoder,
-            render_loop::LoopOptions {
-                reuse: !args.no_pass_reuse,
-                frames_in_flight: args
-                    .frames_in_flight
-                    .map_or(if is_cpu { 2 } else { 3 }, usize::from),
-                visibility_buffer: args.visibility_buffer,
-            },
+            options,
         );
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await

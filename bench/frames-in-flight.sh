@@ -11,6 +11,7 @@
 # LIGHTCAST_SERVER_BIN / LIGHTCAST_CLIENT_BIN name other binaries (bench/gpu-run.sh's kit).
 set -euo pipefail
 root="$(cd "$(dirname "$0")/.." && pwd)"
+. "$root/bench/lib.sh"
 seconds="${1:-10}"
 width="${2:-320}"
 height="${3:-180}"
@@ -25,17 +26,9 @@ for depth in 1 2 3; do
   LIGHTCAST_CACHE_DIR="$work/cache" "$server" --listen "127.0.0.1:$port" --allow-cpu-adapter \
     --frames-in-flight "$depth" >"$work/server-$depth.log" 2>&1 &
   pid=$!
-  up=false
-  for _ in $(seq 120); do
-    kill -0 "$pid" 2>/dev/null || break
-    curl -fsS "http://127.0.0.1:$port/readyz" >/dev/null 2>&1 && { up=true; break; }
-    sleep 1
-  done
-  $up || { cat "$work/server-$depth.log" >&2; echo "frames-in-flight: the server did not start" >&2; exit 1; }
+  wait_ready "http://127.0.0.1:$port" "$pid" "$work/server-$depth.log" frames-in-flight
   curl -fsS "http://127.0.0.1:$port/v1/server" >"$work/server.json"
-  # One BRSM frame first, which waits for the scene's light caches: no run measures their build.
-  curl -fsS -o /dev/null -X POST "http://127.0.0.1:$port/v1/render" \
-    -d '{"render": {"width": 64, "height": 36, "gi": {"method": "brsm"}}}'
+  warm_brsm "http://127.0.0.1:$port"
   curl -fsS "http://127.0.0.1:$port/metrics" >"$work/before-$depth.txt"
   date +%s.%N >"$work/start-$depth.txt"
   echo "running: --frames-in-flight $depth, $sessions sessions" >&2

@@ -1,16 +1,7 @@
-// The thin G-buffer raster (issue 36): a visibility buffer. The fragment writes the scene-wide
-// triangle id and what a compute pass cannot read back from the scene's buffers alone: the
-// base colour (the material's factor times its texture, sampled here where each material has
-// its bind group and the rasteriser its derivatives), with the facing in alpha (1 front, 0.5
-// back; the clear value 0 marks background). gbuffer_resolve.wgsl rebuilds the position,
-// normal and material terms; the targets it fills are the fat G-buffer's (gbuffer.wgsl), so
-// every later pass reads what it read before. 12 bytes a pixel leave the rasteriser instead
-// of 44.
-
-struct VisibilityOut {
-    @location(0) id: u32,
-    @location(1) base_facing: vec4<f32>,
-}
+// The thin G-buffer raster (issue 36): a visibility buffer (visibility_out.wgsl).
+// gbuffer_resolve.wgsl rebuilds the position, normal and material terms; the targets it fills
+// are the fat G-buffer's (gbuffer.wgsl), so every later pass reads what it read before. 12
+// bytes a pixel leave the rasteriser instead of 44.
 
 @fragment
 fn fs_main(
@@ -22,5 +13,5 @@ fn fs_main(
     if !m.covered {
         discard;
     }
-    return VisibilityOut(in.first_triangle + primitive, vec4<f32>(m.brdf.base, select(0.5, 1.0, front)));
+    return visibility_out(in, m, front, primitive);
 }

@@ -65,6 +65,7 @@ pub const GBUFFER_VISIBILITY: ShaderSource = ShaderSource {
         wgsl!("material_model.wgsl"),
         wgsl!("materials.wgsl"),
         wgsl!("gbuffer_vertex.wgsl"),
+        wgsl!("visibility_out.wgsl"),
         wgsl!("gbuffer_visibility.wgsl"),
     ],
 };
@@ -167,6 +168,7 @@ pub const RSM_VISIBILITY: ShaderSource = ShaderSource {
         wgsl!("rsm_glossy.wgsl"),
         wgsl!("rsm_texel.wgsl"),
         wgsl!("rsm_vertex.wgsl"),
+        wgsl!("visibility_out.wgsl"),
         wgsl!("rsm_visibility.wgsl"),
     ],
 };

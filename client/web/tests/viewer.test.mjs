@@ -290,8 +290,7 @@ async function everyMethod(browser, methods) {
         // Issue 36: a second viewer of the same scene, light and parameters shares BRSM's
         // light-side stages, and each page's stage table says among how many sessions.
         await step('a second brsm viewer shares its light-side stages and the timings say ÷ 2', async () => {
-          // A context of its own, as another viewer's browser (a second page of the first
-          // page's context painted its first frame only after 15–20 s here; not investigated).
+          // A context of its own, as another viewer's browser.
           const otherContext = await browser.newContext({ viewport: { width: 480, height: 360 } });
           const other = await otherContext.newPage();
           try {

@@ -38,7 +38,7 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     let m = materials[point.material];
     let brdf = surface_brdf(base.rgb, m.metallic, m.roughness, m.specular);
     let roughness = select(brdf.roughness, camera.roughness, camera.roughness > 0.0);
-    let n = facing_normal(normal, base.a > 0.75);
+    let n = visible_normal(point, base);
     // Emitters emit from the side their vertex normals face, as in write_gbuffer.
     let emits = dot(normal, camera.position - world) > 0.0;
     textureStore(out_position, texel, vec4<f32>(world, 1.0));

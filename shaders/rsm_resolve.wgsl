@@ -43,7 +43,7 @@ fn resolve(@builtin(global_invocation_id) id: vec3<u32>) {
     let point = visible_point(t, texel_ndc(local, vec2<u32>(side)), face.view_proj);
     let m = materials[point.material];
     let brdf = surface_brdf(base.rgb, m.metallic, m.roughness, m.specular);
-    let n = facing_normal(point.normal, base.a > 0.75);
+    let n = visible_normal(point, base);
     let out = rsm_texel(face, lights.list[face.light], point.world, n, brdf);
     textureStore(out_position, texel, out.position);
     textureStore(out_normal, texel, out.normal);

@@ -47,6 +47,12 @@ fn visible_point(t: u32, ndc: vec2<f32>, view_proj: mat4x4<f32>) -> VisiblePoint
     );
 }
 
+// The shading normal of `point` as the raster's `facing_normal` makes it, the facing read from
+// the visibility buffer's base-colour texel (visibility_out.wgsl: alpha 1 front, 0.5 back).
+fn visible_normal(point: VisiblePoint, base_facing: vec4<f32>) -> vec3<f32> {
+    return facing_normal(point.normal, base_facing.a > 0.75);
+}
+
 // Normalised device coordinates of texel `texel`'s centre in a viewport of `size` texels.
 fn texel_ndc(texel: vec2<u32>, size: vec2<u32>) -> vec2<f32> {
     return vec2<f32>(
